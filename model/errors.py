@@ -1,0 +1,28 @@
+"""One exception hierarchy for the model (signac-style): every message names the bad value,
+what was expected and, where there is one, the fix."""
+
+from __future__ import annotations
+
+
+class NematicError(Exception):
+    """Base class of every error raised on purpose by this project."""
+
+
+class ParameterError(NematicError, ValueError):
+    """A parameter or numerics value is unknown, of the wrong type or out of range."""
+
+    def __init__(self, name: str, value: object, allowed: str):
+        self.name, self.value, self.allowed = name, value, allowed
+        super().__init__(f"invalid value for '{name}': {value!r} (allowed: {allowed})")
+
+
+class SimulationFailure(NematicError, RuntimeError):
+    """A run ended early for a physical or numerical reason (J <= 0, no convergence, NaN).
+
+    ``reason`` is a short machine-readable tag, ``t`` the simulation time at which it happened.
+    """
+
+    def __init__(self, reason: str, detail: str, t: float | None = None):
+        self.reason, self.detail, self.t = reason, detail, t
+        when = "" if t is None else f" at t = {t:.6g}"
+        super().__init__(f"{reason}{when}: {detail}")

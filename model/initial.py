@@ -1,0 +1,56 @@
+r"""Seeded, resolution-independent initial conditions.
+
+A band-limited complex Gaussian field
+
+.. math:: \psi(x) = \frac{1}{\sqrt{M}} \sum_{n^2 + m^2 \le n_c^2} c_{nm}\, e^{2\pi i (n x + m y)},
+          \qquad c_{nm} \sim \mathcal{CN}(0, 1),
+
+(M the number of modes, so :math:`\langle |\psi|^2 \rangle = 1`) is drawn from the seed in a
+fixed mode order and evaluated at the cell centres of any grid with N > 2 n_c. The director
+angle is :math:`2\theta = \arg \psi` (isotropic, correlation length ~ 1/n_c) and
+
+.. math:: (q_1, q_2) = S_0 (\cos 2\theta, \sin 2\theta)
+          + a\, (\mathrm{Re}\,\psi, \mathrm{Im}\,\psi), \qquad A = 0,
+
+with :math:`a` = ``noise_amplitude`` (0 by default). Same seed, any resolution: the same
+physical field (the paper's per-node white noise would be erased by the Frank term and would
+make resolution studies meaningless; DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import ParameterError
+from .parameters import Parameters
+
+Array = np.ndarray
+
+
+def band_limited_field(seed: int, modes: int, resolution: int) -> Array:
+    """The complex field :math:`\\psi` above, sampled at cell centres ``(i + 1/2) / N``."""
+    if resolution <= 2 * modes:
+        raise ParameterError("resolution", resolution,
+                             f"> 2 * noise_modes = {2 * modes} (the initial field has modes "
+                             f"up to {modes}; lower noise_modes or raise the resolution)")
+    rng = np.random.default_rng(seed)
+    ns = np.arange(-modes, modes + 1)
+    n, m = np.meshgrid(ns, ns, indexing="ij")
+    keep = n**2 + m**2 <= modes**2
+    n, m = n[keep], m[keep]
+    c = (rng.standard_normal(n.size) + 1j * rng.standard_normal(n.size)) / np.sqrt(2.0)
+    c = c / np.sqrt(n.size)
+    # shift to cell centres so that every resolution samples the same function
+    c = c * np.exp(1j * np.pi * (n + m) / resolution)
+    Z = np.zeros((resolution, resolution), dtype=complex)
+    Z[n % resolution, m % resolution] = c
+    return np.fft.ifft2(Z) * resolution**2
+
+
+def initial_fields(params: Parameters, resolution: int, seed: int) -> tuple[Array, Array, Array]:
+    """Return ``(q1, q2, A)`` at t = 0 for the given seed (see module docstring)."""
+    psi = band_limited_field(seed, params.noise_modes, resolution)
+    angle = np.angle(psi)  # = 2 theta
+    q1 = params.S0 * np.cos(angle) + params.noise_amplitude * psi.real
+    q2 = params.S0 * np.sin(angle) + params.noise_amplitude * psi.imag
+    return q1, q2, np.zeros_like(q1)

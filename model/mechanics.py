@@ -1,0 +1,354 @@
+r"""Quasi-static force balance :math:`\mathrm{Div}\, P = 0` (paper Eq. 3) on the periodic square.
+
+The deformation is :math:`F = \bar F + \nabla \tilde u` with a periodic fluctuation
+:math:`\tilde u` and the applied pure shear :math:`\bar F = \mathrm{diag}(1+\epsilon, 1-\epsilon)`
+(the paper's :math:`\epsilon_{11} = \epsilon = -\epsilon_{22}`; at small strain the mean
+displacement gradient is exactly that).
+
+Two solvers share one interface (:meth:`solve`, :meth:`spin`):
+
+* :class:`LinearMechanics`: small strain, one exact Fourier solve with the Green operator of
+  the isotropic medium (shear modulus 1, 2-D bulk modulus kappa, or incompressible by
+  projection).
+* :class:`FiniteMechanics`: neo-Hookean + nemato-elastic (exact derivative of Eq. 1),
+  Newton-Krylov on :math:`\tilde u` in Fourier space. Each Newton step solves
+  :math:`-\mathrm{Div}(\mathbb K : \nabla \delta u) = \mathrm{Div}\, P` by conjugate gradients,
+  preconditioned by the exact Green operator of the homogeneous isotropic reference medium
+  (so a small-strain step converges in one iteration), warm-started, with a backtracking line
+  search that keeps :math:`J > 0` and decreases the residual.
+
+**Residual.** :math:`r = \lVert \hat k_J \hat P_{iJ} \rVert / \max(1, \lVert P \rVert)`: the RMS
+of :math:`\mathrm{Div}\,P` in the :math:`H^{-1}` norm (so high wavenumbers are not amplified),
+relative to the RMS stress with the shear modulus G = 1 as a floor.
+
+**Spin.** The Jaumann derivative of Eq. (4) needs :math:`W = \operatorname{skew} \nabla \dot u`.
+Since u is slaved to Q, :math:`\dot u` solves the linearised balance
+:math:`\mathrm{Div}(\mathbb K : \nabla \dot u + \partial_Q P : \dot Q) = 0` (an extra linear
+solve: exact, no lagged difference). :meth:`spin` returns
+:math:`\omega = \tfrac12 (\partial_1 \dot u_2 - \partial_2 \dot u_1)` for a given
+:math:`\dot Q`.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import constitutive as cl
+from . import krylov
+from . import tensors as T
+from .errors import SimulationFailure
+from .fourier import SpectralGrid
+
+log = logging.getLogger(__name__)
+Array = np.ndarray
+
+
+@dataclass
+class MechanicalState:
+    """Everything the Q and A equations and the observables need from the mechanics.
+
+    ``Ebar_dev`` holds the two independent components ((E11 - E22)/2, E12) of the deviatoric
+    part of :math:`\\bar E = \\tfrac12 (J^{-1} C - I)` (small strain: of e), ``Jm1`` is
+    :math:`J - 1` as it enters :math:`B'` (small strain: tr e), ``trP`` is
+    :math:`P_{11} + P_{22}` (Eq. 5).
+    """
+
+    F: Array
+    P: Array
+    Ebar_dev: Array
+    Jm1: Array
+    trP: Array
+    u_hat: Array
+    iterations: int = 0
+    residual: float = 0.0
+    extras: dict = field(default_factory=dict)
+
+
+def applied_deformation(eps: float) -> Array:
+    """The mean deformation gradient :math:`\\bar F = \\mathrm{diag}(1+\\epsilon, 1-\\epsilon)`."""
+    return np.array([[1.0 + eps, 0.0], [0.0, 1.0 - eps]])
+
+
+class _Mechanics:
+    def __init__(self, params, grid: SpectralGrid, *, spin_tol: float = 1e-8):
+        self.params = params
+        self.grid = grid
+        self.spin_tol = spin_tol
+        self.spin_iterations = 0
+        self.omega_hat: Array | None = None
+        self.moduli = cl.Moduli.from_params(params)
+        self.Fbar = applied_deformation(params.eps)
+        g = grid
+        kh = g.khat
+        # Green operator of the isotropic medium (mu = 1, lambda + mu = kappa):
+        # [mu k^2 I + (lambda + mu) k k] u = b  ->  u = (I - a khat khat) b / k^2
+        self._inv_k2 = np.where(g.active, 1.0 / np.where(g.active, g.kd2, 1.0), 0.0)
+        self._khat = kh
+
+    def _green(self, b_hat: Array, a: float) -> Array:
+        kh = self._khat
+        kb = kh[0] * b_hat[0] + kh[1] * b_hat[1]
+        return (b_hat - a * kh * kb) * self._inv_k2
+
+    def _grad_hat(self, u_hat: Array) -> Array:
+        """:math:`(\\nabla u)_{ij} = i k_j u_i`, shape (2, 2, ...)."""
+        g = self.grid
+        return np.stack([np.stack([1j * g.kx * u_hat[0], 1j * g.ky * u_hat[0]]),
+                         np.stack([1j * g.kx * u_hat[1], 1j * g.ky * u_hat[1]])])
+
+    def _div_hat(self, P_hat: Array) -> Array:
+        g = self.grid
+        return 1j * (g.kx * P_hat[:, 0] + g.ky * P_hat[:, 1])
+
+    def residual(self, P: Array, P_hat: Array | None = None) -> float:
+        """:math:`\\lVert \\hat k_J \\hat P_{iJ} \\rVert / \\max(1, \\mathrm{RMS}\\, P)`."""
+        g = self.grid
+        if P_hat is None:
+            P_hat = g.forward(P)
+        kh = self._khat
+        r = kh[0] * P_hat[:, 0] + kh[1] * P_hat[:, 1]
+        scale = max(1.0, float(np.sqrt(np.mean(np.sum(P**2, axis=(0, 1))))))
+        return g.rms_hat(r) / scale
+
+    def spin_from_rate(self, udot_hat: Array) -> Array:
+        """:math:`\\omega = \\tfrac12 (\\partial_1 \\dot u_2 - \\partial_2 \\dot u_1)`."""
+        g = self.grid
+        return g.inverse(0.5j * (g.kx * udot_hat[1] - g.ky * udot_hat[0]))
+
+
+class LinearMechanics(_Mechanics):
+    """Small-strain force balance, solved exactly in Fourier space.
+
+    .. math::
+        \\mathrm{Div}\\big(2\\,\\mathrm{dev}\\, e + \\kappa\\, \\mathrm{tr}\\, e\\, I + \\tau\\big) = 0,
+        \\quad \\tau = (\\alpha - B) Q - B' (Q:Q) I,
+        \\quad \\hat{\\tilde u} = \\frac{1}{k^2}\\Big(I - \\frac{\\kappa}{\\kappa + 1} \\hat k \\hat k\\Big)
+        \\, i \\hat\\tau k
+
+    (incompressible: the factor is 1 and :math:`\\hat p = \\hat k \\cdot \\hat \\tau \\cdot \\hat k`,
+    mean pressure 0 so that :math:`\\overline{\\mathrm{tr}\\,\\sigma} = \\overline{\\mathrm{tr}\\,\\tau}`
+    in both variants).
+    """
+
+    def __init__(self, params, grid: SpectralGrid, *, incompressible: bool = False,
+                 spin_tol: float = 1e-8):
+        super().__init__(params, grid, spin_tol=spin_tol)
+        self.incompressible = incompressible
+        k = params.kappa
+        self._a = 1.0 if incompressible else k / (k + 1.0)
+        self.ebar = np.array([[params.eps, 0.0], [0.0, -params.eps]])
+
+    def _eigenstress(self, q1: Array, q2: Array) -> Array:
+        m = self.moduli
+        Q = T.nematic(q1, q2)
+        tau = (m.alpha - m.B) * Q
+        if m.B_prime:
+            tau = tau - m.B_prime * T.ddot(Q, Q) * T.identity(q1.shape)
+        return tau
+
+    def solve(self, q1: Array, q2: Array, **_: object) -> MechanicalState:
+        g = self.grid
+        tau = self._eigenstress(q1, q2)
+        tau_hat = g.forward(tau)
+        b_hat = self._div_hat(tau_hat)  # i tau_hat k
+        u_hat = self._green(b_hat, self._a)
+        grad_u = g.inverse(self._grad_hat(u_hat)) + self.ebar[:, :, None, None]
+        e = 0.5 * (grad_u + T.transpose(grad_u))
+        tr_e = T.trace(e)
+        eye = T.identity(tr_e.shape)
+        if self.incompressible:
+            kh = self._khat
+            p_hat = np.einsum("i...,ij...,j...->...", kh, tau_hat, kh)
+            p = g.inverse(p_hat)
+            sigma = -p * eye + 2.0 * e + tau
+        else:
+            sigma = 2.0 * (e - 0.5 * tr_e * eye) + self.params.kappa * tr_e * eye + tau
+        Ebar_dev = np.stack([0.5 * (e[0, 0] - e[1, 1]), e[0, 1]])
+        return MechanicalState(F=T.identity(tr_e.shape) + grad_u, P=sigma, Ebar_dev=Ebar_dev,
+                               Jm1=tr_e, trP=T.trace(sigma), u_hat=u_hat)
+
+    def spin_multiplier(self, qdot1_hat: Array, qdot2_hat: Array) -> Array:
+        """Fourier symbol of the spin: :math:`\\hat\\omega = -\\tfrac12 (\\alpha - B)\\,
+        \\hat t \\cdot \\hat{\\dot Q} \\cdot \\hat k`, :math:`\\hat t = (-\\hat k_2, \\hat k_1)`
+        (the isotropic B' part of the eigenstress is curl free)."""
+        kx, ky = self._khat
+        m = self.moduli
+        return -0.5 * (m.alpha - m.B) * (-2.0 * kx * ky * qdot1_hat + (kx**2 - ky**2) * qdot2_hat)
+
+    def corotational_hat(self, q1: Array, q2: Array, R_hat: Array, t: float | None = None
+                         ) -> tuple[Array, Array]:
+        """Solve :math:`\omega = \Omega[R + 2 \omega J q]` (Jq = (-q2, q1)) by GMRES on
+        :math:`\hat\omega`, warm-started; return ``(Qdot hat components, omega)``.
+
+        Without the Jaumann feedback this is one multiplication; the feedback operator has
+        norm <= (alpha - B) max S, and :math:`I - M` becomes singular at (alpha - B) S = 1 for
+        a uniform state (loss of well-posedness, reported as ``spin_diverged``).
+        """
+        g = self.grid
+
+        def jaumann_hat(omega_hat: Array) -> tuple[Array, Array]:
+            omega = g.inverse(omega_hat)
+            return g.forward(np.stack([-2.0 * omega * q2, 2.0 * omega * q1])), omega
+
+        def A(omega_hat: Array) -> Array:
+            j = jaumann_hat(omega_hat)[0]
+            return omega_hat - self.spin_multiplier(j[0], j[1])
+
+        b = self.spin_multiplier(R_hat[0], R_hat[1])
+        x0 = self.omega_hat if self.omega_hat is not None else b
+        omega_hat, it, status = krylov.gmres(A, b, x0, lambda r: r, g.inner,
+                                             rtol=self.spin_tol, maxiter=100)
+        self.spin_iterations += it
+        if status != "ok":
+            raise SimulationFailure(
+                "spin_diverged", "the Jaumann spin solve did not converge in "
+                f"{it} iterations ((alpha - B) S too large: loss of well-posedness)", t)
+        self.omega_hat = omega_hat
+        j_hat, omega = jaumann_hat(omega_hat)
+        return R_hat + j_hat, omega
+
+    def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
+                     t: float | None = None) -> tuple[Array, Array]:
+        qdot_hat, omega = self.corotational_hat(q1, q2, self.grid.forward(R), t)
+        return self.grid.inverse(qdot_hat), omega
+
+
+class FiniteMechanics(_Mechanics):
+    """Finite-strain force balance by Newton-Krylov (see the module docstring)."""
+
+    def __init__(self, params, grid: SpectralGrid, *, tol: float = 1e-8, max_newton: int = 30,
+                 cg_rtol: float = 1e-3, max_cg: int = 200, spin_tol: float = 1e-8):
+        super().__init__(params, grid, spin_tol=spin_tol)
+        self.tol = tol
+        self.max_newton = max_newton
+        self.cg_rtol = cg_rtol
+        self.max_cg = max_cg
+        k = params.kappa
+        self._a = k / (k + 1.0)  # reference medium: mu0 = 1, kappa0 = kappa
+        n = grid.n
+        self.u_hat = np.zeros((2, n, n // 2 + 1), dtype=complex)  # warm start
+        self.udot_hat = np.zeros_like(self.u_hat)
+        self.cg_iterations = 0
+
+    def deformation(self, u_hat: Array) -> Array:
+        return self.Fbar[:, :, None, None] + self.grid.inverse(self._grad_hat(u_hat))
+
+    def _operator(self, K: Array):
+        g = self.grid
+
+        def A(v_hat: Array) -> Array:
+            dF = g.inverse(self._grad_hat(v_hat))
+            return -self._div_hat(g.forward(cl.apply_tangent(K, dF)))
+
+        return A
+
+    def _pcg(self, A, b_hat: Array, x0: Array, rtol: float) -> tuple[Array, int, bool]:
+        x, it, status = krylov.pcg(A, b_hat, x0, lambda r: self._green(r, self._a),
+                                   self.grid.inner, rtol=rtol, maxiter=self.max_cg)
+        return x, it, status == "ok"
+
+    def _evaluate(self, u_hat: Array, Q: Array) -> tuple[Array, Array, Array, float]:
+        F = self.deformation(u_hat)
+        J = T.det(F)
+        if not np.all(J > 0):
+            return F, F, F, np.inf
+        P = cl.first_piola(F, Q, self.moduli)
+        P_hat = self.grid.forward(P)
+        return F, P, P_hat, self.residual(P, P_hat)
+
+    def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
+              t: float | None = None) -> MechanicalState:
+        Q = T.nematic(q1, q2)
+        u_hat = self.u_hat if u_guess is None else u_guess
+        F, P, P_hat, res = self._evaluate(u_hat, Q)
+        if not np.isfinite(res):  # the guess is unusable: restart from the homogeneous state
+            u_hat = np.zeros_like(u_hat)
+            F, P, P_hat, res = self._evaluate(u_hat, Q)
+            if not np.isfinite(res):
+                raise SimulationFailure("J<=0", "the applied deformation has J <= 0", t)
+        it = 0
+        K = None
+        while res > self.tol:
+            if it >= self.max_newton:
+                raise SimulationFailure(
+                    "newton_diverged",
+                    f"force balance not converged after {it} Newton iterations "
+                    f"(residual {res:.3g} > {self.tol:g})", t)
+            it += 1
+            K = cl.tangent(F, Q, self.moduli)
+            b = self._div_hat(P_hat)
+            # inexact Newton: ask CG for just the reduction this step needs
+            rtol = float(np.clip(0.5 * self.tol / res, 1e-8, self.cg_rtol))
+            du, ncg, ok = self._pcg(self._operator(K), b, np.zeros_like(b), rtol)
+            self.cg_iterations += ncg
+            if not ok and ncg < self.max_cg:
+                raise SimulationFailure(
+                    "ellipticity_lost",
+                    "the tangent stiffness is not positive definite (loss of ellipticity)", t)
+            step = 1.0
+            for _ in range(12):
+                trial = u_hat + step * du
+                F_t, P_t, P_hat_t, res_t = self._evaluate(trial, Q)
+                if np.isfinite(res_t) and res_t < res:
+                    break
+                step *= 0.5
+            else:
+                reason = "J<=0" if not np.isfinite(res_t) else "newton_diverged"
+                raise SimulationFailure(
+                    reason, f"line search failed at Newton iteration {it} "
+                    f"(residual {res:.3g})", t)
+            u_hat, F, P, P_hat, res = trial, F_t, P_t, P_hat_t, res_t
+        self.u_hat = u_hat
+        J = T.det(F)
+        C = T.matmul(T.transpose(F), F)
+        Ebar_dev = np.stack([0.25 * (C[0, 0] - C[1, 1]) / J, 0.5 * C[0, 1] / J])
+        return MechanicalState(F=F, P=P, Ebar_dev=Ebar_dev, Jm1=J - 1.0, trP=T.trace(P),
+                               u_hat=u_hat, iterations=it, residual=res, extras={"K": K})
+
+    def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
+                     t: float | None = None) -> tuple[Array, Array]:
+        """Solve for :math:`\dot u` and :math:`\dot Q = R + 2\omega J q` together:
+
+        .. math::
+            -\mathrm{Div}\big(\mathbb K : \nabla \dot u + E\, \omega(\dot u)\big)
+            = \mathrm{Div}(\partial_Q P : R), \qquad E = \partial_Q P : (2 J q),
+            \quad \omega(\dot u) = \tfrac12 (\partial_1 \dot u_2 - \partial_2 \dot u_1),
+
+        by GMRES (Green-preconditioned, warm-started). Returns ``(Qdot components, omega)``.
+        """
+        g = self.grid
+        Q = T.nematic(q1, q2)
+        K = mech.extras.get("K")
+        if K is None:
+            K = cl.tangent(mech.F, Q, self.moduli)
+            mech.extras["K"] = K
+        E = cl.first_piola_q_increment(mech.F, Q, T.nematic(-2.0 * q2, 2.0 * q1), self.moduli)
+        b = self._div_hat(g.forward(cl.first_piola_q_increment(mech.F, Q, T.nematic(*R),
+                                                               self.moduli)))
+
+        def A(v_hat: Array) -> Array:
+            G = g.inverse(self._grad_hat(v_hat))
+            omega = 0.5 * (G[1, 0] - G[0, 1])
+            return -self._div_hat(g.forward(cl.apply_tangent(K, G) + E * omega))
+
+        udot, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
+                                        g.inner, rtol=self.spin_tol, maxiter=self.max_cg)
+        self.spin_iterations += it
+        if status != "ok":
+            raise SimulationFailure(
+                "spin_diverged", "the displacement-rate (Jaumann spin) solve did not converge "
+                f"in {it} iterations: loss of ellipticity", t)
+        self.udot_hat = udot
+        omega = self.spin_from_rate(udot)
+        return np.stack([R[0] - 2.0 * omega * q2, R[1] + 2.0 * omega * q1]), omega
+
+
+def make_mechanics(params, numerics, grid: SpectralGrid) -> LinearMechanics | FiniteMechanics:
+    if numerics.mechanics == "linear":
+        return LinearMechanics(params, grid, incompressible=numerics.incompressible,
+                               spin_tol=numerics.spin_tol)
+    return FiniteMechanics(params, grid, tol=numerics.newton_tol, max_newton=numerics.max_newton,
+                           spin_tol=numerics.spin_tol)

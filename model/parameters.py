@@ -1,0 +1,266 @@
+"""Model parameters and numerics: two frozen, keyword-only, validated objects.
+
+The physical constants carry the paper's symbols (Eqs. 1-5). The Fig. 2 caption fixes
+``S0, A0, gamma/tau, B, K, chi``; every other constant is our choice, documented with its
+reason in ``docs/model.md`` (table "Constants").
+
+``alpha_minus_B`` is accepted as an input everywhere a dict of parameters is read
+(``alpha = B + alpha_minus_B``), because the paper sweeps the contractility ``alpha - B``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+from .errors import ParameterError
+
+MECHANICS = ("finite", "linear")
+
+
+def _suggest(name: str, valid: list[str]) -> str:
+    close = difflib.get_close_matches(name, valid, n=1)
+    return f"did you mean '{close[0]}'? " if close else ""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Parameters:
+    """Dimensionless constants of paper Eqs. (1)-(5). Lengths in units of L, stresses in
+    units of the shear modulus G, time in units of tau (so ``tau = 1`` by default).
+
+    Attributes (paper symbol):
+        S0: initial (homogeneous) nematic order parameter S.
+        A0: A_0, the Landau-de Gennes quadratic coefficient without activity.
+        B: nemato-elastic deviatoric coupling.
+        B_prime: B', nemato-elastic volumetric coupling.
+        C: quartic Landau-de Gennes coefficient (bounds S).
+        K: Frank constant.
+        kappa: bulk modulus of the neo-Hookean matrix (2-D, in units of G).
+        alpha: active stress magnitude.
+        chi: stress-activity coupling, Eq. (5) f = chi tr P.
+        zeta: linear relaxation of the activity A, Eq. (5).
+        s: cubic saturation of the activity A, Eq. (5).
+        gamma: rotational viscosity of Q, Eq. (4).
+        tau: time scale of A, Eq. (5).
+        eps: applied macroscopic pure shear, F_bar = diag(1 + eps, 1 - eps).
+        noise_modes: the random initial director field contains the Fourier modes
+            2 pi (n, m) with n^2 + m^2 <= noise_modes^2 (resolution independent).
+        noise_amplitude: RMS of an extra Gaussian (q1, q2) perturbation drawn from the same
+            band-limited field (needed when S0 = 0, as in Fig. A1).
+    """
+
+    S0: float = 0.1
+    A0: float = 0.1
+    B: float = 0.5
+    B_prime: float = 0.0
+    C: float = 3.0
+    K: float = 5e-5
+    kappa: float = 10.0
+    alpha: float = 1.5
+    chi: float = 10.0
+    zeta: float = 1.0
+    s: float = 10.0
+    gamma: float = 1.0
+    tau: float = 1.0
+    eps: float = 0.0
+    noise_modes: int = 16
+    noise_amplitude: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.type in ("int", int):
+                if isinstance(value, bool) or not isinstance(value, int):
+                    if isinstance(value, float) and value.is_integer():
+                        object.__setattr__(self, f.name, int(value))
+                        continue
+                    raise ParameterError(f.name, value, "an integer")
+            else:
+                if isinstance(value, bool) or not isinstance(value, (int, float)):
+                    raise ParameterError(f.name, value, "a real number")
+                if not math.isfinite(value):
+                    raise ParameterError(f.name, value, "a finite real number")
+                object.__setattr__(self, f.name, float(value))
+        positive = ("gamma", "tau", "kappa")
+        non_negative = ("S0", "K", "C", "zeta", "s", "chi", "B", "noise_amplitude")
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ParameterError(name, getattr(self, name), "a number > 0")
+        for name in non_negative:
+            if getattr(self, name) < 0:
+                raise ParameterError(name, getattr(self, name), "a number >= 0")
+        if self.S0 >= 1:
+            raise ParameterError("S0", self.S0, "0 <= S0 < 1")
+        if not -0.5 < self.eps < 0.5:
+            raise ParameterError("eps", self.eps, "-0.5 < eps < 0.5 (J_bar = 1 - eps^2 > 0)")
+        if not 1 <= self.noise_modes <= 256:
+            raise ParameterError("noise_modes", self.noise_modes, "an integer in [1, 256]")
+
+    @property
+    def alpha_minus_B(self) -> float:
+        """The contractility alpha - B that the paper's figures are plotted against."""
+        return self.alpha - self.B
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def names(cls) -> list[str]:
+        return [f.name for f in fields(cls)]
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> Parameters:
+        """Build from a mapping; ``alpha_minus_B`` sets ``alpha = B + alpha_minus_B``."""
+        values = dict(values)
+        valid = cls.names()
+        amb = values.pop("alpha_minus_B", None)
+        for key in values:
+            if key not in valid:
+                raise ParameterError(
+                    key, values[key],
+                    f"{_suggest(key, valid + ['alpha_minus_B'])}known parameters: "
+                    + ", ".join(valid + ["alpha_minus_B"]),
+                )
+        if amb is not None:
+            if "alpha" in values:
+                raise ParameterError(
+                    "alpha_minus_B", amb, "either 'alpha' or 'alpha_minus_B', not both"
+                )
+            if isinstance(amb, bool) or not isinstance(amb, (int, float)):
+                raise ParameterError("alpha_minus_B", amb, "a real number")
+            values["alpha"] = float(values.get("B", cls.B)) + float(amb)
+        return cls(**values)
+
+    def replace(self, **changes: Any) -> Parameters:
+        return Parameters.from_dict({**self.to_dict(), **changes})
+
+
+@dataclass(frozen=True, kw_only=True)
+class Numerics:
+    """How the equations are solved (not what they are).
+
+    Attributes:
+        resolution: N, grid points per side of the periodic unit square (even, >= 16).
+        t_final: end time (units of tau).
+        dt: initial (and, with ``adaptive = False``, fixed) time step.
+        adaptive: adapt dt from the embedded ETD1/ETD2 error estimate.
+        tolerance: absolute local error tolerance per step (RMS over the grid, per field).
+        dt_max: largest step the adaptive controller may take.
+        save_every: interval between saved time-series points.
+        snapshot_times: times at which full fields are stored (final time always is).
+        mechanics: "finite" (neo-Hookean, Newton-Krylov) or "linear" (small strain).
+        incompressible: linear mechanics only: enforce div u = 0 by spectral projection.
+        newton_tol: force-balance residual tolerance (see docs/model.md, "Residual").
+        max_newton: Newton iterations allowed per solve before failing.
+        spin_tol: relative tolerance of the fixed point for the Jaumann spin.
+    """
+
+    resolution: int = 128
+    t_final: float = 300.0
+    dt: float = 0.05
+    adaptive: bool = True
+    tolerance: float = 1e-3
+    dt_max: float = 1.0
+    save_every: float = 5.0
+    snapshot_times: tuple[float, ...] = ()
+    mechanics: str = "finite"
+    incompressible: bool = False
+    newton_tol: float = 1e-8
+    max_newton: int = 30
+    spin_tol: float = 1e-6
+
+    def __post_init__(self) -> None:
+        def number(name: str, *, integer: bool = False) -> float:
+            value = getattr(self, name)
+            ok = isinstance(value, int) if integer else isinstance(value, (int, float))
+            if isinstance(value, bool) or not ok or not math.isfinite(value):
+                if integer and isinstance(value, float) and value.is_integer():
+                    object.__setattr__(self, name, int(value))
+                    return int(value)
+                raise ParameterError(name, value, "an integer" if integer else "a real number")
+            if not integer:
+                object.__setattr__(self, name, float(value))
+            return value
+
+        n = number("resolution", integer=True)
+        if n < 16 or n % 2:
+            raise ParameterError("resolution", n, "an even integer >= 16")
+        for name in ("t_final", "dt", "tolerance", "dt_max", "save_every", "newton_tol",
+                     "spin_tol"):
+            if number(name) <= 0:
+                raise ParameterError(name, getattr(self, name), "a number > 0")
+        if number("max_newton", integer=True) < 1:
+            raise ParameterError("max_newton", self.max_newton, "an integer >= 1")
+        if self.mechanics not in MECHANICS:
+            raise ParameterError("mechanics", self.mechanics, " or ".join(MECHANICS))
+        for name in ("adaptive", "incompressible"):
+            if not isinstance(getattr(self, name), bool):
+                raise ParameterError(name, getattr(self, name), "true or false")
+        if self.incompressible and self.mechanics != "linear":
+            raise ParameterError(
+                "incompressible", True, "true only with mechanics = 'linear' (finite strain "
+                "is compressible with bulk modulus kappa)"
+            )
+        snaps = self.snapshot_times
+        if isinstance(snaps, (int, float)):
+            snaps = (snaps,)
+        try:
+            snaps = tuple(sorted(float(t) for t in snaps))
+        except (TypeError, ValueError):
+            raise ParameterError("snapshot_times", self.snapshot_times,
+                                 "a list of times") from None
+        if any(not 0 <= t <= self.t_final for t in snaps):
+            raise ParameterError("snapshot_times", list(snaps),
+                                 f"times between 0 and t_final = {self.t_final}")
+        object.__setattr__(self, "snapshot_times", snaps)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["snapshot_times"] = list(self.snapshot_times)
+        return d
+
+    @classmethod
+    def names(cls) -> list[str]:
+        return [f.name for f in fields(cls)]
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> Numerics:
+        valid = cls.names()
+        for key in values:
+            if key not in valid:
+                raise ParameterError(
+                    key, values[key],
+                    f"{_suggest(key, valid)}known numerics: " + ", ".join(valid),
+                )
+        return cls(**dict(values))
+
+    def replace(self, **changes: Any) -> Numerics:
+        return Numerics.from_dict({**self.to_dict(), **changes})
+
+
+def split_settings(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Split a flat mapping of NAME -> value into (parameters, numerics) dicts.
+
+    Unknown names raise :class:`ParameterError` with the closest valid name suggested.
+    """
+    pnames = set(Parameters.names()) | {"alpha_minus_B"}
+    nnames = set(Numerics.names())
+    params: dict[str, Any] = {}
+    numerics: dict[str, Any] = {}
+    for key, value in values.items():
+        if key in pnames:
+            params[key] = value
+        elif key in nnames:
+            numerics[key] = value
+        else:
+            valid = sorted(pnames | nnames)
+            raise ParameterError(key, value, f"{_suggest(key, valid)}known names: "
+                                 + ", ".join(valid))
+    return params, numerics
+
+
+__all__ = ["MECHANICS", "Numerics", "Parameters", "split_settings"]

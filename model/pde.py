@@ -1,0 +1,105 @@
+r"""The py-pde PDE class: paper Eqs. (3)-(5) with a readable numpy ``evolution_rate``.
+
+State: a :class:`pde.FieldCollection` of three scalar fields ``q1, q2, A`` on the periodic
+unit square. The displacement is not a state variable: it is slaved to Q by quasi-static
+force balance (Eq. 3), solved on every evaluation by :mod:`model.mechanics`.
+
+Equations (tensor conventions: docs/model.md):
+
+.. math::
+    H &= -\big(A + A_0 + C\, Q:Q - 2 B' (J - 1)\big) Q + B\, \mathrm{dev}\,\bar E
+         + K \nabla^2 Q
+         \qquad (= -\delta \Psi / \delta Q \text{ of Eq. 1, projected on sym. traceless}) \\
+    \gamma \big(\dot Q - W Q + Q W\big) &= H \qquad\qquad (\text{Eq. 4}) \\
+    \tau \dot A &= -\zeta A - \chi\, \mathrm{tr}\, P - s A^3 \qquad (\text{Eq. 5})
+
+In components, with :math:`W = \omega\,[[0, -1], [1, 0]]`:
+:math:`\dot q_1 = H_{11}/\gamma - 2 \omega q_2`, :math:`\dot q_2 = H_{12}/\gamma + 2 \omega q_1`,
+where :math:`\omega = \tfrac12 \operatorname{curl} \dot u` depends linearly on :math:`\dot Q`
+(the displacement rate solves the rate form of Eq. 3), so :math:`\omega` is found by a fixed
+point iteration :math:`\omega \leftarrow \Omega[H/\gamma + 2 \omega J q]`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pde import CartesianGrid, FieldCollection, ScalarField
+from pde.pdes.base import PDEBase
+
+from . import tensors as T
+from .errors import SimulationFailure
+from .fourier import SpectralGrid
+from .mechanics import MechanicalState, make_mechanics
+from .parameters import Numerics, Parameters
+
+Array = np.ndarray
+LABELS = ("q1", "q2", "A")
+
+
+def make_grid(resolution: int) -> CartesianGrid:
+    """The periodic unit square with ``resolution`` cells per side."""
+    return CartesianGrid([(0.0, 1.0), (0.0, 1.0)], [resolution, resolution], periodic=True)
+
+
+def make_state(q1: Array, q2: Array, A: Array) -> FieldCollection:
+    grid = make_grid(q1.shape[0])
+    return FieldCollection([ScalarField(grid, np.array(d, dtype=float)) for d in (q1, q2, A)],
+                           labels=list(LABELS))
+
+
+class ActiveNematicPDE(PDEBase):
+    """Active nematic solid, paper Eqs. (1)-(5); see the module docstring."""
+
+    explicit_time_dependence = False
+    check_implementation = False  # evolution_rate is numpy-only (spectral mechanics)
+
+    def __init__(self, params: Parameters | None = None, numerics: Numerics | None = None):
+        super().__init__()
+        self.params = params or Parameters()
+        self.numerics = numerics or Numerics()
+        self.spectral = SpectralGrid(self.numerics.resolution)
+        self.mechanics = make_mechanics(self.params, self.numerics, self.spectral)
+
+    # --- pieces of the right-hand side (readable reference) ----------------------------
+    def molecular_field(self, q1: Array, q2: Array, A: Array, mech: MechanicalState) -> Array:
+        """:math:`H` (components H11, H12), the negative variational derivative of Eq. (1)."""
+        p = self.params
+        QQ = 2.0 * (q1**2 + q2**2)
+        bulk = A + p.A0 + p.C * QQ - 2.0 * p.B_prime * mech.Jm1
+        lap1 = self.spectral.laplacian(q1)
+        lap2 = self.spectral.laplacian(q2)
+        return np.stack([-bulk * q1 + p.B * mech.Ebar_dev[0] + p.K * lap1,
+                         -bulk * q2 + p.B * mech.Ebar_dev[1] + p.K * lap2])
+
+    def corotational_rates(self, q1: Array, q2: Array, H: Array, mech: MechanicalState,
+                           t: float | None = None) -> tuple[Array, Array, Array]:
+        """Solve :math:`\dot Q = H/\gamma + W Q - Q W` with the spin slaved to
+        :math:`\dot Q` through the displacement rate (see :mod:`model.mechanics`)."""
+        qdot, omega = self.mechanics.corotational(mech, q1, q2, H / self.params.gamma, t)
+        return qdot[0], qdot[1], omega
+
+    def activity_rate(self, A: Array, mech: MechanicalState) -> Array:
+        """Paper Eq. (5): :math:`(-\\zeta A - \\chi\\, \\mathrm{tr} P - s A^3)/\\tau`."""
+        p = self.params
+        return (-p.zeta * A - p.chi * mech.trP - p.s * A**3) / p.tau
+
+    def rates(self, q1: Array, q2: Array, A: Array, t: float | None = None
+              ) -> tuple[Array, MechanicalState, Array]:
+        """Return ``(d/dt [q1, q2, A], mechanical state, omega)``."""
+        mech = self.mechanics.solve(q1, q2, t=t)
+        H = self.molecular_field(q1, q2, A, mech)
+        qd1, qd2, omega = self.corotational_rates(q1, q2, H, mech, t)
+        return np.stack([qd1, qd2, self.activity_rate(A, mech)]), mech, omega
+
+    def evolution_rate(self, state: FieldCollection, t: float = 0) -> FieldCollection:  # type: ignore[override]
+        q1, q2, A = state.data
+        rate, _, _ = self.rates(q1, q2, A, t)
+        if not np.all(np.isfinite(rate)):
+            raise SimulationFailure("nan", "non-finite rate", t)
+        out = state.copy()
+        out.data[:] = rate
+        return out
+
+    # --- helpers used by the solver and the observables --------------------------------
+    def nematic_tensor(self, q1: Array, q2: Array) -> Array:
+        return T.nematic(q1, q2)

@@ -1,0 +1,192 @@
+"""One simulation: ``run(params, numerics, seed) -> xarray.Dataset``, the one entry that
+:mod:`sweep` calls.
+
+The Dataset is self-describing: time series of every observable (dim ``time``), snapshots of
+the fields (dims ``snapshot_time, x, y``), per-run scalars (values at ``t_final``, time and
+pattern size at the first peak of sigma2_S, wall time) and, as attributes, every parameter
+(``param_<name>``), every numerics field (``num_<name>``), the seed, the code version, the git
+commit and the status. A run that fails (J <= 0, no convergence, NaN, ...) does not raise: it
+returns what it computed up to the failure with ``status = "failed"`` and the ``reason``.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+import subprocess
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from pde.solvers import Controller
+from pde.trackers import CallbackTracker
+
+from . import __version__
+from . import tensors as T
+from .errors import SimulationFailure
+from .initial import initial_fields
+from .mechanics import LinearMechanics
+from .observables import first_peak, snapshot_observables
+from .parameters import Numerics, Parameters
+from .pde import ActiveNematicPDE, make_state
+from .solver import ETDRK2Solver
+
+log = logging.getLogger(__name__)
+
+SCHEMA_VERSION = 1
+SERIES = ("mean_S", "sigma2_S", "cos2theta", "lambda", "mean_I1bar", "min_J", "mean_A",
+          "free_energy", "residual")
+UNITS = {"mean_S": "1", "sigma2_S": "1", "cos2theta": "1", "lambda": "L", "mean_I1bar": "1",
+         "min_J": "1", "mean_A": "1", "free_energy": "G L^2", "residual": "1"}
+LONG_NAMES = {
+    "mean_S": "area mean of the nematic order parameter S",
+    "sigma2_S": "variance of S over the unit domain (paper sigma_S^2)",
+    "cos2theta": "anisotropy <cos 2 theta> = <q1 / S>",
+    "lambda": "pattern size 2 pi / (spectrum-weighted mean |k| of S - <S>)",
+    "mean_I1bar": "area mean of I1bar = tr C / J",
+    "min_J": "minimum of J = det F",
+    "mean_A": "area mean of the activity A",
+    "free_energy": "total free energy, paper Eq. (1)",
+    "residual": "force-balance residual |Div P|_{H^-1} / max(1, |P|)",
+}
+
+
+@functools.lru_cache(maxsize=1)
+def git_commit() -> str:
+    """The commit of the source tree this code runs from ("unknown" outside git)."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent,
+                             capture_output=True, text=True, timeout=5, check=True)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=Path(__file__).parent, capture_output=True, text=True,
+                               timeout=5)
+        return out.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def _attr(value: Any) -> Any:
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, (list, tuple)):
+        return json.dumps(list(value))
+    return value
+
+
+def save_times(numerics: Numerics) -> np.ndarray:
+    """Regular saves every ``save_every`` plus ``t_final`` and the snapshot times."""
+    regular = np.arange(0.0, numerics.t_final, numerics.save_every)
+    times = np.concatenate([regular, [numerics.t_final], numerics.snapshot_times])
+    return np.unique(np.round(times, 12))
+
+
+def run(params: Parameters, numerics: Numerics, seed: int, *,
+        progress: Callable[[float], None] | None = None) -> xr.Dataset:
+    """Simulate paper Eqs. (1)-(5) from the seeded initial condition; see module docstring."""
+    wall0 = time.perf_counter()
+    eq = ActiveNematicPDE(params, numerics)
+    grid = eq.spectral
+    linear = isinstance(eq.mechanics, LinearMechanics)
+    q1, q2, A = initial_fields(params, numerics.resolution, seed)
+    state = make_state(q1, q2, A)
+    solver = ETDRK2Solver(eq)
+    times = save_times(numerics)
+    snap_set = {float(t) for t in np.round(list(numerics.snapshot_times) + [numerics.t_final],
+                                           12)}
+    rows: list[dict[str, float]] = []
+    snaps: list[tuple[float, np.ndarray]] = []
+
+    def record(st, t: float) -> None:
+        d = st.data
+        mech = eq.mechanics.solve(d[0], d[1], t=t)
+        residual = mech.residual if not linear else eq.mechanics.residual(mech.P)
+        obs = snapshot_observables(d[0], d[1], d[2], mech.F, residual, params, grid,
+                                   linear=linear)
+        obs["time"] = float(t)
+        obs["steps"] = float(solver.stats["steps"])
+        rows.append(obs)
+        if float(np.round(t, 12)) in snap_set:
+            u = grid.inverse(mech.u_hat)
+            C = T.matmul(T.transpose(mech.F), mech.F)
+            I1bar = T.trace(C) / T.det(mech.F)
+            snaps.append((float(t), np.stack([d[0], d[1], d[2], u[0], u[1], I1bar])))
+
+    if progress is not None:
+        solver.on_step = lambda t, h: progress(min(t / numerics.t_final, 1.0))
+    status, reason, detail, t_failed = "ok", "", "", float("nan")
+    tracker = CallbackTracker(record, interrupts=list(times))
+    controller = Controller(solver, t_range=numerics.t_final, tracker=[tracker])
+    try:
+        controller.run(state, numerics.dt)
+    except SimulationFailure as exc:
+        status, reason, detail = "failed", exc.reason, exc.detail
+        t_failed = float(exc.t) if exc.t is not None else float("nan")
+        log.info("run failed: %s", exc)
+    if status == "ok" and rows and not all(np.isfinite(rows[-1][k]) for k in
+                                           ("mean_S", "sigma2_S", "min_J")):
+        status, reason, detail = "failed", "nan", "non-finite observables at the end"
+    wall = time.perf_counter() - wall0
+    return _to_dataset(rows, snaps, grid.x, params, numerics, seed, solver,
+                       status=status, reason=reason, detail=detail, t_failed=t_failed,
+                       wall=wall)
+
+
+def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: int,
+                solver: ETDRK2Solver, *, status: str, reason: str, detail: str,
+                t_failed: float, wall: float) -> xr.Dataset:
+    t = np.array([r["time"] for r in rows], dtype=float)
+    data_vars: dict[str, Any] = {}
+    for name in (*SERIES, "steps"):
+        data_vars[name] = ("time", np.array([r[name] for r in rows], dtype=float),
+                           {"long_name": LONG_NAMES.get(name, "accepted time steps"),
+                            "units": UNITS.get(name, "1")})
+    fields = ("q1", "q2", "A", "u1", "u2", "I1bar")
+    n = len(x)
+    snap_t = np.array([s[0] for s in snaps], dtype=float)
+    stack = (np.stack([s[1] for s in snaps], axis=1) if snaps
+             else np.zeros((len(fields), 0, n, n)))
+    for i, name in enumerate(fields):
+        data_vars[name] = (("snapshot_time", "x", "y"), stack[i].astype(np.float32),
+                           {"long_name": {"q1": "Q11 = S cos 2 theta",
+                                          "q2": "Q12 = S sin 2 theta", "A": "activity A",
+                                          "u1": "periodic displacement fluctuation u~_1",
+                                          "u2": "periodic displacement fluctuation u~_2",
+                                          "I1bar": "I1bar = tr C / J"}[name], "units": "1"})
+    sig = data_vars["sigma2_S"][1]
+    lam = data_vars["lambda"][1]
+    ok_final = status == "ok" and len(t) > 0
+    scalars = {}
+    for name in ("sigma2_S", "mean_S", "cos2theta", "lambda"):
+        series = data_vars[name][1]
+        scalars[f"{name}_final"] = float(series[-1]) if ok_final else float("nan")
+    if len(t):
+        ip = first_peak(sig)
+        scalars["t_peak"] = float(t[ip])
+        scalars["lambda_peak"] = float(lam[ip])
+    else:
+        scalars["t_peak"] = scalars["lambda_peak"] = float("nan")
+    scalars["wall_time"] = wall
+    for name, value in scalars.items():
+        data_vars[name] = ((), value)
+    attrs: dict[str, Any] = {
+        "title": "active nematic solid simulation (Yang, Guo, Mahadevan, Eqs. 1-5)",
+        "status": status, "reason": reason, "detail": detail, "t_failed": t_failed,
+        "seed": int(seed), "code_version": __version__, "git_commit": git_commit(),
+        "schema_version": SCHEMA_VERSION,
+        "parameters_json": json.dumps(params.to_dict(), sort_keys=True),
+        "numerics_json": json.dumps(numerics.to_dict(), sort_keys=True),
+        "fft_backend": solver.pde.spectral.fft.backend,
+        **{f"solver_{k}": int(v) for k, v in solver.stats.items()},
+    }
+    attrs.update({f"param_{k}": _attr(v) for k, v in params.to_dict().items()})
+    attrs["param_alpha_minus_B"] = params.alpha_minus_B
+    attrs.update({f"num_{k}": _attr(v) for k, v in numerics.to_dict().items()})
+    coords = {"time": ("time", t, {"units": "tau", "long_name": "time"}),
+              "snapshot_time": ("snapshot_time", snap_t, {"units": "tau"}),
+              "x": ("x", x, {"units": "L", "long_name": "reference coordinate X1"}),
+              "y": ("y", x, {"units": "L", "long_name": "reference coordinate X2"})}
+    return xr.Dataset(data_vars, coords=coords, attrs=attrs)

@@ -1,0 +1,49 @@
+"""Grid tensor algebra for 2 x 2 tensors stored components first: ``T[i, j, x, y]``.
+
+Explicit 2-D formulas (no ``np.linalg`` on tiny matrices): they are exact and vectorise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+Array = np.ndarray
+
+
+def det(T: Array) -> Array:
+    return T[0, 0] * T[1, 1] - T[0, 1] * T[1, 0]
+
+
+def inv(T: Array) -> Array:
+    d = det(T)
+    return np.stack([np.stack([T[1, 1], -T[0, 1]]), np.stack([-T[1, 0], T[0, 0]])]) / d
+
+
+def transpose(T: Array) -> Array:
+    return np.swapaxes(T, 0, 1)
+
+
+def matmul(A: Array, B: Array) -> Array:
+    return np.einsum("ik...,kj...->ij...", A, B)
+
+
+def ddot(A: Array, B: Array) -> Array:
+    """Double contraction ``A : B = A_ij B_ij``."""
+    return np.einsum("ij...,ij...->...", A, B)
+
+
+def trace(T: Array) -> Array:
+    return T[0, 0] + T[1, 1]
+
+
+def identity(shape: tuple[int, ...]) -> Array:
+    eye = np.zeros((2, 2, *shape))
+    eye[0, 0] = 1.0
+    eye[1, 1] = 1.0
+    return eye
+
+
+def nematic(q1: Array, q2: Array) -> Array:
+    """The traceless symmetric tensor ``Q = [[q1, q2], [q2, -q1]]`` (q1 = S cos 2 theta,
+    q2 = S sin 2 theta, so Q = S (2 n n - I) and Q : Q = 2 S^2)."""
+    return np.stack([np.stack([q1, q2]), np.stack([q2, -q1])])

@@ -1,0 +1,93 @@
+"""``nematic simulate``: one run of the model, with a progress bar, a summary and a picture.
+
+Only parses and calls :func:`model.simulate.run`; registers itself on :data:`sweep.cli.app`.
+Exit codes: 0 the run succeeded, 1 the run failed (the reason and time are printed), 2 bad input.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from model.errors import ParameterError
+from model.parameters import Numerics, Parameters, split_settings
+
+from .cli import EXIT_BAD_INPUT, EXIT_FAILED_RUNS, app
+from .errors import CampaignError
+from .spec import parse_assignments
+from .store import atomic_to_netcdf
+
+
+@app.command()
+def simulate(
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", metavar="NAME=VALUE",
+        help="A model parameter (S0, A0, B, B_prime, C, K, kappa, alpha, alpha_minus_B, chi, "
+             "zeta, s, gamma, tau, eps, noise_modes, noise_amplitude) or numerics field "
+             "(resolution, t_final, dt, adaptive, tolerance, dt_max, save_every, "
+             "snapshot_times, mechanics, incompressible, newton_tol, max_newton, spin_tol). "
+             "Repeatable.")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the random initial director field.")] = 0,
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="Write the run (time series, snapshots, attributes) to this netCDF.")
+    ] = None,
+    png: Annotated[Path | None, typer.Option(
+        "--png", help="Draw the final snapshot (Fig. 2a style) and sigma2_S(t) to this PNG.")
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Run one simulation of paper Eqs. (1)-(5) and print sigma2_S, <cos 2 theta>, lambda."""
+    console = Console(highlight=False)
+    err = Console(stderr=True, highlight=False)
+    try:
+        settings = parse_assignments(set_ or [])
+        pdict, ndict = split_settings(settings)
+        params = Parameters.from_dict(pdict)
+        numerics = Numerics.from_dict(ndict)
+    except (ParameterError, CampaignError, TypeError) as exc:
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+    for path in (out, png):
+        if path is not None and not path.resolve().parent.is_dir():
+            err.print(f"[red]error:[/red] the folder of {path} does not exist")
+            raise typer.Exit(EXIT_BAD_INPUT)
+
+    from model.simulate import run  # heavy import (py-pde) only when needed
+
+    desc = (f"alpha-B={params.alpha_minus_B:g} {numerics.mechanics} "
+            f"{numerics.resolution}^2 seed {seed}")
+    try:
+        with Progress(TextColumn("{task.description}"), BarColumn(),
+                      TextColumn("t = {task.fields[t]:>7.2f}"), TimeElapsedColumn(),
+                      TimeRemainingColumn(), console=err, disable=quiet, transient=False) as bar:
+            task = bar.add_task(desc, total=1.0, t=0.0)
+
+            def progress(fraction: float) -> None:
+                bar.update(task, completed=fraction, t=fraction * numerics.t_final)
+
+            ds = run(params, numerics, seed, progress=progress)
+    except ParameterError as exc:  # e.g. resolution too low for the initial noise
+        err.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+    if out is not None:
+        atomic_to_netcdf(ds, out)
+    if png is not None and ds.sizes.get("snapshot_time", 0):
+        from .snapshot_plot import snapshot_figure
+
+        snapshot_figure(ds, png)
+    last = {k: float(ds[k].values[-1]) for k in ("sigma2_S", "cos2theta", "lambda")} \
+        if ds.sizes["time"] else {}
+    summary = ", ".join(f"{k} = {v:.4g}" for k, v in last.items())
+    wall = float(ds["wall_time"])
+    steps = int(ds.attrs.get("solver_steps", 0))
+    if ds.attrs["status"] != "ok":
+        t_fail = ds.attrs.get("t_failed", float("nan"))
+        err.print(f"[red]run failed[/red] at t = {t_fail:.4g}: {ds.attrs['reason']}: "
+                  f"{ds.attrs['detail']} (last saved: {summary}; {wall:.1f} s)")
+        raise typer.Exit(EXIT_FAILED_RUNS)
+    console.print(f"t = {float(ds['time'].values[-1]):g}: {summary}; {steps} steps, "
+                  f"wall time {wall:.2f} s")

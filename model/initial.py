@@ -27,19 +27,25 @@ from .parameters import Parameters
 Array = np.ndarray
 
 
-def band_limited_field(seed: int, modes: int, resolution: int) -> Array:
-    """The complex field :math:`\\psi` above, sampled at cell centres ``(i + 1/2) / N``."""
-    if resolution <= 2 * modes:
-        raise ParameterError("resolution", resolution,
-                             f"> 2 * noise_modes = {2 * modes} (the initial field has modes "
-                             f"up to {modes}; lower noise_modes or raise the resolution)")
+def band_limited_modes(seed: int, modes: int) -> tuple[Array, Array, Array]:
+    """The lattice modes ``(n, m)`` with n^2 + m^2 <= modes^2 and their coefficients
+    :math:`c_{nm} / \\sqrt{M}`, drawn from ``seed`` in a fixed order."""
     rng = np.random.default_rng(seed)
     ns = np.arange(-modes, modes + 1)
     n, m = np.meshgrid(ns, ns, indexing="ij")
     keep = n**2 + m**2 <= modes**2
     n, m = n[keep], m[keep]
     c = (rng.standard_normal(n.size) + 1j * rng.standard_normal(n.size)) / np.sqrt(2.0)
-    c = c / np.sqrt(n.size)
+    return n, m, c / np.sqrt(n.size)
+
+
+def band_limited_field(seed: int, modes: int, resolution: int) -> Array:
+    """The complex field :math:`\\psi` above, sampled at cell centres ``(i + 1/2) / N``."""
+    if resolution <= 2 * modes:
+        raise ParameterError("resolution", resolution,
+                             f"> 2 * noise_modes = {2 * modes} (the initial field has modes "
+                             f"up to {modes}; lower noise_modes or raise the resolution)")
+    n, m, c = band_limited_modes(seed, modes)
     # shift to cell centres so that every resolution samples the same function
     c = c * np.exp(1j * np.pi * (n + m) / resolution)
     Z = np.zeros((resolution, resolution), dtype=complex)

@@ -180,7 +180,7 @@ class LinearMechanics(_Mechanics):
 
     def corotational_hat(self, q1: Array, q2: Array, R_hat: Array, t: float | None = None
                          ) -> tuple[Array, Array]:
-        """Solve :math:`\omega = \Omega[R + 2 \omega J q]` (Jq = (-q2, q1)) by GMRES on
+        r"""Solve :math:`\omega = \Omega[R + 2 \omega J q]` (Jq = (-q2, q1)) by GMRES on
         :math:`\hat\omega`, warm-started; return ``(Qdot hat components, omega)``.
 
         Without the Jaumann feedback this is one multiplication; the feedback operator has
@@ -310,7 +310,7 @@ class FiniteMechanics(_Mechanics):
 
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
                      t: float | None = None) -> tuple[Array, Array]:
-        """Solve for :math:`\dot u` and :math:`\dot Q = R + 2\omega J q` together:
+        r"""Solve for :math:`\dot u` and :math:`\dot Q = R + 2\omega J q` together:
 
         .. math::
             -\mathrm{Div}\big(\mathbb K : \nabla \dot u + E\, \omega(\dot u)\big)

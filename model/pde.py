@@ -73,7 +73,7 @@ class ActiveNematicPDE(PDEBase):
 
     def corotational_rates(self, q1: Array, q2: Array, H: Array, mech: MechanicalState,
                            t: float | None = None) -> tuple[Array, Array, Array]:
-        """Solve :math:`\dot Q = H/\gamma + W Q - Q W` with the spin slaved to
+        r"""Solve :math:`\dot Q = H/\gamma + W Q - Q W` with the spin slaved to
         :math:`\dot Q` through the displacement rate (see :mod:`model.mechanics`)."""
         qdot, omega = self.mechanics.corotational(mech, q1, q2, H / self.params.gamma, t)
         return qdot[0], qdot[1], omega

@@ -150,7 +150,7 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     stack = (np.stack([s[1] for s in snaps], axis=1) if snaps
              else np.zeros((len(fields), 0, n, n)))
     for i, name in enumerate(fields):
-        data_vars[name] = (("snapshot_time", "x", "y"), stack[i].astype(np.float32),
+        data_vars[name] = (("snapshot_time", "x", "y"), stack[i],
                            {"long_name": {"q1": "Q11 = S cos 2 theta",
                                           "q2": "Q12 = S sin 2 theta", "A": "activity A",
                                           "u1": "periodic displacement fluctuation u~_1",

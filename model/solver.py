@@ -173,10 +173,8 @@ class ETDRK2Solver(SolverBase):
             t = t_start
             h = self._dt
             while t < t_end - 1e-12 * max(1.0, abs(t_end)):
-                if self.adaptive:
-                    h_try = min(h, self.dt_max, t_end - t)
-                else:
-                    h_try = h
+                # land exactly on t_end (the next save time)
+                h_try = min(h, self.dt_max, t_end - t) if self.adaptive else min(h, t_end - t)
                 new, _, err = self.step(u, t, h_try)
                 if not np.all(np.isfinite(new)):
                     raise SimulationFailure("nan", "non-finite state after a step", t)

@@ -140,6 +140,7 @@ class LinearMechanics(_Mechanics):
         k = params.kappa
         self._a = 1.0 if incompressible else k / (k + 1.0)
         self.ebar = np.array([[params.eps, 0.0], [0.0, -params.eps]])
+        self._spin_symbols: tuple[Array, Array] | None = None
 
     def _eigenstress(self, q1: Array, q2: Array) -> Array:
         m = self.moduli
@@ -170,13 +171,48 @@ class LinearMechanics(_Mechanics):
         return MechanicalState(F=T.identity(tr_e.shape) + grad_u, P=sigma, Ebar_dev=Ebar_dev,
                                Jm1=tr_e, trP=T.trace(sigma), u_hat=u_hat)
 
+    def spectral_response(self, q_hat: Array, QQ_hat: Array | None
+                          ) -> tuple[Array, Array, Array]:
+        """Fast path of :meth:`solve` for the time stepper, all from the spectra of q1, q2
+        (and of Q:Q when B' != 0): returns ``(dev e hat (2 comps), tr e hat, tr sigma hat)``.
+
+        Same equations as :meth:`solve` (tested to agree); no real-space F or P is formed.
+        """
+        g, m = self.grid, self.moduli
+        amb = m.alpha - m.B
+        t11 = amb * q_hat[0]
+        t12 = amb * q_hat[1]
+        iso = -m.B_prime * QQ_hat if QQ_hat is not None else 0.0
+        # b_i = i k_j tau_ij ; tau = [[t11 + iso, t12], [t12, -t11 + iso]]
+        b = np.stack([1j * (g.kx * (t11 + iso) + g.ky * t12),
+                      1j * (g.kx * t12 + g.ky * (-t11 + iso))])
+        u = self._green(b, self._a)
+        e11 = 1j * g.kx * u[0]
+        e22 = 1j * g.ky * u[1]
+        e12 = 0.5j * (g.ky * u[0] + g.kx * u[1])
+        dev = np.stack([0.5 * (e11 - e22), e12])
+        dev[0, 0, 0] += self.params.eps * g.n**2  # the applied mean strain diag(eps, -eps)
+        tr_e = e11 + e22
+        tr_tau = 2.0 * iso if QQ_hat is not None else 0.0
+        if self.incompressible:
+            kh = self._khat
+            p_hat = (kh[0] ** 2 - kh[1] ** 2) * t11 + 2 * kh[0] * kh[1] * t12 + \
+                (iso if QQ_hat is not None else 0.0) * g.active
+            tr_sigma = -2.0 * p_hat + tr_tau
+        else:
+            tr_sigma = 2.0 * self.params.kappa * tr_e + tr_tau
+        return dev, tr_e, tr_sigma
+
     def spin_multiplier(self, qdot1_hat: Array, qdot2_hat: Array) -> Array:
         """Fourier symbol of the spin: :math:`\\hat\\omega = -\\tfrac12 (\\alpha - B)\\,
         \\hat t \\cdot \\hat{\\dot Q} \\cdot \\hat k`, :math:`\\hat t = (-\\hat k_2, \\hat k_1)`
         (the isotropic B' part of the eigenstress is curl free)."""
-        kx, ky = self._khat
-        m = self.moduli
-        return -0.5 * (m.alpha - m.B) * (-2.0 * kx * ky * qdot1_hat + (kx**2 - ky**2) * qdot2_hat)
+        if self._spin_symbols is None:
+            kx, ky = self._khat
+            c = -0.5 * (self.moduli.alpha - self.moduli.B)
+            self._spin_symbols = (c * (-2.0 * kx * ky), c * (kx**2 - ky**2))
+        m1, m2 = self._spin_symbols
+        return m1 * qdot1_hat + m2 * qdot2_hat
 
     def corotational_hat(self, q1: Array, q2: Array, R_hat: Array, t: float | None = None
                          ) -> tuple[Array, Array]:

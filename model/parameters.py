@@ -171,7 +171,7 @@ class Numerics:
     incompressible: bool = False
     newton_tol: float = 1e-8
     max_newton: int = 30
-    spin_tol: float = 1e-6
+    spin_tol: float = 1e-5
 
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:

@@ -92,21 +92,25 @@ class ETDRK2Solver(SolverBase):
         return g.forward(rate) - self.L * u_hat
 
     def _nonlinear_hat_linear(self, u: Array, u_hat: Array, t: float) -> Array:
+        """Linear-mechanics fast path: every linear map of q stays in Fourier space."""
         eq = self.pde
-        p, g, mech_model = eq.params, eq.spectral, eq.mechanics
+        p, g, mech = eq.params, eq.spectral, eq.mechanics
         q1, q2, A = u
-        mech = mech_model.solve(q1, q2)
         QQ = 2.0 * (q1**2 + q2**2)
-        bulk_nl = A + p.C * QQ - 2.0 * p.B_prime * mech.Jm1
-        H_nl = np.stack([-bulk_nl * q1 + p.B * mech.Ebar_dev[0],
-                         -bulk_nl * q2 + p.B * mech.Ebar_dev[1]])
-        H_nl_hat = g.forward(H_nl)
-        R_hat = H_nl_hat / p.gamma + self.L[:2] * u_hat[:2]  # H / gamma, full
-        qdot_hat, _ = mech_model.corotational_hat(q1, q2, R_hat, t)
-        A_nl = (-p.chi * mech.trP - p.s * A**3) / p.tau
+        QQ_hat = g.forward(QQ) if p.B_prime else None
+        dev_hat, tr_e_hat, tr_sigma_hat = mech.spectral_response(u_hat[:2], QQ_hat)
+        if p.B_prime:
+            tr_e, tr_sigma = g.inverse(np.stack([tr_e_hat, tr_sigma_hat]))
+            bulk_nl = A + p.C * QQ - 2.0 * p.B_prime * tr_e
+        else:
+            tr_sigma = g.inverse(tr_sigma_hat)
+            bulk_nl = A + p.C * QQ
+        H_hat = g.forward(np.stack([-bulk_nl * q1, -bulk_nl * q2])) + p.B * dev_hat
+        R_hat = H_hat / p.gamma + self.L[:2] * u_hat[:2]  # H / gamma, full
+        qdot_hat, _ = mech.corotational_hat(q1, q2, R_hat, t)
         N_hat = np.empty_like(u_hat)
         N_hat[:2] = qdot_hat - self.L[:2] * u_hat[:2]
-        N_hat[2] = g.forward(A_nl)
+        N_hat[2] = g.forward((-p.chi * tr_sigma - p.s * A**3) / p.tau)
         return N_hat
 
     # --- one step ----------------------------------------------------------------------

@@ -41,8 +41,8 @@ def simulate(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Run one simulation of paper Eqs. (1)-(5) and print sigma2_S, <cos 2 theta>, lambda."""
-    console = Console(highlight=False)
-    err = Console(stderr=True, highlight=False)
+    console = Console(highlight=False, soft_wrap=True)
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
     try:
         settings = parse_assignments(set_ or [])
         pdict, ndict = split_settings(settings)

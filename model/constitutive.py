@@ -108,18 +108,20 @@ def tangent(F: Array, Q: Array, m: Moduli) -> Array:
 
     Assembled column by column from :func:`first_piola_increment` (exact).
     """
-    K = np.empty((2, 2, 2, 2, *F.shape[2:]))
+    shape = F.shape[2:]
+    dF = np.zeros((2, 2, 2, 2, *shape))  # [i, j, k, L]: the unit direction e_k e_L
     for k in range(2):
         for L in range(2):
-            dF = np.zeros_like(F)
-            dF[k, L] = 1.0
-            K[:, :, k, L] = first_piola_increment(F, Q, dF, m)
-    return K
+            dF[k, L, k, L] = 1.0
+    # all four directions at once, broadcasting F and Q over the direction axes (k, L)
+    dP = first_piola_increment(F[:, :, None, None], Q[:, :, None, None], dF, m)
+    return dP
 
 
 def apply_tangent(K: Array, dF: Array) -> Array:
     """:math:`dP_{iJ} = K_{iJkL}\\, dF_{kL}`."""
-    return np.einsum("ijkl...,kl...->ij...", K, dF)
+    shape = dF.shape[2:]
+    return (K.reshape(2, 2, 4, *shape) * dF.reshape(1, 1, 4, *shape)).sum(axis=2)
 
 
 def first_piola_q_increment(F: Array, Q: Array, dQ: Array, m: Moduli) -> Array:

@@ -133,8 +133,12 @@ class SpectralGrid:
         return self.inverse(self.grad_hat(self.forward(a)))
 
     def inner(self, a_hat: Array, b_hat: Array) -> float:
-        """Real-space inner product sum_x a b, computed from half spectra (Parseval)."""
-        return float(np.sum(self.weights * (a_hat.conj() * b_hat).real)) / self.n**2
+        """Real-space inner product sum_x a b, computed from half spectra (Parseval): weight 2
+        on every column of the half spectrum but the first and the last (Nyquist)."""
+        full = np.vdot(a_hat, b_hat).real
+        edges = (np.vdot(a_hat[..., 0], b_hat[..., 0]).real
+                 + np.vdot(a_hat[..., -1], b_hat[..., -1]).real)
+        return float(2.0 * full - edges) / self.n**2
 
     def rms_hat(self, a_hat: Array) -> float:
         """RMS over the grid (and over leading components summed) from a half spectrum."""

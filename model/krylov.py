@@ -56,16 +56,35 @@ def gmres(A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxit
 
     Stops when ``||b - A x|| <= rtol ||b||``. Returns ``(x, iterations, status)``.
     """
+    x, it, status, _ = _gmres(lambda v: (A(v), None), b, x0, M, inner, rtol=rtol,
+                              maxiter=maxiter, restart=restart)
+    return x, it, status
+
+
+def gmres_aux(op: Callable[[Array], tuple[Array, Array]], b: Array, x0: Array, M: Op,
+              inner: Inner, *, rtol: float, maxiter: int, restart: int = 30
+              ) -> tuple[Array, int, str, Array]:
+    """GMRES for an operator that returns ``(A v, L v)``, L another linear map: also returns
+    ``L x`` for the solution, taken from the final true-residual evaluation (so a quantity the
+    operator computes anyway need not be recomputed)."""
+    x, it, status, Lx = _gmres(op, b, x0, M, inner, rtol=rtol, maxiter=maxiter,
+                               restart=restart)
+    assert Lx is not None
+    return x, it, status, Lx
+
+
+def _gmres(op: Callable[[Array], tuple[Array, Array | None]], b: Array, x0: Array, M: Op,
+           inner: Inner, *, rtol: float, maxiter: int, restart: int
+           ) -> tuple[Array, int, str, Array | None]:
     x = x0.copy()
     bnorm = np.sqrt(inner(b, b)) or 1.0
     total = 0
     while True:
-        r = b - A(x)
+        Ax, Lx = op(x)
+        r = b - Ax  # the true residual (and L x of the current iterate)
         beta = np.sqrt(inner(r, r))
-        if beta <= rtol * bnorm:
-            return x, total, "ok"
-        if total >= maxiter:
-            return x, total, "maxiter"
+        if beta <= rtol * bnorm or total >= maxiter:
+            return x, total, ("ok" if beta <= rtol * bnorm else "maxiter"), Lx
         V = [r / beta]
         Z: list[Array] = []
         H = np.zeros((restart + 1, restart))
@@ -77,7 +96,7 @@ def gmres(A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxit
         for k in range(restart):
             z = M(V[k])
             Z.append(z)
-            w = A(z)
+            w = op(z)[0]
             for i in range(k + 1):  # modified Gram-Schmidt
                 H[i, k] = inner(V[i], w)
                 w = w - H[i, k] * V[i]
@@ -98,6 +117,6 @@ def gmres(A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxit
                 break  # converged, out of budget, or happy breakdown (exact solution)
             V.append(w / h_next)
         m = k + 1
-        y = np.linalg.solve(np.triu(H[:m, :m]), g[:m]) if m else np.zeros(0)
+        y = np.linalg.solve(np.triu(H[:m, :m]), g[:m])
         for i in range(m):
             x = x + y[i] * Z[i]

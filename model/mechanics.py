@@ -123,14 +123,15 @@ class LinearMechanics(_Mechanics):
     """Small-strain force balance, solved exactly in Fourier space.
 
     .. math::
-        \\mathrm{Div}\\big(2\\,\\mathrm{dev}\\, e + \\kappa\\, \\mathrm{tr}\\, e\\, I + \\tau\\big) = 0,
-        \\quad \\tau = (\\alpha - B) Q - B' (Q:Q) I,
-        \\quad \\hat{\\tilde u} = \\frac{1}{k^2}\\Big(I - \\frac{\\kappa}{\\kappa + 1} \\hat k \\hat k\\Big)
-        \\, i \\hat\\tau k
+        \\mathrm{Div}\\big(2\\,\\mathrm{dev}\\, e + \\kappa\\, \\mathrm{tr}\\, e\\, I
+        + \\tau\\big) = 0, \\quad \\tau = (\\alpha - B) Q - B' (Q:Q) I,
+        \\quad \\hat{\\tilde u} = \\frac{1}{k^2}\\Big(I - \\frac{\\kappa}{\\kappa + 1}
+        \\hat k \\hat k\\Big) \\, i \\hat\\tau k
 
-    (incompressible: the factor is 1 and :math:`\\hat p = \\hat k \\cdot \\hat \\tau \\cdot \\hat k`,
-    mean pressure 0 so that :math:`\\overline{\\mathrm{tr}\\,\\sigma} = \\overline{\\mathrm{tr}\\,\\tau}`
-    in both variants).
+    (incompressible: the factor is 1 and
+    :math:`\\hat p = \\hat k \\cdot \\hat \\tau \\cdot \\hat k`, mean pressure 0 so that
+    :math:`\\overline{\\mathrm{tr}\\,\\sigma} = \\overline{\\mathrm{tr}\\,\\tau}` in both
+    variants).
     """
 
     def __init__(self, params, grid: SpectralGrid, *, incompressible: bool = False,
@@ -225,26 +226,23 @@ class LinearMechanics(_Mechanics):
         """
         g = self.grid
 
-        def jaumann_hat(omega_hat: Array) -> tuple[Array, Array]:
+        def operator(omega_hat: Array) -> tuple[Array, Array]:
+            """``(I - M) omega_hat`` and the Jaumann rate ``2 omega J q`` (hat) it used."""
             omega = g.inverse(omega_hat)
-            return g.forward(np.stack([-2.0 * omega * q2, 2.0 * omega * q1])), omega
-
-        def A(omega_hat: Array) -> Array:
-            j = jaumann_hat(omega_hat)[0]
-            return omega_hat - self.spin_multiplier(j[0], j[1])
+            j = g.forward(np.stack([-2.0 * omega * q2, 2.0 * omega * q1]))
+            return omega_hat - self.spin_multiplier(j[0], j[1]), j
 
         b = self.spin_multiplier(R_hat[0], R_hat[1])
         x0 = self.omega_hat if self.omega_hat is not None else b
-        omega_hat, it, status = krylov.gmres(A, b, x0, lambda r: r, g.inner,
-                                             rtol=self.spin_tol, maxiter=100)
+        omega_hat, it, status, j_hat = krylov.gmres_aux(
+            operator, b, x0, lambda r: r, g.inner, rtol=self.spin_tol, maxiter=100)
         self.spin_iterations += it
         if status != "ok":
             raise SimulationFailure(
                 "spin_diverged", "the Jaumann spin solve did not converge in "
                 f"{it} iterations ((alpha - B) S too large: loss of well-posedness)", t)
         self.omega_hat = omega_hat
-        j_hat, omega = jaumann_hat(omega_hat)
-        return R_hat + j_hat, omega
+        return R_hat + j_hat, g.inverse(omega_hat)
 
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
                      t: float | None = None) -> tuple[Array, Array]:

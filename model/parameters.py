@@ -136,7 +136,11 @@ class Parameters:
         return cls(**values)
 
     def replace(self, **changes: Any) -> Parameters:
-        return Parameters.from_dict({**self.to_dict(), **changes})
+        """A copy with ``changes``; ``alpha_minus_B`` keeps B (or the new B) and sets alpha."""
+        base = self.to_dict()
+        if "alpha_minus_B" in changes:
+            base.pop("alpha")
+        return Parameters.from_dict({**base, **changes})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -169,9 +173,9 @@ class Numerics:
     snapshot_times: tuple[float, ...] = ()
     mechanics: str = "finite"
     incompressible: bool = False
-    newton_tol: float = 1e-8
+    newton_tol: float = 1e-6
     max_newton: int = 30
-    spin_tol: float = 1e-5
+    spin_tol: float = 1e-4
 
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:

@@ -181,6 +181,8 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
         "numerics_json": json.dumps(numerics.to_dict(), sort_keys=True),
         "fft_backend": solver.pde.spectral.fft.backend,
         **{f"solver_{k}": int(v) for k, v in solver.stats.items()},
+        "solver_spin_iterations": int(solver.pde.mechanics.spin_iterations),
+        "fft_count": int(solver.pde.spectral.fft.count),
     }
     attrs.update({f"param_{k}": _attr(v) for k, v in params.to_dict().items()})
     attrs["param_alpha_minus_B"] = params.alpha_minus_B

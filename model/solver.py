@@ -95,6 +95,7 @@ class ETDRK2Solver(SolverBase):
         """Linear-mechanics fast path: every linear map of q stays in Fourier space."""
         eq = self.pde
         p, g, mech = eq.params, eq.spectral, eq.mechanics
+        assert isinstance(mech, LinearMechanics)
         q1, q2, A = u
         QQ = 2.0 * (q1**2 + q2**2)
         QQ_hat = g.forward(QQ) if p.B_prime else None
@@ -135,26 +136,26 @@ class ETDRK2Solver(SolverBase):
         g = self.pde.spectral
         mech = self.pde.mechanics
         u_hat = g.forward(u)
-        finite = isinstance(mech, FiniteMechanics)
+        finite = mech if isinstance(mech, FiniteMechanics) else None
         if N0_hat is None:
             N0_hat = self.nonlinear_hat(u, u_hat, t)
-        if finite:
-            u0, udot0 = mech.u_hat.copy(), mech.udot_hat.copy()
+        if finite is not None:
+            u0, udot0 = finite.u_hat.copy(), finite.udot_hat.copy()
         E, phi1, phi2 = self._phis(h)
         a_hat = E * u_hat + h * phi1 * N0_hat
         a = g.inverse(a_hat)
-        if finite:
-            mech.u_hat = u0 + h * udot0  # first-order predictor of the displacement
+        if finite is not None:
+            finite.u_hat = u0 + h * udot0  # first-order predictor of the displacement
         try:
             Na_hat = self.nonlinear_hat(a, a_hat, t + h)
         except SimulationFailure:
-            if finite:
-                mech.u_hat, mech.udot_hat = u0, udot0
+            if finite is not None:
+                finite.u_hat, finite.udot_hat = u0, udot0
             raise
         corr = h * phi2 * (Na_hat - N0_hat)
         new = g.inverse(a_hat + corr)
         err = max(g.rms_hat(corr[i]) for i in range(3))
-        if finite:
+        if finite is not None:
             self._finite_restore = (u0, udot0)
         return new, N0_hat, err
 
@@ -187,9 +188,9 @@ class ETDRK2Solver(SolverBase):
                                                              0.2, 2.0))
                     if err > self.tolerance:
                         self.stats["rejected"] += 1
-                        if isinstance(self.pde.mechanics, FiniteMechanics):
-                            self.pde.mechanics.u_hat, self.pde.mechanics.udot_hat = (
-                                self._finite_restore)
+                        mech = self.pde.mechanics
+                        if isinstance(mech, FiniteMechanics):
+                            mech.u_hat, mech.udot_hat = self._finite_restore
                         h = self._quantize(h_try * fac)
                         if h < self.dt_min:
                             raise SimulationFailure(

@@ -119,7 +119,7 @@ def test_initial_field_is_resolution_independent():
     for N in (16, 40, 64):
         x = (np.arange(N) + 0.5) / N
         X, Y = np.meshgrid(x, x, indexing="ij")
-        direct = sum(ck * np.exp(2j * np.pi * (nk * X + mk * Y)) for nk, mk, ck in zip(n, m, c))
+        direct = sum(ck * np.exp(2j * np.pi * (nk * X + mk * Y)) for nk, mk, ck in zip(n, m, c, strict=True))
         np.testing.assert_allclose(band_limited_field(5, 6, N), direct, atol=1e-12)
     q1, q2, A = initial_fields(Parameters(S0=0.1, noise_modes=6), 64, 5)
     np.testing.assert_allclose(np.hypot(q1, q2), 0.1, rtol=1e-12)  # homogeneous S0

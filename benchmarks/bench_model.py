@@ -91,6 +91,8 @@ def main() -> None:
     ap.add_argument("--finite-sizes", default="64,128")
     ap.add_argument("--pypde", action="store_true",
                     help="also time py-pde's adaptive explicit solver (slow) at 128^2")
+    ap.add_argument("--pypde-t", type=float, default=20.0,
+                    help="t_final of the py-pde comparison (its explicit solver is slow)")
     ap.add_argument("--out", default=str(HERE / "bench_model.json"))
     args = ap.parse_args()
     if args.quick:
@@ -102,7 +104,8 @@ def main() -> None:
     configs = [{"N": n, "mechanics": "linear", "t_final": t_final} for n in sizes]
     configs += [{"N": n, "mechanics": "finite", "t_final": t_final} for n in fsizes]
     if args.pypde:
-        configs.append({"N": 128, "mechanics": "linear", "t_final": t_final, "pypde": True})
+        configs.append({"N": 128, "mechanics": "linear", "t_final": args.pypde_t,
+                        "pypde": True})
     rows = []
     hdr = (f"{'mech':7s} {'N':>4s} {'t':>5s} {'wall1 s':>8s} {'wall2 s':>8s} {'steps':>6s} "
            f"{'FFT/step':>8s} {'floor s':>8s} {'wall/floor':>10s} {'RSS MB':>7s} {'sigma2_S':>10s}")

@@ -26,7 +26,7 @@ def pcg(A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxiter
     "indefinite" (a direction of non-positive curvature: the operator is not SPD).
     """
     x = x0.copy()
-    r = b - A(x)
+    r = b - A(x) if np.any(x) else b.copy()  # a zero start needs no operator application
     z = M(r)
     p = z.copy()
     rz = inner(r, z)

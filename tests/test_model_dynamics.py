@@ -113,6 +113,22 @@ def test_same_seed_bitwise_identical_different_seed_differs():
     assert not np.array_equal(a["q1"].values, c["q1"].values)
 
 
+def test_bitwise_identical_across_processes():
+    """Two fresh processes give the same bits (campaigns run on different workers)."""
+    import subprocess
+    import sys
+
+    code = ("import hashlib; from model.parameters import Parameters, Numerics; "
+            "from model.simulate import run; "
+            "ds = run(Parameters(noise_modes=6, K=1e-3, S0=0.2), Numerics(resolution=32, "
+            "t_final=3, save_every=3), 5); "
+            "print(hashlib.sha256(ds['q1'].values.tobytes() + ds['A'].values.tobytes())"
+            ".hexdigest())")
+    digests = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              check=True).stdout.strip() for _ in range(2)}
+    assert len(digests) == 1
+
+
 def test_initial_field_is_resolution_independent():
     """The same seed gives the same physical field at any resolution (DESIGN.md)."""
     n, m, c = band_limited_modes(5, 6)

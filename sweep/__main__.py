@@ -1,0 +1,5 @@
+"""``python -m sweep ...`` is the ``nematic`` program."""
+
+from .cli import app
+
+app(prog_name="nematic")

@@ -1,0 +1,204 @@
+"""The phase diagram of a campaign: ``results/<name>/phase.nc``.
+
+Dims are the sweep dims (in the campaign's order; a zip group is one dim named after its
+first axis, the other axes are coordinates on it) and ``seed`` (CF ``standard_name``
+"realization"). For every per-run observable ``X`` (sigma2_S, mean_S, cos2theta, lambda at
+t_final; lambda_peak and t_peak at the first peak of sigma2_S(t); plus any other scalar the
+model writes) the file holds ``X`` over (dims..., seed), NaN where a run is missing or failed,
+and ``X_mean``, ``X_std`` (sample standard deviation, ddof = 1, NaN below two seeds) and
+``X_count`` over the seeds that succeeded. ``status`` (0 missing, 1 ok, 2 failed, CF flags),
+``reason`` and ``run_id`` (the run file is ``runs/<run_id>.nc``) locate every run.
+
+The values come from the per-run records (the scalars the worker copied from each run file),
+so aggregation opens no run file; the records are checked against the files' presence.
+Written by the driver (or ``nematic aggregate``) alone, atomically.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from .expand import Expansion
+from .provenance import code_version, git_commit
+from .spec import AMB, NUMERICS_TYPES, PARAMETER_TYPES
+from .store import CampaignStore, Record, atomic_to_netcdf, now_iso
+
+log = logging.getLogger(__name__)
+
+STATUS_MISSING, STATUS_OK, STATUS_FAILED = 0, 1, 2
+
+#: phase.nc variable -> (scalar in the run file, long_name). Units are all "1": the model is
+#: dimensionless (lengths in units of the domain size L, times in units of tau).
+OBSERVABLES: dict[str, tuple[str, str]] = {
+    "sigma2_S": ("sigma2_S_final", "variance of the nematic order parameter S over the "
+                 "domain at t_final"),
+    "mean_S": ("mean_S_final", "domain mean of the nematic order parameter S at t_final"),
+    "cos2theta": ("cos2theta_final", "domain mean of cos(2 theta) (director anisotropy) at "
+                  "t_final"),
+    "lambda": ("lambda_final", "pattern size lambda at t_final (units of L)"),
+    "lambda_peak": ("lambda_peak", "pattern size lambda at the first peak of sigma2_S(t) "
+                    "(units of L)"),
+    "t_peak": ("t_peak", "time of the first peak of sigma2_S(t) (units of tau)"),
+}
+#: Scalars of the run files that are not observables (they differ between identical runs).
+NOT_OBSERVABLES = {"wall_time"}
+
+PARAMETER_LONG_NAMES = {
+    "alpha_minus_B": "contractility alpha - B", "alpha": "active stress magnitude alpha",
+    "B": "nemato-elastic coupling B", "K": "Frank constant K", "chi": "stress-activity "
+    "coupling chi", "eps": "applied pure shear strain eps", "S0": "initial nematic order S0",
+    "A0": "Landau-de Gennes coefficient A0", "C": "quartic Landau-de Gennes coefficient C",
+    "zeta": "activity relaxation rate zeta", "s": "cubic activity saturation s",
+    "gamma": "rotational viscosity gamma", "tau": "activity time scale tau",
+    "kappa": "bulk modulus kappa", "B_prime": "volumetric nemato-elastic coupling B'",
+}
+
+
+def _observable_names(records: Mapping[str, Record]) -> dict[str, tuple[str, str]]:
+    out = dict(OBSERVABLES)
+    known = {src for src, _ in OBSERVABLES.values()}
+    extra: set[str] = set()
+    for rec in records.values():
+        extra.update((rec.get("scalars") or {}).keys())
+    for src in sorted(extra - known - NOT_OBSERVABLES):
+        name = src.removesuffix("_final")
+        if name not in out and name not in ("status", "reason", "run_id", "seed"):
+            out[name] = (src, f"{src} (run scalar)")
+    return out
+
+
+def _seed_stats(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean, sample std (ddof = 1) and count over the last axis, ignoring NaN, no warnings."""
+    ok = np.isfinite(values)
+    count = ok.sum(axis=-1)
+    filled = np.where(ok, values, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count > 0, filled.sum(axis=-1) / np.maximum(count, 1), np.nan)
+        dev = np.where(ok, values - mean[..., None], 0.0)
+        var = (dev**2).sum(axis=-1) / np.maximum(count - 1, 1)
+        std = np.where(count > 1, np.sqrt(var), np.nan)
+    return mean, std, count.astype(np.int32)
+
+
+def _coord_attrs(name: str) -> dict[str, str]:
+    attrs = {"long_name": PARAMETER_LONG_NAMES.get(name, name)}
+    if name in PARAMETER_TYPES or NUMERICS_TYPES.get(name) in ("int", "float"):
+        attrs["units"] = "1"
+    return attrs
+
+
+def build_phase(expansion: Expansion, records: Mapping[str, Record],
+                store: CampaignStore | None = None) -> xr.Dataset:
+    """The phase-diagram Dataset of a campaign from its run records (see module doc)."""
+    campaign = expansion.campaign
+    dims = [d.name for d in campaign.dims] + ["seed"]
+    shape = (*campaign.shape, len(campaign.seeds))
+    n = len(expansion)
+    status = np.zeros(n, dtype=np.int8)
+    reason = np.full(n, "", dtype=object)
+    observables = _observable_names(records)
+    data = {name: np.full(n, np.nan) for name in observables}
+    versions: set[str] = set()
+    commits: set[str] = set()
+    for i, rid in enumerate(expansion.run_ids):
+        rec = records.get(rid)
+        if rec is None or (store is not None and not store.is_complete(rid, rec,
+                                                                       check_size=False)):
+            continue
+        if rec.get("status") != "ok":
+            status[i] = STATUS_FAILED
+            reason[i] = str(rec.get("reason") or "unknown")
+            continue
+        status[i] = STATUS_OK
+        scalars = rec.get("scalars") or {}
+        for name, (src, _) in observables.items():
+            value = scalars.get(src)
+            if value is not None:
+                data[name][i] = float(value)
+        if rec.get("code_version"):
+            versions.add(str(rec["code_version"]))
+        if rec.get("git_commit"):
+            commits.add(str(rec["git_commit"]))
+
+    coords: dict[str, Any] = {}
+    for d in campaign.dims:
+        for axis in d.axes:
+            coords[axis.name] = xr.Variable((d.name,), np.asarray(axis.values),
+                                            _coord_attrs(axis.name))
+    coords["seed"] = xr.Variable(("seed",), np.asarray(campaign.seeds, dtype=np.int64), {
+        "standard_name": "realization",
+        "long_name": "random seed of the initial director field", "units": "1"})
+
+    ds = xr.Dataset(coords=coords)
+    ds["status"] = xr.Variable(dims, status.reshape(shape), {
+        "long_name": "run status", "flag_values": np.array([0, 1, 2], dtype=np.int8),
+        "flag_meanings": "missing ok failed"})
+    ds["reason"] = xr.Variable(dims, reason.reshape(shape).astype(str), {
+        "long_name": "why the run failed (empty when it did not)"})
+    ds["run_id"] = xr.Variable(dims, np.asarray(expansion.run_ids, dtype=str).reshape(shape), {
+        "long_name": "run identifier: the run's file is runs/<run_id>.nc"})
+    for name, (src, long_name) in observables.items():
+        values = data[name].reshape(shape)
+        ds[name] = xr.Variable(dims, values, {"long_name": long_name, "units": "1",
+                                              "source_variable": src})
+        mean, std, count = _seed_stats(values)
+        sd = dims[:-1]
+        ds[f"{name}_mean"] = xr.Variable(sd, mean, {
+            "long_name": f"seed mean of {name}", "units": "1", "cell_methods": "seed: mean"})
+        ds[f"{name}_std"] = xr.Variable(sd, std, {
+            "long_name": f"seed standard deviation (ddof = 1) of {name}", "units": "1",
+            "cell_methods": "seed: standard_deviation"})
+        ds[f"{name}_count"] = xr.Variable(sd, count, {
+            "long_name": f"number of seeds with a value of {name}", "units": "1"})
+
+    swept = {a.name for a in campaign.axes}
+    first = expansion.points[0]
+    params = first.parameters.to_dict()
+    fixed_params = {k: v for k, v in params.items() if k not in swept
+                    and not (k == "alpha" and (AMB in swept or "B" in swept))}
+    if AMB not in swept and "alpha" not in swept and "B" not in swept:
+        fixed_params[AMB] = first.parameters.alpha_minus_B
+    fixed_numerics = {k: v for k, v in first.numerics.to_dict().items() if k not in swept}
+    n_ok = int((status == STATUS_OK).sum())
+    n_failed = int((status == STATUS_FAILED).sum())
+    ds.attrs.update({
+        "Conventions": "CF-1.10",
+        "title": f"phase diagram of campaign {campaign.name}",
+        "campaign": campaign.name,
+        "description": campaign.description,
+        "source": "active-nematic-solids campaign manager (nematic aggregate)",
+        "code_version": code_version(),
+        "git_commit": git_commit(),
+        "run_code_versions": ", ".join(sorted(versions)),
+        "run_git_commits": ", ".join(sorted(commits)),
+        "created": now_iso(),
+        "history": f"{now_iso()}: aggregated {n_ok} ok and {n_failed} failed of {n} runs",
+        "campaign_yaml": campaign.text,
+        "campaign_overrides": "; ".join(campaign.overrides),
+        "sweep_dims": ", ".join(d.name for d in campaign.dims),
+        "zip_groups": "; ".join(", ".join(a.name for a in d.axes)
+                                for d in campaign.dims if len(d.axes) > 1),
+        "n_runs": n, "n_ok": n_ok, "n_failed": n_failed, "n_missing": n - n_ok - n_failed,
+        **{f"param_{k}": v for k, v in fixed_params.items()},
+        **{f"num_{k}": v for k, v in fixed_numerics.items()},
+    })
+    return ds
+
+
+def write_phase(expansion: Expansion, store: CampaignStore,
+                records: Mapping[str, Record] | None = None) -> xr.Dataset:
+    """Build and atomically write ``results/<name>/phase.nc``; return the Dataset."""
+    if records is None:
+        records = store.scan()
+    ds = build_phase(expansion, records, store)
+    store.root.mkdir(parents=True, exist_ok=True)
+    atomic_to_netcdf(ds, store.phase_path)
+    log.info("wrote %s (%d ok, %d failed, %d missing)", store.phase_path, ds.attrs["n_ok"],
+             ds.attrs["n_failed"], ds.attrs["n_missing"])
+    return ds
+

@@ -1,0 +1,469 @@
+"""The ``nematic`` program: parses the command line, calls :mod:`sweep` and prints.
+
+Exit codes: 0 success; 1 some runs failed (they are listed); 2 bad input (invalid campaign,
+unreachable scheduler) or refused to start (the campaign is locked by another driver);
+130 interrupted (Ctrl-C / SIGTERM; rerun the same command to resume).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import json
+import logging
+import math
+import os
+import signal
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.logging import RichHandler
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+from rich.table import Table
+
+from .errors import CampaignError, CampaignLocked, ClusterError, StoreError
+from .spec import Campaign, Overrides, load_campaign, parse_assignments, parse_value
+
+app = typer.Typer(
+    name="nematic",
+    help="Active nematic solids: run the model, sweep it, aggregate phase diagrams.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",
+)
+
+EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+log = logging.getLogger("sweep.cli")
+
+# --------------------------------------------------------------------------- shared options
+CampaignArg = Annotated[Path, typer.Argument(help="The campaign YAML file.", show_default=False)]
+ResultsOpt = Annotated[Path, typer.Option(
+    "--results", envvar="NEMATIC_RESULTS",
+    help="Folder holding `results/NAME/` for every campaign.")]
+SetOpt = Annotated[list[str] | None, typer.Option(
+    "--set", metavar="NAME=VALUE",
+    help="Override a base parameter or numerics value (repeatable), e.g. --set resolution=64.")]
+SeedsOpt = Annotated[str | None, typer.Option(
+    "--seeds", help="Override the seeds: a count (5) or a list (0,1,2).")]
+NameOpt = Annotated[str | None, typer.Option(
+    "--name", help="Override the campaign name (and so its results folder).")]
+VerboseOpt = Annotated[bool, typer.Option("--verbose", "-v", help="Log progress details.")]
+
+
+def _setup_logging(console: Console, verbose: bool) -> None:
+    import distributed  # noqa: F401 - configures its loggers on import: quieten them after
+
+    level = logging.INFO if verbose else logging.WARNING
+    handler = RichHandler(console=console, show_path=False, show_time=verbose)
+    handler.setLevel(level)
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if isinstance(h, RichHandler):
+            root.removeHandler(h)
+    root.addHandler(handler)
+    root.setLevel(level)
+    for noisy in ("distributed", "tornado", "asyncio", "bokeh"):
+        logging.getLogger(noisy).setLevel(logging.ERROR)
+
+
+def _parse_seeds(text: str | None) -> int | list[int] | None:
+    if text is None:
+        return None
+    value = parse_value(text if "," not in text or "[" in text else f"[{text}]")
+    return value  # validated with the rest of the campaign
+
+
+def _load(console: Console, path: Path, settings: list[str] | None, seeds: str | None,
+          name: str | None, scheduler: str | None = None,
+          workers: int | None = None) -> Campaign:
+    try:
+        overrides = Overrides(settings=parse_assignments(settings or []),
+                              seeds=_parse_seeds(seeds), name=name, scheduler=scheduler,
+                              workers=workers)
+        return load_campaign(path, overrides)
+    except CampaignError as e:
+        console.print(f"[bold red]error:[/] {e}", highlight=False, markup=True, soft_wrap=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+
+
+def _err_console() -> Console:
+    return Console(stderr=True, highlight=False, soft_wrap=True)
+
+
+def _fmt_time(seconds: float | None) -> str:
+    if seconds is None or not math.isfinite(seconds):
+        return "unknown"
+    seconds = int(round(seconds))
+    h, rem = divmod(seconds, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM (a batch system ending the driver's job) stops as cleanly as Ctrl-C."""
+    def handler(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+# --------------------------------------------------------------------------- validate
+@app.command()
+def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
+             set_: SetOpt = None, seeds: SeedsOpt = None, name: NameOpt = None) -> None:
+    """Check a campaign file without running anything.
+
+    Exit 0 if it is valid (a summary of the grid is printed), 2 with every problem listed
+    (file:line, key path, value, what is allowed) otherwise.
+    """
+    console = Console(highlight=False, soft_wrap=True)
+    c = _load(_err_console(), campaign, set_, seeds, name)
+    console.print(f"[green]valid[/]: campaign [bold]{c.name}[/] ({campaign})")
+    for d in c.dims:
+        for a in d.axes:
+            vals = ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in a.values[:8])
+            more = ", ..." if len(a.values) > 8 else ""
+            zipped = f" (zipped with {d.name})" if a.name != d.name else ""
+            console.print(f"  axis {a.name}{zipped}: {len(a.values)} values [{vals}{more}]")
+    console.print(f"  seeds: {len(c.seeds)}; grid points: {c.n_points}; runs: {c.n_runs}")
+    ex = c.execution
+    where = {"local": f"local dask cluster ({ex.workers or 'one per core'} worker(s))",
+             "scheduler": f"dask scheduler {ex.scheduler}",
+             "cluster": f"dask-jobqueue {ex.cluster.kind if ex.cluster else ''}"}[ex.mode]
+    console.print(f"  execution: {where}; results: {results / c.name}")
+    if c.fits or c.figures:
+        console.print("  fits: " + (", ".join(p.name for p in c.fits) or "none")
+                      + "; figures: " + (", ".join(p.name for p in c.figures) or "none"))
+
+
+# --------------------------------------------------------------------------- run
+class _ProgressEvents:
+    """Draws the progress bar and prints failures as they happen. Without a terminal (a
+    batch job's log) it prints a progress line every :data:`LOG_EVERY` seconds instead."""
+
+    LOG_EVERY = 30.0
+
+    def __init__(self, console: Console, progress: Progress, store: Any):
+        self.console, self.progress, self.store = console, progress, store
+        self.task: TaskID | None = None
+        self.ok = 0
+        self.failed = 0
+        self.total = self.skipped = 0
+        self.t0 = self.last_log = time.monotonic()
+
+    def planned(self, plan: Any, expansion: Any) -> None:
+        c = expansion.campaign
+        skipped = " (skipped; --retry-failed redoes them)" if plan.failed else ""
+        self.console.print(
+            f"campaign [bold]{c.name}[/]: {len(expansion)} runs ({c.n_points} points x "
+            f"{len(c.seeds)} seeds); {len(plan.done)} done, {len(plan.failed)} failed{skipped}, "
+            f"{len(plan.todo)} to run -> {self.store.root}", soft_wrap=True)
+        if plan.adopted or plan.discarded:
+            self.console.print(f"recovered {plan.adopted} unindexed run file(s); "
+                               f"{plan.discarded} truncated or missing file(s) will be redone")
+
+    def started(self, plan: Any, total: int, workers: int) -> None:
+        self.skipped = len(plan.done) + len(plan.failed)
+        self.total = total
+        self.t0 = self.last_log = time.monotonic()
+        self.task = self.progress.add_task("runs", total=total, completed=self.skipped,
+                                           counts=self._counts())
+
+    def _counts(self) -> str:
+        return f"[green]{self.ok} ok[/] [red]{self.failed} failed[/]"
+
+    def finished_run(self, run: Any, record: dict[str, Any]) -> None:
+        from .execute import describe_failure
+
+        if record.get("status") == "ok":
+            self.ok += 1
+        else:
+            self.failed += 1
+            self.progress.console.print(f"[red]FAILED[/] {describe_failure(run, record)}",
+                                        highlight=False, soft_wrap=True)
+        if self.task is not None:
+            self.progress.update(self.task, advance=1, counts=self._counts())
+        now = time.monotonic()
+        done = self.ok + self.failed
+        if not self.console.is_terminal and (now - self.last_log >= self.LOG_EVERY
+                                             or self.skipped + done == self.total):
+            self.last_log = now
+            remaining = self.total - self.skipped - done
+            eta = remaining * (now - self.t0) / done if done else None
+            self.console.print(f"progress: {self.skipped + done}/{self.total} runs "
+                               f"({self.ok} ok, {self.failed} failed this session), "
+                               f"elapsed {_fmt_time(now - self.t0)}, ETA {_fmt_time(eta)}")
+
+
+@app.command()
+def run(
+    campaign: CampaignArg,
+    results: ResultsOpt = Path("results"),
+    set_: SetOpt = None,
+    seeds: SeedsOpt = None,
+    name: NameOpt = None,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Use the dask scheduler at this address (tcp://HOST:PORT) instead "
+        "of the campaign's execution section.")] = None,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", help="Local worker processes (default: the campaign's, else one per "
+        "core).")] = None,
+    retry_failed: Annotated[bool, typer.Option(
+        "--retry-failed", help="Also redo runs that failed before.")] = False,
+    aggregate: Annotated[bool, typer.Option(
+        "--aggregate/--no-aggregate", help="Write phase.nc at the end.")] = True,
+    figures: Annotated[bool, typer.Option(
+        "--figures/--no-figures", help="After phase.nc, write fits.nc and the figures "
+        "(as 'nematic figures' does).")] = True,
+    verbose: VerboseOpt = False,
+) -> None:
+    """Run a campaign on dask, resuming where it stopped.
+
+    Finished runs are skipped, the rest run on a local dask cluster (default), a scheduler or
+    a dask-jobqueue cluster; one netCDF per run, phase.nc at the end. Exit 0 if every run
+    succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 130 when
+    interrupted (rerun to resume).
+    """
+    from .aggregate import write_phase
+    from .execute import describe_failure, drive
+    from .expand import expand
+    from .store import CampaignStore
+
+    err = _err_console()
+    _setup_logging(err, verbose)
+    c = _load(err, campaign, set_, seeds, name, scheduler, workers)
+    store = CampaignStore(results, c.name)
+    lock = store.lock()
+    try:
+        store.ensure()
+        lock.acquire(command=" ".join(sys.argv))
+    except (CampaignLocked, StoreError) as e:
+        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+    try:
+        expansion = expand(c)
+        progress = Progress(
+            TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+            TextColumn("{task.fields[counts]}"), TimeElapsedColumn(), TextColumn("ETA"),
+            TimeRemainingColumn(), console=err, transient=False)
+        events = _ProgressEvents(err, progress, store)
+        try:
+            with _sigterm_as_interrupt(), progress:
+                plan, summary = drive(expansion, store, retry_failed=retry_failed,
+                                      events=events)
+        except ClusterError as e:
+            err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except KeyboardInterrupt:  # before any run was submitted
+            err.print("[yellow]interrupted[/]; rerun the same command to resume")
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+        if summary is not None and summary.interrupted:
+            err.print(f"[yellow]interrupted[/] after {summary.completed} run(s) "
+                      f"({summary.ok} ok, {len(summary.failed)} failed); rerun the same "
+                      "command to resume")
+            raise typer.Exit(EXIT_INTERRUPTED)
+        if summary is not None and summary.wall_time > 0:
+            err.print(f"{summary.completed} run(s) in {_fmt_time(summary.wall_time)} "
+                      f"(sum of run times {_fmt_time(summary.run_time)})")
+        if aggregate:
+            write_phase(expansion, store)
+            err.print(f"phase diagram: {store.phase_path}")
+            if figures:
+                for figure in _regenerate_figures(c, results):
+                    err.print(f"figure: {figure}")
+        failures = [] if summary is None else summary.failed
+        n_failed = len(failures) + len(plan.failed)
+        if summary is not None and summary.lost:
+            err.print(f"[yellow]{len(summary.lost)} run(s) were cancelled by dask[/] (the "
+                      "scheduler or cluster went away); rerun the same command to do them")
+            if not n_failed:
+                raise typer.Exit(EXIT_FAILED_RUNS)
+        if n_failed:
+            err.print(f"[red]{n_failed} run(s) failed[/]:")
+            for r, rec in failures[:20]:
+                err.print(f"  {describe_failure(r, rec)}", soft_wrap=True, highlight=False)
+            if len(failures) > 20:
+                err.print(f"  ... and {len(failures) - 20} more")
+            if plan.failed:
+                err.print(f"  ... and {len(plan.failed)} earlier failure(s); "
+                          "--retry-failed redoes them")
+            err.print(f"details: nematic status {campaign}")
+            raise typer.Exit(EXIT_FAILED_RUNS)
+    finally:
+        lock.release()
+
+
+def _regenerate_figures(campaign: Campaign, results: Path) -> list[Path]:
+    """Fits and figures after a run (:func:`sweep.figures.regenerate`, which logs and never
+    raises for a figure it cannot draw); nothing while that module does not exist."""
+    try:
+        from .figures import regenerate
+    except ModuleNotFoundError as e:
+        if e.name != "sweep.figures":
+            raise
+        return []
+    return list(regenerate(campaign, results))
+
+
+# --------------------------------------------------------------------------- status
+@app.command()
+def status(
+    campaign: CampaignArg,
+    results: ResultsOpt = Path("results"),
+    set_: SetOpt = None,
+    seeds: SeedsOpt = None,
+    name: NameOpt = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", help="Concurrency assumed for the ETA when no driver is running.")] = None,
+) -> None:
+    """Show done / failed / pending runs, failure reasons and an ETA.
+
+    Counts are given overall and per sweep value. Only the run records are read (no netCDF),
+    so it answers in seconds for 10^5 runs, also while the campaign runs.
+    """
+    from .expand import expand
+    from .status import campaign_status
+    from .store import CampaignStore
+
+    console = Console(highlight=False, soft_wrap=True)
+    c = _load(_err_console(), campaign, set_, seeds, name)
+    store = CampaignStore(results, c.name)
+    report = campaign_status(expand(c), store, workers=workers)
+    if as_json:
+        typer.echo(json.dumps(report.to_dict(), default=str))
+        return
+    pct = 100.0 * report.done / max(report.total, 1)
+    console.print(f"campaign [bold]{report.campaign}[/] ({report.folder}): "
+                  f"[green]{report.done} done[/], [red]{report.failed} failed[/], "
+                  f"{report.pending} pending of {report.total} ({pct:.0f}% done)")
+    if report.running:
+        console.print(f"running: pid {report.running.get('pid')} on "
+                      f"{report.running.get('host')} since {report.running.get('started')}")
+    if report.pending:
+        basis = f" ({report.eta_basis})" if report.eta_basis else ""
+        console.print(f"ETA: {_fmt_time(report.eta_seconds)}{basis}")
+    if report.mean_run_time is not None:
+        console.print(f"mean run time: {report.mean_run_time:.3g} s")
+    for ax in report.per_axis:
+        table = Table(title=f"by {ax.dim}", title_justify="left", show_edge=False)
+        for col in (ax.dim, "done", "failed", "pending"):
+            table.add_column(col, justify="right")
+        for row in zip(ax.labels, ax.done, ax.failed, ax.pending, strict=True):
+            table.add_row(*map(str, row))
+        console.print(table)
+    if report.reasons:
+        console.print("[red]failures by reason[/]: "
+                      + ", ".join(f"{k}: {v}" for k, v in report.reasons.items()))
+        for ex in report.examples:
+            coords = ", ".join(f"{k}={v}" for k, v in ex["coords"].items())
+            t = ex.get("t_failed")
+            at = f" at t = {t:.4g}" if isinstance(t, (int, float)) else ""
+            detail = str(ex["detail"]).strip().splitlines()
+            console.print(f"  {ex['run_id']} ({coords}): {ex['reason']}{at}"
+                          + (f": {detail[-1]}" if detail else ""), soft_wrap=True)
+        console.print(f"  (full records with tracebacks: {store.runs_dir}/<run_id>.json)")
+    if report.foreign_runs:
+        console.print(f"{report.foreign_runs} run record(s) in the folder belong to other "
+                      "grids (kept, not counted)")
+
+
+# --------------------------------------------------------------------------- aggregate
+@app.command("aggregate")
+def aggregate_cmd(
+    campaign: CampaignArg,
+    results: ResultsOpt = Path("results"),
+    set_: SetOpt = None,
+    seeds: SeedsOpt = None,
+    name: NameOpt = None,
+    verbose: VerboseOpt = False,
+) -> None:
+    """Write `results/NAME/phase.nc` from the runs on disk.
+
+    Missing and failed runs are NaN. Refuses while a driver is running the campaign (the
+    driver aggregates when it ends).
+    """
+    from .aggregate import write_phase
+    from .expand import expand
+    from .store import CampaignStore
+
+    err = _err_console()
+    _setup_logging(err, verbose)
+    c = _load(err, campaign, set_, seeds, name)
+    store = CampaignStore(results, c.name)
+    if not store.runs_dir.is_dir():
+        err.print(f"[bold red]error:[/] no results for campaign {c.name} in {store.root}; "
+                  f"run it first (nematic run {campaign})", soft_wrap=True)
+        raise typer.Exit(EXIT_BAD_INPUT)
+    lock = store.lock()
+    try:
+        lock.acquire(command=" ".join(sys.argv))
+    except CampaignLocked as e:
+        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+    try:
+        ds = write_phase(expand(c), store)
+    finally:
+        lock.release()
+    Console(highlight=False, soft_wrap=True).print(
+        f"wrote {store.phase_path}: {ds.attrs['n_ok']} ok, {ds.attrs['n_failed']} failed, "
+        f"{ds.attrs['n_missing']} missing of {ds.attrs['n_runs']} runs")
+
+
+# --------------------------------------------------------------------------- other commands
+# Commands written elsewhere live in their own modules and are registered here:
+#   sweep/cli_simulate.py   `nematic simulate`  (the lead engineer; registers itself with
+#                           `from sweep.cli import app` and `@app.command()`)
+#   sweep/cli_stability.py  `nematic stability` (issue 3; defines `stability`, registered here)
+#   sweep/cli_figures.py    `nematic figures`   (issue 5; either convention works)
+# A module that does not exist yet is skipped; any other import error is raised.
+PLUGIN_MODULES: dict[str, str | None] = {
+    "sweep.cli_simulate": None,
+    "sweep.cli_stability": "stability",
+    "sweep.cli_figures": "figures",
+}
+
+
+def _register_plugins() -> None:
+    for module_name, command in PLUGIN_MODULES.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as e:
+            if e.name != module_name:
+                raise
+            continue
+        callback = getattr(module, command, None) if command else None
+        registered = {info.callback for info in app.registered_commands}
+        if callable(callback) and callback not in registered:
+            app.command()(callback)
+
+
+_register_plugins()
+
+
+def main() -> None:  # pragma: no cover - the console script calls `app` directly
+    os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    app()

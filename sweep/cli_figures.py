@@ -1,0 +1,74 @@
+"""``nematic figures``: fits and figures of a campaign from its results folder.
+
+Only parses and calls :func:`sweep.figures.produce`; registers itself on :data:`sweep.cli.app`.
+Exit codes: 0 every fit and figure was produced, 1 some failed (listed), 2 bad input (invalid
+campaign, unknown figure name, no phase.nc yet).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from .cli import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED_RUNS,
+    CampaignArg,
+    NameOpt,
+    ResultsOpt,
+    SeedsOpt,
+    SetOpt,
+    VerboseOpt,
+    _err_console,
+    _load,
+    _setup_logging,
+    app,
+)
+
+
+@app.command()
+def figures(
+    campaign: CampaignArg,
+    results: ResultsOpt = Path("results"),
+    set_: SetOpt = None,
+    seeds: SeedsOpt = None,
+    name: NameOpt = None,
+    only: Annotated[list[str] | None, typer.Option(
+        "--only", metavar="FIGURE",
+        help="Draw only this figure (repeatable): fig2, fig3, fig4, figA1. Default: the "
+             "campaign's 'figures:' list, else every figure that applies to its grid.")] = None,
+    fits: Annotated[bool, typer.Option(
+        "--fits/--no-fits", help="Recompute fits.nc from phase.nc first (default), or draw "
+        "from the fits.nc on disk.")] = True,
+    verbose: VerboseOpt = False,
+) -> None:
+    """Write results/<name>/fits.nc and results/<name>/figures/*.png|pdf from phase.nc.
+
+    Figures read only the results folder (phase.nc, fits.nc, runs/*.nc). The overrides
+    (--set, --seeds, --name) must match those of the run, since they name the folder. Exit 0
+    if everything was produced, 1 if a fit or figure failed (listed), 2 on bad input or
+    when the campaign has no phase.nc yet.
+    """
+    from .figures import FigureError, produce
+
+    console = Console(highlight=False, soft_wrap=True)
+    err = _err_console()
+    _setup_logging(err, verbose)
+    c = _load(err, campaign, set_, seeds, name)
+    try:
+        out = produce(c, results, names=only or None, fits=fits)
+    except FigureError as e:
+        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+    if out.fits_path is not None:
+        console.print(f"fits: {out.fits_path}")
+    for path in out.paths:
+        console.print(f"figure: {path}")
+    if out.failures:
+        err.print(f"[red]{len(out.failures)} failed[/]:")
+        for what, why in out.failures.items():
+            err.print(f"  {what}: {why}", soft_wrap=True, highlight=False)
+        raise typer.Exit(EXIT_FAILED_RUNS)

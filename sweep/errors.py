@@ -1,0 +1,48 @@
+"""The campaign manager's exceptions. They extend the model's hierarchy
+(:class:`model.errors.NematicError`), so a caller can catch everything this project raises
+on purpose with one class. Every message names the bad value, what is allowed and the fix."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from model.errors import NematicError
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One mistake in a campaign: where it is, what was found and what is allowed.
+
+    ``path`` is the key path inside the YAML document (``sweep.axes.chi[2]``); ``location``
+    is ``"FILE:LINE"`` or a command-line option (``"--set K=..."``).
+    """
+
+    path: str
+    message: str
+    location: str = ""
+
+    def __str__(self) -> str:
+        where = f"{self.location}: " if self.location else ""
+        return f"{where}{self.path or '<document>'}: {self.message}"
+
+
+class CampaignError(NematicError, ValueError):
+    """A campaign file (or its command-line overrides) is invalid. Exit code 2."""
+
+    def __init__(self, source: str, problems: list[Problem]):
+        self.source = source
+        self.problems = list(problems)
+        head = f"invalid campaign {source}: {len(self.problems)} problem(s)"
+        super().__init__("\n".join([head, *(f"  {p}" for p in self.problems)]))
+
+
+class CampaignLocked(NematicError, RuntimeError):
+    """Another driver holds the campaign's lock. Exit code 2 (refused to start)."""
+
+
+class StoreError(NematicError, RuntimeError):
+    """The results folder is unusable (not writable, not a campaign folder, ...)."""
+
+
+class ClusterError(NematicError, RuntimeError):
+    """The dask cluster cannot be reached or its workers cannot run the model. Exit code 2."""

@@ -1,0 +1,459 @@
+"""Execution: the worker task and the driver that fans runs out over dask.
+
+The worker task (:func:`execute_run`) runs one simulation, writes its netCDF atomically and
+then its record, and returns the record; it never raises for a failed or crashing run (the
+record says why, with the traceback). The driver (:func:`run_campaign`) plans from what is on
+disk (:func:`plan_runs`), submits the remaining runs through a bounded window, reports each
+result as it arrives and can be interrupted at any point: everything it needs to resume is on
+disk, nothing is kept in dask.
+
+Clusters (:func:`dask_client`): an embedded ``LocalCluster`` (default), an existing scheduler
+(``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster (``execution.cluster``).
+The results folder must be visible at the same path from every worker (a shared filesystem).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import os
+import signal
+import socket
+import time
+import traceback
+from collections.abc import Callable, Iterator, Mapping
+from concurrent.futures import CancelledError
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+from model.parameters import Numerics, Parameters
+
+from .errors import ClusterError
+from .expand import Expansion, RunSpec
+from .spec import CLUSTER_KINDS, ExecutionSpec, StoreSpec
+from .store import (
+    CampaignStore,
+    Record,
+    atomic_to_netcdf,
+    now_iso,
+    record_from_dataset,
+)
+
+if TYPE_CHECKING:
+    import xarray as xr
+    from distributed import Client
+
+log = logging.getLogger(__name__)
+
+#: Runs in flight per worker thread (keeps the scheduler's queue short for 10^5 runs).
+INFLIGHT_PER_THREAD = 4
+MIN_INFLIGHT = 8
+#: How often the submission window follows the cluster's size (seconds).
+WINDOW_REFRESH = 10.0
+#: How often the driver refreshes the manifest while running (seconds).
+MANIFEST_EVERY = 300.0
+#: Run-file attributes added by the campaign manager.
+IDENTITY_ATTRS = ("run_id", "campaign", "identity_schema")
+
+
+# --------------------------------------------------------------------------- the worker task
+@dataclass(frozen=True)
+class RunTask:
+    """Everything a worker needs for one run (plain data: cheap to pickle)."""
+
+    run_id: str
+    seed: int
+    parameters: dict[str, Any]
+    numerics: dict[str, Any]
+    runs_dir: str
+    campaign: str
+    coords: dict[str, Any] = field(default_factory=dict)
+    snapshot_fields: tuple[str, ...] | None = None
+    snapshot_dtype: str = "float64"
+
+    @classmethod
+    def from_spec(cls, run: RunSpec, store: CampaignStore, campaign: str,
+                  store_spec: StoreSpec) -> RunTask:
+        return cls(run_id=run.run_id, seed=run.seed,
+                   parameters=run.point.parameters.to_dict(),
+                   numerics=run.point.numerics.to_dict(),
+                   runs_dir=str(store.runs_dir.resolve()), campaign=campaign,
+                   coords=dict(run.point.coords), snapshot_fields=store_spec.snapshot_fields,
+                   snapshot_dtype=store_spec.snapshot_dtype)
+
+
+def prepare_dataset(ds: xr.Dataset, task: RunTask) -> tuple[xr.Dataset, dict[str, Any]]:
+    """Add the run's identity attributes, keep the requested snapshot fields in the requested
+    precision; return the Dataset and its netCDF encoding (snapshots zlib-compressed)."""
+    from .identity import SCHEMA_VERSION
+
+    ds = ds.copy(deep=False)
+    if task.snapshot_fields is not None:
+        drop = [n for n, v in ds.data_vars.items()
+                if "snapshot_time" in v.dims and n not in task.snapshot_fields]
+        ds = ds.drop_vars(drop)
+    encoding: dict[str, Any] = {}
+    for name, var in ds.data_vars.items():
+        if var.ndim >= 2:
+            encoding[str(name)] = {"zlib": True, "complevel": 4}
+            if task.snapshot_dtype == "float32" and var.dtype.kind == "f":
+                ds[name] = var.astype("float32")
+    ds.attrs.update(run_id=task.run_id, campaign=task.campaign,
+                    identity_schema=SCHEMA_VERSION)
+    return ds, encoding
+
+
+def _failure(task: RunTask, reason: str, detail: str, tb: str, wall: float) -> Record:
+    return {"run_id": task.run_id, "status": "failed", "reason": reason, "detail": detail,
+            "t_failed": None, "traceback": tb, "seed": task.seed, "wall_time": wall,
+            "nc_bytes": None, "scalars": {}, "code_version": "", "git_commit": "",
+            "finished": now_iso(), "host": socket.gethostname()}
+
+
+def execute_run(task: RunTask) -> Record:
+    """Run one simulation on a worker; write ``<run_id>.nc`` then ``<run_id>.json``
+    atomically; return the record. A run the model reports as failed keeps its (partial)
+    Dataset; a Python exception becomes a record with reason ``"exception"`` and the
+    traceback; a failure to write the file, reason ``"write_error"``."""
+    from model.simulate import run as simulate
+
+    store = CampaignStore(Path(task.runs_dir).parent.parent, Path(task.runs_dir).parent.name)
+    t0 = time.perf_counter()
+    try:
+        ds = simulate(Parameters.from_dict(task.parameters), Numerics.from_dict(task.numerics),
+                      task.seed)
+    except Exception as e:  # noqa: BLE001 - any crash is recorded, the campaign goes on
+        record = _failure(task, "exception", f"{type(e).__name__}: {e}", traceback.format_exc(),
+                          time.perf_counter() - t0)
+    else:
+        try:
+            ds, encoding = prepare_dataset(ds, task)
+            nc_bytes = atomic_to_netcdf(ds, store.nc_path(task.run_id), encoding)
+            record = record_from_dataset(ds, task.run_id, nc_bytes)
+            if record.get("wall_time") is None:
+                record["wall_time"] = time.perf_counter() - t0
+        except Exception as e:  # noqa: BLE001
+            record = _failure(task, "write_error", f"{type(e).__name__}: {e}",
+                              traceback.format_exc(), time.perf_counter() - t0)
+    record.update(parameters=task.parameters, numerics=task.numerics, coords=task.coords,
+                  campaign=task.campaign, pid=os.getpid())
+    store.write_record(record)
+    return record
+
+
+def worker_environment() -> dict[str, Any]:
+    """Run on every worker before a campaign: proves the code is importable there."""
+    import model.simulate  # noqa: F401 - the import is the check
+
+    from .provenance import environment
+
+    return environment()
+
+
+# --------------------------------------------------------------------------- planning
+@dataclass
+class Plan:
+    """What is on disk for a campaign's runs, and what remains to do (run positions)."""
+
+    todo: list[int]
+    done: list[int]
+    failed: list[int]
+    records: dict[str, Record]
+    adopted: int = 0
+    discarded: int = 0
+
+
+def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False) -> Plan:
+    """Classify every run: done (skipped), failed (skipped unless ``retry_failed``), to do.
+
+    A record whose file is missing or has another size than recorded (truncated) is discarded
+    and its run redone; a ``.nc`` without a record is adopted if it opens, else deleted.
+    """
+    records = store.scan()
+    plan = Plan(todo=[], done=[], failed=[], records=records)
+    for i, rid in enumerate(expansion.run_ids):
+        rec = records.get(rid)
+        if rec is None and rid in store.nc_present:
+            rec = store.adopt(rid)
+            if rec is not None:
+                plan.adopted += 1
+        if rec is not None and not store.is_complete(rid, rec):
+            log.warning("run %s: its file is missing or truncated; it will be redone", rid)
+            store.discard(rid)
+            records.pop(rid, None)
+            plan.discarded += 1
+            rec = None
+        if rec is None:
+            plan.todo.append(i)
+        elif rec.get("status") == "ok":
+            plan.done.append(i)
+        elif retry_failed:
+            plan.todo.append(i)
+        else:
+            plan.failed.append(i)
+    return plan
+
+
+# --------------------------------------------------------------------------- clusters
+def local_worker_count(execution: ExecutionSpec) -> int:
+    if execution.workers:
+        return execution.workers
+    n = os.cpu_count() or 1
+    return max(1, n // max(1, execution.threads_per_worker))
+
+
+@contextlib.contextmanager
+def dask_client(execution: ExecutionSpec, *, timeout: float = 30.0) -> Iterator[Client]:
+    """A dask ``Client`` for the campaign's execution section (closed on exit)."""
+    from distributed import Client, LocalCluster
+
+    if execution.scheduler:
+        log.info("connecting to the dask scheduler at %s", execution.scheduler)
+        try:
+            client = Client(execution.scheduler, timeout=timeout)
+        except OSError as e:
+            raise ClusterError(f"cannot reach the dask scheduler at {execution.scheduler}: "
+                               f"{e}") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    if execution.cluster is not None:
+        import dask_jobqueue
+
+        spec = execution.cluster
+        cls = getattr(dask_jobqueue, CLUSTER_KINDS[spec.kind])
+        log.info("starting a dask-jobqueue %s", cls.__name__)
+        try:
+            jobqueue = cls(**dict(spec.options))
+        except (ValueError, TypeError, OSError) as e:
+            raise ClusterError(f"cannot set up the {cls.__name__} of execution.cluster: "
+                               f"{e}") from None
+        with jobqueue as cluster:
+            if spec.adapt:
+                cluster.adapt(minimum_jobs=spec.adapt[0], maximum_jobs=spec.adapt[1])
+            else:
+                cluster.scale(jobs=spec.jobs)
+            with Client(cluster) as client:
+                yield client
+        return
+    n = local_worker_count(execution)
+    log.info("starting a local dask cluster: %d worker process(es)", n)
+    kwargs: dict[str, Any] = {}
+    if execution.memory_limit:
+        kwargs["memory_limit"] = execution.memory_limit
+    with _workers_ignore_sigint():
+        cluster = LocalCluster(n_workers=n, threads_per_worker=execution.threads_per_worker,
+                               processes=True, dashboard_address=":0",
+                               silence_logs=logging.ERROR, **kwargs)
+    with cluster, Client(cluster) as client:
+        yield client
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint() -> Iterator[None]:
+    """Start local worker processes with SIGINT ignored (the disposition is inherited across
+    exec, and Python then installs no KeyboardInterrupt handler): a terminal's Ctrl-C reaches
+    the whole process group, but only the driver should react, by cancelling the runs and
+    closing the cluster cleanly."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def make_cluster(execution: ExecutionSpec) -> Any:
+    """The dask-jobqueue cluster object of ``execution.cluster`` (not scaled: no job is
+    submitted), e.g. to inspect ``job_script()``."""
+    import dask_jobqueue
+
+    assert execution.cluster is not None
+    cls = getattr(dask_jobqueue, CLUSTER_KINDS[execution.cluster.kind])
+    return cls(**dict(execution.cluster.options))
+
+
+# --------------------------------------------------------------------------- the driver
+class RunEvents(Protocol):
+    """What the driver reports (the CLI draws the progress bar from these)."""
+
+    def started(self, plan: Plan, total: int, workers: int) -> None: ...
+
+    def finished_run(self, run: RunSpec, record: Record) -> None: ...
+
+
+@dataclass
+class RunSummary:
+    total: int
+    skipped: int
+    submitted: int = 0
+    ok: int = 0
+    failed: list[tuple[RunSpec, Record]] = field(default_factory=list)
+    failed_before: int = 0
+    #: runs whose dask task was cancelled under them (scheduler or cluster gone): no record
+    lost: list[RunSpec] = field(default_factory=list)
+    interrupted: bool = False
+    wall_time: float = 0.0
+    run_time: float = 0.0
+
+    @property
+    def completed(self) -> int:
+        return self.ok + len(self.failed)
+
+
+def _lost_task_record(task: RunTask, exc: BaseException) -> Record:
+    from distributed import KilledWorker
+
+    if isinstance(exc, KilledWorker):
+        reason = "killed_worker"
+        detail = (f"the run's worker died repeatedly ({exc}); it may exhaust memory or "
+                  "crash the interpreter")
+    else:
+        reason = "exception"
+        detail = f"{type(exc).__name__}: {exc}"
+    tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    return _failure(task, reason, detail, tb, math.nan)
+
+
+def run_campaign(expansion: Expansion, store: CampaignStore, client: Client, plan: Plan,
+                 events: RunEvents | None = None, *,
+                 clock: Callable[[], float] = time.monotonic) -> RunSummary:
+    """Run ``plan.todo`` on ``client``; return when all are done or on Ctrl-C
+    (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set)."""
+    from distributed import as_completed
+
+    campaign = expansion.campaign
+    t0 = clock()
+    summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
+                         failed_before=len(plan.failed))
+    try:
+        info = client.run(worker_environment)
+        workers = max(1, sum(client.nthreads().values()))
+    except Exception as e:  # noqa: BLE001 - a worker that cannot import the code is fatal
+        raise ClusterError(f"the dask workers cannot run the model ({type(e).__name__}: {e});"
+                           " install this package in the workers' environment") from e
+    for addr, env in info.items():
+        log.debug("worker %s: %s", addr, env)
+    if events:
+        events.started(plan, len(expansion), workers)
+    queue = list(reversed(plan.todo))
+    tasks: dict[Any, tuple[RunSpec, RunTask]] = {}
+    ac = as_completed()
+    last_manifest = clock()
+    sizing = {"window": max(MIN_INFLIGHT, INFLIGHT_PER_THREAD * workers), "at": clock()}
+
+    def window() -> int:
+        # Adaptive clusters (dask-jobqueue) grow and shrink: follow their thread count.
+        if clock() - sizing["at"] > WINDOW_REFRESH:
+            with contextlib.suppress(Exception):
+                threads = sum(client.nthreads().values())
+                sizing["window"] = max(MIN_INFLIGHT, INFLIGHT_PER_THREAD * threads)
+            sizing["at"] = clock()
+        return int(sizing["window"])
+
+    def submit_more() -> None:
+        while queue and ac.count() < window():
+            run = expansion.run(queue.pop())
+            task = RunTask.from_spec(run, store, campaign.name, campaign.store)
+            fut = client.submit(execute_run, task, key=f"nematic-run-{run.run_id}", pure=False)
+            tasks[fut.key] = (run, task)
+            ac.add(fut)
+            summary.submitted += 1
+
+    try:
+        submit_more()
+        for fut in ac:
+            run, task = tasks.pop(fut.key)
+            try:
+                record = fut.result()
+            except CancelledError as e:  # the cluster went away under the run: not its fault
+                (log.debug if summary.lost else log.warning)(
+                    "run %s was cancelled by dask (%s); rerun to redo it", run.run_id,
+                    " ".join(str(e).split()))
+                summary.lost.append(run)
+                if client.status not in ("running", "connecting"):
+                    queue.clear()  # the client is closed: nothing more can be submitted
+                submit_more()
+                continue
+            except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
+                record = _lost_task_record(task, e)
+                record.update(parameters=task.parameters, numerics=task.numerics,
+                              coords=task.coords, campaign=task.campaign)
+                store.write_record(record)
+            fut.release()
+            if record.get("status") == "ok":
+                summary.ok += 1
+            else:
+                summary.failed.append((run, record))
+            wall = record.get("wall_time")
+            if isinstance(wall, (int, float)) and math.isfinite(wall):
+                summary.run_time += float(wall)
+            if events:
+                events.finished_run(run, record)
+            submit_more()
+            if clock() - last_manifest > MANIFEST_EVERY:
+                store.scan()
+                last_manifest = clock()
+    except KeyboardInterrupt:
+        summary.interrupted = True
+        log.info("interrupted: cancelling %d pending run(s)", ac.count())
+        with contextlib.suppress(Exception):
+            client.cancel(list(ac.futures))
+    summary.wall_time = clock() - t0
+    return summary
+
+
+class DriveEvents(RunEvents, Protocol):
+    def planned(self, plan: Plan, expansion: Expansion) -> None: ...
+
+
+#: Temporary files younger than this may belong to a cancelled run still finishing on a
+#: remote worker: a driver on a remote cluster leaves them (seconds).
+REMOTE_TMP_AGE = 600.0
+
+
+def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
+          events: DriveEvents | None = None) -> tuple[Plan, RunSummary | None]:
+    """What ``nematic run`` does while holding the campaign's lock: clean up, record the
+    campaign text, plan from disk, run what remains on the campaign's dask cluster and
+    refresh the manifest. Returns the plan and the summary (``None`` if nothing was to do;
+    ``interrupted`` set on Ctrl-C). Raises :class:`~sweep.errors.ClusterError` if the
+    cluster cannot be used."""
+    campaign = expansion.campaign
+    local = campaign.execution.mode == "local"
+    store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
+    store.save_campaign_text(campaign.text, campaign.overrides)
+    plan = plan_runs(expansion, store, retry_failed=retry_failed)
+    if events:
+        events.planned(plan, expansion)
+    summary = None
+    if plan.todo:
+        try:
+            with dask_client(campaign.execution) as client:
+                summary = run_campaign(expansion, store, client, plan, events)
+        except KeyboardInterrupt:  # while the cluster was starting or closing
+            summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
+                                 failed_before=len(plan.failed), interrupted=True)
+        finally:
+            if local:  # the local workers are gone: whatever they left half-written goes
+                store.clean_temporaries()
+    store.scan()
+    return plan, summary
+
+
+def describe_failure(run: RunSpec, record: Mapping[str, Any]) -> str:
+    """One line: the run, its swept values and seed, why and when it failed."""
+    coords = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                       for k, v in run.coords.items())
+    when = record.get("t_failed")
+    at = f" at t = {when:.4g}" if isinstance(when, (int, float)) and math.isfinite(when) else ""
+    detail = str(record.get("detail") or "").strip().splitlines()
+    return (f"run {run.run_id} ({coords}) failed: {record.get('reason') or 'unknown'}{at}"
+            + (f": {detail[-1]}" if detail else ""))

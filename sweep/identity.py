@@ -1,0 +1,120 @@
+"""Run identity: ``run_id`` = hash of the canonical, normalised parameters + numerics + seed +
+identity schema version (after signac's ``calc_id``).
+
+Canonical form (:func:`canonical_json`): the *complete* parameter and numerics dicts (the
+model's defaults filled in, ``alpha_minus_B`` resolved into ``alpha``), each value normalised
+(floats to :data:`~sweep.spec.SIGNIFICANT_DIGITS` significant digits and written as strings, so
+``0.3`` and ``0.30000000000000004``, ``1e-5`` and ``0.00001``, ``1`` and ``1.0`` are one value;
+``-0.0`` is ``0``), keys sorted, compact JSON. The id is the first :data:`ID_LENGTH` hex digits
+of its SHA-256.
+
+Anything that changes a run's result or its file changes the id, so an id names one file's
+content; the code version does not enter (it is recorded in the file instead).
+Bump :data:`SCHEMA_VERSION` only when the canonical form itself changes.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+
+from model.parameters import Numerics, Parameters
+
+from .spec import SIGNIFICANT_DIGITS
+
+SCHEMA_VERSION = 1
+ID_LENGTH = 16
+
+
+def canonical_value(value: Any) -> Any:
+    """One value in canonical form (JSON-ready): floats as ``'%.12g'`` strings."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        x = float(value)
+        if not math.isfinite(x):
+            return str(x)
+        text = f"{x:.{SIGNIFICANT_DIGITS}g}"
+        return "0" if float(text) == 0 else text
+    if isinstance(value, str):
+        return value
+    if value is None:
+        return None
+    if isinstance(value, Mapping):
+        return {str(k): canonical_value(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [canonical_value(v) for v in value]
+    raise TypeError(f"cannot canonicalise {value!r} of type {type(value).__name__}")
+
+
+def _dumps(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+
+
+def canonical_json(parameters: Mapping[str, Any], numerics: Mapping[str, Any],
+                   seed: int) -> str:
+    """The canonical text that is hashed. The mappings are taken as given: pass complete
+    dicts (``Parameters.to_dict()``), or use :func:`run_id_for`."""
+    return _dumps({
+        "numerics": canonical_value(dict(numerics)),
+        "parameters": canonical_value(dict(parameters)),
+        "schema": SCHEMA_VERSION,
+        "seed": canonical_value(int(seed)),
+    })
+
+
+def hash_canonical(parameters: Mapping[str, Any], numerics: Mapping[str, Any],
+                   seed: int) -> str:
+    """run_id of complete parameter / numerics dicts (no defaults filled in)."""
+    text = canonical_json(parameters, numerics, seed)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()[:ID_LENGTH]
+
+
+def run_id_for(parameters: Parameters | Mapping[str, Any],
+               numerics: Numerics | Mapping[str, Any], seed: int) -> str:
+    """run_id of one run; mappings go through the model's objects first (defaults filled in,
+    ``alpha_minus_B`` resolved, values validated)."""
+    p = parameters if isinstance(parameters, Parameters) else Parameters.from_dict(parameters)
+    n = numerics if isinstance(numerics, Numerics) else Numerics.from_dict(numerics)
+    return hash_canonical(p.to_dict(), n.to_dict(), seed)
+
+
+class PointHasher:
+    """run_ids of many seeds at one grid point, hashing the shared prefix once.
+
+    Equal to :func:`hash_canonical` ("seed" is the last key in sorted order, so the canonical
+    text is ``prefix + '"seed":"<seed>"}'``); checked by the tests.
+    """
+
+    def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
+        head = _dumps({
+            "numerics": canonical_value(dict(numerics)),
+            "parameters": canonical_value(dict(parameters)),
+            "schema": SCHEMA_VERSION,
+        })
+        self._prefix = hashlib.sha256((head[:-1] + ',"seed":').encode("ascii"))
+
+    def __call__(self, seed: int) -> str:
+        return self.many([seed])[0]
+
+    def many(self, seeds: Iterable[int]) -> list[str]:
+        out = []
+        for suffix in seed_suffixes(tuple(seeds)):
+            h = self._prefix.copy()
+            h.update(suffix)
+            out.append(h.hexdigest()[:ID_LENGTH])
+        return out
+
+
+@functools.lru_cache(maxsize=8)
+def seed_suffixes(seeds: tuple[int, ...]) -> list[bytes]:
+    """The canonical text's tail for each seed: ``'"<seed>"}'``."""
+    return [(_dumps(canonical_value(int(s))) + "}").encode("ascii") for s in seeds]

@@ -1,0 +1,461 @@
+"""The results folder of one campaign, ``results/<name>/``::
+
+    campaign.yaml           the campaign text of the last run (provenance)
+    runs/<run_id>.nc        one self-describing netCDF per run (time series, snapshots, attrs)
+    runs/<run_id>.json      the run's record: status, reason, traceback, scalars, nc size
+    manifest.json           cache of all records (so ``status`` reads one file, not 10^5)
+    phase.nc                the aggregate (written by the driver alone)
+    .lock                   held (flock) by the one driver running the campaign
+
+Every file is written to a temporary name in the same folder and renamed into place
+(``os.replace`` is atomic on POSIX), so a file that exists is complete. A run counts as
+*done* when its record exists and, for a run that produced a Dataset, its ``.nc`` has the size
+the record states; a ``.nc`` without a record (the worker died between the two renames) is
+adopted if it opens and names the same run, deleted otherwise. The manifest is only a cache:
+a record whose file changed since (other mtime or size) or is missing from it is read again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import errno
+import json
+import logging
+import math
+import os
+import socket
+import time
+import uuid
+from collections.abc import Iterable, Iterator, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .errors import CampaignLocked, StoreError
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+log = logging.getLogger(__name__)
+
+RUNS = "runs"
+MANIFEST = "manifest.json"
+PHASE = "phase.nc"
+LOCK = ".lock"
+CAMPAIGN_COPY = "campaign.yaml"
+TMP_SUFFIX = ".tmp"
+MANIFEST_VERSION = 3
+#: Record keys kept in the manifest (the sidecar also has traceback, parameters, numerics).
+MANIFEST_KEYS = ("status", "reason", "detail", "t_failed", "seed", "wall_time", "nc_bytes",
+                 "scalars", "code_version", "git_commit", "finished")
+MAX_DETAIL = 500
+
+Record = dict[str, Any]
+
+
+# --------------------------------------------------------------------------- atomic writes
+def temporary_path(path: Path) -> Path:
+    """A unique hidden name next to ``path`` (same filesystem, so the rename is atomic)."""
+    return path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}{TMP_SUFFIX}")
+
+
+def _fsync_dir(directory: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_path(path: Path) -> Iterator[Path]:
+    """Yield a temporary path; on success fsync it and rename it to ``path``."""
+    tmp = temporary_path(path)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+    _fsync_dir(path.parent)
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (tuple, set)):
+        return list(value)
+    return str(value)
+
+
+def dumps(obj: Any) -> str:
+    """JSON with NaN allowed (Python's json reads it back)."""
+    return json.dumps(obj, default=_json_default, allow_nan=True, sort_keys=True)
+
+
+def netcdf_attr(value: Any) -> Any:
+    """A value netCDF can store as an attribute (bools as 0/1, None as "", dicts as JSON)."""
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if value is None:
+        return ""
+    if isinstance(value, Mapping):
+        return dumps(dict(value))
+    if isinstance(value, (list, tuple)):
+        if not value:
+            return ""
+        if all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool)
+               for v in value):
+            return np.asarray(value)
+        return dumps(list(value))
+    return value
+
+
+def atomic_to_netcdf(ds: xr.Dataset, path: Path,
+                     encoding: Mapping[str, Mapping[str, Any]] | None = None) -> int:
+    """Write ``ds`` to ``path`` atomically; return the file's size in bytes."""
+    ds = ds.copy(deep=False)
+    ds.attrs = {k: netcdf_attr(v) for k, v in ds.attrs.items()}
+    for var in ds.variables.values():
+        var.attrs = {k: netcdf_attr(v) for k, v in var.attrs.items()}
+    import dask
+
+    # Inside a dask worker xarray would guard the write with a distributed lock (a round trip
+    # to the scheduler, and a failure while it shuts down): the file is private, so no lock.
+    with atomic_path(path) as tmp, dask.config.set(scheduler="synchronous"):
+        ds.to_netcdf(tmp, engine="netcdf4", encoding=dict(encoding or {}))
+        size = tmp.stat().st_size
+    return size
+
+
+# --------------------------------------------------------------------------- run records
+def now_iso() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+
+
+def _float(value: Any) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return math.nan
+    return x
+
+
+def scalars_of(ds: xr.Dataset) -> dict[str, float]:
+    """Every 0-d numeric data variable of a run Dataset (sigma2_S_final, t_peak, ...)."""
+    out = {}
+    for name, var in ds.data_vars.items():
+        if var.ndim == 0 and np.issubdtype(var.dtype, np.number):
+            out[str(name)] = _float(var.values)
+    return out
+
+
+def record_from_dataset(ds: xr.Dataset, run_id: str, nc_bytes: int | None) -> Record:
+    """The record of a run from its Dataset (the worker, or adoption of an unindexed file)."""
+    a = ds.attrs
+    status = str(a.get("status", "ok")) or "ok"
+    t_failed = _float(a.get("t_failed", math.nan))
+    scalars = scalars_of(ds)
+    return {
+        "run_id": run_id,
+        "status": "ok" if status == "ok" else "failed",
+        "reason": str(a.get("reason", "")),
+        "detail": str(a.get("detail", "")),
+        "t_failed": None if math.isnan(t_failed) else t_failed,
+        "traceback": "",
+        "seed": int(a["seed"]) if "seed" in a else None,
+        "wall_time": scalars.get("wall_time"),
+        "nc_bytes": nc_bytes,
+        "scalars": scalars,
+        "code_version": str(a.get("code_version", "")),
+        "git_commit": str(a.get("git_commit", "")),
+        "finished": now_iso(),
+        "host": socket.gethostname(),
+    }
+
+
+def slim(record: Mapping[str, Any], stamp: list[int]) -> Record:
+    """The manifest's copy of a record; ``stamp`` is its file's [mtime_ns, size]."""
+    out = {k: record.get(k) for k in MANIFEST_KEYS}
+    if isinstance(out["detail"], str) and len(out["detail"]) > MAX_DETAIL:
+        out["detail"] = out["detail"][:MAX_DETAIL] + "..."
+    out["stamp"] = stamp
+    return out
+
+
+# --------------------------------------------------------------------------- the lock
+class CampaignLock:
+    """An exclusive ``flock`` on ``results/<name>/.lock``, released by the kernel when the
+    process ends however it ends (SIGKILL included), so a dead driver never blocks a resume.
+    The file holds the holder's pid, host and start time for the message."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._fd: int | None = None
+
+    def acquire(self, command: str = "") -> None:
+        import fcntl
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as e:
+            os.close(fd)
+            if e.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise
+            holder = read_lock_holder(self.path) or {}
+            raise CampaignLocked(
+                f"campaign folder {self.path.parent} is in use by another driver "
+                f"(pid {holder.get('pid', '?')} on {holder.get('host', '?')}, since "
+                f"{holder.get('started', '?')}: {holder.get('command', '')}). Wait for it to "
+                "finish or stop it (Ctrl-C); 'nematic status' shows its progress."
+            ) from None
+        info = {"pid": os.getpid(), "host": socket.gethostname(), "started": now_iso(),
+                "command": command}
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
+        self._fd = fd
+
+    def release(self) -> None:
+        if self._fd is not None:
+            import fcntl
+
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, 0)
+            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> CampaignLock:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def read_lock_holder(path: Path) -> dict[str, Any] | None:
+    """Who holds the lock (pid, host, started, command), or ``None`` if nobody does."""
+    import fcntl
+
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError:
+            try:
+                return dict(json.loads(os.pread(fd, 4096, 0).decode() or "{}"))
+            except ValueError:
+                return {}
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)
+
+
+# --------------------------------------------------------------------------- the folder
+class CampaignStore:
+    """``results/<name>/`` and everything in it."""
+
+    def __init__(self, results_root: str | Path, name: str):
+        self.results_root = Path(results_root)
+        self.root = self.results_root / name
+        self.runs_dir = self.root / RUNS
+        self.manifest_path = self.root / MANIFEST
+        self.phase_path = self.root / PHASE
+        self.lock_path = self.root / LOCK
+        self.campaign_copy = self.root / CAMPAIGN_COPY
+        #: names of the .nc files seen by the last :meth:`scan` (run_ids)
+        self.nc_present: set[str] = set()
+
+    # paths
+    def nc_path(self, run_id: str) -> Path:
+        return self.runs_dir / f"{run_id}.nc"
+
+    def record_path(self, run_id: str) -> Path:
+        return self.runs_dir / f"{run_id}.json"
+
+    def lock(self) -> CampaignLock:
+        return CampaignLock(self.lock_path)
+
+    def ensure(self) -> None:
+        try:
+            self.runs_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise StoreError(f"cannot create {self.runs_dir}: {e.strerror}") from None
+        if not os.access(self.runs_dir, os.W_OK):
+            raise StoreError(f"{self.runs_dir} is not writable")
+
+    # records
+    def write_record(self, record: Mapping[str, Any]) -> None:
+        atomic_write_text(self.record_path(str(record["run_id"])), dumps(dict(record)))
+
+    def read_record(self, run_id: str) -> Record | None:
+        try:
+            return dict(json.loads(self.record_path(run_id).read_text(encoding="utf-8")))
+        except (FileNotFoundError, ValueError):
+            return None
+
+    def load_manifest(self) -> dict[str, Record]:
+        """The cached records (columnar JSON: one list per key, one entry per run)."""
+        try:
+            data = json.loads(self.manifest_path.read_text(encoding="utf-8"))
+        except (FileNotFoundError, ValueError):
+            return {}
+        if not isinstance(data, dict) or data.get("version") != MANIFEST_VERSION:
+            return {}
+        try:
+            keys = [k for k in (*MANIFEST_KEYS, "stamp") if k != "scalars"]
+            names = list(data["scalars"])
+            rows = zip(*(data[k] for k in keys), strict=True)
+            values = zip(*(data["scalars"][k] for k in names), strict=True) if names else None
+            records = {}
+            for rid, row in zip(data["run_id"], rows, strict=True):
+                rec = dict(zip(keys, row, strict=True))
+                scalar_row = next(values) if values is not None else ()
+                rec["scalars"] = {k: v for k, v in zip(names, scalar_row, strict=True)
+                                  if v is not None}
+                records[rid] = rec
+        except (KeyError, TypeError, ValueError, StopIteration):
+            return {}
+        return records
+
+    def save_manifest(self, records: Mapping[str, Record]) -> None:
+        """Write the manifest atomically (best effort: a read-only folder is left alone)."""
+        ids = list(records)
+        data: dict[str, Any] = {"version": MANIFEST_VERSION, "run_id": ids}
+        for key in (*MANIFEST_KEYS, "stamp"):
+            if key != "scalars":
+                data[key] = [records[r].get(key) for r in ids]
+        names = sorted({k for r in ids for k in (records[r].get("scalars") or {})})
+        data["scalars"] = {k: [(records[r].get("scalars") or {}).get(k) for r in ids]
+                           for k in names}
+        try:
+            atomic_write_text(self.manifest_path, dumps(data))
+        except OSError as e:
+            log.debug("manifest not written: %s", e)
+
+    def scan(self, *, save: bool = True) -> dict[str, Record]:
+        """All run records (slim) keyed by run_id, from the manifest where it is current and
+        from the per-run files elsewhere; also sets :attr:`nc_present`. Opens no netCDF."""
+        manifest = self.load_manifest()
+        records: dict[str, Record] = {}
+        nc: set[str] = set()
+        changed = False
+        try:
+            entries = os.scandir(self.runs_dir)
+        except FileNotFoundError:
+            self.nc_present = set()
+            return {}
+        with entries:
+            for entry in entries:
+                name = entry.name
+                if name.startswith("."):
+                    continue
+                if name.endswith(".nc"):
+                    nc.add(name[:-3])
+                elif name.endswith(".json"):
+                    rid = name[:-5]
+                    try:
+                        st = entry.stat()
+                    except FileNotFoundError:
+                        continue
+                    stamp = [st.st_mtime_ns, st.st_size]
+                    cached = manifest.get(rid)
+                    if cached is not None and cached.get("stamp") == stamp:
+                        records[rid] = cached
+                        continue
+                    full = self.read_record(rid)
+                    if full is None:
+                        continue
+                    records[rid] = slim(full, stamp)
+                    changed = True
+        if len(records) != len(manifest):
+            changed = True
+        self.nc_present = nc
+        if save and changed:
+            self.save_manifest(records)
+        return records
+
+    def is_complete(self, run_id: str, record: Mapping[str, Any] | None, *,
+                    check_size: bool = True) -> bool:
+        """Whether ``record`` stands for a finished run whose file (if any) is intact."""
+        if record is None:
+            return False
+        nc_bytes = record.get("nc_bytes")
+        if nc_bytes is None:  # a run that raised: the record is all there is
+            return record.get("status") == "failed"
+        if not check_size:
+            return run_id in self.nc_present
+        try:
+            return self.nc_path(run_id).stat().st_size == int(nc_bytes)
+        except FileNotFoundError:
+            return False
+
+    def adopt(self, run_id: str) -> Record | None:
+        """Index a ``.nc`` that has no record (its worker died before writing it): keep it if
+        it opens and names this run, else delete it. Returns the new record or ``None``."""
+        path = self.nc_path(run_id)
+        import dask
+        import xarray as xr
+
+        try:
+            with dask.config.set(scheduler="synchronous"), \
+                    xr.open_dataset(path, engine="netcdf4") as ds:
+                ds.load()
+                if str(ds.attrs.get("run_id", "")) != run_id:
+                    raise ValueError(f"it names run {ds.attrs.get('run_id')!r}")
+                record = record_from_dataset(ds, run_id, path.stat().st_size)
+        except Exception as e:  # noqa: BLE001 - any unreadable file is simply redone
+            log.warning("removing unreadable run file %s (%s)", path, e)
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+            return None
+        self.write_record(record)
+        return record
+
+    def discard(self, run_id: str) -> None:
+        """Remove a run's record and file (before redoing it)."""
+        for p in (self.record_path(run_id), self.nc_path(run_id)):
+            with contextlib.suppress(FileNotFoundError):
+                p.unlink()
+
+    def clean_temporaries(self, min_age: float = 0.0) -> int:
+        """Delete leftover temporary files older than ``min_age`` seconds (only call while
+        holding the lock; a worker of a remote cluster may still be finishing a cancelled
+        run, so the driver passes a safety age there)."""
+        n = 0
+        now = time.time()
+        for directory in (self.root, self.runs_dir):
+            with contextlib.suppress(FileNotFoundError), os.scandir(directory) as it:
+                for entry in it:
+                    if entry.name.startswith(".") and entry.name.endswith(TMP_SUFFIX):
+                        with contextlib.suppress(FileNotFoundError):
+                            if now - entry.stat().st_mtime >= min_age:
+                                os.unlink(entry.path)
+                                n += 1
+        if n:
+            log.info("removed %d temporary file(s) left by an interrupted run", n)
+        return n
+
+    def save_campaign_text(self, text: str, overrides: Iterable[str] = ()) -> None:
+        header = "".join(f"# override: {o}\n" for o in overrides)
+        atomic_write_text(self.campaign_copy, header + text)

@@ -1,0 +1,88 @@
+"""Helpers shared by the campaign-manager tests (real model runs at 32^2, short t_final)."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from sweep.expand import expand
+from sweep.spec import load_campaign
+
+#: A small real campaign. alpha - B = 20 fails at once (the finite solver loses ellipticity:
+#: (alpha - B) S0 = 2 > G / 2), so the campaign has failures to record.
+SMALL = """\
+name: {name}
+description: campaign-manager test
+parameters: {{noise_modes: 8}}
+numerics: {{resolution: 32, t_final: {t_final}, save_every: 0.5, snapshot_times: [1]}}
+sweep:
+  axes:
+    alpha_minus_B: {values}
+seeds: {seeds}
+execution: {{workers: {workers}}}
+"""
+
+
+def write_campaign(folder: Path, name: str = "small", values: str = "[0.1, 0.2, 20.0]",
+                   seeds: int = 2, t_final: float = 2.0, workers: int = 2) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{name}.yaml"
+    path.write_text(SMALL.format(name=name, values=values, seeds=seeds, t_final=t_final,
+                                 workers=workers))
+    return path
+
+
+def run_ids(path: Path) -> list[str]:
+    return expand(load_campaign(path)).run_ids
+
+
+def records(runs_dir: Path) -> dict[str, dict]:
+    return {p.stem: json.loads(p.read_text()) for p in runs_dir.glob("*.json")}
+
+
+def file_stamps(runs_dir: Path) -> dict[str, tuple[int, int]]:
+    """(inode, mtime_ns) of every run file: unchanged stamps mean not recomputed."""
+    out = {}
+    for p in runs_dir.glob("*.nc"):
+        st = p.stat()
+        out[p.stem] = (st.st_ino, st.st_mtime_ns)
+    return out
+
+
+def start_driver(args: list[str], log: Path) -> subprocess.Popen:
+    """``nematic ARGS`` in its own session (so the test can signal it like a terminal)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1", COLUMNS="200")
+    with open(log, "wb") as out:
+        return subprocess.Popen([sys.executable, "-m", "sweep", *args], stdout=out,
+                                stderr=subprocess.STDOUT, env=env, start_new_session=True)
+
+
+def wait_for(predicate, timeout: float, what: str, interval: float = 0.2) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(interval)
+    raise TimeoutError(f"timed out after {timeout} s waiting for {what}")
+
+
+def group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def kill_group(proc: subprocess.Popen) -> None:
+    """Clean-up: SIGKILL whatever is left of a driver's session (its own processes only)."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    with contextlib.suppress(subprocess.TimeoutExpired):
+        proc.wait(timeout=10)

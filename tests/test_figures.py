@@ -1,0 +1,209 @@
+"""Every registered figure renders from a small REAL results folder (model at 32^2, short
+t_final, run through the campaign manager's Python API: expand -> execute_run -> write_phase),
+`nematic figures` writes fits.nc and the figures, and regenerate() is the run hook."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import xarray as xr
+from typer.testing import CliRunner
+
+from sweep import figures
+from sweep.aggregate import write_phase
+from sweep.cli import app
+from sweep.execute import RunTask, execute_run
+from sweep.expand import expand
+from sweep.fits import FITS
+from sweep.spec import load_campaign
+from sweep.store import CampaignStore
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+#: alpha - B x K (figs. 2, 3). The runs are short (t/tau = 3): the fits may be poor or NaN,
+#: the figures must still render. Fit options from the YAML (fewer bootstrap replicates).
+SIZES = """\
+name: sizes
+parameters: {noise_modes: 8}
+numerics: {resolution: 32, t_final: 3, save_every: 0.5, snapshot_times: [1.5]}
+sweep:
+  axes:
+    K: [2.0e-4, 1.0e-3]
+    alpha_minus_B: [0.3, 1.0]
+seeds: 2
+fits: [{scaling: {n_boot: 100}}, {transition: {n_boot: 100, min_jump: 0.01}}]
+figures: [fig2, fig3]
+"""
+#: chi x K x eps at alpha - B = 1 (fig. 4), one seed; snapshot fields without u.
+PHASE = """\
+name: phase
+parameters: {alpha_minus_B: 1.0, noise_modes: 8}
+numerics: {resolution: 32, t_final: 2, save_every: 0.5}
+sweep:
+  axes:
+    chi: [0.0, 5.0]
+    K: [1.0e-4, 1.0e-2]
+    eps: [0.0, 0.05]
+seeds: 1
+store: {snapshot_fields: [q1, q2, I1bar], snapshot_dtype: float32}
+fits: [{anisotropy: {n_boot: 100}}]
+"""
+#: chi x eps, linear incompressible mechanics, S0 = 0 with noise (fig. A1). No I1bar stored.
+STABILITY = """\
+name: stab
+parameters: {S0: 0.0, A0: 1.0, K: 1.0e-4, alpha_minus_B: 1.0, noise_amplitude: 1.0e-3,
+             noise_modes: 8}
+numerics: {mechanics: linear, incompressible: true, resolution: 32, t_final: 8, save_every: 1,
+           tolerance: 1.0e-4}
+sweep:
+  axes:
+    chi: [3.0, 10.0]
+    eps: [0.05, 0.2]
+seeds: 2
+store: {snapshot_fields: [q1, q2]}
+figures: [figA1]
+"""
+
+
+def build(folder: Path, text: str) -> SimpleNamespace:
+    """Run a campaign for real, in this process, and aggregate it."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "campaign.yaml"
+    path.write_text(text)
+    campaign = load_campaign(path)
+    store = CampaignStore(folder / "results", campaign.name)
+    store.ensure()
+    expansion = expand(campaign)
+    for run in expansion:
+        execute_run(RunTask.from_spec(run, store, campaign.name, campaign.store))
+    write_phase(expansion, store)
+    return SimpleNamespace(path=path, campaign=campaign, results=folder / "results",
+                           root=store.root)
+
+
+@pytest.fixture(scope="module")
+def sizes(tmp_path_factory):
+    return build(tmp_path_factory.mktemp("sizes"), SIZES)
+
+
+@pytest.fixture(scope="module")
+def phase4(tmp_path_factory):
+    return build(tmp_path_factory.mktemp("phase"), PHASE)
+
+
+@pytest.fixture(scope="module")
+def stab(tmp_path_factory):
+    return build(tmp_path_factory.mktemp("stab"), STABILITY)
+
+
+def assert_figure(paths: list[Path], name: str, root: Path) -> None:
+    assert sorted(p.name for p in paths) == [f"{name}.pdf", f"{name}.png"]
+    for p in paths:
+        assert p.parent == root / "figures"
+        assert p.stat().st_size > 10_000
+    assert (root / "figures" / f"{name}.png").read_bytes()[:8] == PNG_MAGIC
+    assert (root / "figures" / f"{name}.pdf").read_bytes()[:5] == b"%PDF-"
+    assert not list((root / "figures").glob(".*"))  # no temporary file left
+
+
+def test_registry_names_match_the_campaign_schema():
+    from sweep.spec import registry_names
+
+    assert registry_names("figures") == ["fig2", "fig3", "fig4", "figA1"]
+    assert set(registry_names("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy",
+                                           "stability"}
+
+
+def test_fig2_and_fig3_render_and_fits_are_written(sizes):
+    out = figures.produce(sizes.campaign, sizes.results)
+    assert out.failures == {}
+    names = sorted({p.stem for p in out.paths})
+    assert names == ["fig2", "fig3"]
+    for n in names:
+        assert_figure([p for p in out.paths if p.stem == n], n, sizes.root)
+    with xr.open_dataset(sizes.root / FITS) as f:
+        assert f["transition_location"].dims == ("K",)
+        assert f["transition_location"].attrs["fit_min_jump"] == 0.01  # the campaign's options
+        assert f["alpha_cr"].dims == ("K",)
+        assert f["scaling_exponent"].attrs["fit_n_boot"] == 100
+        assert f.attrs["campaign"] == "sizes"
+
+
+def test_fig2_options_pick_the_snapshot_and_the_other_dims(sizes):
+    paths = figures.draw("fig2", sizes.root, {"select": {"K": 1e-3}, "seed": 1, "curves": 2,
+                                              "snapshot": {"alpha_minus_B": 1.0, "seed": 1,
+                                                           "time": 1.5}, "yscale": "log"})
+    assert_figure(paths, "fig2", sizes.root)
+    with pytest.raises(figures.FigureError, match="unknown option 'snapshots'"):
+        figures.draw("fig2", sizes.root, {"snapshots": []})
+
+
+def test_fig4_renders_in_3d_with_the_caption_snapshots(phase4):
+    out = figures.produce(phase4.campaign, phase4.results)  # no figures listed: auto
+    assert out.failures == {}
+    assert_figure(out.paths, "fig4", phase4.root)
+    with xr.open_dataset(phase4.root / FITS) as f:
+        assert f["anisotropy_slope"].dims == ("chi", "K")
+
+
+def test_fig4_in_2d_when_one_axis_is_fixed(phase4):
+    paths = figures.draw("fig4", phase4.root, {"select": {"K": 1e-4}})
+    assert_figure(paths, "fig4", phase4.root)
+
+
+def test_figA1_renders_with_the_theory_line(stab):
+    paths = figures.regenerate(stab.campaign, stab.results)
+    assert_figure(paths, "figA1", stab.root)
+    with xr.open_dataset(stab.root / FITS) as f:
+        unstable = f["stability_unstable"].values
+        theory = f["stability_eps_c_theory"].sel(chi=10.0).item()
+        # docs/stability.md section 7: eps_c = 0.10715 at chi (alpha - B) = 10
+        assert theory == pytest.approx(0.10715, rel=1e-4)
+        assert np.isinf(f["stability_eps_c_theory"].sel(chi=3.0).item()) or np.isnan(
+            f["stability_eps_c_theory"].sel(chi=3.0).item())
+        assert set(np.unique(unstable)) <= {-1, 0, 1}
+        assert f["stability_fraction_unstable"].dims == ("chi", "eps")
+
+
+def test_cli_figures(sizes, tmp_path):
+    runner = CliRunner()
+    result = runner.invoke(app, ["figures", str(sizes.path), "--results", str(sizes.results),
+                                 "--only", "fig3"])
+    assert result.exit_code == 0, result.output
+    assert "fig3.png" in result.output
+    assert "fits.nc" in result.output
+    result = runner.invoke(app, ["figures", str(sizes.path), "--results", str(sizes.results),
+                                 "--only", "fig9"])
+    assert result.exit_code == 2
+    assert "unknown figure" in result.output
+    empty = runner.invoke(app, ["figures", str(sizes.path), "--results", str(tmp_path)])
+    assert empty.exit_code == 2
+    assert "no phase diagram" in empty.output
+    assert figures.regenerate(sizes.campaign, tmp_path) == []
+
+
+def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(stab):
+    """fig2 needs alpha - B swept; this grid sweeps chi and eps: exit 1 with the reason,
+    figA1 still drawn (from the fits.nc on disk: --no-fits)."""
+    figures.produce(stab.campaign, stab.results, names=["figA1"])  # fits.nc present
+    result = CliRunner().invoke(app, ["figures", str(stab.path), "--results",
+                                      str(stab.results), "--only", "fig2", "--only", "figA1",
+                                      "--no-fits"])
+    assert result.exit_code == 1, result.output
+    out = " ".join(result.output.split())
+    assert "fig2: fig2 needs alpha_minus_B" in out
+    assert "figA1.png" in out
+
+
+def test_option_problems_for_campaign_validation():
+    assert figures.option_problems("fig2", {"seed": 3, "yscale": "log"}) == []
+    assert figures.option_problems("fig3", {"seed": 3}) == [
+        "unknown option 'seed'; allowed: none"]
+    problems = figures.option_problems("fig4", {"snapshots": [{"K": 1e-6}, 3]})
+    assert len(problems) == 1
+    assert "snapshots" in problems[0]
+    assert figures.option_problems("fig2", {"yscale": "symlog"}) == [
+        "yscale = 'symlog'; expected 'linear' or 'log'"]

@@ -1,0 +1,243 @@
+"""Fits recover known values from synthetic phase diagrams with noise, within their stated
+intervals (sweep/fits.py). Synthetic data are fine here: these test the estimators; the
+figures are tested on real runs in tests/test_figures.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from sweep import fits
+from sweep.store import atomic_to_netcdf
+
+
+def phase(data: dict[str, np.ndarray], coords: dict[str, np.ndarray], **attrs) -> xr.Dataset:
+    """A phase.nc-like Dataset: observables over (sweep dims..., seed)."""
+    dims = [*coords, "seed"]
+    n_seed = next(iter(data.values())).shape[-1]
+    ds = xr.Dataset({k: (dims, v) for k, v in data.items()},
+                    coords={**coords, "seed": np.arange(n_seed)}, attrs=attrs)
+    shape = ds[next(iter(data))].shape
+    ds["status"] = (dims, np.where(np.isfinite(ds[next(iter(data))].values), 1, 2)
+                    .astype(np.int8).reshape(shape))
+    return ds
+
+
+def subcritical_sigma2(rng, x, x0, n_seeds, spread=0.02):
+    """sigma2_S(t_final): each seed jumps from ~1e-12 to ~1e-2 at its own threshold
+    x0 + N(0, spread) (a subcritical transition depends on the initial noise)."""
+    thr = x0 + spread * rng.standard_normal(n_seeds)
+    high = 10 ** (-2 + 0.1 * rng.standard_normal((x.size, n_seeds)))
+    low = 10 ** (-12 + 0.5 * rng.standard_normal((x.size, n_seeds)))
+    return np.where(x[:, None] > thr[None, :], high, low)
+
+
+# --------------------------------------------------------------------------- transition
+@pytest.mark.parametrize("x0", [0.43, 0.5501, 0.78])
+def test_transition_recovers_the_jump_within_its_interval(rng, raise_fp_errors, x0):
+    x = np.linspace(0.1, 1.0, 10)
+    f = fits.fit_transition(x, subcritical_sigma2(rng, x, x0, 20), n_boot=300, rng=rng)
+    assert f.lower <= x0 <= f.upper
+    assert f.grid_lower <= x0 <= f.grid_upper
+    assert f.upper - f.lower <= 0.2 + 1e-12  # at most two grid cells with this seed spread
+    assert f.jump > 8  # decades
+    assert f.direction == 1
+    assert f.fraction_high[0] == 0
+    assert f.fraction_high[-1] == 1
+
+
+def test_transition_interval_widens_when_seeds_disagree(rng):
+    """Seeds whose thresholds straddle a grid value: the bootstrap moves the jump between two
+    brackets, so the interval covers both."""
+    x = np.linspace(0.1, 1.0, 10)
+    v = subcritical_sigma2(rng, x, 0.5, 6, spread=0.08)
+    f = fits.fit_transition(x, v, n_boot=500, rng=rng)
+    assert f.lower <= 0.5 <= f.upper
+    assert np.any((f.fraction_high > 0) & (f.fraction_high < 1))
+
+
+def test_transition_on_unsorted_axis_and_falling_observable(rng):
+    x = np.array([0.3, 0.1, 0.2, 0.5, 0.4])
+    v = np.where(x[:, None] < 0.33, 1e-2, 1e-9) * np.exp(0.1 * rng.standard_normal((5, 4)))
+    f = fits.fit_transition(x, v, n_boot=100, rng=rng)
+    assert (f.grid_lower, f.grid_upper) == (0.3, 0.4)
+    assert f.direction == -1
+    assert f.location == pytest.approx(0.35)
+
+
+def test_no_transition_below_min_jump(rng):
+    x = np.linspace(0, 1, 6)
+    v = 1e-3 * np.exp(0.3 * rng.standard_normal((6, 5)))
+    f = fits.fit_transition(x, v, n_boot=50, rng=rng)
+    assert np.isnan(f.location)
+
+
+def test_transition_dataset_fit_per_other_dim(rng):
+    """Two values of K with different jumps; missing runs (NaN) are skipped."""
+    x = np.linspace(0.1, 1.0, 10)
+    truth = {1e-4: 0.43, 1e-3: 0.67}
+    sig = np.stack([subcritical_sigma2(rng, x, x0, 8) for x0 in truth.values()])
+    sig[0, 3, 2] = np.nan
+    ds = phase({"sigma2_S": sig}, {"K": np.array(list(truth)), "alpha_minus_B": x})
+    out = fits.transition(ds, {"n_boot": 200})
+    assert out["transition_location"].dims == ("K",)
+    for k, x0 in truth.items():
+        row = out.sel(K=k)
+        assert float(row["transition_lower"]) <= x0 <= float(row["transition_upper"])
+    assert out["transition_fraction_high"].dims == ("K", "alpha_minus_B")
+    assert out["transition_location"].attrs["fit_axis"] == "alpha_minus_B"
+
+
+# --------------------------------------------------------------------------- alpha_cr, scaling
+K_TRUE = np.array([1e-5, 3e-5, 1e-4, 3e-4])
+ACR_TRUE = np.array([0.30, 0.35, 0.40, 0.45])
+AMB = np.linspace(0.6, 1.6, 6)
+
+
+def sizes(rng, exponent=0.5, c=2.0, noise=0.05, n_seeds=30):
+    """lambda = c (K / (alpha - B - alpha_cr))^exponent with 5 % log-normal noise per seed."""
+    x = K_TRUE[:, None] / (AMB[None, :] - ACR_TRUE[:, None])
+    return c * x[..., None] ** exponent * np.exp(noise * rng.standard_normal((*x.shape,
+                                                                              n_seeds)))
+
+
+def size_phase(lam, sigma2=None):
+    sigma2 = np.full(lam.shape, 1e-2) if sigma2 is None else sigma2
+    return phase({"lambda_peak": lam, "sigma2_S": sigma2},
+                 {"K": K_TRUE, "alpha_minus_B": AMB})
+
+
+@pytest.mark.parametrize("method", ["linear", "nonlinear"])
+def test_alpha_cr_recovered_within_interval(rng, method):
+    out = fits.alpha_cr(size_phase(sizes(rng)), {"method": method, "n_boot": 200})
+    lo, hi = out["alpha_cr_lower"].values, out["alpha_cr_upper"].values
+    assert np.all((lo <= ACR_TRUE) & (hi >= ACR_TRUE)), (lo, out["alpha_cr"].values, hi)
+    assert np.all(hi - lo < 0.1)
+    np.testing.assert_allclose(out["alpha_cr_prefactor"].values, 2.0, rtol=0.1)
+    np.testing.assert_array_equal(out["alpha_cr_n_points"].values, AMB.size)
+
+
+def test_scaling_exponent_recovered_within_bootstrap_interval(rng):
+    out = fits.scaling(size_phase(sizes(rng)), {"n_boot": 300})
+    beta = float(out["scaling_exponent"])
+    lo, hi = float(out["scaling_exponent_lower"]), float(out["scaling_exponent_upper"])
+    assert lo <= 0.5 <= hi
+    assert lo < beta < hi
+    assert hi - lo < 0.1
+    assert float(out["scaling_prefactor"]) == pytest.approx(2.0, rel=0.1)
+    assert int(out["scaling_used"].sum()) == K_TRUE.size * AMB.size
+    assert np.all((out["alpha_cr_lower"].values <= ACR_TRUE)
+                  & (out["alpha_cr_upper"].values >= ACR_TRUE))
+
+
+def test_power_law_fit_recovers_other_exponents(rng):
+    """The exponent fit itself is not tied to 1/2: with alpha_cr given, any exponent."""
+    for beta in (0.35, 0.5, 0.8):
+        lam = sizes(rng, exponent=beta).mean(-1)
+        f = fits.size_scaling(K_TRUE, AMB, lam, alpha_cr=ACR_TRUE)
+        assert f.exponent == pytest.approx(beta, abs=0.02)
+
+
+def test_relaxed_runs_are_excluded_from_the_size_fits(rng):
+    """Runs below the transition (sigma2_S ~ 1e-12) have meaningless sizes: the automatic
+    level drops them, and the fit is unchanged."""
+    lam = sizes(rng)
+    sigma2 = np.full(lam.shape, 1e-2)
+    lam_bad = lam.copy()
+    lam_bad[:, 0, :5] = 0.01  # nonsense sizes...
+    sigma2[:, 0, :5] = 1e-12  # ...of relaxed runs
+    assert fits.patterned_level(sigma2) == pytest.approx(10**-7)
+    clean = fits.scaling(size_phase(lam, sigma2), {"n_boot": 100})
+    dirty = fits.scaling(size_phase(lam_bad, sigma2), {"n_boot": 100})
+    assert float(dirty["scaling_exponent"]) == pytest.approx(float(clean["scaling_exponent"]),
+                                                             abs=1e-12)
+    assert fits.patterned_level(np.full(5, 1e-2)) == 0.0  # no gap: every run counts
+
+
+def test_size_fit_asks_for_select_when_another_dim_varies(rng):
+    lam = sizes(rng, n_seeds=3)
+    ds = phase({"lambda_peak": np.stack([lam, lam]), "sigma2_S": np.full((2, *lam.shape), 0.1)},
+               {"eps": np.array([0.0, 0.1]), "K": K_TRUE, "alpha_minus_B": AMB})
+    with pytest.raises(fits.FitError, match="select"):
+        fits.scaling(ds, {"n_boot": 10})
+    out = fits.scaling(ds, {"n_boot": 10, "select": {"eps": 0.1}})
+    assert np.isfinite(float(out["scaling_exponent"]))
+
+
+# --------------------------------------------------------------------------- anisotropy
+def test_anisotropy_slope_recovered_within_interval(rng):
+    eps = np.linspace(0.0, 0.1, 5)
+    chi = np.array([0.0, 5.0])
+    slopes = np.array([0.5, 4.0])
+    cos = (slopes[:, None, None] * eps[None, :, None] + 0.02
+           + 0.03 * rng.standard_normal((2, 5, 20)))
+    out = fits.anisotropy(phase({"cos2theta": cos}, {"chi": chi, "eps": eps}), {"n_boot": 400})
+    lo, hi = out["anisotropy_slope_lower"].values, out["anisotropy_slope_upper"].values
+    assert np.all((lo <= slopes) & (slopes <= hi))
+    assert np.all(hi - lo < 1.0)
+    assert out["anisotropy_mean"].dims == ("chi", "eps")
+
+
+# --------------------------------------------------------------------------- plumbing
+def test_bootstrap_seed_means_handle_missing_runs(rng):
+    v = np.array([[1.0, 2.0, np.nan], [np.nan, np.nan, np.nan], [5.0, 5.0, 5.0]])
+    b = fits.bootstrap_seed_means(v, 200, rng)
+    assert b.shape == (200, 3)
+    assert np.all((b[:, 0] >= 1) & (b[:, 0] <= 2))
+    assert set(np.unique(b[:, 0])) == {1.0, 1.5, 2.0}
+    assert np.all(np.isnan(b[:, 1]))
+    assert np.all(b[:, 2] == 5.0)
+
+
+def test_same_phase_same_fits(rng):
+    ds = size_phase(sizes(rng, n_seeds=5))
+    a, _ = fits.compute_fits(ds, [("scaling", {"n_boot": 50})])
+    b, _ = fits.compute_fits(ds, [("scaling", {"n_boot": 50})])
+    xr.testing.assert_identical(a.drop_attrs(), b.drop_attrs())
+
+
+def test_resolve_merges_included_fits_and_rejects_unknown():
+    out = fits.resolve([("alpha_cr", {"method": "nonlinear"}), ("scaling", {"n_boot": 10}),
+                        ("transition", {}), ("transition", {"axis": "chi"})])
+    assert out == [("scaling", {"method": "nonlinear", "n_boot": 10}), ("transition", {})]
+    with pytest.raises(fits.FitError, match="unknown fit 'scalling'"):
+        fits.resolve([("scalling", {})])
+
+
+def test_bad_options_are_named(rng):
+    ds = size_phase(sizes(rng, n_seeds=3))
+    with pytest.raises(fits.FitError, match="unknown option 'n_bot'"):
+        fits.scaling(ds, {"n_bot": 10})
+    with pytest.raises(fits.FitError, match="method"):
+        fits.alpha_cr(ds, {"method": "cubic", "n_boot": 5})
+    with pytest.raises(fits.FitError, match="'chi' is neither swept"):
+        fits.transition(ds, {"axis": "chi"})
+
+
+def test_fits_nc_round_trip(rng, tmp_path):
+    """Write-then-reopen: fits.nc keeps its variables, dims and attributes; a failing fit is
+    recorded, not fatal."""
+    ds = size_phase(sizes(rng, n_seeds=4), sigma2=10 ** rng.uniform(-3, -1, (4, 6, 4)))
+    atomic_to_netcdf(ds.assign_attrs(campaign="synthetic"), tmp_path / "phase.nc")
+    path, failures = fits.write_fits(tmp_path, [("scaling", {"n_boot": 20}),
+                                                ("transition", {"n_boot": 20, "min_jump": 0.1}),
+                                                ("anisotropy", {})])
+    assert path == tmp_path / "fits.nc"
+    assert set(failures) == {"anisotropy"}  # no eps axis and no cos2theta
+    back = fits.load_fits(tmp_path)
+    assert back["alpha_cr"].dims == ("K",)
+    assert back["scaling_x"].dims == ("K", "alpha_minus_B")
+    assert back["scaling_exponent"].attrs["fit"] == "scaling"
+    assert back.attrs["campaign"] == "synthetic"
+    assert "anisotropy" in back.attrs["failed_fits"]
+    assert not list(tmp_path.glob(".*tmp"))
+
+
+def test_option_problems_for_campaign_validation():
+    assert fits.option_problems("scaling", {"method": "nonlinear", "n_boot": 50}) == []
+    problems = fits.option_problems("transition", {"axes": "chi", "n_boot": 0})
+    assert any("unknown option 'axes'" in p for p in problems)
+    assert any("n_boot = 0" in p for p in problems)
+    assert fits.option_problems("nope", {}) == [
+        "unknown fit 'nope'; registered: alpha_cr, anisotropy, scaling, stability, transition"]

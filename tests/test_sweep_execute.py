@@ -1,0 +1,431 @@
+"""Running campaigns for real (model at 32^2, short t_final, a local dask cluster): files and
+records, failures, status, phase.nc, resume, grid extension, the lock, SIGKILL and Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import xarray as xr
+from sweep_helpers import (
+    file_stamps,
+    group_alive,
+    kill_group,
+    records,
+    run_ids,
+    start_driver,
+    wait_for,
+    write_campaign,
+)
+from typer.testing import CliRunner
+
+from sweep.cli import app
+from sweep.execute import RunTask, execute_run
+from sweep.store import CampaignLock, read_lock_holder
+
+
+def invoke(*args: str):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="session")
+def small(tmp_path_factory):
+    """The small campaign (3 alpha - B values x 2 seeds, one value failing), run once."""
+    folder = tmp_path_factory.mktemp("small")
+    path = write_campaign(folder)
+    result = invoke("run", path, "--results", folder / "results")
+    return SimpleNamespace(path=path, results=folder / "results", result=result,
+                           runs=folder / "results" / "small" / "runs", ids=run_ids(path))
+
+
+@pytest.fixture
+def copy_of_small(small, tmp_path):
+    """A private copy of the small campaign's results (for tests that change them)."""
+    shutil.copytree(small.results, tmp_path / "results", symlinks=True)
+    path = shutil.copy(small.path, tmp_path / "small.yaml")
+    return SimpleNamespace(path=Path(path), results=tmp_path / "results",
+                           runs=tmp_path / "results" / "small" / "runs", ids=small.ids)
+
+
+def test_failed_runs_are_recorded_and_exit_1(small):
+    out = " ".join(small.result.output.split())
+    assert small.result.exit_code == 1, small.result.output
+    assert "FAILED run" in out
+    assert "alpha_minus_B=20" in out
+    assert "2 run(s) failed" in out
+    recs = records(small.runs)
+    assert set(recs) == set(small.ids)
+    failed = [r for r in recs.values() if r["status"] == "failed"]
+    assert len(failed) == 2
+    assert all(r["coords"]["alpha_minus_B"] == 20.0 and r["reason"] for r in failed)
+
+
+def test_every_run_has_a_complete_self_describing_file(small):
+    recs = records(small.runs)
+    for rid in small.ids:
+        nc = small.runs / f"{rid}.nc"
+        assert nc.stat().st_size == recs[rid]["nc_bytes"]
+        with xr.open_dataset(nc) as ds:
+            assert ds.attrs["run_id"] == rid
+            assert ds.attrs["campaign"] == "small"
+            assert ds.attrs["seed"] == recs[rid]["seed"]
+            assert ds.attrs["status"] == recs[rid]["status"]
+            assert math.isclose(ds.attrs["param_alpha_minus_B"],
+                                recs[rid]["coords"]["alpha_minus_B"])
+            assert "num_resolution" in ds.attrs
+            assert "git_commit" in ds.attrs
+            if recs[rid]["status"] == "ok":
+                assert ds.sizes["x"] == 32
+                assert float(ds["sigma2_S_final"]) == recs[rid]["scalars"]["sigma2_S_final"]
+    assert not list(small.runs.glob(".*"))  # no temporary file left
+
+
+def test_status_shows_counts_per_value_and_reasons(small):
+    result = invoke("status", small.path, "--results", small.results)
+    assert result.exit_code == 0, result.output
+    out = " ".join(result.output.split())
+    assert "4 done" in out
+    assert "2 failed" in out
+    assert "0 pending of 6" in out
+    reason = next(r["reason"] for r in records(small.runs).values() if r["status"] != "ok")
+    assert f"{reason}: 2" in out
+    as_json = json.loads(invoke("status", small.path, "--results", small.results,
+                                "--json").output)
+    assert (as_json["done"], as_json["failed"], as_json["pending"]) == (4, 2, 0)
+    axis = as_json["per_axis"][0]
+    assert axis["labels"] == ["0.1", "0.2", "20"]
+    assert axis["done"] == [2, 2, 0]
+    assert axis["failed"] == [0, 0, 2]
+
+
+def test_phase_nc(small, tmp_path):
+    path = small.results / "small" / "phase.nc"
+    recs = records(small.runs)
+    with xr.open_dataset(path) as ds:
+        ds.load()
+    assert ds["sigma2_S"].dims == ("alpha_minus_B", "seed")
+    np.testing.assert_array_equal(ds["alpha_minus_B"].values, [0.1, 0.2, 20.0])
+    np.testing.assert_array_equal(ds["seed"].values, [0, 1])
+    assert ds["seed"].attrs["standard_name"] == "realization"
+    assert ds["status"].attrs["flag_meanings"] == "missing ok failed"
+    np.testing.assert_array_equal(ds["status"].values, [[1, 1], [1, 1], [2, 2]])
+    for name in ("sigma2_S", "mean_S", "cos2theta", "lambda_peak", "t_peak"):
+        for suffix in ("", "_mean", "_std", "_count"):
+            var = ds[name + suffix]
+            assert var.attrs["long_name"]
+            assert var.attrs["units"] == "1"
+    # values come from the run files; failed runs are NaN
+    for i in range(3):
+        for j in range(2):
+            rid = str(ds["run_id"].values[i, j])
+            if recs[rid]["status"] == "ok":
+                with xr.open_dataset(small.runs / f"{rid}.nc") as run:
+                    assert ds["sigma2_S"].values[i, j] == float(run["sigma2_S_final"])
+                    assert ds["t_peak"].values[i, j] == float(run["t_peak"])
+            else:
+                assert np.isnan(ds["sigma2_S"].values[i, j])
+    s = ds["sigma2_S"].values
+    np.testing.assert_allclose(ds["sigma2_S_mean"].values[:2], s[:2].mean(axis=1), rtol=1e-14)
+    np.testing.assert_allclose(ds["sigma2_S_std"].values[:2], s[:2].std(axis=1, ddof=1),
+                               rtol=1e-12)
+    np.testing.assert_array_equal(ds["sigma2_S_count"].values, [2, 2, 0])
+    assert np.isnan(ds["sigma2_S_mean"].values[2])
+    # provenance
+    assert ds.attrs["Conventions"].startswith("CF-")
+    assert ds.attrs["campaign_yaml"] == small.path.read_text()
+    assert ds.attrs["code_version"]
+    assert ds.attrs["git_commit"]
+    assert ds.attrs["created"]
+    assert (ds.attrs["n_ok"], ds.attrs["n_failed"], ds.attrs["n_missing"]) == (4, 2, 0)
+    assert ds.attrs["param_noise_modes"] == 8
+    assert ds.attrs["num_resolution"] == 32
+    # round trip
+    again = tmp_path / "again.nc"
+    ds.to_netcdf(again)
+    with xr.open_dataset(again) as back:
+        xr.testing.assert_identical(back.load(), ds)
+
+
+def test_resume_skips_finished_runs(copy_of_small):
+    before = file_stamps(copy_of_small.runs)
+    result = invoke("run", copy_of_small.path, "--results", copy_of_small.results, "--no-figures")
+    out = " ".join(result.output.split())
+    assert result.exit_code == 1  # the two failures are still failures
+    assert "4 done, 2 failed" in out
+    assert "0 to run" in out
+    assert file_stamps(copy_of_small.runs) == before
+
+
+def test_retry_failed_and_grid_extension(copy_of_small):
+    before = file_stamps(copy_of_small.runs)
+    old_records = records(copy_of_small.runs)
+    text = copy_of_small.path.read_text().replace("[0.1, 0.2, 20.0]", "[0.1, 0.15, 0.2, 20.0]")
+    copy_of_small.path.write_text(text)
+    result = invoke("run", copy_of_small.path, "--results", copy_of_small.results,
+                    "--retry-failed", "--no-figures")
+    assert result.exit_code == 1, result.output  # alpha - B = 20 fails again
+    out = " ".join(result.output.split())
+    assert "8 runs" in out
+    assert "4 done" in out
+    assert "4 to run" in out
+    after = file_stamps(copy_of_small.runs)
+    ok_before = [r for r, rec in old_records.items() if rec["status"] == "ok"]
+    assert all(after[r] == before[r] for r in ok_before)  # finished runs not recomputed
+    recs = records(copy_of_small.runs)
+    assert len(recs) == 8
+    new = [r for r in recs if r not in old_records]
+    assert len(new) == 2
+    assert all(recs[r]["coords"]["alpha_minus_B"] == 0.15 for r in new)
+    redone = [r for r, rec in old_records.items() if rec["status"] == "failed"]
+    assert all(recs[r]["finished"] >= old_records[r]["finished"] for r in redone)
+    assert all(recs[r]["pid"] != old_records[r]["pid"] for r in redone)
+    with xr.open_dataset(copy_of_small.results / "small" / "phase.nc") as ds:
+        assert ds.sizes["alpha_minus_B"] == 4
+
+
+def test_a_run_file_without_its_record_is_adopted(copy_of_small):
+    old = records(copy_of_small.runs)
+    rid = next(r for r, rec in old.items() if rec["status"] == "ok")
+    (copy_of_small.runs / f"{rid}.json").unlink()  # the worker died between the two renames
+    before = file_stamps(copy_of_small.runs)
+    result = invoke("run", copy_of_small.path, "--results", copy_of_small.results, "--no-figures")
+    assert result.exit_code == 1  # the two failures remain
+    assert "recovered 1 unindexed run file" in " ".join(result.output.split())
+    assert file_stamps(copy_of_small.runs) == before
+    adopted = records(copy_of_small.runs)[rid]
+    assert adopted["status"] == "ok"
+    assert adopted["scalars"] == old[rid]["scalars"]
+
+
+def test_a_second_driver_is_refused(copy_of_small):
+    lock = CampaignLock(copy_of_small.results / "small" / ".lock")
+    lock.acquire(command="nematic run small.yaml")
+    try:
+        result = invoke("run", copy_of_small.path, "--results", copy_of_small.results)
+        assert result.exit_code == 2
+        out = " ".join(result.output.split())
+        assert "in use by another driver" in out
+        assert f"pid {os.getpid()}" in out
+        result = invoke("aggregate", copy_of_small.path, "--results", copy_of_small.results)
+        assert result.exit_code == 2
+        status = invoke("status", copy_of_small.path, "--results", copy_of_small.results)
+        assert status.exit_code == 0
+        assert f"running: pid {os.getpid()}" in status.output
+    finally:
+        lock.release()
+    assert read_lock_holder(lock.path) is None
+
+
+def test_aggregate_command(copy_of_small):
+    phase = copy_of_small.results / "small" / "phase.nc"
+    phase.unlink()
+    result = invoke("aggregate", copy_of_small.path, "--results", copy_of_small.results)
+    assert result.exit_code == 0, result.output
+    assert "4 ok, 2 failed, 0 missing of 6 runs" in " ".join(result.output.split())
+    assert phase.exists()
+
+
+def test_aggregate_marks_missing_runs(copy_of_small):
+    victim = copy_of_small.ids[0]
+    (copy_of_small.runs / f"{victim}.json").unlink()
+    (copy_of_small.runs / f"{victim}.nc").unlink()
+    assert invoke("aggregate", copy_of_small.path, "--results",
+                  copy_of_small.results).exit_code == 0
+    with xr.open_dataset(copy_of_small.results / "small" / "phase.nc") as ds:
+        assert int(ds["status"].values[0, 0]) == 0
+        assert np.isnan(ds["sigma2_S"].values[0, 0])
+        assert int(ds["sigma2_S_count"].values[0]) == 1
+        assert np.isnan(ds["sigma2_S_std"].values[0])
+
+
+def test_a_crashing_run_is_recorded_with_its_traceback(tmp_path):
+    runs = tmp_path / "results" / "crash" / "runs"
+    runs.mkdir(parents=True)
+    task = RunTask(run_id="0123456789abcdef", seed=0, parameters={"K": -1.0},
+                   numerics={"resolution": 32}, runs_dir=str(runs), campaign="crash")
+    record = execute_run(task)
+    assert record["status"] == "failed"
+    assert record["reason"] == "exception"
+    assert "ParameterError" in record["traceback"]
+    assert "'K'" in record["detail"]
+    assert json.loads((runs / "0123456789abcdef.json").read_text())["reason"] == "exception"
+    assert not (runs / "0123456789abcdef.nc").exists()
+
+
+def test_sigkill_of_the_driver_then_resume(tmp_path):
+    path = write_campaign(tmp_path, name="killed", values="[0.1, 0.15, 0.2]", seeds=2,
+                          t_final=2.5)
+    results = tmp_path / "results"
+    runs = results / "killed" / "runs"
+    ids = run_ids(path)
+    proc = start_driver(["run", str(path), "--results", str(results), "--no-figures"],
+                        tmp_path / "log")
+    try:
+        wait_for(lambda: len(list(runs.glob("*.json"))) >= 2 or proc.poll() is not None, 120,
+                 "two finished runs")
+        assert proc.poll() is None, (tmp_path / "log").read_text()
+        proc.send_signal(signal.SIGKILL)  # the driver alone, mid-campaign
+        proc.wait(timeout=10)
+        wait_for(lambda: not group_alive(proc.pid), 30, "the local workers to exit")
+    finally:
+        kill_group(proc)
+    done = sorted(records(runs))
+    assert 2 <= len(done) < len(ids)
+    # Plant damage: truncate a finished file; put garbage where a pending run's file goes.
+    truncated = done[0]
+    nc = runs / f"{truncated}.nc"
+    nc.write_bytes(nc.read_bytes()[: nc.stat().st_size // 2])
+    pending = next(r for r in ids if r not in done)
+    (runs / f"{pending}.nc").write_bytes(b"CDF\x01 not really netCDF")
+    before = file_stamps(runs)
+
+    result = invoke("run", path, "--results", results, "--no-figures")
+    assert result.exit_code == 0, result.output
+    recs = records(runs)
+    assert sorted(recs) == sorted(ids)
+    after = file_stamps(runs)
+    untouched = [r for r in done if r != truncated]
+    assert all(after[r] == before[r] for r in untouched)  # not recomputed
+    recomputed = [r for r in ids if after[r] != before.get(r)]
+    assert len(recomputed) == len(ids) - len(untouched)
+    for rid in (truncated, pending):
+        assert (runs / f"{rid}.nc").stat().st_size == recs[rid]["nc_bytes"]
+        with xr.open_dataset(runs / f"{rid}.nc") as ds:
+            assert ds.attrs["run_id"] == rid
+    assert not list(runs.glob(".*"))
+
+
+def test_ctrl_c_stops_cleanly(tmp_path):
+    path = write_campaign(tmp_path, name="interrupted", values="[0.1, 0.15, 0.2]",
+                          seeds=2, t_final=2.5)
+    results = tmp_path / "results"
+    runs = results / "interrupted" / "runs"
+    log = tmp_path / "log"
+    proc = start_driver(["run", str(path), "--results", str(results), "--no-figures"], log)
+    try:
+        wait_for(lambda: len(list(runs.glob("*.json"))) >= 1 or proc.poll() is not None, 120,
+                 "a finished run")
+        assert proc.poll() is None, log.read_text()
+        os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
+        rc = proc.wait(timeout=60)
+    finally:
+        kill_group(proc)
+    assert rc == 130, log.read_text()
+    assert "rerun the same command to resume" in " ".join(log.read_text().split())
+    assert read_lock_holder(results / "interrupted" / ".lock") is None
+    assert not list(runs.glob(".*"))
+    n_done = len(records(runs))
+    assert 1 <= n_done < 6
+    # the folder is consistent: what finished is done, the rest pending (the SIGKILL test
+    # shows a rerun completing such a folder)
+    status = json.loads(invoke("status", path, "--results", results, "--json").output)
+    assert (status["done"], status["failed"], status["pending"]) == (n_done, 0, 6 - n_done)
+
+
+# ----------------------------------------------------------------------------- a real cluster
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """A real `dask scheduler` and two `dask worker` processes on 127.0.0.1."""
+    folder = tmp_path_factory.mktemp("cluster")
+    sched_file = folder / "scheduler.json"
+    dask = [sys.executable, "-m", "dask"]  # the `dask` command of this environment
+    procs: list[subprocess.Popen] = []
+
+    def spawn(args: list[str], name: str) -> subprocess.Popen:
+        with open(folder / f"{name}.log", "wb") as log:
+            p = subprocess.Popen([*dask, *args], stdout=log, stderr=subprocess.STDOUT,
+                                 start_new_session=True)
+        procs.append(p)
+        return p
+
+    try:
+        spawn(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+               "--scheduler-file", str(sched_file)], "scheduler")
+        wait_for(sched_file.exists, 60, "the dask scheduler")
+        address = json.loads(sched_file.read_text())["address"]
+        workers = [spawn(["worker", address, "--nthreads", "1", "--no-nanny", "--host",
+                          "127.0.0.1", "--no-dashboard", "--name", f"w{i}"], f"worker{i}")
+                   for i in range(2)]
+        from distributed import Client
+
+        with Client(address, timeout=30) as client:
+            client.wait_for_workers(2, timeout=60)
+        yield SimpleNamespace(address=address, workers=workers, folder=folder)
+    finally:
+        for p in procs:
+            kill_group(p)
+
+
+def test_cluster_run_gives_the_local_phase_nc(small, dask_cluster, tmp_path):
+    results = tmp_path / "results"
+    result = invoke("run", small.path, "--results", results, "--scheduler",
+                    dask_cluster.address, "--no-figures")
+    assert result.exit_code == 1, result.output  # the same two failures
+    with xr.open_dataset(small.results / "small" / "phase.nc") as local, \
+            xr.open_dataset(results / "small" / "phase.nc") as remote:
+        local, remote = local.load(), remote.load()
+        differ = {n: (local[n].values, remote[n].values) for n in local.data_vars
+                  if not local[n].equals(remote[n])}
+        # bitwise: the model is deterministic across processes (same seed, same numerics)
+        assert not differ, differ
+        xr.testing.assert_equal(local, remote)  # data, dims and coords
+        assert local.attrs["campaign_yaml"] == remote.attrs["campaign_yaml"]
+    pids = {r["pid"] for r in records(results / "small" / "runs").values()}
+    assert pids <= {p.pid for p in dask_cluster.workers}  # ran on the cluster's workers
+
+
+def test_a_worker_killed_mid_campaign(dask_cluster, tmp_path):
+    path = write_campaign(tmp_path, name="worker-killed", values="[0.1, 0.15, 0.2]", seeds=2,
+                          t_final=3.0)
+    results = tmp_path / "results"
+    runs = results / "worker-killed" / "runs"
+    log = tmp_path / "log"
+    driver = start_driver(["run", str(path), "--results", str(results), "--scheduler",
+                           dask_cluster.address, "--no-figures"], log)
+    try:
+        wait_for(lambda: len(list(runs.glob("*.json"))) >= 1 or driver.poll() is not None,
+                 120, "a finished run")
+        assert driver.poll() is None, log.read_text()
+        victim = dask_cluster.workers[0]
+        victim.send_signal(signal.SIGKILL)
+        victim.wait(timeout=10)
+        rc = driver.wait(timeout=180)
+    finally:
+        kill_group(driver)
+    assert rc == 0, log.read_text()
+    recs = records(runs)
+    assert sorted(recs) == sorted(run_ids(path))
+    assert all(r["status"] == "ok" for r in recs.values())
+    assert {r["pid"] for r in recs.values()} <= {victim.pid, dask_cluster.workers[1].pid}
+
+
+def test_store_section_keeps_the_chosen_snapshot_fields(tmp_path):
+    from sweep.expand import expand
+    from sweep.spec import parse_campaign
+    from sweep.store import CampaignStore
+
+    campaign = parse_campaign(
+        "name: stored\nparameters: {noise_modes: 8, alpha_minus_B: 0.1}\n"
+        "numerics: {resolution: 32, t_final: 1}\nseeds: 1\n"
+        "store: {snapshot_times: [0.5], snapshot_fields: [q1, A], snapshot_dtype: float32}\n")
+    run = next(iter(expand(campaign)))
+    store = CampaignStore(tmp_path, "stored")
+    store.ensure()
+    record = execute_run(RunTask.from_spec(run, store, campaign.name, campaign.store))
+    assert record["status"] == "ok", record
+    with xr.open_dataset(store.nc_path(run.run_id)) as ds:
+        snapshots = {n for n, v in ds.data_vars.items() if "snapshot_time" in v.dims}
+        assert snapshots == {"q1", "A"}
+        assert ds["q1"].dtype == np.float32
+        np.testing.assert_allclose(ds["snapshot_time"].values, [0.5, 1.0])
+        assert ds.attrs["run_id"] == run.run_id
+        assert ds["q1"].encoding.get("zlib")

@@ -1,0 +1,117 @@
+"""run_id: pinned golden hashes, and invariance under key order, float spelling, int/float
+and alpha vs alpha_minus_B (signac ``calc_id`` style)."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from model.parameters import Numerics, Parameters
+from sweep.expand import expand
+from sweep.identity import (
+    SCHEMA_VERSION,
+    PointHasher,
+    canonical_json,
+    hash_canonical,
+    run_id_for,
+)
+from sweep.spec import parse_campaign
+
+# Complete, explicit dicts: the golden hashes must not move when the model's defaults do.
+P = {"S0": 0.1, "A0": 0.1, "B": 0.5, "B_prime": 0.0, "C": 1.0, "K": 5e-05, "kappa": 10.0,
+     "alpha": 0.9, "chi": 10.0, "zeta": 1.0, "s": 1.0, "gamma": 1.0, "tau": 1.0, "eps": 0.0,
+     "noise_modes": 16}
+N = {"resolution": 128, "t_final": 300.0, "dt": 0.05, "adaptive": True, "tolerance": 0.001,
+     "dt_max": 1.0, "save_every": 5.0, "snapshot_times": [100.0, 300.0], "mechanics": "finite",
+     "incompressible": False, "newton_tol": 1e-08, "max_newton": 30, "spin_tol": 1e-08}
+
+GOLDEN = {0: "c483160a9a6aa705", 1: "10f815a531a5b374", 49: "f090e8046b4a6e3b"}
+
+
+def test_schema_version_is_pinned():
+    # Changing the canonical form changes every run_id: bump SCHEMA_VERSION and the goldens.
+    assert SCHEMA_VERSION == 1
+
+
+def test_canonical_text_is_pinned():
+    assert canonical_json(P, N, 0) == (
+        '{"numerics":{"adaptive":true,"dt":"0.05","dt_max":"1","incompressible":false,'
+        '"max_newton":"30","mechanics":"finite","newton_tol":"1e-08","resolution":"128",'
+        '"save_every":"5","snapshot_times":["100","300"],"spin_tol":"1e-08","t_final":"300",'
+        '"tolerance":"0.001"},"parameters":{"A0":"0.1","B":"0.5","B_prime":"0","C":"1",'
+        '"K":"5e-05","S0":"0.1","alpha":"0.9","chi":"10","eps":"0","gamma":"1","kappa":"10",'
+        '"noise_modes":"16","s":"1","tau":"1","zeta":"1"},"schema":1,"seed":"0"}')
+
+
+@pytest.mark.parametrize(("seed", "expected"), sorted(GOLDEN.items()))
+def test_golden_hashes(seed, expected):
+    assert hash_canonical(P, N, seed) == expected
+
+
+def test_other_golden():
+    assert hash_canonical(dict(P, alpha=1.5, K=1e-4), dict(N, resolution=64), 7) == \
+        "8b92d798b0613bce"
+
+
+def test_key_order_does_not_matter():
+    rng = random.Random(1)
+    for _ in range(20):
+        p_items, n_items = list(P.items()), list(N.items())
+        rng.shuffle(p_items)
+        rng.shuffle(n_items)
+        assert hash_canonical(dict(p_items), dict(n_items), 0) == GOLDEN[0]
+
+
+def test_float_spelling_does_not_matter():
+    spelled = dict(P, alpha=0.6 + 0.3, K=0.00005, S0=0.1 * 3 / 3, C=1, kappa=10)
+    assert spelled["alpha"] != 0.9  # 0.8999999999999999
+    assert hash_canonical(spelled, dict(N, t_final=300, dt=0.05000000000000001), 0) == GOLDEN[0]
+    assert hash_canonical(dict(P, eps=-0.0), N, 0) == GOLDEN[0]
+    assert hash_canonical(P, dict(N, snapshot_times=(100, 300.0)), 0) == GOLDEN[0]
+
+
+def test_real_changes_change_the_id():
+    ids = {
+        hash_canonical(P, N, 0),
+        hash_canonical(P, N, 1),
+        hash_canonical(dict(P, alpha=0.91), N, 0),
+        hash_canonical(dict(P, K=5.0001e-05), N, 0),
+        hash_canonical(P, dict(N, resolution=64), 0),
+        hash_canonical(P, dict(N, mechanics="linear"), 0),
+        hash_canonical(P, dict(N, adaptive=False), 0),
+        hash_canonical(P, dict(N, snapshot_times=[100.0]), 0),
+    }
+    assert len(ids) == 8
+
+
+def test_alpha_minus_b_is_alpha():
+    n = Numerics(resolution=64)
+    a = run_id_for({"alpha_minus_B": 0.4}, n, 3)
+    b = run_id_for({"alpha": 0.9}, n, 3)
+    c = run_id_for({"B": 0.5, "alpha_minus_B": 0.4000000000000001}, n, 3)
+    assert a == b == c
+    assert run_id_for(Parameters.from_dict({"alpha": 0.9}), n, 3) == a
+
+
+def test_defaults_written_or_not_are_one_run():
+    assert run_id_for({}, {}, 0) == run_id_for(Parameters().to_dict(), Numerics().to_dict(), 0)
+
+
+def test_point_hasher_equals_hash_canonical():
+    h = PointHasher(P, N)
+    for seed in (0, 1, 49, 12345678901):
+        assert h(seed) == hash_canonical(P, N, seed)
+
+
+def test_expansion_ids_match_single_run_ids():
+    c = parse_campaign("name: x\nsweep: {axes: {alpha_minus_B: [0.1, 0.4], K: [1.0e-4, "
+                       "1.0e-3]}}\nseeds: 3\nnumerics: {resolution: 32}")
+    e = expand(c)
+    assert len(set(e.run_ids)) == 12
+    for run in e:
+        assert run.run_id == run_id_for(run.point.parameters, run.point.numerics, run.seed)
+    # the same grid written with alpha instead of alpha_minus_B is the same set of runs
+    c2 = parse_campaign("name: y\nparameters: {B: 0.5}\nsweep: {axes: {alpha: [0.6, 0.9], "
+                        "K: [0.0001, 0.001]}}\nseeds: [0, 1, 2]\nnumerics: {resolution: 32}")
+    assert expand(c2).run_ids == e.run_ids

@@ -1,0 +1,165 @@
+"""The results folder: atomic writes, the lock, the records and their manifest cache."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from sweep.errors import CampaignLocked
+from sweep.store import (
+    CampaignLock,
+    CampaignStore,
+    atomic_to_netcdf,
+    atomic_write_text,
+    netcdf_attr,
+    read_lock_holder,
+)
+
+
+def dataset() -> xr.Dataset:
+    return xr.Dataset(
+        {"field": (("x", "y"), np.arange(12.0).reshape(3, 4)), "scalar": ((), 1.5)},
+        coords={"x": [0.0, 0.5, 1.0]},
+        attrs={"flag": True, "nothing": None, "times": [1.0, 2.0], "empty": [],
+               "mapping": {"a": 1}, "text": "x"})
+
+
+def test_atomic_netcdf_round_trip(tmp_path):
+    path = tmp_path / "a.nc"
+    size = atomic_to_netcdf(dataset(), path, {"field": {"zlib": True}})
+    assert size == path.stat().st_size
+    assert [p.name for p in tmp_path.iterdir()] == ["a.nc"]  # no temporary left
+    with xr.open_dataset(path) as back:
+        np.testing.assert_array_equal(back["field"].values, dataset()["field"].values)
+        assert back.attrs["flag"] == 1
+        assert back.attrs["nothing"] == ""
+        np.testing.assert_array_equal(back.attrs["times"], [1.0, 2.0])
+        assert json.loads(back.attrs["mapping"]) == {"a": 1}
+
+
+def test_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    path = tmp_path / "a.nc"
+    atomic_to_netcdf(dataset(), path)
+    before = path.read_bytes()
+    with pytest.raises(ValueError, match="unexpected encoding"):
+        atomic_to_netcdf(dataset(), path, {"field": {"not_an_option": 1}})
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["a.nc"]
+
+
+def test_netcdf_attr():
+    assert netcdf_attr(True) == 1
+    assert netcdf_attr(None) == ""
+    assert netcdf_attr(()) == ""
+    assert netcdf_attr(["a", "b"]) == '["a", "b"]'
+    assert netcdf_attr(3.5) == 3.5
+
+
+def test_lock_excludes_a_second_holder(tmp_path):
+    path = tmp_path / "c" / ".lock"
+    first = CampaignLock(path)
+    first.acquire(command="nematic run c.yaml")
+    try:
+        holder = read_lock_holder(path)
+        assert holder["pid"] == os.getpid()
+        assert holder["command"] == "nematic run c.yaml"
+        with pytest.raises(CampaignLocked, match=f"pid {os.getpid()}"):
+            CampaignLock(path).acquire()
+    finally:
+        first.release()
+    assert read_lock_holder(path) is None
+    with CampaignLock(path):
+        assert read_lock_holder(path) is not None
+
+
+def test_a_killed_holder_releases_the_lock(tmp_path):
+    path = tmp_path / ".lock"
+    code = ("import sys, time; from sweep.store import CampaignLock; "
+            f"CampaignLock(__import__('pathlib').Path({str(path)!r})).acquire(); "
+            "print('locked', flush=True); time.sleep(60)")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE)
+    try:
+        assert proc.stdout.readline().strip() == b"locked"
+        assert read_lock_holder(path)["pid"] == proc.pid
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        proc.kill()
+    assert read_lock_holder(path) is None
+    CampaignLock(path).acquire()  # and it can be taken again
+
+
+def record(rid: str, status: str = "ok", nc_bytes: int | None = 10) -> dict:
+    return {"run_id": rid, "status": status, "reason": "" if status == "ok" else "nan",
+            "detail": "", "t_failed": None, "traceback": "", "seed": 0, "wall_time": 1.0,
+            "nc_bytes": nc_bytes, "scalars": {"sigma2_S_final": 0.5}, "code_version": "v",
+            "git_commit": "c", "finished": "2026-01-01T00:00:00+00:00"}
+
+
+def test_scan_caches_records_and_sees_changes(tmp_path):
+    store = CampaignStore(tmp_path, "c")
+    store.ensure()
+    for rid in ("a", "b"):
+        store.write_record(record(rid))
+        (store.runs_dir / f"{rid}.nc").write_bytes(b"x" * 10)
+    recs = store.scan()
+    assert set(recs) == {"a", "b"}
+    assert recs["a"]["scalars"] == {"sigma2_S_final": 0.5}
+    assert store.manifest_path.exists()
+    assert store.load_manifest()["b"]["status"] == "ok"
+    # a record rewritten (a retried run) is read again, not taken from the cache
+    time.sleep(0.01)
+    store.write_record(record("a", status="failed"))
+    assert store.scan()["a"]["status"] == "failed"
+    # a deleted record disappears
+    store.discard("b")
+    assert set(store.scan()) == {"a"}
+    # a corrupt or foreign manifest is ignored
+    atomic_write_text(store.manifest_path, "{not json")
+    assert set(store.scan()) == {"a"}
+
+
+def test_is_complete_checks_the_file(tmp_path):
+    store = CampaignStore(tmp_path, "c")
+    store.ensure()
+    store.write_record(record("a"))
+    assert not store.is_complete("a", store.read_record("a"))  # no file
+    (store.runs_dir / "a.nc").write_bytes(b"x" * 5)
+    assert not store.is_complete("a", store.read_record("a"))  # truncated
+    (store.runs_dir / "a.nc").write_bytes(b"x" * 10)
+    assert store.is_complete("a", store.read_record("a"))
+    crashed = record("b", status="failed", nc_bytes=None)  # raised: the record is all
+    assert store.is_complete("b", crashed)
+    assert not store.is_complete("c", None)
+
+
+def test_adopt_rejects_unreadable_files(tmp_path):
+    store = CampaignStore(tmp_path, "c")
+    store.ensure()
+    (store.runs_dir / "a.nc").write_bytes(b"CDF\x01garbage")
+    assert store.adopt("a") is None
+    assert not (store.runs_dir / "a.nc").exists()
+    atomic_to_netcdf(dataset().assign_attrs(run_id="other"), store.runs_dir / "b.nc")
+    assert store.adopt("b") is None  # a file that names another run is not this run
+
+
+def test_clean_temporaries(tmp_path):
+    store = CampaignStore(tmp_path, "c")
+    store.ensure()
+    old = store.runs_dir / ".a.nc.123.tmp"
+    old.write_text("")
+    os.utime(old, (time.time() - 3600, time.time() - 3600))
+    young = store.runs_dir / ".b.nc.456.tmp"
+    young.write_text("")
+    assert store.clean_temporaries(min_age=600) == 1
+    assert young.exists()
+    assert not old.exists()
+    assert store.clean_temporaries() == 1

@@ -246,6 +246,17 @@ class Numerics:
         return Numerics.from_dict({**self.to_dict(), **changes})
 
 
+def check_compatible(params: Parameters, numerics: Numerics) -> None:
+    """Constraints that involve both objects: the grid must resolve the initial noise
+    (resolution > 2 noise_modes, so the same physical field exists at this resolution)."""
+    if numerics.resolution <= 2 * params.noise_modes:
+        raise ParameterError(
+            "resolution", numerics.resolution,
+            f"an even integer > 2 * noise_modes = {2 * params.noise_modes} (the initial field "
+            f"has Fourier modes up to {params.noise_modes}; raise the resolution or lower "
+            "noise_modes)")
+
+
 def split_settings(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """Split a flat mapping of NAME -> value into (parameters, numerics) dicts.
 
@@ -267,4 +278,4 @@ def split_settings(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str,
     return params, numerics
 
 
-__all__ = ["MECHANICS", "Numerics", "Parameters", "split_settings"]
+__all__ = ["MECHANICS", "Numerics", "Parameters", "check_compatible", "split_settings"]

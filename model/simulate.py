@@ -31,7 +31,7 @@ from .errors import SimulationFailure
 from .initial import initial_fields
 from .mechanics import LinearMechanics
 from .observables import first_peak, snapshot_observables
-from .parameters import Numerics, Parameters
+from .parameters import Numerics, Parameters, check_compatible
 from .pde import ActiveNematicPDE, make_state
 from .solver import ETDRK2Solver
 
@@ -87,6 +87,7 @@ def save_times(numerics: Numerics) -> np.ndarray:
 def run(params: Parameters, numerics: Numerics, seed: int, *,
         progress: Callable[[float], None] | None = None) -> xr.Dataset:
     """Simulate paper Eqs. (1)-(5) from the seeded initial condition; see module docstring."""
+    check_compatible(params, numerics)
     wall0 = time.perf_counter()
     eq = ActiveNematicPDE(params, numerics)
     grid = eq.spectral

@@ -45,7 +45,7 @@ def figures(
         "from the fits.nc on disk.")] = True,
     verbose: VerboseOpt = False,
 ) -> None:
-    """Write results/<name>/fits.nc and results/<name>/figures/*.png|pdf from phase.nc.
+    """Write `results/NAME/fits.nc` and `results/NAME/figures/*.png|pdf` from phase.nc.
 
     Figures read only the results folder (phase.nc, fits.nc, runs/*.nc). The overrides
     (--set, --seeds, --name) must match those of the run, since they name the folder. Exit 0

@@ -14,13 +14,6 @@ import typer
 
 from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, split_settings
-from model.stability import (
-    base_state,
-    critical_eps_closed_form,
-    critical_eps_numerical,
-    max_growth_rate,
-    paper_eq6,
-)
 
 _TRUE = {"true", "yes", "on"}
 _FALSE = {"false", "no", "off"}
@@ -94,6 +87,14 @@ def stability(
         raise typer.Exit(code=2) from None
 
     inc = numerics.incompressible
+    from model.stability import (  # scipy: imported only when the command runs
+        base_state,
+        critical_eps_closed_form,
+        critical_eps_numerical,
+        max_growth_rate,
+        paper_eq6,
+    )
+
     closed = _finite(critical_eps_closed_form(params, incompressible=inc))
     crit = critical_eps_numerical(params, incompressible=inc, nmax=nmax)
     numerical = _finite(crit.eps)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from model.errors import ParameterError
-from model.parameters import Numerics, Parameters
+from model.parameters import Numerics, Parameters, check_compatible
 
 from .identity import PointHasher
 from .spec import AMB, NUMERICS_TYPES, PARAMETER_TYPES, Campaign
@@ -75,7 +75,9 @@ def iter_points(campaign: Campaign) -> Iterator[tuple[tuple[int, ...], dict[str,
 
 def make_point(campaign: Campaign, index: tuple[int, ...], coords: dict[str, Any]) -> GridPoint:
     params, numerics = _settings(campaign, coords)
-    return GridPoint(index, coords, Parameters.from_dict(params), Numerics.from_dict(numerics))
+    point = GridPoint(index, coords, Parameters.from_dict(params), Numerics.from_dict(numerics))
+    check_compatible(point.parameters, point.numerics)
+    return point
 
 
 def check_points(campaign: Campaign, checker: _Checker) -> None:

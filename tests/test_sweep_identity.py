@@ -106,12 +106,12 @@ def test_point_hasher_equals_hash_canonical():
 
 def test_expansion_ids_match_single_run_ids():
     c = parse_campaign("name: x\nsweep: {axes: {alpha_minus_B: [0.1, 0.4], K: [1.0e-4, "
-                       "1.0e-3]}}\nseeds: 3\nnumerics: {resolution: 32}")
+                       "1.0e-3]}}\nseeds: 3\nnumerics: {resolution: 64}")
     e = expand(c)
     assert len(set(e.run_ids)) == 12
     for run in e:
         assert run.run_id == run_id_for(run.point.parameters, run.point.numerics, run.seed)
     # the same grid written with alpha instead of alpha_minus_B is the same set of runs
     c2 = parse_campaign("name: y\nparameters: {B: 0.5}\nsweep: {axes: {alpha: [0.6, 0.9], "
-                        "K: [0.0001, 0.001]}}\nseeds: [0, 1, 2]\nnumerics: {resolution: 32}")
+                        "K: [0.0001, 0.001]}}\nseeds: [0, 1, 2]\nnumerics: {resolution: 64}")
     assert expand(c2).run_ids == e.run_ids

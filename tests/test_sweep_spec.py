@@ -18,7 +18,7 @@ GOOD = """
 name: good
 description: a test campaign
 parameters: {B: 0.5, chi: 10}
-numerics: {resolution: 32, t_final: 4}
+numerics: {resolution: 64, t_final: 4}
 sweep:
   axes:
     alpha_minus_B: {linspace: [0.1, 0.7, 7]}
@@ -129,7 +129,7 @@ def test_jobqueue_cluster_section_builds_a_job_script():
 
 
 # ----------------------------------------------------------------------------- bad input
-BASE = "numerics: {resolution: 32, t_final: 4}\n"
+BASE = "numerics: {resolution: 64, t_final: 4}\n"
 
 #: (YAML text, substrings every one of which must appear in the message)
 BAD = {
@@ -141,6 +141,8 @@ BAD = {
                               ["numerics.K", "move it under 'parameters:'"]),
     "wrong type": ("parameters: {K: abc}\n", ["parameters.K", "'abc'", "real number"]),
     "impossible value": ("parameters: {K: -1}\n", ["parameters.K", "-1", ">= 0"]),
+    "resolution below the initial noise": ("parameters: {noise_modes: 40}\n",
+                                           ["numerics.resolution", "noise_modes"]),
     "odd resolution": ("numerics: {resolution: 33, t_final: 4}\n", ["numerics.resolution", "33", "even"]),
     "unequal zip lengths": (
         "sweep: {axes: {K: [1.0e-4, 1.0e-3], eps: [0, 0.1, 0.2]}, zip: [[K, eps]]}\n",

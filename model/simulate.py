@@ -11,13 +11,10 @@ returns what it computed up to the failure with ``status = "failed"`` and the ``
 
 from __future__ import annotations
 
-import functools
 import json
 import logging
-import subprocess
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,6 +30,7 @@ from .mechanics import LinearMechanics
 from .observables import first_peak, snapshot_observables
 from .parameters import Numerics, Parameters, check_compatible
 from .pde import ActiveNematicPDE, make_state
+from .provenance import git_commit
 from .solver import ETDRK2Solver
 
 log = logging.getLogger(__name__)
@@ -53,20 +51,6 @@ LONG_NAMES = {
     "free_energy": "total free energy, paper Eq. (1)",
     "residual": "force-balance residual |Div P|_{H^-1} / max(1, |P|)",
 }
-
-
-@functools.lru_cache(maxsize=1)
-def git_commit() -> str:
-    """The commit of the source tree this code runs from ("unknown" outside git)."""
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent,
-                             capture_output=True, text=True, timeout=5, check=True)
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=Path(__file__).parent, capture_output=True, text=True,
-                               timeout=5)
-        return out.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
 
 
 def _attr(value: Any) -> Any:

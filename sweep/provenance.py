@@ -2,32 +2,16 @@
 
 from __future__ import annotations
 
-import functools
 import logging
 import platform
-import subprocess
-from pathlib import Path
 from typing import Any
 
 import model
+from model.provenance import git_commit
 
 log = logging.getLogger(__name__)
 
-
-@functools.lru_cache(maxsize=1)
-def git_commit() -> str:
-    """``HEAD`` of the repository holding the code (``+dirty`` if it has uncommitted changes to
-    tracked files), or ``"unknown"`` outside a git checkout."""
-    here = Path(__file__).resolve().parent
-    try:
-        head = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True,
-                              text=True, timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(here), "status", "--porcelain",
-                                "--untracked-files=no"], capture_output=True, text=True,
-                               timeout=10, check=True).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return head + ("+dirty" if dirty else "")
+__all__ = ["code_version", "environment", "git_commit"]
 
 
 def code_version() -> str:

@@ -32,7 +32,7 @@ def test_fig2_high_activity_forms_a_pattern_at_128():
     assert 0.02 < float(ds["lambda_final"]) < 0.5  # a pattern size well inside the box
 
 
-@pytest.mark.slow
+@pytest.mark.long
 def test_fig2_high_activity_forms_a_pattern_finite_strain_at_128():
     ds = run(FIG2.replace(alpha_minus_B=1.0), Numerics(resolution=128, t_final=300), 0)
     assert ds.attrs["status"] == "ok"

@@ -41,6 +41,7 @@ from . import krylov
 from . import tensors as T
 from .errors import SimulationFailure
 from .fourier import SpectralGrid
+from .kernels import apply_tangent_kernel, tangent_kernel
 
 log = logging.getLogger(__name__)
 Array = np.ndarray
@@ -267,6 +268,12 @@ class FiniteMechanics(_Mechanics):
         self.udot_hat = np.zeros_like(self.u_hat)
         self.cg_iterations = 0
 
+    def _tangent(self, F: Array, q1: Array, q2: Array) -> Array:
+        """The tangent dP/dF by the numba kernel (reference: ``constitutive.tangent``)."""
+        m = self.moduli
+        return tangent_kernel(np.ascontiguousarray(F), np.ascontiguousarray(q1),
+                              np.ascontiguousarray(q2), m.kappa, m.B, m.B_prime, m.alpha)
+
     def deformation(self, u_hat: Array) -> Array:
         return self.Fbar[:, :, None, None] + self.grid.inverse(self._grad_hat(u_hat))
 
@@ -275,7 +282,7 @@ class FiniteMechanics(_Mechanics):
 
         def A(v_hat: Array) -> Array:
             dF = g.inverse(self._grad_hat(v_hat))
-            return -self._div_hat(g.forward(cl.apply_tangent(K, dF)))
+            return -self._div_hat(g.forward(apply_tangent_kernel(K, dF)))
 
         return A
 
@@ -312,7 +319,7 @@ class FiniteMechanics(_Mechanics):
                     f"force balance not converged after {it} Newton iterations "
                     f"(residual {res:.3g} > {self.tol:g})", t)
             it += 1
-            K = cl.tangent(F, Q, self.moduli)
+            K = self._tangent(F, q1, q2)
             b = self._div_hat(P_hat)
             # inexact Newton: ask CG for just the reduction this step needs
             rtol = float(np.clip(0.5 * self.tol / res, 1e-8, self.cg_rtol))
@@ -357,7 +364,7 @@ class FiniteMechanics(_Mechanics):
         Q = T.nematic(q1, q2)
         K = mech.extras.get("K")
         if K is None:
-            K = cl.tangent(mech.F, Q, self.moduli)
+            K = self._tangent(mech.F, q1, q2)
             mech.extras["K"] = K
         E = cl.first_piola_q_increment(mech.F, Q, T.nematic(-2.0 * q2, 2.0 * q1), self.moduli)
         b = self._div_hat(g.forward(cl.first_piola_q_increment(mech.F, Q, T.nematic(*R),
@@ -366,7 +373,7 @@ class FiniteMechanics(_Mechanics):
         def A(v_hat: Array) -> Array:
             G = g.inverse(self._grad_hat(v_hat))
             omega = 0.5 * (G[1, 0] - G[0, 1])
-            return -self._div_hat(g.forward(cl.apply_tangent(K, G) + E * omega))
+            return -self._div_hat(g.forward(apply_tangent_kernel(K, G) + E * omega))
 
         udot, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
                                         g.inner, rtol=self.spin_tol, maxiter=self.max_cg)

@@ -83,3 +83,22 @@ def test_rotation_invariance_of_energy(rng):
     Qr = T.matmul(T.matmul(R, Q), T.transpose(R))
     Fr = T.matmul(F, T.transpose(R))
     np.testing.assert_allclose(cl.energy_density(Fr, Qr, M_PASSIVE), W, atol=1e-13)
+
+
+def test_numba_tangent_kernel_matches_numpy_reference(rng):
+    from model.kernels import tangent_kernel
+
+    F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 8, 8))
+    q = 0.4 * rng.standard_normal((2, 8, 8))
+    ref = cl.tangent(F, T.nematic(*q), M)
+    fast = tangent_kernel(F, q[0], q[1], M.kappa, M.B, M.B_prime, M.alpha)
+    np.testing.assert_allclose(fast, ref, rtol=1e-13, atol=1e-13)
+
+
+def test_numba_apply_tangent_matches_numpy_reference(rng):
+    from model.kernels import apply_tangent_kernel
+
+    K = rng.standard_normal((2, 2, 2, 2, 6, 6))
+    dF = rng.standard_normal((2, 2, 6, 6))
+    np.testing.assert_allclose(apply_tangent_kernel(K, dF), cl.apply_tangent(K, dF),
+                               rtol=1e-14, atol=1e-14)

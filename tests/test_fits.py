@@ -179,6 +179,17 @@ def test_anisotropy_slope_recovered_within_interval(rng):
     assert out["anisotropy_mean"].dims == ("chi", "eps")
 
 
+def test_anisotropy_with_one_seed_has_no_interval(rng):
+    """A single seed has no seed-to-seed spread: the interval is NaN, not of zero width."""
+    eps = np.linspace(0.0, 0.1, 5)
+    cos = 2.0 * eps[None, :, None] + 0.01 * rng.standard_normal((1, 5, 1))
+    out = fits.anisotropy(phase({"cos2theta": cos}, {"chi": np.array([5.0]), "eps": eps}),
+                          {"n_boot": 50})
+    assert np.isfinite(out["anisotropy_slope"].values).all()
+    assert np.isnan(out["anisotropy_slope_lower"].values).all()
+    assert np.isnan(out["anisotropy_slope_upper"].values).all()
+
+
 # --------------------------------------------------------------------------- plumbing
 def test_bootstrap_seed_means_handle_missing_runs(rng):
     v = np.array([[1.0, 2.0, np.nan], [np.nan, np.nan, np.nan], [5.0, 5.0, 5.0]])

@@ -94,16 +94,6 @@ class _Mechanics:
         kb = kh[0] * b_hat[0] + kh[1] * b_hat[1]
         return (b_hat - a * kh * kb) * self._inv_k2
 
-    def _grad_hat(self, u_hat: Array) -> Array:
-        """:math:`(\\nabla u)_{ij} = i k_j u_i`, shape (2, 2, ...)."""
-        g = self.grid
-        return np.stack([np.stack([1j * g.kx * u_hat[0], 1j * g.ky * u_hat[0]]),
-                         np.stack([1j * g.kx * u_hat[1], 1j * g.ky * u_hat[1]])])
-
-    def _div_hat(self, P_hat: Array) -> Array:
-        g = self.grid
-        return 1j * (g.kx * P_hat[:, 0] + g.ky * P_hat[:, 1])
-
     def residual(self, P: Array, P_hat: Array | None = None) -> float:
         """:math:`\\lVert \\hat k_J \\hat P_{iJ} \\rVert / \\max(1, \\mathrm{RMS}\\, P)`."""
         g = self.grid
@@ -156,9 +146,9 @@ class LinearMechanics(_Mechanics):
         g = self.grid
         tau = self._eigenstress(q1, q2)
         tau_hat = g.forward(tau)
-        b_hat = self._div_hat(tau_hat)  # i tau_hat k
+        b_hat = self.grid.div_hat(tau_hat)  # i tau_hat k
         u_hat = self._green(b_hat, self._a)
-        grad_u = g.inverse(self._grad_hat(u_hat)) + self.ebar[:, :, None, None]
+        grad_u = g.inverse(self.grid.grad_hat(u_hat)) + self.ebar[:, :, None, None]
         e = 0.5 * (grad_u + T.transpose(grad_u))
         tr_e = T.trace(e)
         eye = T.identity(tr_e.shape)
@@ -275,14 +265,14 @@ class FiniteMechanics(_Mechanics):
                               np.ascontiguousarray(q2), m.kappa, m.B, m.B_prime, m.alpha)
 
     def deformation(self, u_hat: Array) -> Array:
-        return self.Fbar[:, :, None, None] + self.grid.inverse(self._grad_hat(u_hat))
+        return self.Fbar[:, :, None, None] + self.grid.inverse(self.grid.grad_hat(u_hat))
 
     def _operator(self, K: Array):
         g = self.grid
 
         def A(v_hat: Array) -> Array:
-            dF = g.inverse(self._grad_hat(v_hat))
-            return -self._div_hat(g.forward(apply_tangent_kernel(K, dF)))
+            dF = g.inverse(self.grid.grad_hat(v_hat))
+            return -self.grid.div_hat(g.forward(apply_tangent_kernel(K, dF)))
 
         return A
 
@@ -320,7 +310,7 @@ class FiniteMechanics(_Mechanics):
                     f"(residual {res:.3g} > {self.tol:g})", t)
             it += 1
             K = self._tangent(F, q1, q2)
-            b = self._div_hat(P_hat)
+            b = self.grid.div_hat(P_hat)
             # inexact Newton: ask CG for just the reduction this step needs
             rtol = float(np.clip(0.5 * self.tol / res, 1e-8, self.cg_rtol))
             du, ncg, ok = self._pcg(self._operator(K), b, np.zeros_like(b), rtol)
@@ -367,13 +357,13 @@ class FiniteMechanics(_Mechanics):
             K = self._tangent(mech.F, q1, q2)
             mech.extras["K"] = K
         E = cl.first_piola_q_increment(mech.F, Q, T.nematic(-2.0 * q2, 2.0 * q1), self.moduli)
-        b = self._div_hat(g.forward(cl.first_piola_q_increment(mech.F, Q, T.nematic(*R),
+        b = self.grid.div_hat(g.forward(cl.first_piola_q_increment(mech.F, Q, T.nematic(*R),
                                                                self.moduli)))
 
         def A(v_hat: Array) -> Array:
-            G = g.inverse(self._grad_hat(v_hat))
+            G = g.inverse(self.grid.grad_hat(v_hat))
             omega = 0.5 * (G[1, 0] - G[0, 1])
-            return -self._div_hat(g.forward(apply_tangent_kernel(K, G) + E * omega))
+            return -self.grid.div_hat(g.forward(apply_tangent_kernel(K, G) + E * omega))
 
         udot, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
                                         g.inner, rtol=self.spin_tol, maxiter=self.max_cg)

@@ -26,7 +26,6 @@ import numpy as np
 from pde import CartesianGrid, FieldCollection, ScalarField
 from pde.pdes.base import PDEBase
 
-from . import tensors as T
 from .errors import SimulationFailure
 from .fourier import SpectralGrid
 from .mechanics import MechanicalState, make_mechanics
@@ -99,7 +98,3 @@ class ActiveNematicPDE(PDEBase):
         out = state.copy()
         out.data[:] = rate
         return out
-
-    # --- helpers used by the solver and the observables --------------------------------
-    def nematic_tensor(self, q1: Array, q2: Array) -> Array:
-        return T.nematic(q1, q2)

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from pde.solvers.base import SolverBase
@@ -130,15 +129,13 @@ class ETDRK2Solver(SolverBase):
             self._phi_cache[h] = cached
         return cached
 
-    def step(self, u: Array, t: float, h: float, N0_hat: Array | None = None
-             ) -> tuple[Array, Array, float]:
+    def step(self, u: Array, t: float, h: float) -> tuple[Array, Array, float]:
         """One ETDRK2 step; returns (new state, N(u) hat, error estimate)."""
         g = self.pde.spectral
         mech = self.pde.mechanics
         u_hat = g.forward(u)
         finite = mech if isinstance(mech, FiniteMechanics) else None
-        if N0_hat is None:
-            N0_hat = self.nonlinear_hat(u, u_hat, t)
+        N0_hat = self.nonlinear_hat(u, u_hat, t)
         if finite is not None:
             u0, udot0 = finite.u_hat.copy(), finite.udot_hat.copy()
         E, phi1, phi2 = self._phis(h)
@@ -213,6 +210,3 @@ class ETDRK2Solver(SolverBase):
             return t
 
         return stepper
-
-    def info_dict(self) -> dict[str, Any]:
-        return dict(self.stats)

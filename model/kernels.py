@@ -114,3 +114,129 @@ def apply_tangent_kernel(K, dF):  # pragma: no cover - compiled
                                        + K[i, j, 1, 0, x, y] * dF[1, 0, x, y]
                                        + K[i, j, 1, 1, x, y] * dF[1, 1, x, y])
     return out
+
+
+# --- pointwise pieces of the time stepper (references: model.solver / model.pde) -----------
+
+@njit(cache=True)
+def _phi12(z):  # pragma: no cover - compiled
+    """:math:`\\varphi_1(z), \\varphi_2(z)` of a real scalar, Taylor series for small |z|
+    (the same branches as :func:`model.solver.phi_functions`)."""
+    if abs(z) < 1e-3:
+        return (1.0 + z / 2.0 + z * z / 6.0 + z * z * z / 24.0,
+                0.5 + z / 6.0 + z * z / 24.0 + z * z * z / 120.0)
+    em1 = np.expm1(z)
+    return em1 / z, (em1 - z) / (z * z)
+
+
+@njit(cache=True)
+def activity_exponential(A, h, zeta, s, tau):  # pragma: no cover - compiled
+    r"""The pointwise Jacobian :math:`L_A = -(\zeta + 3 s A^2)/\tau` of the local part of
+    Eq. (5) and :math:`\varphi_1(h L_A), \varphi_2(h L_A)`; returns ``(L_A, phi1, phi2)``."""
+    nx, ny = A.shape
+    L = np.empty((nx, ny))
+    p1 = np.empty((nx, ny))
+    p2 = np.empty((nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = A[x, y]
+            lam = -(zeta + 3.0 * s * a * a) / tau
+            L[x, y] = lam
+            p1[x, y], p2[x, y] = _phi12(lam * h)
+    return L, p1, p2
+
+
+@njit(cache=True)
+def bulk_terms(q1, q2, A, tr_e, C, two_Bp):  # pragma: no cover - compiled
+    r"""``[-b q1, -b q2]`` with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (the
+    non-constant part of the Landau-de Gennes bulk term in H, Eq. 4; ``A0`` is in L_q)."""
+    nx, ny = q1.shape
+    out = np.empty((2, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = q1[x, y]
+            b = q2[x, y]
+            bulk = A[x, y] + C * 2.0 * (a * a + b * b) - two_Bp * tr_e[x, y]
+            out[0, x, y] = -bulk * a
+            out[1, x, y] = -bulk * b
+    return out
+
+
+@njit(cache=True)
+def activity_rate(A, trP, zeta, chi, s, tau):  # pragma: no cover - compiled
+    r"""Paper Eq. (5): :math:`(-\zeta A - \chi\, \mathrm{tr} P - s A^3)/\tau`."""
+    nx, ny = A.shape
+    out = np.empty((nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = A[x, y]
+            out[x, y] = (-zeta * a - chi * trP[x, y] - s * a * a * a) / tau
+    return out
+
+
+@njit(cache=True)
+def jaumann_products(omega, q1, q2):  # pragma: no cover - compiled
+    r"""The corotational rate :math:`2 \omega J q = [-2 \omega q_2, 2 \omega q_1]`."""
+    nx, ny = q1.shape
+    out = np.empty((2, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            w = 2.0 * omega[x, y]
+            out[0, x, y] = -w * q2[x, y]
+            out[1, x, y] = w * q1[x, y]
+    return out
+
+
+@njit(cache=True)
+def symbol_combination(x, m1, m2, a, b):  # pragma: no cover - compiled
+    r""":math:`x - (m_1 a + m_2 b)` for half spectra ``a, b`` and real symbols ``m1, m2``
+    (``x`` may be a zero array): the spin multiplier of the linear mechanics, fused."""
+    nx, ny = a.shape
+    out = np.empty((nx, ny), dtype=np.complex128)
+    for i in range(nx):
+        for j in range(ny):
+            out[i, j] = x[i, j] - (m1[i, j] * a[i, j] + m2[i, j] * b[i, j])
+    return out
+
+
+@njit(cache=True)
+def linear_response(q1h, q2h, isoh, kx, ky, khx, khy, inv_k2, amb, a, kappa,
+                    incompressible, mean_dev):  # pragma: no cover - compiled
+    r"""Fused :meth:`model.mechanics.LinearMechanics.spectral_response`: from the spectra of
+    q1, q2 (and of the isotropic eigenstress ``isoh`` = -B' Q:Q hat, zeros if B' = 0) return
+    the spectra ``dev e`` (2 components), ``tr e`` and ``tr sigma`` of the small-strain
+    solution; ``a`` is the Green operator's kappa / (kappa + 1) (1 if incompressible) and
+    ``mean_dev`` the applied eps times N^2 (the mean of dev e in unnormalised spectra)."""
+    nx, ny = q1h.shape
+    dev = np.empty((2, nx, ny), dtype=np.complex128)
+    tr_e = np.empty((nx, ny), dtype=np.complex128)
+    tr_s = np.empty((nx, ny), dtype=np.complex128)
+    for i in range(nx):
+        for j in range(ny):
+            t11 = amb * q1h[i, j]
+            t12 = amb * q2h[i, j]
+            iso = isoh[i, j]
+            k1 = kx[i, j]
+            k2 = ky[i, j]
+            b1 = 1j * (k1 * (t11 + iso) + k2 * t12)
+            b2 = 1j * (k1 * t12 + k2 * (-t11 + iso))
+            h1 = khx[i, j]
+            h2 = khy[i, j]
+            kb = h1 * b1 + h2 * b2
+            u1 = (b1 - a * h1 * kb) * inv_k2[i, j]
+            u2 = (b2 - a * h2 * kb) * inv_k2[i, j]
+            e11 = 1j * k1 * u1
+            e22 = 1j * k2 * u2
+            e12 = 0.5j * (k2 * u1 + k1 * u2)
+            dev[0, i, j] = 0.5 * (e11 - e22)
+            dev[1, i, j] = e12
+            tr_e[i, j] = e11 + e22
+            if incompressible:
+                p = (h1 * h1 - h2 * h2) * t11 + 2.0 * h1 * h2 * t12
+                if inv_k2[i, j] != 0.0:
+                    p += iso
+                tr_s[i, j] = -2.0 * p + 2.0 * iso
+            else:
+                tr_s[i, j] = 2.0 * kappa * (e11 + e22) + 2.0 * iso
+    dev[0, 0, 0] += mean_dev
+    return dev, tr_e, tr_s

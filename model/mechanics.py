@@ -41,7 +41,13 @@ from . import krylov
 from . import tensors as T
 from .errors import SimulationFailure
 from .fourier import SpectralGrid
-from .kernels import apply_tangent_kernel, tangent_kernel
+from .kernels import (
+    apply_tangent_kernel,
+    jaumann_products,
+    linear_response,
+    symbol_combination,
+    tangent_kernel,
+)
 
 log = logging.getLogger(__name__)
 Array = np.ndarray
@@ -133,6 +139,7 @@ class LinearMechanics(_Mechanics):
         self._a = 1.0 if incompressible else k / (k + 1.0)
         self.ebar = np.array([[params.eps, 0.0], [0.0, -params.eps]])
         self._spin_symbols: tuple[Array, Array] | None = None
+        self._zero_hat = np.zeros(grid.k2.shape, dtype=complex)
 
     def _eigenstress(self, q1: Array, q2: Array) -> Array:
         m = self.moduli
@@ -168,8 +175,19 @@ class LinearMechanics(_Mechanics):
         """Fast path of :meth:`solve` for the time stepper, all from the spectra of q1, q2
         (and of Q:Q when B' != 0): returns ``(dev e hat (2 comps), tr e hat, tr sigma hat)``.
 
-        Same equations as :meth:`solve` (tested to agree); no real-space F or P is formed.
+        The numba kernel :func:`model.kernels.linear_response`; its readable reference is
+        :meth:`spectral_response_reference` (tested to agree, and with :meth:`solve`).
         """
+        g, m = self.grid, self.moduli
+        iso = -m.B_prime * QQ_hat if QQ_hat is not None else self._zero_hat
+        return linear_response(q_hat[0], q_hat[1], iso, g.kx, g.ky, self._khat[0],
+                               self._khat[1], self._inv_k2, m.alpha - m.B, self._a,
+                               self.params.kappa, self.incompressible,
+                               self.params.eps * g.n**2)
+
+    def spectral_response_reference(self, q_hat: Array, QQ_hat: Array | None
+                                    ) -> tuple[Array, Array, Array]:
+        """numpy reference of :meth:`spectral_response`."""
         g, m = self.grid, self.moduli
         amb = m.alpha - m.B
         t11 = amb * q_hat[0]
@@ -207,9 +225,10 @@ class LinearMechanics(_Mechanics):
         return m1 * qdot1_hat + m2 * qdot2_hat
 
     def corotational_hat(self, q1: Array, q2: Array, R_hat: Array, t: float | None = None
-                         ) -> tuple[Array, Array]:
+                         ) -> Array:
         r"""Solve :math:`\omega = \Omega[R + 2 \omega J q]` (Jq = (-q2, q1)) by GMRES on
-        :math:`\hat\omega`, warm-started; return ``(Qdot hat components, omega)``.
+        :math:`\hat\omega`, warm-started; return the spectra of the Qdot components (the
+        spin's spectrum is kept in ``omega_hat``).
 
         Without the Jaumann feedback this is one multiplication; the feedback operator has
         norm <= (alpha - B) max S, and :math:`I - M` becomes singular at (alpha - B) S = 1 for
@@ -219,11 +238,13 @@ class LinearMechanics(_Mechanics):
 
         def operator(omega_hat: Array) -> tuple[Array, Array]:
             """``(I - M) omega_hat`` and the Jaumann rate ``2 omega J q`` (hat) it used."""
-            omega = g.inverse(omega_hat)
-            j = g.forward(np.stack([-2.0 * omega * q2, 2.0 * omega * q1]))
-            return omega_hat - self.spin_multiplier(j[0], j[1]), j
+            j = g.forward(jaumann_products(g.inverse(omega_hat), q1, q2))
+            return symbol_combination(omega_hat, m1, m2, j[0], j[1]), j
 
-        b = self.spin_multiplier(R_hat[0], R_hat[1])
+        self.spin_multiplier(R_hat[0], R_hat[1])  # builds the symbols on first use
+        assert self._spin_symbols is not None
+        m1, m2 = self._spin_symbols
+        b = symbol_combination(self._zero_hat, -m1, -m2, R_hat[0], R_hat[1])
         x0 = self.omega_hat if self.omega_hat is not None else b
         omega_hat, it, status, j_hat = krylov.gmres_aux(
             operator, b, x0, lambda r: r, g.inner, rtol=self.spin_tol, maxiter=100)
@@ -233,12 +254,13 @@ class LinearMechanics(_Mechanics):
                 "spin_diverged", "the Jaumann spin solve did not converge in "
                 f"{it} iterations ((alpha - B) S too large: loss of well-posedness)", t)
         self.omega_hat = omega_hat
-        return R_hat + j_hat, g.inverse(omega_hat)
+        return R_hat + j_hat
 
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
                      t: float | None = None) -> tuple[Array, Array]:
-        qdot_hat, omega = self.corotational_hat(q1, q2, self.grid.forward(R), t)
-        return self.grid.inverse(qdot_hat), omega
+        qdot_hat = self.corotational_hat(q1, q2, self.grid.forward(R), t)
+        assert self.omega_hat is not None
+        return self.grid.inverse(qdot_hat), self.grid.inverse(self.omega_hat)
 
 
 class FiniteMechanics(_Mechanics):

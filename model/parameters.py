@@ -160,7 +160,7 @@ class Numerics:
         incompressible: linear mechanics only: enforce div u = 0 by spectral projection.
         newton_tol: force-balance residual tolerance (see docs/model.md, "Residual").
         max_newton: Newton iterations allowed per solve before failing.
-        spin_tol: relative tolerance of the fixed point for the Jaumann spin.
+        spin_tol: relative GMRES tolerance of the Jaumann spin solve.
     """
 
     resolution: int = 128
@@ -175,7 +175,7 @@ class Numerics:
     incompressible: bool = False
     newton_tol: float = 1e-6
     max_newton: int = 30
-    spin_tol: float = 1e-4
+    spin_tol: float = 1e-3
 
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:

@@ -102,3 +102,46 @@ def test_numba_apply_tangent_matches_numpy_reference(rng):
     dF = rng.standard_normal((2, 2, 6, 6))
     np.testing.assert_allclose(apply_tangent_kernel(K, dF), cl.apply_tangent(K, dF),
                                rtol=1e-14, atol=1e-14)
+
+
+@pytest.mark.parametrize("incompressible", [False, True])
+@pytest.mark.parametrize("B_prime", [0.0, 0.2])
+def test_numba_linear_response_matches_numpy_reference(rng, incompressible, B_prime):
+    from model.fourier import SpectralGrid
+    from model.mechanics import LinearMechanics
+    from model.parameters import Parameters
+
+    g = SpectralGrid(16)
+    mech = LinearMechanics(Parameters(B_prime=B_prime, eps=0.03, alpha=1.3), g,
+                           incompressible=incompressible)
+    q = 0.2 * rng.standard_normal((2, 16, 16))
+    q_hat = g.forward(q)
+    QQ_hat = g.forward(2 * (q[0] ** 2 + q[1] ** 2)) if B_prime else None
+    for fast, ref in zip(mech.spectral_response(q_hat, QQ_hat),
+                         mech.spectral_response_reference(q_hat, QQ_hat), strict=True):
+        np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+
+
+def test_numba_pointwise_stepper_kernels_match_numpy(rng):
+    from model import kernels as kern
+    from model.solver import phi_functions
+
+    q1, q2, A, tr = 0.3 * rng.standard_normal((4, 8, 8))
+    A[0, 0] = 0.0  # the small-|z| branch
+    zeta, s, tau, C, Bp, chi, h = 1.0, 10.0, 1.0, 3.0, 0.2, 10.0, 0.3
+    L, p1, p2 = kern.activity_exponential(A, h, zeta, s, tau)
+    L_ref = -(zeta + 3 * s * A**2) / tau
+    _, p1_ref, p2_ref = phi_functions(L_ref * h)
+    for fast, ref in ((L, L_ref), (p1, p1_ref), (p2, p2_ref)):
+        np.testing.assert_allclose(fast, ref, rtol=1e-14)
+    bulk = A + C * 2 * (q1**2 + q2**2) - 2 * Bp * tr
+    np.testing.assert_allclose(kern.bulk_terms(q1, q2, A, tr, C, 2 * Bp),
+                               np.stack([-bulk * q1, -bulk * q2]), rtol=1e-14)
+    np.testing.assert_allclose(kern.activity_rate(A, tr, zeta, chi, s, tau),
+                               (-zeta * A - chi * tr - s * A**3) / tau, rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(kern.jaumann_products(tr, q1, q2),
+                               np.stack([-2 * tr * q2, 2 * tr * q1]), rtol=1e-15)
+    a, b = rng.standard_normal((2, 8, 5)) + 1j * rng.standard_normal((2, 8, 5))
+    m1, m2 = rng.standard_normal((2, 8, 5))
+    np.testing.assert_allclose(kern.symbol_combination(a, m1, m2, a, b), a - (m1 * a + m2 * b),
+                               rtol=1e-14)

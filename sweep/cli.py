@@ -154,9 +154,11 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
              "scheduler": f"dask scheduler {ex.scheduler}",
              "cluster": f"dask-jobqueue {ex.cluster.kind if ex.cluster else ''}"}[ex.mode]
     console.print(f"  execution: {where}; results: {results / c.name}")
-    if c.fits or c.figures:
+    if c.fits or c.figures is not None:
+        shown = ("every one that applies" if c.figures is None
+                 else ", ".join(p.name for p in c.figures) or "none")
         console.print("  fits: " + (", ".join(p.name for p in c.fits) or "none")
-                      + "; figures: " + (", ".join(p.name for p in c.figures) or "none"))
+                      + "; figures: " + shown)
 
 
 # --------------------------------------------------------------------------- run

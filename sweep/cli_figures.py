@@ -39,7 +39,8 @@ def figures(
     only: Annotated[list[str] | None, typer.Option(
         "--only", metavar="FIGURE",
         help="Draw only this figure (repeatable): fig2, fig3, fig4, figA1. Default: the "
-             "campaign's 'figures:' list, else every figure that applies to its grid.")] = None,
+             "campaign's 'figures:' list ('figures: []': none), else every figure that "
+             "applies to its grid.")] = None,
     fits: Annotated[bool, typer.Option(
         "--fits/--no-fits", help="Recompute fits.nc from phase.nc first (default), or draw "
         "from the fits.nc on disk.")] = True,
@@ -65,8 +66,14 @@ def figures(
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:
         console.print(f"fits: {out.fits_path}")
+    for note in out.notes:
+        console.print(f"  note: {note}", markup=False)
     for path in out.paths:
         console.print(f"figure: {path}")
+    if not out.figures:
+        why = ("the campaign lists none (figures: [])" if c.figures is not None
+               else "none applies to this grid")
+        console.print(f"no figures: {why}; --only FIGURE draws one", markup=False)
     if out.failures:
         err.print(f"[red]{len(out.failures)} failed[/]:")
         for what, why in out.failures.items():

@@ -19,7 +19,10 @@ campaign lists them under ``figures:``, options as ``{name: {option: value}}``):
     :math:`K/(\alpha - B - \alpha^{cr})` on log-log axes, seed mean and standard deviation per
     point coloured by K, the fitted power law with its exponent and bootstrap interval in the
     legend, the slope-1/2 reference of Eq. (7); inset :math:`\alpha^{cr}(K)` with its interval
-    (and the :math:`\sigma^2_S` jump's interval for comparison when fitted).
+    (and the :math:`\sigma^2_S` jump's interval for comparison when fitted), K whose
+    :math:`\alpha^{cr}` is at its bound (0) circled and counted in the fit's legend entry.
+    Runs whose first peak was not reached by :math:`t_{\rm final}` are left out by the fits
+    (:mod:`sweep.fits`); the title says how many.
 ``fig4`` (paper Fig. 4)
     (a) the phase diagram over the swept ones of :math:`\chi(\alpha - B)`, K and
     :math:`\varepsilon` (3-D when all three are swept): colour :math:`\langle\cos 2\theta\rangle`,
@@ -192,7 +195,7 @@ def _safe_snapshot(ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool
     right, I1bar (background) below."""
     from matplotlib.ticker import MaxNLocator
 
-    from .snapshot_plot import draw_snapshot
+    from .snapshot_plot import background_colorbar, draw_snapshot
 
     if run.sizes.get("snapshot_time", 0) == 0 or "q1" not in run or "q2" not in run:
         ax.text(0.5, 0.5, "no snapshot stored", ha="center", va="center",
@@ -213,12 +216,8 @@ def _safe_snapshot(ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool
     cb.locator = MaxNLocator(5)
     cb.update_ticks()
     if has_i1 and ax.images:
-        cb2 = fig.colorbar(ax.images[0], cax=ax.inset_axes((0.1, -0.09, 0.8, 0.04)),
-                           orientation="horizontal")
-        cb2.set_label(r"$\bar I_1 = \mathrm{tr}\,C/J$ (background)")
-        cb2.locator = MaxNLocator(4)
-        cb2.formatter.set_useOffset(False)  # type: ignore[attr-defined]
-        cb2.update_ticks()
+        background_colorbar(fig, ax.images[0], cax=ax.inset_axes((0.1, -0.09, 0.8, 0.04)),
+                            orientation="horizontal")
 
 
 # --------------------------------------------------------------------------- fig2
@@ -372,6 +371,11 @@ def fig3(res: Results, options: Mapping[str, Any]) -> Figure:
     pref = float(f["scaling_prefactor"])
     acr = f["alpha_cr"].values
     amb = f[AMB].values.astype(float)
+    at_bound = (f["alpha_cr_at_bound"].values.astype(bool) if "alpha_cr_at_bound" in f
+                else np.zeros(K.size, dtype=bool))
+    bound = f["alpha_cr"].attrs.get("fit_alpha_cr_min", 0.0)
+    n_unpeaked = int(f["alpha_cr"].attrs.get("fit_n_unpeaked", 0))
+    n_patterned = int(f["alpha_cr"].attrs.get("fit_n_patterned", 0))
 
     fig = Figure(figsize=(6.4, 5.0), layout="constrained")
     ax = fig.add_subplot()
@@ -397,9 +401,11 @@ def fig3(res: Results, options: Mapping[str, Any]) -> Figure:
     xu = xgrid[used]
     if xu.size and math.isfinite(beta):
         xs = np.geomspace(xu.min() / 1.3, xu.max() * 1.3, 50)
+        bound_note = ("\n" + rf"$\alpha^{{cr}}$ at its bound {_fmt(float(bound))} for "
+                      f"{int(at_bound.sum())} of {K.size} K" if np.any(at_bound) else "")
         ax.plot(xs, pref * xs**beta, "k-", lw=1.5,
                 label=(rf"fit: $\lambda \propto x^{{\beta}}$, $\beta$ = {beta:.3f} "
-                       f"[{lo:.3f}, {hi:.3f}]"))
+                       f"[{lo:.3f}, {hi:.3f}]" + bound_note))
         gx = float(np.exp(np.mean(np.log(xu))))
         gy = float(np.exp(np.mean(np.log(lam[used]))))
         ax.plot(xs, 0.75 * gy * (xs / gx) ** 0.5, "--", color="0.35", lw=1.3,
@@ -409,9 +415,11 @@ def fig3(res: Results, options: Mapping[str, Any]) -> Figure:
     ax.set_xlabel(r"$K/(\alpha - B - \alpha^{cr})$")
     ax.set_ylabel(r"pattern size $\lambda$ at the first peak of $\sigma^2_S$ ($L$)")
     n_seeds = int(res.phase.sizes.get("seed", 0))
+    left_out = (f"\n{n_unpeaked} of {n_patterned} patterned runs left out: first peak of "
+                r"$\sigma^2_S$ not reached by $t_{\rm final}$" if n_unpeaked else "")
     ax.set_title(f"{res.name}: paper Fig. 3 (mean ± std over {n_seeds} seeds; "
                  f"{int(f['scaling_exponent'].attrs.get('fit_confidence', 0.95) * 100)}% "
-                 "bootstrap interval)", fontsize=9)
+                 "bootstrap interval)" + left_out, fontsize=9)
     ys = [line.get_ydata() for line in ax.lines]
     yall = np.concatenate([np.asarray(y, dtype=float) for y in ys]) if ys else np.array([])
     yall = yall[np.isfinite(yall) & (yall > 0)]
@@ -433,6 +441,10 @@ def fig3(res: Results, options: Mapping[str, Any]) -> Figure:
                          np.where(np.isfinite(ahi), ahi - acr, 0.0)])[:, okk]
         ins.errorbar(K[okk], acr[okk], yerr=np.maximum(yerr, 0.0), fmt="s-", color="tab:blue",
                      ms=4, capsize=2, lw=1, label=r"from $\lambda$")
+        if np.any(at_bound & okk):
+            ins.axhline(float(bound), color="0.6", lw=0.8, ls=":")
+            ins.plot(K[at_bound & okk], acr[at_bound & okk], "o", mfc="none", mec="tab:red",
+                     ms=8, mew=1.2, label=f"at bound ({_fmt(float(bound))})")
     if ("transition_location" in f and "K" in f["transition_location"].dims
             and f["transition_location"].attrs.get("fit_axis", AMB) == AMB):
         tl = f["transition_location"].sel(K=K, method="nearest").values
@@ -808,26 +820,32 @@ def draw(name: str, root: str | Path, options: Mapping[str, Any] | None = None,
 
 @dataclass
 class Outcome:
-    """What :func:`produce` did: files written, fits and figures that failed (name -> why)."""
+    """What :func:`produce` did: the figures it set out to draw, files written, fits and
+    figures that failed (name -> why), and caveats about the fits written
+    (:func:`sweep.fits.fit_notes`)."""
 
     paths: list[Path] = field(default_factory=list)
     failures: dict[str, str] = field(default_factory=dict)
     fits_path: Path | None = None
+    figures: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
 
 def plan(campaign: Campaign, phase: xr.Dataset, names: Sequence[str] | None = None
          ) -> tuple[list[tuple[str, dict[str, Any]]], list[tuple[str, dict[str, Any]]]]:
-    """(fits, figures) to produce: the figures named (``names``), else the campaign's, else
-    every registered figure that applies to this grid; the campaign's fits first (their
-    options win), then the fits those figures need."""
-    listed = {p.name: dict(p.options) for p in campaign.figures}
+    """(fits, figures) to produce: the figures named (``names``), else the campaign's
+    ``figures:`` list (``figures: []``: none), else (no ``figures:`` key) every registered
+    figure that applies to this grid; the campaign's fits first (their options win), then
+    the fits those figures need."""
+    listed = (None if campaign.figures is None
+              else {p.name: dict(p.options) for p in campaign.figures})
     if names:
         unknown = [n for n in names if n not in REGISTRY]
         if unknown:
             raise FigureError(f"unknown figure(s) {', '.join(unknown)}; registered: "
                               f"{', '.join(sorted(REGISTRY))}")
-        figures = [(n, listed.get(n, {})) for n in names]
-    elif listed:
+        figures = [(n, (listed or {}).get(n, {})) for n in names]
+    elif listed is not None:
         figures = list(listed.items())
     else:
         figures = [(n, {}) for n, spec in REGISTRY.items() if spec.applies(phase)]
@@ -849,7 +867,7 @@ def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str]
     except F.FitError as e:
         raise FigureError(str(e)) from None
     fit_requests, figures = plan(campaign, phase, names)
-    out = Outcome()
+    out = Outcome(figures=[n for n, _ in figures])
     if fits and fit_requests:
         try:
             out.fits_path, failed = F.write_fits(root, fit_requests)
@@ -859,6 +877,10 @@ def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str]
             failed = {"fits": f"{type(e).__name__}: {e}"}
             log.warning("fits not written", exc_info=True)
         out.failures.update({f"fit {k}": v for k, v in failed.items()})
+    if out.fits_path is not None:
+        out.notes = F.fit_notes(F.load_fits(root))
+    if not figures:  # figures: [] in the campaign
+        return out
     results = Results(root)
     for name, options in figures:
         try:
@@ -874,13 +896,16 @@ def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str]
 
 def regenerate(campaign: Campaign, results_dir: str | Path) -> list[Path]:
     """Fits and figures of ``campaign`` after a run (the hook of ``nematic run``): writes
-    ``fits.nc`` and ``figures/*.png|pdf``; returns the figure paths. Never raises for a
-    figure that cannot be drawn (it is logged); returns [] when there is no phase.nc."""
+    ``fits.nc`` and ``figures/*.png|pdf`` (none with ``figures: []``); returns the figure
+    paths. Never raises for a figure that cannot be drawn (it is logged, as are the fits'
+    caveats, :func:`sweep.fits.fit_notes`); returns [] when there is no phase.nc."""
     try:
         out = produce(campaign, results_dir)
     except FigureError as e:
         log.warning("no figures: %s", e)
         return []
+    for note in out.notes:
+        log.warning("fits: %s", note)
     for name, why in out.failures.items():
         log.warning("%s failed: %s", name, why)
     return out.paths

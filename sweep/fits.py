@@ -30,20 +30,40 @@ Registered fits (:data:`REGISTRY`; a campaign lists them under ``fits:``, option
     means of :math:`\lambda` (ordinary least squares), so :math:`\alpha^{cr} = -b/m` and
     :math:`c = (mK)^{-1/2}`; ``method: nonlinear`` fits
     :math:`\lambda = c\,[K/(\alpha - B - \alpha^{cr})]^{p}` with :math:`p` = ``exponent``
-    (default 1/2) by least squares (scipy ``curve_fit``). Only patterned runs count: those
-    whose :math:`\sigma^2_S(t_{\rm final})` exceeds ``min_sigma2`` (default: automatic, the
-    middle of the widest gap of at least ``min_gap`` decades in the sorted
-    :math:`\log_{10}\sigma^2_S` of all runs; no gap, every run counts). The pattern size is
-    ``lambda_peak`` (Fig. 3: at the first peak of :math:`\sigma^2_S(t)`) unless
-    ``observable`` says otherwise. Interval: bootstrap over seeds.
+    (default 1/2) by least squares in :math:`\lambda` (c in closed form, a bounded scalar
+    search over :math:`\alpha^{cr}`). The fit is bounded: :math:`\alpha^{cr} \ge`
+    ``alpha_cr_min`` (default 0: a negative critical activity is unphysical, it would put the
+    onset of patterning below zero contractility, where nothing drives it). When
+    the unbounded optimum lies below the bound, the bounded fit is at the bound
+    (:math:`\alpha^{cr}` = ``alpha_cr_min``, the linear fit becomes
+    :math:`\lambda^{-2} = m(\alpha - B - \alpha^{cr}_{\min})`, the least-squares optimum under
+    the bound) and ``alpha_cr_at_bound`` is 1; ``alpha_cr_bound_fraction`` is the fraction of
+    bootstrap replicates at the bound. ``alpha_cr_min: null`` fits without bound. Only
+    patterned runs count: those whose :math:`\sigma^2_S(t_{\rm final})` exceeds ``min_sigma2``
+    (default: automatic, the middle of the widest gap of at least ``min_gap`` decades in the
+    sorted :math:`\log_{10}\sigma^2_S` of all runs; no gap, every run counts). The pattern
+    size is ``lambda_peak`` (Fig. 3: at the first peak of :math:`\sigma^2_S(t)`) unless
+    ``observable`` says otherwise. A run whose first peak is at :math:`t_{\rm final}` or
+    within ``peak_margin`` (default 1) save intervals of it (:math:`t_{\rm peak} \ge
+    t_{\rm final} - {\rm peak\_margin}\cdot{\rm save\_every}`, from phase.nc's ``t_peak`` and
+    the campaign's ``t_final`` and ``save_every``) has not reached its peak: its
+    ``lambda_peak`` is merely :math:`\lambda` near :math:`t_{\rm final}`, not Fig. 3's
+    quantity, so it is left out (``require_peak``, default true for ``lambda_peak``, false
+    for any other observable). The runs left out are counted per grid point
+    (``alpha_cr_unpeaked_count``), per K (``alpha_cr_n_unpeaked``) and in total (attribute
+    ``fit_n_unpeaked`` of ``alpha_cr`` and ``scaling_exponent``). Interval: bootstrap over
+    seeds (of the runs that count).
 
 ``scaling``
     The exponent :math:`\beta` of :math:`\lambda = c\,x^{\beta}`,
     :math:`x = K/(\alpha - B - \alpha^{cr}(K))`, over all K (paper Eq. (7) predicts
     :math:`\beta = 1/2`): least squares on :math:`(\log_{10}x, \log_{10}\langle\lambda\rangle)`
-    over the patterned grid points with :math:`\alpha - B > \alpha^{cr}`. The interval is a
+    over the patterned grid points with :math:`\alpha - B > \alpha^{cr}`, from the same runs
+    as ``alpha_cr`` (runs without a peak left out). The interval is a
     bootstrap over seeds of the whole chain (:math:`\alpha^{cr}(K)` refitted in every
-    replicate). Also writes the ``alpha_cr`` variables. Note: with one K and the linear
+    replicate). Also writes the ``alpha_cr`` variables; ``scaling_exponent`` carries the
+    number of K whose :math:`\alpha^{cr}` is at its bound (``fit_n_alpha_cr_at_bound``).
+    Note: with one K and the linear
     :math:`\alpha^{cr}` fit, :math:`\beta = 1/2` nearly by construction (:math:`\lambda^{-2}`
     linear in :math:`\alpha - B` *is* exponent 1/2 in :math:`\alpha - B`); the exponent is a
     test of the K dependence and needs several K.
@@ -77,7 +97,7 @@ import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -98,7 +118,8 @@ Array = NDArray[np.float64]
 
 COMMON_OPTIONS = ("n_boot", "confidence", "bootstrap_seed", "select")
 TRANSITION_OPTIONS = ("axis", "observable", "log", "min_jump", "mean", "prefix")
-SIZE_OPTIONS = ("method", "exponent", "observable", "min_sigma2", "min_gap")
+SIZE_OPTIONS = ("method", "exponent", "observable", "min_sigma2", "min_gap", "alpha_cr_min",
+                "require_peak", "peak_margin")
 ANISOTROPY_OPTIONS = ("axis", "observable")
 STABILITY_OPTIONS = ("activity", "strain", "unstable_reasons", "fraction", "n_fine",
                      "incompressible")
@@ -296,29 +317,56 @@ def fit_power_law(x: ArrayLike, y: ArrayLike) -> tuple[float, float]:
     return beta, (10.0**b if math.isfinite(b) else math.nan)
 
 
+class AlphaCrFit(NamedTuple):
+    """:func:`alpha_cr_from_sizes` for one K: the critical activity, the prefactor c and
+    whether the bound ``alpha_cr >= alpha_cr_min`` is active (the unbounded optimum is
+    below it)."""
+
+    alpha_cr: float
+    prefactor: float
+    at_bound: bool
+
+
 def alpha_cr_from_sizes(amb: ArrayLike, lam: ArrayLike, K: float, *, method: str = "linear",
-                        exponent: float = 0.5) -> tuple[float, float]:
-    r"""``(alpha_cr, c)`` for one Frank constant from the seed-mean pattern sizes ``lam`` at
-    the contractilities ``amb`` (NaN entries are skipped), paper Eq. (7):
-    :math:`\lambda = c\,[K/(\alpha - B - \alpha^{cr})]^{p}`.
+                        exponent: float = 0.5, alpha_cr_min: float | None = 0.0
+                        ) -> AlphaCrFit:
+    r"""``(alpha_cr, c, at_bound)`` for one Frank constant from the seed-mean pattern sizes
+    ``lam`` at the contractilities ``amb`` (NaN entries are skipped), paper Eq. (7):
+    :math:`\lambda = c\,[K/(\alpha - B - \alpha^{cr})]^{p}`, with
+    :math:`\alpha^{cr} \ge` ``alpha_cr_min`` (``None``: unbounded).
 
     ``linear`` (:math:`p = 1/2`): :math:`\lambda^{-2} = m(\alpha - B) + b`,
-    :math:`\alpha^{cr} = -b/m`, :math:`c = (mK)^{-1/2}` (NaN unless :math:`m > 0`).
+    :math:`\alpha^{cr} = -b/m`, :math:`c = (mK)^{-1/2}` (NaN unless :math:`m > 0`). For
+    :math:`m > 0` the bound is the linear constraint :math:`b \le -m\,\alpha^{cr}_{\min}`, so
+    when the unbounded optimum violates it the bounded least-squares optimum lies on it: the
+    line through :math:`(\alpha^{cr}_{\min}, 0)`,
+    :math:`\lambda^{-2} = m(\alpha - B - \alpha^{cr}_{\min})` (NaN unless that :math:`m > 0`).
     ``nonlinear``: least squares in :math:`\lambda` with :math:`p` = ``exponent``: for fixed
     :math:`\alpha^{cr}` the model is linear in c (closed form), and the residual is minimised
-    over :math:`\alpha^{cr} < \min(\alpha - B)` (bounded scalar search).
+    over :math:`\max(\alpha^{cr}_{\min}, \cdot) \le \alpha^{cr} < \min(\alpha - B)` (bounded
+    scalar search; NaN when :math:`\min(\alpha - B) \le \alpha^{cr}_{\min}`, as the model
+    needs :math:`\alpha - B > \alpha^{cr}` at every point).
     """
+    nan = AlphaCrFit(math.nan, math.nan, False)
     a = np.asarray(amb, dtype=float)
     lv = np.asarray(lam, dtype=float)
     ok = np.isfinite(a) & np.isfinite(lv) & (lv > 0)
     a, lv = a[ok], lv[ok]
     if a.size < 2 or np.ptp(a) == 0:
-        return math.nan, math.nan
-    m, b = fit_line(a, lv**-2.0)
+        return nan
+    bound = None if alpha_cr_min is None else float(alpha_cr_min)
     if method == "linear":
+        y = lv**-2.0
+        m, b = fit_line(a, y)
         if not m > 0:
-            return math.nan, math.nan
-        return -b / m, 1.0 / math.sqrt(m * K)
+            return nan
+        if bound is None or -b / m >= bound:
+            return AlphaCrFit(-b / m, 1.0 / math.sqrt(m * K), False)
+        d = a - bound
+        m = float(d @ y / (d @ d))
+        if not m > 0:
+            return nan
+        return AlphaCrFit(bound, 1.0 / math.sqrt(m * K), True)
     if method != "nonlinear":
         raise FitError(f"alpha_cr method {method!r}: expected 'linear' or 'nonlinear'")
     from scipy.optimize import minimize_scalar
@@ -326,6 +374,11 @@ def alpha_cr_from_sizes(amb: ArrayLike, lam: ArrayLike, K: float, *, method: str
     top = float(a.min())
     span = float(np.ptp(a))
     lower = top - 50.0 * span
+    bounded = False
+    if bound is not None and bound >= lower:  # else the bound is far below the data: inactive
+        if bound >= top:
+            return nan
+        lower, bounded = bound, True
 
     def profile(acr: float) -> tuple[float, float]:
         """Least-squares c at fixed alpha_cr (linear in c) and the residual sum of squares."""
@@ -336,18 +389,25 @@ def alpha_cr_from_sizes(amb: ArrayLike, lam: ArrayLike, K: float, *, method: str
     with np.errstate(all="ignore"):
         opt = minimize_scalar(lambda acr: profile(acr)[1], bounds=(lower, top - 1e-9 * span),
                               method="bounded", options={"xatol": 1e-10 * span})
-    acr = float(opt.x)
-    if not opt.success or acr < lower + 1e-3 * span:  # no finite alpha_cr fits these data
-        return math.nan, math.nan
-    return acr, profile(acr)[0]
+        acr = float(opt.x)
+        if not opt.success:
+            return nan
+        near = acr < lower + 1e-3 * span
+        if near and bounded and profile(lower)[1] <= profile(acr)[1]:
+            return AlphaCrFit(lower, profile(lower)[0], True)  # the optimum is at the bound
+        if near and not bounded:  # the residual falls without end: no finite alpha_cr fits
+            return nan
+        return AlphaCrFit(acr, profile(acr)[0], False)
 
 
 @dataclass(frozen=True)
 class SizeScaling:
-    """:func:`size_scaling` on one set of seed means: alpha_cr and c per K, the exponent."""
+    """:func:`size_scaling` on one set of seed means: alpha_cr and c per K (and whether the
+    bound of alpha_cr is active), the exponent."""
 
     alpha_cr: Array
     prefactor_K: Array
+    at_bound: NDArray[np.bool_]
     x: Array
     used: NDArray[np.bool_]
     exponent: float
@@ -355,29 +415,47 @@ class SizeScaling:
 
 
 def size_scaling(K: ArrayLike, amb: ArrayLike, lam_mean: ArrayLike, *, method: str = "linear",
-                 exponent: float = 0.5, alpha_cr: ArrayLike | None = None) -> SizeScaling:
-    r"""alpha_cr(K) (:func:`alpha_cr_from_sizes`, unless given) and the exponent of
-    :math:`\lambda = c\,x^\beta`, :math:`x = K/(\alpha - B - \alpha^{cr}(K))`
-    (:func:`fit_power_law`) over the points with :math:`x > 0`. ``lam_mean`` is
-    ``(len(K), len(amb))``, NaN where there is no pattern."""
+                 exponent: float = 0.5, alpha_cr: ArrayLike | None = None,
+                 alpha_cr_min: float | None = 0.0) -> SizeScaling:
+    r"""alpha_cr(K) (:func:`alpha_cr_from_sizes` with the bound ``alpha_cr_min``, unless
+    given) and the exponent of :math:`\lambda = c\,x^\beta`,
+    :math:`x = K/(\alpha - B - \alpha^{cr}(K))` (:func:`fit_power_law`) over the points with
+    :math:`x > 0`. ``lam_mean`` is ``(len(K), len(amb))``, NaN where there is no pattern."""
     Ka = np.asarray(K, dtype=float)
     a = np.asarray(amb, dtype=float)
     lm = np.asarray(lam_mean, dtype=float)
     if alpha_cr is None:
-        fits = [alpha_cr_from_sizes(a, lm[i], float(Ka[i]), method=method, exponent=exponent)
-                for i in range(Ka.size)]
-        acr = np.array([f[0] for f in fits])
-        cK = np.array([f[1] for f in fits])
+        fits = [alpha_cr_from_sizes(a, lm[i], float(Ka[i]), method=method, exponent=exponent,
+                                    alpha_cr_min=alpha_cr_min) for i in range(Ka.size)]
+        acr = np.array([f.alpha_cr for f in fits])
+        cK = np.array([f.prefactor for f in fits])
+        at_bound = np.array([f.at_bound for f in fits], dtype=bool)
     else:
         acr = np.asarray(alpha_cr, dtype=float)
         cK = np.full(Ka.size, np.nan)
+        at_bound = np.zeros(Ka.size, dtype=bool)
     d = a[None, :] - acr[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         x = np.where(d > 0, Ka[:, None] / np.where(d > 0, d, 1.0), np.nan)
     used = np.isfinite(x) & np.isfinite(lm) & (lm > 0)
     beta, c = fit_power_law(x[used], lm[used])
-    return SizeScaling(alpha_cr=acr, prefactor_K=cK, x=x, used=used, exponent=beta,
-                       prefactor=c)
+    return SizeScaling(alpha_cr=acr, prefactor_K=cK, at_bound=at_bound, x=x, used=used,
+                       exponent=beta, prefactor=c)
+
+
+def peak_not_reached(t_peak: ArrayLike, t_final: ArrayLike, save_every: ArrayLike = 0.0,
+                     margin: float = 1.0) -> NDArray[np.bool_]:
+    r"""Which runs have not reached the first peak of :math:`\sigma^2_S(t)` by
+    :math:`t_{\rm final}`: :math:`t_{\rm peak} \ge t_{\rm final} - {\rm margin}\cdot
+    {\rm save\_every}` (to a relative 1e-9 of :math:`t_{\rm final}`; the arrays broadcast).
+    Such a run's "first peak" is the last saved point or one a save interval before it (the
+    series was still rising, or only just turned): not the peak of Fig. 3. NaN
+    ``t_peak`` (missing or failed run): False."""
+    tp = np.asarray(t_peak, dtype=float)
+    tf = np.asarray(t_final, dtype=float)
+    se = np.asarray(save_every, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(tp) & (tp >= tf - margin * se - 1e-9 * np.abs(tf))
 
 
 # --------------------------------------------------------------------------- phase.nc access
@@ -480,6 +558,17 @@ def _problems(name: str, options: Mapping[str, Any], allowed: Iterable[str]) -> 
     sel = options.get("select")
     if sel is not None and not isinstance(sel, Mapping):
         out.append(f"select = {sel!r}; expected a mapping {{sweep axis: value}}")
+    bound = options.get("alpha_cr_min")
+    if bound is not None and (isinstance(bound, bool) or not isinstance(bound, (int, float))
+                              or not math.isfinite(bound)):
+        out.append(f"alpha_cr_min = {bound!r}; expected a number (the lower bound of alpha_cr) "
+                   "or null (no bound)")
+    require = options.get("require_peak")
+    if require is not None and not isinstance(require, bool):
+        out.append(f"require_peak = {require!r}; expected true or false")
+    margin = options.get("peak_margin", 1.0)
+    if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not margin >= 0:
+        out.append(f"peak_margin = {margin!r}; expected a number of save intervals >= 0")
     return out
 
 
@@ -572,8 +661,67 @@ def transition(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
     return result
 
 
-def _size_data(phase: xr.Dataset, options: Mapping[str, Any]
-               ) -> tuple[xr.Dataset, Array, Array, Array, float]:
+def _run_setting(ds: xr.Dataset, name: str) -> xr.DataArray | None:
+    """A numerics setting of the runs (``t_final``, ``save_every``) over the phase diagram:
+    the coordinate ``name`` when swept (a dim, a zipped coordinate, or a scalar left by
+    ``select``), else phase.nc's attribute ``num_<name>``; ``None`` if neither is there."""
+    if name in ds.coords:
+        return ds[name].astype(float)
+    value = ds.attrs.get(f"num_{name}")
+    try:
+        return None if value is None else xr.DataArray(float(value))
+    except (TypeError, ValueError):
+        return None
+
+
+def _unpeaked(ds: xr.Dataset, require: bool, margin: float
+              ) -> tuple[NDArray[np.bool_], str]:
+    """:func:`peak_not_reached` for every run of ``ds`` (dims K, alpha_minus_B, seed), and a
+    description of the check for the fit's attributes. Without ``t_peak`` or ``t_final`` in
+    phase.nc no run is flagged (logged)."""
+    dims = ("K", AMB, "seed")
+    none = np.zeros(tuple(ds.sizes[d] for d in dims), dtype=bool)
+    if not require:
+        return none, "off (require_peak: false)"
+    if "t_peak" not in ds:
+        log.warning("alpha_cr: phase.nc has no t_peak: cannot tell runs that did not reach "
+                    "the first peak of sigma2_S; every run counts")
+        return none, "not done: phase.nc has no t_peak"
+    t_final = _run_setting(ds, "t_final")
+    if t_final is None:
+        log.warning("alpha_cr: t_final of the runs unknown (no num_t_final attribute in "
+                    "phase.nc): cannot tell runs that did not reach the first peak of "
+                    "sigma2_S; every run counts")
+        return none, "not done: t_final unknown"
+    save_every = _run_setting(ds, "save_every")
+    check = f"t_peak >= t_final - {margin:g} save_every"
+    if save_every is None:
+        log.warning("alpha_cr: save_every of the runs unknown (no num_save_every attribute in "
+                    "phase.nc): only runs with t_peak = t_final count as without a peak")
+        save_every, check = xr.DataArray(0.0), "t_peak >= t_final (save_every unknown)"
+    t_peak = ds["t_peak"]
+    tp, tf, se = (v.broadcast_like(t_peak).transpose(*dims).values
+                  for v in (t_peak, t_final, save_every))
+    return peak_not_reached(tp, tf, se, margin), check
+
+
+@dataclass(frozen=True)
+class _SizeData:
+    """The runs that enter the ``alpha_cr`` and ``scaling`` fits (:func:`_size_data`)."""
+
+    ds: xr.Dataset
+    K: Array
+    amb: Array
+    #: (K, alpha_minus_B, seed): the pattern size of every run that counts, NaN elsewhere
+    lam: Array
+    level: float
+    #: (K, alpha_minus_B): patterned runs left out because their peak was not reached
+    unpeaked: NDArray[np.int32]
+    #: attributes of the fit variables describing the peak check
+    peak_attrs: dict[str, Any]
+
+
+def _size_data(phase: xr.Dataset, options: Mapping[str, Any]) -> _SizeData:
     ds = select(phase, options.get("select"))
     observable = str(options.get("observable", "lambda_peak"))
     if observable not in ds:
@@ -590,21 +738,42 @@ def _size_data(phase: xr.Dataset, options: Mapping[str, Any]
         level = patterned_level(sig, min_gap=float(options.get("min_gap", 2.0)))
     level = float(level)
     with np.errstate(invalid="ignore"):
-        patterned = np.isfinite(sig) & (sig > level)
-    lam = np.where(patterned & np.isfinite(lam) & (lam > 0), lam, np.nan)
-    return ds, ds["K"].values.astype(float), ds[AMB].values.astype(float), lam, level
+        sized = np.isfinite(sig) & (sig > level) & np.isfinite(lam) & (lam > 0)
+    require = options.get("require_peak")
+    require = observable == "lambda_peak" if require is None else bool(require)
+    margin = float(options.get("peak_margin", 1.0))
+    unpeaked, check = _unpeaked(ds, require, margin)
+    left_out = sized & unpeaked
+    n_left_out = int(left_out.sum())
+    if n_left_out:
+        log.info("alpha_cr: %d of %d patterned runs left out (first peak of sigma2_S not "
+                 "reached: %s)", n_left_out, int(sized.sum()), check)
+    peak_attrs: dict[str, Any] = {
+        "fit_require_peak": int(require), "fit_peak_margin": margin, "fit_peak_check": check,
+        "fit_n_unpeaked": n_left_out, "fit_n_patterned": int(sized.sum())}
+    return _SizeData(ds=ds, K=ds["K"].values.astype(float), amb=ds[AMB].values.astype(float),
+                     lam=np.where(sized & ~unpeaked, lam, np.nan), level=level,
+                     unpeaked=left_out.sum(-1).astype(np.int32), peak_attrs=peak_attrs)
 
 
+def _alpha_cr_bound(options: Mapping[str, Any]) -> float | None:
+    bound = options.get("alpha_cr_min", 0.0)
+    return None if bound is None else float(bound)
 
-def _alpha_cr_vars(ds: xr.Dataset, fit: SizeScaling, boot: Array, conf: float,
-                   options: Mapping[str, Any], level: float, counts: Array) -> xr.Dataset:
-    res = xr.Dataset(coords={"K": ds["K"].variable})
+
+def _alpha_cr_vars(data: _SizeData, fit: SizeScaling, boot: Array, boot_at_bound: Array,
+                   conf: float, options: Mapping[str, Any], counts: Array) -> xr.Dataset:
+    ds = data.ds
+    res = xr.Dataset(coords={"K": ds["K"].variable, AMB: ds[AMB].variable})
     lo_hi = np.array([_percentiles(boot[:, i], conf) for i in range(boot.shape[1])])
     method = str(options.get("method", "linear"))
+    bound = _alpha_cr_bound(options)
     attrs: dict[str, Any] = {
         "fit_method": method, "fit_exponent": float(options.get("exponent", 0.5)),
         "fit_observable": str(options.get("observable", "lambda_peak")),
-             "fit_min_sigma2": level}
+        "fit_min_sigma2": data.level,
+        "fit_alpha_cr_min": "none" if bound is None else bound,
+        **data.peak_attrs}
     res["alpha_cr"] = _var(["K"], fit.alpha_cr, "critical activity alpha_cr from the pattern "
                            "sizes (paper Eq. 7)", **attrs)
     res["alpha_cr_lower"] = _var(["K"], lo_hi[:, 0], "alpha_cr seed-bootstrap interval, "
@@ -615,54 +784,81 @@ def _alpha_cr_vars(ds: xr.Dataset, fit: SizeScaling, boot: Array, conf: float,
                                "deviation")
     res["alpha_cr_prefactor"] = _var(["K"], fit.prefactor_K, "c in lambda = c (K / (alpha - B "
                                      "- alpha_cr))^(1/2) at this K", "L")
+    res["alpha_cr_at_bound"] = _var(
+        ["K"], fit.at_bound.astype(np.int8), "1 if alpha_cr is at its lower bound "
+        "alpha_cr_min (the unbounded fit would put it below), 0 otherwise",
+        flag_values=np.array([0, 1], dtype=np.int8), flag_meanings="free at_bound",
+        fit_alpha_cr_min=attrs["fit_alpha_cr_min"])
+    finite = np.isfinite(boot).sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        frac = np.where(finite > 0, boot_at_bound.sum(axis=0) / np.maximum(finite, 1), np.nan)
+    res["alpha_cr_bound_fraction"] = _var(["K"], frac, "fraction of the bootstrap replicates "
+                                          "(with a fit) whose alpha_cr is at its lower bound")
     res["alpha_cr_n_points"] = _var(["K"], counts.astype(np.int32), "alpha - B values with a "
                                     "pattern used in the fit")
+    res["alpha_cr_unpeaked_count"] = _var(
+        ["K", AMB], data.unpeaked, "patterned runs left out of the alpha_cr and scaling fits "
+        "because the first peak of sigma2_S(t) was not reached by t_final "
+        f"({data.peak_attrs['fit_peak_check']})",
+        fit_peak_check=data.peak_attrs["fit_peak_check"])
+    res["alpha_cr_n_unpeaked"] = _var(["K"], data.unpeaked.sum(axis=1).astype(np.int32),
+                                      "patterned runs at this K left out of the fits: first "
+                                      "peak of sigma2_S(t) not reached by t_final")
     return res
 
 
 def _size_fit(phase: xr.Dataset, options: Mapping[str, Any], with_scaling: bool) -> xr.Dataset:
-    ds, K, amb, lam, level = _size_data(phase, options)
+    data = _size_data(phase, options)
+    K, amb, lam = data.K, data.amb, data.lam
     method = str(options.get("method", "linear"))
     if method not in ("linear", "nonlinear"):
         raise FitError(f"alpha_cr: method = {method!r}; expected 'linear' or 'nonlinear'")
     exponent = float(options.get("exponent", 0.5))
+    bound = _alpha_cr_bound(options)
     n_boot = int(options.get("n_boot", 1000))
     conf = float(options.get("confidence", 0.95))
     rng = _rng(options)
     mean = _finite_mean(lam)
-    fit = size_scaling(K, amb, mean, method=method, exponent=exponent)
+    fit = size_scaling(K, amb, mean, method=method, exponent=exponent, alpha_cr_min=bound)
     counts = np.isfinite(mean).sum(axis=1)
     if not np.any(np.isfinite(fit.alpha_cr)):
         log.warning("alpha_cr: no fit at any K (each needs two patterned alpha - B values "
                     "with lambda^-2 increasing in alpha - B)")
+    if np.any(fit.at_bound):
+        log.info("alpha_cr: at its bound %g for K = %s", bound,
+                 ", ".join(f"{k:g}" for k in K[fit.at_bound]))
     boots = bootstrap_seed_means(lam, n_boot, rng)
     acr_b = np.full((n_boot, K.size), np.nan)
+    bound_b = np.zeros((n_boot, K.size), dtype=bool)
     beta_b = np.full(n_boot, np.nan)
     for b in range(n_boot):
-        fb = size_scaling(K, amb, boots[b], method=method, exponent=exponent)
+        fb = size_scaling(K, amb, boots[b], method=method, exponent=exponent,
+                          alpha_cr_min=bound)
         acr_b[b] = fb.alpha_cr
+        bound_b[b] = fb.at_bound
         beta_b[b] = fb.exponent
-    res = _alpha_cr_vars(ds, fit, acr_b, conf, options, level, counts)
+    res = _alpha_cr_vars(data, fit, acr_b, bound_b, conf, options, counts)
     if not with_scaling:
         return res
-    res = res.assign_coords({AMB: ds[AMB].variable})
     dims2 = ["K", AMB]
     res["scaling_x"] = _var(dims2, fit.x, "K / (alpha - B - alpha_cr(K))")
     res["scaling_lambda_mean"] = _var(dims2, mean, "seed mean of the pattern size over the "
-                                      "patterned runs", "L")
+                                      "patterned runs that reached their peak", "L")
     res["scaling_lambda_std"] = _var(dims2, _finite_std(lam), "seed standard deviation "
-                                     "(ddof = 1) of the pattern size over the patterned runs",
-                                     "L")
+                                     "(ddof = 1) of the pattern size over the patterned runs "
+                                     "that reached their peak", "L")
     res["scaling_lambda_count"] = _var(dims2, np.isfinite(lam).sum(-1).astype(np.int32),
-                                       "patterned runs at this point")
+                                       "patterned runs that reached their peak at this point")
     res["scaling_used"] = _var(dims2, fit.used.astype(np.int8), "1 if the point enters the "
                                "exponent fit")
     lo, hi = _percentiles(beta_b, conf)
     n_K = int(np.any(fit.used, axis=1).sum())
     attrs: dict[str, Any] = {
         "fit_alpha_cr_method": method, "fit_n_boot": n_boot, "fit_confidence": conf,
-        "fit_n_points": int(fit.used.sum()),
-             "fit_n_K": n_K}
+        "fit_n_points": int(fit.used.sum()), "fit_n_K": n_K,
+        "fit_alpha_cr_min": "none" if bound is None else bound,
+        "fit_n_alpha_cr_at_bound": int(fit.at_bound.sum()),
+        **data.peak_attrs}
     res["scaling_exponent"] = _var([], fit.exponent, "exponent beta of lambda = c (K / (alpha"
                                    " - B - alpha_cr))^beta (paper Eq. 7: 1/2)", **attrs)
     res["scaling_exponent_lower"] = _var([], lo, "scaling exponent, seed-bootstrap interval "
@@ -995,6 +1191,33 @@ def compute_fits(phase: xr.Dataset, requests: Iterable[tuple[str, Mapping[str, A
         "failed_fits": "; ".join(f"{k}: {v}" for k, v in failures.items()),
     })
     return merged, failures
+
+
+def fit_notes(ds: xr.Dataset) -> list[str]:
+    """One-line caveats about the fits in ``ds`` (a fits.nc) for the command line: the runs
+    the ``alpha_cr`` / ``scaling`` fits left out because the first peak of sigma2_S was not
+    reached by t_final, a peak check that could not be done, and the K whose alpha_cr is at
+    its lower bound. Empty when there is nothing to say (or no such fit)."""
+    if "alpha_cr" not in ds:
+        return []
+    notes = []
+    attrs = ds["alpha_cr"].attrs
+    n = int(attrs.get("fit_n_unpeaked", 0))
+    check = str(attrs.get("fit_peak_check", ""))
+    if n:
+        notes.append(f"alpha_cr/scaling: {n} of {int(attrs.get('fit_n_patterned', n))} "
+                     "patterned run(s) left out: the first peak of sigma2_S was not reached "
+                     f"by t_final ({check}; per point: alpha_cr_unpeaked_count in {FITS})")
+    elif check.startswith("not done"):
+        notes.append(f"alpha_cr/scaling: runs without a peak of sigma2_S not looked for "
+                     f"({check})")
+    if "alpha_cr_at_bound" in ds:
+        at = np.asarray(ds["alpha_cr_at_bound"].values).astype(bool)
+        if at.any():
+            K = ", ".join(f"{float(k):g}" for k in ds["K"].values[at])
+            notes.append(f"alpha_cr at its bound {attrs.get('fit_alpha_cr_min', 0)} for K = "
+                         f"{K} (the unbounded fit would put it lower)")
+    return notes
 
 
 def load_phase(root: Path) -> xr.Dataset:

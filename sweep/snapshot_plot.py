@@ -1,24 +1,72 @@
 """A run's snapshot drawn like the paper's Fig. 2a: director quivers coloured by S over an
-I1bar = tr C / J background. Reads only a run Dataset (as written by ``model.simulate.run``)."""
+I1bar = tr C / J background. Reads only a run Dataset (as written by ``model.simulate.run``).
+
+The background shows I1bar - 2 (I1bar >= 2 in 2-D, = 2 without shear), scaled by a power of
+ten that the colour bar's label states when it is small: I1bar itself differs from 2 by
+~1e-5 in a weakly strained pattern, which gave tick labels like "2.00001" or an offset "+2"
+with a "1e-5" multiplier.
+"""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import xarray as xr
 
+#: |I1bar - 2| below this (or at least BACKGROUND_MAX) is shown times a power of ten.
+BACKGROUND_MIN, BACKGROUND_MAX = 1e-2, 1e3
+BACKGROUND_NAME = r"$\bar I_1 = \mathrm{tr}\,C / J$"
+
+
+def background(i1: np.ndarray) -> tuple[np.ndarray, str]:
+    """The snapshot's background from the I1bar field: ``(values, label)``. The values are
+    I1bar - 2, times 10^n when the largest |I1bar - 2| is below :data:`BACKGROUND_MIN` (or
+    at least :data:`BACKGROUND_MAX`), so that they lie in [1, 10); the label says what is
+    shown (e.g. ``10^{5} (I1bar - 2)``), for the colour bar."""
+    values = np.asarray(i1, dtype=float) - 2.0
+    finite = values[np.isfinite(values)]
+    top = float(np.abs(finite).max()) if finite.size else 0.0
+    shown = r"\bar I_1 - 2"
+    if top > 0 and not BACKGROUND_MIN <= top < BACKGROUND_MAX:
+        n = -math.floor(math.log10(top))
+        values = values * 10.0**n
+        shown = rf"10^{{{n}}}\,(\bar I_1 - 2)"
+    return values, rf"${shown}$, {BACKGROUND_NAME} (background)"
+
+
+def background_colorbar(fig: Any, image: Any, **kwargs: Any) -> Any:
+    """A colour bar for the background ``image`` drawn by :func:`draw_snapshot` (its label
+    is the image's label), with at most 5 plain ticks: no offset, no multiplier.
+    ``kwargs`` go to ``fig.colorbar`` (``ax``, ``cax``, ``location``, ...)."""
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
+    cb = fig.colorbar(image, **kwargs)
+    label = image.get_label()
+    cb.set_label(label if label and not label.startswith("_") else BACKGROUND_NAME)
+    cb.locator = MaxNLocator(5)
+    formatter = ScalarFormatter(useOffset=False)
+    formatter.set_scientific(False)
+    cb.formatter = formatter
+    cb.update_ticks()
+    return cb
+
 
 def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32,
                   colorbar: bool = True):
-    """Draw snapshot ``index`` of ``ds`` on a matplotlib axes; returns the quiver artist."""
+    """Draw snapshot ``index`` of ``ds`` on a matplotlib axes; returns the quiver artist.
+    The background image (``ax.images[0]``) is :func:`background` of I1bar; its label is the
+    colour-bar label (:func:`background_colorbar`)."""
     q1 = ds["q1"].isel(snapshot_time=index).values.astype(float)
     q2 = ds["q2"].isel(snapshot_time=index).values.astype(float)
     i1 = ds["I1bar"].isel(snapshot_time=index).values.astype(float)
     x = ds["x"].values
     n = len(x)
-    bg = ax.imshow(i1.T, origin="lower", extent=(0, 1, 0, 1), cmap="Greys",
-                   interpolation="nearest")
+    values, label = background(i1)
+    bg = ax.imshow(values.T, origin="lower", extent=(0, 1, 0, 1), cmap="Greys",
+                   interpolation="nearest", label=label)
     stride = max(1, n // arrows)
     sl = (slice(stride // 2, None, stride), slice(stride // 2, None, stride))
     S = np.hypot(q1, q2)
@@ -40,8 +88,7 @@ def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32,
     if colorbar:
         fig = ax.figure
         fig.colorbar(qv, ax=ax, fraction=0.046, pad=0.02, label="S (quivers)")
-        fig.colorbar(bg, ax=ax, location="bottom", fraction=0.05, pad=0.03,
-                     label=r"$\bar I_1 = \mathrm{tr}\,C / J$ (background)")
+        background_colorbar(fig, bg, ax=ax, location="bottom", fraction=0.05, pad=0.03)
     return qv
 
 

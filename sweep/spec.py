@@ -16,7 +16,8 @@ The schema (documented for users in ``docs/campaigns.md``)::
     seeds: 50                       # a count (seeds 0..49), a list, or {count: 50, start: 1000}
     store: {snapshot_times: [100, 300], snapshot_fields: [q1, q2, A], snapshot_dtype: float32}
     fits: [transition]              # names (or {name: {options}}) from sweep.fits.REGISTRY
-    figures: [fig2]                 # names (or {name: {options}}) from sweep.figures.REGISTRY
+    figures: [fig2]                 # names (or {name: {options}}) from sweep.figures.REGISTRY;
+                                    # [] draws none; absent: every figure that applies
     execution:
       workers: 2                    # local dask LocalCluster (default: one per core)
       scheduler: tcp://host:8786    # or an existing dask scheduler
@@ -175,7 +176,9 @@ class ExecutionSpec:
 @dataclass(frozen=True)
 class Campaign:
     """A validated campaign. ``parameters`` / ``numerics`` are the base values as written
-    (validated by the model's own objects at every grid point)."""
+    (validated by the model's own objects at every grid point). ``figures`` is ``None`` when
+    the file has no ``figures:`` (or ``figures: null``): draw every registered figure that
+    applies to the grid; an empty tuple (``figures: []``) draws none."""
 
     name: str
     description: str
@@ -185,7 +188,7 @@ class Campaign:
     seeds: tuple[int, ...]
     store: StoreSpec
     fits: tuple[Product, ...]
-    figures: tuple[Product, ...]
+    figures: tuple[Product, ...] | None
     execution: ExecutionSpec
     source: str = "<string>"
     text: str = ""
@@ -845,7 +848,9 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     dims = _check_sweep(c, doc.get("sweep"), base)
     seeds = _check_seeds(c, doc.get("seeds"))
     fits = _check_products(c, doc.get("fits"), "fits")
-    figures = _check_products(c, doc.get("figures"), "figures")
+    # no figures key (or null): the default, every figure that applies; [] means none
+    figures = (None if doc.get("figures") is None
+               else _check_products(c, doc.get("figures"), "figures"))
     execution = _check_execution(c, doc.get("execution"))
     c.raise_if_any()
     campaign = Campaign(

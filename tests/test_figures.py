@@ -4,6 +4,7 @@ t_final, run through the campaign manager's Python API: expand -> execute_run ->
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -14,11 +15,11 @@ from typer.testing import CliRunner
 
 from sweep import figures
 from sweep.aggregate import write_phase
-from sweep.cli import app
+from sweep.cli import _regenerate_figures, app
 from sweep.execute import RunTask, execute_run
 from sweep.expand import expand
 from sweep.fits import FITS
-from sweep.spec import load_campaign
+from sweep.spec import load_campaign, parse_campaign
 from sweep.store import CampaignStore
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -183,6 +184,67 @@ def test_cli_figures(sizes, tmp_path):
     assert empty.exit_code == 2
     assert "no phase diagram" in empty.output
     assert figures.regenerate(sizes.campaign, tmp_path) == []
+
+
+def test_plan_figures_listed_empty_or_default(sizes):
+    """figures: [] plans no figure (the campaign's fits are still planned), no figures key
+    plans every figure that applies to the grid, --only wins over both."""
+    phase = xr.open_dataset(sizes.root / "phase.nc").load()
+    base = SIZES.replace("figures: [fig2, fig3]\n", "")
+    fits_, figs = figures.plan(parse_campaign(base + "figures: []\n"), phase)
+    assert figs == []
+    assert [name for name, _ in fits_] == ["scaling", "transition"]
+    fits_line = next(line for line in base.splitlines() if line.startswith("fits:"))
+    no_fits = base.replace(fits_line, "fits: []")
+    assert figures.plan(parse_campaign(no_fits + "figures: []\n"), phase) == ([], [])
+    _, figs = figures.plan(parse_campaign(base), phase)
+    assert [name for name, _ in figs] == ["fig2", "fig3"]  # the default: what applies
+    _, figs = figures.plan(parse_campaign(base + "figures: []\n"), phase, names=["fig3"])
+    assert figs == [("fig3", {})]
+
+
+def test_empty_figures_list_draws_nothing_after_a_run(sizes, tmp_path):
+    """The hook of `nematic run` (sweep.cli._regenerate_figures) with figures: [] writes the
+    campaign's fits and no figure; `nematic figures` says so, and --only still draws."""
+    path = tmp_path / "campaign.yaml"
+    path.write_text(SIZES.replace("figures: [fig2, fig3]", "figures: []"))
+    campaign = load_campaign(path)
+    assert campaign.figures == ()
+    results = tmp_path / "results"
+    root = results / campaign.name
+    root.mkdir(parents=True)
+    shutil.copy(sizes.root / "phase.nc", root / "phase.nc")
+    assert _regenerate_figures(campaign, results) == []
+    assert not (root / "figures").exists()
+    with xr.open_dataset(root / FITS) as f:
+        assert "scaling_exponent" in f
+        assert "transition_location" in f
+    runner = CliRunner()
+    result = runner.invoke(app, ["figures", str(path), "--results", str(results)])
+    assert result.exit_code == 0, result.output
+    assert "no figures: the campaign lists none (figures: [])" in " ".join(result.output.split())
+    assert not (root / "figures").exists()
+    result = runner.invoke(app, ["figures", str(path), "--results", str(results),
+                                 "--only", "fig3"])
+    assert result.exit_code == 0, result.output
+    assert (root / "figures" / "fig3.png").is_file()
+
+
+def test_cli_figures_prints_the_fit_notes(sizes):
+    """Runs left out of the size fits (first peak of sigma2_S at t_final in these short
+    runs) and alpha_cr at its bound are reported under the fits.nc line."""
+    result = CliRunner().invoke(app, ["figures", str(sizes.path), "--results",
+                                      str(sizes.results), "--only", "fig3"])
+    assert result.exit_code == 0, result.output
+    out = " ".join(result.output.split())
+    with xr.open_dataset(sizes.root / FITS) as f:
+        n = f["alpha_cr"].attrs["fit_n_unpeaked"]
+        notes = figures.F.fit_notes(f)
+    assert n > 0  # t_final = 3: the patterns are still growing
+    assert f"note: alpha_cr/scaling: {n} of" in out
+    assert len(notes) >= 1
+    for note in notes:
+        assert " ".join(note.split()) in out
 
 
 def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(stab):

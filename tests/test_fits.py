@@ -165,6 +165,165 @@ def test_size_fit_asks_for_select_when_another_dim_varies(rng):
     assert np.isfinite(float(out["scaling_exponent"]))
 
 
+def peaks(lam, t_final=100.0):
+    """t_peak of every run: well before t_final (the peak was reached)."""
+    return np.full(lam.shape, 0.4 * t_final)
+
+
+def test_runs_without_a_peak_are_left_out_and_counted(rng):
+    """Runs whose first sigma2_S peak is at t_final, or within one save interval of it, have
+    a lambda_peak that is only lambda near t_final: left out of alpha_cr and scaling (exactly
+    as if they were missing), and counted per point, per K and in total."""
+    lam = sizes(rng, n_seeds=6)
+    t_peak = peaks(lam)
+    sigma2 = np.full(lam.shape, 1e-2)
+    bad = lam.copy()
+    t_peak[0, 0, :3] = 100.0  # at t_final
+    t_peak[1, 2, 1] = 99.5  # within one save interval (save_every = 1)
+    t_peak[3, 5, 0] = 99.0  # exactly one save interval before
+    t_peak[2, 4, 2] = 98.5  # a peak 1.5 save intervals before t_final: reached, kept
+    flagged = t_peak >= 99.0
+    bad[flagged] *= 5.0  # still-growing patterns: meaningless sizes
+    t_peak[3, 0, 4], sigma2[3, 0, 4] = 100.0, 1e-12  # relaxed run: not patterned anyway
+    ds = phase({"lambda_peak": bad, "sigma2_S": sigma2, "t_peak": t_peak},
+               {"K": K_TRUE, "alpha_minus_B": AMB}, num_t_final=100.0, num_save_every=1.0)
+    out = fits.scaling(ds, {"n_boot": 100})
+
+    expected = flagged.sum(-1)
+    expected[3, 0] = 0
+    np.testing.assert_array_equal(out["alpha_cr_unpeaked_count"].values, expected)
+    assert out["alpha_cr_unpeaked_count"].dims == ("K", "alpha_minus_B")
+    assert "t_final" in out["alpha_cr_unpeaked_count"].attrs["long_name"]
+    np.testing.assert_array_equal(out["alpha_cr_n_unpeaked"].values, [3, 1, 0, 1])
+    for name in ("alpha_cr", "scaling_exponent"):
+        assert out[name].attrs["fit_n_unpeaked"] == 5
+        assert out[name].attrs["fit_n_patterned"] == lam.size - 1
+        assert out[name].attrs["fit_require_peak"] == 1
+    np.testing.assert_array_equal(out["scaling_lambda_count"].values, 6 - flagged.sum(-1)
+                                  - (np.arange(6) == 0)[None, :] * [[0], [0], [0], [1]])
+
+    # the same fit as with those runs missing (NaN) and no peak check
+    clean = lam.copy()
+    clean[flagged] = np.nan
+    clean[3, 0, 4] = np.nan
+    ref = fits.scaling(phase({"lambda_peak": clean, "sigma2_S": np.full(lam.shape, 1e-2)},
+                             {"K": K_TRUE, "alpha_minus_B": AMB}), {"n_boot": 100})
+    for name in ("alpha_cr", "alpha_cr_lower", "alpha_cr_upper", "scaling_exponent",
+                 "scaling_exponent_lower", "scaling_exponent_upper", "scaling_lambda_mean"):
+        np.testing.assert_allclose(out[name].values, ref[name].values, rtol=1e-12,
+                                   err_msg=name)
+    assert np.all((out["alpha_cr_lower"].values <= ACR_TRUE)
+                  & (out["alpha_cr_upper"].values >= ACR_TRUE))
+
+    # require_peak: false keeps them (and the fit moves), peak_margin: 0 keeps t < t_final
+    kept = fits.scaling(ds, {"n_boot": 10, "require_peak": False})
+    assert kept["scaling_exponent"].attrs["fit_n_unpeaked"] == 0
+    assert int(kept["alpha_cr_unpeaked_count"].sum()) == 0
+    assert float(kept["scaling_exponent"]) != pytest.approx(float(out["scaling_exponent"]))
+    strict = fits.alpha_cr(ds, {"n_boot": 10, "peak_margin": 0})
+    assert strict["alpha_cr"].attrs["fit_n_unpeaked"] == 3
+    # an observable at t_final has no peak to reach: nothing is left out by default
+    lam_final = fits.alpha_cr(ds.assign(lambda_final=ds["lambda_peak"]),
+                              {"n_boot": 10, "observable": "lambda_final"})
+    assert lam_final["alpha_cr"].attrs["fit_n_unpeaked"] == 0
+
+
+def test_peak_check_with_swept_t_final_and_without_t_peak(rng):
+    """t_final zipped with K (a coordinate on the K dim) sets each row's limit; a phase.nc
+    without t_peak leaves every run in, and says so."""
+    lam = sizes(rng, n_seeds=3)
+    t_final = np.array([50.0, 100.0, 100.0, 200.0])
+    t_peak = np.full(lam.shape, 60.0)  # reached, except where t_final = 50
+    ds = phase({"lambda_peak": lam, "sigma2_S": np.full(lam.shape, 1e-2), "t_peak": t_peak},
+               {"K": K_TRUE, "alpha_minus_B": AMB}, num_save_every=2.0)
+    ds = ds.assign_coords(t_final=("K", t_final))
+    out = fits.alpha_cr(ds, {"n_boot": 10})
+    np.testing.assert_array_equal(out["alpha_cr_n_unpeaked"].values, [AMB.size * 3, 0, 0, 0])
+    assert np.isnan(out["alpha_cr"].values[0])
+    assert np.all(np.isfinite(out["alpha_cr"][1:]))
+    assert fits.fit_notes(out)[0].startswith(f"alpha_cr/scaling: {AMB.size * 3} of "
+                                             f"{lam.size} patterned run(s) left out")
+    blind = fits.alpha_cr(ds.drop_vars("t_peak"), {"n_boot": 10})
+    assert blind["alpha_cr"].attrs["fit_n_unpeaked"] == 0
+    assert blind["alpha_cr"].attrs["fit_peak_check"] == "not done: phase.nc has no t_peak"
+    assert "not looked for" in fits.fit_notes(blind)[0]
+    np.testing.assert_array_equal(
+        fits.peak_not_reached([10.0, 98.0, 99.0, 100.0, np.nan], 100.0, 2.0),
+        [False, True, True, True, False])
+
+
+def acr_sizes(rng, acr, n_seeds=30, noise=0.05, amb=AMB):
+    """Eq. (7) sizes with the critical activity ``acr`` for every K."""
+    x = K_TRUE[:, None] / (amb[None, :] - acr)
+    return 2.0 * x[..., None] ** 0.5 * np.exp(noise * rng.standard_normal((*x.shape,
+                                                                           n_seeds)))
+
+
+@pytest.mark.parametrize("method", ["linear", "nonlinear"])
+def test_alpha_cr_is_bounded_at_zero(rng, method):
+    """Data of a negative critical activity (-0.3): the unbounded fit finds about that, the
+    default fit stops at the bound 0 and says so; a true alpha_cr of 0 is found at or just
+    above 0, never below."""
+    lam = acr_sizes(rng, -0.3)
+    free = fits.alpha_cr(size_phase(lam), {"method": method, "n_boot": 100,
+                                           "alpha_cr_min": None})
+    np.testing.assert_allclose(free["alpha_cr"].values, -0.3, atol=0.1)
+    assert np.all(free["alpha_cr_upper"].values < 0)  # the data push it below zero
+    np.testing.assert_array_equal(free["alpha_cr_at_bound"].values, 0)
+    assert free["alpha_cr"].attrs["fit_alpha_cr_min"] == "none"
+
+    out = fits.scaling(size_phase(lam), {"method": method, "n_boot": 100})
+    np.testing.assert_array_equal(out["alpha_cr"].values, 0.0)
+    np.testing.assert_array_equal(out["alpha_cr_at_bound"].values, 1)
+    np.testing.assert_array_equal(out["alpha_cr_lower"].values, 0.0)
+    np.testing.assert_allclose(out["alpha_cr_bound_fraction"].values, 1.0)
+    assert np.all(np.isfinite(out["alpha_cr_prefactor"].values))
+    assert out["alpha_cr"].attrs["fit_alpha_cr_min"] == 0.0
+    assert out["scaling_exponent"].attrs["fit_n_alpha_cr_at_bound"] == K_TRUE.size
+    assert np.isfinite(float(out["scaling_exponent"]))
+    np.testing.assert_allclose(out["scaling_x"].values, K_TRUE[:, None] / AMB[None, :])
+    assert fits.fit_notes(out)[-1] == ("alpha_cr at its bound 0.0 for K = 1e-05, 3e-05, "
+                                       "0.0001, 0.0003 (the unbounded fit would put it lower)")
+
+    zero = fits.alpha_cr(size_phase(acr_sizes(rng, 0.0, n_seeds=10)),
+                         {"method": method, "n_boot": 200})
+    assert np.all(zero["alpha_cr"].values >= 0)
+    assert np.all(zero["alpha_cr_lower"].values >= 0)
+    assert np.all(zero["alpha_cr_lower"].values == 0)  # 0 lies within the interval
+    assert np.all(zero["alpha_cr_upper"].values < 0.2)
+    assert np.all((zero["alpha_cr_bound_fraction"].values > 0)
+                  & (zero["alpha_cr_bound_fraction"].values < 1))
+
+
+def test_bounded_linear_fit_is_the_constrained_least_squares_optimum(rng):
+    """At the bound the linear fit is the line through (alpha_cr_min, 0): no alpha_cr above
+    the bound (each with its best slope) fits lambda^-2 better."""
+    amb = np.array([0.5, 0.8, 1.1, 1.4, 2.0])
+    lam = 2.0 * (1e-4 / (amb + 0.4)) ** 0.5 * np.exp(0.03 * rng.standard_normal(amb.size))
+    y = lam**-2.0
+    for bound in (0.0, 0.2):
+        f = fits.alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=bound)
+        assert f.at_bound
+        assert f.alpha_cr == bound
+        m = 1.0 / (f.prefactor**2 * 1e-4)
+
+        def rss(acr):
+            d = amb - acr
+            slope = d @ y / (d @ d)
+            return float(((y - slope * d) ** 2).sum())
+
+        assert float(((y - m * (amb - bound)) ** 2).sum()) == pytest.approx(rss(bound))
+        assert all(rss(a) >= rss(bound) for a in np.linspace(bound, 0.49, 50))
+    free = fits.alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=None)
+    assert free.alpha_cr < 0
+    assert not free.at_bound
+    inside = fits.alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=-5.0)
+    assert inside == free
+    # nonlinear: no admissible alpha_cr when the bound is at or above the smallest alpha - B
+    assert np.isnan(fits.alpha_cr_from_sizes(amb, lam, 1e-4, method="nonlinear",
+                                             alpha_cr_min=0.5).alpha_cr)
+
+
 # --------------------------------------------------------------------------- anisotropy
 def test_anisotropy_slope_recovered_within_interval(rng):
     eps = np.linspace(0.0, 0.1, 5)
@@ -250,5 +409,12 @@ def test_option_problems_for_campaign_validation():
     problems = fits.option_problems("transition", {"axes": "chi", "n_boot": 0})
     assert any("unknown option 'axes'" in p for p in problems)
     assert any("n_boot = 0" in p for p in problems)
+    problems = fits.option_problems("scaling", {"alpha_cr_min": "zero", "require_peak": 1,
+                                                "peak_margin": -1})
+    assert any("alpha_cr_min = 'zero'" in p for p in problems)
+    assert any("require_peak = 1" in p for p in problems)
+    assert any("peak_margin = -1" in p for p in problems)
+    assert fits.option_problems("alpha_cr", {"alpha_cr_min": None, "require_peak": False,
+                                             "peak_margin": 0}) == []
     assert fits.option_problems("nope", {}) == [
         "unknown fit 'nope'; registered: alpha_cr, anisotropy, scaling, stability, transition"]

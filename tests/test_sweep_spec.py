@@ -65,6 +65,27 @@ def test_defaults_and_name_from_file(tmp_path):
     assert c.parameters["K"] == 1e-4  # YAML 1.1 would read "1e-4" as a string
 
 
+def test_figures_empty_list_means_none_and_absent_means_default(tmp_path):
+    """figures: [] draws no figure; no figures key (or null) keeps the default (every
+    figure that applies: figures is None); validate says which."""
+    base = "parameters: {K: 1e-4}\nseeds: 1\nfits: [scaling]\n"
+    absent = load_campaign(write(tmp_path, base, "absent.yaml"))
+    assert absent.figures is None
+    assert load_campaign(write(tmp_path, base + "figures:\n", "null.yaml")).figures is None
+    empty = load_campaign(write(tmp_path, base + "figures: []\n", "empty.yaml"))
+    assert empty.figures == ()
+    assert [p.name for p in empty.fits] == ["scaling"]  # the fits are unaffected
+    listed = load_campaign(write(tmp_path, base + "figures: [fig3, {fig2: {seed: 1}}]\n",
+                                 "listed.yaml"))
+    assert [(p.name, dict(p.options)) for p in listed.figures] == [("fig3", {}),
+                                                                    ("fig2", {"seed": 1})]
+    runner = CliRunner()
+    out = runner.invoke(app, ["validate", str(tmp_path / "empty.yaml")]).output
+    assert "fits: scaling; figures: none" in out
+    out = runner.invoke(app, ["validate", str(tmp_path / "absent.yaml")]).output
+    assert "fits: scaling; figures: every one that applies" in out
+
+
 def test_seed_list_and_geomspace(tmp_path):
     c = parse_campaign("name: g\nsweep: {axes: {K: {geomspace: [1.0e-5, 1.0e-3, 3]}}}\nseeds: [3, 1, 7]")
     assert c.seeds == (3, 1, 7)

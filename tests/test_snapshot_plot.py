@@ -1,0 +1,76 @@
+"""The snapshot picture (sweep/snapshot_plot.py: fig2 panel (a), `nematic simulate --png`):
+the I1bar background's colour bar has plain, short tick labels however close I1bar is to 2
+(no offset "+2", no "1e-5" multiplier), and its label says what the numbers are."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from sweep.snapshot_plot import background, draw_snapshot, snapshot_figure
+
+
+def run_dataset(i1bar: np.ndarray) -> xr.Dataset:
+    """A run Dataset with one snapshot (what model.simulate.run writes, reduced)."""
+    n = i1bar.shape[0]
+    x = (np.arange(n) + 0.5) / n
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    theta = 0.5 * np.sin(2 * np.pi * X)
+    S = 0.1 + 0.05 * np.cos(2 * np.pi * Y)
+    t = np.arange(0.0, 11.0)
+    field = ("snapshot_time", "x", "y")
+    return xr.Dataset(
+        {"q1": (field, (S * np.cos(2 * theta))[None]), "q2": (field, (S * np.sin(2 * theta))[None]),
+         "I1bar": (field, i1bar[None].astype(np.float32)), "sigma2_S": ("time", 1e-3 * t)},
+        coords={"x": x, "y": x, "snapshot_time": [10.0], "time": t},
+        attrs={"param_alpha_minus_B": 0.5, "seed": 0, "num_mechanics": "linear",
+               "status": "ok"})
+
+
+def pattern(n: int = 32) -> np.ndarray:
+    x = (np.arange(n) + 0.5) / n
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    return np.sin(np.pi * X) ** 2 * np.cos(np.pi * Y) ** 2
+
+
+def test_background_is_i1bar_minus_2_scaled_to_plain_numbers():
+    values, label = background(2.0 + 9.3e-5 * pattern())
+    assert 1 <= np.abs(values).max() < 10
+    assert r"10^{5}\,(\bar I_1 - 2)" in label
+    values, label = background(2.0 + 0.04 + 0.003 * pattern())  # strained: no scaling
+    np.testing.assert_allclose(values, 0.04 + 0.003 * pattern(), rtol=1e-12)
+    assert label.startswith(r"$\bar I_1 - 2$")
+    values, label = background(np.full((4, 4), 2.0))  # no deformation at all
+    assert np.all(values == 0)
+    assert label.startswith(r"$\bar I_1 - 2$")
+
+
+@pytest.mark.parametrize("amplitude", [3e-6, 9.3e-5, 4.5e-3, 0.07])
+def test_background_colorbar_ticks_are_plain(amplitude):
+    """The failure this replaces: I1bar = 2 + 1e-5 ... gave tick labels '2.000025' or an
+    offset text '+2' with a multiplier '1e-5'."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(5, 5))
+    ax = fig.add_subplot()
+    draw_snapshot(ax, run_dataset(2.0 + amplitude * pattern()))
+    fig.draw_without_rendering()  # sets the tick labels and the offset text
+    cb = ax.images[0].colorbar
+    assert cb is not None
+    axis = cb.ax.xaxis  # the background's colour bar is horizontal, below the snapshot
+    labels = [t.get_text() for t in axis.get_ticklabels() if t.get_text()]
+    assert 2 <= len(labels) <= 6
+    for text in labels:
+        assert "e" not in text.lower()
+        assert "+" not in text
+        assert len(text) <= 5, labels
+        float(text.replace("\N{MINUS SIGN}", "-"))
+    assert axis.get_offset_text().get_text() == ""
+    assert r"(\bar I_1 - 2)" in cb.ax.get_xlabel() or r"\bar I_1 - 2" in cb.ax.get_xlabel()
+    assert "background" in cb.ax.get_xlabel()
+
+
+def test_snapshot_figure_writes_a_png(tmp_path):
+    path = snapshot_figure(run_dataset(2.0 + 2e-5 * pattern()), tmp_path / "snap.png")
+    assert path.read_bytes()[:4] == b"\x89PNG"

@@ -240,3 +240,140 @@ def linear_response(q1h, q2h, isoh, kx, ky, khx, khy, inv_k2, amb, a, kappa,
                 tr_s[i, j] = 2.0 * kappa * (e11 + e22) + 2.0 * iso
     dev[0, 0, 0] += mean_dev
     return dev, tr_e, tr_s
+
+
+# --- finite-strain stress and spectral operators (references: model.constitutive,
+#     model.fourier.SpectralGrid, model.mechanics) ----------------------------------------
+
+@njit(cache=True)
+def _stress_point(a, b, c, d, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # pragma: no cover
+    """First Piola stress at one point, F = [[a, b], [c, d]]; if ``active`` the full Eq. (2)
+    stress for Q = (q1, q2), else the Q-increment :math:`\\partial P/\\partial Q : dQ` for
+    dQ = (d1, d2). Returns (P00, P01, P10, P11)."""
+    C00 = a * a + c * c
+    C01 = a * b + c * d
+    C11 = b * b + d * d
+    J = a * d - b * c
+    J2 = J * J
+    Ci00 = C11 / J2
+    Ci01 = -C01 / J2
+    Ci11 = C00 / J2
+    if active:
+        I1 = C00 + C11
+        CQ = (C00 - C11) * q1 + 2.0 * C01 * q2
+        qq = 2.0 * (q1 * q1 + q2 * q2)
+        iso = kappa * (J - 1.0) * J - Bp * qq * J  # coefficient of C^-1
+        S00 = (1.0 - 0.5 * I1 * Ci00) / J + iso * Ci00 - B * (q1 - 0.5 * CQ * Ci00) / J \
+            + alpha * q1
+        S01 = (-0.5 * I1 * Ci01) / J + iso * Ci01 - B * (q2 - 0.5 * CQ * Ci01) / J + alpha * q2
+        S11 = (1.0 - 0.5 * I1 * Ci11) / J + iso * Ci11 - B * (-q1 - 0.5 * CQ * Ci11) / J \
+            - alpha * q1
+    else:
+        CdQ = (C00 - C11) * d1 + 2.0 * C01 * d2
+        QdQ = 2.0 * (q1 * d1 + q2 * d2)
+        iso = -2.0 * Bp * QdQ * J
+        S00 = -B * (d1 - 0.5 * CdQ * Ci00) / J + iso * Ci00 + alpha * d1
+        S01 = -B * (d2 - 0.5 * CdQ * Ci01) / J + iso * Ci01 + alpha * d2
+        S11 = -B * (-d1 - 0.5 * CdQ * Ci11) / J + iso * Ci11 - alpha * d1
+    return (a * S00 + b * S01, a * S01 + b * S11, c * S00 + d * S01, c * S01 + d * S11)
+
+
+@njit(cache=True)
+def first_piola_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compiled
+    """:math:`P = F \\mathbf S(F, Q)`, paper Eq. (2) (reference:
+    :func:`model.constitutive.first_piola`)."""
+    nx, ny = q1.shape
+    P = np.empty((2, 2, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            p00, p01, p10, p11 = _stress_point(F[0, 0, x, y], F[0, 1, x, y], F[1, 0, x, y],
+                                               F[1, 1, x, y], q1[x, y], q2[x, y], 0.0, 0.0,
+                                               kappa, B, Bp, alpha, True)
+            P[0, 0, x, y] = p00
+            P[0, 1, x, y] = p01
+            P[1, 0, x, y] = p10
+            P[1, 1, x, y] = p11
+    return P
+
+
+@njit(cache=True)
+def q_increment_kernel(F, q1, q2, d1, d2, kappa, B, Bp, alpha):  # pragma: no cover
+    """:math:`\\partial P/\\partial Q : dQ` at fixed F for dQ = nematic(d1, d2) (reference:
+    :func:`model.constitutive.first_piola_q_increment`)."""
+    nx, ny = q1.shape
+    P = np.empty((2, 2, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            p00, p01, p10, p11 = _stress_point(F[0, 0, x, y], F[0, 1, x, y], F[1, 0, x, y],
+                                               F[1, 1, x, y], q1[x, y], q2[x, y], d1[x, y],
+                                               d2[x, y], 0.0, B, Bp, alpha, False)
+            P[0, 0, x, y] = p00
+            P[0, 1, x, y] = p01
+            P[1, 0, x, y] = p10
+            P[1, 1, x, y] = p11
+    return P
+
+
+@njit(cache=True)
+def grad_hat_kernel(v, kx, ky):  # pragma: no cover - compiled
+    """:math:`\\widehat{\\partial_j v_i} = i k_j \\hat v_i` (reference:
+    :meth:`model.fourier.SpectralGrid.grad_hat`)."""
+    nx, ny = kx.shape
+    out = np.empty((2, 2, nx, ny), dtype=np.complex128)
+    for i in range(2):
+        for x in range(nx):
+            for y in range(ny):
+                z = 1j * v[i, x, y]
+                out[i, 0, x, y] = kx[x, y] * z
+                out[i, 1, x, y] = ky[x, y] * z
+    return out
+
+
+@njit(cache=True)
+def neg_div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
+    """:math:`-i k_j \\hat T_{ij}` (reference: minus
+    :meth:`model.fourier.SpectralGrid.div_hat`)."""
+    nx, ny = kx.shape
+    out = np.empty((2, nx, ny), dtype=np.complex128)
+    for i in range(2):
+        for x in range(nx):
+            for y in range(ny):
+                out[i, x, y] = -1j * (kx[x, y] * T[i, 0, x, y] + ky[x, y] * T[i, 1, x, y])
+    return out
+
+
+@njit(cache=True)
+def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
+    """Green operator of the isotropic reference medium, :math:`(I - a \\hat k \\hat k)
+    \\hat b / k^2` (reference: ``model.mechanics._Mechanics._green``)."""
+    nx, ny = khx.shape
+    out = np.empty((2, nx, ny), dtype=np.complex128)
+    for x in range(nx):
+        for y in range(ny):
+            h1 = khx[x, y]
+            h2 = khy[x, y]
+            kb = a * (h1 * b[0, x, y] + h2 * b[1, x, y])
+            out[0, x, y] = (b[0, x, y] - h1 * kb) * inv_k2[x, y]
+            out[1, x, y] = (b[1, x, y] - h2 * kb) * inv_k2[x, y]
+    return out
+
+
+@njit(cache=True)
+def apply_tangent_spin_kernel(K, G, E):  # pragma: no cover - compiled
+    """:math:`K : G + E\\, \\omega(G)` with :math:`\\omega = \\tfrac12 (G_{10} - G_{01})`: the
+    rate-form stress of the displacement-rate (spin) problem, point by point."""
+    nx, ny = G.shape[2], G.shape[3]
+    out = np.empty((2, 2, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            g00 = G[0, 0, x, y]
+            g01 = G[0, 1, x, y]
+            g10 = G[1, 0, x, y]
+            g11 = G[1, 1, x, y]
+            w = 0.5 * (g10 - g01)
+            for i in range(2):
+                for j in range(2):
+                    out[i, j, x, y] = (K[i, j, 0, 0, x, y] * g00 + K[i, j, 0, 1, x, y] * g01
+                                       + K[i, j, 1, 0, x, y] * g10 + K[i, j, 1, 1, x, y] * g11
+                                       + E[i, j, x, y] * w)
+    return out

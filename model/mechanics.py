@@ -43,8 +43,14 @@ from .errors import SimulationFailure
 from .fourier import SpectralGrid
 from .kernels import (
     apply_tangent_kernel,
+    apply_tangent_spin_kernel,
+    first_piola_kernel,
+    grad_hat_kernel,
+    green_kernel,
     jaumann_products,
     linear_response,
+    neg_div_hat_kernel,
+    q_increment_kernel,
     symbol_combination,
     tangent_kernel,
 )
@@ -96,6 +102,11 @@ class _Mechanics:
         self._khat = kh
 
     def _green(self, b_hat: Array, a: float) -> Array:
+        """:math:`(I - a \\hat k \\hat k) \\hat b / k^2` (numba kernel)."""
+        return green_kernel(b_hat, self._khat[0], self._khat[1], self._inv_k2, a)
+
+    def _green_reference(self, b_hat: Array, a: float) -> Array:
+        """numpy reference of :meth:`_green`."""
         kh = self._khat
         kb = kh[0] * b_hat[0] + kh[1] * b_hat[1]
         return (b_hat - a * kh * kb) * self._inv_k2
@@ -287,14 +298,15 @@ class FiniteMechanics(_Mechanics):
                               np.ascontiguousarray(q2), m.kappa, m.B, m.B_prime, m.alpha)
 
     def deformation(self, u_hat: Array) -> Array:
-        return self.Fbar[:, :, None, None] + self.grid.inverse(self.grid.grad_hat(u_hat))
+        g = self.grid
+        return self.Fbar[:, :, None, None] + g.inverse(grad_hat_kernel(u_hat, g.kx, g.ky))
 
     def _operator(self, K: Array):
         g = self.grid
 
         def A(v_hat: Array) -> Array:
-            dF = g.inverse(self.grid.grad_hat(v_hat))
-            return -self.grid.div_hat(g.forward(apply_tangent_kernel(K, dF)))
+            dF = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))
+            return neg_div_hat_kernel(g.forward(apply_tangent_kernel(K, dF)), g.kx, g.ky)
 
         return A
 
@@ -303,23 +315,24 @@ class FiniteMechanics(_Mechanics):
                                    self.grid.inner, rtol=rtol, maxiter=self.max_cg)
         return x, it, status == "ok"
 
-    def _evaluate(self, u_hat: Array, Q: Array) -> tuple[Array, Array, Array, float]:
+    def _evaluate(self, u_hat: Array, q1: Array, q2: Array
+                  ) -> tuple[Array, Array, Array, float]:
         F = self.deformation(u_hat)
         J = T.det(F)
         if not np.all(J > 0):
             return F, F, F, np.inf
-        P = cl.first_piola(F, Q, self.moduli)
+        m = self.moduli  # P by the numba kernel (reference: constitutive.first_piola)
+        P = first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
         P_hat = self.grid.forward(P)
         return F, P, P_hat, self.residual(P, P_hat)
 
     def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
               t: float | None = None) -> MechanicalState:
-        Q = T.nematic(q1, q2)
         u_hat = self.u_hat if u_guess is None else u_guess
-        F, P, P_hat, res = self._evaluate(u_hat, Q)
+        F, P, P_hat, res = self._evaluate(u_hat, q1, q2)
         if not np.isfinite(res):  # the guess is unusable: restart from the homogeneous state
             u_hat = np.zeros_like(u_hat)
-            F, P, P_hat, res = self._evaluate(u_hat, Q)
+            F, P, P_hat, res = self._evaluate(u_hat, q1, q2)
             if not np.isfinite(res):
                 raise SimulationFailure("J<=0", "the applied deformation has J <= 0", t)
         it = 0
@@ -344,7 +357,7 @@ class FiniteMechanics(_Mechanics):
             step = 1.0
             for _ in range(12):
                 trial = u_hat + step * du
-                F_t, P_t, P_hat_t, res_t = self._evaluate(trial, Q)
+                F_t, P_t, P_hat_t, res_t = self._evaluate(trial, q1, q2)
                 if np.isfinite(res_t) and res_t < res:
                     break
                 step *= 0.5
@@ -372,20 +385,21 @@ class FiniteMechanics(_Mechanics):
 
         by GMRES (Green-preconditioned, warm-started). Returns ``(Qdot components, omega)``.
         """
-        g = self.grid
-        Q = T.nematic(q1, q2)
+        g, m = self.grid, self.moduli
         K = mech.extras.get("K")
         if K is None:
             K = self._tangent(mech.F, q1, q2)
             mech.extras["K"] = K
-        E = cl.first_piola_q_increment(mech.F, Q, T.nematic(-2.0 * q2, 2.0 * q1), self.moduli)
-        b = self.grid.div_hat(g.forward(cl.first_piola_q_increment(mech.F, Q, T.nematic(*R),
-                                                               self.moduli)))
+        F = np.ascontiguousarray(mech.F)
+        # dP/dQ : dQ by the numba kernel (reference: constitutive.first_piola_q_increment)
+        E = q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, 0.0, m.B, m.B_prime, m.alpha)
+        b = g.div_hat(g.forward(q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
+                                                   np.ascontiguousarray(R[1]), 0.0, m.B,
+                                                   m.B_prime, m.alpha)))
 
         def A(v_hat: Array) -> Array:
-            G = g.inverse(self.grid.grad_hat(v_hat))
-            omega = 0.5 * (G[1, 0] - G[0, 1])
-            return -self.grid.div_hat(g.forward(apply_tangent_kernel(K, G) + E * omega))
+            G = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))
+            return neg_div_hat_kernel(g.forward(apply_tangent_spin_kernel(K, G, E)), g.kx, g.ky)
 
         udot, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
                                         g.inner, rtol=self.spin_tol, maxiter=self.max_cg)

@@ -80,7 +80,7 @@ class ActiveNematicPDE(PDEBase):
     def activity_rate(self, A: Array, mech: MechanicalState) -> Array:
         """Paper Eq. (5): :math:`(-\\zeta A - \\chi\\, \\mathrm{tr} P - s A^3)/\\tau`."""
         p = self.params
-        return (-p.zeta * A - p.chi * mech.trP - p.s * A**3) / p.tau
+        return (-p.zeta * A - p.chi * mech.trP - p.s * A * A * A) / p.tau
 
     def rates(self, q1: Array, q2: Array, A: Array, t: float | None = None
               ) -> tuple[Array, MechanicalState, Array]:

@@ -145,3 +145,42 @@ def test_numba_pointwise_stepper_kernels_match_numpy(rng):
     m1, m2 = rng.standard_normal((2, 8, 5))
     np.testing.assert_allclose(kern.symbol_combination(a, m1, m2, a, b), a - (m1 * a + m2 * b),
                                rtol=1e-14)
+
+
+def test_numba_finite_strain_kernels_match_numpy_references(rng):
+    from model import kernels as kern
+
+    M = cl.Moduli(kappa=10.0, B=0.5, B_prime=0.2, alpha=1.5)
+    F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 6, 6))
+    q = 0.3 * rng.standard_normal((2, 6, 6))
+    d = rng.standard_normal((2, 6, 6))
+    Q, dQ = T.nematic(q[0], q[1]), T.nematic(d[0], d[1])
+    np.testing.assert_allclose(
+        kern.first_piola_kernel(F, q[0], q[1], M.kappa, M.B, M.B_prime, M.alpha),
+        cl.first_piola(F, Q, M), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(
+        kern.q_increment_kernel(F, q[0], q[1], d[0], d[1], M.kappa, M.B, M.B_prime, M.alpha),
+        cl.first_piola_q_increment(F, Q, dQ, M), rtol=1e-12, atol=1e-13)
+    K = cl.tangent(F, Q, M)
+    E = cl.first_piola_q_increment(F, Q, d[0] * np.eye(2)[:, :, None, None], M)
+    G = rng.standard_normal((2, 2, 6, 6))
+    omega = 0.5 * (G[1, 0] - G[0, 1])
+    np.testing.assert_allclose(kern.apply_tangent_spin_kernel(K, G, E),
+                               cl.apply_tangent(K, G) + E * omega, rtol=1e-12, atol=1e-13)
+
+
+def test_numba_spectral_kernels_match_numpy_references(rng):
+    from model import kernels as kern
+    from model.fourier import SpectralGrid
+    from model.mechanics import FiniteMechanics
+    from model.parameters import Parameters
+
+    g = SpectralGrid(16)
+    v = g.forward(rng.standard_normal((2, 16, 16)))
+    Th = g.forward(rng.standard_normal((2, 2, 16, 16)))
+    np.testing.assert_allclose(kern.grad_hat_kernel(v, g.kx, g.ky), g.grad_hat(v), rtol=1e-15)
+    np.testing.assert_allclose(kern.neg_div_hat_kernel(Th, g.kx, g.ky), -g.div_hat(Th),
+                               rtol=1e-14, atol=1e-12)
+    mech = FiniteMechanics(Parameters(), g)
+    np.testing.assert_allclose(mech._green(v, 0.7), mech._green_reference(v, 0.7),
+                               rtol=1e-14, atol=1e-16)

@@ -29,6 +29,13 @@ execution: {{workers: {workers}}}
 """
 
 
+#: A campaign long enough to be interrupted mid-way (kill and Ctrl-C tests): 24 runs of
+#: t_final = 20 at 32^2. With fewer or shorter runs a fast solver finishes every run before
+#: the signal arrives (seen: 6 runs of t_final = 2.5 all done within 2 s).
+INTERRUPTIBLE = {"values": "[0.1, 0.11, 0.12, 0.13, 0.14, 0.15, 0.16, 0.17, 0.18, 0.19, 0.2, 0.21]",
+                 "seeds": 2, "t_final": 20.0}
+
+
 def write_campaign(folder: Path, name: str = "small", values: str = "[0.1, 0.2, 20.0]",
                    seeds: int = 2, t_final: float = 2.0, workers: int = 2) -> Path:
     folder.mkdir(parents=True, exist_ok=True)

@@ -279,16 +279,15 @@ def _stress_point(a, b, c, d, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # p
 
 
 @njit(cache=True)
-def first_piola_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compiled
-    """:math:`P = F \\mathbf S(F, Q)`, paper Eq. (2) (reference:
-    :func:`model.constitutive.first_piola`)."""
+def _stress_field(F, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # pragma: no cover
+    """:func:`_stress_point` at every grid point, as a (2, 2, nx, ny) array."""
     nx, ny = q1.shape
     P = np.empty((2, 2, nx, ny))
     for x in range(nx):
         for y in range(ny):
             p00, p01, p10, p11 = _stress_point(F[0, 0, x, y], F[0, 1, x, y], F[1, 0, x, y],
-                                               F[1, 1, x, y], q1[x, y], q2[x, y], 0.0, 0.0,
-                                               kappa, B, Bp, alpha, True)
+                                               F[1, 1, x, y], q1[x, y], q2[x, y], d1[x, y],
+                                               d2[x, y], kappa, B, Bp, alpha, active)
             P[0, 0, x, y] = p00
             P[0, 1, x, y] = p01
             P[1, 0, x, y] = p10
@@ -297,21 +296,17 @@ def first_piola_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - co
 
 
 @njit(cache=True)
-def q_increment_kernel(F, q1, q2, d1, d2, kappa, B, Bp, alpha):  # pragma: no cover
+def first_piola_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compiled
+    """:math:`P = F \\mathbf S(F, Q)`, paper Eq. (2) (reference:
+    :func:`model.constitutive.first_piola`)."""
+    return _stress_field(F, q1, q2, q1, q2, kappa, B, Bp, alpha, True)
+
+
+@njit(cache=True)
+def q_increment_kernel(F, q1, q2, d1, d2, B, Bp, alpha):  # pragma: no cover - compiled
     """:math:`\\partial P/\\partial Q : dQ` at fixed F for dQ = nematic(d1, d2) (reference:
-    :func:`model.constitutive.first_piola_q_increment`)."""
-    nx, ny = q1.shape
-    P = np.empty((2, 2, nx, ny))
-    for x in range(nx):
-        for y in range(ny):
-            p00, p01, p10, p11 = _stress_point(F[0, 0, x, y], F[0, 1, x, y], F[1, 0, x, y],
-                                               F[1, 1, x, y], q1[x, y], q2[x, y], d1[x, y],
-                                               d2[x, y], 0.0, B, Bp, alpha, False)
-            P[0, 0, x, y] = p00
-            P[0, 1, x, y] = p01
-            P[1, 0, x, y] = p10
-            P[1, 1, x, y] = p11
-    return P
+    :func:`model.constitutive.first_piola_q_increment`; kappa does not enter)."""
+    return _stress_field(F, q1, q2, d1, d2, 0.0, B, Bp, alpha, False)
 
 
 @njit(cache=True)

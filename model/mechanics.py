@@ -149,7 +149,9 @@ class LinearMechanics(_Mechanics):
         k = params.kappa
         self._a = 1.0 if incompressible else k / (k + 1.0)
         self.ebar = np.array([[params.eps, 0.0], [0.0, -params.eps]])
-        self._spin_symbols: tuple[Array, Array] | None = None
+        kx, ky = self._khat  # the spin symbols m1, m2 of spin_multiplier
+        c = -0.5 * (self.moduli.alpha - self.moduli.B)
+        self._spin_symbols = (c * (-2.0 * kx * ky), c * (kx**2 - ky**2))
         self._zero_hat = np.zeros(grid.k2.shape, dtype=complex)
 
     def _eigenstress(self, q1: Array, q2: Array) -> Array:
@@ -228,10 +230,6 @@ class LinearMechanics(_Mechanics):
         """Fourier symbol of the spin: :math:`\\hat\\omega = -\\tfrac12 (\\alpha - B)\\,
         \\hat t \\cdot \\hat{\\dot Q} \\cdot \\hat k`, :math:`\\hat t = (-\\hat k_2, \\hat k_1)`
         (the isotropic B' part of the eigenstress is curl free)."""
-        if self._spin_symbols is None:
-            kx, ky = self._khat
-            c = -0.5 * (self.moduli.alpha - self.moduli.B)
-            self._spin_symbols = (c * (-2.0 * kx * ky), c * (kx**2 - ky**2))
         m1, m2 = self._spin_symbols
         return m1 * qdot1_hat + m2 * qdot2_hat
 
@@ -252,8 +250,6 @@ class LinearMechanics(_Mechanics):
             j = g.forward(jaumann_products(g.inverse(omega_hat), q1, q2))
             return symbol_combination(omega_hat, m1, m2, j[0], j[1]), j
 
-        self.spin_multiplier(R_hat[0], R_hat[1])  # builds the symbols on first use
-        assert self._spin_symbols is not None
         m1, m2 = self._spin_symbols
         b = symbol_combination(self._zero_hat, -m1, -m2, R_hat[0], R_hat[1])
         x0 = self.omega_hat if self.omega_hat is not None else b
@@ -392,10 +388,10 @@ class FiniteMechanics(_Mechanics):
             mech.extras["K"] = K
         F = np.ascontiguousarray(mech.F)
         # dP/dQ : dQ by the numba kernel (reference: constitutive.first_piola_q_increment)
-        E = q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, 0.0, m.B, m.B_prime, m.alpha)
+        E = q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, m.B, m.B_prime, m.alpha)
         b = g.div_hat(g.forward(q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
-                                                   np.ascontiguousarray(R[1]), 0.0, m.B,
-                                                   m.B_prime, m.alpha)))
+                                                   np.ascontiguousarray(R[1]), m.B, m.B_prime,
+                                                   m.alpha)))
 
         def A(v_hat: Array) -> Array:
             G = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))

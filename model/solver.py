@@ -82,12 +82,6 @@ class ETDRK2Solver(SolverBase):
         self.stats = {"steps": 0, "rejected": 0, "rhs": 0, "newton": 0}
 
     # --- the split right-hand side -----------------------------------------------------
-    def activity_jacobian(self, A: Array) -> Array:
-        """:math:`L_A(x) = -(\\zeta + 3 s A_n(x)^2)/\\tau`, the pointwise derivative of the local
-        part of Eq. (5) at the start of the step (exponential Rosenbrock splitting)."""
-        p = self.pde.params
-        return -(p.zeta + 3.0 * p.s * A**2) / p.tau
-
     def split(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
         """Return ``(N_q hat, Adot)`` for the state ``u = [q1, q2, A]`` with ``q_hat`` the
         spectra of q1, q2: :math:`\\hat N_q = \\widehat{\\dot q} - L_q \\hat q` in Fourier space,

@@ -147,6 +147,55 @@ def activity_exponential(A, h, zeta, s, tau):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _phi0123(z):  # pragma: no cover - compiled
+    """:math:`e^z, \\varphi_1(z), \\varphi_2(z), \\varphi_3(z)` of a real scalar: Taylor series
+    for |z| < 1, the recursion :math:`\\varphi_{k+1} = (\\varphi_k - 1/k!)/z` otherwise (the
+    same branches as :func:`model.solver.phi_functions`)."""
+    if abs(z) < 1.0:
+        p1 = 0.0
+        p2 = 0.0
+        p3 = 0.0
+        term = 1.0  # z^j / j!
+        for j in range(20):
+            # phi_k = sum_j z^j / (j + k)!
+            p1 += term / (j + 1)
+            p2 += term / ((j + 1) * (j + 2))
+            p3 += term / ((j + 1) * (j + 2) * (j + 3))
+            term *= z / (j + 1)
+        return np.exp(z), p1, p2, p3
+    em1 = np.expm1(z)
+    p1 = em1 / z
+    p2 = (p1 - 1.0) / z
+    p3 = (p2 - 0.5) / z
+    return np.exp(z), p1, p2, p3
+
+
+@njit(cache=True)
+def activity_exponential4(A, h, zeta, s, tau):  # pragma: no cover - compiled
+    r"""For the ETDRK4 step: :math:`L_A = -(\zeta + 3 s A^2)/\tau` and, point by point,
+    ``out[0:4]`` = :math:`e^{z}, \varphi_{1,2,3}(z)` at :math:`z = h L_A`, ``out[4:7]`` =
+    :math:`e^{z/2}, \varphi_{1,2}(z/2)`; returns ``(L_A, out)``."""
+    nx, ny = A.shape
+    L = np.empty((nx, ny))
+    out = np.empty((7, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = A[x, y]
+            lam = -(zeta + 3.0 * s * a * a) / tau
+            L[x, y] = lam
+            e, p1, p2, p3 = _phi0123(lam * h)
+            out[0, x, y] = e
+            out[1, x, y] = p1
+            out[2, x, y] = p2
+            out[3, x, y] = p3
+            e, p1, p2, _ = _phi0123(0.5 * lam * h)
+            out[4, x, y] = e
+            out[5, x, y] = p1
+            out[6, x, y] = p2
+    return L, out
+
+
+@njit(cache=True)
 def bulk_terms(q1, q2, A, tr_e, C, two_Bp):  # pragma: no cover - compiled
     r"""``[-b q1, -b q2]`` with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (the
     non-constant part of the Landau-de Gennes bulk term in H, Eq. 4; ``A0`` is in L_q)."""

@@ -20,6 +20,7 @@ from typing import Any
 from .errors import ParameterError
 
 MECHANICS = ("finite", "linear")
+SCHEMES = ("etdrk4", "etdrk2")
 
 
 def _suggest(name: str, valid: list[str]) -> str:
@@ -151,7 +152,9 @@ class Numerics:
         resolution: N, grid points per side of the periodic unit square (even, >= 16).
         t_final: end time (units of tau).
         dt: initial (and, with ``adaptive = False``, fixed) time step.
-        adaptive: adapt dt from the embedded ETD1/ETD2 error estimate.
+        scheme: time integrator, "etdrk4" (Krogstad's fourth-order exponential Runge-Kutta,
+            embedded third-order error estimate) or "etdrk2" (second order, embedded ETD1).
+        adaptive: adapt dt from the scheme's embedded error estimate.
         tolerance: absolute local error tolerance per step (RMS over the grid, per field).
         dt_max: largest step the adaptive controller may take.
         save_every: interval between saved time-series points.
@@ -166,6 +169,7 @@ class Numerics:
     resolution: int = 128
     t_final: float = 300.0
     dt: float = 0.05
+    scheme: str = "etdrk4"
     adaptive: bool = True
     tolerance: float = 1e-3
     dt_max: float = 1.0
@@ -199,6 +203,8 @@ class Numerics:
                 raise ParameterError(name, getattr(self, name), "a number > 0")
         if number("max_newton", integer=True) < 1:
             raise ParameterError("max_newton", self.max_newton, "an integer >= 1")
+        if self.scheme not in SCHEMES:
+            raise ParameterError("scheme", self.scheme, " or ".join(SCHEMES))
         if self.mechanics not in MECHANICS:
             raise ParameterError("mechanics", self.mechanics, " or ".join(MECHANICS))
         for name in ("adaptive", "incompressible"):

@@ -31,7 +31,7 @@ from .observables import first_peak, snapshot_observables
 from .parameters import Numerics, Parameters, check_compatible
 from .pde import ActiveNematicPDE, make_state
 from .provenance import git_commit
-from .solver import ETDRK2Solver
+from .solver import SCHEMES, ETDSolver
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +78,7 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
     linear = isinstance(eq.mechanics, LinearMechanics)
     q1, q2, A = initial_fields(params, numerics.resolution, seed)
     state = make_state(q1, q2, A)
-    solver = ETDRK2Solver(eq)
+    solver = SCHEMES[numerics.scheme](eq)
     times = save_times(numerics)
     snap_set = {float(t) for t in np.round(list(numerics.snapshot_times) + [numerics.t_final],
                                            12)}
@@ -121,7 +121,7 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
 
 
 def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: int,
-                solver: ETDRK2Solver, *, status: str, reason: str, detail: str,
+                solver: ETDSolver, *, status: str, reason: str, detail: str,
                 t_failed: float, wall: float) -> xr.Dataset:
     t = np.array([r["time"] for r in rows], dtype=float)
     data_vars: dict[str, Any] = {}
@@ -167,6 +167,7 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
         "fft_backend": solver.pde.spectral.fft.backend,
         **{f"solver_{k}": int(v) for k, v in solver.stats.items()},
         "solver_spin_iterations": int(solver.pde.mechanics.spin_iterations),
+        "solver_cg_iterations": int(getattr(solver.pde.mechanics, "cg_iterations", 0)),
         "fft_count": int(solver.pde.spectral.fft.count),
     }
     attrs.update({f"param_{k}": _attr(v) for k, v in params.to_dict().items()})

@@ -184,3 +184,37 @@ def test_numba_spectral_kernels_match_numpy_references(rng):
     mech = FiniteMechanics(Parameters(), g)
     np.testing.assert_allclose(mech._green(v, 0.7), mech._green_reference(v, 0.7),
                                rtol=1e-14, atol=1e-16)
+
+
+def test_phi_functions_match_their_integral_definition():
+    """phi_k(z) = int_0^1 e^{(1 - s) z} s^(k-1) / (k-1)! ds on both branches (|z| < 1 Taylor,
+    recursion beyond), in numpy and in the numba scalar kernel."""
+    import math
+
+    from scipy.integrate import quad
+
+    from model import kernels as kern
+    from model.solver import phi_functions
+
+    z = np.array([-60.0, -7.3, -1.0001, -0.9999, -0.3, -1e-9, 0.0, 0.4])
+    numpy_phis = phi_functions(z, 3)
+    for i, zi in enumerate(z):
+        exact = [math.exp(zi)] + [
+            quad(lambda s, k=k, zi=zi: math.exp((1 - s) * zi) * s ** (k - 1) / math.factorial(k - 1),
+                 0, 1, epsabs=0, epsrel=1e-13, limit=200)[0] for k in (1, 2, 3)]
+        np.testing.assert_allclose([p[i] for p in numpy_phis], exact, rtol=1e-11)
+        np.testing.assert_allclose(kern._phi0123(zi), exact, rtol=1e-11)
+
+
+def test_etdrk4_activity_exponentials_match_numpy(rng):
+    from model import kernels as kern
+    from model.solver import phi_functions
+
+    A = 0.5 * rng.standard_normal((8, 8))
+    A[0, 0] = 0.0
+    zeta, s, tau, h = 1.0, 10.0, 1.0, 0.7
+    L, out = kern.activity_exponential4(A, h, zeta, s, tau)
+    L_ref = -(zeta + 3 * s * A**2) / tau
+    np.testing.assert_allclose(L, L_ref, rtol=1e-15)
+    ref = list(phi_functions(L_ref * h, 3)) + list(phi_functions(L_ref * h / 2, 2))
+    np.testing.assert_allclose(out, np.stack(ref), rtol=1e-13)

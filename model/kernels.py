@@ -119,34 +119,6 @@ def apply_tangent_kernel(K, dF):  # pragma: no cover - compiled
 # --- pointwise pieces of the time stepper (references: model.solver / model.pde) -----------
 
 @njit(cache=True)
-def _phi12(z):  # pragma: no cover - compiled
-    """:math:`\\varphi_1(z), \\varphi_2(z)` of a real scalar, Taylor series for small |z|
-    (the same branches as :func:`model.solver.phi_functions`)."""
-    if abs(z) < 1e-3:
-        return (1.0 + z / 2.0 + z * z / 6.0 + z * z * z / 24.0,
-                0.5 + z / 6.0 + z * z / 24.0 + z * z * z / 120.0)
-    em1 = np.expm1(z)
-    return em1 / z, (em1 - z) / (z * z)
-
-
-@njit(cache=True)
-def activity_exponential(A, h, zeta, s, tau):  # pragma: no cover - compiled
-    r"""The pointwise Jacobian :math:`L_A = -(\zeta + 3 s A^2)/\tau` of the local part of
-    Eq. (5) and :math:`\varphi_1(h L_A), \varphi_2(h L_A)`; returns ``(L_A, phi1, phi2)``."""
-    nx, ny = A.shape
-    L = np.empty((nx, ny))
-    p1 = np.empty((nx, ny))
-    p2 = np.empty((nx, ny))
-    for x in range(nx):
-        for y in range(ny):
-            a = A[x, y]
-            lam = -(zeta + 3.0 * s * a * a) / tau
-            L[x, y] = lam
-            p1[x, y], p2[x, y] = _phi12(lam * h)
-    return L, p1, p2
-
-
-@njit(cache=True)
 def _phi0123(z):  # pragma: no cover - compiled
     """:math:`e^z, \\varphi_1(z), \\varphi_2(z), \\varphi_3(z)` of a real scalar: Taylor series
     for |z| < 1, the recursion :math:`\\varphi_{k+1} = (\\varphi_k - 1/k!)/z` otherwise (the
@@ -168,6 +140,23 @@ def _phi0123(z):  # pragma: no cover - compiled
     p2 = (p1 - 1.0) / z
     p3 = (p2 - 0.5) / z
     return np.exp(z), p1, p2, p3
+
+
+@njit(cache=True)
+def activity_exponential(A, h, zeta, s, tau):  # pragma: no cover - compiled
+    r"""The pointwise Jacobian :math:`L_A = -(\zeta + 3 s A^2)/\tau` of the local part of
+    Eq. (5) and :math:`\varphi_1(h L_A), \varphi_2(h L_A)`; returns ``(L_A, phi1, phi2)``."""
+    nx, ny = A.shape
+    L = np.empty((nx, ny))
+    p1 = np.empty((nx, ny))
+    p2 = np.empty((nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = A[x, y]
+            lam = -(zeta + 3.0 * s * a * a) / tau
+            L[x, y] = lam
+            _, p1[x, y], p2[x, y], _ = _phi0123(lam * h)
+    return L, p1, p2
 
 
 @njit(cache=True)

@@ -119,6 +119,8 @@ class ETDSolver(SolverBase):
         self.Lq = -(p.A0 + p.K * g.k2) / p.gamma  # the q1, q2 symbol (Fourier space)
         self._zeros = np.zeros((g.n, g.n))
         self._known: list[tuple[Array, Array]] = []
+        #: the finite-strain warm start (u_hat, udot_hat) at the start of the current step
+        self._finite_restore: tuple[Array, Array] | None = None
         self._phi_cache: dict[tuple[float, int], tuple[Array, ...]] = {}
         self.on_step: Callable[[float, float], None] | None = None
         self.stats = {"steps": 0, "rejected": 0, "stage_failures": 0, "rhs": 0, "newton": 0}
@@ -191,12 +193,31 @@ class ETDSolver(SolverBase):
         """One step from ``(u, t)`` of size ``h``; returns (new state, error estimate)."""
         raise NotImplementedError
 
+    def _save_finite(self) -> FiniteMechanics | None:
+        """Remember the finite-strain warm start after the step's first right-hand side (so a
+        rejected step can put it back); returns the finite mechanics, or None if linear."""
+        mech = self.pde.mechanics
+        if not isinstance(mech, FiniteMechanics):
+            return None
+        self._finite_restore = (mech.u_hat.copy(), mech.udot_hat.copy())
+        return mech
+
     def _restore_finite(self) -> None:
         """Put the finite-strain displacement warm start back to the step's start."""
         mech = self.pde.mechanics
-        saved = getattr(self, "_finite_restore", None)
-        if isinstance(mech, FiniteMechanics) and saved is not None:
-            mech.u_hat, mech.udot_hat = saved
+        if isinstance(mech, FiniteMechanics) and self._finite_restore is not None:
+            mech.u_hat, mech.udot_hat = self._finite_restore
+
+    def _finish(self, u: Array, q_hat: Array, new_q_hat: Array, new_A: Array, err_q: Array,
+                err_A: Array) -> tuple[Array, float]:
+        """The new state, its spectra remembered for the next step, and the error estimate
+        (RMS over the grid, maximum over the three fields) of ``err_q`` (spectra) and
+        ``err_A`` (real space)."""
+        g = self.pde.spectral
+        new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
+        self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
+        err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]), float(np.sqrt(np.mean(err_A**2))))
+        return new, err
 
     def _quantize(self, h: float) -> float:
         """Round a proposed step down onto the ladder dt_max * 2^(-j/8), so that only a few
@@ -276,34 +297,23 @@ class ETDRK2Solver(ETDSolver):
     def step(self, u: Array, t: float, h: float) -> tuple[Array, float]:
         """One ETDRK2 step; returns (new state, error estimate)."""
         g = self.pde.spectral
-        mech = self.pde.mechanics
         q_hat = self._spectrum(u[:2])
         A = u[2]
-        finite = mech if isinstance(mech, FiniteMechanics) else None
         self._finite_restore = None
         Nq0, Adot0 = self.split(u, q_hat, t)
-        if finite is not None:
-            u0, udot0 = finite.u_hat.copy(), finite.udot_hat.copy()
+        finite = self._save_finite()
         E, phi1, phi2 = self._phis(h)
         p = self.pde.params
         LA, phi1A, phi2A = kern.activity_exponential(A, h, p.zeta, p.s, p.tau)
         aq_hat = E * q_hat + h * phi1 * Nq0
         aA = A + h * phi1A * Adot0  # = e^{L h} A + h phi1 (Adot - L A)
         a = np.concatenate([g.inverse(aq_hat), aA[None]])
-        if finite is not None:
-            finite.u_hat = u0 + h * udot0  # first-order predictor of the displacement
-        if finite is not None:
-            self._finite_restore = (u0, udot0)
+        if finite is not None:  # first-order predictor of the displacement
+            finite.u_hat = finite.u_hat + h * finite.udot_hat
         Nqa, Adota = self.split(a, aq_hat, t + h)
         corr_q = h * phi2 * (Nqa - Nq0)
         corr_A = h * phi2A * (Adota - Adot0 - LA * (aA - A))
-        new_q_hat = aq_hat + corr_q
-        new = np.concatenate([g.inverse(new_q_hat), (aA + corr_A)[None]])
-        self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
-        err = max(g.rms_hat(corr_q[0]), g.rms_hat(corr_q[1]),
-                  float(np.sqrt(np.mean(corr_A**2))))
-        return new, err
-
+        return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A)
 
 
 class ETDRK4Solver(ETDSolver):
@@ -316,9 +326,7 @@ class ETDRK4Solver(ETDSolver):
     def step(self, u: Array, t: float, h: float) -> tuple[Array, float]:
         """One Krogstad ETDRK4 step; returns (new state, error estimate)."""
         g = self.pde.spectral
-        mech = self.pde.mechanics
         p = self.pde.params
-        finite = mech if isinstance(mech, FiniteMechanics) else None
         self._finite_restore = None
         q_hat = self._spectrum(u[:2])
         A = u[2]
@@ -327,34 +335,30 @@ class ETDRK4Solver(ETDSolver):
         LA, PA = kern.activity_exponential4(A, h, p.zeta, p.s, p.tau)
         EA, F1, F2, F3, EA2, G1, G2 = PA
 
-        def rhs(q_s: Array, A_s: Array, t_s: float) -> tuple[Array, Array, Array]:
-            """Stage state -> (real state, N_q hat, N_A) with N_A = Adot - L_A A."""
-            state = np.concatenate([g.inverse(q_s), A_s[None]])
-            Nq, Adot = self.split(state, q_s, t_s)
-            return state, Nq, Adot - LA * A_s
+        def rhs(q_s: Array, A_s: Array, t_s: float) -> tuple[Array, Array]:
+            """Stage (q spectra, A) -> (N_q hat, N_A) with N_A = Adot - L_A A."""
+            Nq, Adot = self.split(np.concatenate([g.inverse(q_s), A_s[None]]), q_s, t_s)
+            return Nq, Adot - LA * A_s
 
         Nq_u, Adot_u = self.split(u, q_hat, t)
         NA_u = Adot_u - LA * A
+        finite = self._save_finite()
         if finite is not None:
-            u0, udot0 = finite.u_hat.copy(), finite.udot_hat.copy()
-            self._finite_restore = (u0, udot0)
-            finite.u_hat = u0 + 0.5 * h * udot0
+            finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
         # stage a (t + h/2): ETD1 half step
-        hq_u = 0.5 * h * g1 * Nq_u
-        hA_u = 0.5 * h * G1 * NA_u
-        aq = E2 * q_hat + hq_u
-        aA = EA2 * A + hA_u
-        _, Nq_a, NA_a = rhs(aq, aA, t + 0.5 * h)
+        aq = E2 * q_hat + 0.5 * h * g1 * Nq_u
+        aA = EA2 * A + 0.5 * h * G1 * NA_u
+        Nq_a, NA_a = rhs(aq, aA, t + 0.5 * h)
         # stage b (t + h/2): Krogstad's correction with phi_2
         bq = aq + h * g2 * (Nq_a - Nq_u)
         bA = aA + h * G2 * (NA_a - NA_u)
-        _, Nq_b, NA_b = rhs(bq, bA, t + 0.5 * h)
+        Nq_b, NA_b = rhs(bq, bA, t + 0.5 * h)
         if finite is not None:
             finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
         # stage c (t + h)
         cq = E * q_hat + h * f1 * Nq_u + 2.0 * h * f2 * (Nq_b - Nq_u)
         cA = EA * A + h * F1 * NA_u + 2.0 * h * F2 * (NA_b - NA_u)
-        _, Nq_c, NA_c = rhs(cq, cA, t + h)
+        Nq_c, NA_c = rhs(cq, cA, t + h)
         # the fourth-order combination
         w_u, w_ab, w_c = f1 - 3.0 * f2 + 4.0 * f3, 2.0 * f2 - 4.0 * f3, 4.0 * f3 - f2
         new_q_hat = E * q_hat + h * (w_u * Nq_u + w_ab * (Nq_a + Nq_b) + w_c * Nq_c)
@@ -363,12 +367,8 @@ class ETDRK4Solver(ETDSolver):
                               + (4.0 * F3 - F2) * NA_c)
         # embedded estimate: the same weights with N_a in place of (N_a + N_b)/2, i.e. the
         # Cox-Matthews third-order weights on the first-order midpoint stage: O(h^3)
-        err_q = h * w_ab * (Nq_b - Nq_a)
-        err_A = h * WA_ab * (NA_b - NA_a)
-        new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
-        self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
-        err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]), float(np.sqrt(np.mean(err_A**2))))
-        return new, err
+        return self._finish(u, q_hat, new_q_hat, new_A, h * w_ab * (Nq_b - Nq_a),
+                            h * WA_ab * (NA_b - NA_a))
 
 
 #: the schemes ``numerics.scheme`` may name

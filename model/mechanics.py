@@ -91,6 +91,7 @@ class _Mechanics:
         self.grid = grid
         self.spin_tol = spin_tol
         self.spin_iterations = 0
+        self.cg_iterations = 0  # Newton's CG iterations (finite mechanics only)
         self.omega_hat: Array | None = None
         self.moduli = cl.Moduli.from_params(params)
         self.Fbar = applied_deformation(params.eps)
@@ -285,7 +286,6 @@ class FiniteMechanics(_Mechanics):
         n = grid.n
         self.u_hat = np.zeros((2, n, n // 2 + 1), dtype=complex)  # warm start
         self.udot_hat = np.zeros_like(self.u_hat)
-        self.cg_iterations = 0
 
     def _tangent(self, F: Array, q1: Array, q2: Array) -> Array:
         """The tangent dP/dF by the numba kernel (reference: ``constitutive.tangent``)."""

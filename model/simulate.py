@@ -167,7 +167,7 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
         "fft_backend": solver.pde.spectral.fft.backend,
         **{f"solver_{k}": int(v) for k, v in solver.stats.items()},
         "solver_spin_iterations": int(solver.pde.mechanics.spin_iterations),
-        "solver_cg_iterations": int(getattr(solver.pde.mechanics, "cg_iterations", 0)),
+        "solver_cg_iterations": int(solver.pde.mechanics.cg_iterations),
         "fft_count": int(solver.pde.spectral.fft.count),
     }
     attrs.update({f"param_{k}": _attr(v) for k, v in params.to_dict().items()})

@@ -11,76 +11,67 @@ Nyquist mode is not defined on a real grid); the Laplacian uses the exact ``-|k|
 from __future__ import annotations
 
 import logging
-from typing import Any
 
 import numpy as np
-
-try:  # planned FFTW is 2.5-3x faster than numpy at 128^2 here; scipy.fft otherwise
-    import pyfftw
-    import pyfftw.builders
-
-    HAVE_FFTW = True
-except ImportError:  # pragma: no cover - depends on the platform
-    HAVE_FFTW = False
-
 import scipy.fft
+
+from . import fftw_native
 
 log = logging.getLogger(__name__)
 
 Array = np.ndarray
 
-#: FFTW_MEASURE times candidate algorithms and may pick a different one in another process
+#: FFTW through :mod:`model.fftw_native` (2.5-3x faster than numpy's FFT at 128^2 here, and
+#: callable from compiled code); scipy.fft where the FFTW library cannot be loaded.
+#: FFTW_MEASURE would time candidate algorithms and may pick a different one in another process
 #: (seen: a campaign's local and dask-cluster runs differed in the last digits), so results would
-#: not be bitwise reproducible across processes. FFTW_ESTIMATE chooses deterministically from
-#: the size alone and is only 10-20% slower here (64^2-256^2, measured).
-PLANNER = "FFTW_ESTIMATE"
+#: not be bitwise reproducible across processes; FFTW_ESTIMATE chooses deterministically from the
+#: size alone and is only 10-20% slower here (64^2-256^2, measured).
+HAVE_FFTW = fftw_native.AVAILABLE
 
 
 class FFT:
-    """Real 2-D FFTs over the last two axes, with one cached FFTW plan per array shape."""
+    """Real 2-D FFTs over the last two axes (one FFTW plan pair per grid size)."""
 
     def __init__(self, n: int, *, backend: str = "auto"):
         self.n = n
-        self.backend = "fftw" if (backend == "auto" and HAVE_FFTW) else backend
-        if self.backend == "auto":
-            self.backend = "scipy"
-        if self.backend == "fftw" and not HAVE_FFTW:
-            raise ImportError("pyfftw is not installed; use backend='scipy'")
-        self._plans: dict[tuple[str, tuple[int, ...]], Any] = {}
+        if backend == "auto":
+            backend = "fftw" if HAVE_FFTW else "scipy"
+        if backend == "fftw" and not HAVE_FFTW:
+            raise ImportError("the FFTW library (shipped with pyfftw) cannot be loaded; "
+                              "use backend='scipy'")
+        if backend not in ("fftw", "scipy"):
+            raise ValueError(f"unknown FFT backend {backend!r} (fftw, scipy)")
+        self.backend = backend
+        #: the (r2c, c2r) plans for compiled code (None for scipy)
+        self.plans = fftw_native.plans(n) if backend == "fftw" else None
         self.count = 0  # number of 2-D transforms performed (for the benchmark)
-
-    def _plan(self, kind: str, shape: tuple[int, ...]) -> Any:
-        key = (kind, shape)
-        plan = self._plans.get(key)
-        if plan is None:
-            if kind == "f":
-                a = pyfftw.empty_aligned(shape, dtype="float64")
-                plan = pyfftw.builders.rfftn(a, axes=(-2, -1), threads=1,
-                                             planner_effort=PLANNER)
-            else:
-                a = pyfftw.empty_aligned(shape, dtype="complex128")
-                plan = pyfftw.builders.irfftn(a, s=(self.n, self.n), axes=(-2, -1), threads=1,
-                                              planner_effort=PLANNER)
-            self._plans[key] = plan
-        return plan
 
     def forward(self, a: Array) -> Array:
         """``rfft2`` over the last two axes (unnormalised)."""
-        self.count += int(np.prod(a.shape[:-2], dtype=int))
-        if self.backend == "fftw":
-            plan = self._plan("f", a.shape)
-            plan.input_array[...] = a
-            return plan().copy()
-        return scipy.fft.rfftn(a, axes=(-2, -1), workers=1)
+        lead = a.shape[:-2]
+        k = int(np.prod(lead, dtype=int))
+        self.count += k
+        if self.plans is None:
+            return scipy.fft.rfftn(a, axes=(-2, -1), workers=1)
+        n = self.n
+        src = np.ascontiguousarray(a, dtype=np.float64).reshape(k, n, n)
+        out = np.empty((k, n, n // 2 + 1), dtype=np.complex128)
+        fftw_native.rfft2_many(self.plans[0], src, out)
+        return out.reshape(lead + (n, n // 2 + 1))
 
     def inverse(self, a: Array) -> Array:
         """``irfft2`` over the last two axes (divides by N^2)."""
-        self.count += int(np.prod(a.shape[:-2], dtype=int))
-        if self.backend == "fftw":  # c2r destroys its input: always work on the plan's copy
-            plan = self._plan("i", a.shape)
-            plan.input_array[...] = a
-            return plan().copy()
-        return scipy.fft.irfftn(a, s=(self.n, self.n), axes=(-2, -1), workers=1)
+        lead = a.shape[:-2]
+        k = int(np.prod(lead, dtype=int))
+        self.count += k
+        if self.plans is None:
+            return scipy.fft.irfftn(a, s=(self.n, self.n), axes=(-2, -1), workers=1)
+        n = self.n
+        src = np.ascontiguousarray(a, dtype=np.complex128).reshape(k, n, n // 2 + 1)
+        out = np.empty((k, n, n), dtype=np.float64)
+        fftw_native.irfft2_many(self.plans[1], src, out)
+        return out.reshape(lead + (n, n))
 
 
 class SpectralGrid:

@@ -118,27 +118,34 @@ def apply_tangent_kernel(K, dF):  # pragma: no cover - compiled
 
 # --- pointwise pieces of the time stepper (references: model.solver / model.pde) -----------
 
+#: 1/j! for j = 0..21, the Taylor coefficients of the phi functions
+_RECIP_FACT = np.array([1.0 / float(np.prod(np.arange(1, j + 1))) for j in range(22)])
+
+
 @njit(cache=True)
-def _phi0123(z):  # pragma: no cover - compiled
-    """:math:`e^z, \\varphi_1(z), \\varphi_2(z), \\varphi_3(z)` of a real scalar: Taylor series
-    for |z| < 1, the recursion :math:`\\varphi_{k+1} = (\\varphi_k - 1/k!)/z` otherwise (the
-    same branches as :func:`model.solver.phi_functions`)."""
+def _phi123_from(z, em1):  # pragma: no cover - compiled
+    """:math:`\varphi_{1,2,3}(z)` given :math:`e^z - 1`: Taylor series (Horner, 19 terms:
+    truncation < 1e-17) for |z| < 1, the recursion :math:`\varphi_{k+1} = (\varphi_k - 1/k!)/z`
+    otherwise (the same branches as :func:`model.solver.phi_functions`)."""
     if abs(z) < 1.0:
         p1 = 0.0
         p2 = 0.0
         p3 = 0.0
-        term = 1.0  # z^j / j!
-        for j in range(20):
-            # phi_k = sum_j z^j / (j + k)!
-            p1 += term / (j + 1)
-            p2 += term / ((j + 1) * (j + 2))
-            p3 += term / ((j + 1) * (j + 2) * (j + 3))
-            term *= z / (j + 1)
-        return np.exp(z), p1, p2, p3
-    em1 = np.expm1(z)
+        for j in range(18, -1, -1):  # phi_k = sum_j z^j / (j + k)!
+            p1 = p1 * z + _RECIP_FACT[j + 1]
+            p2 = p2 * z + _RECIP_FACT[j + 2]
+            p3 = p3 * z + _RECIP_FACT[j + 3]
+        return p1, p2, p3
     p1 = em1 / z
     p2 = (p1 - 1.0) / z
     p3 = (p2 - 0.5) / z
+    return p1, p2, p3
+
+
+@njit(cache=True)
+def _phi0123(z):  # pragma: no cover - compiled
+    """:math:`e^z, \varphi_1(z), \varphi_2(z), \varphi_3(z)` of a real scalar."""
+    p1, p2, p3 = _phi123_from(z, np.expm1(z))
     return np.exp(z), p1, p2, p3
 
 
@@ -172,13 +179,22 @@ def activity_exponential4(A, h, zeta, s, tau):  # pragma: no cover - compiled
             a = A[x, y]
             lam = -(zeta + 3.0 * s * a * a) / tau
             L[x, y] = lam
-            e, p1, p2, p3 = _phi0123(lam * h)
-            out[0, x, y] = e
+            z = lam * h
+            # one transcendental per point: e^z - 1 = (e^{z/2} - 1)(e^{z/2} + 1), with
+            # e^{z/2} from exp where it is small (1 + expm1 would lose its relative accuracy)
+            if z < -1.0:
+                e_half = np.exp(0.5 * z)
+                em1_half = e_half - 1.0
+            else:
+                em1_half = np.expm1(0.5 * z)
+                e_half = 1.0 + em1_half
+            p1, p2, p3 = _phi123_from(z, em1_half * (e_half + 1.0))
+            out[0, x, y] = e_half * e_half
             out[1, x, y] = p1
             out[2, x, y] = p2
             out[3, x, y] = p3
-            e, p1, p2, _ = _phi0123(0.5 * lam * h)
-            out[4, x, y] = e
+            p1, p2, _ = _phi123_from(0.5 * z, em1_half)
+            out[4, x, y] = e_half
             out[5, x, y] = p1
             out[6, x, y] = p2
     return L, out
@@ -278,6 +294,25 @@ def linear_response(q1h, q2h, isoh, kx, ky, khx, khy, inv_k2, amb, a, kappa,
                 tr_s[i, j] = 2.0 * kappa * (e11 + e22) + 2.0 * iso
     dev[0, 0, 0] += mean_dev
     return dev, tr_e, tr_s
+
+
+@njit(cache=True)
+def linear_response_symbols(q1h, q2h, isoh, S, mean_dev):  # pragma: no cover - compiled
+    r""":func:`linear_response` as a real 4 x 3 matrix of Fourier symbols ``S`` (outputs
+    dev e (2), tr e, tr sigma; inputs q1 hat, q2 hat, iso hat; made by
+    :meth:`model.mechanics.LinearMechanics.response_symbols`): the small-strain response is
+    linear and every factor i of a derivative meets another one, so the symbols are real."""
+    nx, ny = q1h.shape
+    out = np.empty((4, nx, ny), dtype=np.complex128)
+    for i in range(nx):
+        for j in range(ny):
+            a = q1h[i, j]
+            b = q2h[i, j]
+            c = isoh[i, j]
+            for r in range(4):
+                out[r, i, j] = S[r, 0, i, j] * a + S[r, 1, i, j] * b + S[r, 2, i, j] * c
+    out[0, 0, 0] += mean_dev
+    return out
 
 
 # --- finite-strain stress and spectral operators (references: model.constitutive,

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import constitutive as cl
-from . import krylov
+from . import fast_finite, krylov
 from . import tensors as T
 from .errors import SimulationFailure
 from .fourier import SpectralGrid
@@ -199,6 +199,23 @@ class LinearMechanics(_Mechanics):
                                self.params.kappa, self.incompressible,
                                self.params.eps * g.n**2)
 
+    def response_symbols(self) -> Array:
+        """The real symbols ``S[r, c]`` of :meth:`spectral_response` (outputs r: dev e (2
+        components), tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat), for
+        :func:`model.kernels.linear_response_symbols`: the responses to unit spectra."""
+        g, m = self.grid, self.moduli
+        one, zero = np.ones(g.k2.shape, dtype=complex), self._zero_hat
+        cols = []
+        for q1h, q2h, iso in ((one, zero, zero), (zero, one, zero), (zero, zero, one)):
+            dev, tr_e, tr_s = linear_response(q1h, q2h, iso, g.kx, g.ky, self._khat[0],
+                                              self._khat[1], self._inv_k2, m.alpha - m.B,
+                                              self._a, self.params.kappa, self.incompressible,
+                                              0.0)
+            cols.append(np.stack([dev[0], dev[1], tr_e, tr_s]))
+        S = np.stack(cols, axis=1)
+        assert np.all(S.imag == 0.0)
+        return np.ascontiguousarray(S.real)
+
     def spectral_response_reference(self, q_hat: Array, QQ_hat: Array | None
                                     ) -> tuple[Array, Array, Array]:
         """numpy reference of :meth:`spectral_response`."""
@@ -286,6 +303,10 @@ class FiniteMechanics(_Mechanics):
         n = grid.n
         self.u_hat = np.zeros((2, n, n // 2 + 1), dtype=complex)  # warm start
         self.udot_hat = np.zeros_like(self.u_hat)
+        #: Krylov solves compiled with native FFTW (model.fast_finite); False: numpy reference
+        self.compiled = grid.fft.plans is not None
+        self._weights = grid.weights / n**2  # Parseval weights of the half spectrum
+        self._workspace: tuple[Array, Array] | None = None
 
     def _tangent(self, F: Array, q1: Array, q2: Array) -> Array:
         """The tangent dP/dF by the numba kernel (reference: ``constitutive.tangent``)."""
@@ -306,9 +327,44 @@ class FiniteMechanics(_Mechanics):
 
         return A
 
-    def _pcg(self, A, b_hat: Array, x0: Array, rtol: float) -> tuple[Array, int, bool]:
-        x, it, status = krylov.pcg(A, b_hat, x0, lambda r: self._green(r, self._a),
-                                   self.grid.inner, rtol=rtol, maxiter=self.max_cg)
+    def _pcg(self, K: Array, b_hat: Array, rtol: float) -> tuple[Array, int, bool]:
+        """Newton's correction from zero: compiled (:func:`model.fast_finite.pcg`) or the
+        numpy reference (:func:`model.krylov.pcg` on :meth:`_operator`)."""
+        g = self.grid
+        x0 = np.zeros_like(b_hat)
+        if self.compiled:
+            assert g.fft.plans is not None
+            x, it, code, nop = fast_finite.pcg(
+                K, b_hat, x0, g.kx, g.ky, self._khat[0], self._khat[1], self._inv_k2, self._a,
+                self._weights, *g.fft.plans, rtol, self.max_cg)
+            g.fft.count += 8 * nop
+            return x, it, code == 0
+        x, it, status = krylov.pcg(self._operator(K), b_hat, x0,
+                                   lambda r: self._green(r, self._a), g.inner, rtol=rtol,
+                                   maxiter=self.max_cg)
+        return x, it, status == "ok"
+
+    def _udot_gmres(self, K: Array, E: Array, b: Array) -> tuple[Array, int, bool]:
+        """The displacement-rate solve, warm-started: compiled
+        (:func:`model.fast_finite.gmres`) or the numpy reference (:func:`model.krylov.gmres`)."""
+        g = self.grid
+        if self.compiled:
+            assert g.fft.plans is not None
+            if self._workspace is None:
+                self._workspace = fast_finite.workspace(g.n)
+            x, it, ok, nop = fast_finite.gmres(
+                K, E, b, self.udot_hat, g.kx, g.ky, self._khat[0], self._khat[1],
+                self._inv_k2, self._a, self._weights, *g.fft.plans, self.spin_tol,
+                self.max_cg, *self._workspace)
+            g.fft.count += 8 * nop
+            return x, it, ok
+
+        def A(v_hat: Array) -> Array:
+            G = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))
+            return neg_div_hat_kernel(g.forward(apply_tangent_spin_kernel(K, G, E)), g.kx, g.ky)
+
+        x, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
+                                     g.inner, rtol=self.spin_tol, maxiter=self.max_cg)
         return x, it, status == "ok"
 
     def _evaluate(self, u_hat: Array, q1: Array, q2: Array
@@ -344,7 +400,7 @@ class FiniteMechanics(_Mechanics):
             b = self.grid.div_hat(P_hat)
             # inexact Newton: ask CG for just the reduction this step needs
             rtol = float(np.clip(0.5 * self.tol / res, 1e-8, self.cg_rtol))
-            du, ncg, ok = self._pcg(self._operator(K), b, np.zeros_like(b), rtol)
+            du, ncg, ok = self._pcg(K, b, rtol)
             self.cg_iterations += ncg
             if not ok and ncg < self.max_cg:
                 raise SimulationFailure(
@@ -393,14 +449,9 @@ class FiniteMechanics(_Mechanics):
                                                    np.ascontiguousarray(R[1]), m.B, m.B_prime,
                                                    m.alpha)))
 
-        def A(v_hat: Array) -> Array:
-            G = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))
-            return neg_div_hat_kernel(g.forward(apply_tangent_spin_kernel(K, G, E)), g.kx, g.ky)
-
-        udot, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
-                                        g.inner, rtol=self.spin_tol, maxiter=self.max_cg)
+        udot, it, ok = self._udot_gmres(K, E, b)
         self.spin_iterations += it
-        if status != "ok":
+        if not ok:
             raise SimulationFailure(
                 "spin_diverged", "the displacement-rate (Jaumann spin) solve did not converge "
                 f"in {it} iterations: loss of ellipticity", t)

@@ -62,6 +62,7 @@ from collections.abc import Callable
 import numpy as np
 from pde.solvers.base import SolverBase
 
+from . import fast_linear
 from . import kernels as kern
 from .errors import SimulationFailure
 from .mechanics import FiniteMechanics, LinearMechanics
@@ -123,6 +124,13 @@ class ETDSolver(SolverBase):
         self._finite_restore: tuple[Array, Array] | None = None
         self._phi_cache: dict[tuple[float, int], tuple[Array, ...]] = {}
         self.on_step: Callable[[float, float], None] | None = None
+        #: the linear right-hand side as one compiled function (native FFTW only)
+        mech = pde.mechanics
+        self.compiled = isinstance(mech, LinearMechanics) and g.fft.plans is not None
+        self._weights = g.weights / g.n**2  # Parseval weights of the half spectrum
+        self._workspace = fast_linear.workspace(g.n) if self.compiled else ()
+        self._symbols = (mech.response_symbols()
+                         if isinstance(mech, LinearMechanics) and self.compiled else None)
         self.stats = {"steps": 0, "rejected": 0, "stage_failures": 0, "rhs": 0, "newton": 0}
 
     # --- the split right-hand side -----------------------------------------------------
@@ -142,7 +150,11 @@ class ETDSolver(SolverBase):
         return g.forward(rate[:2]) - self.Lq * q_hat, rate[2]
 
     def _split_linear(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
-        """Linear-mechanics fast path: every linear map of q stays in Fourier space."""
+        """Linear-mechanics fast path: every linear map of q stays in Fourier space. Runs as
+        one compiled function (:func:`model.fast_linear.linear_split`) where native FFTW is
+        available and ``self.compiled`` is set; the numpy code below is its reference."""
+        if self.compiled:
+            return self._split_linear_compiled(u, q_hat, t)
         eq = self.pde
         p, g, mech = eq.params, eq.spectral, eq.mechanics
         assert isinstance(mech, LinearMechanics)
@@ -162,6 +174,29 @@ class ETDSolver(SolverBase):
         qdot_hat -= Lq_hat
         Adot = kern.activity_rate(A, tr_sigma, p.zeta, p.chi, p.s, p.tau)
         return qdot_hat, Adot
+
+    def _split_linear_compiled(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
+        """:meth:`_split_linear` by :func:`model.fast_linear.linear_split`."""
+        eq = self.pde
+        p, g, mech = eq.params, eq.spectral, eq.mechanics
+        assert isinstance(mech, LinearMechanics)
+        assert g.fft.plans is not None
+        m1, m2 = mech._spin_symbols
+        x0 = mech.omega_hat
+        if x0 is None:
+            x0 = np.zeros(g.k2.shape, dtype=complex)
+        Nq, Adot, omega_hat, its, ok, nfft = fast_linear.linear_split(
+            u[0], u[1], u[2], np.ascontiguousarray(q_hat), x0, self.Lq, m1, m2,
+            self._symbols, self._weights, *g.fft.plans, p.eps * g.n**2, p.B, p.B_prime, p.C,
+            p.gamma, p.zeta, p.chi, p.s, p.tau, mech.spin_tol, 100, *self._workspace)
+        g.fft.count += nfft
+        mech.spin_iterations += its
+        if not ok:
+            raise SimulationFailure(
+                "spin_diverged", "the Jaumann spin solve did not converge in "
+                f"{its} iterations ((alpha - B) S too large: loss of well-posedness)", t)
+        mech.omega_hat = omega_hat
+        return Nq, Adot
 
     def full_rate(self, u: Array, t: float = 0.0) -> Array:
         """:math:`\\dot u` assembled from the split (equals ``pde.evolution_rate``; tested)."""

@@ -9,6 +9,7 @@ from pde import FieldCollection
 from pde.solvers import Controller
 
 from model.errors import SimulationFailure
+from model.fourier import HAVE_FFTW
 from model.initial import band_limited_field, band_limited_modes, initial_fields
 from model.parameters import Numerics, Parameters
 from model.pde import ActiveNematicPDE, make_state
@@ -22,17 +23,34 @@ def _final(ds):
     return np.stack([ds[k].values[-1] for k in ("q1", "q2", "A")])
 
 
-@pytest.mark.parametrize("mechanics", ["linear", "finite"])
-def test_fast_split_rate_equals_numpy_reference(mechanics):
-    """ETDRK2's L u + N(u) is the PDE's readable ``evolution_rate`` (different code paths)."""
-    p = SMALL.replace(eps=0.03, B_prime=0.1)
-    num = Numerics(resolution=32, mechanics=mechanics, spin_tol=1e-12, newton_tol=1e-12)
+@pytest.mark.parametrize(("mechanics", "incompressible", "compiled", "B_prime"), [
+    ("linear", False, True, 0.1), ("linear", False, True, 0.0), ("linear", True, True, 0.1),
+    ("linear", False, False, 0.1), ("linear", True, False, 0.1), ("finite", False, True, 0.1),
+    ("finite", False, False, 0.1)])
+def test_fast_split_rate_equals_numpy_reference(mechanics, incompressible, compiled, B_prime):
+    """ETDRK2's L u + N(u) is the PDE's readable ``evolution_rate`` (different code paths):
+    both the compiled paths (native FFTW: the whole linear right-hand side, model.fast_linear;
+    the finite-strain Krylov solves, model.fast_finite) and their numpy references."""
+    if compiled and not HAVE_FFTW:
+        pytest.skip("native FFTW not available")
+    linear = mechanics == "linear"
+    p = SMALL.replace(eps=0.03, B_prime=B_prime, alpha_minus_B=1.5 if linear else 1.0)
+    num = Numerics(resolution=32, mechanics=mechanics, spin_tol=1e-12, newton_tol=1e-12,
+                   incompressible=incompressible)
     eq = ActiveNematicPDE(p, num)
     state = make_state(*initial_fields(p, 32, seed=4))
+    if linear:
+        state.data[:2] *= 2.0  # a strong Jaumann feedback: several spin iterations
     state.data[2] = 0.3 * np.cos(2 * np.pi * eq.spectral.x)[:, None]  # nonzero activity
     ref = eq.evolution_rate(state).data
     solver = ETDRK2Solver(ActiveNematicPDE(p, num))
+    assert solver.compiled == (HAVE_FFTW and linear)
+    solver.compiled = compiled and linear
+    if not linear:
+        assert solver.pde.mechanics.compiled == HAVE_FFTW
+        solver.pde.mechanics.compiled = compiled
     fast = solver.full_rate(state.data, 0.0)
+    assert solver.pde.mechanics.spin_iterations >= (3 if linear else 1)
     np.testing.assert_allclose(fast, ref, atol=1e-9 * np.abs(ref).max())
 
 

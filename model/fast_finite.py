@@ -1,0 +1,209 @@
+r"""The finite-strain Krylov solves as compiled functions (numba + native FFTW).
+
+The two linear problems of :class:`model.mechanics.FiniteMechanics` (module docstring there):
+
+* Newton's correction, :math:`-\mathrm{Div}(\mathbb K : \nabla \delta u) = \mathrm{Div}\, P`,
+  by preconditioned conjugate gradients (:func:`pcg`, Saad Alg. 9.1);
+* the displacement rate of the Jaumann spin, :math:`-\mathrm{Div}(\mathbb K : \nabla \dot u
+  + E\, \omega(\dot u)) = \mathrm{Div}(\partial_Q P : R)`, by right-preconditioned
+  restarted GMRES (:func:`gmres`, Saad Alg. 9.5),
+
+both preconditioned by the Green operator of the homogeneous isotropic reference medium, with
+the Parseval inner product of half spectra. They are the same algorithms, step for step, as
+:func:`model.krylov.pcg` / :func:`model.krylov.gmres` driven by the numpy operators of
+``FiniteMechanics`` (the readable reference and the fallback, tested to agree); here the whole
+loop, its eight transforms per operator application included, stays in compiled code.
+
+Only used where :data:`model.fftw_native.AVAILABLE`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from . import fftw_native as fx
+from .kernels import green_kernel
+
+Array = np.ndarray
+
+
+@njit(cache=True)
+def _inner(a, b, w):  # pragma: no cover - compiled
+    """Real-space inner product of two (2, N, N//2 + 1) half spectra (weights ``w`` include
+    the Parseval factor and 1/N^2)."""
+    s = 0.0
+    for c in range(a.shape[0]):
+        for i in range(a.shape[1]):
+            for j in range(a.shape[2]):
+                s += w[i, j] * (a[c, i, j].real * b[c, i, j].real
+                                + a[c, i, j].imag * b[c, i, j].imag)
+    return s
+
+
+@njit(cache=True)
+def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, P, out):  # pragma: no cover
+    """``out`` = :math:`-\\mathrm{Div}(\\mathbb K : \\nabla v\\, [+ E\\, \\omega(v)])` for the
+    spectrum ``v`` (the E term if ``spin``): 4 inverse and 4 forward transforms."""
+    nx, ny = kx.shape
+    for i in range(2):
+        for j in range(2):
+            for x in range(nx):
+                for y in range(ny):
+                    k = kx[x, y] if j == 0 else ky[x, y]
+                    work_hat[x, y] = 1j * k * v[i, x, y]
+            fx.irfft2(pi, work_hat, G[i, j])
+    n = G.shape[2]
+    for x in range(n):
+        for y in range(n):
+            g00 = G[0, 0, x, y]
+            g01 = G[0, 1, x, y]
+            g10 = G[1, 0, x, y]
+            g11 = G[1, 1, x, y]
+            w = 0.5 * (g10 - g01)
+            for i in range(2):
+                for j in range(2):
+                    val = (K[i, j, 0, 0, x, y] * g00 + K[i, j, 0, 1, x, y] * g01
+                           + K[i, j, 1, 0, x, y] * g10 + K[i, j, 1, 1, x, y] * g11)
+                    if spin:
+                        val += E[i, j, x, y] * w
+                    P[i, j, x, y] = val
+    for i in range(2):
+        fx.rfft2(pf, P[i, 0], work_hat)
+        for x in range(nx):
+            for y in range(ny):
+                out[i, x, y] = -1j * kx[x, y] * work_hat[x, y]
+        fx.rfft2(pf, P[i, 1], work_hat)
+        for x in range(nx):
+            for y in range(ny):
+                out[i, x, y] -= 1j * ky[x, y] * work_hat[x, y]
+
+
+@njit(cache=True)
+def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pragma: no cover
+    """Preconditioned CG for Newton's correction; returns ``(x, iterations, status,
+    operator applications)``, status 0 ok, 1 maxiter, 2 indefinite (as
+    :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
+    n = K.shape[4]
+    work_hat = np.empty(kx.shape, dtype=np.complex128)
+    G = np.empty((2, 2, n, n))
+    P = np.empty((2, 2, n, n))
+    x = x0.copy()
+    nop = 0
+    if np.any(x != 0):
+        Ax = np.empty_like(b)
+        _operator(x, K, K[0, 0], False, kx, ky, pf, pi, work_hat, G, P, Ax)
+        nop += 1
+        r = b - Ax
+    else:
+        r = b.copy()
+    z = green_kernel(r, khx, khy, inv_k2, a)
+    p = z.copy()
+    rz = _inner(r, z, w)
+    ref = np.sqrt(abs(_inner(b, green_kernel(b, khx, khy, inv_k2, a), w)))
+    if ref == 0.0:
+        ref = 1.0
+    Ap = np.empty_like(b)
+    for it in range(maxiter + 1):
+        if np.sqrt(abs(rz)) <= rtol * ref:
+            return x, it, 0, nop
+        if it == maxiter:
+            break
+        _operator(p, K, K[0, 0], False, kx, ky, pf, pi, work_hat, G, P, Ap)
+        nop += 1
+        pAp = _inner(p, Ap, w)
+        if pAp <= 0:
+            return x, it, 2, nop
+        step = rz / pAp
+        x += step * p
+        r -= step * Ap
+        z = green_kernel(r, khx, khy, inv_k2, a)
+        rz_new = _inner(r, z, w)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return x, maxiter, 1, nop
+
+
+@njit(cache=True)
+def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V, Z
+          ):  # pragma: no cover
+    """Right-preconditioned restarted GMRES for the displacement rate; returns ``(x,
+    iterations, converged, operator applications)``. ``V`` (restart + 1 spectra) and ``Z``
+    (restart) are caller-owned work arrays."""
+    n = K.shape[4]
+    restart = Z.shape[0]
+    work_hat = np.empty(kx.shape, dtype=np.complex128)
+    G = np.empty((2, 2, n, n))
+    P = np.empty((2, 2, n, n))
+    Ax = np.empty_like(b)
+    wv = np.empty_like(b)
+    H = np.zeros((restart + 1, restart))
+    g = np.zeros(restart + 1)
+    cs = np.zeros(restart)
+    sn = np.zeros(restart)
+    x = x0.copy()
+    bnorm = np.sqrt(_inner(b, b, w))
+    if bnorm == 0.0:
+        bnorm = 1.0
+    total = 0
+    nop = 0
+    while True:
+        _operator(x, K, E, True, kx, ky, pf, pi, work_hat, G, P, Ax)
+        nop += 1
+        r = b - Ax
+        beta = np.sqrt(_inner(r, r, w))
+        if beta <= rtol * bnorm:
+            return x, total, True, nop
+        if total >= maxiter:
+            return x, total, False, nop
+        V[0] = r / beta
+        H[:, :] = 0.0
+        g[:] = 0.0
+        g[0] = beta
+        k = 0
+        h_next = 0.0
+        for k in range(restart):
+            Z[k] = green_kernel(V[k], khx, khy, inv_k2, a)
+            _operator(Z[k], K, E, True, kx, ky, pf, pi, work_hat, G, P, wv)
+            nop += 1
+            for i in range(k + 1):  # modified Gram-Schmidt
+                hik = _inner(V[i], wv, w)
+                H[i, k] = hik
+                wv -= hik * V[i]
+            h_next = np.sqrt(max(_inner(wv, wv, w), 0.0))
+            H[k + 1, k] = h_next
+            for i in range(k):  # the previous Givens rotations
+                t = cs[i] * H[i, k] + sn[i] * H[i + 1, k]
+                H[i + 1, k] = -sn[i] * H[i, k] + cs[i] * H[i + 1, k]
+                H[i, k] = t
+            denom = np.hypot(H[k, k], H[k + 1, k])
+            if denom == 0.0:
+                denom = 1e-300
+            cs[k] = H[k, k] / denom
+            sn[k] = H[k + 1, k] / denom
+            H[k, k] = denom
+            H[k + 1, k] = 0.0
+            g[k + 1] = -sn[k] * g[k]
+            g[k] = cs[k] * g[k]
+            total += 1
+            if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
+                break
+            V[k + 1] = wv / h_next
+        m = k + 1
+        y = np.zeros(m)  # back substitution with the triangular H
+        for i in range(m - 1, -1, -1):
+            acc = g[i]
+            for j in range(i + 1, m):
+                acc -= H[i, j] * y[j]
+            y[i] = acc / H[i, i]
+        for i in range(m):
+            x += y[i] * Z[i]
+        if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
+            return x, total, True, nop
+
+
+def workspace(n: int, restart: int = 30) -> tuple[Array, Array]:
+    """The ``(V, Z)`` work arrays of :func:`gmres` for an N x N grid."""
+    shape = (2, n, n // 2 + 1)
+    return (np.empty((restart + 1,) + shape, dtype=np.complex128),
+            np.empty((restart,) + shape, dtype=np.complex128))

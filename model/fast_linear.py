@@ -1,0 +1,205 @@
+r"""The linear-mechanics right-hand side as one compiled function (numba + native FFTW).
+
+Computes exactly what :meth:`model.solver.ETDSolver._split_linear` computes (its readable numpy
+path, which stays the reference and the fallback, tested to agree): from the state q1, q2, A
+and the spectra of q1, q2,
+
+.. math::
+    \hat H = \widehat{b(q, A)\, q} + B\, \widehat{\mathrm{dev}\, e}, \quad
+    R = \hat H/\gamma + L_q \hat q, \quad
+    (I - M)\,\hat\omega = \Omega[R], \quad M \hat\omega = \Omega[\widehat{2 \omega J q}], \\
+    \hat N_q = R + \widehat{2\omega J q} - L_q \hat q, \qquad
+    \dot A = (-\zeta A - \chi\, \mathrm{tr}\,\sigma - s A^3)/\tau \quad (\text{Eq. 5}),
+
+with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (Eq. 4; A0 and the Frank term are in
+:math:`L_q`), the small-strain response of :func:`model.kernels.linear_response` (as its real
+symbols ``S``, :func:`model.kernels.linear_response_symbols`), and the spin
+equation (the Jaumann term, :meth:`model.mechanics.LinearMechanics.corotational_hat`) solved by
+the same restarted GMRES as :func:`model.krylov.gmres_aux` (Saad Alg. 9.5, no preconditioner,
+warm start, Givens-rotated residual, modified Gram-Schmidt, Parseval inner product), here
+without leaving compiled code: the transforms run through :mod:`model.fftw_native`.
+
+Only built where :data:`model.fftw_native.AVAILABLE`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from . import fftw_native as fx
+from .kernels import activity_rate, bulk_terms, linear_response_symbols
+
+Array = np.ndarray
+
+
+@njit(cache=True)
+def _inner(a, b, w):  # pragma: no cover - compiled
+    """Real-space inner product of two half spectra (Parseval weights ``w`` include 1/N^2)."""
+    s = 0.0
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            s += w[i, j] * (a[i, j].real * b[i, j].real + a[i, j].imag * b[i, j].imag)
+    return s
+
+
+@njit(cache=True)
+def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, out, jout):  # pragma: no cover
+    """``out = (I - M) x`` and ``jout`` = the spectra of :math:`2 \\omega J q` for
+    :math:`\\hat\\omega = x` (3 transforms); ``omega``, ``prod`` are real work arrays."""
+    n = q1.shape[0]
+    fx.irfft2(pi, x, omega)
+    for a in range(n):
+        for b in range(n):
+            w = 2.0 * omega[a, b]
+            prod[0, a, b] = -w * q2[a, b]
+            prod[1, a, b] = w * q1[a, b]
+    fx.rfft2(pf, prod[0], jout[0])
+    fx.rfft2(pf, prod[1], jout[1])
+    for i in range(x.shape[0]):
+        for j in range(x.shape[1]):
+            out[i, j] = x[i, j] - (m1[i, j] * jout[0, i, j] + m2[i, j] * jout[1, i, j])
+
+
+@njit(cache=True)
+def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragma: no cover
+    """Solve :math:`(I - M)\\hat\\omega = b` by restarted GMRES from ``x0``; returns
+    ``(omega_hat, j_hat, iterations, converged, operator applications)`` with ``j_hat`` the
+    spectra of :math:`2\\omega J q` at the solution (accumulated from the basis: no extra operator
+    application). The same algorithm, step for step, as :func:`model.krylov._gmres`; the
+    Krylov basis ``V`` (restart + 1 spectra) and its Jaumann rates ``LZ`` (restart pairs) are
+    caller-owned work arrays (so that megabytes are not allocated on every call)."""
+    n = q1.shape[0]
+    restart = LZ.shape[0]
+    shape = b.shape
+    omega = np.empty((n, n))
+    prod = np.empty((2, n, n))
+    Ax = np.empty(shape, dtype=np.complex128)
+    x = x0.copy()
+    Lx = np.empty((2,) + shape, dtype=np.complex128)
+    wv = np.empty(shape, dtype=np.complex128)
+    H = np.zeros((restart + 1, restart))
+    g = np.zeros(restart + 1)
+    cs = np.zeros(restart)
+    sn = np.zeros(restart)
+    bnorm = np.sqrt(_inner(b, b, w))
+    if bnorm == 0.0:
+        bnorm = 1.0
+    total = 0
+    nop = 0
+    while True:
+        _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, Ax, Lx)
+        nop += 1
+        r = b - Ax
+        beta = np.sqrt(_inner(r, r, w))
+        if beta <= rtol * bnorm:
+            return x, Lx, total, True, nop
+        if total >= maxiter:
+            return x, Lx, total, False, nop
+        V[0] = r / beta
+        H[:, :] = 0.0
+        g[:] = 0.0
+        g[0] = beta
+        k = 0
+        h_next = 0.0
+        for k in range(restart):
+            _spin_operator(V[k], q1, q2, m1, m2, pf, pi, omega, prod, wv, LZ[k])
+            nop += 1
+            for i in range(k + 1):  # modified Gram-Schmidt
+                hik = _inner(V[i], wv, w)
+                H[i, k] = hik
+                wv -= hik * V[i]
+            h_next = np.sqrt(max(_inner(wv, wv, w), 0.0))
+            H[k + 1, k] = h_next
+            for i in range(k):  # the previous Givens rotations
+                t = cs[i] * H[i, k] + sn[i] * H[i + 1, k]
+                H[i + 1, k] = -sn[i] * H[i, k] + cs[i] * H[i + 1, k]
+                H[i, k] = t
+            denom = np.hypot(H[k, k], H[k + 1, k])
+            if denom == 0.0:
+                denom = 1e-300
+            cs[k] = H[k, k] / denom
+            sn[k] = H[k + 1, k] / denom
+            H[k, k] = denom
+            H[k + 1, k] = 0.0
+            g[k + 1] = -sn[k] * g[k]
+            g[k] = cs[k] * g[k]
+            total += 1
+            if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
+                break
+            V[k + 1] = wv / h_next
+        m = k + 1
+        y = np.zeros(m)  # back substitution with the triangular H
+        for i in range(m - 1, -1, -1):
+            acc = g[i]
+            for j in range(i + 1, m):
+                acc -= H[i, j] * y[j]
+            y[i] = acc / H[i, i]
+        for i in range(m):
+            x += y[i] * V[i]
+            Lx += y[i] * LZ[i]
+        if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
+            return x, Lx, total, True, nop
+
+
+def workspace(n: int, restart: int = 30) -> tuple[Array, Array]:
+    """The ``(V, LZ)`` work arrays of :func:`spin_gmres` for an N x N grid."""
+    shape = (n, n // 2 + 1)
+    return (np.empty((restart + 1,) + shape, dtype=np.complex128),
+            np.empty((restart, 2) + shape, dtype=np.complex128))
+
+
+@njit(cache=True)
+def linear_split(q1, q2, A, q_hat, omega_hat, Lq, m1, m2, S, w,
+                 pf, pi, mean_dev, B, Bp, C, gamma,
+                 zeta, chi, s, tau, spin_tol, maxiter, V, LZ):  # pragma: no cover
+    """``(N_q hat, Adot, omega_hat, spin iterations, converged, transforms)`` for the state
+    (see the module docstring); ``omega_hat`` is the warm start of the spin solve, ``V``,
+    ``LZ`` the work arrays of :func:`spin_gmres`."""
+    n = q1.shape[0]
+    shape = q_hat.shape[1:]
+    nfft = 0
+    if Bp != 0.0:
+        qq = np.empty((n, n))
+        for x in range(n):
+            for y in range(n):
+                qq[x, y] = 2.0 * (q1[x, y] ** 2 + q2[x, y] ** 2)
+        QQ_hat = np.empty(shape, dtype=np.complex128)
+        fx.rfft2(pf, qq, QQ_hat)
+        nfft += 1
+        iso = -Bp * QQ_hat
+    else:
+        iso = np.zeros(shape, dtype=np.complex128)
+    resp = linear_response_symbols(q_hat[0], q_hat[1], iso, S, mean_dev)
+    dev = resp[:2]
+    tr_e_hat = resp[2]
+    tr_s_hat = resp[3]
+    tr_s = np.empty((n, n))
+    fx.irfft2(pi, tr_s_hat, tr_s)
+    nfft += 1
+    tr_e = np.zeros((n, n))
+    if Bp != 0.0:
+        fx.irfft2(pi, tr_e_hat, tr_e)
+        nfft += 1
+    bulk = bulk_terms(q1, q2, A, tr_e, C, 2.0 * Bp)
+    R = np.empty((2,) + shape, dtype=np.complex128)
+    fx.rfft2(pf, bulk[0], R[0])
+    fx.rfft2(pf, bulk[1], R[1])
+    nfft += 2
+    rhs = np.empty(shape, dtype=np.complex128)
+    for c in range(2):
+        for i in range(shape[0]):
+            for j in range(shape[1]):
+                R[c, i, j] = (R[c, i, j] + B * dev[c, i, j]) / gamma + Lq[i, j] * q_hat[c, i, j]
+    for i in range(shape[0]):
+        for j in range(shape[1]):
+            rhs[i, j] = m1[i, j] * R[0, i, j] + m2[i, j] * R[1, i, j]
+    omega_hat, j_hat, its, ok, nop = spin_gmres(rhs, omega_hat, q1, q2, m1, m2, w, pf, pi,
+                                                spin_tol, maxiter, V, LZ)
+    nfft += 3 * nop
+    for c in range(2):
+        for i in range(shape[0]):
+            for j in range(shape[1]):
+                R[c, i, j] += j_hat[c, i, j] - Lq[i, j] * q_hat[c, i, j]
+    Adot = activity_rate(A, tr_s, zeta, chi, s, tau)
+    return R, Adot, omega_hat, its, ok, nfft

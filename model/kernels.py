@@ -201,6 +201,25 @@ def activity_exponential4(A, h, zeta, s, tau):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def etd_combination(E, x, h, coef, terms):  # pragma: no cover - compiled
+    r""":math:`E x + h \sum_k c_k N_k` in one pass: an ETD stage or update. For the q spectra
+    ``x``, ``terms[k]`` are ``(2, N, N//2 + 1)`` and ``E``, ``coef[k]`` real symbols
+    ``(N, N//2 + 1)``; for A everything is ``(N, N)`` (then a leading axis of length 1 is
+    added by the caller). ``coef`` and ``terms`` are tuples of equal length."""
+    nc, nx, ny = x.shape
+    out = np.empty_like(x)
+    m = len(coef)
+    for c in range(nc):
+        for i in range(nx):
+            for j in range(ny):
+                acc = terms[0][c, i, j] * coef[0][i, j]
+                for k in range(1, m):
+                    acc += terms[k][c, i, j] * coef[k][i, j]
+                out[c, i, j] = E[i, j] * x[c, i, j] + h * acc
+    return out
+
+
+@njit(cache=True)
 def bulk_terms(q1, q2, A, tr_e, C, two_Bp):  # pragma: no cover - compiled
     r"""``[-b q1, -b q2]`` with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (the
     non-constant part of the Landau-de Gennes bulk term in H, Eq. 4; ``A0`` is in L_q)."""

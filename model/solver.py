@@ -358,6 +358,10 @@ class ETDRK4Solver(ETDSolver):
     name = "etdrk4"
     error_order = 3
 
+    def __init__(self, pde: ActiveNematicPDE, **kwargs):
+        super().__init__(pde, **kwargs)
+        self._weight_cache: dict[float, tuple[Array, Array, dict[str, tuple[Array, ...]]]] = {}
+
     def step(self, u: Array, t: float, h: float) -> tuple[Array, float]:
         """One Krogstad ETDRK4 step; returns (new state, error estimate)."""
         g = self.pde.spectral
@@ -365,10 +369,17 @@ class ETDRK4Solver(ETDSolver):
         self._finite_restore = None
         q_hat = self._spectrum(u[:2])
         A = u[2]
-        E, f1, f2, f3 = self._phis(h, 3)
-        E2, g1, g2 = self._phis(0.5 * h, 2)
+        E, E2, wq = self._krogstad_weights(h)
         LA, PA = kern.activity_exponential4(A, h, p.zeta, p.s, p.tau)
         EA, F1, F2, F3, EA2, G1, G2 = PA
+        wA = self._weights_from(F1, F2, F3, G1, G2)
+        comb = kern.etd_combination
+
+        def combo_q(Eq: Array, x: Array, w: tuple[Array, ...], N: tuple[Array, ...]) -> Array:
+            return comb(Eq, x, h, w, N)
+
+        def combo_A(Ea: Array, x: Array, w: tuple[Array, ...], N: tuple[Array, ...]) -> Array:
+            return comb(Ea, x[None], h, w, tuple(n[None] for n in N))[0]
 
         def rhs(q_s: Array, A_s: Array, t_s: float) -> tuple[Array, Array]:
             """Stage (q spectra, A) -> (N_q hat, N_A) with N_A = Adot - L_A A."""
@@ -381,29 +392,46 @@ class ETDRK4Solver(ETDSolver):
         if finite is not None:
             finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
         # stage a (t + h/2): ETD1 half step
-        aq = E2 * q_hat + 0.5 * h * g1 * Nq_u
-        aA = EA2 * A + 0.5 * h * G1 * NA_u
-        Nq_a, NA_a = rhs(aq, aA, t + 0.5 * h)
-        # stage b (t + h/2): Krogstad's correction with phi_2
-        bq = aq + h * g2 * (Nq_a - Nq_u)
-        bA = aA + h * G2 * (NA_a - NA_u)
-        Nq_b, NA_b = rhs(bq, bA, t + 0.5 * h)
+        Nq_a, NA_a = rhs(combo_q(E2, q_hat, wq["a"], (Nq_u,)),
+                         combo_A(EA2, A, wA["a"], (NA_u,)), t + 0.5 * h)
+        # stage b (t + h/2): Krogstad's correction with phi_2, a + h phi_2(h/2) (N_a - N_u)
+        Nq_b, NA_b = rhs(combo_q(E2, q_hat, wq["b"], (Nq_u, Nq_a)),
+                         combo_A(EA2, A, wA["b"], (NA_u, NA_a)), t + 0.5 * h)
         if finite is not None:
             finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
         # stage c (t + h)
-        cq = E * q_hat + h * f1 * Nq_u + 2.0 * h * f2 * (Nq_b - Nq_u)
-        cA = EA * A + h * F1 * NA_u + 2.0 * h * F2 * (NA_b - NA_u)
-        Nq_c, NA_c = rhs(cq, cA, t + h)
+        Nq_c, NA_c = rhs(combo_q(E, q_hat, wq["c"], (Nq_u, Nq_b)),
+                         combo_A(EA, A, wA["c"], (NA_u, NA_b)), t + h)
         # the fourth-order combination
-        w_u, w_ab, w_c = f1 - 3.0 * f2 + 4.0 * f3, 2.0 * f2 - 4.0 * f3, 4.0 * f3 - f2
-        new_q_hat = E * q_hat + h * (w_u * Nq_u + w_ab * (Nq_a + Nq_b) + w_c * Nq_c)
-        WA_ab = 2.0 * F2 - 4.0 * F3
-        new_A = EA * A + h * ((F1 - 3.0 * F2 + 4.0 * F3) * NA_u + WA_ab * (NA_a + NA_b)
-                              + (4.0 * F3 - F2) * NA_c)
+        new_q_hat = combo_q(E, q_hat, wq["new"], (Nq_u, Nq_a, Nq_b, Nq_c))
+        new_A = combo_A(EA, A, wA["new"], (NA_u, NA_a, NA_b, NA_c))
         # embedded estimate: the same weights with N_a in place of (N_a + N_b)/2, i.e. the
         # Cox-Matthews third-order weights on the first-order midpoint stage: O(h^3)
-        return self._finish(u, q_hat, new_q_hat, new_A, h * w_ab * (Nq_b - Nq_a),
-                            h * WA_ab * (NA_b - NA_a))
+        return self._finish(u, q_hat, new_q_hat, new_A, h * wq["new"][1] * (Nq_b - Nq_a),
+                            h * wA["new"][1] * (NA_b - NA_a))
+
+    @staticmethod
+    def _weights_from(f1: Array, f2: Array, f3: Array, g1: Array, g2: Array
+                      ) -> dict[str, tuple[Array, ...]]:
+        """The stage and update weights of Krogstad's scheme from phi_k(hL) (f) and
+        phi_k(hL/2) (g): a = e^{Lh/2} u + h [g1/2] N_u, b = e^{Lh/2} u + h [g1/2 - g2, g2]
+        (N_u, N_a), c = e^{Lh} u + h [f1 - 2 f2, 2 f2] (N_u, N_b), u_{n+1} = e^{Lh} u +
+        h [w_u, w_ab, w_ab, w_c] (N_u, N_a, N_b, N_c) (module docstring)."""
+        w_ab = 2.0 * f2 - 4.0 * f3
+        return {"a": (0.5 * g1,), "b": (0.5 * g1 - g2, g2), "c": (f1 - 2.0 * f2, 2.0 * f2),
+                "new": (f1 - 3.0 * f2 + 4.0 * f3, w_ab, w_ab, 4.0 * f3 - f2)}
+
+    def _krogstad_weights(self, h: float) -> tuple[Array, Array, dict[str, tuple[Array, ...]]]:
+        """``(e^{L_q h}, e^{L_q h/2}, weights)`` for the q spectra, cached per step size."""
+        cached = self._weight_cache.get(h)
+        if cached is None:
+            E, f1, f2, f3 = self._phis(h, 3)
+            E2, g1, g2 = self._phis(0.5 * h, 2)
+            cached = (E, E2, self._weights_from(f1, f2, f3, g1, g2))
+            if len(self._weight_cache) > 64:
+                self._weight_cache.clear()
+            self._weight_cache[h] = cached
+        return cached
 
 
 #: the schemes ``numerics.scheme`` may name

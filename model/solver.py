@@ -48,9 +48,12 @@ retried with h/4; if it still fails at ``h <= 1e-3 dt_max`` the failure is the r
 
 In linear mechanics the Jaumann spin is computed with the spectral symbol of
 :meth:`model.mechanics.LinearMechanics.spin_multiplier`, reusing the transforms the step needs
-anyway, and the pointwise algebra runs in the numba kernels of :mod:`model.kernels`; finite
-mechanics uses the generic :meth:`ActiveNematicPDE.rates` path with the displacement-rate solve,
-and warm-starts Newton from the last stage's displacement plus its rate times the time offset.
+anyway, and the whole right-hand side runs as one compiled function
+(:mod:`model.fast_linear`) where native FFTW is available (its numpy reference otherwise); the
+stage algebra is one compiled pass per stage (:func:`model.kernels.etd_combination`); finite
+mechanics uses the generic :meth:`ActiveNematicPDE.rates` path with the displacement-rate solve
+(its Krylov solves compiled, :mod:`model.fast_finite`), and warm-starts Newton from the last
+stage's displacement plus its rate times the time offset.
 """
 
 from __future__ import annotations
@@ -124,8 +127,9 @@ class ETDSolver(SolverBase):
         self._finite_restore: tuple[Array, Array] | None = None
         self._phi_cache: dict[tuple[float, int], tuple[Array, ...]] = {}
         self.on_step: Callable[[float, float], None] | None = None
-        #: the linear right-hand side as one compiled function (native FFTW only)
         mech = pde.mechanics
+        #: the linear right-hand side as one compiled function (native FFTW only); False: the
+        #: numpy reference path
         self.compiled = isinstance(mech, LinearMechanics) and g.fft.plans is not None
         self._weights = g.weights / g.n**2  # Parseval weights of the half spectrum
         self._workspace = fast_linear.workspace(g.n) if self.compiled else ()

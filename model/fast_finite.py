@@ -23,26 +23,14 @@ import numpy as np
 from numba import njit
 
 from . import fftw_native as fx
-from .kernels import green_kernel
+from .kernels import apply_tangent_kernel, apply_tangent_spin_kernel, green_kernel
+from .krylov import givens_column, solve_upper, weighted_inner
 
 Array = np.ndarray
 
 
 @njit(cache=True)
-def _inner(a, b, w):  # pragma: no cover - compiled
-    """Real-space inner product of two (2, N, N//2 + 1) half spectra (weights ``w`` include
-    the Parseval factor and 1/N^2)."""
-    s = 0.0
-    for c in range(a.shape[0]):
-        for i in range(a.shape[1]):
-            for j in range(a.shape[2]):
-                s += w[i, j] * (a[c, i, j].real * b[c, i, j].real
-                                + a[c, i, j].imag * b[c, i, j].imag)
-    return s
-
-
-@njit(cache=True)
-def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, P, out):  # pragma: no cover
+def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, out):  # pragma: no cover
     """``out`` = :math:`-\\mathrm{Div}(\\mathbb K : \\nabla v\\, [+ E\\, \\omega(v)])` for the
     spectrum ``v`` (the E term if ``spin``): 4 inverse and 4 forward transforms."""
     nx, ny = kx.shape
@@ -53,21 +41,7 @@ def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, P, out):  # pragma: no
                     k = kx[x, y] if j == 0 else ky[x, y]
                     work_hat[x, y] = 1j * k * v[i, x, y]
             fx.irfft2(pi, work_hat, G[i, j])
-    n = G.shape[2]
-    for x in range(n):
-        for y in range(n):
-            g00 = G[0, 0, x, y]
-            g01 = G[0, 1, x, y]
-            g10 = G[1, 0, x, y]
-            g11 = G[1, 1, x, y]
-            w = 0.5 * (g10 - g01)
-            for i in range(2):
-                for j in range(2):
-                    val = (K[i, j, 0, 0, x, y] * g00 + K[i, j, 0, 1, x, y] * g01
-                           + K[i, j, 1, 0, x, y] * g10 + K[i, j, 1, 1, x, y] * g11)
-                    if spin:
-                        val += E[i, j, x, y] * w
-                    P[i, j, x, y] = val
+    P = apply_tangent_spin_kernel(K, G, E) if spin else apply_tangent_kernel(K, G)
     for i in range(2):
         fx.rfft2(pf, P[i, 0], work_hat)
         for x in range(nx):
@@ -87,20 +61,19 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
     n = K.shape[4]
     work_hat = np.empty(kx.shape, dtype=np.complex128)
     G = np.empty((2, 2, n, n))
-    P = np.empty((2, 2, n, n))
     x = x0.copy()
     nop = 0
     if np.any(x != 0):
         Ax = np.empty_like(b)
-        _operator(x, K, K[0, 0], False, kx, ky, pf, pi, work_hat, G, P, Ax)
+        _operator(x, K, K[0, 0], False, kx, ky, pf, pi, work_hat, G, Ax)
         nop += 1
         r = b - Ax
     else:
         r = b.copy()
     z = green_kernel(r, khx, khy, inv_k2, a)
     p = z.copy()
-    rz = _inner(r, z, w)
-    ref = np.sqrt(abs(_inner(b, green_kernel(b, khx, khy, inv_k2, a), w)))
+    rz = weighted_inner(r, z, w)
+    ref = np.sqrt(abs(weighted_inner(b, green_kernel(b, khx, khy, inv_k2, a), w)))
     if ref == 0.0:
         ref = 1.0
     Ap = np.empty_like(b)
@@ -109,16 +82,16 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
             return x, it, 0, nop
         if it == maxiter:
             break
-        _operator(p, K, K[0, 0], False, kx, ky, pf, pi, work_hat, G, P, Ap)
+        _operator(p, K, K[0, 0], False, kx, ky, pf, pi, work_hat, G, Ap)
         nop += 1
-        pAp = _inner(p, Ap, w)
+        pAp = weighted_inner(p, Ap, w)
         if pAp <= 0:
             return x, it, 2, nop
         step = rz / pAp
         x += step * p
         r -= step * Ap
         z = green_kernel(r, khx, khy, inv_k2, a)
-        rz_new = _inner(r, z, w)
+        rz_new = weighted_inner(r, z, w)
         p = z + (rz_new / rz) * p
         rz = rz_new
     return x, maxiter, 1, nop
@@ -134,7 +107,6 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
     restart = Z.shape[0]
     work_hat = np.empty(kx.shape, dtype=np.complex128)
     G = np.empty((2, 2, n, n))
-    P = np.empty((2, 2, n, n))
     Ax = np.empty_like(b)
     wv = np.empty_like(b)
     H = np.zeros((restart + 1, restart))
@@ -142,16 +114,16 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
     cs = np.zeros(restart)
     sn = np.zeros(restart)
     x = x0.copy()
-    bnorm = np.sqrt(_inner(b, b, w))
+    bnorm = np.sqrt(weighted_inner(b, b, w))
     if bnorm == 0.0:
         bnorm = 1.0
     total = 0
     nop = 0
     while True:
-        _operator(x, K, E, True, kx, ky, pf, pi, work_hat, G, P, Ax)
+        _operator(x, K, E, True, kx, ky, pf, pi, work_hat, G, Ax)
         nop += 1
         r = b - Ax
-        beta = np.sqrt(_inner(r, r, w))
+        beta = np.sqrt(weighted_inner(r, r, w))
         if beta <= rtol * bnorm:
             return x, total, True, nop
         if total >= maxiter:
@@ -164,38 +136,21 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
         h_next = 0.0
         for k in range(restart):
             Z[k] = green_kernel(V[k], khx, khy, inv_k2, a)
-            _operator(Z[k], K, E, True, kx, ky, pf, pi, work_hat, G, P, wv)
+            _operator(Z[k], K, E, True, kx, ky, pf, pi, work_hat, G, wv)
             nop += 1
             for i in range(k + 1):  # modified Gram-Schmidt
-                hik = _inner(V[i], wv, w)
+                hik = weighted_inner(V[i], wv, w)
                 H[i, k] = hik
                 wv -= hik * V[i]
-            h_next = np.sqrt(max(_inner(wv, wv, w), 0.0))
+            h_next = np.sqrt(max(weighted_inner(wv, wv, w), 0.0))
             H[k + 1, k] = h_next
-            for i in range(k):  # the previous Givens rotations
-                t = cs[i] * H[i, k] + sn[i] * H[i + 1, k]
-                H[i + 1, k] = -sn[i] * H[i, k] + cs[i] * H[i + 1, k]
-                H[i, k] = t
-            denom = np.hypot(H[k, k], H[k + 1, k])
-            if denom == 0.0:
-                denom = 1e-300
-            cs[k] = H[k, k] / denom
-            sn[k] = H[k + 1, k] / denom
-            H[k, k] = denom
-            H[k + 1, k] = 0.0
-            g[k + 1] = -sn[k] * g[k]
-            g[k] = cs[k] * g[k]
+            givens_column(H, g, cs, sn, k)
             total += 1
             if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
                 break
             V[k + 1] = wv / h_next
         m = k + 1
-        y = np.zeros(m)  # back substitution with the triangular H
-        for i in range(m - 1, -1, -1):
-            acc = g[i]
-            for j in range(i + 1, m):
-                acc -= H[i, j] * y[j]
-            y[i] = acc / H[i, i]
+        y = solve_upper(H, g, m)
         for i in range(m):
             x += y[i] * Z[i]
         if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:

@@ -29,18 +29,9 @@ from numba import njit
 
 from . import fftw_native as fx
 from .kernels import activity_rate, bulk_terms, linear_response_symbols
+from .krylov import givens_column, solve_upper, weighted_inner
 
 Array = np.ndarray
-
-
-@njit(cache=True)
-def _inner(a, b, w):  # pragma: no cover - compiled
-    """Real-space inner product of two half spectra (Parseval weights ``w`` include 1/N^2)."""
-    s = 0.0
-    for i in range(a.shape[0]):
-        for j in range(a.shape[1]):
-            s += w[i, j] * (a[i, j].real * b[i, j].real + a[i, j].imag * b[i, j].imag)
-    return s
 
 
 @njit(cache=True)
@@ -82,7 +73,7 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
     g = np.zeros(restart + 1)
     cs = np.zeros(restart)
     sn = np.zeros(restart)
-    bnorm = np.sqrt(_inner(b, b, w))
+    bnorm = np.sqrt(weighted_inner(b, b, w))
     if bnorm == 0.0:
         bnorm = 1.0
     total = 0
@@ -91,7 +82,7 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
         _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, Ax, Lx)
         nop += 1
         r = b - Ax
-        beta = np.sqrt(_inner(r, r, w))
+        beta = np.sqrt(weighted_inner(r, r, w))
         if beta <= rtol * bnorm:
             return x, Lx, total, True, nop
         if total >= maxiter:
@@ -106,35 +97,18 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
             _spin_operator(V[k], q1, q2, m1, m2, pf, pi, omega, prod, wv, LZ[k])
             nop += 1
             for i in range(k + 1):  # modified Gram-Schmidt
-                hik = _inner(V[i], wv, w)
+                hik = weighted_inner(V[i], wv, w)
                 H[i, k] = hik
                 wv -= hik * V[i]
-            h_next = np.sqrt(max(_inner(wv, wv, w), 0.0))
+            h_next = np.sqrt(max(weighted_inner(wv, wv, w), 0.0))
             H[k + 1, k] = h_next
-            for i in range(k):  # the previous Givens rotations
-                t = cs[i] * H[i, k] + sn[i] * H[i + 1, k]
-                H[i + 1, k] = -sn[i] * H[i, k] + cs[i] * H[i + 1, k]
-                H[i, k] = t
-            denom = np.hypot(H[k, k], H[k + 1, k])
-            if denom == 0.0:
-                denom = 1e-300
-            cs[k] = H[k, k] / denom
-            sn[k] = H[k + 1, k] / denom
-            H[k, k] = denom
-            H[k + 1, k] = 0.0
-            g[k + 1] = -sn[k] * g[k]
-            g[k] = cs[k] * g[k]
+            givens_column(H, g, cs, sn, k)
             total += 1
             if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
                 break
             V[k + 1] = wv / h_next
         m = k + 1
-        y = np.zeros(m)  # back substitution with the triangular H
-        for i in range(m - 1, -1, -1):
-            acc = g[i]
-            for j in range(i + 1, m):
-                acc -= H[i, j] * y[j]
-            y[i] = acc / H[i, i]
+        y = solve_upper(H, g, m)
         for i in range(m):
             x += y[i] * V[i]
             Lx += y[i] * LZ[i]

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from numba import njit
 
 Array = np.ndarray
 Op = Callable[[Array], Array]
@@ -108,16 +109,7 @@ def _gmres(op: Callable[[Array], tuple[Array, Array | None]], b: Array, x0: Arra
                 w = w - H[i, k] * V[i]
             h_next = np.sqrt(max(inner(w, w), 0.0))
             H[k + 1, k] = h_next
-            for i in range(k):  # apply the previous Givens rotations
-                t = cs[i] * H[i, k] + sn[i] * H[i + 1, k]
-                H[i + 1, k] = -sn[i] * H[i, k] + cs[i] * H[i + 1, k]
-                H[i, k] = t
-            denom = np.hypot(H[k, k], H[k + 1, k]) or 1e-300
-            cs[k], sn[k] = H[k, k] / denom, H[k + 1, k] / denom
-            H[k, k] = denom
-            H[k + 1, k] = 0.0
-            g[k + 1] = -sn[k] * g[k]
-            g[k] = cs[k] * g[k]
+            givens_column(H, g, cs, sn, k)
             total += 1
             if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
                 break  # converged, out of budget, or happy breakdown (exact solution)
@@ -132,3 +124,52 @@ def _gmres(op: Callable[[Array], tuple[Array, Array | None]], b: Array, x0: Arra
                 Lx = Lx + y[i] * Lz_i
         if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
             return x, total, "ok", Lx
+
+
+# --- pieces shared with the compiled solvers (model.fast_linear, model.fast_finite) --------
+
+@njit(cache=True)
+def givens_column(H, g, cs, sn, k):  # pragma: no cover - compiled
+    """GMRES's least-squares update for Hessenberg column ``k``: apply the previous Givens
+    rotations to it, make the k-th one that zeroes ``H[k + 1, k]``, and rotate the residual
+    vector ``g`` (|g[k + 1]| is then the residual norm of the current iterate)."""
+    for i in range(k):
+        t = cs[i] * H[i, k] + sn[i] * H[i + 1, k]
+        H[i + 1, k] = -sn[i] * H[i, k] + cs[i] * H[i + 1, k]
+        H[i, k] = t
+    denom = np.hypot(H[k, k], H[k + 1, k])
+    if denom == 0.0:
+        denom = 1e-300
+    cs[k] = H[k, k] / denom
+    sn[k] = H[k + 1, k] / denom
+    H[k, k] = denom
+    H[k + 1, k] = 0.0
+    g[k + 1] = -sn[k] * g[k]
+    g[k] = cs[k] * g[k]
+
+
+@njit(cache=True)
+def solve_upper(H, g, m):  # pragma: no cover - compiled
+    """``y`` with ``triu(H[:m, :m]) y = g[:m]`` by back substitution."""
+    y = np.zeros(m)
+    for i in range(m - 1, -1, -1):
+        acc = g[i]
+        for j in range(i + 1, m):
+            acc -= H[i, j] * y[j]
+        y[i] = acc / H[i, i]
+    return y
+
+
+@njit(cache=True)
+def weighted_inner(a, b, w):  # pragma: no cover - compiled
+    r""":math:`\sum w\, \mathrm{Re}(\bar a b)` for C-contiguous complex arrays ``a``, ``b``
+    whose trailing axes have the shape of ``w`` (``w`` repeats over leading axes): the
+    real-space inner product of half spectra when ``w`` holds the Parseval weights / N^2."""
+    af = a.reshape(-1)
+    bf = b.reshape(-1)
+    wf = w.reshape(-1)
+    nw = wf.size
+    s = 0.0
+    for i in range(af.size):
+        s += wf[i % nw] * (af[i].real * bf[i].real + af[i].imag * bf[i].imag)
+    return s

@@ -154,6 +154,7 @@ class LinearMechanics(_Mechanics):
         c = -0.5 * (self.moduli.alpha - self.moduli.B)
         self._spin_symbols = (c * (-2.0 * kx * ky), c * (kx**2 - ky**2))
         self._zero_hat = np.zeros(grid.k2.shape, dtype=complex)
+        self.spin_maxiter = 100  # GMRES iterations of the spin solve before spin_diverged
 
     def _eigenstress(self, q1: Array, q2: Array) -> Array:
         m = self.moduli
@@ -272,14 +273,22 @@ class LinearMechanics(_Mechanics):
         b = symbol_combination(self._zero_hat, -m1, -m2, R_hat[0], R_hat[1])
         x0 = self.omega_hat if self.omega_hat is not None else b
         omega_hat, it, status, j_hat = krylov.gmres_aux(
-            operator, b, x0, lambda r: r, g.inner, rtol=self.spin_tol, maxiter=100)
-        self.spin_iterations += it
-        if status != "ok":
+            operator, b, x0, lambda r: r, g.inner, rtol=self.spin_tol,
+            maxiter=self.spin_maxiter)
+        self.accept_spin(omega_hat, it, status == "ok", t)
+        return R_hat + j_hat
+
+    def accept_spin(self, omega_hat: Array, iterations: int, converged: bool,
+                    t: float | None) -> None:
+        """Book a spin solve (here or in :func:`model.fast_linear.linear_split`): count its
+        iterations, fail the run if it did not converge, keep the spin as the next warm
+        start."""
+        self.spin_iterations += iterations
+        if not converged:
             raise SimulationFailure(
                 "spin_diverged", "the Jaumann spin solve did not converge in "
-                f"{it} iterations ((alpha - B) S too large: loss of well-posedness)", t)
+                f"{iterations} iterations ((alpha - B) S too large: loss of well-posedness)", t)
         self.omega_hat = omega_hat
-        return R_hat + j_hat
 
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
                      t: float | None = None) -> tuple[Array, Array]:

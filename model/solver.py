@@ -192,14 +192,10 @@ class ETDSolver(SolverBase):
         Nq, Adot, omega_hat, its, ok, nfft = fast_linear.linear_split(
             u[0], u[1], u[2], np.ascontiguousarray(q_hat), x0, self.Lq, m1, m2,
             self._symbols, self._weights, *g.fft.plans, p.eps * g.n**2, p.B, p.B_prime, p.C,
-            p.gamma, p.zeta, p.chi, p.s, p.tau, mech.spin_tol, 100, *self._workspace)
+            p.gamma, p.zeta, p.chi, p.s, p.tau, mech.spin_tol, mech.spin_maxiter,
+            *self._workspace)
         g.fft.count += nfft
-        mech.spin_iterations += its
-        if not ok:
-            raise SimulationFailure(
-                "spin_diverged", "the Jaumann spin solve did not converge in "
-                f"{its} iterations ((alpha - B) S too large: loss of well-posedness)", t)
-        mech.omega_hat = omega_hat
+        mech.accept_spin(omega_hat, its, ok, t)
         return Nq, Adot
 
     def full_rate(self, u: Array, t: float = 0.0) -> Array:

@@ -24,7 +24,7 @@ from numba import njit
 
 from . import fftw_native as fx
 from .kernels import apply_tangent_kernel, apply_tangent_spin_kernel, green_kernel
-from .krylov import givens_column, solve_upper, weighted_inner
+from .krylov import axpy, givens_column, mgs_column, scaled, solve_upper, weighted_inner
 
 Array = np.ndarray
 
@@ -88,8 +88,8 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
         if pAp <= 0:
             return x, it, 2, nop
         step = rz / pAp
-        x += step * p
-        r -= step * Ap
+        axpy(x, step, p)
+        axpy(r, -step, Ap)
         z = green_kernel(r, khx, khy, inv_k2, a)
         rz_new = weighted_inner(r, z, w)
         p = z + (rz_new / rz) * p
@@ -128,7 +128,7 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
             return x, total, True, nop
         if total >= maxiter:
             return x, total, False, nop
-        V[0] = r / beta
+        scaled(V[0], r, beta)
         H[:, :] = 0.0
         g[:] = 0.0
         g[0] = beta
@@ -138,21 +138,17 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
             Z[k] = green_kernel(V[k], khx, khy, inv_k2, a)
             _operator(Z[k], K, E, True, kx, ky, pf, pi, work_hat, G, wv)
             nop += 1
-            for i in range(k + 1):  # modified Gram-Schmidt
-                hik = weighted_inner(V[i], wv, w)
-                H[i, k] = hik
-                wv -= hik * V[i]
-            h_next = np.sqrt(max(weighted_inner(wv, wv, w), 0.0))
+            h_next = mgs_column(V, wv, H, k, w)
             H[k + 1, k] = h_next
             givens_column(H, g, cs, sn, k)
             total += 1
             if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
                 break
-            V[k + 1] = wv / h_next
+            scaled(V[k + 1], wv, h_next)
         m = k + 1
         y = solve_upper(H, g, m)
         for i in range(m):
-            x += y[i] * Z[i]
+            axpy(x, y[i], Z[i])
         if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
             return x, total, True, nop
 

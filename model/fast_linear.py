@@ -29,7 +29,7 @@ from numba import njit
 
 from . import fftw_native as fx
 from .kernels import activity_rate, bulk_terms, linear_response_symbols
-from .krylov import givens_column, solve_upper, weighted_inner
+from .krylov import axpy, givens_column, mgs_column, scaled, solve_upper, weighted_inner
 
 Array = np.ndarray
 
@@ -87,7 +87,7 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
             return x, Lx, total, True, nop
         if total >= maxiter:
             return x, Lx, total, False, nop
-        V[0] = r / beta
+        scaled(V[0], r, beta)
         H[:, :] = 0.0
         g[:] = 0.0
         g[0] = beta
@@ -96,22 +96,18 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
         for k in range(restart):
             _spin_operator(V[k], q1, q2, m1, m2, pf, pi, omega, prod, wv, LZ[k])
             nop += 1
-            for i in range(k + 1):  # modified Gram-Schmidt
-                hik = weighted_inner(V[i], wv, w)
-                H[i, k] = hik
-                wv -= hik * V[i]
-            h_next = np.sqrt(max(weighted_inner(wv, wv, w), 0.0))
+            h_next = mgs_column(V, wv, H, k, w)
             H[k + 1, k] = h_next
             givens_column(H, g, cs, sn, k)
             total += 1
             if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
                 break
-            V[k + 1] = wv / h_next
+            scaled(V[k + 1], wv, h_next)
         m = k + 1
         y = solve_upper(H, g, m)
         for i in range(m):
-            x += y[i] * V[i]
-            Lx += y[i] * LZ[i]
+            axpy(x, y[i], V[i])
+            axpy(Lx, y[i], LZ[i])
         if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
             return x, Lx, total, True, nop
 

@@ -161,15 +161,108 @@ def solve_upper(H, g, m):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _wdot(wf, af, bf, o, nw):  # pragma: no cover - compiled
+    """The weighted real inner product of one block (offset ``o``, length ``nw``) of the
+    flat complex arrays ``af``, ``bf``: four interleaved partial sums, so that the additions
+    pipeline (deterministic; not the order of ``numpy.sum``)."""
+    n4 = nw - nw % 4
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    for i in range(0, n4, 4):
+        j = o + i
+        s0 += wf[i] * (af[j].real * bf[j].real + af[j].imag * bf[j].imag)
+        s1 += wf[i + 1] * (af[j + 1].real * bf[j + 1].real + af[j + 1].imag * bf[j + 1].imag)
+        s2 += wf[i + 2] * (af[j + 2].real * bf[j + 2].real + af[j + 2].imag * bf[j + 2].imag)
+        s3 += wf[i + 3] * (af[j + 3].real * bf[j + 3].real + af[j + 3].imag * bf[j + 3].imag)
+    for i in range(n4, nw):
+        s0 += wf[i] * (af[o + i].real * bf[o + i].real + af[o + i].imag * bf[o + i].imag)
+    return (s0 + s1) + (s2 + s3)
+
+
+@njit(cache=True)
 def weighted_inner(a, b, w):  # pragma: no cover - compiled
     r""":math:`\sum w\, \mathrm{Re}(\bar a b)` for C-contiguous complex arrays ``a``, ``b``
     whose trailing axes have the shape of ``w`` (``w`` repeats over leading axes): the
-    real-space inner product of half spectra when ``w`` holds the Parseval weights / N^2."""
+    real-space inner product of half spectra when ``w`` holds the Parseval weights / N^2.
+    Summed block by block (a block per leading index) in :func:`_wdot`'s order."""
     af = a.reshape(-1)
     bf = b.reshape(-1)
     wf = w.reshape(-1)
     nw = wf.size
     s = 0.0
-    for i in range(af.size):
-        s += wf[i % nw] * (af[i].real * bf[i].real + af[i].imag * bf[i].imag)
+    for block in range(af.size // nw):
+        s += _wdot(wf, af, bf, block * nw, nw)
     return s
+
+
+@njit(cache=True)
+def _axpy_wdot(wf, yf, alpha, xf, af, o, nw):  # pragma: no cover - compiled
+    """``y += alpha x`` over one block of the flat arrays, fused with :func:`_wdot` of ``a``
+    and the updated ``y`` (the same summation order; ``a`` may be ``y`` itself)."""
+    n4 = nw - nw % 4
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    for i in range(0, n4, 4):
+        j = o + i
+        yf[j] += alpha * xf[j]
+        yf[j + 1] += alpha * xf[j + 1]
+        yf[j + 2] += alpha * xf[j + 2]
+        yf[j + 3] += alpha * xf[j + 3]
+        s0 += wf[i] * (af[j].real * yf[j].real + af[j].imag * yf[j].imag)
+        s1 += wf[i + 1] * (af[j + 1].real * yf[j + 1].real + af[j + 1].imag * yf[j + 1].imag)
+        s2 += wf[i + 2] * (af[j + 2].real * yf[j + 2].real + af[j + 2].imag * yf[j + 2].imag)
+        s3 += wf[i + 3] * (af[j + 3].real * yf[j + 3].real + af[j + 3].imag * yf[j + 3].imag)
+    for i in range(n4, nw):
+        j = o + i
+        yf[j] += alpha * xf[j]
+        s0 += wf[i] * (af[j].real * yf[j].real + af[j].imag * yf[j].imag)
+    return (s0 + s1) + (s2 + s3)
+
+
+@njit(cache=True)
+def axpy_inner(y, alpha, x, a, w):  # pragma: no cover - compiled
+    """``y += alpha * x``, then return :func:`weighted_inner` ``(a, y, w)``, in one pass over
+    memory (bitwise the same as the two calls; ``a`` may be ``y``)."""
+    yf = y.reshape(-1)
+    xf = x.reshape(-1)
+    af = a.reshape(-1)
+    wf = w.reshape(-1)
+    nw = wf.size
+    s = 0.0
+    for block in range(yf.size // nw):
+        s += _axpy_wdot(wf, yf, alpha, xf, af, block * nw, nw)
+    return s
+
+
+@njit(cache=True)
+def mgs_column(V, wv, H, k, w):  # pragma: no cover - compiled
+    """Modified Gram-Schmidt of ``wv`` against the basis ``V[0..k]`` (GMRES's Arnoldi
+    step): ``H[i, k]`` = <V_i, wv>, ``wv -= H[i, k] V_i`` in turn; returns ``|wv|`` after.
+    Each subtraction is fused with the next inner product (:func:`axpy_inner`): the same
+    arithmetic as the plain loop, with half the passes over memory."""
+    H[0, k] = weighted_inner(V[0], wv, w)
+    for i in range(1, k + 1):
+        H[i, k] = axpy_inner(wv, -H[i - 1, k], V[i - 1], V[i], w)
+    return np.sqrt(max(axpy_inner(wv, -H[k, k], V[k], wv, w), 0.0))
+
+
+@njit(cache=True)
+def axpy(y, alpha, x):  # pragma: no cover - compiled
+    """``y += alpha * x`` in place (C-contiguous arrays of one shape; no temporary)."""
+    yf = y.reshape(-1)
+    xf = x.reshape(-1)
+    for i in range(yf.size):
+        yf[i] += alpha * xf[i]
+
+
+@njit(cache=True)
+def scaled(dst, x, alpha):  # pragma: no cover - compiled
+    """``dst[...] = x / alpha`` in place (C-contiguous arrays of one shape)."""
+    df = dst.reshape(-1)
+    xf = x.reshape(-1)
+    for i in range(df.size):
+        df[i] = xf[i] / alpha

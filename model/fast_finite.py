@@ -24,7 +24,7 @@ from numba import njit
 
 from . import fftw_native as fx
 from .kernels import apply_tangent_kernel, apply_tangent_spin_kernel, green_kernel
-from .krylov import axpy, givens_column, mgs_column, scaled, solve_upper, weighted_inner
+from .krylov import arnoldi_column, axpy, scaled, solve_upper, weighted_inner
 
 Array = np.ndarray
 
@@ -138,9 +138,7 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
             Z[k] = green_kernel(V[k], khx, khy, inv_k2, a)
             _operator(Z[k], K, E, True, kx, ky, pf, pi, work_hat, G, wv)
             nop += 1
-            h_next = mgs_column(V, wv, H, k, w)
-            H[k + 1, k] = h_next
-            givens_column(H, g, cs, sn, k)
+            h_next = arnoldi_column(V, wv, H, g, cs, sn, k, w)
             total += 1
             if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
                 break

@@ -29,7 +29,7 @@ from numba import njit
 
 from . import fftw_native as fx
 from .kernels import activity_rate, bulk_terms, linear_response_symbols
-from .krylov import axpy, givens_column, mgs_column, scaled, solve_upper, weighted_inner
+from .krylov import arnoldi_column, axpy, scaled, solve_upper, weighted_inner
 
 Array = np.ndarray
 
@@ -96,9 +96,7 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
         for k in range(restart):
             _spin_operator(V[k], q1, q2, m1, m2, pf, pi, omega, prod, wv, LZ[k])
             nop += 1
-            h_next = mgs_column(V, wv, H, k, w)
-            H[k + 1, k] = h_next
-            givens_column(H, g, cs, sn, k)
+            h_next = arnoldi_column(V, wv, H, g, cs, sn, k, w)
             total += 1
             if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
                 break

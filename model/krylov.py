@@ -251,6 +251,17 @@ def mgs_column(V, wv, H, k, w):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def arnoldi_column(V, wv, H, g, cs, sn, k, w):  # pragma: no cover - compiled
+    """One Arnoldi step of the compiled GMRESes for the new vector ``wv``: Gram-Schmidt
+    against ``V[0..k]`` (:func:`mgs_column`), ``H[k + 1, k]`` = its norm, and the Givens
+    update of the least-squares problem (:func:`givens_column`); returns the norm."""
+    h_next = mgs_column(V, wv, H, k, w)
+    H[k + 1, k] = h_next
+    givens_column(H, g, cs, sn, k)
+    return h_next
+
+
+@njit(cache=True)
 def axpy(y, alpha, x):  # pragma: no cover - compiled
     """``y += alpha * x`` in place (C-contiguous arrays of one shape; no temporary)."""
     yf = y.reshape(-1)

@@ -40,7 +40,7 @@ def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, out):  # pragma: no co
                 for y in range(ny):
                     k = kx[x, y] if j == 0 else ky[x, y]
                     work_hat[x, y] = 1j * k * v[i, x, y]
-            fx.irfft2(pi, work_hat, G[i, j])
+            fx.irfft2_via(pi, work_hat, G[i, j], work_hat)  # work_hat is rebuilt each time
     P = apply_tangent_spin_kernel(K, G, E) if spin else apply_tangent_kernel(K, G)
     for i in range(2):
         fx.rfft2(pf, P[i, 0], work_hat)

@@ -35,11 +35,13 @@ Array = np.ndarray
 
 
 @njit(cache=True)
-def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, out, jout):  # pragma: no cover
+def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, out, jout
+                   ):  # pragma: no cover
     """``out = (I - M) x`` and ``jout`` = the spectra of :math:`2 \\omega J q` for
-    :math:`\\hat\\omega = x` (3 transforms); ``omega``, ``prod`` are real work arrays."""
+    :math:`\\hat\\omega = x` (3 transforms); ``omega``, ``prod`` are real work arrays,
+    ``scratch`` a half spectrum for the inverse transform."""
     n = q1.shape[0]
-    fx.irfft2(pi, x, omega)
+    fx.irfft2_via(pi, x, omega, scratch)
     for a in range(n):
         for b in range(n):
             w = 2.0 * omega[a, b]
@@ -65,6 +67,7 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
     shape = b.shape
     omega = np.empty((n, n))
     prod = np.empty((2, n, n))
+    scratch = fx.aligned_half(n)
     Ax = np.empty(shape, dtype=np.complex128)
     x = x0.copy()
     Lx = np.empty((2,) + shape, dtype=np.complex128)
@@ -79,7 +82,7 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
     total = 0
     nop = 0
     while True:
-        _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, Ax, Lx)
+        _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, Ax, Lx)
         nop += 1
         r = b - Ax
         beta = np.sqrt(weighted_inner(r, r, w))
@@ -94,7 +97,8 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
         k = 0
         h_next = 0.0
         for k in range(restart):
-            _spin_operator(V[k], q1, q2, m1, m2, pf, pi, omega, prod, wv, LZ[k])
+            _spin_operator(V[k], q1, q2, m1, m2, pf, pi, omega, prod, scratch, wv,
+                           LZ[k])
             nop += 1
             h_next = arnoldi_column(V, wv, H, g, cs, sn, k, w)
             total += 1

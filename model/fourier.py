@@ -23,10 +23,11 @@ Array = np.ndarray
 
 #: FFTW through :mod:`model.fftw_native` (2.5-3x faster than numpy's FFT at 128^2 here, and
 #: callable from compiled code); scipy.fft where the FFTW library cannot be loaded.
-#: FFTW_MEASURE would time candidate algorithms and may pick a different one in another process
-#: (seen: a campaign's local and dask-cluster runs differed in the last digits), so results would
-#: not be bitwise reproducible across processes; FFTW_ESTIMATE chooses deterministically from the
-#: size alone and is only 10-20% slower here (64^2-256^2, measured).
+#: FFTW_MEASURE at run time would time candidate algorithms and may pick a different one in
+#: another process (seen: a campaign's local and dask-cluster runs differed in the last digits),
+#: so results would not be bitwise reproducible across processes. The plans therefore come from
+#: wisdom shipped with the code (FFTW_PATIENT, made once) or, for sizes it does not hold, from
+#: FFTW_ESTIMATE: both deterministic (:mod:`model.fftw_native`).
 HAVE_FFTW = fftw_native.AVAILABLE
 
 
@@ -45,6 +46,8 @@ class FFT:
         self.backend = backend
         #: the (r2c, c2r) plans for compiled code (None for scipy)
         self.plans = fftw_native.plans(n) if backend == "fftw" else None
+        #: where the plans came from: "wisdom", "estimate" (FFTW), or "" (scipy)
+        self.plan_source = fftw_native.plan_source(n) if backend == "fftw" else ""
         self.count = 0  # number of 2-D transforms performed (for the benchmark)
 
     def forward(self, a: Array) -> Array:

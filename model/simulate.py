@@ -165,6 +165,7 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
         "parameters_json": json.dumps(params.to_dict(), sort_keys=True),
         "numerics_json": json.dumps(numerics.to_dict(), sort_keys=True),
         "fft_backend": solver.pde.spectral.fft.backend,
+        "fft_plans": solver.pde.spectral.fft.plan_source,
         **{f"solver_{k}": int(v) for k, v in solver.stats.items()},
         "solver_spin_iterations": int(solver.pde.mechanics.spin_iterations),
         "solver_cg_iterations": int(solver.pde.mechanics.cg_iterations),

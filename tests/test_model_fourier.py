@@ -67,3 +67,67 @@ def test_linear_response_symbols_match_the_direct_kernel(rng):
         dev, tr_e, tr_s = mech.spectral_response(qh[:2], qh[2])
         fast = kern.linear_response_symbols(qh[0], qh[1], -0.2 * qh[2], S, 0.01 * n**2)
         np.testing.assert_allclose(fast, np.stack([dev[0], dev[1], tr_e, tr_s]), atol=1e-10)
+
+
+def test_irfft_through_a_scratch_even_the_input_itself(rng):
+    n = 32
+    f, i = fftw_native.plans(n)
+    a = rng.standard_normal((n, n))
+    spec = scipy.fft.rfft2(a)
+    for scratch in (fftw_native.aligned_empty(spec.shape, complex),
+                    _misaligned(spec.shape, complex), "self"):
+        src = spec.copy()
+        out = np.empty((n, n))
+        fftw_native.irfft2_via(i, src, out, src if isinstance(scratch, str) else scratch)
+        np.testing.assert_allclose(out, a, rtol=0, atol=1e-13)
+        if not isinstance(scratch, str):
+            np.testing.assert_array_equal(src, spec)  # a separate scratch leaves src intact
+
+
+def _run(code: str, env: dict[str, str]) -> str:
+    import os
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-c", code], env={**os.environ, **env}, check=True,
+                          capture_output=True, text=True).stdout.strip()
+
+
+_TRANSFORM = """
+import hashlib, numpy as np
+from model import fftw_native as fx
+n = {n}
+f, i = fx.plans(n)
+a = np.random.default_rng(1).standard_normal((n, n))
+out = np.empty((n, n // 2 + 1), complex)
+fx.rfft2(f, a, out)
+print(fx.WISDOM_LOADED, fx.plan_source(n), hashlib.sha256(out.tobytes()).hexdigest())
+"""
+
+
+def test_shipped_wisdom_plans_are_the_same_in_every_process(tmp_path):
+    """Wisdom made once (FFTW_PATIENT, timing) is imported by later processes, which plan from
+    it without timing: their transforms are bitwise identical; a size the wisdom does not hold
+    gets FFTW_ESTIMATE's plan (also deterministic)."""
+    wisdom = tmp_path / "wisdom.txt"
+    _run(f"from model import fftw_native as fx; open({str(wisdom)!r}, 'w').write("
+         "fx.patient_wisdom([16]))", {"NEMATIC_FFTW_WISDOM": ""})
+    env = {"NEMATIC_FFTW_WISDOM": str(wisdom)}
+    one, two = (_run(_TRANSFORM.format(n=16), env) for _ in range(2))
+    assert one == two
+    assert one.split()[:2] == ["True", "wisdom"]
+    assert _run(_TRANSFORM.format(n=18), env).split()[:2] == ["True", "estimate"]
+    off = _run(_TRANSFORM.format(n=16), {"NEMATIC_FFTW_WISDOM": ""})
+    assert off.split()[:2] == ["False", "estimate"]
+
+
+def test_the_shipped_wisdom_holds_the_campaign_sizes():
+    """The wisdom file in the package covers the resolutions the campaigns use (when this FFTW
+    build accepts it: elsewhere plans fall back to FFTW_ESTIMATE, see model.fftw_native)."""
+    assert fftw_native.WISDOM_FILE is not None
+    text = fftw_native.WISDOM_FILE.read_text()
+    assert text.startswith("(fftw-3")
+    if not fftw_native.WISDOM_LOADED:
+        pytest.skip("this FFTW build does not accept the shipped wisdom")
+    for n in (32, 64, 128, 256):
+        assert fftw_native.plan_source(n) == "wisdom"

@@ -119,9 +119,14 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
         bnorm = 1.0
     total = 0
     nop = 0
+    zero_start = not np.any(x)  # then r = b: no operator application
     while True:
-        _operator(x, K, E, True, kx, ky, pf, pi, work_hat, G, Ax)
-        nop += 1
+        if zero_start:
+            Ax[...] = 0.0
+            zero_start = False
+        else:
+            _operator(x, K, E, True, kx, ky, pf, pi, work_hat, G, Ax)
+            nop += 1
         r = b - Ax
         beta = np.sqrt(weighted_inner(r, r, w))
         if beta <= rtol * bnorm:

@@ -56,7 +56,8 @@ def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, out, jout
 
 @njit(cache=True)
 def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragma: no cover
-    """Solve :math:`(I - M)\\hat\\omega = b` by restarted GMRES from ``x0``; returns
+    """Solve :math:`(I - M)\\hat\\omega = b` by restarted GMRES from ``x0`` (a zero ``x0``
+    costs no operator application: the residual is ``b``); returns
     ``(omega_hat, j_hat, iterations, converged, operator applications)`` with ``j_hat`` the
     spectra of :math:`2\\omega J q` at the solution (accumulated from the basis: no extra operator
     application). The same algorithm, step for step, as :func:`model.krylov._gmres`; the
@@ -81,9 +82,15 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
         bnorm = 1.0
     total = 0
     nop = 0
+    zero_start = not np.any(x)  # then r = b and L x = 0: no operator application
     while True:
-        _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, Ax, Lx)
-        nop += 1
+        if zero_start:
+            Ax[:, :] = 0.0
+            Lx[:, :, :] = 0.0
+            zero_start = False
+        else:
+            _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, Ax, Lx)
+            nop += 1
         r = b - Ax
         beta = np.sqrt(weighted_inner(r, r, w))
         if beta <= rtol * bnorm:

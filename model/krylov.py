@@ -70,7 +70,8 @@ def gmres_aux(op: Callable[[Array], tuple[Array, Array]], b: Array, x0: Array, M
     operator computes anyway need not be recomputed)."""
     x, it, status, Lx = _gmres(op, b, x0, M, inner, rtol=rtol, maxiter=maxiter,
                                restart=restart)
-    assert Lx is not None
+    if Lx is None:  # a zero start that needed no iteration (b = 0): L x = L 0
+        Lx = op(x)[1]
     return x, it, status, Lx
 
 
@@ -80,13 +81,19 @@ def _gmres(op: Callable[[Array], tuple[Array, Array | None]], b: Array, x0: Arra
     """Restarted GMRES; the auxiliary output ``L x`` is accumulated from the ``L z`` of the
     basis (L is linear), so a cycle that converges needs no extra operator application: the
     stopping test uses the Givens-rotated residual estimate, the true residual is recomputed
-    only at a restart."""
+    only at a restart. A zero start ``x0 = 0`` needs no operator application for its residual
+    (it is ``b``; ``L x`` is then None until the first update)."""
     x = x0.copy()
     bnorm = np.sqrt(inner(b, b)) or 1.0
     total = 0
+    Lx: Array | None = None
+    zero_start = not np.any(x)  # then r = b and L x = 0: no operator application
     while True:
-        Ax, Lx = op(x)
-        r = b - Ax  # the true residual (and L x of the current iterate)
+        if zero_start:
+            r, zero_start = b.copy(), False
+        else:
+            Ax, Lx = op(x)
+            r = b - Ax  # the true residual (and L x of the current iterate)
         beta = np.sqrt(inner(r, r))
         if beta <= rtol * bnorm or total >= maxiter:
             return x, total, ("ok" if beta <= rtol * bnorm else "maxiter"), Lx
@@ -118,10 +125,9 @@ def _gmres(op: Callable[[Array], tuple[Array, Array | None]], b: Array, x0: Arra
         y = np.linalg.solve(np.triu(H[:m, :m]), g[:m])
         for i in range(m):
             x = x + y[i] * Z[i]
-            if Lx is not None:
-                Lz_i = LZ[i]
-                assert Lz_i is not None
-                Lx = Lx + y[i] * Lz_i
+            Lz_i = LZ[i]
+            if Lz_i is not None:  # (None: the operator has no auxiliary output)
+                Lx = y[i] * Lz_i if Lx is None else Lx + y[i] * Lz_i
         if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
             return x, total, "ok", Lx
 

@@ -70,3 +70,66 @@ def test_mgs_column_is_modified_gram_schmidt(shape, rng):
     # the remainder is orthogonal to the basis
     for i in range(k + 1):
         assert abs(krylov.weighted_inner(V[i], wv, w)) < 1e-12 * norm
+
+
+def test_gmres_from_zero_needs_no_operator_application_for_its_residual(rng):
+    """A zero start takes b as its residual: one operator application per iteration and none
+    more (a warm start pays one for its residual); both reach the tolerance, and the auxiliary
+    output L x is the same linear map of the solution."""
+    n = 24
+    A = np.eye(n) + 0.3 * rng.standard_normal((n, n)) / np.sqrt(n)
+    L = rng.standard_normal((2, n))
+    b = rng.standard_normal(n)
+    calls = []
+
+    def op(v):
+        calls.append(1)
+        return A @ v, L @ v
+
+    solution = np.linalg.solve(A, b)
+    for x0 in (np.zeros(n), solution + 0.1 * rng.standard_normal(n)):
+        calls.clear()
+        x, it, status, Lx = krylov.gmres_aux(op, b, x0, lambda r: r, np.dot, rtol=1e-10,
+                                             maxiter=100)
+        assert status == "ok"
+        np.testing.assert_allclose(x, solution, atol=1e-8)
+        np.testing.assert_allclose(Lx, L @ x, atol=1e-8)
+        assert len(calls) == it + (0 if not np.any(x0) else 1)
+    calls.clear()
+    x, it, status, Lx = krylov.gmres_aux(op, np.zeros(n), np.zeros(n), lambda r: r, np.dot,
+                                         rtol=1e-10, maxiter=100)
+    assert (it, status) == (0, "ok")
+    assert not np.any(x)
+    assert Lx.shape == (2,)
+    assert not np.any(Lx)
+
+
+def test_compiled_spin_gmres_from_zero_meets_its_tolerance(rng):
+    from model import fast_linear, fftw_native
+    from model.fourier import SpectralGrid
+    from model.mechanics import LinearMechanics
+    from model.parameters import Parameters
+
+    if not fftw_native.AVAILABLE:
+        pytest.skip("native FFTW not available")
+    n = 32
+    g = SpectralGrid(n)
+    mech = LinearMechanics(Parameters.from_dict({"alpha_minus_B": 1.0}), g)
+    m1, m2 = mech._spin_symbols
+    q1, q2 = 0.3 * rng.standard_normal((2, n, n))
+    b = g.forward(rng.standard_normal((n, n)))
+    w = g.weights / n**2
+    V, LZ = fast_linear.workspace(n)
+    x, j, its, ok, nop = fast_linear.spin_gmres(b, np.zeros_like(b), q1, q2, m1, m2, w,
+                                                *g.fft.plans, 1e-6, 100, V, LZ)
+    assert ok
+    assert its > 2
+    assert nop == its  # no application for the zero start's residual
+    Ax, jx = np.empty_like(b), np.empty((2,) + b.shape, complex)
+    fast_linear._spin_operator(x, q1, q2, m1, m2, *g.fft.plans, np.empty((n, n)),
+                               np.empty((2, n, n)), fftw_native.aligned_empty(b.shape, complex),
+                               Ax, jx)
+    r = b - Ax
+    assert np.sqrt(krylov.weighted_inner(r, r, w)) <= 1.01e-6 * np.sqrt(
+        krylov.weighted_inner(b, b, w))
+    np.testing.assert_allclose(j, jx, atol=1e-10 * np.abs(jx).max())  # accumulated = direct

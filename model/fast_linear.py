@@ -16,7 +16,7 @@ with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (Eq. 4; A0 and the Frank ter
 symbols ``S``, :func:`model.kernels.linear_response_symbols`), and the spin
 equation (the Jaumann term, :meth:`model.mechanics.LinearMechanics.corotational_hat`) solved by
 the same restarted GMRES as :func:`model.krylov.gmres_aux` (Saad Alg. 9.5, no preconditioner,
-warm start, Givens-rotated residual, modified Gram-Schmidt, Parseval inner product), here
+started from zero, Givens-rotated residual, modified Gram-Schmidt, Parseval inner product), here
 without leaving compiled code: the transforms run through :mod:`model.fftw_native`.
 
 Only built where :data:`model.fftw_native.AVAILABLE`.
@@ -133,8 +133,9 @@ def linear_split(q1, q2, A, q_hat, omega_hat, Lq, m1, m2, S, w,
                  pf, pi, mean_dev, B, Bp, C, gamma,
                  zeta, chi, s, tau, spin_tol, maxiter, V, LZ):  # pragma: no cover
     """``(N_q hat, Adot, omega_hat, spin iterations, converged, transforms)`` for the state
-    (see the module docstring); ``omega_hat`` is the warm start of the spin solve, ``V``,
-    ``LZ`` the work arrays of :func:`spin_gmres`."""
+    (see the module docstring); ``omega_hat`` is the start of the spin solve (zeros from the
+    solver: no operator application for its residual), ``V``, ``LZ`` the work arrays of
+    :func:`spin_gmres`."""
     n = q1.shape[0]
     shape = q_hat.shape[1:]
     nfft = 0

@@ -186,7 +186,7 @@ class ETDSolver(SolverBase):
         assert isinstance(mech, LinearMechanics)
         assert g.fft.plans is not None
         m1, m2 = mech._spin_symbols
-        x0 = np.zeros(g.k2.shape, dtype=complex)  # zero start (LinearMechanics.corotational_hat)
+        x0 = mech._zero_hat  # zero start (LinearMechanics.corotational_hat); copied, not written
         Nq, Adot, omega_hat, its, ok, nfft = fast_linear.linear_split(
             u[0], u[1], u[2], np.ascontiguousarray(q_hat), x0, self.Lq, m1, m2,
             self._symbols, self._weights, *g.fft.plans, p.eps * g.n**2, p.B, p.B_prime, p.C,

@@ -24,7 +24,7 @@ from numba import njit
 
 from . import fftw_native as fx
 from .kernels import apply_tangent_kernel, apply_tangent_spin_kernel, green_kernel
-from .krylov import arnoldi_column, axpy, scaled, solve_upper, weighted_inner
+from .krylov import arnoldi_column, axpy, axpy_sum, scaled, solve_upper, weighted_inner
 
 Array = np.ndarray
 
@@ -150,8 +150,7 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
             scaled(V[k + 1], wv, h_next)
         m = k + 1
         y = solve_upper(H, g, m)
-        for i in range(m):
-            axpy(x, y[i], Z[i])
+        axpy_sum(x, y, Z, m)
         if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
             return x, total, True, nop
 

@@ -13,7 +13,8 @@ and the spectra of q1, q2,
 
 with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (Eq. 4; A0 and the Frank term are in
 :math:`L_q`), the small-strain response of :func:`model.kernels.linear_response` (as its real
-symbols ``S``, :func:`model.kernels.linear_response_symbols`), and the spin
+Fourier symbols ``S``, :meth:`model.mechanics.LinearMechanics.response_symbols`, applied point
+by point), and the spin
 equation (the Jaumann term, :meth:`model.mechanics.LinearMechanics.corotational_hat`) solved by
 the same restarted GMRES as :func:`model.krylov.gmres_aux` (Saad Alg. 9.5, no preconditioner,
 started from zero, Givens-rotated residual, modified Gram-Schmidt, Parseval inner product), here
@@ -28,8 +29,8 @@ import numpy as np
 from numba import njit
 
 from . import fftw_native as fx
-from .kernels import activity_rate, bulk_terms, linear_response_symbols
-from .krylov import arnoldi_column, axpy, scaled, solve_upper, weighted_inner
+from .kernels import activity_rate, bulk_terms
+from .krylov import arnoldi_column, axpy_sum, scaled, solve_upper, weighted_inner
 
 Array = np.ndarray
 
@@ -114,9 +115,8 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
             scaled(V[k + 1], wv, h_next)
         m = k + 1
         y = solve_upper(H, g, m)
-        for i in range(m):
-            axpy(x, y[i], V[i])
-            axpy(Lx, y[i], LZ[i])
+        axpy_sum(x, y, V, m)  # one pass each, bitwise m axpys
+        axpy_sum(Lx, y, LZ, m)
         if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
             return x, Lx, total, True, nop
 
@@ -135,51 +135,72 @@ def linear_split(q1, q2, A, q_hat, omega_hat, Lq, m1, m2, S, w,
     """``(N_q hat, Adot, omega_hat, spin iterations, converged, transforms)`` for the state
     (see the module docstring); ``omega_hat`` is the start of the spin solve (zeros from the
     solver: no operator application for its residual), ``V``, ``LZ`` the work arrays of
-    :func:`spin_gmres`."""
+    :func:`spin_gmres`. The small-strain response ``S[r, c]`` (outputs r: dev e (2 comps),
+    tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat; the symbols of
+    :meth:`model.mechanics.LinearMechanics.response_symbols`) is applied point by point where
+    it is used, so that no response spectra are stored (the passes over memory, not the
+    arithmetic, are what this costs); with B' = 0 the Q:Q column and tr e are skipped."""
     n = q1.shape[0]
     shape = q_hat.shape[1:]
+    nx, ny = shape
     nfft = 0
+    tr_s_hat = np.empty(shape, dtype=np.complex128)
+    tr_e = np.zeros((n, n))
     if Bp != 0.0:
         qq = np.empty((n, n))
         for x in range(n):
             for y in range(n):
                 qq[x, y] = 2.0 * (q1[x, y] ** 2 + q2[x, y] ** 2)
-        QQ_hat = np.empty(shape, dtype=np.complex128)
-        fx.rfft2(pf, qq, QQ_hat)
+        iso = np.empty(shape, dtype=np.complex128)
+        fx.rfft2(pf, qq, iso)
         nfft += 1
-        iso = -Bp * QQ_hat
+        tr_e_hat = np.empty(shape, dtype=np.complex128)
+        for i in range(nx):
+            for j in range(ny):
+                a = q_hat[0, i, j]
+                b = q_hat[1, i, j]
+                c = -Bp * iso[i, j]
+                iso[i, j] = c
+                tr_e_hat[i, j] = S[2, 0, i, j] * a + S[2, 1, i, j] * b + S[2, 2, i, j] * c
+                tr_s_hat[i, j] = S[3, 0, i, j] * a + S[3, 1, i, j] * b + S[3, 2, i, j] * c
+        fx.irfft2_via(pi, tr_e_hat, tr_e, tr_e_hat)
+        nfft += 1
     else:
-        iso = np.zeros(shape, dtype=np.complex128)
-    resp = linear_response_symbols(q_hat[0], q_hat[1], iso, S, mean_dev)
-    dev = resp[:2]
-    tr_e_hat = resp[2]
-    tr_s_hat = resp[3]
+        iso = np.empty((1, 1), dtype=np.complex128)  # not read
+        for i in range(nx):
+            for j in range(ny):
+                tr_s_hat[i, j] = S[3, 0, i, j] * q_hat[0, i, j] + S[3, 1, i, j] * q_hat[1, i, j]
     tr_s = np.empty((n, n))
-    fx.irfft2(pi, tr_s_hat, tr_s)
+    fx.irfft2_via(pi, tr_s_hat, tr_s, tr_s_hat)
     nfft += 1
-    tr_e = np.zeros((n, n))
-    if Bp != 0.0:
-        fx.irfft2(pi, tr_e_hat, tr_e)
-        nfft += 1
     bulk = bulk_terms(q1, q2, A, tr_e, C, 2.0 * Bp)
     R = np.empty((2,) + shape, dtype=np.complex128)
     fx.rfft2(pf, bulk[0], R[0])
     fx.rfft2(pf, bulk[1], R[1])
     nfft += 2
     rhs = np.empty(shape, dtype=np.complex128)
-    for c in range(2):
-        for i in range(shape[0]):
-            for j in range(shape[1]):
-                R[c, i, j] = (R[c, i, j] + B * dev[c, i, j]) / gamma + Lq[i, j] * q_hat[c, i, j]
-    for i in range(shape[0]):
-        for j in range(shape[1]):
-            rhs[i, j] = m1[i, j] * R[0, i, j] + m2[i, j] * R[1, i, j]
+    for i in range(nx):
+        for j in range(ny):
+            a = q_hat[0, i, j]
+            b = q_hat[1, i, j]
+            d0 = S[0, 0, i, j] * a + S[0, 1, i, j] * b
+            d1 = S[1, 0, i, j] * a + S[1, 1, i, j] * b
+            if Bp != 0.0:
+                d0 += S[0, 2, i, j] * iso[i, j]
+                d1 += S[1, 2, i, j] * iso[i, j]
+            if i == 0 and j == 0:
+                d0 += mean_dev  # the applied mean strain
+            r0 = (R[0, i, j] + B * d0) / gamma + Lq[i, j] * a
+            r1 = (R[1, i, j] + B * d1) / gamma + Lq[i, j] * b
+            R[0, i, j] = r0
+            R[1, i, j] = r1
+            rhs[i, j] = m1[i, j] * r0 + m2[i, j] * r1
     omega_hat, j_hat, its, ok, nop = spin_gmres(rhs, omega_hat, q1, q2, m1, m2, w, pf, pi,
                                                 spin_tol, maxiter, V, LZ)
     nfft += 3 * nop
     for c in range(2):
-        for i in range(shape[0]):
-            for j in range(shape[1]):
+        for i in range(nx):
+            for j in range(ny):
                 R[c, i, j] += j_hat[c, i, j] - Lq[i, j] * q_hat[c, i, j]
     Adot = activity_rate(A, tr_s, zeta, chi, s, tau)
     return R, Adot, omega_hat, its, ok, nfft

@@ -63,18 +63,26 @@ class FFT:
         fftw_native.rfft2_many(self.plans[0], src, out)
         return out.reshape(lead + (n, n // 2 + 1))
 
-    def inverse(self, a: Array) -> Array:
-        """``irfft2`` over the last two axes (divides by N^2)."""
+    def inverse(self, a: Array, out: Array | None = None) -> Array:
+        """``irfft2`` over the last two axes (divides by N^2), into ``out`` if given (a
+        C-contiguous float array of the result's shape, e.g. a slice of a larger state)."""
         lead = a.shape[:-2]
         k = int(np.prod(lead, dtype=int))
         self.count += k
-        if self.plans is None:
-            return scipy.fft.irfftn(a, s=(self.n, self.n), axes=(-2, -1), workers=1)
         n = self.n
+        if self.plans is None:
+            res = scipy.fft.irfftn(a, s=(n, n), axes=(-2, -1), workers=1)
+            if out is None:
+                return res
+            out[...] = res
+            return out
         src = np.ascontiguousarray(a, dtype=np.complex128).reshape(k, n, n // 2 + 1)
-        out = np.empty((k, n, n), dtype=np.float64)
-        fftw_native.irfft2_many(self.plans[1], src, out)
-        return out.reshape(lead + (n, n))
+        if out is None:
+            out = np.empty(lead + (n, n), dtype=np.float64)
+        elif out.shape != lead + (n, n) or not out.flags.c_contiguous:
+            raise ValueError(f"out must be C-contiguous of shape {lead + (n, n)}")
+        fftw_native.irfft2_many(self.plans[1], src, out.reshape(k, n, n))
+        return out
 
 
 class SpectralGrid:
@@ -112,8 +120,8 @@ class SpectralGrid:
     def forward(self, a: Array) -> Array:
         return self.fft.forward(a)
 
-    def inverse(self, a: Array) -> Array:
-        return self.fft.inverse(a)
+    def inverse(self, a: Array, out: Array | None = None) -> Array:
+        return self.fft.inverse(a, out)
 
     # --- spectral calculus (inputs and outputs in Fourier space) ----------------------
     def grad_hat(self, a_hat: Array) -> Array:

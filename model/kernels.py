@@ -167,13 +167,16 @@ def activity_exponential(A, h, zeta, s, tau):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def activity_exponential4(A, h, zeta, s, tau):  # pragma: no cover - compiled
-    r"""For the ETDRK4 step: :math:`L_A = -(\zeta + 3 s A^2)/\tau` and, point by point,
-    ``out[0:4]`` = :math:`e^{z}, \varphi_{1,2,3}(z)` at :math:`z = h L_A`, ``out[4:7]`` =
-    :math:`e^{z/2}, \varphi_{1,2}(z/2)`; returns ``(L_A, out)``."""
+def activity_krogstad(A, h, zeta, s, tau):  # pragma: no cover - compiled
+    r"""For the ETDRK4 step of the activity: :math:`L_A = -(\zeta + 3 s A^2)/\tau` and,
+    point by point, Krogstad's weights (:meth:`model.solver.ETDRK4Solver._weights_from`) from
+    :math:`f_k = \varphi_k(z)`, :math:`g_k = \varphi_k(z/2)` at :math:`z = h L_A`:
+    ``W[0:2]`` = :math:`e^{z}, e^{z/2}`; ``W[2]`` = g1/2 (stage a); ``W[3:5]`` = g1/2 - g2, g2
+    (stage b); ``W[5:7]`` = f1 - 2 f2, 2 f2 (stage c); ``W[7:10]`` = f1 - 3 f2 + 4 f3,
+    2 f2 - 4 f3, 4 f3 - f2 (the update). Returns ``(L_A, W)``; one pass, no temporaries."""
     nx, ny = A.shape
     L = np.empty((nx, ny))
-    out = np.empty((7, nx, ny))
+    W = np.empty((10, nx, ny))
     for x in range(nx):
         for y in range(ny):
             a = A[x, y]
@@ -188,16 +191,19 @@ def activity_exponential4(A, h, zeta, s, tau):  # pragma: no cover - compiled
             else:
                 em1_half = np.expm1(0.5 * z)
                 e_half = 1.0 + em1_half
-            p1, p2, p3 = _phi123_from(z, em1_half * (e_half + 1.0))
-            out[0, x, y] = e_half * e_half
-            out[1, x, y] = p1
-            out[2, x, y] = p2
-            out[3, x, y] = p3
-            p1, p2, _ = _phi123_from(0.5 * z, em1_half)
-            out[4, x, y] = e_half
-            out[5, x, y] = p1
-            out[6, x, y] = p2
-    return L, out
+            f1, f2, f3 = _phi123_from(z, em1_half * (e_half + 1.0))
+            g1, g2, _ = _phi123_from(0.5 * z, em1_half)
+            W[0, x, y] = e_half * e_half
+            W[1, x, y] = e_half
+            W[2, x, y] = 0.5 * g1
+            W[3, x, y] = 0.5 * g1 - g2
+            W[4, x, y] = g2
+            W[5, x, y] = f1 - 2.0 * f2
+            W[6, x, y] = 2.0 * f2
+            W[7, x, y] = f1 - 3.0 * f2 + 4.0 * f3
+            W[8, x, y] = 2.0 * f2 - 4.0 * f3
+            W[9, x, y] = 4.0 * f3 - f2
+    return L, W
 
 
 @njit(cache=True)
@@ -313,25 +319,6 @@ def linear_response(q1h, q2h, isoh, kx, ky, khx, khy, inv_k2, amb, a, kappa,
                 tr_s[i, j] = 2.0 * kappa * (e11 + e22) + 2.0 * iso
     dev[0, 0, 0] += mean_dev
     return dev, tr_e, tr_s
-
-
-@njit(cache=True)
-def linear_response_symbols(q1h, q2h, isoh, S, mean_dev):  # pragma: no cover - compiled
-    r""":func:`linear_response` as a real 4 x 3 matrix of Fourier symbols ``S`` (outputs
-    dev e (2), tr e, tr sigma; inputs q1 hat, q2 hat, iso hat; made by
-    :meth:`model.mechanics.LinearMechanics.response_symbols`): the small-strain response is
-    linear and every factor i of a derivative meets another one, so the symbols are real."""
-    nx, ny = q1h.shape
-    out = np.empty((4, nx, ny), dtype=np.complex128)
-    for i in range(nx):
-        for j in range(ny):
-            a = q1h[i, j]
-            b = q2h[i, j]
-            c = isoh[i, j]
-            for r in range(4):
-                out[r, i, j] = S[r, 0, i, j] * a + S[r, 1, i, j] * b + S[r, 2, i, j] * c
-    out[0, 0, 0] += mean_dev
-    return out
 
 
 # --- finite-strain stress and spectral operators (references: model.constitutive,

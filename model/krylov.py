@@ -166,25 +166,18 @@ def solve_upper(H, g, m):  # pragma: no cover - compiled
     return y
 
 
-@njit(cache=True)
-def _wdot(wf, af, bf, o, nw):  # pragma: no cover - compiled
-    """The weighted real inner product of one block (offset ``o``, length ``nw``) of the
-    flat complex arrays ``af``, ``bf``: four interleaved partial sums, so that the additions
-    pipeline (deterministic; not the order of ``numpy.sum``)."""
-    n4 = nw - nw % 4
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    for i in range(0, n4, 4):
-        j = o + i
-        s0 += wf[i] * (af[j].real * bf[j].real + af[j].imag * bf[j].imag)
-        s1 += wf[i + 1] * (af[j + 1].real * bf[j + 1].real + af[j + 1].imag * bf[j + 1].imag)
-        s2 += wf[i + 2] * (af[j + 2].real * bf[j + 2].real + af[j + 2].imag * bf[j + 2].imag)
-        s3 += wf[i + 3] * (af[j + 3].real * bf[j + 3].real + af[j + 3].imag * bf[j + 3].imag)
-    for i in range(n4, nw):
-        s0 += wf[i] * (af[o + i].real * bf[o + i].real + af[o + i].imag * bf[o + i].imag)
-    return (s0 + s1) + (s2 + s3)
+@njit(cache=True, fastmath={"reassoc"})
+def _wdot(wf, af, bf):  # pragma: no cover - compiled
+    """The weighted real inner product of the flat complex arrays ``af``, ``bf`` (one
+    block, of the length of ``wf``). Compiled with reassociation allowed (and nothing
+    else: no contraction into FMAs), so that LLVM vectorises the sum: its order is then
+    that of the compiled loop (SIMD lanes, then a fixed tree), fixed for a given machine and
+    independent of the arrays' alignment (tested), not the order of ``numpy.sum``; 3x faster
+    than the scalar sum at 128^2 (session 8, measured)."""
+    s = 0.0
+    for i in range(wf.size):
+        s += wf[i] * (af[i].real * bf[i].real + af[i].imag * bf[i].imag)
+    return s
 
 
 @njit(cache=True)
@@ -199,40 +192,55 @@ def weighted_inner(a, b, w):  # pragma: no cover - compiled
     nw = wf.size
     s = 0.0
     for block in range(af.size // nw):
-        s += _wdot(wf, af, bf, block * nw, nw)
+        lo, hi = block * nw, (block + 1) * nw
+        s += _wdot(wf, af[lo:hi], bf[lo:hi])
+    return s
+
+
+@njit(cache=True, fastmath={"reassoc"})
+def _axpy_wdot(wf, yf, alpha, xf, af):  # pragma: no cover - compiled
+    """``y += alpha x`` for one block of the flat arrays (of the length of ``wf``), fused
+    with :func:`_wdot` of ``a`` and the updated ``y``. The update is exact as written (no FMA
+    contraction); only the sum is reassociated. ``a`` may be ``y`` (LLVM's run-time overlap
+    check then takes a scalar loop: correct, slower; :func:`_axpy_norm2` is that case)."""
+    s = 0.0
+    for i in range(wf.size):
+        yf[i] += alpha * xf[i]
+        s += wf[i] * (af[i].real * yf[i].real + af[i].imag * yf[i].imag)
+    return s
+
+
+@njit(cache=True, fastmath={"reassoc"})
+def _axpy_norm2(wf, yf, alpha, xf):  # pragma: no cover - compiled
+    """``y += alpha x`` for one block, fused with the weighted squared norm of the updated
+    ``y`` (:func:`_axpy_wdot` with ``a = y``, without the overlap that keeps it scalar)."""
+    s = 0.0
+    for i in range(wf.size):
+        v = yf[i] + alpha * xf[i]
+        yf[i] = v
+        s += wf[i] * (v.real * v.real + v.imag * v.imag)
     return s
 
 
 @njit(cache=True)
-def _axpy_wdot(wf, yf, alpha, xf, af, o, nw):  # pragma: no cover - compiled
-    """``y += alpha x`` over one block of the flat arrays, fused with :func:`_wdot` of ``a``
-    and the updated ``y`` (the same summation order; ``a`` may be ``y`` itself)."""
-    n4 = nw - nw % 4
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    for i in range(0, n4, 4):
-        j = o + i
-        yf[j] += alpha * xf[j]
-        yf[j + 1] += alpha * xf[j + 1]
-        yf[j + 2] += alpha * xf[j + 2]
-        yf[j + 3] += alpha * xf[j + 3]
-        s0 += wf[i] * (af[j].real * yf[j].real + af[j].imag * yf[j].imag)
-        s1 += wf[i + 1] * (af[j + 1].real * yf[j + 1].real + af[j + 1].imag * yf[j + 1].imag)
-        s2 += wf[i + 2] * (af[j + 2].real * yf[j + 2].real + af[j + 2].imag * yf[j + 2].imag)
-        s3 += wf[i + 3] * (af[j + 3].real * yf[j + 3].real + af[j + 3].imag * yf[j + 3].imag)
-    for i in range(n4, nw):
-        j = o + i
-        yf[j] += alpha * xf[j]
-        s0 += wf[i] * (af[j].real * yf[j].real + af[j].imag * yf[j].imag)
-    return (s0 + s1) + (s2 + s3)
+def axpy_norm2(y, alpha, x, w):  # pragma: no cover - compiled
+    """``y += alpha * x``, then return :func:`weighted_inner` ``(y, y, w)``, in one pass."""
+    yf = y.reshape(-1)
+    xf = x.reshape(-1)
+    wf = w.reshape(-1)
+    nw = wf.size
+    s = 0.0
+    for block in range(yf.size // nw):
+        lo, hi = block * nw, (block + 1) * nw
+        s += _axpy_norm2(wf, yf[lo:hi], alpha, xf[lo:hi])
+    return s
 
 
 @njit(cache=True)
 def axpy_inner(y, alpha, x, a, w):  # pragma: no cover - compiled
     """``y += alpha * x``, then return :func:`weighted_inner` ``(a, y, w)``, in one pass over
-    memory (bitwise the same as the two calls; ``a`` may be ``y``)."""
+    memory (the same as the two calls to roundoff: the vectorised sums may group
+    differently; ``a`` may be ``y``, but :func:`axpy_norm2` is faster for that)."""
     yf = y.reshape(-1)
     xf = x.reshape(-1)
     af = a.reshape(-1)
@@ -240,7 +248,8 @@ def axpy_inner(y, alpha, x, a, w):  # pragma: no cover - compiled
     nw = wf.size
     s = 0.0
     for block in range(yf.size // nw):
-        s += _axpy_wdot(wf, yf, alpha, xf, af, block * nw, nw)
+        lo, hi = block * nw, (block + 1) * nw
+        s += _axpy_wdot(wf, yf[lo:hi], alpha, xf[lo:hi], af[lo:hi])
     return s
 
 
@@ -253,7 +262,7 @@ def mgs_column(V, wv, H, k, w):  # pragma: no cover - compiled
     H[0, k] = weighted_inner(V[0], wv, w)
     for i in range(1, k + 1):
         H[i, k] = axpy_inner(wv, -H[i - 1, k], V[i - 1], V[i], w)
-    return np.sqrt(max(axpy_inner(wv, -H[k, k], V[k], wv, w), 0.0))
+    return np.sqrt(max(axpy_norm2(wv, -H[k, k], V[k], w), 0.0))
 
 
 @njit(cache=True)
@@ -274,6 +283,21 @@ def axpy(y, alpha, x):  # pragma: no cover - compiled
     xf = x.reshape(-1)
     for i in range(yf.size):
         yf[i] += alpha * xf[i]
+
+
+@njit(cache=True)
+def axpy_sum(x, y, B, m):  # pragma: no cover - compiled
+    """``x += y[0] B[0] + ... + y[m-1] B[m-1]`` in one pass over ``x`` (the GMRES solution
+    update from a basis ``B``); the terms are added to each element in that order, so it is
+    bitwise the same as m calls of :func:`axpy`, with one read and write of ``x``."""
+    xf = x.reshape(-1)
+    size = xf.size
+    Bf = B.reshape((B.shape[0], size))
+    for p in range(size):
+        acc = xf[p]
+        for i in range(m):
+            acc += y[i] * Bf[i, p]
+        xf[p] = acc
 
 
 @njit(cache=True)

@@ -203,7 +203,8 @@ class LinearMechanics(_Mechanics):
     def response_symbols(self) -> Array:
         """The real symbols ``S[r, c]`` of :meth:`spectral_response` (outputs r: dev e (2
         components), tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat), for
-        :func:`model.kernels.linear_response_symbols`: the responses to unit spectra."""
+        :func:`model.fast_linear.linear_split`: the responses to unit spectra; the response is
+        linear and every factor i of a derivative meets another one, so they are real."""
         g, m = self.grid, self.moduli
         one, zero = np.ones(g.k2.shape, dtype=complex), self._zero_hat
         cols = []

@@ -368,9 +368,10 @@ class ETDRK4Solver(ETDSolver):
         q_hat = self._spectrum(u[:2])
         A = u[2]
         E, E2, wq = self._krogstad_weights(h)
-        LA, PA = kern.activity_exponential4(A, h, p.zeta, p.s, p.tau)
-        EA, F1, F2, F3, EA2, G1, G2 = PA
-        wA = self._weights_from(F1, F2, F3, G1, G2)
+        LA, W = kern.activity_krogstad(A, h, p.zeta, p.s, p.tau)  # pointwise L_A: no cache
+        EA, EA2 = W[0], W[1]
+        wA = {"a": (W[2],), "b": (W[3], W[4]), "c": (W[5], W[6]),
+              "new": (W[7], W[8], W[8], W[9])}
         comb = kern.etd_combination
 
         def combo_q(Eq: Array, x: Array, w: tuple[Array, ...], N: tuple[Array, ...]) -> Array:
@@ -381,7 +382,10 @@ class ETDRK4Solver(ETDSolver):
 
         def rhs(q_s: Array, A_s: Array, t_s: float) -> tuple[Array, Array]:
             """Stage (q spectra, A) -> (N_q hat, N_A) with N_A = Adot - L_A A."""
-            Nq, Adot = self.split(np.concatenate([g.inverse(q_s), A_s[None]]), q_s, t_s)
+            stage = np.empty((3,) + A_s.shape)
+            g.inverse(q_s, out=stage[:2])
+            stage[2] = A_s
+            Nq, Adot = self.split(stage, q_s, t_s)
             return Nq, Adot - LA * A_s
 
         Nq_u, Adot_u = self.split(u, q_hat, t)

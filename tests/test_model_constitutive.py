@@ -206,15 +206,19 @@ def test_phi_functions_match_their_integral_definition():
         np.testing.assert_allclose(kern._phi0123(zi), exact, rtol=1e-11)
 
 
-def test_etdrk4_activity_exponentials_match_numpy(rng):
+def test_etdrk4_activity_weights_match_numpy(rng):
     from model import kernels as kern
-    from model.solver import phi_functions
+    from model.solver import ETDRK4Solver, phi_functions
 
     A = 0.5 * rng.standard_normal((8, 8))
     A[0, 0] = 0.0
+    A[0, 1] = 0.04  # |z| < 1: the Taylor branch, for both h and h/2
     zeta, s, tau, h = 1.0, 10.0, 1.0, 0.7
-    L, out = kern.activity_exponential4(A, h, zeta, s, tau)
+    L, W = kern.activity_krogstad(A, h, zeta, s, tau)
     L_ref = -(zeta + 3 * s * A**2) / tau
     np.testing.assert_allclose(L, L_ref, rtol=1e-15)
-    ref = list(phi_functions(L_ref * h, 3)) + list(phi_functions(L_ref * h / 2, 2))
-    np.testing.assert_allclose(out, np.stack(ref), rtol=1e-13)
+    E, f1, f2, f3 = phi_functions(L_ref * h, 3)
+    E2, g1, g2 = phi_functions(L_ref * h / 2, 2)
+    w = ETDRK4Solver._weights_from(f1, f2, f3, g1, g2)
+    ref = [E, E2, *w["a"], *w["b"], *w["c"], w["new"][0], w["new"][1], w["new"][3]]
+    np.testing.assert_allclose(W, np.stack(ref), rtol=1e-12, atol=1e-15)

@@ -1,7 +1,7 @@
 """The compiled Krylov pieces shared by the fast solvers (model.krylov): the weighted inner
 product against its numpy definition, the fused update + inner product and the fused
-Gram-Schmidt step against their plain, unfused sequence (bitwise), and the Arnoldi
-orthogonality they produce."""
+Gram-Schmidt step against their plain, unfused sequence (bitwise), the vectorised sums'
+independence of alignment, and the Arnoldi orthogonality they produce."""
 
 from __future__ import annotations
 
@@ -36,11 +36,37 @@ def test_axpy_inner_is_bitwise_the_two_steps(shape, rng):
     got = krylov.axpy_inner(y, -0.37, x, a, w)
     assert np.array_equal(y, y_plain)
     assert got == expected
-    # with a = y itself: the squared norm of the updated vector
-    y2 = _spectra(rng, shape)
-    y2_plain = y2.copy()
-    krylov.axpy(y2_plain, 0.5, x)
-    assert krylov.axpy_inner(y2, 0.5, x, y2, w) == krylov.weighted_inner(y2_plain, y2_plain, w)
+    # the squared norm of the updated vector: axpy_norm2, or axpy_inner with a = y itself
+    # (which LLVM runs as a scalar loop, whose sum may group differently: roundoff only)
+    norm2 = krylov.weighted_inner(y_plain, y_plain, w)
+    y2 = y_plain.copy()
+    krylov.axpy(y2, 0.5, x)
+    expected2 = krylov.weighted_inner(y2, y2, w)
+    y3 = y_plain.copy()
+    assert krylov.axpy_norm2(y3, 0.5, x, w) == expected2
+    assert np.array_equal(y3, y2)
+    y4 = y_plain.copy()
+    assert krylov.axpy_inner(y4, 0.5, x, y4, w) == pytest.approx(expected2, rel=1e-13)
+    assert np.array_equal(y4, y2)
+    assert norm2 > 0
+
+
+def test_the_vectorised_sums_do_not_depend_on_alignment(rng):
+    """The reassociated (SIMD) sums must give the same bits wherever the arrays start:
+    otherwise two runs of one simulation could differ with the allocator's addresses."""
+    shape = (2, 64, 33)
+    w = rng.random(shape[-2:])
+    a, b = _spectra(rng, shape), _spectra(rng, shape)
+    ref = krylov.weighted_inner(a, b, w)
+    ref_norm = krylov.axpy_norm2(a.copy(), 0.3, b, w)
+    n = a.size
+    for offset in range(8):  # complex128 views starting 0, 16, ..., 112 bytes into a buffer
+        buf = np.empty(2 * n + 16, dtype=complex)
+        a2 = buf[offset:offset + n].reshape(shape)
+        b2 = buf[n + 8 + offset:n + 8 + offset + n].reshape(shape)
+        a2[...], b2[...] = a, b
+        assert krylov.weighted_inner(a2, b2, w) == ref
+        assert krylov.axpy_norm2(a2, 0.3, b2, w) == ref_norm
 
 
 @pytest.mark.parametrize("shape", [(16, 9), (2, 30, 16)])
@@ -133,3 +159,16 @@ def test_compiled_spin_gmres_from_zero_meets_its_tolerance(rng):
     assert np.sqrt(krylov.weighted_inner(r, r, w)) <= 1.01e-6 * np.sqrt(
         krylov.weighted_inner(b, b, w))
     np.testing.assert_allclose(j, jx, atol=1e-10 * np.abs(jx).max())  # accumulated = direct
+
+
+def test_axpy_sum_is_bitwise_the_axpys(rng):
+    shape = (2, 30, 16)
+    B = _spectra(rng, (5,) + shape)
+    y = rng.standard_normal(5)
+    x0 = _spectra(rng, shape)
+    plain = x0.copy()
+    for i in range(4):
+        krylov.axpy(plain, y[i], B[i])
+    fused = x0.copy()
+    krylov.axpy_sum(fused, y, B, 4)  # the first m = 4 of the 5 basis vectors
+    assert np.array_equal(fused, plain)

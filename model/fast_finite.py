@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from . import fftw_native as fx
-from .kernels import apply_tangent_kernel, apply_tangent_spin_kernel, green_kernel
+from .kernels import apply_tangent_kernel, apply_tangent_spin_kernel, green_kernel, imul
 from .krylov import arnoldi_column, axpy, axpy_sum, scaled, solve_upper, weighted_inner
 
 Array = np.ndarray
@@ -39,18 +39,18 @@ def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, out):  # pragma: no co
             for x in range(nx):
                 for y in range(ny):
                     k = kx[x, y] if j == 0 else ky[x, y]
-                    work_hat[x, y] = 1j * k * v[i, x, y]
+                    work_hat[x, y] = imul(k, v[i, x, y])
             fx.irfft2_via(pi, work_hat, G[i, j], work_hat)  # work_hat is rebuilt each time
     P = apply_tangent_spin_kernel(K, G, E) if spin else apply_tangent_kernel(K, G)
     for i in range(2):
         fx.rfft2(pf, P[i, 0], work_hat)
         for x in range(nx):
             for y in range(ny):
-                out[i, x, y] = -1j * kx[x, y] * work_hat[x, y]
+                out[i, x, y] = imul(-kx[x, y], work_hat[x, y])
         fx.rfft2(pf, P[i, 1], work_hat)
         for x in range(nx):
             for y in range(ny):
-                out[i, x, y] -= 1j * ky[x, y] * work_hat[x, y]
+                out[i, x, y] -= imul(ky[x, y], work_hat[x, y])
 
 
 @njit(cache=True)

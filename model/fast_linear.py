@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from . import fftw_native as fx
-from .kernels import activity_rate, bulk_terms
+from .kernels import activity_rate, bulk_terms, rmul
 from .krylov import arnoldi_column, axpy_sum, scaled, solve_upper, weighted_inner
 
 Array = np.ndarray
@@ -42,17 +42,19 @@ def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, out, jout
     :math:`\\hat\\omega = x` (3 transforms); ``omega``, ``prod`` are real work arrays,
     ``scratch`` a half spectrum for the inverse transform."""
     n = q1.shape[0]
-    fx.irfft2_via(pi, x, omega, scratch)
+    if not fx.unscaled_irfft2_via(pi, x, omega, scratch):
+        raise ValueError("the spin work array is not aligned for FFTW")
+    two_scale = 2.0 / (n * n)  # the inverse transform's 1/N^2 (a power of two: exact)
     for a in range(n):
         for b in range(n):
-            w = 2.0 * omega[a, b]
+            w = two_scale * omega[a, b]
             prod[0, a, b] = -w * q2[a, b]
             prod[1, a, b] = w * q1[a, b]
     fx.rfft2(pf, prod[0], jout[0])
     fx.rfft2(pf, prod[1], jout[1])
     for i in range(x.shape[0]):
         for j in range(x.shape[1]):
-            out[i, j] = x[i, j] - (m1[i, j] * jout[0, i, j] + m2[i, j] * jout[1, i, j])
+            out[i, j] = x[i, j] - (rmul(m1[i, j], jout[0, i, j]) + rmul(m2[i, j], jout[1, i, j]))
 
 
 @njit(cache=True)
@@ -169,7 +171,8 @@ def linear_split(q1, q2, A, q_hat, omega_hat, Lq, m1, m2, S, w,
         iso = np.empty((1, 1), dtype=np.complex128)  # not read
         for i in range(nx):
             for j in range(ny):
-                tr_s_hat[i, j] = S[3, 0, i, j] * q_hat[0, i, j] + S[3, 1, i, j] * q_hat[1, i, j]
+                tr_s_hat[i, j] = (rmul(S[3, 0, i, j], q_hat[0, i, j])
+                                  + rmul(S[3, 1, i, j], q_hat[1, i, j]))
     tr_s = np.empty((n, n))
     fx.irfft2_via(pi, tr_s_hat, tr_s, tr_s_hat)
     nfft += 1
@@ -183,24 +186,26 @@ def linear_split(q1, q2, A, q_hat, omega_hat, Lq, m1, m2, S, w,
         for j in range(ny):
             a = q_hat[0, i, j]
             b = q_hat[1, i, j]
-            d0 = S[0, 0, i, j] * a + S[0, 1, i, j] * b
-            d1 = S[1, 0, i, j] * a + S[1, 1, i, j] * b
+            d0 = rmul(S[0, 0, i, j], a) + rmul(S[0, 1, i, j], b)
+            d1 = rmul(S[1, 0, i, j], a) + rmul(S[1, 1, i, j], b)
             if Bp != 0.0:
-                d0 += S[0, 2, i, j] * iso[i, j]
-                d1 += S[1, 2, i, j] * iso[i, j]
+                d0 += rmul(S[0, 2, i, j], iso[i, j])
+                d1 += rmul(S[1, 2, i, j], iso[i, j])
             if i == 0 and j == 0:
                 d0 += mean_dev  # the applied mean strain
-            r0 = (R[0, i, j] + B * d0) / gamma + Lq[i, j] * a
-            r1 = (R[1, i, j] + B * d1) / gamma + Lq[i, j] * b
+            h0 = R[0, i, j] + rmul(B, d0)  # H / gamma, divided component by component
+            h1 = R[1, i, j] + rmul(B, d1)  # (numba would divide by gamma as complex)
+            r0 = complex(h0.real / gamma, h0.imag / gamma) + rmul(Lq[i, j], a)
+            r1 = complex(h1.real / gamma, h1.imag / gamma) + rmul(Lq[i, j], b)
             R[0, i, j] = r0
             R[1, i, j] = r1
-            rhs[i, j] = m1[i, j] * r0 + m2[i, j] * r1
+            rhs[i, j] = rmul(m1[i, j], r0) + rmul(m2[i, j], r1)
     omega_hat, j_hat, its, ok, nop = spin_gmres(rhs, omega_hat, q1, q2, m1, m2, w, pf, pi,
                                                 spin_tol, maxiter, V, LZ)
     nfft += 3 * nop
     for c in range(2):
         for i in range(nx):
             for j in range(ny):
-                R[c, i, j] += j_hat[c, i, j] - Lq[i, j] * q_hat[c, i, j]
+                R[c, i, j] += j_hat[c, i, j] - rmul(Lq[i, j], q_hat[c, i, j])
     Adot = activity_rate(A, tr_s, zeta, chi, s, tau)
     return R, Adot, omega_hat, its, ok, nfft

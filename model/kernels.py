@@ -7,7 +7,33 @@ agree (``tests/test_model_constitutive.py``).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
+
+
+def rmul(c, z):
+    """``c * z`` for a real ``c``; compiled, a complex ``z`` is scaled component by component
+    (numba would promote ``c`` to complex and multiply as complex numbers: twice the work, and
+    in the hot loops below that work, not memory, was the limit; the values are the same)."""
+    return c * z
+
+
+@overload(rmul)
+def _rmul_compiled(c, z):  # pragma: no cover - compiled
+    if isinstance(z, types.Complex):
+        return lambda c, z: complex(c * z.real, c * z.imag)
+    return lambda c, z: c * z
+
+
+def imul(c, z):
+    """``1j * c * z`` for a real ``c`` and a complex ``z``, compiled as
+    ``complex(-c z.imag, c z.real)`` (see :func:`rmul`)."""
+    return 1j * c * z
+
+
+@overload(imul)
+def _imul_compiled(c, z):  # pragma: no cover - compiled
+    return lambda c, z: complex(-c * z.imag, c * z.real)
 
 
 @njit(cache=True)
@@ -218,10 +244,10 @@ def etd_combination(E, x, h, coef, terms):  # pragma: no cover - compiled
     for c in range(nc):
         for i in range(nx):
             for j in range(ny):
-                acc = terms[0][c, i, j] * coef[0][i, j]
+                acc = rmul(coef[0][i, j], terms[0][c, i, j])
                 for k in range(1, m):
-                    acc += terms[k][c, i, j] * coef[k][i, j]
-                out[c, i, j] = E[i, j] * x[c, i, j] + h * acc
+                    acc += rmul(coef[k][i, j], terms[k][c, i, j])
+                out[c, i, j] = rmul(E[i, j], x[c, i, j]) + rmul(h, acc)
     return out
 
 
@@ -397,9 +423,9 @@ def grad_hat_kernel(v, kx, ky):  # pragma: no cover - compiled
     for i in range(2):
         for x in range(nx):
             for y in range(ny):
-                z = 1j * v[i, x, y]
-                out[i, 0, x, y] = kx[x, y] * z
-                out[i, 1, x, y] = ky[x, y] * z
+                z = v[i, x, y]
+                out[i, 0, x, y] = imul(kx[x, y], z)
+                out[i, 1, x, y] = imul(ky[x, y], z)
     return out
 
 
@@ -412,7 +438,8 @@ def neg_div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
     for i in range(2):
         for x in range(nx):
             for y in range(ny):
-                out[i, x, y] = -1j * (kx[x, y] * T[i, 0, x, y] + ky[x, y] * T[i, 1, x, y])
+                out[i, x, y] = imul(-1.0, rmul(kx[x, y], T[i, 0, x, y])
+                                    + rmul(ky[x, y], T[i, 1, x, y]))
     return out
 
 
@@ -426,9 +453,9 @@ def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
         for y in range(ny):
             h1 = khx[x, y]
             h2 = khy[x, y]
-            kb = a * (h1 * b[0, x, y] + h2 * b[1, x, y])
-            out[0, x, y] = (b[0, x, y] - h1 * kb) * inv_k2[x, y]
-            out[1, x, y] = (b[1, x, y] - h2 * kb) * inv_k2[x, y]
+            kb = rmul(a, rmul(h1, b[0, x, y]) + rmul(h2, b[1, x, y]))
+            out[0, x, y] = rmul(inv_k2[x, y], b[0, x, y] - rmul(h1, kb))
+            out[1, x, y] = rmul(inv_k2[x, y], b[1, x, y] - rmul(h2, kb))
     return out
 
 

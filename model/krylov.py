@@ -13,6 +13,8 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
+from .kernels import rmul
+
 Array = np.ndarray
 Op = Callable[[Array], Array]
 Inner = Callable[[Array, Array], float]
@@ -205,7 +207,7 @@ def _axpy_wdot(wf, yf, alpha, xf, af):  # pragma: no cover - compiled
     check then takes a scalar loop: correct, slower; :func:`_axpy_norm2` is that case)."""
     s = 0.0
     for i in range(wf.size):
-        yf[i] += alpha * xf[i]
+        yf[i] += rmul(alpha, xf[i])
         s += wf[i] * (af[i].real * yf[i].real + af[i].imag * yf[i].imag)
     return s
 
@@ -216,7 +218,7 @@ def _axpy_norm2(wf, yf, alpha, xf):  # pragma: no cover - compiled
     ``y`` (:func:`_axpy_wdot` with ``a = y``, without the overlap that keeps it scalar)."""
     s = 0.0
     for i in range(wf.size):
-        v = yf[i] + alpha * xf[i]
+        v = yf[i] + rmul(alpha, xf[i])
         yf[i] = v
         s += wf[i] * (v.real * v.real + v.imag * v.imag)
     return s
@@ -282,22 +284,26 @@ def axpy(y, alpha, x):  # pragma: no cover - compiled
     yf = y.reshape(-1)
     xf = x.reshape(-1)
     for i in range(yf.size):
-        yf[i] += alpha * xf[i]
+        yf[i] += rmul(alpha, xf[i])
 
 
 @njit(cache=True)
 def axpy_sum(x, y, B, m):  # pragma: no cover - compiled
     """``x += y[0] B[0] + ... + y[m-1] B[m-1]`` in one pass over ``x`` (the GMRES solution
     update from a basis ``B``); the terms are added to each element in that order, so it is
-    bitwise the same as m calls of :func:`axpy`, with one read and write of ``x``."""
+    bitwise the same as m calls of :func:`axpy`, with one read and write of ``x`` from memory
+    (block by block: each block of x stays in cache while the m terms are added)."""
     xf = x.reshape(-1)
     size = xf.size
     Bf = B.reshape((B.shape[0], size))
-    for p in range(size):
-        acc = xf[p]
+    block = 512  # x's block stays in L1 while the m terms are added to it
+    for lo in range(0, size, block):
+        hi = min(lo + block, size)
         for i in range(m):
-            acc += y[i] * Bf[i, p]
-        xf[p] = acc
+            c = y[i]
+            for p in range(lo, hi):  # componentwise: the same values as c * (complex)
+                b = Bf[i, p]
+                xf[p] = complex(xf[p].real + c * b.real, xf[p].imag + c * b.imag)
 
 
 @njit(cache=True)
@@ -305,5 +311,5 @@ def scaled(dst, x, alpha):  # pragma: no cover - compiled
     """``dst[...] = x / alpha`` in place (C-contiguous arrays of one shape)."""
     df = dst.reshape(-1)
     xf = x.reshape(-1)
-    for i in range(df.size):
-        df[i] = xf[i] / alpha
+    for i in range(df.size):  # component by component (numba would divide as complex)
+        df[i] = complex(xf[i].real / alpha, xf[i].imag / alpha)

@@ -161,10 +161,12 @@ def linear_split(q1, q2, A, q_hat, omega_hat, Lq, m1, m2, S, w,
             for j in range(ny):
                 a = q_hat[0, i, j]
                 b = q_hat[1, i, j]
-                c = -Bp * iso[i, j]
+                c = rmul(-Bp, iso[i, j])
                 iso[i, j] = c
-                tr_e_hat[i, j] = S[2, 0, i, j] * a + S[2, 1, i, j] * b + S[2, 2, i, j] * c
-                tr_s_hat[i, j] = S[3, 0, i, j] * a + S[3, 1, i, j] * b + S[3, 2, i, j] * c
+                tr_e_hat[i, j] = (rmul(S[2, 0, i, j], a) + rmul(S[2, 1, i, j], b)
+                                  + rmul(S[2, 2, i, j], c))
+                tr_s_hat[i, j] = (rmul(S[3, 0, i, j], a) + rmul(S[3, 1, i, j], b)
+                                  + rmul(S[3, 2, i, j], c))
         fx.irfft2_via(pi, tr_e_hat, tr_e, tr_e_hat)
         nfft += 1
     else:

@@ -203,8 +203,8 @@ def weighted_inner(a, b, w):  # pragma: no cover - compiled
 def _axpy_wdot(wf, yf, alpha, xf, af):  # pragma: no cover - compiled
     """``y += alpha x`` for one block of the flat arrays (of the length of ``wf``), fused
     with :func:`_wdot` of ``a`` and the updated ``y``. The update is exact as written (no FMA
-    contraction); only the sum is reassociated. ``a`` may be ``y`` (LLVM's run-time overlap
-    check then takes a scalar loop: correct, slower; :func:`_axpy_norm2` is that case)."""
+    contraction); only the sum is reassociated. ``a`` must not overlap ``y`` (LLVM's run-time
+    overlap check would take a scalar loop); :func:`_axpy_norm2` is the case ``a = y``."""
     s = 0.0
     for i in range(wf.size):
         yf[i] += rmul(alpha, xf[i])
@@ -225,33 +225,24 @@ def _axpy_norm2(wf, yf, alpha, xf):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def axpy_norm2(y, alpha, x, w):  # pragma: no cover - compiled
-    """``y += alpha * x``, then return :func:`weighted_inner` ``(y, y, w)``, in one pass."""
-    yf = y.reshape(-1)
-    xf = x.reshape(-1)
-    wf = w.reshape(-1)
-    nw = wf.size
-    s = 0.0
-    for block in range(yf.size // nw):
-        lo, hi = block * nw, (block + 1) * nw
-        s += _axpy_norm2(wf, yf[lo:hi], alpha, xf[lo:hi])
-    return s
-
-
-@njit(cache=True)
 def axpy_inner(y, alpha, x, a, w):  # pragma: no cover - compiled
     """``y += alpha * x``, then return :func:`weighted_inner` ``(a, y, w)``, in one pass over
     memory (the same as the two calls to roundoff: the vectorised sums may group
-    differently; ``a`` may be ``y``, but :func:`axpy_norm2` is faster for that)."""
+    differently). ``a`` is either ``y`` itself (then it is the squared norm of the updated
+    ``y``, by :func:`_axpy_norm2`) or does not overlap it."""
     yf = y.reshape(-1)
     xf = x.reshape(-1)
     af = a.reshape(-1)
     wf = w.reshape(-1)
     nw = wf.size
+    norm = a.ctypes.data == y.ctypes.data  # a is y (else a must not overlap y)
     s = 0.0
     for block in range(yf.size // nw):
         lo, hi = block * nw, (block + 1) * nw
-        s += _axpy_wdot(wf, yf[lo:hi], alpha, xf[lo:hi], af[lo:hi])
+        if norm:
+            s += _axpy_norm2(wf, yf[lo:hi], alpha, xf[lo:hi])
+        else:
+            s += _axpy_wdot(wf, yf[lo:hi], alpha, xf[lo:hi], af[lo:hi])
     return s
 
 
@@ -264,7 +255,7 @@ def mgs_column(V, wv, H, k, w):  # pragma: no cover - compiled
     H[0, k] = weighted_inner(V[0], wv, w)
     for i in range(1, k + 1):
         H[i, k] = axpy_inner(wv, -H[i - 1, k], V[i - 1], V[i], w)
-    return np.sqrt(max(axpy_norm2(wv, -H[k, k], V[k], w), 0.0))
+    return np.sqrt(max(axpy_inner(wv, -H[k, k], V[k], wv, w), 0.0))
 
 
 @njit(cache=True)

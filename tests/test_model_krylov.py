@@ -36,19 +36,14 @@ def test_axpy_inner_is_bitwise_the_two_steps(shape, rng):
     got = krylov.axpy_inner(y, -0.37, x, a, w)
     assert np.array_equal(y, y_plain)
     assert got == expected
-    # the squared norm of the updated vector: axpy_norm2, or axpy_inner with a = y itself
-    # (which LLVM runs as a scalar loop, whose sum may group differently: roundoff only)
-    norm2 = krylov.weighted_inner(y_plain, y_plain, w)
+    # with a = y itself: the squared norm of the updated vector
     y2 = y_plain.copy()
     krylov.axpy(y2, 0.5, x)
     expected2 = krylov.weighted_inner(y2, y2, w)
     y3 = y_plain.copy()
-    assert krylov.axpy_norm2(y3, 0.5, x, w) == expected2
+    assert krylov.axpy_inner(y3, 0.5, x, y3, w) == expected2
     assert np.array_equal(y3, y2)
-    y4 = y_plain.copy()
-    assert krylov.axpy_inner(y4, 0.5, x, y4, w) == pytest.approx(expected2, rel=1e-13)
-    assert np.array_equal(y4, y2)
-    assert norm2 > 0
+    assert expected2 > 0
 
 
 def test_the_vectorised_sums_do_not_depend_on_alignment(rng):
@@ -58,7 +53,8 @@ def test_the_vectorised_sums_do_not_depend_on_alignment(rng):
     w = rng.random(shape[-2:])
     a, b = _spectra(rng, shape), _spectra(rng, shape)
     ref = krylov.weighted_inner(a, b, w)
-    ref_norm = krylov.axpy_norm2(a.copy(), 0.3, b, w)
+    a_copy = a.copy()
+    ref_norm = krylov.axpy_inner(a_copy, 0.3, b, a_copy, w)
     n = a.size
     for offset in range(8):  # complex128 views starting 0, 16, ..., 112 bytes into a buffer
         buf = np.empty(2 * n + 16, dtype=complex)
@@ -66,7 +62,7 @@ def test_the_vectorised_sums_do_not_depend_on_alignment(rng):
         b2 = buf[n + 8 + offset:n + 8 + offset + n].reshape(shape)
         a2[...], b2[...] = a, b
         assert krylov.weighted_inner(a2, b2, w) == ref
-        assert krylov.axpy_norm2(a2, 0.3, b2, w) == ref_norm
+        assert krylov.axpy_inner(a2, 0.3, b2, a2, w) == ref_norm
 
 
 @pytest.mark.parametrize("shape", [(16, 9), (2, 30, 16)])

@@ -26,3 +26,11 @@ class SimulationFailure(NematicError, RuntimeError):
         self.reason, self.detail, self.t = reason, detail, t
         when = "" if t is None else f" at t = {t:.6g}"
         super().__init__(f"{reason}{when}: {detail}")
+
+
+class IllPosed(SimulationFailure):
+    """The rate problem of an accepted state lost well-posedness (``rate_problem_ill_posed``):
+    the failure of the state, not of a step, so a shorter step is not tried."""
+
+    def __init__(self, detail: str, t: float | None = None):
+        super().__init__("rate_problem_ill_posed", detail, t)

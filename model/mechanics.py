@@ -39,6 +39,7 @@ import numpy as np
 from . import constitutive as cl
 from . import fast_finite, krylov
 from . import tensors as T
+from . import wellposedness as wp
 from .errors import SimulationFailure
 from .fourier import SpectralGrid
 from .kernels import (
@@ -282,6 +283,15 @@ class LinearMechanics(_Mechanics):
         self.accept_spin(omega_hat, it, status == "ok", t)
         return R_hat + j_hat
 
+    def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None
+                    ) -> tuple[float, int, float]:
+        r"""Well-posedness margin of the rate problem (:mod:`model.wellposedness`):
+        :math:`1 - (\alpha - B) \max S`, its flat grid index, and the wave-vector angle of
+        the minimum (perpendicular to the director there)."""
+        m, idx = wp.linear_margin(q1, q2, self.params.alpha_minus_B)
+        theta = 0.5 * float(np.arctan2(q2.flat[idx], q1.flat[idx]))
+        return m, idx, (theta + 0.5 * np.pi) % np.pi
+
     def accept_spin(self, omega_hat: Array, iterations: int, converged: bool,
                     t: float | None) -> None:
         """Book a spin solve (here or in :func:`model.fast_linear.linear_split`): count its
@@ -458,6 +468,7 @@ class FiniteMechanics(_Mechanics):
         F = np.ascontiguousarray(mech.F)
         # dP/dQ : dQ by the numba kernel (reference: constitutive.first_piola_q_increment)
         E = q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, m.B, m.B_prime, m.alpha)
+        mech.extras["E"] = E
         b = g.div_hat(g.forward(q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
                                                    np.ascontiguousarray(R[1]), m.B, m.B_prime,
                                                    m.alpha)))
@@ -471,6 +482,25 @@ class FiniteMechanics(_Mechanics):
         self.udot_hat = udot
         omega = self.spin_from_rate(udot)
         return np.stack([R[0] - 2.0 * omega * q2, R[1] + 2.0 * omega * q1]), omega
+
+
+    def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None
+                    ) -> tuple[float, int, float]:
+        """Well-posedness margin of the rate problem at the deformation of ``mech`` (solved
+        here if not given), its flat grid index and the wave-vector angle of the minimum
+        (:func:`model.wellposedness.finite_margin`; reuses the tangent and E of
+        :meth:`corotational` when ``mech`` has them)."""
+        m = self.moduli
+        if mech is None:
+            mech = self.solve(q1, q2)
+        K = mech.extras.get("K")
+        if K is None:
+            K = self._tangent(mech.F, q1, q2)
+        E = mech.extras.get("E")
+        if E is None:
+            E = q_increment_kernel(np.ascontiguousarray(mech.F), q1, q2, -2.0 * q2, 2.0 * q1,
+                                   m.B, m.B_prime, m.alpha)
+        return wp.finite_margin(K, E, m.kappa)
 
 
 def make_mechanics(params, numerics, grid: SpectralGrid) -> LinearMechanics | FiniteMechanics:

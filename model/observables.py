@@ -6,10 +6,17 @@ Definitions (unit domain, :math:`\langle\cdot\rangle` = area mean):
 * ``sigma2_S`` :math:`\sigma^2_S = \langle (S - \langle S\rangle)^2 \rangle` (paper, Fig. 2);
 * ``cos2theta`` :math:`\langle \cos 2\theta \rangle = \langle q_1 / S \rangle`, points with
   :math:`S < 10^{-12}` (undefined director) count as 0 (isotropic);
-* ``lambda`` the pattern size :math:`\lambda = 2\pi / \bar k`, :math:`\bar k = \sum_k |k|\,
-  |\widehat{\delta S}(k)|^2 / \sum_k |\widehat{\delta S}(k)|^2` over all nonzero modes
-  (isotropic spectrum-weighted mean wavenumber of :math:`\delta S = S - \langle S \rangle`);
-  NaN when :math:`\sigma^2_S = 0`;
+* ``lambda`` the pattern size :math:`\lambda = L / \bar n` from the **radial (shell-summed)
+  spectrum** :math:`E(n) = \sum_{n - 1/2 \le |k| L / 2\pi < n + 1/2}
+  |\widehat{\delta S}(k)|^2` of :math:`\delta S = S - \langle S \rangle`: :math:`\bar n =
+  \sum_{n \ge 1} n E(n)^2 / \sum_{n \ge 1} E(n)^2`, the centroid of the squared spectrum (a
+  peak position that weights the dominant shells and not the noise floor, and moves
+  continuously when two shells compete; :func:`pattern_size`);
+* ``lambda_mean`` :math:`2\pi / \bar k` with :math:`\bar k = \sum_k |k|\, |\widehat{\delta S}(k)|^2
+  / \sum_k |\widehat{\delta S}(k)|^2` over all nonzero modes (the spectrum-weighted mean
+  wavenumber, :func:`pattern_size_mean`); both NaN when :math:`\sigma^2_S = 0`;
+* ``rate_margin`` the well-posedness margin of the rate problem
+  (:mod:`model.wellposedness`, 1 passive, 0 at the loss of well-posedness);
 * ``mean_I1bar`` :math:`\langle \mathrm{tr}\, C / J \rangle`, ``min_J`` :math:`\min J`,
   ``mean_A`` :math:`\langle A \rangle`;
 * ``free_energy`` :math:`\int \Psi` of paper Eq. (1) (small-strain elastic energy in linear
@@ -38,14 +45,43 @@ def anisotropy(q1: Array, q2: Array) -> float:
     return float(np.mean(np.where(ok, q1 / np.where(ok, S, 1.0), 0.0)))
 
 
-def pattern_size(S: Array, grid: SpectralGrid) -> float:
+def _power(S: Array, grid: SpectralGrid) -> Array | None:
+    """Half-spectrum power of S - <S> with Parseval weights (mean mode zeroed); None if the
+    field is uniform."""
     dS_hat = grid.forward(S - S.mean())
     power = grid.weights * np.abs(dS_hat) ** 2
     power[0, 0] = 0.0
-    total = power.sum()
-    if total <= 1e-30 * S.size**2:
+    if power.sum() <= 1e-30 * S.size**2:
+        return None
+    return power
+
+
+def radial_spectrum(S: Array, grid: SpectralGrid) -> Array:
+    r""":math:`E(n)`, n = 0, 1, ..., the power of S - <S> summed over the shells
+    :math:`n - 1/2 \le |k| / 2\pi < n + 1/2` (unit box: k = 2 pi (i, j)); E(0) = 0."""
+    power = _power(S, grid)
+    shell = np.rint(np.sqrt(grid.k2) / (2 * np.pi)).astype(np.int64)
+    if power is None:
+        return np.zeros(int(shell.max()) + 1)
+    return np.bincount(shell.ravel(), weights=power.ravel())
+
+
+def pattern_size(S: Array, grid: SpectralGrid) -> float:
+    r"""Pattern size :math:`L / \bar n`, :math:`\bar n = \sum_n n E(n)^2 / \sum_n E(n)^2` over
+    the shells n >= 1 of the radial spectrum (module docstring); NaN for a uniform field."""
+    E = radial_spectrum(S, grid)[1:]
+    if not np.any(E > 0):
         return float("nan")
-    kbar = float((np.sqrt(grid.k2) * power).sum() / total)
+    w = (E / E.max()) ** 2
+    return float(w.sum() / (np.arange(1, len(E) + 1) * w).sum())
+
+
+def pattern_size_mean(S: Array, grid: SpectralGrid) -> float:
+    r""":math:`2\pi / \bar k`, the spectrum-weighted mean wavenumber (module docstring)."""
+    power = _power(S, grid)
+    if power is None:
+        return float("nan")
+    kbar = float((np.sqrt(grid.k2) * power).sum() / power.sum())
     return 2 * np.pi / kbar
 
 
@@ -77,6 +113,7 @@ def snapshot_observables(q1: Array, q2: Array, A: Array, F: Array, residual: flo
         "sigma2_S": float(np.mean((S - S.mean()) ** 2)),
         "cos2theta": anisotropy(q1, q2),
         "lambda": pattern_size(S, grid),
+        "lambda_mean": pattern_size_mean(S, grid),
         "mean_I1bar": float(np.mean(T.trace(C) / J)),
         "min_J": float(J.min()),
         "mean_A": float(A.mean()),
@@ -86,11 +123,10 @@ def snapshot_observables(q1: Array, q2: Array, A: Array, F: Array, residual: flo
 
 
 def first_peak(values: Array, *, significance: float = 0.5) -> int:
-    """Index of the first local maximum of a time series that reaches at least
-    ``significance`` times its global maximum (so a small early wiggle of the relaxing
-    initial noise is not taken for the pattern's peak); the global maximum if there is none
-    (e.g. a series that only grows). Fig. 3 measures lambda "at the first peak value of
-    sigma2_S over time"."""
+    """The paper's literal rule ("at the first peak value of sigma2_S over time"): index of
+    the first local maximum that reaches at least ``significance`` times the global maximum
+    (so a wiggle of the relaxing initial noise is not taken); the global maximum if there is
+    none. On a plateau this picks the first bump of the coarsening phase, however small."""
     v = np.asarray(values, dtype=float)
     if not len(v):
         return 0
@@ -101,3 +137,59 @@ def first_peak(values: Array, *, significance: float = 0.5) -> int:
                 and finite[i] >= significance * top:
             return i
     return int(np.argmax(finite))
+
+
+def prominence(v: Array, i: int) -> float:
+    """Topographic prominence of the local maximum ``v[i]``: its height above the higher of
+    the lowest points between it and the nearest higher sample on either side (the series'
+    end where there is none), as in ``scipy.signal.peak_prominences``."""
+    left = v[:i + 1]
+    higher = np.nonzero(left[:-1] > v[i])[0]
+    lo_left = float(left[higher[-1] + 1:].min()) if len(higher) else float(left.min())
+    right = v[i:]
+    higher = np.nonzero(right[1:] > v[i])[0]
+    lo_right = float(right[:higher[0] + 1].min()) if len(higher) else float(right.min())
+    return float(v[i] - max(lo_left, lo_right))
+
+
+def growth_peak(values: Array, times: Array | None = None, *, rate_fraction: float = 0.1,
+                min_prominence: float = 0.1) -> int:
+    r"""Fig. 3's "first peak" read robustly, at the **end of the growth phase**: the first
+    sample after the fastest growth from which the logarithmic growth rate
+    :math:`d \ln \sigma^2_S / dt` stays below ``rate_fraction`` of its maximum over the next
+    interval; or, if a local maximum follows within one growth time (the samples from the
+    fastest growth to that point) and is a real overshoot (topographic prominence of at
+    least ``min_prominence`` times the series' range), that maximum. Bumps and creep of
+    the coarsening phase (rates ~1 % of the growth rate) are never taken, however high; a
+    series still growing at its end gives its last sample (fits treat it as not peaked); a
+    series that never grows gives its maximum. Values below 1e-6 of the maximum are ignored
+    (round-off level at the start). ``times`` (default: unit spacing) may be
+    irregular."""
+    v = np.asarray(values, dtype=float)
+    n = len(v)
+    if not n or not np.isfinite(v).any():
+        return 0
+    t = np.arange(n, dtype=float) if times is None else np.asarray(times, dtype=float)
+    # values below floor * max carry no growth information (sigma2_S starts at exactly 0
+    # for a uniform S0 and leaves round-off level in one step)
+    floor = 1e-6 * float(np.nanmax(v))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lv = np.where(np.isfinite(v) & (v > floor), np.log(np.where(v > floor, v, 1.0)),
+                      np.nan)
+        rate = np.diff(lv) / np.diff(t)
+    w = np.where(np.isfinite(v), v, np.nanmin(v))
+    if n < 2 or not np.any(np.isfinite(rate)) or np.nanmax(rate) <= 0:
+        return int(np.argmax(w))
+    i_fast = int(np.nanargmax(rate))
+    slow = np.nonzero(rate[i_fast:] < rate_fraction * rate[i_fast])[0]
+    if not len(slow):
+        return n - 1
+    end = i_fast + int(slow[0])
+    span = float(w.max() - w.min())
+    # an overshoot peaks within one growth time (i_fast -> end) of the end of growth
+    for i in range(max(end, 1), min(n - 1, 2 * end - i_fast + 2)):
+        if w[i] > w[i - 1] and w[i] >= w[i + 1]:
+            return i if prominence(w, i) >= min_prominence * span else end
+        if w[i] < w[i - 1]:
+            break
+    return end

@@ -21,6 +21,7 @@ from .errors import ParameterError
 
 MECHANICS = ("finite", "linear")
 SCHEMES = ("etdrk4", "etdrk2")
+ERROR_NORMS = ("max", "rms")
 
 
 def _suggest(name: str, valid: list[str]) -> str:
@@ -155,7 +156,9 @@ class Numerics:
         scheme: time integrator, "etdrk4" (Krogstad's fourth-order exponential Runge-Kutta,
             embedded third-order error estimate) or "etdrk2" (second order, embedded ETD1).
         adaptive: adapt dt from the scheme's embedded error estimate.
-        tolerance: absolute local error tolerance per step (RMS over the grid, per field).
+        tolerance: absolute local error tolerance per step (per field, in ``error_norm``).
+        error_norm: "max" (the largest pointwise error: no grid point may leave the accurate
+            trajectory) or "rms" (the RMS over the grid).
         dt_max: largest step the adaptive controller may take.
         save_every: interval between saved time-series points.
         snapshot_times: times at which full fields are stored (final time always is).
@@ -172,6 +175,7 @@ class Numerics:
     scheme: str = "etdrk4"
     adaptive: bool = True
     tolerance: float = 1e-3
+    error_norm: str = "max"
     dt_max: float = 1.0
     save_every: float = 5.0
     snapshot_times: tuple[float, ...] = ()
@@ -203,6 +207,8 @@ class Numerics:
                 raise ParameterError(name, getattr(self, name), "a number > 0")
         if number("max_newton", integer=True) < 1:
             raise ParameterError("max_newton", self.max_newton, "an integer >= 1")
+        if self.error_norm not in ERROR_NORMS:
+            raise ParameterError("error_norm", self.error_norm, " or ".join(ERROR_NORMS))
         if self.scheme not in SCHEMES:
             raise ParameterError("scheme", self.scheme, " or ".join(SCHEMES))
         if self.mechanics not in MECHANICS:

@@ -3,7 +3,8 @@
 
 The Dataset is self-describing: time series of every observable (dim ``time``), snapshots of
 the fields (dims ``snapshot_time, x, y``), per-run scalars (values at ``t_final``, time and
-pattern size at the first peak of sigma2_S, wall time) and, as attributes, every parameter
+pattern size at the first peak of sigma2_S by the growth-peak rule and by the paper's
+literal rule, the smallest well-posedness margin, wall time) and, as attributes, every parameter
 (``param_<name>``), every numerics field (``num_<name>``), the seed, the code version, the git
 commit and the status. A run that fails (J <= 0, no convergence, NaN, ...) does not raise: it
 returns what it computed up to the failure with ``status = "failed"`` and the ``reason``.
@@ -27,7 +28,7 @@ from . import tensors as T
 from .errors import SimulationFailure
 from .initial import initial_fields
 from .mechanics import LinearMechanics
-from .observables import first_peak, snapshot_observables
+from .observables import first_peak, growth_peak, snapshot_observables
 from .parameters import Numerics, Parameters, check_compatible
 from .pde import ActiveNematicPDE, make_state
 from .provenance import git_commit
@@ -36,20 +37,25 @@ from .solver import SCHEMES, ETDSolver
 log = logging.getLogger(__name__)
 
 SCHEMA_VERSION = 1
-SERIES = ("mean_S", "sigma2_S", "cos2theta", "lambda", "mean_I1bar", "min_J", "mean_A",
-          "free_energy", "residual")
-UNITS = {"mean_S": "1", "sigma2_S": "1", "cos2theta": "1", "lambda": "L", "mean_I1bar": "1",
-         "min_J": "1", "mean_A": "1", "free_energy": "G L^2", "residual": "1"}
+SERIES = ("mean_S", "sigma2_S", "cos2theta", "lambda", "lambda_mean", "mean_I1bar", "min_J",
+          "mean_A", "free_energy", "residual", "rate_margin")
+UNITS = {"mean_S": "1", "sigma2_S": "1", "cos2theta": "1", "lambda": "L", "lambda_mean": "L",
+         "mean_I1bar": "1", "min_J": "1", "mean_A": "1", "free_energy": "G L^2",
+         "residual": "1", "rate_margin": "1"}
 LONG_NAMES = {
     "mean_S": "area mean of the nematic order parameter S",
     "sigma2_S": "variance of S over the unit domain (paper sigma_S^2)",
     "cos2theta": "anisotropy <cos 2 theta> = <q1 / S>",
-    "lambda": "pattern size 2 pi / (spectrum-weighted mean |k| of S - <S>)",
+    "lambda": "pattern size L / n at the peak of the radial (shell-summed) spectrum of "
+              "S - <S>",
+    "lambda_mean": "pattern size 2 pi / (spectrum-weighted mean |k| of S - <S>)",
     "mean_I1bar": "area mean of I1bar = tr C / J",
     "min_J": "minimum of J = det F",
     "mean_A": "area mean of the activity A",
     "free_energy": "total free energy, paper Eq. (1)",
     "residual": "force-balance residual |Div P|_{H^-1} / max(1, |P|)",
+    "rate_margin": "well-posedness margin of the rate problem, min det of its symbol / "
+                   "(kappa + 1): 1 passive, 0 ill posed",
 }
 
 
@@ -91,6 +97,7 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
         residual = mech.residual if not linear else eq.mechanics.residual(mech.P)
         obs = snapshot_observables(d[0], d[1], d[2], mech.F, residual, params, grid,
                                    linear=linear)
+        obs["rate_margin"] = eq.mechanics.rate_margin(d[0], d[1], mech)[0]
         obs["time"] = float(t)
         obs["steps"] = float(solver.stats["steps"])
         rows.append(obs)
@@ -148,12 +155,19 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     for name in ("sigma2_S", "mean_S", "cos2theta", "lambda"):
         series = data_vars[name][1]
         scalars[f"{name}_final"] = float(series[-1]) if ok_final else float("nan")
-    if len(t):
-        ip = first_peak(sig)
-        scalars["t_peak"] = float(t[ip])
-        scalars["lambda_peak"] = float(lam[ip])
-    else:
-        scalars["t_peak"] = scalars["lambda_peak"] = float("nan")
+    lam_mean = data_vars["lambda_mean"][1]
+    scalars["lambda_mean_final"] = float(lam_mean[-1]) if ok_final else float("nan")
+    peaks = {"": growth_peak(sig, t), "_literal": first_peak(sig)} if len(t) else {}
+    for suffix in ("", "_literal"):
+        ip = peaks.get(suffix)
+        scalars[f"t_peak{suffix}"] = float(t[ip]) if ip is not None else float("nan")
+        scalars[f"lambda_peak{suffix}"] = float(lam[ip]) if ip is not None else float("nan")
+    ip = peaks.get("")
+    scalars["lambda_mean_peak"] = float(lam_mean[ip]) if ip is not None else float("nan")
+    rates = data_vars["rate_margin"][1]
+    margin = min(solver.margin_min, float(np.nanmin(rates)) if np.any(np.isfinite(rates))
+                 else np.inf)
+    scalars["rate_margin_min"] = margin if np.isfinite(margin) else float("nan")
     scalars["wall_time"] = wall
     for name, value in scalars.items():
         data_vars[name] = ((), value)

@@ -37,8 +37,9 @@ fourth-order value (local extrapolation). Measured orders 3.8-4.1 (tests).
 
 with the difference ``u_{n+1} - a`` (O(h^2)) as the error estimate.
 
-**Step control** (both): the error is the RMS over the grid, maximum over the three fields; a
-step is accepted if it is below ``numerics.tolerance`` and the next step is scaled by
+**Step control** (both): the error is the largest pointwise error (``error_norm = "max"``,
+default; ``"rms"``: the RMS over the grid), maximum over the three fields; a step is accepted
+if it is below ``numerics.tolerance`` and the next step is scaled by
 :math:`0.9\,(\mathrm{tol}/\mathrm{err})^{1/p}` (p = 3 for ETDRK4, 2 for ETDRK2), clipped to
 [0.2, 2] and ``dt_max``, and rounded down onto the ladder ``dt_max 2^(-j/8)`` so that the phi
 functions of :math:`L_q` are reused. A step whose stage cannot be evaluated (non-finite, a spin
@@ -67,8 +68,8 @@ from pde.solvers.base import SolverBase
 
 from . import fast_linear
 from . import kernels as kern
-from .errors import SimulationFailure
-from .mechanics import FiniteMechanics, LinearMechanics
+from .errors import IllPosed, SimulationFailure
+from .mechanics import FiniteMechanics, LinearMechanics, MechanicalState
 from .pde import ActiveNematicPDE
 
 log = logging.getLogger(__name__)
@@ -119,6 +120,7 @@ class ETDSolver(SolverBase):
         self.adaptive = num.adaptive if adaptive is None else adaptive
         self.tolerance = num.tolerance if tolerance is None else tolerance
         self.dt_max = num.dt_max if dt_max is None else dt_max
+        self.error_norm = num.error_norm
         p, g = pde.params, pde.spectral
         self.Lq = -(p.A0 + p.K * g.k2) / p.gamma  # the q1, q2 symbol (Fourier space)
         self._zeros = np.zeros((g.n, g.n))
@@ -136,6 +138,12 @@ class ETDSolver(SolverBase):
         self._symbols = (mech.response_symbols()
                          if isinstance(mech, LinearMechanics) and self.compiled else None)
         self.stats = {"steps": 0, "rejected": 0, "stage_failures": 0, "rhs": 0, "newton": 0}
+        #: the finite mechanical state of the last right-hand side (its tangent and E serve
+        #: the well-posedness check of the step's start)
+        self._last_mech: MechanicalState | None = None
+        #: smallest well-posedness margin over the accepted states (model.wellposedness)
+        self.margin_min = float("inf")
+        self._checked_at = float("nan")
 
     # --- the split right-hand side -----------------------------------------------------
     def split(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
@@ -148,6 +156,7 @@ class ETDSolver(SolverBase):
         if isinstance(eq.mechanics, LinearMechanics):
             return self._split_linear(u, q_hat, t)
         rate, mech, _ = eq.rates(u[0], u[1], u[2], t)
+        self._last_mech = mech
         self.stats["newton"] += mech.iterations
         if not np.all(np.isfinite(rate)):
             raise SimulationFailure("nan", "non-finite rate", t)
@@ -226,6 +235,28 @@ class ETDSolver(SolverBase):
         """One step from ``(u, t)`` of size ``h``; returns (new state, error estimate)."""
         raise NotImplementedError
 
+    def check_wellposed(self, u: Array, t: float) -> float:
+        """The well-posedness margin of the state ``u`` (an accepted state: every step checks
+        its start after the first right-hand side, reusing that evaluation's tangent); raises
+        :class:`model.errors.IllPosed` when it is <= 0, naming the value and the place."""
+        if t == self._checked_at:  # a rejected step retried from the same state
+            return self.margin_min
+        mech = self.pde.mechanics
+        state = self._last_mech if isinstance(mech, FiniteMechanics) else None
+        self._checked_at = t
+        margin, idx, phi = mech.rate_margin(u[0], u[1], state)
+        self.margin_min = min(self.margin_min, margin)
+        if margin <= 0.0:
+            n = self.pde.spectral.n
+            ix, iy = divmod(idx, n)
+            S = float(np.hypot(u[0].flat[idx], u[1].flat[idx]))
+            amb = self.pde.params.alpha_minus_B
+            raise IllPosed(
+                f"well-posedness margin {margin:.3g} <= 0 at x = {(ix + 0.5) / n:.3f}, "
+                f"y = {(iy + 0.5) / n:.3f} (S = {S:.3f}, (alpha - B) S = {amb * S:.3f}, "
+                f"wave vector at {np.degrees(phi):.0f} deg)", t)
+        return margin
+
     def _save_finite(self) -> FiniteMechanics | None:
         """Remember the finite-strain warm start after the step's first right-hand side (so a
         rejected step can put it back); returns the finite mechanics, or None if linear."""
@@ -244,12 +275,17 @@ class ETDSolver(SolverBase):
     def _finish(self, u: Array, q_hat: Array, new_q_hat: Array, new_A: Array, err_q: Array,
                 err_A: Array) -> tuple[Array, float]:
         """The new state, its spectra remembered for the next step, and the error estimate
-        (RMS over the grid, maximum over the three fields) of ``err_q`` (spectra) and
-        ``err_A`` (real space)."""
+        of ``err_q`` (spectra) and ``err_A`` (real space): the largest pointwise error
+        (``error_norm = "max"``, two inverse transforms) or the RMS over the grid, maximum
+        over the three fields."""
         g = self.pde.spectral
         new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
         self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
-        err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]), float(np.sqrt(np.mean(err_A**2))))
+        if self.error_norm == "max":
+            err = max(float(np.abs(g.inverse(err_q)).max()), float(np.abs(err_A).max()))
+        else:
+            err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]),
+                      float(np.sqrt(np.mean(err_A**2))))
         return new, err
 
     def _quantize(self, h: float) -> float:
@@ -279,9 +315,11 @@ class ETDSolver(SolverBase):
                         raise SimulationFailure("nan", "non-finite state after a step", t)
                 except SimulationFailure as exc:
                     # a too-large step can throw a stage out of the well-posed range: retry
-                    # smaller; a failure that persists at small steps is the run's
+                    # smaller; a failure that persists at small steps is the run's, and so is
+                    # an ill-posed accepted state (a shorter step cannot change it)
                     self._restore_finite()
-                    if not self.adaptive or h_try <= self.retry_floor * self.dt_max:
+                    if (not self.adaptive or isinstance(exc, IllPosed)
+                            or h_try <= self.retry_floor * self.dt_max):
                         raise
                     log.debug("step %g at t = %g failed (%s): retrying with h / 4", h_try, t, exc)
                     self.stats["rejected"] += 1
@@ -334,6 +372,7 @@ class ETDRK2Solver(ETDSolver):
         A = u[2]
         self._finite_restore = None
         Nq0, Adot0 = self.split(u, q_hat, t)
+        self.check_wellposed(u, t)
         finite = self._save_finite()
         E, phi1, phi2 = self._phis(h)
         p = self.pde.params
@@ -389,6 +428,7 @@ class ETDRK4Solver(ETDSolver):
             return Nq, Adot - LA * A_s
 
         Nq_u, Adot_u = self.split(u, q_hat, t)
+        self.check_wellposed(u, t)
         NA_u = Adot_u - LA * A
         finite = self._save_finite()
         if finite is not None:

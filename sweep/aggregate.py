@@ -3,8 +3,9 @@
 Dims are the sweep dims (in the campaign's order; a zip group is one dim named after its
 first axis, the other axes are coordinates on it) and ``seed`` (CF ``standard_name``
 "realization"). For every per-run observable ``X`` (sigma2_S, mean_S, cos2theta, lambda at
-t_final; lambda_peak and t_peak at the first peak of sigma2_S(t); plus any other scalar the
-model writes) the file holds ``X`` over (dims..., seed), NaN where a run is missing or failed,
+t_final; lambda_peak and t_peak at the first peak of sigma2_S(t) by the growth-peak rule and
+by the paper's literal rule; lambda_mean; rate_margin_min; plus any other scalar the model
+writes) the file holds ``X`` over (dims..., seed), NaN where a run is missing or failed,
 and ``X_mean``, ``X_std`` (sample standard deviation, ddof = 1, NaN below two seeds) and
 ``X_count`` over the seeds that succeeded. ``status`` (0 missing, 1 ok, 2 failed, CF flags),
 ``reason`` and ``run_id`` (the run file is ``runs/<run_id>.nc``) locate every run.
@@ -40,10 +41,22 @@ OBSERVABLES: dict[str, tuple[str, str]] = {
     "mean_S": ("mean_S_final", "domain mean of the nematic order parameter S at t_final"),
     "cos2theta": ("cos2theta_final", "domain mean of cos(2 theta) (director anisotropy) at "
                   "t_final"),
-    "lambda": ("lambda_final", "pattern size lambda at t_final (units of L)"),
-    "lambda_peak": ("lambda_peak", "pattern size lambda at the first peak of sigma2_S(t) "
-                    "(units of L)"),
-    "t_peak": ("t_peak", "time of the first peak of sigma2_S(t) (units of tau)"),
+    "lambda": ("lambda_final", "pattern size lambda (radial spectrum peak) at t_final "
+               "(units of L)"),
+    "lambda_peak": ("lambda_peak", "pattern size lambda at the first peak of sigma2_S(t), "
+                    "growth-peak rule (units of L)"),
+    "t_peak": ("t_peak", "time of the first peak of sigma2_S(t), growth-peak rule (units of "
+               "tau)"),
+    "lambda_peak_literal": ("lambda_peak_literal", "pattern size lambda at the first local "
+                            "maximum of sigma2_S(t), the paper's literal rule (units of L)"),
+    "t_peak_literal": ("t_peak_literal", "time of the first local maximum of sigma2_S(t), the "
+                       "paper's literal rule (units of tau)"),
+    "lambda_mean": ("lambda_mean_final", "pattern size 2 pi / mean |k| at t_final (units of "
+                    "L)"),
+    "lambda_mean_peak": ("lambda_mean_peak", "pattern size 2 pi / mean |k| at the first peak "
+                         "of sigma2_S(t), growth-peak rule (units of L)"),
+    "rate_margin_min": ("rate_margin_min", "smallest well-posedness margin of the rate "
+                        "problem over the run (1 passive, 0 ill posed)"),
 }
 #: Scalars of the run files that are not observables (they differ between identical runs).
 NOT_OBSERVABLES = {"wall_time"}

@@ -42,14 +42,17 @@ Registered fits (:data:`REGISTRY`; a campaign lists them under ``fits:``, option
     patterned runs count: those whose :math:`\sigma^2_S(t_{\rm final})` exceeds ``min_sigma2``
     (default: automatic, the middle of the widest gap of at least ``min_gap`` decades in the
     sorted :math:`\log_{10}\sigma^2_S` of all runs; no gap, every run counts). The pattern
-    size is ``lambda_peak`` (Fig. 3: at the first peak of :math:`\sigma^2_S(t)`) unless
-    ``observable`` says otherwise. A run whose first peak is at :math:`t_{\rm final}` or
+    size is ``lambda_peak`` (Fig. 3: at the first peak of :math:`\sigma^2_S(t)` by the
+    growth-peak rule, docs/model.md section 6) unless ``observable`` says otherwise
+    (``lambda_peak_literal``: the paper's literal first-peak rule, checked against
+    ``t_peak_literal``; ``lambda_mean_peak``: the mean-|k| length at the growth peak). A run
+    whose first peak is at :math:`t_{\rm final}` or
     within ``peak_margin`` (default 1) save intervals of it (:math:`t_{\rm peak} \ge
     t_{\rm final} - {\rm peak\_margin}\cdot{\rm save\_every}`, from phase.nc's ``t_peak`` and
     the campaign's ``t_final`` and ``save_every``) has not reached its peak: its
     ``lambda_peak`` is merely :math:`\lambda` near :math:`t_{\rm final}`, not Fig. 3's
-    quantity, so it is left out (``require_peak``, default true for ``lambda_peak``, false
-    for any other observable). The runs left out are counted per grid point
+    quantity, so it is left out (``require_peak``, default true for the ``lambda*_peak*``
+    observables, false for any other). The runs left out are counted per grid point
     (``alpha_cr_unpeaked_count``), per K (``alpha_cr_n_unpeaked``) and in total (attribute
     ``fit_n_unpeaked`` of ``alpha_cr`` and ``scaling_exponent``). Interval: bootstrap over
     seeds (of the runs that count).
@@ -674,19 +677,23 @@ def _run_setting(ds: xr.Dataset, name: str) -> xr.DataArray | None:
         return None
 
 
-def _unpeaked(ds: xr.Dataset, require: bool, margin: float
+#: the peak time that goes with each peak observable (the growth-peak rule by default)
+PEAK_TIMES = {"lambda_peak_literal": "t_peak_literal"}
+
+
+def _unpeaked(ds: xr.Dataset, require: bool, margin: float, t_name: str = "t_peak"
               ) -> tuple[NDArray[np.bool_], str]:
     """:func:`peak_not_reached` for every run of ``ds`` (dims K, alpha_minus_B, seed), and a
-    description of the check for the fit's attributes. Without ``t_peak`` or ``t_final`` in
-    phase.nc no run is flagged (logged)."""
+    description of the check for the fit's attributes. Without the peak time ``t_name`` or
+    ``t_final`` in phase.nc no run is flagged (logged)."""
     dims = ("K", AMB, "seed")
     none = np.zeros(tuple(ds.sizes[d] for d in dims), dtype=bool)
     if not require:
         return none, "off (require_peak: false)"
-    if "t_peak" not in ds:
-        log.warning("alpha_cr: phase.nc has no t_peak: cannot tell runs that did not reach "
-                    "the first peak of sigma2_S; every run counts")
-        return none, "not done: phase.nc has no t_peak"
+    if t_name not in ds:
+        log.warning("alpha_cr: phase.nc has no %s: cannot tell runs that did not reach "
+                    "the first peak of sigma2_S; every run counts", t_name)
+        return none, f"not done: phase.nc has no {t_name}"
     t_final = _run_setting(ds, "t_final")
     if t_final is None:
         log.warning("alpha_cr: t_final of the runs unknown (no num_t_final attribute in "
@@ -694,12 +701,12 @@ def _unpeaked(ds: xr.Dataset, require: bool, margin: float
                     "sigma2_S; every run counts")
         return none, "not done: t_final unknown"
     save_every = _run_setting(ds, "save_every")
-    check = f"t_peak >= t_final - {margin:g} save_every"
+    check = f"{t_name} >= t_final - {margin:g} save_every"
     if save_every is None:
         log.warning("alpha_cr: save_every of the runs unknown (no num_save_every attribute in "
                     "phase.nc): only runs with t_peak = t_final count as without a peak")
-        save_every, check = xr.DataArray(0.0), "t_peak >= t_final (save_every unknown)"
-    t_peak = ds["t_peak"]
+        save_every, check = xr.DataArray(0.0), f"{t_name} >= t_final (save_every unknown)"
+    t_peak = ds[t_name]
     tp, tf, se = (v.broadcast_like(t_peak).transpose(*dims).values
                   for v in (t_peak, t_final, save_every))
     return peak_not_reached(tp, tf, se, margin), check
@@ -740,9 +747,10 @@ def _size_data(phase: xr.Dataset, options: Mapping[str, Any]) -> _SizeData:
     with np.errstate(invalid="ignore"):
         sized = np.isfinite(sig) & (sig > level) & np.isfinite(lam) & (lam > 0)
     require = options.get("require_peak")
-    require = observable == "lambda_peak" if require is None else bool(require)
+    peaked = observable.startswith("lambda") and "_peak" in observable
+    require = peaked if require is None else bool(require)
     margin = float(options.get("peak_margin", 1.0))
-    unpeaked, check = _unpeaked(ds, require, margin)
+    unpeaked, check = _unpeaked(ds, require, margin, PEAK_TIMES.get(observable, "t_peak"))
     left_out = sized & unpeaked
     n_left_out = int(left_out.sum())
     if n_left_out:

@@ -183,9 +183,15 @@ class _ProgressEvents:
             f"campaign [bold]{c.name}[/]: {len(expansion)} runs ({c.n_points} points x "
             f"{len(c.seeds)} seeds); {len(plan.done)} done, {len(plan.failed)} failed{skipped}, "
             f"{len(plan.todo)} to run -> {self.store.root}", soft_wrap=True)
-        if plan.adopted or plan.discarded:
-            self.console.print(f"recovered {plan.adopted} unindexed run file(s); "
-                               f"{plan.discarded} truncated or missing file(s) will be redone")
+        if plan.adopted:
+            self.console.print(f"recovered {plan.adopted} unindexed run file(s)")
+        if plan.redone:
+            self.console.print(f"[yellow]{len(plan.redone)} run(s) will be redone[/] (their "
+                               "file is missing, truncated or corrupt):", soft_wrap=True)
+            for rid, why in plan.redone[:10]:
+                self.console.print(f"  {rid}: {why}", soft_wrap=True, markup=False)
+            if len(plan.redone) > 10:
+                self.console.print(f"  ... and {len(plan.redone) - 10} more")
 
     def started(self, plan: Any, total: int, workers: int) -> None:
         self.skipped = len(plan.done) + len(plan.failed)
@@ -235,6 +241,9 @@ def run(
         "core).")] = None,
     retry_failed: Annotated[bool, typer.Option(
         "--retry-failed", help="Also redo runs that failed before.")] = False,
+    verify: Annotated[bool, typer.Option(
+        "--verify", help="Checksum every finished run's file (by default only files whose "
+        "size or mtime changed are), and redo the corrupt ones.")] = False,
     aggregate: Annotated[bool, typer.Option(
         "--aggregate/--no-aggregate", help="Write phase.nc at the end.")] = True,
     figures: Annotated[bool, typer.Option(
@@ -275,7 +284,7 @@ def run(
         try:
             with _sigterm_as_interrupt(), progress:
                 plan, summary = drive(expansion, store, retry_failed=retry_failed,
-                                      events=events)
+                                      verify=verify, events=events)
         except ClusterError as e:
             err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
             raise typer.Exit(EXIT_BAD_INPUT) from None
@@ -294,6 +303,7 @@ def run(
             write_phase(expansion, store)
             err.print(f"phase diagram: {store.phase_path}")
             if figures:
+                repair_products(c, results, err, phase=False)
                 for figure in _regenerate_figures(c, results):
                     err.print(f"figure: {figure}")
         failures = [] if summary is None else summary.failed
@@ -316,6 +326,40 @@ def run(
             raise typer.Exit(EXIT_FAILED_RUNS)
     finally:
         lock.release()
+
+
+def repair_products(campaign: Campaign, results: Path, console: Console, *,
+                    phase: bool = True) -> bool:
+    """Before fits and figures are drawn: an unreadable ``phase.nc`` is rebuilt from the run
+    records (taking the campaign's lock) and an unreadable ``fits.nc`` removed (the fits
+    recompute it), each with a message. Returns whether ``fits.nc`` was removed. Raises
+    :class:`CampaignLocked` if a driver holds the campaign while phase.nc must be rebuilt."""
+    from .aggregate import write_phase
+    from .expand import expand
+    from .fits import FITS
+    from .store import CampaignStore, netcdf_problem
+
+    store = CampaignStore(results, campaign.name)
+    if phase and store.phase_path.exists():
+        problem = netcdf_problem(store.phase_path, ("status", "run_id"))
+        if problem is not None:
+            console.print(f"[yellow]{store.phase_path}: {problem}[/]; rebuilding it from the "
+                          "run records", soft_wrap=True, highlight=False)
+            lock = store.lock()
+            lock.acquire(command=" ".join(sys.argv))
+            try:
+                write_phase(expand(campaign), store)
+            finally:
+                lock.release()
+    fits_path = store.root / FITS
+    if fits_path.exists():
+        problem = netcdf_problem(fits_path)
+        if problem is not None:
+            console.print(f"[yellow]{fits_path}: {problem}[/]; removing it (the fits "
+                          "recompute it)", soft_wrap=True, highlight=False)
+            fits_path.unlink()
+            return True
+    return False
 
 
 def _regenerate_figures(campaign: Campaign, results: Path) -> list[Path]:

@@ -26,7 +26,9 @@ from .cli import (
     _load,
     _setup_logging,
     app,
+    repair_products,
 )
+from .errors import CampaignLocked
 
 
 @app.command()
@@ -60,8 +62,11 @@ def figures(
     _setup_logging(err, verbose)
     c = _load(err, campaign, set_, seeds, name)
     try:
+        if repair_products(c, results, err) and not fits:
+            err.print("fits.nc was unreadable: recomputing the fits despite --no-fits")
+            fits = True
         out = produce(c, results, names=only or None, fits=fits)
-    except FigureError as e:
+    except (FigureError, CampaignLocked) as e:
         err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:

@@ -34,9 +34,11 @@ from .errors import ClusterError
 from .expand import Expansion, RunSpec
 from .spec import CLUSTER_KINDS, ExecutionSpec, StoreSpec
 from .store import (
+    RETRYABLE_REASONS,
     CampaignStore,
     Record,
     atomic_to_netcdf,
+    file_stamp,
     now_iso,
     record_from_dataset,
 )
@@ -130,8 +132,10 @@ def execute_run(task: RunTask) -> Record:
     else:
         try:
             ds, encoding = prepare_dataset(ds, task)
-            nc_bytes = atomic_to_netcdf(ds, store.nc_path(task.run_id), encoding)
-            record = record_from_dataset(ds, task.run_id, nc_bytes)
+            path = store.nc_path(task.run_id)
+            atomic_to_netcdf(ds, path, encoding)
+            stamp = file_stamp(path)
+            record = record_from_dataset(ds, task.run_id, stamp["nc_bytes"], stamp)
             if record.get("wall_time") is None:
                 record["wall_time"] = time.perf_counter() - t0
         except Exception as e:  # noqa: BLE001
@@ -162,14 +166,22 @@ class Plan:
     failed: list[int]
     records: dict[str, Record]
     adopted: int = 0
-    discarded: int = 0
+    #: runs whose record or file was unusable (missing, truncated, corrupt): (run_id, why)
+    redone: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def discarded(self) -> int:
+        return len(self.redone)
 
 
-def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False) -> Plan:
+def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
+              verify: bool = False) -> Plan:
     """Classify every run: done (skipped), failed (skipped unless ``retry_failed``), to do.
 
-    A record whose file is missing or has another size than recorded (truncated) is discarded
-    and its run redone; a ``.nc`` without a record is adopted if it opens, else deleted.
+    A record whose file is missing, truncated or corrupt (:meth:`CampaignStore.check_run_file`;
+    ``verify`` checksums every file) is discarded and its run redone; a ``.nc`` without a
+    record is adopted if it opens, else deleted; a record of a result that could not be
+    written (reason ``write_error``) is redone.
     """
     records = store.scan()
     plan = Plan(todo=[], done=[], failed=[], records=records)
@@ -179,21 +191,32 @@ def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool 
             rec = store.adopt(rid)
             if rec is not None:
                 plan.adopted += 1
-        if rec is not None and not store.is_complete(rid, rec):
-            log.warning("run %s: its file is missing or truncated; it will be redone", rid)
+        problem = None if rec is None else store.check_run_file(rid, rec, verify=verify)
+        if rec is not None and problem is not None:
+            log.warning("run %s: %s; it will be redone", rid, problem)
             store.discard(rid)
             records.pop(rid, None)
-            plan.discarded += 1
+            plan.redone.append((rid, problem))
             rec = None
+        elif rec is not None and rec.get("nc_bytes") is not None and (
+                not rec.get("nc_sha256") or rec.get("nc_mtime_ns") != _mtime(store, rid)):
+            store.refresh_stamp(rid)  # intact, but copied or checksum-less: stat next time
         if rec is None:
             plan.todo.append(i)
         elif rec.get("status") == "ok":
             plan.done.append(i)
-        elif retry_failed:
+        elif retry_failed or rec.get("reason") in RETRYABLE_REASONS:
             plan.todo.append(i)
         else:
             plan.failed.append(i)
     return plan
+
+
+def _mtime(store: CampaignStore, run_id: str) -> int | None:
+    try:
+        return store.nc_path(run_id).stat().st_mtime_ns
+    except OSError:
+        return None
 
 
 # --------------------------------------------------------------------------- clusters
@@ -420,6 +443,7 @@ REMOTE_TMP_AGE = 600.0
 
 
 def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
+          verify: bool = False,
           events: DriveEvents | None = None) -> tuple[Plan, RunSummary | None]:
     """What ``nematic run`` does while holding the campaign's lock: clean up, record the
     campaign text, plan from disk, run what remains on the campaign's dask cluster and
@@ -430,7 +454,7 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
     store.save_campaign_text(campaign.text, campaign.overrides)
-    plan = plan_runs(expansion, store, retry_failed=retry_failed)
+    plan = plan_runs(expansion, store, retry_failed=retry_failed, verify=verify)
     if events:
         events.planned(plan, expansion)
     summary = None

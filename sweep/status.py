@@ -14,7 +14,7 @@ import numpy as np
 
 from .execute import local_worker_count
 from .expand import Expansion
-from .store import CampaignStore, read_lock_holder
+from .store import RETRYABLE_REASONS, CampaignStore, read_lock_holder
 
 DONE, FAILED, PENDING = "done", "failed", "pending"
 MAX_EXAMPLES = 10
@@ -76,7 +76,9 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     finished: list[str] = []
     for i, rid in enumerate(expansion.run_ids):
         rec = records.get(rid)
-        if rec is None or not store.is_complete(rid, rec, check_size=False):
+        if rec is None or not store.is_complete(rid, rec):
+            continue  # the driver would redo it: pending
+        if rec.get("status") != "ok" and rec.get("reason") in RETRYABLE_REASONS:
             continue
         if rec.get("status") == "ok":
             state[i] = 0

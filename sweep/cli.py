@@ -8,6 +8,7 @@ unreachable scheduler) or refused to start (the campaign is locked by another dr
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib
 import json
 import logging
@@ -16,10 +17,11 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
+import click
 import typer
 from rich.console import Console
 from rich.logging import RichHandler
@@ -37,7 +39,66 @@ from rich.table import Table
 from .errors import CampaignError, CampaignLocked, ClusterError, StoreError
 from .spec import Campaign, Overrides, load_campaign, parse_assignments, parse_value
 
-app = typer.Typer(
+EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: Show Python tracebacks of errors (``nematic --debug ...`` or ``NEMATIC_DEBUG=1``).
+DEBUG = {"on": False}
+
+
+def _guarded(command: Callable[..., Any]) -> Callable[..., Any]:
+    """A command that turns errors into one line on stderr instead of a traceback: bad
+    input, files that cannot be read or written and similar errors exit 2 (the file and
+    cause named), anything else exits 1 as an internal error. ``--debug`` (or a command's
+    ``--verbose``) lets the exception through, with its traceback."""
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except (typer.Exit, click.exceptions.ClickException, click.exceptions.Abort,
+                KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as e:
+            if DEBUG["on"] or kwargs.get("verbose"):
+                raise
+            code, text = _describe_error(e)
+            _err_console().print(f"[bold red]error:[/] {text} (--debug shows the traceback)",
+                                 soft_wrap=True, highlight=False, markup=True)
+            raise typer.Exit(code) from None
+
+    return wrapper
+
+
+def _describe_error(e: Exception) -> tuple[int, str]:
+    from model.errors import NematicError
+
+    from .store import storage_cause
+
+    if isinstance(e, NematicError):
+        return EXIT_BAD_INPUT, str(e)
+    if isinstance(e, MemoryError):
+        return EXIT_BAD_INPUT, ("not enough memory (lower the resolution, or give the process "
+                                "more memory)")
+    if isinstance(e, OSError):
+        where = str(e.filename) if e.filename else ""
+        cause = storage_cause(Path(where), e) if where else (e.strerror or str(e))
+        return EXIT_BAD_INPUT, f"{where + ': ' if where else ''}{cause}"
+    return EXIT_FAILED_RUNS, f"internal error: {type(e).__name__}: {' '.join(str(e).split())}"
+
+
+class _App(typer.Typer):
+    """A Typer whose commands are :func:`_guarded`."""
+
+    def command(self, *args: Any, **kwargs: Any  # type: ignore[override]
+                ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+        register = super().command(*args, **kwargs)
+
+        def decorator(f: Callable[..., Any]) -> Callable[..., Any]:
+            register(_guarded(f))
+            return f
+
+        return decorator
+
+
+app = _App(
     name="nematic",
     help="Active nematic solids: run the model, sweep it, aggregate phase diagrams.",
     no_args_is_help=True,
@@ -46,7 +107,15 @@ app = typer.Typer(
     rich_markup_mode="markdown",
 )
 
-EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+@app.callback()
+def _options(debug: Annotated[bool, typer.Option(
+        "--debug", envvar="NEMATIC_DEBUG",
+        help="Show the Python traceback of an error (by default one line says what went "
+        "wrong).")] = False) -> None:
+    """Active nematic solids: run the model, sweep it, aggregate phase diagrams."""
+    DEBUG["on"] = debug
+
 log = logging.getLogger("sweep.cli")
 
 # --------------------------------------------------------------------------- shared options
@@ -183,6 +252,9 @@ class _ProgressEvents:
             f"campaign [bold]{c.name}[/]: {len(expansion)} runs ({c.n_points} points x "
             f"{len(c.seeds)} seeds); {len(plan.done)} done, {len(plan.failed)} failed{skipped}, "
             f"{len(plan.todo)} to run -> {self.store.root}", soft_wrap=True)
+        if plan.unspooled:
+            self.console.print(f"moved {plan.unspooled} result(s) that could not be written "
+                               "before into the results folder")
         if plan.adopted:
             self.console.print(f"recovered {plan.adopted} unindexed run file(s)")
         if plan.redone:
@@ -285,12 +357,29 @@ def run(
             with _sigterm_as_interrupt(), progress:
                 plan, summary = drive(expansion, store, retry_failed=retry_failed,
                                       verify=verify, events=events)
-        except ClusterError as e:
-            err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        except (ClusterError, StoreError) as e:
+            err.print(f"[bold red]error:[/] {e}", soft_wrap=True, highlight=False)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
+            err.print(f"[bold red]error:[/] {_storage_message(store, e)}", soft_wrap=True,
+                      highlight=False)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:  # before any run was submitted
             err.print("[yellow]interrupted[/]; rerun the same command to resume")
             raise typer.Exit(EXIT_INTERRUPTED) from None
+        if summary is not None and summary.storage_error is not None:
+            kept = [str(rec.get("saved_to")) for _, rec in summary.unsaved
+                    if rec.get("saved_to")]
+            err.print(f"[bold red]error: results cannot be written[/]: "
+                      f"{summary.storage_error}. "
+                      f"Stopped after {summary.completed} stored run(s) this session; the "
+                      f"other runs stay pending (not failed). "
+                      + (f"{len(kept)} computed result(s) kept in "
+                         f"{Path(kept[0]).parent} (moved in by the next run). " if kept
+                         else "")
+                      + "Fix the storage and rerun the same command.",
+                      soft_wrap=True, highlight=False)
+            raise typer.Exit(EXIT_BAD_INPUT)
         if summary is not None and summary.interrupted:
             err.print(f"[yellow]interrupted[/] after {summary.completed} run(s) "
                       f"({summary.ok} ok, {len(summary.failed)} failed); rerun the same "
@@ -300,12 +389,18 @@ def run(
             err.print(f"{summary.completed} run(s) in {_fmt_time(summary.wall_time)} "
                       f"(sum of run times {_fmt_time(summary.run_time)})")
         if aggregate:
-            write_phase(expansion, store)
-            err.print(f"phase diagram: {store.phase_path}")
-            if figures:
-                repair_products(c, results, err, phase=False)
-                for figure in _regenerate_figures(c, results):
-                    err.print(f"figure: {figure}")
+            try:
+                write_phase(expansion, store)
+                err.print(f"phase diagram: {store.phase_path}")
+                if figures:
+                    repair_products(c, results, err, phase=False)
+                    for figure in _regenerate_figures(c, results):
+                        err.print(f"figure: {figure}")
+            except StoreError as e:
+                err.print(f"[bold red]error:[/] {e}; the runs are stored, rerun the same "
+                          "command (or nematic aggregate) once the folder can be written",
+                          soft_wrap=True, highlight=False)
+                raise typer.Exit(EXIT_BAD_INPUT) from None
         failures = [] if summary is None else summary.failed
         n_failed = len(failures) + len(plan.failed)
         if summary is not None and summary.lost:
@@ -326,6 +421,12 @@ def run(
             raise typer.Exit(EXIT_FAILED_RUNS)
     finally:
         lock.release()
+
+
+def _storage_message(store: Any, e: OSError) -> str:
+    from .store import storage_error
+
+    return str(storage_error(Path(e.filename) if e.filename else store.root, e))
 
 
 def repair_products(campaign: Campaign, results: Path, console: Console, *,
@@ -467,13 +568,13 @@ def aggregate_cmd(
     lock = store.lock()
     try:
         lock.acquire(command=" ".join(sys.argv))
-    except CampaignLocked as e:
-        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        try:
+            ds = write_phase(expand(c), store)
+        finally:
+            lock.release()
+    except (CampaignLocked, StoreError) as e:
+        err.print(f"[bold red]error:[/] {e}", soft_wrap=True, highlight=False)
         raise typer.Exit(EXIT_BAD_INPUT) from None
-    try:
-        ds = write_phase(expand(c), store)
-    finally:
-        lock.release()
     Console(highlight=False, soft_wrap=True).print(
         f"wrote {store.phase_path}: {ds.attrs['n_ok']} ok, {ds.attrs['n_failed']} failed, "
         f"{ds.attrs['n_missing']} missing of {ds.attrs['n_runs']} runs")
@@ -502,7 +603,8 @@ def _register_plugins() -> None:
                 raise
             continue
         callback = getattr(module, command, None) if command else None
-        registered = {info.callback for info in app.registered_commands}
+        registered = {getattr(info.callback, "__wrapped__", info.callback)
+                      for info in app.registered_commands}
         if callable(callback) and callback not in registered:
             app.command()(callback)
 

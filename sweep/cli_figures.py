@@ -28,7 +28,8 @@ from .cli import (
     app,
     repair_products,
 )
-from .errors import CampaignLocked
+from .errors import CampaignLocked, StoreError
+from .store import probe_write, storage_cause
 
 
 @app.command()
@@ -61,12 +62,19 @@ def figures(
     err = _err_console()
     _setup_logging(err, verbose)
     c = _load(err, campaign, set_, seeds, name)
+    root = results / c.name
+    problem = probe_write(root) if root.is_dir() else None
+    if problem is not None:
+        err.print(f"[bold red]error:[/] cannot write the fits and figures in {root}: "
+                  f"{storage_cause(root / 'figures', problem)}", soft_wrap=True,
+                  highlight=False)
+        raise typer.Exit(EXIT_BAD_INPUT)
     try:
         if repair_products(c, results, err) and not fits:
             err.print("fits.nc was unreadable: recomputing the fits despite --no-fits")
             fits = True
         out = produce(c, results, names=only or None, fits=fits)
-    except (FigureError, CampaignLocked) as e:
+    except (FigureError, StoreError, CampaignLocked) as e:
         err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import CampaignLocked, StoreError
+from .errors import CampaignLocked, StorageError, StoreError
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -80,17 +80,110 @@ def _fsync_dir(directory: Path) -> None:
             os.close(fd)
 
 
+#: errno -> what it means for a results folder.
+_CAUSES = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is exceeded",
+    errno.EROFS: "the filesystem is read-only",
+    errno.EFBIG: "the file size limit was reached",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+    errno.ENOENT: "the folder does not exist",
+    errno.ENOTDIR: "a part of the path is not a folder",
+    errno.EIO: "an input/output error of the storage",
+}
+#: Free space below which a failed write is put down to a full disk (bytes).
+NEARLY_FULL = 1 << 20
+
+
+def probe_write(folder: Path) -> OSError | None:
+    """Write (and remove) a small file in ``folder``; the error, or ``None`` if it works."""
+    probe = folder / f".probe.{uuid.uuid4().hex[:12]}{TMP_SUFFIX}"
+    try:
+        with open(probe, "wb") as f:
+            f.write(b"\0" * 65536)
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as e:
+        return e
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(probe)
+    return None
+
+
+def _existing(path: Path) -> Path:
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _read_only(path: Path) -> bool:
+    try:
+        return bool(os.statvfs(_existing(path.parent)).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
+def storage_cause(path: Path, exc: BaseException | None = None) -> str:
+    """Why ``path`` could not be written, in words, from the error (an ``OSError``'s errno)
+    or, when the error does not say (netCDF reports "HDF error"), from the folder itself:
+    read-only, nearly no free space, a file size limit (``ulimit -f``), a test write."""
+    import resource
+
+    if isinstance(exc, OSError) and exc.errno in (errno.EACCES, errno.EPERM, errno.ENOENT):
+        # some libraries (netCDF) report a read-only filesystem or a file in the way so
+        if _read_only(path):
+            return _CAUSES[errno.EROFS]
+        if not _existing(path.parent).is_dir():
+            return f"{_CAUSES[errno.ENOTDIR]} ({_existing(path.parent)} is a file)"
+    if isinstance(exc, OSError) and exc.errno in _CAUSES:
+        cause = _CAUSES[exc.errno]
+        if exc.errno == errno.EFBIG:
+            soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+            if soft != resource.RLIM_INFINITY:
+                cause += f" (ulimit -f: {soft} bytes)"
+        return cause
+    folder = _existing(path.parent)
+    try:
+        vfs = os.statvfs(folder)
+    except OSError:
+        vfs = None
+    if vfs is not None and vfs.f_flag & os.ST_RDONLY:
+        return _CAUSES[errno.EROFS]
+    if vfs is not None and vfs.f_bavail * vfs.f_frsize < NEARLY_FULL:
+        return f"the disk is full ({vfs.f_bavail * vfs.f_frsize} bytes free)"
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if soft != resource.RLIM_INFINITY:
+        return f"the file size limit was reached (ulimit -f: {soft} bytes)"
+    probe = probe_write(folder) if folder.is_dir() else None
+    if probe is not None and probe.errno in _CAUSES:
+        return _CAUSES[probe.errno]
+    if exc is not None:
+        return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    return "unknown cause"
+
+
+def storage_error(path: Path, exc: BaseException) -> StorageError:
+    """The :class:`StorageError` for a failed write of ``path``."""
+    return StorageError(f"cannot write {path}: {storage_cause(path, exc)}")
+
+
 @contextlib.contextmanager
 def atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary path; on success fsync it and rename it to ``path``."""
+    """Yield a temporary path; on success fsync it and rename it to ``path``. A failure to
+    write (an ``OSError``; netCDF's ``RuntimeError``) raises :class:`StorageError` naming
+    the path and the cause."""
     tmp = temporary_path(path)
     try:
         yield tmp
         with open(tmp, "rb+") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)
+    except (OSError, RuntimeError) as e:
+        raise storage_error(path, e) from e
     finally:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
     _fsync_dir(path.parent)
 
@@ -266,8 +359,12 @@ class CampaignLock:
     def acquire(self, command: str = "") -> None:
         import fcntl
 
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as e:
+            raise StorageError(f"cannot create the lock file {self.path}: "
+                               f"{storage_cause(self.path, e)}") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as e:
@@ -283,8 +380,9 @@ class CampaignLock:
             ) from None
         info = {"pid": os.getpid(), "host": socket.gethostname(), "started": now_iso(),
                 "command": command}
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
+        with contextlib.suppress(OSError):  # who holds it is a courtesy (a full disk...)
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
         self._fd = fd
 
     def release(self) -> None:
@@ -353,12 +451,17 @@ class CampaignStore:
         return CampaignLock(self.lock_path)
 
     def ensure(self) -> None:
+        """Create the folder and check that a file can be written in it (a test write: the
+        permission bits do not stop root, a read-only or full filesystem does)."""
         try:
             self.runs_dir.mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise StoreError(f"cannot create {self.runs_dir}: {e.strerror}") from None
-        if not os.access(self.runs_dir, os.W_OK):
-            raise StoreError(f"{self.runs_dir} is not writable")
+            raise StorageError(f"cannot create {self.runs_dir}: "
+                               f"{storage_cause(self.runs_dir, e)}") from None
+        problem = probe_write(self.runs_dir)
+        if problem is not None:
+            raise StorageError(f"cannot write in {self.runs_dir}: "
+                               f"{storage_cause(self.runs_dir / 'x', problem)}")
 
     # records
     def write_record(self, record: Mapping[str, Any]) -> None:
@@ -407,7 +510,7 @@ class CampaignStore:
                            for k in names}
         try:
             atomic_write_text(self.manifest_path, dumps(data))
-        except OSError as e:
+        except (OSError, StoreError) as e:
             log.debug("manifest not written: %s", e)
 
     def scan(self, *, save: bool = True) -> dict[str, Record]:

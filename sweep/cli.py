@@ -25,6 +25,7 @@ import click
 import typer
 from rich.console import Console
 from rich.logging import RichHandler
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -60,8 +61,8 @@ def _guarded(command: Callable[..., Any]) -> Callable[..., Any]:
             if DEBUG["on"] or kwargs.get("verbose"):
                 raise
             code, text = _describe_error(e)
-            _err_console().print(f"[bold red]error:[/] {text} (--debug shows the traceback)",
-                                 soft_wrap=True, highlight=False, markup=True)
+            _err_console().print(f"[bold red]error:[/] {escape(text)} (--debug shows the "
+                                 "traceback)", soft_wrap=True, highlight=False, markup=True)
             raise typer.Exit(code) from None
 
     return wrapper
@@ -165,7 +166,8 @@ def _load(console: Console, path: Path, settings: list[str] | None, seeds: str |
                               workers=workers)
         return load_campaign(path, overrides)
     except CampaignError as e:
-        console.print(f"[bold red]error:[/] {e}", highlight=False, markup=True, soft_wrap=True)
+        console.print(f"[bold red]error:[/] {escape(str(e))}", highlight=False, markup=True,
+                      soft_wrap=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
 
 
@@ -344,7 +346,7 @@ def run(
         store.ensure()
         lock.acquire(command=" ".join(sys.argv))
     except (CampaignLocked, StoreError) as e:
-        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     try:
         expansion = expand(c)
@@ -358,10 +360,10 @@ def run(
                 plan, summary = drive(expansion, store, retry_failed=retry_failed,
                                       verify=verify, events=events)
         except (ClusterError, StoreError) as e:
-            err.print(f"[bold red]error:[/] {e}", soft_wrap=True, highlight=False)
+            err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True, highlight=False)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
-            err.print(f"[bold red]error:[/] {_storage_message(store, e)}", soft_wrap=True,
+            err.print(f"[bold red]error:[/] {escape(_storage_message(store, e))}", soft_wrap=True,
                       highlight=False)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:  # before any run was submitted
@@ -371,7 +373,7 @@ def run(
             kept = [str(rec.get("saved_to")) for _, rec in summary.unsaved
                     if rec.get("saved_to")]
             err.print(f"[bold red]error: results cannot be written[/]: "
-                      f"{summary.storage_error}. "
+                      f"{escape(summary.storage_error)}. "
                       f"Stopped after {summary.completed} stored run(s) this session; the "
                       f"other runs stay pending (not failed). "
                       + (f"{len(kept)} computed result(s) kept in "
@@ -397,8 +399,9 @@ def run(
                     for figure in _regenerate_figures(c, results):
                         err.print(f"figure: {figure}")
             except StoreError as e:
-                err.print(f"[bold red]error:[/] {e}; the runs are stored, rerun the same "
-                          "command (or nematic aggregate) once the folder can be written",
+                err.print(f"[bold red]error:[/] {escape(str(e))}; the runs are stored, rerun "
+                          "the same command (or nematic aggregate) once the folder can be "
+                          "written",
                           soft_wrap=True, highlight=False)
                 raise typer.Exit(EXIT_BAD_INPUT) from None
         failures = [] if summary is None else summary.failed
@@ -573,7 +576,7 @@ def aggregate_cmd(
         finally:
             lock.release()
     except (CampaignLocked, StoreError) as e:
-        err.print(f"[bold red]error:[/] {e}", soft_wrap=True, highlight=False)
+        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True, highlight=False)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     Console(highlight=False, soft_wrap=True).print(
         f"wrote {store.phase_path}: {ds.attrs['n_ok']} ok, {ds.attrs['n_failed']} failed, "

@@ -12,6 +12,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from .cli import (
     EXIT_BAD_INPUT,
@@ -75,7 +76,7 @@ def figures(
             fits = True
         out = produce(c, results, names=only or None, fits=fits)
     except (FigureError, StoreError, CampaignLocked) as e:
-        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:
         console.print(f"fits: {out.fits_path}")

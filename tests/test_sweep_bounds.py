@@ -170,6 +170,9 @@ def test_commands_on_unusable_paths_give_one_message(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_bytes(b"\xff\xfe not text")
     assert_message(invoke("validate", bad), 2, "not a UTF-8 text file")
+    odd = tmp_path / "[red]x"  # a path that looks like console markup is printed as it is
+    odd.write_text("")
+    assert_message(invoke("status", campaign, "--results", odd), 2, "[red]x", "not a folder")
     # --debug lets the exception through (CliRunner keeps it; the program prints it)
     res = invoke("--debug", "status", campaign, "--results", blocker)
     assert res.exit_code != 0

@@ -536,6 +536,11 @@ def status(
             console.print(f"  {ex['run_id']} ({coords}): {ex['reason']}{at}"
                           + (f": {detail[-1]}" if detail else ""), soft_wrap=True)
         console.print(f"  (full records with tracebacks: {store.runs_dir}/<run_id>.json)")
+    if report.unreadable:
+        console.print(f"[yellow]{report.unreadable} run(s) pending because their file is "
+                      "missing, truncated or corrupt[/] (the next 'nematic run' redoes them):")
+        for ex in report.unreadable_examples:
+            console.print(f"  {ex['run_id']}: {ex['problem']}", markup=False)
     if report.foreign_runs:
         console.print(f"{report.foreign_runs} run record(s) in the folder belong to other "
                       "grids (kept, not counted)")

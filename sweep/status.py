@@ -49,6 +49,9 @@ class StatusReport:
     eta_basis: str = ""
     running: dict[str, Any] | None = None
     foreign_runs: int = 0
+    #: runs whose file is missing, truncated or corrupt (counted as pending: redone by `run`)
+    unreadable: int = 0
+    unreadable_examples: list[dict[str, str]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -76,10 +79,18 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     examples: list[dict[str, Any]] = []
     times: list[float] = []
     finished: list[str] = []
+    unreadable: list[dict[str, str]] = []
+    n_unreadable = 0
     for i, rid in enumerate(expansion.run_ids):
         rec = records.get(rid)
-        if rec is None or not store.is_complete(rid, rec):
-            continue  # the driver would redo it: pending
+        if rec is None:
+            continue
+        problem = store.check_run_file(rid, rec)
+        if problem is not None:  # the driver will redo it: pending
+            if len(unreadable) < MAX_EXAMPLES:
+                unreadable.append({"run_id": rid, "problem": problem})
+            n_unreadable += 1
+            continue
         if rec.get("status") != "ok" and rec.get("reason") in RETRYABLE_REASONS:
             continue
         if rec.get("status") == "ok":
@@ -116,7 +127,8 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     report = StatusReport(campaign=campaign.name, folder=str(store.root), total=n, done=done,
                           failed=failed, pending=pending, per_axis=per_axis,
                           reasons=dict(reasons.most_common()), examples=examples,
-                          foreign_runs=len(set(records) - set(expansion.position)))
+                          foreign_runs=len(set(records) - set(expansion.position)),
+                          unreadable=n_unreadable, unreadable_examples=unreadable)
     report.running = read_lock_holder(store.lock_path)
     if times:
         report.mean_run_time = float(np.mean(times))

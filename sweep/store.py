@@ -137,6 +137,8 @@ def storage_cause(path: Path, exc: BaseException | None = None) -> str:
             return _CAUSES[errno.EROFS]
         if not _existing(path.parent).is_dir():
             return f"{_CAUSES[errno.ENOTDIR]} ({_existing(path.parent)} is a file)"
+        if not path.parent.exists():
+            return f"the folder {path.parent} does not exist (deleted?)"
     if isinstance(exc, OSError) and exc.errno in _CAUSES:
         cause = _CAUSES[exc.errno]
         if exc.errno == errno.EFBIG:

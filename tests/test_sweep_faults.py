@@ -79,6 +79,9 @@ def test_a_corrupt_run_file_is_reported_and_redone(copy):
     rec["nc_bytes"] = "many"
     (copy.runs / f"{second}.json").write_text(json.dumps(rec))
     assert status_counts(copy) == (2, 2, 2)
+    shown = " ".join(invoke("status", copy.path, "--results", copy.results).output.split())
+    assert "2 run(s) pending because their file is missing, truncated or corrupt" in shown
+    assert f"{first}: its file is corrupt" in shown
     res = invoke("run", copy.path, "--results", copy.results, "--no-figures", "--workers", "1")
     out = " ".join(res.output.split())
     assert res.exit_code == 1, res.output  # the two earlier model failures stay failures
@@ -338,3 +341,30 @@ def test_a_scheduler_without_workers_gives_up_with_a_message(tmp_path):
     assert f"no dask worker joined the dask scheduler at {address} within 3 s" in out
     assert f"dask worker {address} --nthreads 1" in out
     assert not list((tmp_path / "results" / "lonely" / "runs").glob("*.json"))
+
+
+def test_no_command_answers_the_fault_matrix_with_a_traceback(copy):
+    """Every read-side fault at once (random bytes in phase.nc, fits.nc and a run file; a
+    manifest and a record that are not JSON; a record that is a list; a record whose nc_bytes
+    is a string): validate, status, aggregate and figures each answer with an exit code and
+    messages, and agree on what is done."""
+    ok = copy.ok
+    scramble(copy.phase, 2048)
+    (copy.phase.parent / "fits.nc").write_bytes(os.urandom(4096))
+    scramble(copy.runs / f"{ok[0]}.nc")
+    (copy.phase.parent / "manifest.json").write_text("{garbage")
+    (copy.runs / f"{ok[1]}.json").write_text("[1, 2, 3]")
+    (copy.runs / f"{ok[2]}.json").write_text("{not json")
+    rec = json.loads((copy.runs / f"{ok[3]}.json").read_text())
+    (copy.runs / f"{ok[3]}.json").write_text(json.dumps({**rec, "nc_bytes": "12"}))
+    for args in (["validate"], ["status"], ["status", "--json"], ["aggregate"], ["figures"]):
+        res = invoke(*args[:1], copy.path, *args[1:], "--results", copy.results)
+        assert res.exit_code in (0, 1, 2), (args, res.output)
+        assert isinstance(res.exception, SystemExit | type(None)), (args, repr(res.exception))
+        assert_no_traceback(res.output)
+    # the records that cannot be read leave their (intact) files to be adopted by the driver;
+    # the corrupt file and the malformed record are pending for status and aggregate alike
+    done, failed, pending = status_counts(copy)
+    assert (done, failed, pending) == (0, 2, 4)
+    with xr.open_dataset(copy.phase) as ds:
+        assert (ds.attrs["n_ok"], ds.attrs["n_failed"], ds.attrs["n_missing"]) == (0, 2, 4)

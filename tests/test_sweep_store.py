@@ -196,3 +196,27 @@ def test_clean_temporaries(tmp_path):
     assert young.exists()
     assert not old.exists()
     assert store.clean_temporaries() == 1
+
+
+def test_storage_cause_names_the_fault(tmp_path):
+    import errno
+    import resource
+
+    from sweep.store import storage_cause
+
+    target = tmp_path / "runs" / "a.nc"
+    target.parent.mkdir()
+    assert storage_cause(target, OSError(errno.ENOSPC, "x")) == "the disk is full"
+    assert storage_cause(target, OSError(errno.EROFS, "x")) == "the filesystem is read-only"
+    assert storage_cause(target, OSError(errno.EDQUOT, "x")) == "the disk quota is exceeded"
+    efbig = storage_cause(target, OSError(errno.EFBIG, "x"))
+    assert efbig.startswith("the file size limit was reached")
+    if resource.getrlimit(resource.RLIMIT_FSIZE)[0] == resource.RLIM_INFINITY:
+        # netCDF's "HDF error" says nothing: the folder is asked (writable here: the error)
+        assert storage_cause(target, RuntimeError("NetCDF: HDF error")) == \
+            "RuntimeError: NetCDF: HDF error"
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert "is a file" in storage_cause(blocker / "x.nc", OSError(errno.EACCES, "x"))
+    gone = tmp_path / "deleted" / "runs" / "a.nc"
+    assert "does not exist (deleted?)" in storage_cause(gone, OSError(errno.EACCES, "x"))

@@ -996,7 +996,7 @@ def run_memory_limit(campaign: Campaign) -> tuple[int | None, str]:
     worker's (``execution.memory_limit``; a dask-jobqueue job's ``memory`` over its
     ``processes``; on the local cluster the memory here over the workers). ``None`` when it
     is not known (an external scheduler without ``limits.run_memory``)."""
-    from .limits import available_memory, physical_memory
+    from .limits import available_memory
 
     if campaign.limits.run_memory is not None:
         return campaign.limits.run_memory, "limits.run_memory"
@@ -1011,7 +1011,7 @@ def run_memory_limit(campaign: Campaign) -> tuple[int | None, str]:
         return None, ""
     if ex.scheduler is not None:
         return None, ""
-    total = available_memory() if ex.workers is None else physical_memory()
+    total = available_memory()
     if total is None:
         return None, ""
     workers = ex.workers or max(1, (os.cpu_count() or 1) // ex.threads_per_worker)

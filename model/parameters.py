@@ -20,6 +20,10 @@ from typing import Any
 from .errors import ParameterError
 
 MECHANICS = ("finite", "linear")
+#: Most saved times (rows of the time series) and snapshots of one run.
+MAX_SAVES = 1_000_000
+#: Most time steps one run may need at its largest step (t_final / dt_max).
+MAX_STEPS = 10**8
 SCHEMES = ("etdrk4", "etdrk2")
 ERROR_NORMS = ("max", "rms")
 
@@ -232,7 +236,21 @@ class Numerics:
         if any(not 0 <= t <= self.t_final for t in snaps):
             raise ParameterError("snapshot_times", list(snaps),
                                  f"times between 0 and t_final = {self.t_final}")
+        if len(snaps) > MAX_SAVES:
+            raise ParameterError("snapshot_times", f"{len(snaps)} times",
+                                 f"at most {MAX_SAVES} snapshot times")
         object.__setattr__(self, "snapshot_times", snaps)
+        # Bounds on the work and the memory of one run, checked before anything is allocated.
+        if self.t_final / self.save_every > MAX_SAVES:
+            raise ParameterError(
+                "t_final", self.t_final, f"at most {MAX_SAVES} saved times: t_final / "
+                f"save_every <= {MAX_SAVES} (save_every = {self.save_every}; raise it)")
+        step = self.dt_max if self.adaptive else self.dt
+        if self.t_final / step > MAX_STEPS:
+            raise ParameterError(
+                "t_final", self.t_final, f"at most {MAX_STEPS:.0e} time steps of the largest "
+                f"step allowed: t_final / {'dt_max' if self.adaptive else 'dt'} <= "
+                f"{MAX_STEPS:.0e} ({'dt_max' if self.adaptive else 'dt'} = {step})")
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)

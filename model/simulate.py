@@ -25,7 +25,7 @@ from pde.trackers import CallbackTracker
 
 from . import __version__
 from . import tensors as T
-from .errors import SimulationFailure
+from .errors import ParameterError, SimulationFailure
 from .initial import initial_fields
 from .mechanics import LinearMechanics
 from .observables import first_peak, growth_peak, snapshot_observables
@@ -78,6 +78,8 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
         progress: Callable[[float], None] | None = None) -> xr.Dataset:
     """Simulate paper Eqs. (1)-(5) from the seeded initial condition; see module docstring."""
     check_compatible(params, numerics)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError("seed", seed, "an integer >= 0")
     wall0 = time.perf_counter()
     eq = ActiveNematicPDE(params, numerics)
     grid = eq.spectral

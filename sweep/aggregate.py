@@ -27,7 +27,7 @@ import xarray as xr
 from .expand import Expansion
 from .provenance import code_version, git_commit
 from .spec import AMB, NUMERICS_TYPES, PARAMETER_TYPES
-from .store import CampaignStore, Record, atomic_to_netcdf, now_iso
+from .store import RETRYABLE_REASONS, CampaignStore, Record, atomic_to_netcdf, now_iso
 
 log = logging.getLogger(__name__)
 
@@ -120,9 +120,10 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
     commits: set[str] = set()
     for i, rid in enumerate(expansion.run_ids):
         rec = records.get(rid)
-        if rec is None or (store is not None and not store.is_complete(rid, rec,
-                                                                       check_size=False)):
-            continue
+        if rec is None or (store is not None and not store.is_complete(rid, rec)):
+            continue  # missing (or unreadable: the driver redoes it)
+        if rec.get("status") != "ok" and rec.get("reason") in RETRYABLE_REASONS:
+            continue  # not stored: missing, not failed
         if rec.get("status") != "ok":
             status[i] = STATUS_FAILED
             reason[i] = str(rec.get("reason") or "unknown")

@@ -8,6 +8,7 @@ unreachable scheduler) or refused to start (the campaign is locked by another dr
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib
 import json
 import logging
@@ -16,13 +17,15 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
+import click
 import typer
 from rich.console import Console
 from rich.logging import RichHandler
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -37,7 +40,66 @@ from rich.table import Table
 from .errors import CampaignError, CampaignLocked, ClusterError, StoreError
 from .spec import Campaign, Overrides, load_campaign, parse_assignments, parse_value
 
-app = typer.Typer(
+EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: Show Python tracebacks of errors (``nematic --debug ...`` or ``NEMATIC_DEBUG=1``).
+DEBUG = {"on": False}
+
+
+def _guarded(command: Callable[..., Any]) -> Callable[..., Any]:
+    """A command that turns errors into one line on stderr instead of a traceback: bad
+    input, files that cannot be read or written and similar errors exit 2 (the file and
+    cause named), anything else exits 1 as an internal error. ``--debug`` (or a command's
+    ``--verbose``) lets the exception through, with its traceback."""
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except (typer.Exit, click.exceptions.ClickException, click.exceptions.Abort,
+                KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as e:
+            if DEBUG["on"] or kwargs.get("verbose"):
+                raise
+            code, text = _describe_error(e)
+            _err_console().print(f"[bold red]error:[/] {escape(text)} (--debug shows the "
+                                 "traceback)", soft_wrap=True, highlight=False, markup=True)
+            raise typer.Exit(code) from None
+
+    return wrapper
+
+
+def _describe_error(e: Exception) -> tuple[int, str]:
+    from model.errors import NematicError
+
+    from .store import storage_cause
+
+    if isinstance(e, NematicError):
+        return EXIT_BAD_INPUT, str(e)
+    if isinstance(e, MemoryError):
+        return EXIT_BAD_INPUT, ("not enough memory (lower the resolution, or give the process "
+                                "more memory)")
+    if isinstance(e, OSError):
+        where = str(e.filename) if e.filename else ""
+        cause = storage_cause(Path(where), e) if where else (e.strerror or str(e))
+        return EXIT_BAD_INPUT, f"{where + ': ' if where else ''}{cause}"
+    return EXIT_FAILED_RUNS, f"internal error: {type(e).__name__}: {' '.join(str(e).split())}"
+
+
+class _App(typer.Typer):
+    """A Typer whose commands are :func:`_guarded`."""
+
+    def command(self, *args: Any, **kwargs: Any  # type: ignore[override]
+                ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+        register = super().command(*args, **kwargs)
+
+        def decorator(f: Callable[..., Any]) -> Callable[..., Any]:
+            register(_guarded(f))
+            return f
+
+        return decorator
+
+
+app = _App(
     name="nematic",
     help="Active nematic solids: run the model, sweep it, aggregate phase diagrams.",
     no_args_is_help=True,
@@ -46,7 +108,15 @@ app = typer.Typer(
     rich_markup_mode="markdown",
 )
 
-EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+@app.callback()
+def _options(debug: Annotated[bool, typer.Option(
+        "--debug", envvar="NEMATIC_DEBUG",
+        help="Show the Python traceback of an error (by default one line says what went "
+        "wrong).")] = False) -> None:
+    """Active nematic solids: run the model, sweep it, aggregate phase diagrams."""
+    DEBUG["on"] = debug
+
 log = logging.getLogger("sweep.cli")
 
 # --------------------------------------------------------------------------- shared options
@@ -96,7 +166,8 @@ def _load(console: Console, path: Path, settings: list[str] | None, seeds: str |
                               workers=workers)
         return load_campaign(path, overrides)
     except CampaignError as e:
-        console.print(f"[bold red]error:[/] {e}", highlight=False, markup=True, soft_wrap=True)
+        console.print(f"[bold red]error:[/] {escape(str(e))}", highlight=False, markup=True,
+                      soft_wrap=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
 
 
@@ -183,9 +254,18 @@ class _ProgressEvents:
             f"campaign [bold]{c.name}[/]: {len(expansion)} runs ({c.n_points} points x "
             f"{len(c.seeds)} seeds); {len(plan.done)} done, {len(plan.failed)} failed{skipped}, "
             f"{len(plan.todo)} to run -> {self.store.root}", soft_wrap=True)
-        if plan.adopted or plan.discarded:
-            self.console.print(f"recovered {plan.adopted} unindexed run file(s); "
-                               f"{plan.discarded} truncated or missing file(s) will be redone")
+        if plan.unspooled:
+            self.console.print(f"moved {plan.unspooled} result(s) that could not be written "
+                               "before into the results folder")
+        if plan.adopted:
+            self.console.print(f"recovered {plan.adopted} unindexed run file(s)")
+        if plan.redone:
+            self.console.print(f"[yellow]{len(plan.redone)} run(s) will be redone[/] (their "
+                               "file is missing, truncated or corrupt):", soft_wrap=True)
+            for rid, why in plan.redone[:10]:
+                self.console.print(f"  {rid}: {why}", soft_wrap=True, markup=False)
+            if len(plan.redone) > 10:
+                self.console.print(f"  ... and {len(plan.redone) - 10} more")
 
     def started(self, plan: Any, total: int, workers: int) -> None:
         self.skipped = len(plan.done) + len(plan.failed)
@@ -235,6 +315,9 @@ def run(
         "core).")] = None,
     retry_failed: Annotated[bool, typer.Option(
         "--retry-failed", help="Also redo runs that failed before.")] = False,
+    verify: Annotated[bool, typer.Option(
+        "--verify", help="Checksum every finished run's file (by default only files whose "
+        "size or mtime changed are), and redo the corrupt ones.")] = False,
     aggregate: Annotated[bool, typer.Option(
         "--aggregate/--no-aggregate", help="Write phase.nc at the end.")] = True,
     figures: Annotated[bool, typer.Option(
@@ -263,7 +346,7 @@ def run(
         store.ensure()
         lock.acquire(command=" ".join(sys.argv))
     except (CampaignLocked, StoreError) as e:
-        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     try:
         expansion = expand(c)
@@ -275,13 +358,30 @@ def run(
         try:
             with _sigterm_as_interrupt(), progress:
                 plan, summary = drive(expansion, store, retry_failed=retry_failed,
-                                      events=events)
-        except ClusterError as e:
-            err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+                                      verify=verify, events=events)
+        except (ClusterError, StoreError) as e:
+            err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True, highlight=False)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
+            err.print(f"[bold red]error:[/] {escape(_storage_message(store, e))}", soft_wrap=True,
+                      highlight=False)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:  # before any run was submitted
             err.print("[yellow]interrupted[/]; rerun the same command to resume")
             raise typer.Exit(EXIT_INTERRUPTED) from None
+        if summary is not None and summary.storage_error is not None:
+            kept = [str(rec.get("saved_to")) for _, rec in summary.unsaved
+                    if rec.get("saved_to")]
+            err.print(f"[bold red]error: results cannot be written[/]: "
+                      f"{escape(summary.storage_error)}. "
+                      f"Stopped after {summary.completed} stored run(s) this session; the "
+                      f"other runs stay pending (not failed). "
+                      + (f"{len(kept)} computed result(s) kept in "
+                         f"{Path(kept[0]).parent} (moved in by the next run). " if kept
+                         else "")
+                      + "Fix the storage and rerun the same command.",
+                      soft_wrap=True, highlight=False)
+            raise typer.Exit(EXIT_BAD_INPUT)
         if summary is not None and summary.interrupted:
             err.print(f"[yellow]interrupted[/] after {summary.completed} run(s) "
                       f"({summary.ok} ok, {len(summary.failed)} failed); rerun the same "
@@ -291,11 +391,19 @@ def run(
             err.print(f"{summary.completed} run(s) in {_fmt_time(summary.wall_time)} "
                       f"(sum of run times {_fmt_time(summary.run_time)})")
         if aggregate:
-            write_phase(expansion, store)
-            err.print(f"phase diagram: {store.phase_path}")
-            if figures:
-                for figure in _regenerate_figures(c, results):
-                    err.print(f"figure: {figure}")
+            try:
+                write_phase(expansion, store)
+                err.print(f"phase diagram: {store.phase_path}")
+                if figures:
+                    repair_products(c, results, err, phase=False)
+                    for figure in _regenerate_figures(c, results):
+                        err.print(f"figure: {figure}")
+            except StoreError as e:
+                err.print(f"[bold red]error:[/] {escape(str(e))}; the runs are stored, rerun "
+                          "the same command (or nematic aggregate) once the folder can be "
+                          "written",
+                          soft_wrap=True, highlight=False)
+                raise typer.Exit(EXIT_BAD_INPUT) from None
         failures = [] if summary is None else summary.failed
         n_failed = len(failures) + len(plan.failed)
         if summary is not None and summary.lost:
@@ -316,6 +424,46 @@ def run(
             raise typer.Exit(EXIT_FAILED_RUNS)
     finally:
         lock.release()
+
+
+def _storage_message(store: Any, e: OSError) -> str:
+    from .store import storage_error
+
+    return str(storage_error(Path(e.filename) if e.filename else store.root, e))
+
+
+def repair_products(campaign: Campaign, results: Path, console: Console, *,
+                    phase: bool = True) -> bool:
+    """Before fits and figures are drawn: an unreadable ``phase.nc`` is rebuilt from the run
+    records (taking the campaign's lock) and an unreadable ``fits.nc`` removed (the fits
+    recompute it), each with a message. Returns whether ``fits.nc`` was removed. Raises
+    :class:`CampaignLocked` if a driver holds the campaign while phase.nc must be rebuilt."""
+    from .aggregate import write_phase
+    from .expand import expand
+    from .fits import FITS
+    from .store import CampaignStore, netcdf_problem
+
+    store = CampaignStore(results, campaign.name)
+    if phase and store.phase_path.exists():
+        problem = netcdf_problem(store.phase_path, ("status", "run_id"))
+        if problem is not None:
+            console.print(f"[yellow]{store.phase_path}: {problem}[/]; rebuilding it from the "
+                          "run records", soft_wrap=True, highlight=False)
+            lock = store.lock()
+            lock.acquire(command=" ".join(sys.argv))
+            try:
+                write_phase(expand(campaign), store)
+            finally:
+                lock.release()
+    fits_path = store.root / FITS
+    if fits_path.exists():
+        problem = netcdf_problem(fits_path)
+        if problem is not None:
+            console.print(f"[yellow]{fits_path}: {problem}[/]; removing it (the fits "
+                          "recompute it)", soft_wrap=True, highlight=False)
+            fits_path.unlink()
+            return True
+    return False
 
 
 def _regenerate_figures(campaign: Campaign, results: Path) -> list[Path]:
@@ -388,6 +536,11 @@ def status(
             console.print(f"  {ex['run_id']} ({coords}): {ex['reason']}{at}"
                           + (f": {detail[-1]}" if detail else ""), soft_wrap=True)
         console.print(f"  (full records with tracebacks: {store.runs_dir}/<run_id>.json)")
+    if report.unreadable:
+        console.print(f"[yellow]{report.unreadable} run(s) pending because their file is "
+                      "missing, truncated or corrupt[/] (the next 'nematic run' redoes them):")
+        for ex in report.unreadable_examples:
+            console.print(f"  {ex['run_id']}: {ex['problem']}", markup=False)
     if report.foreign_runs:
         console.print(f"{report.foreign_runs} run record(s) in the folder belong to other "
                       "grids (kept, not counted)")
@@ -423,13 +576,13 @@ def aggregate_cmd(
     lock = store.lock()
     try:
         lock.acquire(command=" ".join(sys.argv))
-    except CampaignLocked as e:
-        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        try:
+            ds = write_phase(expand(c), store)
+        finally:
+            lock.release()
+    except (CampaignLocked, StoreError) as e:
+        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True, highlight=False)
         raise typer.Exit(EXIT_BAD_INPUT) from None
-    try:
-        ds = write_phase(expand(c), store)
-    finally:
-        lock.release()
     Console(highlight=False, soft_wrap=True).print(
         f"wrote {store.phase_path}: {ds.attrs['n_ok']} ok, {ds.attrs['n_failed']} failed, "
         f"{ds.attrs['n_missing']} missing of {ds.attrs['n_runs']} runs")
@@ -458,7 +611,8 @@ def _register_plugins() -> None:
                 raise
             continue
         callback = getattr(module, command, None) if command else None
-        registered = {info.callback for info in app.registered_commands}
+        registered = {getattr(info.callback, "__wrapped__", info.callback)
+                      for info in app.registered_commands}
         if callable(callback) and callback not in registered:
             app.command()(callback)
 

@@ -12,6 +12,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from .cli import (
     EXIT_BAD_INPUT,
@@ -26,7 +27,10 @@ from .cli import (
     _load,
     _setup_logging,
     app,
+    repair_products,
 )
+from .errors import CampaignLocked, StoreError
+from .store import probe_write, storage_cause
 
 
 @app.command()
@@ -59,10 +63,20 @@ def figures(
     err = _err_console()
     _setup_logging(err, verbose)
     c = _load(err, campaign, set_, seeds, name)
+    root = results / c.name
+    problem = probe_write(root) if root.is_dir() else None
+    if problem is not None:
+        err.print(f"[bold red]error:[/] cannot write the fits and figures in {root}: "
+                  f"{storage_cause(root / 'figures', problem)}", soft_wrap=True,
+                  highlight=False)
+        raise typer.Exit(EXIT_BAD_INPUT)
     try:
+        if repair_products(c, results, err) and not fits:
+            err.print("fits.nc was unreadable: recomputing the fits despite --no-fits")
+            fits = True
         out = produce(c, results, names=only or None, fits=fits)
-    except FigureError as e:
-        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+    except (FigureError, StoreError, CampaignLocked) as e:
+        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:
         console.print(f"fits: {out.fits_path}")

@@ -7,19 +7,45 @@ Exit codes: 0 the run succeeded, 1 the run failed (the reason and time are print
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from model.errors import ParameterError
-from model.parameters import Numerics, Parameters, split_settings
+from model.parameters import Numerics, Parameters, check_compatible, split_settings
 
 from .cli import EXIT_BAD_INPUT, EXIT_FAILED_RUNS, app
-from .errors import CampaignError
-from .spec import parse_assignments
-from .store import atomic_to_netcdf
+from .errors import CampaignError, StoreError
+from .limits import available_memory, check_run_memory
+from .spec import MAX_SEED, parse_assignments
+from .store import atomic_to_netcdf, probe_write, storage_cause
+
+
+def output_problem(path: Path) -> str | None:
+    """What stops ``path`` from being written (checked before a run, not after it)."""
+    if path.is_dir():
+        return f"--out/--png {path} is a folder; give a file name"
+    parent = path.resolve().parent
+    if not parent.is_dir():
+        return f"the folder of {path} does not exist"
+    problem = probe_write(parent)
+    if problem is not None:
+        return f"cannot write {path}: {storage_cause(path, problem)}"
+    return None
+
+
+def _keep_elsewhere(ds: Any, out: Path) -> Path | None:
+    """Write a result whose ``--out`` failed to the temporary folder; its path or ``None``."""
+    import tempfile
+
+    path = Path(tempfile.gettempdir()) / f"nematic-unsaved-{out.name}"
+    try:
+        atomic_to_netcdf(ds, path)
+    except (OSError, StoreError):
+        return None
+    return path
 
 
 @app.command()
@@ -48,12 +74,17 @@ def simulate(
         pdict, ndict = split_settings(settings)
         params = Parameters.from_dict(pdict)
         numerics = Numerics.from_dict(ndict)
+        check_compatible(params, numerics)
+        if not 0 <= seed <= MAX_SEED:
+            raise ParameterError("seed", seed, f"an integer between 0 and {MAX_SEED}")
+        check_run_memory(numerics, available_memory(), "this machine's available memory")
     except (ParameterError, CampaignError, TypeError) as exc:
-        err.print(f"[red]error:[/red] {exc}")
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     for path in (out, png):
-        if path is not None and not path.resolve().parent.is_dir():
-            err.print(f"[red]error:[/red] the folder of {path} does not exist")
+        problem = None if path is None else output_problem(path)
+        if problem is not None:
+            err.print(f"[red]error:[/red] {problem}", highlight=False)
             raise typer.Exit(EXIT_BAD_INPUT)
 
     from model.simulate import run  # heavy import (py-pde) only when needed
@@ -74,11 +105,22 @@ def simulate(
         err.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out is not None:
-        atomic_to_netcdf(ds, out)
+        try:
+            atomic_to_netcdf(ds, out)
+        except StoreError as exc:
+            kept = _keep_elsewhere(ds, out)
+            err.print(f"[red]error:[/red] {exc}; "
+                      + (f"the result is kept in {kept}" if kept else
+                         "it could not be kept elsewhere either"), highlight=False)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
     if png is not None and ds.sizes.get("snapshot_time", 0):
         from .snapshot_plot import snapshot_figure
 
-        snapshot_figure(ds, png)
+        try:
+            snapshot_figure(ds, png)
+        except StoreError as exc:
+            err.print(f"[red]error:[/red] {exc}", highlight=False)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
     last = {k: float(ds[k].values[-1]) for k in ("sigma2_S", "cos2theta", "lambda")} \
         if ds.sizes["time"] else {}
     summary = ", ".join(f"{k} = {v:.4g}" for k, v in last.items())

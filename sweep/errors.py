@@ -44,5 +44,11 @@ class StoreError(NematicError, RuntimeError):
     """The results folder is unusable (not writable, not a campaign folder, ...)."""
 
 
+class StorageError(StoreError):
+    """A file of the results folder cannot be written: the disk is full, the filesystem is
+    read-only, a file size limit was reached, ... The message names the path and the cause.
+    Not a failure of the run: the run stays pending. Exit code 2."""
+
+
 class ClusterError(NematicError, RuntimeError):
     """The dask cluster cannot be reached or its workers cannot run the model. Exit code 2."""

@@ -30,13 +30,16 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from model.parameters import Numerics, Parameters
 
-from .errors import ClusterError
+from .errors import ClusterError, StorageError, StoreError
 from .expand import Expansion, RunSpec
 from .spec import CLUSTER_KINDS, ExecutionSpec, StoreSpec
 from .store import (
+    RETRYABLE_REASONS,
     CampaignStore,
     Record,
+    atomic_path,
     atomic_to_netcdf,
+    file_stamp,
     now_iso,
     record_from_dataset,
 )
@@ -112,11 +115,55 @@ def _failure(task: RunTask, reason: str, detail: str, tb: str, wall: float) -> R
             "finished": now_iso(), "host": socket.gethostname()}
 
 
+#: ``status`` of the record :func:`execute_run` returns (and does not write) when the
+#: result could not be stored: the run is not a failure, it stays pending.
+UNSAVED = "unsaved"
+
+
+def spool_dir(runs_dir: str | Path) -> Path:
+    """Where a worker keeps a result it could not write into ``runs_dir`` (a full or
+    read-only results disk): ``$NEMATIC_SPOOL`` or the temporary folder, one subfolder per
+    results folder. The driver moves what it finds there into the folder on the next run."""
+    import hashlib
+    import tempfile
+
+    runs = Path(runs_dir).resolve()
+    base = Path(os.environ.get("NEMATIC_SPOOL") or Path(tempfile.gettempdir()) / "nematic-unsaved")
+    tag = hashlib.sha256(str(runs).encode()).hexdigest()[:12]
+    return base / f"{runs.parent.name}-{tag}"
+
+
+def _unsaved(task: RunTask, error: StorageError, ds: xr.Dataset | None,
+             encoding: Mapping[str, Any], wall: float) -> Record:
+    """The record of a run whose result could not be written: kept in the spool if possible
+    (and the message says where), no record written (the run stays pending)."""
+    detail = str(error)
+    saved_to = None
+    if ds is not None:
+        path = spool_dir(task.runs_dir) / f"{task.run_id}.nc"
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_to_netcdf(ds, path, encoding)
+            saved_to = str(path)
+            detail += f"; the result is kept in {path} (moved into the results folder by " \
+                      "the next run)"
+        except (OSError, StoreError) as e:
+            detail += f"; it could not be kept elsewhere either ({e})"
+            with contextlib.suppress(OSError):
+                path.parent.rmdir()
+    record = _failure(task, "storage", detail, "", wall)
+    record.update(status=UNSAVED, saved_to=saved_to, storage_error=str(error))
+    return record
+
+
 def execute_run(task: RunTask) -> Record:
     """Run one simulation on a worker; write ``<run_id>.nc`` then ``<run_id>.json``
     atomically; return the record. A run the model reports as failed keeps its (partial)
     Dataset; a Python exception becomes a record with reason ``"exception"`` and the
-    traceback; a failure to write the file, reason ``"write_error"``."""
+    traceback. A result that cannot be stored (a :class:`StorageError`: disk full,
+    read-only, file size limit) is not a failure of the run: no record is written (the run
+    stays pending), the Dataset is kept in :func:`spool_dir` if possible, and the returned
+    record has status :data:`UNSAVED` with the cause (the driver stops)."""
     from model.simulate import run as simulate
 
     store = CampaignStore(Path(task.runs_dir).parent.parent, Path(task.runs_dir).parent.name)
@@ -128,18 +175,26 @@ def execute_run(task: RunTask) -> Record:
         record = _failure(task, "exception", f"{type(e).__name__}: {e}", traceback.format_exc(),
                           time.perf_counter() - t0)
     else:
+        encoding: dict[str, Any] = {}
         try:
             ds, encoding = prepare_dataset(ds, task)
-            nc_bytes = atomic_to_netcdf(ds, store.nc_path(task.run_id), encoding)
-            record = record_from_dataset(ds, task.run_id, nc_bytes)
+            path = store.nc_path(task.run_id)
+            atomic_to_netcdf(ds, path, encoding)
+            stamp = file_stamp(path)
+            record = record_from_dataset(ds, task.run_id, stamp["nc_bytes"], stamp)
             if record.get("wall_time") is None:
                 record["wall_time"] = time.perf_counter() - t0
-        except Exception as e:  # noqa: BLE001
+        except StorageError as e:
+            return _unsaved(task, e, ds, encoding, time.perf_counter() - t0)
+        except Exception as e:  # noqa: BLE001 - a bug, not the storage: recorded as failed
             record = _failure(task, "write_error", f"{type(e).__name__}: {e}",
                               traceback.format_exc(), time.perf_counter() - t0)
     record.update(parameters=task.parameters, numerics=task.numerics, coords=task.coords,
                   campaign=task.campaign, pid=os.getpid())
-    store.write_record(record)
+    try:
+        store.write_record(record)
+    except StorageError as e:
+        return _unsaved(task, e, None, {}, time.perf_counter() - t0)
     return record
 
 
@@ -162,38 +217,87 @@ class Plan:
     failed: list[int]
     records: dict[str, Record]
     adopted: int = 0
-    discarded: int = 0
+    #: results moved in from the spool (written elsewhere when the folder could not be)
+    unspooled: int = 0
+    #: runs whose record or file was unusable (missing, truncated, corrupt): (run_id, why)
+    redone: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def discarded(self) -> int:
+        return len(self.redone)
 
 
-def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False) -> Plan:
+def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
+              verify: bool = False) -> Plan:
     """Classify every run: done (skipped), failed (skipped unless ``retry_failed``), to do.
 
-    A record whose file is missing or has another size than recorded (truncated) is discarded
-    and its run redone; a ``.nc`` without a record is adopted if it opens, else deleted.
+    A record whose file is missing, truncated or corrupt (:meth:`CampaignStore.check_run_file`;
+    ``verify`` checksums every file) is discarded and its run redone; a ``.nc`` without a
+    record is adopted if it opens, else deleted; a record of a result that could not be
+    written (reason ``write_error``) is redone.
     """
+    unspooled = import_spool(store)
     records = store.scan()
-    plan = Plan(todo=[], done=[], failed=[], records=records)
+    plan = Plan(todo=[], done=[], failed=[], records=records, unspooled=unspooled)
     for i, rid in enumerate(expansion.run_ids):
         rec = records.get(rid)
         if rec is None and rid in store.nc_present:
             rec = store.adopt(rid)
             if rec is not None:
                 plan.adopted += 1
-        if rec is not None and not store.is_complete(rid, rec):
-            log.warning("run %s: its file is missing or truncated; it will be redone", rid)
+        problem = None if rec is None else store.check_run_file(rid, rec, verify=verify)
+        if rec is not None and problem is not None:
+            log.warning("run %s: %s; it will be redone", rid, problem)
             store.discard(rid)
             records.pop(rid, None)
-            plan.discarded += 1
+            plan.redone.append((rid, problem))
             rec = None
+        elif rec is not None and rec.get("nc_bytes") is not None and (
+                not rec.get("nc_sha256") or rec.get("nc_mtime_ns") != _mtime(store, rid)):
+            store.refresh_stamp(rid)  # intact, but copied or checksum-less: stat next time
         if rec is None:
             plan.todo.append(i)
         elif rec.get("status") == "ok":
             plan.done.append(i)
-        elif retry_failed:
+        elif retry_failed or rec.get("reason") in RETRYABLE_REASONS:
             plan.todo.append(i)
         else:
             plan.failed.append(i)
     return plan
+
+
+def import_spool(store: CampaignStore) -> int:
+    """Move the results the workers kept in :func:`spool_dir` (the folder could not be
+    written) into the results folder, where the plan adopts them; return how many. Raises
+    :class:`StorageError` if the folder still cannot be written."""
+    import shutil
+
+    spool = spool_dir(store.runs_dir)
+    try:
+        files = sorted(spool.glob("*.nc"))
+    except OSError:
+        return 0
+    n = 0
+    for src in files:
+        target = store.nc_path(src.stem)
+        if not target.exists() and store.read_record(src.stem) is None:
+            with atomic_path(target) as tmp:
+                shutil.copyfile(src, tmp)
+            n += 1
+        with contextlib.suppress(OSError):
+            src.unlink()
+    with contextlib.suppress(OSError):
+        spool.rmdir()
+    if n:
+        log.info("moved %d result(s) kept in %s into %s", n, spool, store.runs_dir)
+    return n
+
+
+def _mtime(store: CampaignStore, run_id: str) -> int | None:
+    try:
+        return store.nc_path(run_id).stat().st_mtime_ns
+    except OSError:
+        return None
 
 
 # --------------------------------------------------------------------------- clusters
@@ -299,6 +403,10 @@ class RunSummary:
     failed_before: int = 0
     #: runs whose dask task was cancelled under them (scheduler or cluster gone): no record
     lost: list[RunSpec] = field(default_factory=list)
+    #: why results cannot be stored (the driver stopped: the runs left stay pending)
+    storage_error: str | None = None
+    #: results that could not be written where they belong (kept elsewhere if possible)
+    unsaved: list[tuple[RunSpec, Record]] = field(default_factory=list)
     interrupted: bool = False
     wall_time: float = 0.0
     run_time: float = 0.0
@@ -333,6 +441,8 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client, pla
     t0 = clock()
     summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
                          failed_before=len(plan.failed))
+    if campaign.execution.mode != "local":
+        wait_for_workers(client, campaign.execution)
     try:
         info = client.run(worker_environment)
         workers = max(1, sum(client.nthreads().values()))
@@ -388,6 +498,15 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client, pla
                               coords=task.coords, campaign=task.campaign)
                 store.write_record(record)
             fut.release()
+            if record.get("status") == UNSAVED:
+                # The results folder cannot take results: stop instead of burning every run.
+                # The runs in flight are cancelled: they stay pending, as this one does.
+                summary.unsaved.append((run, record))
+                summary.storage_error = str(record.get("storage_error") or "")
+                queue.clear()
+                with contextlib.suppress(Exception):
+                    client.cancel(list(ac.futures))
+                break
             if record.get("status") == "ok":
                 summary.ok += 1
             else:
@@ -410,6 +529,41 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client, pla
     return summary
 
 
+#: While waiting for workers: a line this often (seconds).
+WAIT_REPORT_EVERY = 60.0
+
+
+def wait_for_workers(client: Client, execution: ExecutionSpec) -> None:
+    """Return once the cluster has a worker. Without one after ``execution.wait_for_workers``
+    seconds raise :class:`ClusterError` (0: wait for ever); say so every
+    :data:`WAIT_REPORT_EVERY` seconds meanwhile."""
+    limit = execution.wait_for_workers
+    where = (f"the dask scheduler at {execution.scheduler}" if execution.scheduler
+             else "the dask-jobqueue cluster")
+    t0 = time.monotonic()
+    last: float | None = None
+    step = 1.0  # the first look is short, so that the waiting line comes at once
+    while True:
+        left = limit - (time.monotonic() - t0) if limit else step
+        try:
+            client.wait_for_workers(1, timeout=max(0.5, min(step, left)))
+            return
+        except (TimeoutError, OSError):
+            step = 5.0
+        now = time.monotonic()
+        if last is None or now - last >= WAIT_REPORT_EVERY:
+            log.warning("waiting for a dask worker to join %s (%.0f s so far%s)", where,
+                        now - t0, f", giving up after {limit:g} s" if limit else "")
+            last = now
+        if limit and now - t0 >= limit:
+            hint = (f"start workers with `dask worker {execution.scheduler} --nthreads 1` "
+                    "from this package's environment" if execution.scheduler
+                    else "check the batch system's queue")
+            raise ClusterError(f"no dask worker joined {where} within {limit:g} s "
+                               f"(execution.wait_for_workers); {hint}, or raise the wait "
+                               "(0 waits for ever)")
+
+
 class DriveEvents(RunEvents, Protocol):
     def planned(self, plan: Plan, expansion: Expansion) -> None: ...
 
@@ -420,6 +574,7 @@ REMOTE_TMP_AGE = 600.0
 
 
 def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
+          verify: bool = False,
           events: DriveEvents | None = None) -> tuple[Plan, RunSummary | None]:
     """What ``nematic run`` does while holding the campaign's lock: clean up, record the
     campaign text, plan from disk, run what remains on the campaign's dask cluster and
@@ -430,7 +585,7 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
     store.save_campaign_text(campaign.text, campaign.overrides)
-    plan = plan_runs(expansion, store, retry_failed=retry_failed)
+    plan = plan_runs(expansion, store, retry_failed=retry_failed, verify=verify)
     if events:
         events.planned(plan, expansion)
     summary = None

@@ -36,6 +36,7 @@ import importlib
 import inspect
 import logging
 import math
+import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -48,11 +49,19 @@ import yaml
 from model.parameters import Numerics, Parameters
 
 from .errors import CampaignError, Problem
+from .limits import DEFAULT_MAX_RUNS, max_local_workers, parse_size
 
 log = logging.getLogger(__name__)
 
 TOP_KEYS = ("name", "description", "parameters", "numerics", "sweep", "seeds", "store", "fits",
-            "figures", "execution")
+            "figures", "execution", "limits")
+LIMITS_KEYS = ("max_runs", "run_memory")
+#: Largest campaign file read (bytes), and most YAML nodes after aliases are expanded: a
+#: file of anchors that refer to anchors (a "billion laughs") is refused before it is built.
+MAX_TEXT_BYTES = 4 * 2**20
+MAX_YAML_NODES = 100_000
+#: Most batch jobs of a dask-jobqueue cluster.
+MAX_JOBS = 100_000
 SWEEP_KEYS = ("axes", "zip")
 RANGE_KINDS = ("linspace", "logspace", "geomspace")
 RANGE_KEYS = ("start", "stop", "num")
@@ -60,7 +69,11 @@ STORE_KEYS = ("snapshot_times", "snapshot_fields", "snapshot_dtype")
 #: Snapshot variables of a run file (model.simulate.run contract).
 SNAPSHOT_FIELDS = ("q1", "q2", "A", "u1", "u2", "I1bar")
 SNAPSHOT_DTYPES = ("float64", "float32")
-EXECUTION_KEYS = ("workers", "threads_per_worker", "memory_limit", "scheduler", "cluster")
+EXECUTION_KEYS = ("workers", "threads_per_worker", "memory_limit", "scheduler", "cluster",
+                  "wait_for_workers")
+#: Default of ``execution.wait_for_workers``: how long a driver on an external scheduler or a
+#: batch cluster waits for its first worker before giving up (seconds).
+DEFAULT_WORKER_WAIT = 600.0
 CLUSTER_KINDS = {
     "slurm": "SLURMCluster", "pbs": "PBSCluster", "sge": "SGECluster", "lsf": "LSFCluster",
     "oar": "OARCluster", "moab": "MoabCluster", "htcondor": "HTCondorCluster",
@@ -164,6 +177,8 @@ class ExecutionSpec:
     memory_limit: str | None = None
     scheduler: str | None = None
     cluster: ClusterSpec | None = None
+    #: seconds to wait for a first worker (scheduler / cluster); 0: wait for ever
+    wait_for_workers: float = DEFAULT_WORKER_WAIT
 
     @property
     def mode(self) -> str:
@@ -171,6 +186,16 @@ class ExecutionSpec:
         if self.scheduler:
             return "scheduler"
         return "cluster" if self.cluster else "local"
+
+
+@dataclass(frozen=True)
+class LimitsSpec:
+    """Ceilings checked before the grid is built: ``max_runs`` (runs = product of the axis
+    lengths x seeds) and ``run_memory`` (bytes one run may use; default: what one worker
+    has, see :func:`run_memory_limit`)."""
+
+    max_runs: int = DEFAULT_MAX_RUNS
+    run_memory: int | None = None
 
 
 @dataclass(frozen=True)
@@ -190,6 +215,7 @@ class Campaign:
     fits: tuple[Product, ...]
     figures: tuple[Product, ...] | None
     execution: ExecutionSpec
+    limits: LimitsSpec = field(default_factory=lambda: LimitsSpec())
     source: str = "<string>"
     text: str = ""
     overrides: tuple[str, ...] = ()
@@ -282,6 +308,39 @@ def parse_assignments(items: Sequence[str]) -> dict[str, Any]:
     return out
 
 
+def _expanded_size(root: yaml.Node) -> int:
+    """How many nodes the document has once every alias is expanded (each distinct node is
+    visited once: linear in the file, whatever the expansion)."""
+    sizes: dict[int, int] = {}
+    open_: set[int] = set()  # being sized: meeting one again is a recursive alias
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        if id(node) in sizes:
+            continue
+        if isinstance(node, yaml.MappingNode):
+            children = [n for pair in node.value for n in pair]
+        elif isinstance(node, yaml.SequenceNode):
+            children = list(node.value)
+        else:
+            sizes[id(node)] = 1
+            continue
+        if done:
+            sizes[id(node)] = min(1 + sum(sizes[id(n)] for n in children), 2**62)
+            open_.discard(id(node))
+            continue
+        if id(node) in open_:
+            return 2**62  # a value that contains itself: infinitely large
+        open_.add(id(node))
+        stack.append((node, True))
+        for n in children:
+            if id(n) in open_:
+                return 2**62
+            if id(n) not in sizes:
+                stack.append((n, False))
+    return sizes[id(root)]
+
+
 def _walk(node: yaml.Node, path: Path_, lines: dict[Path_, int], dups: list[Path_]) -> None:
     lines[path] = node.start_mark.line + 1
     if isinstance(node, yaml.MappingNode):
@@ -305,6 +364,7 @@ class _Checker:
     def __init__(self, source: str, lines: dict[Path_, int], origins: dict[Path_, str]):
         self.source, self.lines, self.origins = source, lines, origins
         self.problems: list[Problem] = []
+        self.max_runs = DEFAULT_MAX_RUNS
 
     def location(self, path: Path_) -> str:
         for n in range(len(path), -1, -1):
@@ -442,6 +502,9 @@ def _range_values(c: _Checker, kind: str, spec: Any, path: Path_) -> list[Any] |
     if not _is_int(num) or num < 1:
         c.bad((*path, "num"), num, "an integer >= 1 (the number of values)")
         ok = False
+    elif num > c.max_runs:
+        c.bad((*path, "num"), num, f"at most {c.max_runs} values (limits.max_runs)")
+        ok = False
     if not ok:
         return None
     if kind == "linspace":
@@ -576,12 +639,16 @@ def _check_seeds(c: _Checker, raw: Any) -> tuple[int, ...]:
         if raw < 1:
             c.bad(path, raw, "a count >= 1, a list of seeds, or {count: N, start: S}")
             return ()
+        if raw > c.max_runs:
+            c.bad(path, raw, f"at most {c.max_runs} seeds (limits.max_runs)")
+            return ()
         return tuple(range(int(raw)))
     if isinstance(raw, Mapping):
         m = c.mapping(path, raw, ("count", "start"))
         count, start = m.get("count", DEFAULT_SEEDS), m.get("start", 0)
-        if not _is_int(count) or count < 1:
-            c.bad((*path, "count"), count, "an integer >= 1")
+        if not _is_int(count) or count < 1 or count > c.max_runs:
+            c.bad((*path, "count"), count, f"an integer from 1 to {c.max_runs} "
+                  "(limits.max_runs)")
             return ()
         if not _is_int(start) or start < 0 or start + count > MAX_SEED:
             c.bad((*path, "start"), start, "an integer >= 0")
@@ -689,12 +756,14 @@ def cluster_option_names(kind: str) -> list[str]:
 def _check_execution(c: _Checker, raw: Any) -> ExecutionSpec:
     ex = c.mapping(("execution",), raw, EXECUTION_KEYS)
     workers = ex.get("workers")
-    if workers is not None and (not _is_int(workers) or workers < 1):
-        c.bad(("execution", "workers"), workers, "an integer >= 1 (local worker processes)")
+    most = max_local_workers()
+    if workers is not None and (not _is_int(workers) or not 1 <= workers <= most):
+        c.bad(("execution", "workers"), workers, f"an integer from 1 to {most} (local worker "
+              f"processes; this machine has {os.cpu_count() or 1} core(s))")
         workers = None
     tpw = ex.get("threads_per_worker", 1)
-    if not _is_int(tpw) or tpw < 1:
-        c.bad(("execution", "threads_per_worker"), tpw, "an integer >= 1")
+    if not _is_int(tpw) or not 1 <= tpw <= most:
+        c.bad(("execution", "threads_per_worker"), tpw, f"an integer from 1 to {most}")
         tpw = 1
     memory = ex.get("memory_limit")
     if memory is not None and not isinstance(memory, (str, int)):
@@ -714,9 +783,14 @@ def _check_execution(c: _Checker, raw: Any) -> ExecutionSpec:
     if (scheduler or ex.get("cluster") is not None) and "workers" in ex:
         c.add(("execution", "workers"), "'workers' sizes the local cluster only; with "
               "'scheduler' the cluster is sized elsewhere, with 'cluster' use cluster.jobs")
+    wait = ex.get("wait_for_workers", DEFAULT_WORKER_WAIT)
+    if not _is_number(wait) or not 0 <= wait < math.inf:
+        c.bad(("execution", "wait_for_workers"), wait, "a number of seconds >= 0 (0: wait "
+              "for ever, with a line every minute)")
+        wait = DEFAULT_WORKER_WAIT
     return ExecutionSpec(workers=workers, threads_per_worker=int(tpw),
                          memory_limit=None if memory is None else str(memory),
-                         scheduler=scheduler, cluster=cluster)
+                         scheduler=scheduler, cluster=cluster, wait_for_workers=float(wait))
 
 
 def _check_cluster(c: _Checker, raw: Any) -> ClusterSpec | None:
@@ -731,8 +805,8 @@ def _check_cluster(c: _Checker, raw: Any) -> ClusterSpec | None:
         return None
     valid = cluster_option_names(kind)
     jobs = raw.get("jobs", 1)
-    if not _is_int(jobs) or jobs < 0:
-        c.bad((*path, "jobs"), jobs, "an integer >= 0 (batch jobs to submit)")
+    if not _is_int(jobs) or not 0 <= jobs <= MAX_JOBS:
+        c.bad((*path, "jobs"), jobs, f"an integer from 0 to {MAX_JOBS} (batch jobs to submit)")
         jobs = 1
     adapt = None
     if raw.get("adapt") is not None:
@@ -740,8 +814,9 @@ def _check_cluster(c: _Checker, raw: Any) -> ClusterSpec | None:
         lo, hi = a.get("minimum_jobs", 0), a.get("maximum_jobs")
         if not _is_int(lo) or lo < 0:
             c.bad((*path, "adapt", "minimum_jobs"), lo, "an integer >= 0")
-        elif not _is_int(hi) or hi < max(lo, 1):
-            c.bad((*path, "adapt", "maximum_jobs"), hi, f"an integer >= max(1, {lo})")
+        elif hi is None or not _is_int(hi) or not max(lo, 1) <= hi <= MAX_JOBS:
+            c.bad((*path, "adapt", "maximum_jobs"), hi,
+                  f"an integer from max(1, {lo}) to {MAX_JOBS}")
         else:
             adapt = (int(lo), int(hi))  # type: ignore[arg-type]  # checked by _is_int
     options = {}
@@ -805,18 +880,42 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     in the sweep are rejected here too.
     """
     overrides = overrides or Overrides()
+    if len(text) > MAX_TEXT_BYTES:
+        raise CampaignError(source, [Problem("", f"the file has {len(text)} characters; "
+                                             f"allowed: at most {MAX_TEXT_BYTES}", source)])
     try:
-        node = yaml.compose(text, Loader=_Loader)  # noqa: S506 - _Loader is a SafeLoader
-        doc = yaml.load(text, Loader=_Loader)  # noqa: S506
+        loader = _Loader(text)
+        try:
+            node = loader.get_single_node()
+            if node is not None:
+                size = _expanded_size(node)
+                if size > MAX_YAML_NODES:
+                    raise CampaignError(source, [Problem(
+                        "", f"the YAML expands to more than {MAX_YAML_NODES} values through "
+                        "its aliases (*name); allowed: a campaign without such nesting",
+                        f"{source}:{node.start_mark.line + 1}")])
+            doc = loader.construct_document(node) if node is not None else None
+        finally:
+            loader.dispose()
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
         msg = " ".join(str(getattr(e, "problem", None) or e).split())
         raise CampaignError(source, [Problem("", f"not valid YAML: {msg}", where)]) from None
+    except RecursionError:
+        raise CampaignError(source, [Problem("", "the YAML is nested too deeply", source)]
+                            ) from None
+    if node is None:
+        raise CampaignError(source, [Problem("", "the campaign file is empty; allowed: a "
+                                             "mapping with keys " + ", ".join(TOP_KEYS),
+                                             source)])
     lines: dict[Path_, int] = {}
     dups: list[Path_] = []
-    if node is not None:
+    try:
         _walk(node, (), lines, dups)
+    except RecursionError:
+        raise CampaignError(source, [Problem("", "the YAML is nested too deeply", source)]
+                            ) from None
     origins: dict[Path_, str] = {}
     c = _Checker(source, lines, origins)
     for d in dups:
@@ -831,6 +930,8 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
         if key not in TOP_KEYS:
             c.unknown((str(key),), key, TOP_KEYS)
     _apply_overrides(doc, overrides, origins, c)
+    limits = _check_limits(c, doc.get("limits"))
+    c.max_runs = limits.max_runs
 
     name = _check_name(c, doc.get("name", default_name), ("name",)) or "invalid"
     description = doc.get("description") or ""
@@ -856,13 +957,145 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     campaign = Campaign(
         name=name, description=description, parameters=params, numerics=numerics,
         dims=dims, seeds=seeds, store=store, fits=fits, figures=figures, execution=execution,
-        source=source, text=text, overrides=overrides.describe(),
+        limits=limits, source=source, text=text, overrides=overrides.describe(),
     )
+    # Sizes first, by arithmetic: nothing below is built for a grid that is too large.
+    if campaign.n_runs > limits.max_runs:
+        sizes = " x ".join(f"{len(d)} ({d.name})" for d in dims)
+        c.add(("sweep",) if dims else ("seeds",),
+              f"{campaign.n_runs} runs ({sizes + ' x ' if dims else ''}{len(seeds)} seeds); "
+              f"allowed: at most {limits.max_runs} (limits.max_runs)")
+    _check_memory(c, campaign)
+    _check_product_axes(c, campaign)
+    c.raise_if_any()
     from .expand import check_points  # local import: expand depends on this module
 
     check_points(campaign, c)
     c.raise_if_any()
     return campaign
+
+
+def _check_limits(c: _Checker, raw: Any) -> LimitsSpec:
+    lim = c.mapping(("limits",), raw, LIMITS_KEYS)
+    max_runs = lim.get("max_runs", DEFAULT_MAX_RUNS)
+    if not _is_int(max_runs) or max_runs < 1:
+        c.bad(("limits", "max_runs"), max_runs, "an integer >= 1 (the most runs a campaign "
+              "may have)")
+        max_runs = DEFAULT_MAX_RUNS
+    memory = None
+    if lim.get("run_memory") is not None:
+        memory = parse_size(lim["run_memory"])
+        if memory is None:
+            c.bad(("limits", "run_memory"), lim["run_memory"], "a size such as '8GB' (the "
+                  "most memory one run may need)")
+    return LimitsSpec(max_runs=int(max_runs), run_memory=memory)
+
+
+def run_memory_limit(campaign: Campaign) -> tuple[int | None, str]:
+    """The memory one run may use, and whose limit it is: ``limits.run_memory``, else the
+    worker's (``execution.memory_limit``; a dask-jobqueue job's ``memory`` over its
+    ``processes``; on the local cluster the memory here over the workers). ``None`` when it
+    is not known (an external scheduler without ``limits.run_memory``)."""
+    from .limits import available_memory
+
+    if campaign.limits.run_memory is not None:
+        return campaign.limits.run_memory, "limits.run_memory"
+    ex = campaign.execution
+    if ex.memory_limit is not None and parse_size(ex.memory_limit) is not None:
+        return parse_size(ex.memory_limit), "execution.memory_limit"
+    if ex.cluster is not None:
+        memory = parse_size(ex.cluster.options.get("memory"))
+        processes = ex.cluster.options.get("processes") or 1
+        if memory is not None and _is_int(processes) and processes >= 1:
+            return memory // int(processes), "execution.cluster memory / processes"
+        return None, ""
+    if ex.scheduler is not None:
+        return None, ""
+    total = available_memory()
+    if total is None:
+        return None, ""
+    workers = ex.workers or max(1, (os.cpu_count() or 1) // ex.threads_per_worker)
+    workers = min(workers, max(1, (os.cpu_count() or 1)))  # at most one run per core at once
+    per = total // (workers * ex.threads_per_worker)
+    return per, f"one local worker's share of this machine's memory ({workers} worker(s))"
+
+
+def _check_memory(c: _Checker, campaign: Campaign) -> None:
+    """Refuse a grid whose largest run needs more memory than a worker has (estimated from
+    the resolution and the mechanics: :func:`sweep.limits.run_memory_bytes`)."""
+    from .limits import fmt_bytes, run_memory_bytes
+
+    limit, what = run_memory_limit(campaign)
+    if limit is None:
+        return
+    axes = {a.name: a.values for a in campaign.axes}
+    resolutions = axes.get("resolution", (campaign.numerics.get("resolution",
+                                                                Numerics.resolution),))
+    mechanics = axes.get("mechanics", (campaign.numerics.get("mechanics",
+                                                             Numerics.mechanics),))
+    for n in resolutions:
+        for mech in mechanics:
+            if not _is_int(n) or n < 1:
+                continue  # the model's own check reports it
+            need = run_memory_bytes(int(n), str(mech))
+            if need > limit:
+                path: Path_ = (("sweep", "axes", "resolution") if "resolution" in axes
+                               else ("numerics", "resolution"))
+                c.add(path, f"got {n}: one run ({mech} mechanics) needs about "
+                      f"{fmt_bytes(need)}, more than {what} allows ({fmt_bytes(limit)}); "
+                      "allowed: a lower resolution, or more memory per run (limits.run_memory,"
+                      " execution.memory_limit, fewer workers)")
+                return
+
+
+#: Options of fits and figures that name a sweep axis, and those that map axes to values.
+AXIS_OPTIONS = ("axis", "activity", "strain")
+SELECT_OPTIONS = ("select", "snapshot")
+
+
+def _check_product_axes(c: _Checker, campaign: Campaign) -> None:
+    """Fits' and figures' options against the registries (unknown options, bad values) and
+    against the campaign's axes (an option that names an axis must name one of them)."""
+    names = [a.name for a in campaign.axes]
+    if AMB in names:
+        names.append("alpha")
+    for kind, products in (("fits", campaign.fits), ("figures", campaign.figures or ())):
+        for i, product in enumerate(products):
+            path: Path_ = (kind, i, product.name)
+            for problem in _registry_problems(kind, product):
+                c.add(path, problem)
+            options = product.options
+            for key in AXIS_OPTIONS:
+                value = options.get(key)
+                if value is not None and value not in names:
+                    c.bad((*path, key), value, "a sweep axis of this campaign ("
+                          + (", ".join(names) or "none") + ")"
+                          + (suggest(value, names) if isinstance(value, str) else ""))
+            chosen = [options.get(k) for k in SELECT_OPTIONS]
+            snaps = options.get("snapshots")
+            if isinstance(snaps, Sequence) and not isinstance(snaps, str):
+                chosen.extend(snaps)
+            for mapping in chosen:
+                if not isinstance(mapping, Mapping):
+                    continue
+                for axis in mapping:
+                    if axis not in names:
+                        c.bad((*path,), axis, "sweep axes of this campaign in select / "
+                              "snapshot options (" + (", ".join(names) or "none") + ")")
+
+
+def _registry_problems(kind: str, product: Product) -> list[str]:
+    try:
+        if kind == "figures":
+            from .figures import option_problems
+
+            return option_problems(product.name, product.options)
+        from .fits import REGISTRY, _problems
+
+        spec = REGISTRY.get(product.name)
+        return [] if spec is None else _problems(product.name, product.options, spec.options)
+    except ModuleNotFoundError:
+        return []
 
 
 def load_campaign(path: str | Path, overrides: Overrides | None = None) -> Campaign:

@@ -9,10 +9,13 @@
 
 Every file is written to a temporary name in the same folder and renamed into place
 (``os.replace`` is atomic on POSIX), so a file that exists is complete. A run counts as
-*done* when its record exists and, for a run that produced a Dataset, its ``.nc`` has the size
-the record states; a ``.nc`` without a record (the worker died between the two renames) is
-adopted if it opens and names the same run, deleted otherwise. The manifest is only a cache:
-a record whose file changed since (other mtime or size) or is missing from it is read again.
+*done* when its record exists and, for a run that produced a Dataset, its ``.nc`` is the file
+the worker wrote: the size the record states and, when the file's mtime is not the recorded
+one (or on ``--verify``), the recorded SHA-256 of its content
+(:meth:`CampaignStore.check_run_file`); a ``.nc`` without a record (the worker died between
+the two renames) is adopted if it opens and names the same run, deleted otherwise. The
+manifest is only a cache: a record whose file changed since (other mtime or size) or is
+missing from it is read again.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import errno
+import hashlib
 import json
 import logging
 import math
@@ -33,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import CampaignLocked, StoreError
+from .errors import CampaignLocked, StorageError, StoreError
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -46,11 +50,17 @@ PHASE = "phase.nc"
 LOCK = ".lock"
 CAMPAIGN_COPY = "campaign.yaml"
 TMP_SUFFIX = ".tmp"
-MANIFEST_VERSION = 3
+MANIFEST_VERSION = 4
 #: Record keys kept in the manifest (the sidecar also has traceback, parameters, numerics).
 MANIFEST_KEYS = ("status", "reason", "detail", "t_failed", "seed", "wall_time", "nc_bytes",
-                 "scalars", "code_version", "git_commit", "finished")
+                 "nc_sha256", "nc_mtime_ns", "scalars", "code_version", "git_commit",
+                 "finished")
+#: Variables every run file holds (checked when a file without a checksum is verified).
+RUN_FILE_VARIABLES = ("time", "sigma2_S")
 MAX_DETAIL = 500
+#: Reasons of records that say the result could not be stored, not that the run failed:
+#: such runs are redone by default (records of this kind are no longer written).
+RETRYABLE_REASONS = ("write_error",)
 
 Record = dict[str, Any]
 
@@ -70,17 +80,112 @@ def _fsync_dir(directory: Path) -> None:
             os.close(fd)
 
 
+#: errno -> what it means for a results folder.
+_CAUSES = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is exceeded",
+    errno.EROFS: "the filesystem is read-only",
+    errno.EFBIG: "the file size limit was reached",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+    errno.ENOENT: "the folder does not exist",
+    errno.ENOTDIR: "a part of the path is not a folder",
+    errno.EIO: "an input/output error of the storage",
+}
+#: Free space below which a failed write is put down to a full disk (bytes).
+NEARLY_FULL = 1 << 20
+
+
+def probe_write(folder: Path) -> OSError | None:
+    """Write (and remove) a small file in ``folder``; the error, or ``None`` if it works."""
+    probe = folder / f".probe.{uuid.uuid4().hex[:12]}{TMP_SUFFIX}"
+    try:
+        with open(probe, "wb") as f:
+            f.write(b"\0" * 65536)
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as e:
+        return e
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(probe)
+    return None
+
+
+def _existing(path: Path) -> Path:
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _read_only(path: Path) -> bool:
+    try:
+        return bool(os.statvfs(_existing(path.parent)).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
+def storage_cause(path: Path, exc: BaseException | None = None) -> str:
+    """Why ``path`` could not be written, in words, from the error (an ``OSError``'s errno)
+    or, when the error does not say (netCDF reports "HDF error"), from the folder itself:
+    read-only, nearly no free space, a file size limit (``ulimit -f``), a test write."""
+    import resource
+
+    if isinstance(exc, OSError) and exc.errno in (errno.EACCES, errno.EPERM, errno.ENOENT):
+        # some libraries (netCDF) report a read-only filesystem or a file in the way so
+        if _read_only(path):
+            return _CAUSES[errno.EROFS]
+        if not _existing(path.parent).is_dir():
+            return f"{_CAUSES[errno.ENOTDIR]} ({_existing(path.parent)} is a file)"
+        if not path.parent.exists():
+            return f"the folder {path.parent} does not exist (deleted?)"
+    if isinstance(exc, OSError) and exc.errno in _CAUSES:
+        cause = _CAUSES[exc.errno]
+        if exc.errno == errno.EFBIG:
+            soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+            if soft != resource.RLIM_INFINITY:
+                cause += f" (ulimit -f: {soft} bytes)"
+        return cause
+    folder = _existing(path.parent)
+    try:
+        vfs = os.statvfs(folder)
+    except OSError:
+        vfs = None
+    if vfs is not None and vfs.f_flag & os.ST_RDONLY:
+        return _CAUSES[errno.EROFS]
+    if vfs is not None and vfs.f_bavail * vfs.f_frsize < NEARLY_FULL:
+        return f"the disk is full ({vfs.f_bavail * vfs.f_frsize} bytes free)"
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if soft != resource.RLIM_INFINITY:
+        return f"the file size limit was reached (ulimit -f: {soft} bytes)"
+    probe = probe_write(folder) if folder.is_dir() else None
+    if probe is not None and probe.errno in _CAUSES:
+        return _CAUSES[probe.errno]
+    if exc is not None:
+        return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    return "unknown cause"
+
+
+def storage_error(path: Path, exc: BaseException) -> StorageError:
+    """The :class:`StorageError` for a failed write of ``path``."""
+    return StorageError(f"cannot write {path}: {storage_cause(path, exc)}")
+
+
 @contextlib.contextmanager
 def atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary path; on success fsync it and rename it to ``path``."""
+    """Yield a temporary path; on success fsync it and rename it to ``path``. A failure to
+    write (an ``OSError``; netCDF's ``RuntimeError``) raises :class:`StorageError` naming
+    the path and the cause."""
     tmp = temporary_path(path)
     try:
         yield tmp
         with open(tmp, "rb+") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)
+    except (OSError, RuntimeError) as e:
+        raise storage_error(path, e) from e
     finally:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
     _fsync_dir(path.parent)
 
@@ -142,6 +247,41 @@ def atomic_to_netcdf(ds: xr.Dataset, path: Path,
     return size
 
 
+# --------------------------------------------------------------------------- file checks
+def file_sha256(path: Path) -> str:
+    """The SHA-256 of a file's content (hex), read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(1 << 20):
+            h.update(block)
+    return h.hexdigest()
+
+
+def file_stamp(path: Path) -> dict[str, Any]:
+    """What a run's record says about its file, to recognise it later: size, mtime and
+    SHA-256 (``nc_bytes``, ``nc_mtime_ns``, ``nc_sha256``)."""
+    st = path.stat()
+    return {"nc_bytes": st.st_size, "nc_mtime_ns": st.st_mtime_ns,
+            "nc_sha256": file_sha256(path)}
+
+
+def netcdf_problem(path: Path, variables: Iterable[str] = ()) -> str | None:
+    """Why ``path`` is not a readable netCDF holding ``variables`` (``None`` if it is one):
+    a header read, no data is loaded."""
+    import netCDF4
+
+    try:
+        with netCDF4.Dataset(path, "r") as nc:
+            missing = [v for v in variables if v not in nc.variables]
+    except FileNotFoundError:
+        return "the file is missing"
+    except Exception as e:  # noqa: BLE001 - any failure to open means unreadable
+        return f"unreadable ({type(e).__name__}: {' '.join(str(e).split())})"
+    if missing:
+        return f"it lacks the variable(s) {', '.join(missing)}"
+    return None
+
+
 # --------------------------------------------------------------------------- run records
 def now_iso() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
@@ -164,8 +304,10 @@ def scalars_of(ds: xr.Dataset) -> dict[str, float]:
     return out
 
 
-def record_from_dataset(ds: xr.Dataset, run_id: str, nc_bytes: int | None) -> Record:
-    """The record of a run from its Dataset (the worker, or adoption of an unindexed file)."""
+def record_from_dataset(ds: xr.Dataset, run_id: str, nc_bytes: int | None,
+                        stamp: Mapping[str, Any] | None = None) -> Record:
+    """The record of a run from its Dataset (the worker, or adoption of an unindexed file);
+    ``stamp`` (:func:`file_stamp`) identifies the file written."""
     a = ds.attrs
     status = str(a.get("status", "ok")) or "ok"
     t_failed = _float(a.get("t_failed", math.nan))
@@ -180,12 +322,21 @@ def record_from_dataset(ds: xr.Dataset, run_id: str, nc_bytes: int | None) -> Re
         "seed": int(a["seed"]) if "seed" in a else None,
         "wall_time": scalars.get("wall_time"),
         "nc_bytes": nc_bytes,
+        "nc_sha256": (stamp or {}).get("nc_sha256"),
+        "nc_mtime_ns": (stamp or {}).get("nc_mtime_ns"),
         "scalars": scalars,
         "code_version": str(a.get("code_version", "")),
         "git_commit": str(a.get("git_commit", "")),
         "finished": now_iso(),
         "host": socket.gethostname(),
     }
+
+
+def _is_count(value: Any) -> bool:
+    """A byte count: a non-negative whole number (not a bool, not a string)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    return math.isfinite(value) and value >= 0 and float(value).is_integer()
 
 
 def slim(record: Mapping[str, Any], stamp: list[int]) -> Record:
@@ -210,8 +361,12 @@ class CampaignLock:
     def acquire(self, command: str = "") -> None:
         import fcntl
 
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as e:
+            raise StorageError(f"cannot create the lock file {self.path}: "
+                               f"{storage_cause(self.path, e)}") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as e:
@@ -227,8 +382,9 @@ class CampaignLock:
             ) from None
         info = {"pid": os.getpid(), "host": socket.gethostname(), "started": now_iso(),
                 "command": command}
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
+        with contextlib.suppress(OSError):  # who holds it is a courtesy (a full disk...)
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
         self._fd = fd
 
     def release(self) -> None:
@@ -297,12 +453,17 @@ class CampaignStore:
         return CampaignLock(self.lock_path)
 
     def ensure(self) -> None:
+        """Create the folder and check that a file can be written in it (a test write: the
+        permission bits do not stop root, a read-only or full filesystem does)."""
         try:
             self.runs_dir.mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise StoreError(f"cannot create {self.runs_dir}: {e.strerror}") from None
-        if not os.access(self.runs_dir, os.W_OK):
-            raise StoreError(f"{self.runs_dir} is not writable")
+            raise StorageError(f"cannot create {self.runs_dir}: "
+                               f"{storage_cause(self.runs_dir, e)}") from None
+        problem = probe_write(self.runs_dir)
+        if problem is not None:
+            raise StorageError(f"cannot write in {self.runs_dir}: "
+                               f"{storage_cause(self.runs_dir / 'x', problem)}")
 
     # records
     def write_record(self, record: Mapping[str, Any]) -> None:
@@ -310,9 +471,10 @@ class CampaignStore:
 
     def read_record(self, run_id: str) -> Record | None:
         try:
-            return dict(json.loads(self.record_path(run_id).read_text(encoding="utf-8")))
-        except (FileNotFoundError, ValueError):
+            data = json.loads(self.record_path(run_id).read_text(encoding="utf-8"))
+        except (OSError, ValueError):  # missing, unreadable, not JSON: no record
             return None
+        return dict(data) if isinstance(data, dict) else None
 
     def load_manifest(self) -> dict[str, Record]:
         """The cached records (columnar JSON: one list per key, one entry per run)."""
@@ -350,7 +512,7 @@ class CampaignStore:
                            for k in names}
         try:
             atomic_write_text(self.manifest_path, dumps(data))
-        except OSError as e:
+        except (OSError, StoreError) as e:
             log.debug("manifest not written: %s", e)
 
     def scan(self, *, save: bool = True) -> dict[str, Record]:
@@ -395,20 +557,64 @@ class CampaignStore:
             self.save_manifest(records)
         return records
 
-    def is_complete(self, run_id: str, record: Mapping[str, Any] | None, *,
-                    check_size: bool = True) -> bool:
-        """Whether ``record`` stands for a finished run whose file (if any) is intact."""
-        if record is None:
-            return False
+    def check_run_file(self, run_id: str, record: Mapping[str, Any], *,
+                       verify: bool = False) -> str | None:
+        """Why the run of ``record`` does not count as done (``None`` if it does).
+
+        A run that raised has no file: its record is all there is. Otherwise its ``.nc`` must
+        have the recorded size; if its mtime is not the recorded one (or ``verify``), its
+        content must have the recorded SHA-256 (records written before checksums existed:
+        the file must open and hold the run's variables). One ``stat`` per run when nothing
+        changed, so ``status`` and the driver's plan stay cheap for 10^5 runs."""
         nc_bytes = record.get("nc_bytes")
-        if nc_bytes is None:  # a run that raised: the record is all there is
-            return record.get("status") == "failed"
-        if not check_size:
-            return run_id in self.nc_present
+        if nc_bytes is None:
+            if record.get("status") == "failed":
+                return None
+            return "its record names no run file"
+        if not _is_count(nc_bytes):
+            return f"its record is malformed (nc_bytes = {nc_bytes!r})"
+        path = self.nc_path(run_id)
         try:
-            return self.nc_path(run_id).stat().st_size == int(nc_bytes)
-        except FileNotFoundError:
-            return False
+            st = path.stat()
+        except OSError:
+            return "its file is missing"
+        if st.st_size != int(nc_bytes):
+            return (f"its file has {st.st_size} bytes, not the {int(nc_bytes)} recorded "
+                    "(truncated or overwritten)")
+        if not verify and record.get("nc_mtime_ns") == st.st_mtime_ns:
+            return None
+        sha = record.get("nc_sha256")
+        if isinstance(sha, str) and sha:
+            try:
+                if file_sha256(path) != sha:
+                    return ("its file is corrupt (its content is not the one checksummed "
+                            "when it was written)")
+            except OSError as e:
+                return f"its file cannot be read ({e.strerror or e})"
+            return None
+        problem = netcdf_problem(path, RUN_FILE_VARIABLES)
+        return None if problem is None else f"its file: {problem}"
+
+    def is_complete(self, run_id: str, record: Mapping[str, Any] | None, *,
+                    verify: bool = False) -> bool:
+        """Whether ``record`` stands for a finished run whose file (if any) is intact
+        (:meth:`check_run_file`)."""
+        return record is not None and self.check_run_file(run_id, record,
+                                                          verify=verify) is None
+
+    def refresh_stamp(self, run_id: str) -> None:
+        """After :meth:`check_run_file` accepted a file whose mtime changed (a copy, a
+        restore) or that has no checksum yet (an older record): record its current mtime
+        and checksum, so the next check is a ``stat`` again. Best effort."""
+        full = self.read_record(run_id)
+        if full is None:
+            return
+        path = self.nc_path(run_id)
+        try:
+            full.update(file_stamp(path))
+            self.write_record(full)
+        except (OSError, StoreError) as e:
+            log.debug("record of %s not refreshed: %s", run_id, e)
 
     def adopt(self, run_id: str) -> Record | None:
         """Index a ``.nc`` that has no record (its worker died before writing it): keep it if
@@ -423,7 +629,8 @@ class CampaignStore:
                 ds.load()
                 if str(ds.attrs.get("run_id", "")) != run_id:
                     raise ValueError(f"it names run {ds.attrs.get('run_id')!r}")
-                record = record_from_dataset(ds, run_id, path.stat().st_size)
+                stamp = file_stamp(path)
+                record = record_from_dataset(ds, run_id, stamp["nc_bytes"], stamp)
         except Exception as e:  # noqa: BLE001 - any unreadable file is simply redone
             log.warning("removing unreadable run file %s (%s)", path, e)
             with contextlib.suppress(FileNotFoundError):

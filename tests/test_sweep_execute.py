@@ -6,11 +6,9 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 import signal
 import subprocess
 import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -37,23 +35,8 @@ def invoke(*args: str):
     return CliRunner().invoke(app, [str(a) for a in args])
 
 
-@pytest.fixture(scope="session")
-def small(tmp_path_factory):
-    """The small campaign (3 alpha - B values x 2 seeds, one value failing), run once."""
-    folder = tmp_path_factory.mktemp("small")
-    path = write_campaign(folder)
-    result = invoke("run", path, "--results", folder / "results")
-    return SimpleNamespace(path=path, results=folder / "results", result=result,
-                           runs=folder / "results" / "small" / "runs", ids=run_ids(path))
-
-
-@pytest.fixture
-def copy_of_small(small, tmp_path):
-    """A private copy of the small campaign's results (for tests that change them)."""
-    shutil.copytree(small.results, tmp_path / "results", symlinks=True)
-    path = shutil.copy(small.path, tmp_path / "small.yaml")
-    return SimpleNamespace(path=Path(path), results=tmp_path / "results",
-                           runs=tmp_path / "results" / "small" / "runs", ids=small.ids)
+# `small` (the campaign run once) and `copy_of_small` are in conftest.py: shared with
+# test_sweep_faults.py.
 
 
 def test_failed_runs_are_recorded_and_exit_1(small):

@@ -19,6 +19,7 @@ from sweep.store import (
     CampaignStore,
     atomic_to_netcdf,
     atomic_write_text,
+    file_stamp,
     netcdf_attr,
     read_lock_holder,
 )
@@ -130,15 +131,47 @@ def test_scan_caches_records_and_sees_changes(tmp_path):
 def test_is_complete_checks_the_file(tmp_path):
     store = CampaignStore(tmp_path, "c")
     store.ensure()
-    store.write_record(record("a"))
-    assert not store.is_complete("a", store.read_record("a"))  # no file
-    (store.runs_dir / "a.nc").write_bytes(b"x" * 5)
-    assert not store.is_complete("a", store.read_record("a"))  # truncated
-    (store.runs_dir / "a.nc").write_bytes(b"x" * 10)
+    path = store.runs_dir / "a.nc"
+    atomic_to_netcdf(dataset().rename(field="sigma2_S").assign_coords(time=[0.0]), path)
+    rec = {**record("a"), **file_stamp(path)}
+    store.write_record(rec)
     assert store.is_complete("a", store.read_record("a"))
+    content = path.read_bytes()
+    path.write_bytes(content[:100])
+    assert "truncated" in store.check_run_file("a", rec)
+    path.unlink()
+    assert "missing" in store.check_run_file("a", rec)
+    # same size, other bytes: the mtime changed, so the checksum is compared
+    path.write_bytes(b"\0" * 4096 + content[4096:])
+    assert "corrupt" in store.check_run_file("a", rec)
+    # ... even when the mtime is put back, on --verify
+    os.utime(path, ns=(rec["nc_mtime_ns"], rec["nc_mtime_ns"]))
+    assert store.check_run_file("a", rec) is None
+    assert "corrupt" in store.check_run_file("a", rec, verify=True)
+    # intact content with a new mtime (a copy): accepted, and the record refreshed
+    path.write_bytes(content)
+    assert store.check_run_file("a", rec) is None
+    store.refresh_stamp("a")
+    assert store.read_record("a")["nc_mtime_ns"] == path.stat().st_mtime_ns
+    # a record without a checksum (older records): the file must open and hold the run
+    legacy = {k: v for k, v in rec.items() if k not in ("nc_sha256", "nc_mtime_ns")}
+    assert store.check_run_file("a", legacy) is None
+    path.write_bytes(b"\0" * 4096 + content[4096:])
+    assert "unreadable" in store.check_run_file("a", legacy)
+    for bad in ("abc", "10", -1, 1.5, True, [10]):
+        assert "malformed" in store.check_run_file("a", {**rec, "nc_bytes": bad})
     crashed = record("b", status="failed", nc_bytes=None)  # raised: the record is all
     assert store.is_complete("b", crashed)
     assert not store.is_complete("c", None)
+
+
+def test_unreadable_records_are_no_records(tmp_path):
+    store = CampaignStore(tmp_path, "c")
+    store.ensure()
+    for text in ("{not json", "[1, 2]", "3", "null", "\udcff"):
+        store.record_path("a").write_text(text, errors="surrogateescape")
+        assert store.read_record("a") is None
+        assert store.scan() == {}
 
 
 def test_adopt_rejects_unreadable_files(tmp_path):
@@ -163,3 +196,27 @@ def test_clean_temporaries(tmp_path):
     assert young.exists()
     assert not old.exists()
     assert store.clean_temporaries() == 1
+
+
+def test_storage_cause_names_the_fault(tmp_path):
+    import errno
+    import resource
+
+    from sweep.store import storage_cause
+
+    target = tmp_path / "runs" / "a.nc"
+    target.parent.mkdir()
+    assert storage_cause(target, OSError(errno.ENOSPC, "x")) == "the disk is full"
+    assert storage_cause(target, OSError(errno.EROFS, "x")) == "the filesystem is read-only"
+    assert storage_cause(target, OSError(errno.EDQUOT, "x")) == "the disk quota is exceeded"
+    efbig = storage_cause(target, OSError(errno.EFBIG, "x"))
+    assert efbig.startswith("the file size limit was reached")
+    if resource.getrlimit(resource.RLIMIT_FSIZE)[0] == resource.RLIM_INFINITY:
+        # netCDF's "HDF error" says nothing: the folder is asked (writable here: the error)
+        assert storage_cause(target, RuntimeError("NetCDF: HDF error")) == \
+            "RuntimeError: NetCDF: HDF error"
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert "is a file" in storage_cause(blocker / "x.nc", OSError(errno.EACCES, "x"))
+    gone = tmp_path / "deleted" / "runs" / "a.nc"
+    assert "does not exist (deleted?)" in storage_cause(gone, OSError(errno.EACCES, "x"))

@@ -1,0 +1,95 @@
+"""Bounds checked before anything is expanded, allocated or run: how many runs a campaign may
+have, how much memory one run needs, how many workers a machine can take.
+
+A run's memory is estimated from its resolution N: the interpreter with the model imported
+(:data:`BASE_BYTES`) plus a number of N x N float64 arrays that depends on the mechanics
+(:data:`ARRAYS_PER_POINT`). Measured peak RSS of ``model.simulate.run`` (t_final = 0.2): the
+bare interpreter with the model imported 230 MB; linear mechanics 281 / 293 / 341 MB and
+finite 286 / 306 / 372 MB at N = 64 / 128 / 256, i.e. about 124 (linear) and 172 (finite)
+float64 arrays of N x N above 280 MB; the constants add a margin. The estimate only has to
+be right within a factor of about two: it exists to refuse N = 100000 (75 GiB per array) in
+a second instead of letting the allocation fail after minutes, or the machine swap.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+from typing import Any
+
+from model.errors import ParameterError
+
+#: Default ceiling on the runs of one campaign (``limits.max_runs`` changes it).
+DEFAULT_MAX_RUNS = 1_000_000
+#: Local worker processes allowed per CPU core.
+MAX_WORKERS_PER_CORE = 4
+#: Peak memory of a run without its arrays: the interpreter, numpy, xarray, py-pde, numba.
+BASE_BYTES = 400 * 2**20
+#: Peak memory per grid point of a run, in float64 arrays of N x N (measured, with margin).
+ARRAYS_PER_POINT = {"linear": 160, "finite": 220}
+
+
+def run_memory_bytes(resolution: int, mechanics: str = "finite") -> int:
+    """The estimated peak memory of one run at ``resolution`` (bytes)."""
+    arrays = ARRAYS_PER_POINT.get(mechanics, max(ARRAYS_PER_POINT.values()))
+    return BASE_BYTES + arrays * 8 * int(resolution) ** 2
+
+
+def fmt_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def physical_memory() -> int | None:
+    """The machine's physical memory (bytes), or ``None`` if unknown."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def available_memory() -> int | None:
+    """What one process here may use: the physical memory, or less under an address-space
+    limit (``ulimit -v``), or ``None`` if neither is known."""
+    limits = [m for m in (physical_memory(),) if m]
+    soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+    if soft != resource.RLIM_INFINITY:
+        limits.append(int(soft))
+    return min(limits) if limits else None
+
+
+def parse_size(value: Any) -> int | None:
+    """``"4GB"``, ``"512 MiB"``, ``2e9`` -> bytes (dask's notation); ``None`` for ``"auto"``
+    or anything not understood."""
+    if value is None or isinstance(value, bool):
+        return None
+    if isinstance(value, (int, float)):
+        return int(value) if value > 0 else None
+    try:
+        from dask.utils import parse_bytes
+
+        n = parse_bytes(str(value))
+    except (ValueError, TypeError):
+        return None
+    return int(n) if n > 0 else None
+
+
+def check_run_memory(numerics: Any, limit: int | None, what: str) -> None:
+    """Raise :class:`ParameterError` (on ``resolution``) if one run at these numerics needs
+    more memory than ``limit`` (bytes; ``what`` says whose limit it is)."""
+    if limit is None:
+        return
+    need = run_memory_bytes(numerics.resolution, numerics.mechanics)
+    if need > limit:
+        raise ParameterError(
+            "resolution", numerics.resolution,
+            f"a resolution whose run fits in {what} ({fmt_bytes(limit)}): resolution "
+            f"{numerics.resolution} ({numerics.mechanics} mechanics) needs about "
+            f"{fmt_bytes(need)}")
+
+
+def max_local_workers() -> int:
+    return MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)

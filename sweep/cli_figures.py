@@ -18,6 +18,7 @@ from .cli import (
     EXIT_FAILED_RUNS,
     CampaignArg,
     NameOpt,
+    QuietOpt,
     ResultsOpt,
     SeedsOpt,
     SetOpt,
@@ -26,6 +27,7 @@ from .cli import (
     _load,
     _setup_logging,
     app,
+    error,
 )
 
 
@@ -45,6 +47,7 @@ def figures(
         "--fits/--no-fits", help="Recompute fits.nc from phase.nc first (default), or draw "
         "from the fits.nc on disk.")] = True,
     verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """Write `results/NAME/fits.nc` and `results/NAME/figures/*.png|pdf` from phase.nc.
 
@@ -55,14 +58,14 @@ def figures(
     """
     from .figures import FigureError, produce
 
-    console = Console(highlight=False, soft_wrap=True)
+    console = Console(highlight=False, soft_wrap=True, quiet=quiet)
     err = _err_console()
-    _setup_logging(err, verbose)
+    _setup_logging(err, verbose, quiet)
     c = _load(err, campaign, set_, seeds, name)
     try:
         out = produce(c, results, names=only or None, fits=fits)
     except FigureError as e:
-        err.print(f"[bold red]error:[/] {e}", soft_wrap=True)
+        error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:
         console.print(f"fits: {out.fits_path}")

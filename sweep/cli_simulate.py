@@ -16,7 +16,15 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, split_settings
 
-from .cli import EXIT_BAD_INPUT, EXIT_FAILED_RUNS, app
+from .cli import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED_RUNS,
+    QuietOpt,
+    VerboseOpt,
+    _setup_logging,
+    app,
+    error,
+)
 from .errors import CampaignError
 from .spec import parse_assignments
 from .store import atomic_to_netcdf
@@ -38,22 +46,24 @@ def simulate(
     png: Annotated[Path | None, typer.Option(
         "--png", help="Draw the final snapshot (Fig. 2a style) and sigma2_S(t) to this PNG.")
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """Run one simulation of paper Eqs. (1)-(5) and print sigma2_S, <cos 2 theta>, lambda."""
     console = Console(highlight=False, soft_wrap=True)
     err = Console(stderr=True, highlight=False, soft_wrap=True)
+    _setup_logging(err, verbose, quiet)
     try:
         settings = parse_assignments(set_ or [])
         pdict, ndict = split_settings(settings)
         params = Parameters.from_dict(pdict)
         numerics = Numerics.from_dict(ndict)
     except (ParameterError, CampaignError, TypeError) as exc:
-        err.print(f"[red]error:[/red] {exc}")
+        error(err, exc)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     for path in (out, png):
         if path is not None and not path.resolve().parent.is_dir():
-            err.print(f"[red]error:[/red] the folder of {path} does not exist")
+            error(err, f"the folder of {path} does not exist")
             raise typer.Exit(EXIT_BAD_INPUT)
 
     from model.simulate import run  # heavy import (py-pde) only when needed
@@ -71,7 +81,7 @@ def simulate(
 
             ds = run(params, numerics, seed, progress=progress)
     except ParameterError as exc:  # e.g. resolution too low for the initial noise
-        err.print(f"[red]error:[/red] {exc}")
+        error(err, exc)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out is not None:
         atomic_to_netcdf(ds, out)

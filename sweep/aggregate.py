@@ -200,7 +200,10 @@ def write_phase(expansion: Expansion, store: CampaignStore,
         records = store.scan()
     ds = build_phase(expansion, records, store)
     store.root.mkdir(parents=True, exist_ok=True)
-    atomic_to_netcdf(ds, store.phase_path)
+    # text variables as classic char arrays (read back as str), not netCDF-4 vlen strings,
+    # which older CF checkers (cfchecks, CF <= 1.8) reject
+    text = {name: {"dtype": "S1"} for name in ("reason", "run_id")}
+    atomic_to_netcdf(ds, store.phase_path, text)
     log.info("wrote %s (%d ok, %d failed, %d missing)", store.phase_path, ds.attrs["n_ok"],
              ds.attrs["n_failed"], ds.attrs["n_missing"])
     return ds

@@ -86,9 +86,9 @@ def test_variable_attributes(files, which):
         if "units" in attrs:
             # UDUNITS: the model is dimensionless ("1"); only wall times are in seconds
             assert attrs["units"] in ("1", "s"), (name, attrs["units"])
-        elif "flag_values" not in attrs:  # only strings (run_id, reason) have no units
+        elif "flag_values" not in attrs:  # only text (run_id, reason) has no units
             with netCDF4.Dataset(getattr(files, which)) as nc:
-                assert nc.variables[name].dtype is str, f"{name}: no units"
+                assert nc.variables[name].dtype in (str, "S1"), f"{name}: no units"
 
 
 def test_run_file_scales_and_time(files):
@@ -107,6 +107,18 @@ def test_phase_file_seed_statistics(files):
     assert variables["sigma2_S_mean"]["cell_methods"] == "realization: mean"
     assert variables["sigma2_S_std"]["cell_methods"] == "realization: standard_deviation"
     assert "seed" not in variables["sigma2_S_mean"]["_dims"]
+
+
+def test_phase_file_text_is_char_arrays_read_back_as_strings(files):
+    import xarray as xr
+
+    with netCDF4.Dataset(files.phase) as nc:
+        assert nc.variables["run_id"].dtype == "S1"  # classic char arrays, not vlen strings
+        assert nc.variables["reason"].dtype == "S1"
+    with xr.open_dataset(files.phase) as ds:
+        run_ids = ds["run_id"].values.ravel().tolist()
+        assert all(isinstance(r, str) and len(r) == 16 for r in run_ids)
+        assert set(ds["reason"].values.ravel().tolist()) == {""}
 
 
 def _checker_messages(path: Path, tmp_path: Path) -> list[str]:

@@ -22,6 +22,7 @@ import signal
 import socket
 import time
 import traceback
+import uuid
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
@@ -174,8 +175,9 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
     for addr, info in client.scheduler_info().get("workers", {}).items():
         hosts.setdefault(str(info.get("host", addr)), addr)
     kinds = warm_kinds(expansion)
+    token = uuid.uuid4().hex[:12]  # a shared scheduler may warm several campaigns at once
     futures = [client.submit(warm_worker, kinds, workers=[addr], pure=False,
-                             allow_other_workers=False, key=f"nematic-warmup-{i}")
+                             allow_other_workers=False, key=f"nematic-warmup-{token}-{i}")
                for i, addr in enumerate(hosts.values())]
     out = []
     for fut in futures:

@@ -55,9 +55,37 @@ class ActiveNematicPDE(PDEBase):
     def __init__(self, params: Parameters | None = None, numerics: Numerics | None = None):
         super().__init__()
         self.params = params or Parameters()
+        #: without explicit numerics the grid follows the state (:meth:`use_grid_of`)
+        self.grid_from_state = numerics is None
         self.numerics = numerics or Numerics()
-        self.spectral = SpectralGrid(self.numerics.resolution)
-        self.mechanics = make_mechanics(self.params, self.numerics, self.spectral)
+        self._build(self.numerics)
+
+    def _build(self, numerics: Numerics) -> None:
+        self.numerics = numerics
+        self.spectral = SpectralGrid(numerics.resolution)
+        self.mechanics = make_mechanics(self.params, numerics, self.spectral)
+
+    def use_grid_of(self, state: FieldCollection) -> None:
+        """Match the grid of ``state`` (an N x N periodic unit square, e.g. from
+        :func:`make_state`). Without explicit ``numerics`` the resolution is taken from the
+        state; with them a different resolution is an error (a ``ValueError`` naming both)."""
+        shape = tuple(state.grid.shape)
+        n = shape[0]
+        if len(shape) != 2 or shape[0] != shape[1]:
+            raise ValueError(f"ActiveNematicPDE needs a square 2D grid, got shape {shape}")
+        if n == self.numerics.resolution:
+            return
+        if not self.grid_from_state:
+            raise ValueError(
+                f"the state is on a {n}x{n} grid but the PDE's numerics have resolution "
+                f"{self.numerics.resolution}: pass Numerics(resolution={n}) or a state of "
+                f"that size")
+        self._build(self.numerics.replace(resolution=n))
+
+    def solve(self, state, *args, **kwargs):  # type: ignore[override]
+        """py-pde's :meth:`~pde.pdes.base.PDEBase.solve`, on the grid of ``state``."""
+        self.use_grid_of(state)
+        return super().solve(state, *args, **kwargs)
 
     # --- pieces of the right-hand side (readable reference) ----------------------------
     def molecular_field(self, q1: Array, q2: Array, A: Array, mech: MechanicalState) -> Array:
@@ -91,6 +119,7 @@ class ActiveNematicPDE(PDEBase):
         return np.stack([qd1, qd2, self.activity_rate(A, mech)]), mech, omega
 
     def evolution_rate(self, state: FieldCollection, t: float = 0) -> FieldCollection:  # type: ignore[override]
+        self.use_grid_of(state)
         q1, q2, A = state.data
         rate, _, _ = self.rates(q1, q2, A, t)
         if not np.all(np.isfinite(rate)):

@@ -21,3 +21,47 @@ def git_commit() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return head + ("+dirty" if dirty else "")
+
+
+def library_versions() -> dict[str, str]:
+    """Versions of the libraries a run's numbers depend on (numpy, scipy, py-pde, numba,
+    FFTW, pyfftw, xarray, netCDF4, dask), for the files' provenance attributes; a library
+    that is not installed is left out."""
+    import importlib.metadata as md
+
+    out: dict[str, str] = {}
+    for label, dist in (("numpy", "numpy"), ("scipy", "scipy"), ("py-pde", "py-pde"),
+                        ("numba", "numba"), ("pyfftw", "pyFFTW"), ("xarray", "xarray"),
+                        ("netCDF4", "netCDF4"), ("dask", "dask")):
+        try:
+            out[label] = md.version(dist)
+        except md.PackageNotFoundError:
+            continue
+    fftw = _fftw_version()
+    if fftw:
+        out["fftw"] = fftw
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def _fftw_version() -> str:
+    """The native FFTW library's own version string (``fftw-3.3.5-sse2-avx``), if loaded."""
+    import ctypes
+
+    try:
+        from . import fftw_native
+    except ImportError:
+        return ""
+    lib = getattr(fftw_native, "_LIB", None)
+    if lib is None:
+        return ""
+    try:
+        return ctypes.string_at(ctypes.addressof(ctypes.c_char.in_dll(lib, "fftw_version"))
+                                ).decode(errors="replace")
+    except (ValueError, OSError):
+        return ""
+
+
+def library_versions_text() -> str:
+    """:func:`library_versions` as one attribute value: ``numpy 2.1.3, py-pde 0.45, ...``."""
+    return ", ".join(f"{k} {v}" for k, v in library_versions().items())

@@ -12,6 +12,7 @@ returns what it computed up to the failure with ``status = "failed"`` and the ``
 
 from __future__ import annotations
 
+import datetime as _dt
 import json
 import logging
 import time
@@ -31,31 +32,71 @@ from .mechanics import LinearMechanics
 from .observables import first_peak, growth_peak, snapshot_observables
 from .parameters import Numerics, Parameters, check_compatible
 from .pde import ActiveNematicPDE, make_state
-from .provenance import git_commit
+from .provenance import git_commit, library_versions_text
 from .solver import SCHEMES, ETDSolver
 
 log = logging.getLogger(__name__)
 
+
+class _TrackerTimeIsExpected(logging.Filter):
+    """py-pde warns "Spent more time on handling trackers ... than on the actual simulation"
+    when its trackers take longer than the solver. Here the tracker computes the observables
+    (a force-balance solve per save), so that is expected, not a problem: the message is
+    demoted to DEBUG (shown only with debug logging)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if str(record.msg).startswith("Spent more time on handling trackers"):
+            record.levelno, record.levelname = logging.DEBUG, "DEBUG"
+            return logging.getLogger(record.name).isEnabledFor(logging.DEBUG)
+        return True
+
+
+logging.getLogger("pde.solvers.controller").addFilter(_TrackerTimeIsExpected())
+
 SCHEMA_VERSION = 1
 SERIES = ("mean_S", "sigma2_S", "cos2theta", "lambda", "lambda_mean", "mean_I1bar", "min_J",
           "mean_A", "free_energy", "residual", "rate_margin")
-UNITS = {"mean_S": "1", "sigma2_S": "1", "cos2theta": "1", "lambda": "L", "lambda_mean": "L",
-         "mean_I1bar": "1", "min_J": "1", "mean_A": "1", "free_energy": "G L^2",
-         "residual": "1", "rate_margin": "1"}
+#: CF units: the model is dimensionless (lengths in units of the domain size L, times in units
+#: of tau, energies in units of G L^2), so every quantity has units "1" (UDUNITS: a pure
+#: number) and its long_name says the scale; only the wall time is in seconds.
+UNITS = {"mean_S": "1", "sigma2_S": "1", "cos2theta": "1", "lambda": "1", "lambda_mean": "1",
+         "mean_I1bar": "1", "min_J": "1", "mean_A": "1", "free_energy": "1", "residual": "1",
+         "rate_margin": "1"}
 LONG_NAMES = {
     "mean_S": "area mean of the nematic order parameter S",
     "sigma2_S": "variance of S over the unit domain (paper sigma_S^2)",
     "cos2theta": "anisotropy <cos 2 theta> = <q1 / S>",
-    "lambda": "pattern size L / n at the peak of the radial (shell-summed) spectrum of "
-              "S - <S>",
-    "lambda_mean": "pattern size 2 pi / (spectrum-weighted mean |k| of S - <S>)",
+    "lambda": "pattern size L / n, n the E^2-weighted mean shell of the radial spectrum of "
+              "S - <S>, in units of L",
+    "lambda_mean": "pattern size 2 pi / (spectrum-weighted mean |k| of S - <S>), in units of L",
     "mean_I1bar": "area mean of I1bar = tr C / J",
     "min_J": "minimum of J = det F",
     "mean_A": "area mean of the activity A",
-    "free_energy": "total free energy, paper Eq. (1)",
+    "free_energy": "total free energy, paper Eq. (1), in units of G L^2",
     "residual": "force-balance residual |Div P|_{H^-1} / max(1, |P|)",
     "rate_margin": "well-posedness margin of the rate problem, min det of its symbol / "
                    "(kappa + 1): 1 passive, 0 ill posed",
+}
+#: long_name and units of the per-run scalars
+SCALARS = {
+    "sigma2_S_final": ("sigma2_S at t_final", "1"),
+    "mean_S_final": ("mean_S at t_final", "1"),
+    "cos2theta_final": ("cos2theta at t_final", "1"),
+    "lambda_final": ("pattern size lambda at t_final, in units of L", "1"),
+    "lambda_mean_final": ("pattern size lambda_mean at t_final, in units of L", "1"),
+    "t_peak": ("time of the first peak of sigma2_S(t) (growth-peak rule: the end of the "
+               "growth phase), in units of tau", "1"),
+    "lambda_peak": ("pattern size lambda at the first peak of sigma2_S(t) (growth-peak "
+                    "rule), in units of L", "1"),
+    "lambda_mean_peak": ("pattern size lambda_mean at the first peak of sigma2_S(t) "
+                         "(growth-peak rule), in units of L", "1"),
+    "t_peak_literal": ("time of the first local maximum of sigma2_S(t) (the paper's literal "
+                       "rule), in units of tau", "1"),
+    "lambda_peak_literal": ("pattern size lambda at the first local maximum of sigma2_S(t) "
+                            "(the paper's literal rule), in units of L", "1"),
+    "rate_margin_min": ("smallest well-posedness margin of the rate problem over the run",
+                        "1"),
+    "wall_time": ("wall-clock time of the run", "s"),
 }
 
 
@@ -172,9 +213,15 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     scalars["rate_margin_min"] = margin if np.isfinite(margin) else float("nan")
     scalars["wall_time"] = wall
     for name, value in scalars.items():
-        data_vars[name] = ((), value)
+        long_name, units = SCALARS[name]
+        data_vars[name] = ((), value, {"long_name": long_name, "units": units})
+    created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     attrs: dict[str, Any] = {
+        "Conventions": "CF-1.11",
         "title": "active nematic solid simulation (Yang, Guo, Mahadevan, Eqs. 1-5)",
+        "source": f"active-nematic-solids {__version__} model.simulate.run",
+        "history": f"{created}: simulated by model.simulate.run (seed {int(seed)})",
+        "library_versions": library_versions_text(),
         "status": status, "reason": reason, "detail": detail, "t_failed": t_failed,
         "seed": int(seed), "code_version": __version__, "git_commit": git_commit(),
         "schema_version": SCHEMA_VERSION,
@@ -190,8 +237,11 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     attrs.update({f"param_{k}": _attr(v) for k, v in params.to_dict().items()})
     attrs["param_alpha_minus_B"] = params.alpha_minus_B
     attrs.update({f"num_{k}": _attr(v) for k, v in numerics.to_dict().items()})
-    coords = {"time": ("time", t, {"units": "tau", "long_name": "time"}),
-              "snapshot_time": ("snapshot_time", snap_t, {"units": "tau"}),
-              "x": ("x", x, {"units": "L", "long_name": "reference coordinate X1"}),
-              "y": ("y", x, {"units": "L", "long_name": "reference coordinate X2"})}
+    coords = {"time": ("time", t, {"units": "1", "long_name": "time t, in units of tau"}),
+              "snapshot_time": ("snapshot_time", snap_t, {
+                  "units": "1", "long_name": "time of the snapshot, in units of tau"}),
+              "x": ("x", x, {"units": "1",
+                             "long_name": "reference coordinate X1, in units of L"}),
+              "y": ("y", x, {"units": "1",
+                             "long_name": "reference coordinate X2, in units of L"})}
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)

@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 
 from .expand import Expansion
-from .provenance import code_version, git_commit
+from .provenance import code_version, git_commit, library_versions_text
 from .spec import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from .store import RETRYABLE_REASONS, CampaignStore, Record, atomic_to_netcdf, now_iso
 
@@ -162,11 +162,13 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
                                               "source_variable": src})
         mean, std, count = _seed_stats(values)
         sd = dims[:-1]
+        # CF cell_methods name the collapsed axis by its standard_name (seed: realization)
         ds[f"{name}_mean"] = xr.Variable(sd, mean, {
-            "long_name": f"seed mean of {name}", "units": "1", "cell_methods": "seed: mean"})
+            "long_name": f"seed mean of {name}", "units": "1",
+            "cell_methods": "realization: mean"})
         ds[f"{name}_std"] = xr.Variable(sd, std, {
             "long_name": f"seed standard deviation (ddof = 1) of {name}", "units": "1",
-            "cell_methods": "seed: standard_deviation"})
+            "cell_methods": "realization: standard_deviation"})
         ds[f"{name}_count"] = xr.Variable(sd, count, {
             "long_name": f"number of seeds with a value of {name}", "units": "1"})
 
@@ -181,13 +183,14 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
     n_ok = int((status == STATUS_OK).sum())
     n_failed = int((status == STATUS_FAILED).sum())
     ds.attrs.update({
-        "Conventions": "CF-1.10",
+        "Conventions": "CF-1.11",
         "title": f"phase diagram of campaign {campaign.name}",
         "campaign": campaign.name,
         "description": campaign.description,
         "source": "active-nematic-solids campaign manager (nematic aggregate)",
         "code_version": code_version(),
         "git_commit": git_commit(),
+        "library_versions": library_versions_text(),
         "run_code_versions": ", ".join(sorted(versions)),
         "run_git_commits": ", ".join(sorted(commits)),
         "created": now_iso(),
@@ -211,7 +214,10 @@ def write_phase(expansion: Expansion, store: CampaignStore,
         records = store.scan()
     ds = build_phase(expansion, records, store)
     store.root.mkdir(parents=True, exist_ok=True)
-    atomic_to_netcdf(ds, store.phase_path)
+    # text variables as classic char arrays (read back as str), not netCDF-4 vlen strings,
+    # which older CF checkers (cfchecks, CF <= 1.8) reject
+    text = {name: {"dtype": "S1"} for name in ("reason", "run_id")}
+    atomic_to_netcdf(ds, store.phase_path, text)
     log.info("wrote %s (%d ok, %d failed, %d missing)", store.phase_path, ds.attrs["n_ok"],
              ds.attrs["n_failed"], ds.attrs["n_missing"])
     return ds

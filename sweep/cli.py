@@ -15,7 +15,9 @@ import logging
 import math
 import os
 import signal
+import statistics
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -33,7 +35,6 @@ from rich.progress import (
     TaskID,
     TextColumn,
     TimeElapsedColumn,
-    TimeRemainingColumn,
 )
 from rich.table import Table
 
@@ -103,7 +104,7 @@ app = _App(
     name="nematic",
     help="Active nematic solids: run the model, sweep it, aggregate phase diagrams.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
     rich_markup_mode="markdown",
 )
@@ -131,13 +132,38 @@ SeedsOpt = Annotated[str | None, typer.Option(
     "--seeds", help="Override the seeds: a count (5) or a list (0,1,2).")]
 NameOpt = Annotated[str | None, typer.Option(
     "--name", help="Override the campaign name (and so its results folder).")]
-VerboseOpt = Annotated[bool, typer.Option("--verbose", "-v", help="Log progress details.")]
+VerboseOpt = Annotated[bool, typer.Option(
+    "--verbose", "-v", help="Also log details (INFO messages, library warnings).")]
+QuietOpt = Annotated[bool, typer.Option(
+    "--quiet", "-q", help="Only results and errors: no progress, no warnings.")]
 
 
-def _setup_logging(console: Console, verbose: bool) -> None:
+def error(console: Console, message: object) -> None:
+    """One error line, ``error: MESSAGE``, the same for every command. The message is
+    printed literally (no rich markup: ``[start, stop, num]`` stays as it is)."""
+    console.print(f"[bold red]error:[/] {escape(str(message))}", highlight=False,
+                  soft_wrap=True)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        from .provenance import code_version, git_commit
+
+        typer.echo(f"nematic {code_version()} (git {git_commit()})")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(version: Annotated[bool, typer.Option(
+        "--version", callback=_version_callback, is_eager=True,
+        help="Print the version and exit.")] = False) -> None:
+    """Active nematic solids: run the model, sweep it, aggregate phase diagrams."""
+
+
+def _setup_logging(console: Console, verbose: bool, quiet: bool = False) -> None:
     import distributed  # noqa: F401 - configures its loggers on import: quieten them after
 
-    level = logging.INFO if verbose else logging.WARNING
+    level = logging.INFO if verbose else logging.ERROR if quiet else logging.WARNING
     handler = RichHandler(console=console, show_path=False, show_time=verbose)
     handler.setLevel(level)
     root = logging.getLogger()
@@ -166,8 +192,7 @@ def _load(console: Console, path: Path, settings: list[str] | None, seeds: str |
                               workers=workers)
         return load_campaign(path, overrides)
     except CampaignError as e:
-        console.print(f"[bold red]error:[/] {escape(str(e))}", highlight=False, markup=True,
-                      soft_wrap=True)
+        error(console, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
 
 
@@ -204,21 +229,24 @@ def _sigterm_as_interrupt() -> Iterator[None]:
 # --------------------------------------------------------------------------- validate
 @app.command()
 def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
-             set_: SetOpt = None, seeds: SeedsOpt = None, name: NameOpt = None) -> None:
+             set_: SetOpt = None, seeds: SeedsOpt = None, name: NameOpt = None,
+             verbose: VerboseOpt = False, quiet: QuietOpt = False) -> None:
     """Check a campaign file without running anything.
 
     Exit 0 if it is valid (a summary of the grid is printed), 2 with every problem listed
     (file:line, key path, value, what is allowed) otherwise.
     """
-    console = Console(highlight=False, soft_wrap=True)
+    console = Console(highlight=False, soft_wrap=True, quiet=quiet)
+    _setup_logging(_err_console(), verbose, quiet)
     c = _load(_err_console(), campaign, set_, seeds, name)
-    console.print(f"[green]valid[/]: campaign [bold]{c.name}[/] ({campaign})")
+    console.print(f"[green]valid[/]: campaign [bold]{escape(c.name)}[/] ({escape(str(campaign))})")
     for d in c.dims:
         for a in d.axes:
             vals = ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in a.values[:8])
             more = ", ..." if len(a.values) > 8 else ""
             zipped = f" (zipped with {d.name})" if a.name != d.name else ""
-            console.print(f"  axis {a.name}{zipped}: {len(a.values)} values [{vals}{more}]")
+            console.print(f"  axis {a.name}{zipped}: {len(a.values)} values "
+                          f"{escape(f'[{vals}{more}]')}")
     console.print(f"  seeds: {len(c.seeds)}; grid points: {c.n_points}; runs: {c.n_runs}")
     ex = c.execution
     where = {"local": f"local dask cluster ({ex.workers or 'one per core'} worker(s))",
@@ -235,25 +263,42 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
 # --------------------------------------------------------------------------- run
 class _ProgressEvents:
     """Draws the progress bar and prints failures as they happen. Without a terminal (a
-    batch job's log) it prints a progress line every :data:`LOG_EVERY` seconds instead."""
+    batch job's log) it prints a progress line when a run completes (at most one every
+    :data:`LOG_MIN` seconds) and at least every :data:`LOG_EVERY` seconds instead.
+
+    The ETA is the remaining runs times the median run time of the runs completed so far,
+    over the number of worker threads: a first run that compiled kernels does not skew it."""
 
     LOG_EVERY = 30.0
+    LOG_MIN = 5.0
 
-    def __init__(self, console: Console, progress: Progress, store: Any):
+    def __init__(self, console: Console, progress: Progress, store: Any, *,
+                 clock: Any = time.monotonic):
         self.console, self.progress, self.store = console, progress, store
+        self.clock = clock
         self.task: TaskID | None = None
         self.ok = 0
         self.failed = 0
         self.total = self.skipped = 0
-        self.t0 = self.last_log = time.monotonic()
+        self.workers = 1
+        self.run_times: list[float] = []
+        self.t0 = self.last_log = clock()
+        self._stop = threading.Event()
+        self._heartbeat: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def terminal(self) -> bool:
+        return bool(self.console.is_terminal)
 
     def planned(self, plan: Any, expansion: Any) -> None:
         c = expansion.campaign
         skipped = " (skipped; --retry-failed redoes them)" if plan.failed else ""
         self.console.print(
-            f"campaign [bold]{c.name}[/]: {len(expansion)} runs ({c.n_points} points x "
-            f"{len(c.seeds)} seeds); {len(plan.done)} done, {len(plan.failed)} failed{skipped}, "
-            f"{len(plan.todo)} to run -> {self.store.root}", soft_wrap=True)
+            f"campaign [bold]{escape(c.name)}[/]: {len(expansion)} runs ({c.n_points} points "
+            f"x {len(c.seeds)} seeds); {len(plan.done)} done, {len(plan.failed)} failed"
+            f"{skipped}, {len(plan.todo)} to run -> {escape(str(self.store.root))}",
+            soft_wrap=True)
         if plan.unspooled:
             self.console.print(f"moved {plan.unspooled} result(s) that could not be written "
                                "before into the results folder")
@@ -267,15 +312,73 @@ class _ProgressEvents:
             if len(plan.redone) > 10:
                 self.console.print(f"  ... and {len(plan.redone) - 10} more")
 
+    def dashboard(self, link: str | None) -> None:
+        if link:
+            self.console.print(f"dask dashboard: {escape(link)}", soft_wrap=True)
+        else:
+            self.console.print("dask dashboard: none answers from here (it needs bokeh "
+                               "where the scheduler runs, and its port reachable)",
+                               soft_wrap=True)
+
+    def warming(self) -> None:
+        self.console.print("preparing the workers: compiled kernels (cached on disk; about a "
+                           "minute once per machine, then seconds) ...", soft_wrap=True)
+
+    def warmed(self, infos: list[dict[str, Any]], seconds: float) -> None:
+        compiled = sum(int(i.get("compiled", 0)) for i in infos)
+        what = (f"{compiled} kernel(s) compiled once, now cached for every worker" if compiled
+                else "loaded from the cache")
+        self.console.print(f"workers ready in {seconds:.0f} s ({what})", soft_wrap=True)
+
     def started(self, plan: Any, total: int, workers: int) -> None:
         self.skipped = len(plan.done) + len(plan.failed)
         self.total = total
-        self.t0 = self.last_log = time.monotonic()
+        self.workers = max(1, workers)
+        self.t0 = self.last_log = self.clock()
         self.task = self.progress.add_task("runs", total=total, completed=self.skipped,
-                                           counts=self._counts())
+                                           counts=self._counts(), eta="unknown")
+        if not self.terminal:
+            self._heartbeat = threading.Thread(target=self._beat, daemon=True,
+                                               name="nematic-progress")
+            self._heartbeat.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._heartbeat is not None:
+            self._heartbeat.join(timeout=5)
+
+    def _beat(self) -> None:
+        while not self._stop.wait(1.0):
+            if self.clock() - self.last_log >= self.LOG_EVERY:
+                self._log_line()
 
     def _counts(self) -> str:
         return f"[green]{self.ok} ok[/] [red]{self.failed} failed[/]"
+
+    @property
+    def remaining(self) -> int:
+        return max(0, self.total - self.skipped - self.ok - self.failed)
+
+    def eta(self) -> float | None:
+        """Remaining runs x median run time / workers (None before the first run ends)."""
+        if not self.remaining:
+            return 0.0
+        if not self.run_times:
+            return None
+        return self.remaining * statistics.median(self.run_times[-200:]) / self.workers
+
+    def progress_line(self) -> str:
+        done = self.skipped + self.ok + self.failed
+        running = min(self.workers, self.remaining)
+        return (f"progress: {done}/{self.total} runs ({self.ok} ok, {self.failed} failed, "
+                f"{running} running this session), elapsed "
+                f"{_fmt_time(self.clock() - self.t0)}, ETA {_fmt_time(self.eta())}")
+
+    def _log_line(self) -> None:
+        with self._lock:
+            self.last_log = self.clock()
+            self.console.print(self.progress_line(), highlight=False, markup=False,
+                               soft_wrap=True)
 
     def finished_run(self, run: Any, record: dict[str, Any]) -> None:
         from .execute import describe_failure
@@ -284,20 +387,17 @@ class _ProgressEvents:
             self.ok += 1
         else:
             self.failed += 1
-            self.progress.console.print(f"[red]FAILED[/] {describe_failure(run, record)}",
+            self.progress.console.print(f"[red]FAILED[/] {escape(describe_failure(run, record))}",
                                         highlight=False, soft_wrap=True)
+        wall = record.get("wall_time")
+        if isinstance(wall, (int, float)) and math.isfinite(wall):
+            self.run_times.append(float(wall))
         if self.task is not None:
-            self.progress.update(self.task, advance=1, counts=self._counts())
-        now = time.monotonic()
-        done = self.ok + self.failed
-        if not self.console.is_terminal and (now - self.last_log >= self.LOG_EVERY
-                                             or self.skipped + done == self.total):
-            self.last_log = now
-            remaining = self.total - self.skipped - done
-            eta = remaining * (now - self.t0) / done if done else None
-            self.console.print(f"progress: {self.skipped + done}/{self.total} runs "
-                               f"({self.ok} ok, {self.failed} failed this session), "
-                               f"elapsed {_fmt_time(now - self.t0)}, ETA {_fmt_time(eta)}")
+            self.progress.update(self.task, advance=1, counts=self._counts(),
+                                 eta=_fmt_time(self.eta()))
+        if not self.terminal and (self.clock() - self.last_log >= self.LOG_MIN
+                                  or not self.remaining):
+            self._log_line()
 
 
 @app.command()
@@ -323,7 +423,11 @@ def run(
     figures: Annotated[bool, typer.Option(
         "--figures/--no-figures", help="After phase.nc, write fits.nc and the figures "
         "(as 'nematic figures' does).")] = True,
+    dashboard: Annotated[bool, typer.Option(
+        "--dashboard/--no-dashboard", help="Serve the dask dashboard (local cluster: on "
+        "127.0.0.1, a free port) and print its link.")] = True,
     verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """Run a campaign on dask, resuming where it stopped.
 
@@ -338,33 +442,37 @@ def run(
     from .store import CampaignStore
 
     err = _err_console()
-    _setup_logging(err, verbose)
+    _setup_logging(err, verbose, quiet)
     c = _load(err, campaign, set_, seeds, name, scheduler, workers)
+    say = Console(stderr=True, highlight=False, soft_wrap=True, quiet=quiet)
     store = CampaignStore(results, c.name)
     lock = store.lock()
     try:
         store.ensure()
         lock.acquire(command=" ".join(sys.argv))
     except (CampaignLocked, StoreError) as e:
-        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True)
+        error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     try:
         expansion = expand(c)
         progress = Progress(
             TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-            TextColumn("{task.fields[counts]}"), TimeElapsedColumn(), TextColumn("ETA"),
-            TimeRemainingColumn(), console=err, transient=False)
-        events = _ProgressEvents(err, progress, store)
+            TextColumn("{task.fields[counts]}"), TimeElapsedColumn(),
+            TextColumn("ETA {task.fields[eta]}"), console=err, transient=False,
+            disable=quiet or not err.is_terminal)
+        events = _ProgressEvents(say, progress, store)
         try:
             with _sigterm_as_interrupt(), progress:
-                plan, summary = drive(expansion, store, retry_failed=retry_failed,
-                                      verify=verify, events=events)
+                try:
+                    plan, summary = drive(expansion, store, retry_failed=retry_failed,
+                                          verify=verify, events=events, dashboard=dashboard)
+                finally:
+                    events.close()
         except (ClusterError, StoreError) as e:
-            err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True, highlight=False)
+            error(err, e)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
-            err.print(f"[bold red]error:[/] {escape(_storage_message(store, e))}", soft_wrap=True,
-                      highlight=False)
+            error(err, _storage_message(store, e))
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:  # before any run was submitted
             err.print("[yellow]interrupted[/]; rerun the same command to resume")
@@ -388,21 +496,19 @@ def run(
                       "command to resume")
             raise typer.Exit(EXIT_INTERRUPTED)
         if summary is not None and summary.wall_time > 0:
-            err.print(f"{summary.completed} run(s) in {_fmt_time(summary.wall_time)} "
+            say.print(f"{summary.completed} run(s) in {_fmt_time(summary.wall_time)} "
                       f"(sum of run times {_fmt_time(summary.run_time)})")
         if aggregate:
             try:
                 write_phase(expansion, store)
-                err.print(f"phase diagram: {store.phase_path}")
+                say.print(f"phase diagram: {escape(str(store.phase_path))}")
                 if figures:
                     repair_products(c, results, err, phase=False)
                     for figure in _regenerate_figures(c, results):
-                        err.print(f"figure: {figure}")
+                        say.print(f"figure: {escape(str(figure))}")
             except StoreError as e:
-                err.print(f"[bold red]error:[/] {escape(str(e))}; the runs are stored, rerun "
-                          "the same command (or nematic aggregate) once the folder can be "
-                          "written",
-                          soft_wrap=True, highlight=False)
+                error(err, f"{e}; the runs are stored, rerun the same command (or nematic "
+                      "aggregate) once the folder can be written")
                 raise typer.Exit(EXIT_BAD_INPUT) from None
         failures = [] if summary is None else summary.failed
         n_failed = len(failures) + len(plan.failed)
@@ -414,7 +520,8 @@ def run(
         if n_failed:
             err.print(f"[red]{n_failed} run(s) failed[/]:")
             for r, rec in failures[:20]:
-                err.print(f"  {describe_failure(r, rec)}", soft_wrap=True, highlight=False)
+                err.print(f"  {describe_failure(r, rec)}", soft_wrap=True, highlight=False,
+                          markup=False)
             if len(failures) > 20:
                 err.print(f"  ... and {len(failures) - 20} more")
             if plan.failed:
@@ -488,7 +595,10 @@ def status(
     name: NameOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     workers: Annotated[int | None, typer.Option(
-        "--workers", help="Concurrency assumed for the ETA when no driver is running.")] = None,
+        "--workers", help="Concurrency assumed for the ETA (default: the processes seen "
+        "finishing runs under the running driver, else the local worker count).")] = None,
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """Show done / failed / pending runs, failure reasons and an ETA.
 
@@ -500,6 +610,7 @@ def status(
     from .store import CampaignStore
 
     console = Console(highlight=False, soft_wrap=True)
+    _setup_logging(_err_console(), verbose, quiet)
     c = _load(_err_console(), campaign, set_, seeds, name)
     store = CampaignStore(results, c.name)
     report = campaign_status(expand(c), store, workers=workers)
@@ -510,14 +621,17 @@ def status(
     console.print(f"campaign [bold]{report.campaign}[/] ({report.folder}): "
                   f"[green]{report.done} done[/], [red]{report.failed} failed[/], "
                   f"{report.pending} pending of {report.total} ({pct:.0f}% done)")
+    if quiet:
+        return
     if report.running:
         console.print(f"running: pid {report.running.get('pid')} on "
                       f"{report.running.get('host')} since {report.running.get('started')}")
     if report.pending:
         basis = f" ({report.eta_basis})" if report.eta_basis else ""
         console.print(f"ETA: {_fmt_time(report.eta_seconds)}{basis}")
-    if report.mean_run_time is not None:
-        console.print(f"mean run time: {report.mean_run_time:.3g} s")
+    if report.median_run_time is not None and report.mean_run_time is not None:
+        console.print(f"run time: median {report.median_run_time:.3g} s, mean "
+                      f"{report.mean_run_time:.3g} s (successful runs)")
     for ax in report.per_axis:
         table = Table(title=f"by {ax.dim}", title_justify="left", show_edge=False)
         for col in (ax.dim, "done", "failed", "pending"):
@@ -555,6 +669,7 @@ def aggregate_cmd(
     seeds: SeedsOpt = None,
     name: NameOpt = None,
     verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """Write `results/NAME/phase.nc` from the runs on disk.
 
@@ -566,12 +681,12 @@ def aggregate_cmd(
     from .store import CampaignStore
 
     err = _err_console()
-    _setup_logging(err, verbose)
+    _setup_logging(err, verbose, quiet)
     c = _load(err, campaign, set_, seeds, name)
     store = CampaignStore(results, c.name)
     if not store.runs_dir.is_dir():
-        err.print(f"[bold red]error:[/] no results for campaign {c.name} in {store.root}; "
-                  f"run it first (nematic run {campaign})", soft_wrap=True)
+        error(err, f"no results for campaign {c.name} in {store.root}; run it first "
+              f"(nematic run {campaign})")
         raise typer.Exit(EXIT_BAD_INPUT)
     lock = store.lock()
     try:
@@ -581,9 +696,9 @@ def aggregate_cmd(
         finally:
             lock.release()
     except (CampaignLocked, StoreError) as e:
-        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True, highlight=False)
+        error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
-    Console(highlight=False, soft_wrap=True).print(
+    Console(highlight=False, soft_wrap=True, quiet=quiet).print(
         f"wrote {store.phase_path}: {ds.attrs['n_ok']} ok, {ds.attrs['n_failed']} failed, "
         f"{ds.attrs['n_missing']} missing of {ds.attrs['n_runs']} runs")
 

@@ -12,13 +12,13 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
-from rich.markup import escape
 
 from .cli import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
     CampaignArg,
     NameOpt,
+    QuietOpt,
     ResultsOpt,
     SeedsOpt,
     SetOpt,
@@ -27,6 +27,7 @@ from .cli import (
     _load,
     _setup_logging,
     app,
+    error,
     repair_products,
 )
 from .errors import CampaignLocked, StoreError
@@ -49,6 +50,7 @@ def figures(
         "--fits/--no-fits", help="Recompute fits.nc from phase.nc first (default), or draw "
         "from the fits.nc on disk.")] = True,
     verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """Write `results/NAME/fits.nc` and `results/NAME/figures/*.png|pdf` from phase.nc.
 
@@ -59,9 +61,9 @@ def figures(
     """
     from .figures import FigureError, produce
 
-    console = Console(highlight=False, soft_wrap=True)
+    console = Console(highlight=False, soft_wrap=True, quiet=quiet)
     err = _err_console()
-    _setup_logging(err, verbose)
+    _setup_logging(err, verbose, quiet)
     c = _load(err, campaign, set_, seeds, name)
     root = results / c.name
     problem = probe_write(root) if root.is_dir() else None
@@ -76,7 +78,7 @@ def figures(
             fits = True
         out = produce(c, results, names=only or None, fits=fits)
     except (FigureError, StoreError, CampaignLocked) as e:
-        err.print(f"[bold red]error:[/] {escape(str(e))}", soft_wrap=True)
+        error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:
         console.print(f"fits: {out.fits_path}")

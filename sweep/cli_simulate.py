@@ -16,7 +16,15 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, check_compatible, split_settings
 
-from .cli import EXIT_BAD_INPUT, EXIT_FAILED_RUNS, app
+from .cli import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED_RUNS,
+    QuietOpt,
+    VerboseOpt,
+    _setup_logging,
+    app,
+    error,
+)
 from .errors import CampaignError, StoreError
 from .limits import available_memory, check_run_memory
 from .spec import MAX_SEED, parse_assignments
@@ -64,11 +72,13 @@ def simulate(
     png: Annotated[Path | None, typer.Option(
         "--png", help="Draw the final snapshot (Fig. 2a style) and sigma2_S(t) to this PNG.")
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """Run one simulation of paper Eqs. (1)-(5) and print sigma2_S, <cos 2 theta>, lambda."""
     console = Console(highlight=False, soft_wrap=True)
     err = Console(stderr=True, highlight=False, soft_wrap=True)
+    _setup_logging(err, verbose, quiet)
     try:
         settings = parse_assignments(set_ or [])
         pdict, ndict = split_settings(settings)
@@ -79,12 +89,12 @@ def simulate(
             raise ParameterError("seed", seed, f"an integer between 0 and {MAX_SEED}")
         check_run_memory(numerics, available_memory(), "this machine's available memory")
     except (ParameterError, CampaignError, TypeError) as exc:
-        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        error(err, exc)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     for path in (out, png):
         problem = None if path is None else output_problem(path)
         if problem is not None:
-            err.print(f"[red]error:[/red] {problem}", highlight=False)
+            error(err, problem)
             raise typer.Exit(EXIT_BAD_INPUT)
 
     from model.simulate import run  # heavy import (py-pde) only when needed
@@ -102,16 +112,15 @@ def simulate(
 
             ds = run(params, numerics, seed, progress=progress)
     except ParameterError as exc:  # e.g. resolution too low for the initial noise
-        err.print(f"[red]error:[/red] {exc}")
+        error(err, exc)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out is not None:
         try:
             atomic_to_netcdf(ds, out)
         except StoreError as exc:
             kept = _keep_elsewhere(ds, out)
-            err.print(f"[red]error:[/red] {exc}; "
-                      + (f"the result is kept in {kept}" if kept else
-                         "it could not be kept elsewhere either"), highlight=False)
+            error(err, f"{exc}; " + (f"the result is kept in {kept}" if kept else
+                                     "it could not be kept elsewhere either"))
             raise typer.Exit(EXIT_BAD_INPUT) from None
     if png is not None and ds.sizes.get("snapshot_time", 0):
         from .snapshot_plot import snapshot_figure
@@ -119,7 +128,7 @@ def simulate(
         try:
             snapshot_figure(ds, png)
         except StoreError as exc:
-            err.print(f"[red]error:[/red] {exc}", highlight=False)
+            error(err, exc)
             raise typer.Exit(EXIT_BAD_INPUT) from None
     last = {k: float(ds[k].values[-1]) for k in ("sigma2_S", "cos2theta", "lambda")} \
         if ds.sizes["time"] else {}

@@ -70,9 +70,16 @@ def stability(
         8, "--nmax", min=1, max=64,
         help="Lattice modes 2 pi (n, m) with |n|, |m| <= NMAX enter the numerical maximum.",
     ),
+    verbose: bool = typer.Option(
+        False, "--verbose", "-v", help="Also log details (INFO messages, library warnings)."),
+    quiet: bool = typer.Option(
+        False, "--quiet", "-q", help="Only results and errors: no progress, no warnings."),
 ) -> None:
     """Critical applied shear eps (closed form and numerical bisection), the critical
     wavevector, and the leading growth rate at the given eps (paper Eq. 6, Fig. A1)."""
+    from .cli import _err_console, _setup_logging, error
+
+    _setup_logging(_err_console(), verbose, quiet)
     try:
         values = parse_settings(list(set_ or []))
         pvals, nvals = split_settings(values)
@@ -83,7 +90,7 @@ def stability(
                                  "'linear' (the stability analysis is of the small-strain model)")
         params = Parameters.from_dict(pvals)
     except (ValueError, TypeError) as exc:
-        typer.echo(f"Error: {exc}", err=True)
+        error(_err_console(), exc)
         raise typer.Exit(code=2) from None
 
     inc = numerics.incompressible

@@ -22,6 +22,7 @@ import signal
 import socket
 import time
 import traceback
+import uuid
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
@@ -198,6 +199,50 @@ def execute_run(task: RunTask) -> Record:
     return record
 
 
+def warm_kinds(expansion: Expansion) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+    """One ``(parameters, numerics)`` per distinct kind of run in the campaign (mechanics,
+    scheme, incompressibility, adaptivity): what :func:`warm_worker` compiles."""
+    kinds: dict[tuple[Any, ...], tuple[dict[str, Any], dict[str, Any]]] = {}
+    for point in expansion.points:
+        n = point.numerics
+        key = (n.mechanics, n.scheme, n.incompressible, n.adaptive)
+        if key not in kinds:
+            kinds[key] = (point.parameters.to_dict(), n.to_dict())
+    return list(kinds.values())
+
+
+def warm_worker(kinds: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str, Any]:
+    """Run on one worker per host before the campaign: compiles the model's kernels (or
+    loads them from the disk cache) with tiny runs, so that the other workers load them
+    instead of all compiling at once (:mod:`model.warmup`)."""
+    from model.warmup import warm_up
+
+    info = warm_up([(Parameters.from_dict(p), Numerics.from_dict(n)) for p, n in kinds])
+    info["host"] = socket.gethostname()
+    return info
+
+
+def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
+    """:func:`warm_worker` on one worker of each host (in parallel across hosts); returns
+    what each reported. A worker that cannot run it is left to fail in the environment
+    check that follows."""
+    hosts: dict[str, str] = {}
+    for addr, info in client.scheduler_info().get("workers", {}).items():
+        hosts.setdefault(str(info.get("host", addr)), addr)
+    kinds = warm_kinds(expansion)
+    token = uuid.uuid4().hex[:12]  # a shared scheduler may warm several campaigns at once
+    futures = [client.submit(warm_worker, kinds, workers=[addr], pure=False,
+                             allow_other_workers=False, key=f"nematic-warmup-{token}-{i}")
+               for i, addr in enumerate(hosts.values())]
+    out = []
+    for fut in futures:
+        try:
+            out.append(fut.result())
+        except Exception as e:  # noqa: BLE001 - reported by the environment check
+            log.warning("warm-up failed on a worker: %s: %s", type(e).__name__, e)
+    return out
+
+
 def worker_environment() -> dict[str, Any]:
     """Run on every worker before a campaign: proves the code is importable there."""
     import model.simulate  # noqa: F401 - the import is the check
@@ -309,8 +354,11 @@ def local_worker_count(execution: ExecutionSpec) -> int:
 
 
 @contextlib.contextmanager
-def dask_client(execution: ExecutionSpec, *, timeout: float = 30.0) -> Iterator[Client]:
-    """A dask ``Client`` for the campaign's execution section (closed on exit)."""
+def dask_client(execution: ExecutionSpec, *, timeout: float = 30.0,
+                dashboard: bool = False) -> Iterator[Client]:
+    """A dask ``Client`` for the campaign's execution section (closed on exit). A local
+    cluster serves the dask dashboard on 127.0.0.1 (a free port) if ``dashboard``; a
+    scheduler or a batch cluster serves its own (see :func:`dashboard_link`)."""
     from distributed import Client, LocalCluster
 
     if execution.scheduler:
@@ -351,7 +399,11 @@ def dask_client(execution: ExecutionSpec, *, timeout: float = 30.0) -> Iterator[
         kwargs["memory_limit"] = execution.memory_limit
     with _workers_ignore_sigint():
         cluster = LocalCluster(n_workers=n, threads_per_worker=execution.threads_per_worker,
-                               processes=True, dashboard_address=":0",
+                               processes=True,
+                               # the scheduler's HTTP server (health, metrics; the dashboard
+                               # if asked for) on the loopback interface, a free port
+                               dashboard_address="127.0.0.1:0",
+                               scheduler_kwargs={"dashboard": dashboard},
                                silence_logs=logging.ERROR, **kwargs)
     with cluster, Client(cluster) as client:
         yield client
@@ -385,6 +437,21 @@ def make_cluster(execution: ExecutionSpec) -> Any:
 
 
 # --------------------------------------------------------------------------- the driver
+def dashboard_link(client: Client, timeout: float = 5.0) -> str | None:
+    """The link of the dask dashboard if it answers from here, else ``None`` (started
+    without it, bokeh not installed where the scheduler runs, or not reachable: the
+    scheduler's HTTP server then answers 404 for the page, or not at all)."""
+    import urllib.error
+    import urllib.request
+
+    try:
+        link = str(client.dashboard_link)
+        with urllib.request.urlopen(link, timeout=timeout) as response:  # noqa: S310 - http
+            return link if response.status == 200 else None
+    except (OSError, ValueError, urllib.error.URLError):
+        return None
+
+
 class RunEvents(Protocol):
     """What the driver reports (the CLI draws the progress bar from these)."""
 
@@ -443,6 +510,13 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client, pla
                          failed_before=len(plan.failed))
     if campaign.execution.mode != "local":
         wait_for_workers(client, campaign.execution)
+    if events and hasattr(events, "warming"):
+        events.warming()
+    warm0 = clock()
+    warmed = warm_workers(client, expansion)
+    log.info("warm-up on %d host(s) in %.1f s: %s", len(warmed), clock() - warm0, warmed)
+    if events and hasattr(events, "warmed"):
+        events.warmed(warmed, clock() - warm0)
     try:
         info = client.run(worker_environment)
         workers = max(1, sum(client.nthreads().values()))
@@ -575,7 +649,8 @@ REMOTE_TMP_AGE = 600.0
 
 def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
           verify: bool = False,
-          events: DriveEvents | None = None) -> tuple[Plan, RunSummary | None]:
+          events: DriveEvents | None = None,
+          dashboard: bool = False) -> tuple[Plan, RunSummary | None]:
     """What ``nematic run`` does while holding the campaign's lock: clean up, record the
     campaign text, plan from disk, run what remains on the campaign's dask cluster and
     refresh the manifest. Returns the plan and the summary (``None`` if nothing was to do;
@@ -591,7 +666,9 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
     summary = None
     if plan.todo:
         try:
-            with dask_client(campaign.execution) as client:
+            with dask_client(campaign.execution, dashboard=dashboard) as client:
+                if dashboard and events and hasattr(events, "dashboard"):
+                    events.dashboard(dashboard_link(client))
                 summary = run_campaign(expansion, store, client, plan, events)
         except KeyboardInterrupt:  # while the cluster was starting or closing
             summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),

@@ -108,7 +108,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from model.errors import NematicError
 
-from .provenance import code_version, git_commit
+from .provenance import code_version, git_commit, library_versions_text
 from .spec import AMB
 from .store import PHASE, atomic_to_netcdf, now_iso
 
@@ -631,7 +631,7 @@ def transition(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
         for n in names:
             out[n][k] = getattr(f, n)
         frac[k, order] = f.fraction_high
-    unit = "decades" if log_scale else "1"
+    unit = "1"  # CF: a pure number; a log-scale jump is in decades (its long_name says so)
     what = f"seed mean of {observable} along {axis}"
     long = {
         "location": f"transition location: midpoint of the grid bracket of the largest step "
@@ -642,15 +642,15 @@ def transition(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
         "grid_upper": "grid value above the largest step",
         "seed_lower": "seed-bootstrap percentile interval of the location, lower end",
         "seed_upper": "seed-bootstrap percentile interval of the location, upper end",
-        "jump": f"signed size of the largest step of the {what}",
+        "jump": f"signed size of the largest step of the {what}"
+                + (" (decades: in log10 of the observable)" if log_scale else ""),
         "level": "mid level of the step (log10 of the observable when log)",
         "direction": "+1 if the observable rises across the transition, -1 if it falls",
     }
     coords = _coord_copy(ds, others)
     result = xr.Dataset(coords=coords)
     for n in names:
-        units = unit if n == "jump" else ("1" if n != "level" else "log10" if log_scale else "1")
-        result[f"{pre}_{n}"] = _var(others, out[n].reshape(oshape), long[n], units)
+        result[f"{pre}_{n}"] = _var(others, out[n].reshape(oshape), long[n], unit)
     result[f"{pre}_fraction_high"] = _var(
         [*others, axis], frac.reshape(*oshape, x.size),
         "fraction of seeds beyond the step's mid level")
@@ -1080,7 +1080,7 @@ def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None =
              "fit_incompressible": int(incompressible),
              "fit_mechanics": str(ds.attrs.get("num_mechanics", ""))}
     res["stability_growth"] = _var(dims, growth, "log10 sigma2_S(t_final) / "
-                                   "sigma2_S(t_final / 2)", "decades")
+                                   "sigma2_S(t_final / 2) (decades)", "1")
     res["stability_unstable"] = _var(dims, unstable, "1 unstable, 0 stable, -1 unknown "
                                      "(missing, or failed for another reason)", **attrs)
     res["stability_fraction_unstable"] = _var([act, strain], frac, "fraction of classified "
@@ -1187,8 +1187,10 @@ def compute_fits(phase: xr.Dataset, requests: Iterable[tuple[str, Mapping[str, A
     merged = xr.merge(parts, compat="no_conflicts", join="outer",
                       combine_attrs="override") if parts else xr.Dataset()
     merged.attrs.update({
-        "Conventions": "CF-1.10",
+        "Conventions": "CF-1.11",
         "title": f"fits of campaign {phase.attrs.get('campaign', '')}",
+        "history": f"{now_iso()}: fitted from phase.nc by sweep.fits",
+        "library_versions": library_versions_text(),
         "campaign": str(phase.attrs.get("campaign", "")),
         "source": "active-nematic-solids fits (sweep.fits) of phase.nc",
         "phase_created": str(phase.attrs.get("created", "")),

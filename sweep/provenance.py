@@ -7,11 +7,12 @@ import platform
 from typing import Any
 
 import model
-from model.provenance import git_commit
+from model.provenance import git_commit, library_versions, library_versions_text
 
 log = logging.getLogger(__name__)
 
-__all__ = ["code_version", "environment", "git_commit"]
+__all__ = ["code_version", "environment", "git_commit", "library_versions",
+           "library_versions_text"]
 
 
 def code_version() -> str:
@@ -27,4 +28,4 @@ def environment() -> dict[str, Any]:
     return {"code_version": code_version(), "git_commit": git_commit(),
             "python": platform.python_version(), "numpy": numpy.__version__,
             "xarray": xarray.__version__, "dask": dask.__version__,
-            "host": platform.node()}
+            **library_versions(), "host": platform.node()}

@@ -572,8 +572,15 @@ def _check_sweep(c: _Checker, raw: Any, base: Mapping[str, Any]) -> tuple[Dim, .
                       "" if name not in NUMERICS_TYPES else " (snapshot_times cannot be swept)")
             continue
         if name in base:
-            c.add(path, f"{name!r} is both swept and set in "
-                  f"'{base[name]}:'; remove it from one of them")
+            origin = c.origins.get((base[name], name))
+            if origin is not None:  # a command-line --set
+                c.problems.append(Problem(
+                    name, f"{name!r} is a swept axis of this campaign (sweep.axes.{name}); "
+                    "--set changes only base values: drop it from the command line, or "
+                    "give the campaign a file of its own", f"command line {origin}"))
+            else:
+                c.add(path, f"{name!r} is both swept and set in "
+                      f"'{base[name]}:'; remove it from one of them")
             continue
         axis = _check_axis(c, name, spec, path)
         if axis is not None:
@@ -953,7 +960,6 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     figures = (None if doc.get("figures") is None
                else _check_products(c, doc.get("figures"), "figures"))
     execution = _check_execution(c, doc.get("execution"))
-    c.raise_if_any()
     campaign = Campaign(
         name=name, description=description, parameters=params, numerics=numerics,
         dims=dims, seeds=seeds, store=store, fits=fits, figures=figures, execution=execution,
@@ -970,7 +976,15 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     c.raise_if_any()
     from .expand import check_points  # local import: expand depends on this module
 
-    check_points(campaign, c)
+    # The values are checked by the model even when the structure has problems, so that
+    # every mistake of the file is reported in one pass (on what could be read of it).
+    structural = list(c.problems)
+    try:
+        check_points(campaign, c)
+    except Exception:  # noqa: BLE001 - a structure too broken to build points
+        if not structural:
+            raise
+        c.problems[:] = structural
     c.raise_if_any()
     return campaign
 

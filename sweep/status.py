@@ -45,6 +45,9 @@ class StatusReport:
     reasons: dict[str, int] = field(default_factory=dict)
     examples: list[dict[str, Any]] = field(default_factory=list)
     mean_run_time: float | None = None
+    #: the median of the successful runs' wall times: the ETA's basis (a first run that
+    #: compiled the kernels, or a few slow ones, barely move it)
+    median_run_time: float | None = None
     eta_seconds: float | None = None
     eta_basis: str = ""
     running: dict[str, Any] | None = None
@@ -78,7 +81,7 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     reasons: Counter[str] = Counter()
     examples: list[dict[str, Any]] = []
     times: list[float] = []
-    finished: list[str] = []
+    finished: list[tuple[str, str]] = []  # (finish time, host:pid)
     unreadable: list[dict[str, str]] = []
     n_unreadable = 0
     for i, rid in enumerate(expansion.run_ids):
@@ -108,7 +111,7 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
                                  "detail": rec.get("detail") or "",
                                  "t_failed": rec.get("t_failed")})
         if rec.get("finished"):
-            finished.append(str(rec["finished"]))
+            finished.append((str(rec["finished"]), f"{rec.get('host')}:{rec.get('pid')}"))
     done, failed = int((state == 0).sum()), int((state == 1).sum())
     pending = n - done - failed
 
@@ -132,23 +135,22 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     report.running = read_lock_holder(store.lock_path)
     if times:
         report.mean_run_time = float(np.mean(times))
+        report.median_run_time = float(np.median(times))
     if pending == 0:
         report.eta_seconds = 0.0
         return report
-    if report.running and report.running.get("started"):
+    w = workers or local_worker_count(campaign.execution)
+    concurrency = f"{w} worker(s)"
+    if report.running and report.running.get("started") and not workers:
+        # the processes that finished runs since the running driver started
         start = _parse_time(report.running["started"])
-        now = _dt.datetime.now(_dt.UTC).timestamp()
-        if start is not None and now > start:
-            recent = sum(1 for f in finished if (t := _parse_time(f)) is not None and t >= start)
-            if recent:
-                rate = recent / (now - start)
-                report.eta_seconds = pending / rate
-                report.eta_basis = (f"{recent} run(s) finished since the driver started, "
-                                    f"{rate * 3600:.3g} per hour")
-                return report
-    if report.mean_run_time is not None:
-        w = workers or local_worker_count(campaign.execution)
-        report.eta_seconds = pending * report.mean_run_time / w
-        report.eta_basis = (f"mean run time {report.mean_run_time:.3g} s over {w} "
-                            "worker(s)")
+        procs = {who for f, who in finished
+                 if start is not None and (t := _parse_time(f)) is not None and t >= start}
+        if procs:
+            w = len(procs)
+            concurrency = f"{w} worker(s) seen since the driver started"
+    if report.median_run_time is not None:
+        report.eta_seconds = pending * report.median_run_time / w
+        report.eta_basis = (f"median run time {report.median_run_time:.3g} s over "
+                            f"{concurrency}")
     return report

@@ -241,8 +241,11 @@ def atomic_to_netcdf(ds: xr.Dataset, path: Path,
 
     # Inside a dask worker xarray would guard the write with a distributed lock (a round trip
     # to the scheduler, and a failure while it shuts down): the file is private, so no lock.
+    enc = {str(k): dict(v) for k, v in (encoding or {}).items()}
+    for name in ds.coords:  # CF: a coordinate variable has no _FillValue (xarray's default)
+        enc.setdefault(str(name), {}).setdefault("_FillValue", None)
     with atomic_path(path) as tmp, dask.config.set(scheduler="synchronous"):
-        ds.to_netcdf(tmp, engine="netcdf4", encoding=dict(encoding or {}))
+        ds.to_netcdf(tmp, engine="netcdf4", encoding=enc)
         size = tmp.stat().st_size
     return size
 

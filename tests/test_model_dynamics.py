@@ -205,3 +205,20 @@ def test_jaumann_rotation_preserves_S_and_order_parameter_stays_traceless():
     assert np.abs(omega).max() > 1e-3
     jaumann = np.stack([qd1, qd2]) - H / p.gamma
     np.testing.assert_allclose(q1 * jaumann[0] + q2 * jaumann[1], 0, atol=1e-14)
+
+
+def test_the_pde_takes_its_grid_from_the_state():
+    """``ActiveNematicPDE()`` (no numerics) follows the state's grid; with explicit numerics a
+    state of another size is a clear error, not a reshape failure deep inside."""
+    p = Parameters(noise_modes=4)
+    state = make_state(*initial_fields(p, 48, seed=1))
+    eq = ActiveNematicPDE(p)
+    rate = eq.evolution_rate(state)
+    assert rate.data.shape == (3, 48, 48)
+    assert eq.numerics.resolution == 48
+    assert eq.spectral.n == 48
+    eq.evolution_rate(make_state(*initial_fields(p, 32, seed=1)))  # and follows a new size
+    assert eq.spectral.n == 32
+    fixed = ActiveNematicPDE(p, Numerics(resolution=64))
+    with pytest.raises(ValueError, match="48x48 grid .* resolution 64"):
+        fixed.evolution_rate(state)

@@ -410,4 +410,4 @@ def test_cli_text_and_stable_case():
 def test_cli_bad_input_exit_2(bad):
     res = CliRunner().invoke(_app(), bad)
     assert res.exit_code == 2
-    assert "Error" in res.output
+    assert res.output.startswith("error: ")  # the error style of every nematic command

@@ -90,6 +90,35 @@ def test_status_shows_counts_per_value_and_reasons(small):
     assert axis["failed"] == [0, 0, 2]
 
 
+def test_run_prints_warm_up_dashboard_and_progress_lines(small):
+    out = " ".join(small.result.output.split())
+    assert "workers ready in" in out
+    assert "dask dashboard: http://127.0.0.1:" in out
+    assert "progress: 6/6 runs" in out  # without a terminal: lines, not a bar
+
+
+def test_status_eta_from_the_median_run_time(copy_of_small):
+    recs = records(copy_of_small.runs)
+    ok = sorted(rid for rid, r in recs.items() if r["status"] == "ok")
+    slow = copy_of_small.runs / f"{ok[0]}.json"  # a first run that compiled: 600 s
+    rec = json.loads(slow.read_text())
+    rec["wall_time"] = 600.0
+    slow.write_text(json.dumps(rec))
+    for suffix in (".json", ".nc"):  # one run to do
+        (copy_of_small.runs / f"{ok[1]}{suffix}").unlink()
+    report = json.loads(invoke("status", copy_of_small.path, "--results",
+                               copy_of_small.results, "--json", "--workers", "2").output)
+    times = sorted([600.0] + [recs[r]["wall_time"] for r in ok[2:]])
+    assert report["pending"] == 1
+    assert report["median_run_time"] == pytest.approx(float(np.median(times)))
+    assert report["mean_run_time"] > 200  # the mean is what the 600 s run skews
+    assert report["eta_seconds"] == pytest.approx(report["median_run_time"] / 2)
+    assert "median run time" in report["eta_basis"]
+    text = " ".join(invoke("status", copy_of_small.path, "--results",
+                           copy_of_small.results).output.split())
+    assert f"run time: median {report['median_run_time']:.3g} s" in text
+
+
 def test_phase_nc(small, tmp_path):
     path = small.results / "small" / "phase.nc"
     recs = records(small.runs)

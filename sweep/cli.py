@@ -109,15 +109,6 @@ app = _App(
     rich_markup_mode="markdown",
 )
 
-
-@app.callback()
-def _options(debug: Annotated[bool, typer.Option(
-        "--debug", envvar="NEMATIC_DEBUG",
-        help="Show the Python traceback of an error (by default one line says what went "
-        "wrong).")] = False) -> None:
-    """Active nematic solids: run the model, sweep it, aggregate phase diagrams."""
-    DEBUG["on"] = debug
-
 log = logging.getLogger("sweep.cli")
 
 # --------------------------------------------------------------------------- shared options
@@ -156,8 +147,13 @@ def _version_callback(value: bool) -> None:
 @app.callback()
 def _main(version: Annotated[bool, typer.Option(
         "--version", callback=_version_callback, is_eager=True,
-        help="Print the version and exit.")] = False) -> None:
+        help="Print the version and exit.")] = False,
+          debug: Annotated[bool, typer.Option(
+        "--debug", envvar="NEMATIC_DEBUG",
+        help="Show the Python traceback of an error (by default one line says what went "
+        "wrong).")] = False) -> None:
     """Active nematic solids: run the model, sweep it, aggregate phase diagrams."""
+    DEBUG["on"] = debug
 
 
 def _setup_logging(console: Console, verbose: bool, quiet: bool = False) -> None:

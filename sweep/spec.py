@@ -966,14 +966,16 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
         limits=limits, source=source, text=text, overrides=overrides.describe(),
     )
     # Sizes first, by arithmetic: nothing below is built for a grid that is too large.
+    before_bounds = len(c.problems)
     if campaign.n_runs > limits.max_runs:
         sizes = " x ".join(f"{len(d)} ({d.name})" for d in dims)
         c.add(("sweep",) if dims else ("seeds",),
               f"{campaign.n_runs} runs ({sizes + ' x ' if dims else ''}{len(seeds)} seeds); "
               f"allowed: at most {limits.max_runs} (limits.max_runs)")
     _check_memory(c, campaign)
+    if len(c.problems) > before_bounds:  # out of bounds: stop before any point is built
+        c.raise_if_any()
     _check_product_axes(c, campaign)
-    c.raise_if_any()
     from .expand import check_points  # local import: expand depends on this module
 
     # The values are checked by the model even when the structure has problems, so that

@@ -26,6 +26,7 @@ Definitions (unit domain, :math:`\langle\cdot\rangle` = area mean):
 from __future__ import annotations
 
 import numpy as np
+from scipy.signal import peak_prominences
 
 from . import constitutive as cl
 from . import tensors as T
@@ -139,19 +140,6 @@ def first_peak(values: Array, *, significance: float = 0.5) -> int:
     return int(np.argmax(finite))
 
 
-def prominence(v: Array, i: int) -> float:
-    """Topographic prominence of the local maximum ``v[i]``: its height above the higher of
-    the lowest points between it and the nearest higher sample on either side (the series'
-    end where there is none), as in ``scipy.signal.peak_prominences``."""
-    left = v[:i + 1]
-    higher = np.nonzero(left[:-1] > v[i])[0]
-    lo_left = float(left[higher[-1] + 1:].min()) if len(higher) else float(left.min())
-    right = v[i:]
-    higher = np.nonzero(right[1:] > v[i])[0]
-    lo_right = float(right[:higher[0] + 1].min()) if len(higher) else float(right.min())
-    return float(v[i] - max(lo_left, lo_right))
-
-
 def growth_peak(values: Array, times: Array | None = None, *, rate_fraction: float = 0.1,
                 min_prominence: float = 0.1) -> int:
     r"""Fig. 3's "first peak" read robustly, at the **end of the growth phase**: the first
@@ -189,7 +177,8 @@ def growth_peak(values: Array, times: Array | None = None, *, rate_fraction: flo
     # an overshoot peaks within one growth time (i_fast -> end) of the end of growth
     for i in range(max(end, 1), min(n - 1, 2 * end - i_fast + 2)):
         if w[i] > w[i - 1] and w[i] >= w[i + 1]:
-            return i if prominence(w, i) >= min_prominence * span else end
+            prom = float(peak_prominences(w, [i])[0][0])
+            return i if prom >= min_prominence * span else end
         if w[i] < w[i - 1]:
             break
     return end

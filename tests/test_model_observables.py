@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.signal import peak_prominences
 
 from model.fourier import SpectralGrid
 from model.observables import (
@@ -13,7 +12,6 @@ from model.observables import (
     growth_peak,
     pattern_size,
     pattern_size_mean,
-    prominence,
     radial_spectrum,
 )
 from model.parameters import Numerics, Parameters
@@ -123,10 +121,3 @@ def test_growth_peak_of_a_monotone_rise_is_at_its_end_and_noise_wiggles_are_skip
     with_nan = _series(t, [])
     with_nan[50:] = np.nan  # a failed run's tail
     assert 10 <= growth_peak(with_nan) < 50
-
-
-def test_prominence_matches_scipy():
-    v = np.array([0.0, 2.0, 1.0, 3.0, 0.5, 2.5, 2.0, 4.0, 0.0])
-    expected = peak_prominences(v, [1, 3, 5, 7])[0]
-    assert [prominence(v, i) for i in (1, 3, 5, 7)] == pytest.approx(list(expected))
-    assert list(expected) == [1.0, 2.5, 0.5, 4.0]

@@ -175,7 +175,7 @@ def _wdot(wf, af, bf):  # pragma: no cover - compiled
     else: no contraction into FMAs), so that LLVM vectorises the sum: its order is then
     that of the compiled loop (SIMD lanes, then a fixed tree), fixed for a given machine and
     independent of the arrays' alignment (tested), not the order of ``numpy.sum``; 3x faster
-    than the scalar sum at 128^2 (session 8, measured)."""
+    than the scalar sum at 128^2 (measured)."""
     s = 0.0
     for i in range(wf.size):
         s += wf[i] * (af[i].real * bf[i].real + af[i].imag * bf[i].imag)

@@ -443,11 +443,31 @@ class FiniteMechanics(_Mechanics):
                     f"(residual {res:.3g})", t)
             u_hat, F, P, P_hat, res = trial, F_t, P_t, P_hat_t, res_t
         self.u_hat = u_hat
+        return self._state(F, P, u_hat, iterations=it, residual=res, K=K)
+
+    @staticmethod
+    def _state(F: Array, P: Array, u_hat: Array, *, iterations: int = 0,
+               residual: float = float("nan"), K: Array | None = None) -> MechanicalState:
+        """The :class:`MechanicalState` of the deformation ``F`` with stress ``P``."""
         J = T.det(F)
         C = T.matmul(T.transpose(F), F)
         Ebar_dev = np.stack([0.25 * (C[0, 0] - C[1, 1]) / J, 0.5 * C[0, 1] / J])
         return MechanicalState(F=F, P=P, Ebar_dev=Ebar_dev, Jm1=J - 1.0, trP=T.trace(P),
-                               u_hat=u_hat, iterations=it, residual=res, extras={"K": K})
+                               u_hat=u_hat, iterations=iterations, residual=residual,
+                               extras={"K": K})
+
+    def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None
+                 ) -> MechanicalState:
+        """The mechanical state at the displacement ``u_hat`` as given, without solving the
+        force balance (the stages of the integrated-displacement scheme, where u is part of
+        the integrated state: docs/model.md, section 4). Its ``residual`` is not computed
+        (NaN). Raises ``J<=0`` where the deformation folds."""
+        F = self.deformation(u_hat)
+        if not np.all(T.det(F) > 0):
+            raise SimulationFailure("J<=0", "the integrated displacement has J <= 0", t)
+        m = self.moduli
+        P = first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
+        return self._state(F, P, u_hat)
 
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
                      t: float | None = None) -> tuple[Array, Array]:

@@ -26,6 +26,8 @@ MAX_SAVES = 1_000_000
 MAX_STEPS = 10**8
 SCHEMES = ("etdrk4", "etdrk2")
 ERROR_NORMS = ("max", "rms")
+#: how the finite-strain displacement is found at the stages of a step (Numerics.displacement)
+DISPLACEMENT = ("integrated", "equilibrium")
 
 
 def _suggest(name: str, valid: list[str]) -> str:
@@ -168,6 +170,10 @@ class Numerics:
         snapshot_times: times at which full fields are stored (final time always is).
         mechanics: "finite" (neo-Hookean, Newton-Krylov) or "linear" (small strain).
         incompressible: linear mechanics only: enforce div u = 0 by spectral projection.
+        displacement: finite mechanics only: "integrated" (the displacement is part of the
+            integrated state, advanced with the displacement rate the spin solve computes, and
+            projected back onto force balance once per accepted step) or "equilibrium"
+            (force balance solved by Newton at every stage: the cross-check).
         newton_tol: force-balance residual tolerance (see docs/model.md, "Residual").
         max_newton: Newton iterations allowed per solve before failing.
         spin_tol: relative GMRES tolerance of the Jaumann spin solve.
@@ -185,6 +191,7 @@ class Numerics:
     snapshot_times: tuple[float, ...] = ()
     mechanics: str = "finite"
     incompressible: bool = False
+    displacement: str = "integrated"
     newton_tol: float = 1e-6
     max_newton: int = 30
     spin_tol: float = 1e-3
@@ -217,6 +224,8 @@ class Numerics:
             raise ParameterError("scheme", self.scheme, " or ".join(SCHEMES))
         if self.mechanics not in MECHANICS:
             raise ParameterError("mechanics", self.mechanics, " or ".join(MECHANICS))
+        if self.displacement not in DISPLACEMENT:
+            raise ParameterError("displacement", self.displacement, " or ".join(DISPLACEMENT))
         for name in ("adaptive", "incompressible"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(name, getattr(self, name), "true or false")

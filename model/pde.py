@@ -16,8 +16,8 @@ Equations (tensor conventions: docs/model.md):
 In components, with :math:`W = \omega\,[[0, -1], [1, 0]]`:
 :math:`\dot q_1 = H_{11}/\gamma - 2 \omega q_2`, :math:`\dot q_2 = H_{12}/\gamma + 2 \omega q_1`,
 where :math:`\omega = \tfrac12 \operatorname{curl} \dot u` depends linearly on :math:`\dot Q`
-(the displacement rate solves the rate form of Eq. 3), so :math:`\omega` is found by a fixed
-point iteration :math:`\omega \leftarrow \Omega[H/\gamma + 2 \omega J q]`.
+(the displacement rate solves the rate form of Eq. 3), so :math:`\omega` and :math:`\dot Q`
+are found together by one linear solve (GMRES, :mod:`model.mechanics`).
 """
 
 from __future__ import annotations
@@ -110,10 +110,15 @@ class ActiveNematicPDE(PDEBase):
         p = self.params
         return (-p.zeta * A - p.chi * mech.trP - p.s * A * A * A) / p.tau
 
-    def rates(self, q1: Array, q2: Array, A: Array, t: float | None = None
-              ) -> tuple[Array, MechanicalState, Array]:
-        """Return ``(d/dt [q1, q2, A], mechanical state, omega)``."""
-        mech = self.mechanics.solve(q1, q2, t=t)
+    def rates(self, q1: Array, q2: Array, A: Array, t: float | None = None,
+              u_hat: Array | None = None) -> tuple[Array, MechanicalState, Array]:
+        """Return ``(d/dt [q1, q2, A], mechanical state, omega)``: with the displacement in
+        force balance (Eq. 3, solved), or at the given displacement spectrum ``u_hat``
+        (finite mechanics only; the integrated-displacement stages of the solver)."""
+        if u_hat is None:
+            mech = self.mechanics.solve(q1, q2, t=t)
+        else:
+            mech = self.mechanics.state_at(u_hat, q1, q2, t)
         H = self.molecular_field(q1, q2, A, mech)
         qd1, qd2, omega = self.corotational_rates(q1, q2, H, mech, t)
         return np.stack([qd1, qd2, self.activity_rate(A, mech)]), mech, omega

@@ -137,7 +137,13 @@ class ETDSolver(SolverBase):
         self._workspace = fast_linear.workspace(g.n) if self.compiled else ()
         self._symbols = (mech.response_symbols()
                          if isinstance(mech, LinearMechanics) and self.compiled else None)
-        self.stats = {"steps": 0, "rejected": 0, "stage_failures": 0, "rhs": 0, "newton": 0}
+        #: finite strain with the displacement integrated with the state (Numerics.displacement)
+        self.integrated = isinstance(mech, FiniteMechanics) and num.displacement == "integrated"
+        #: the integrated displacement spectrum at the end of the last step (projected onto
+        #: force balance when the step is accepted)
+        self._pending_disp: Array | None = None
+        self.stats = {"steps": 0, "rejected": 0, "stage_failures": 0, "rhs": 0, "newton": 0,
+                      "projections": 0}
         #: the finite mechanical state of the last right-hand side (its tangent and E serve
         #: the well-posedness check of the step's start)
         self._last_mech: MechanicalState | None = None
@@ -146,16 +152,19 @@ class ETDSolver(SolverBase):
         self._checked_at = float("nan")
 
     # --- the split right-hand side -----------------------------------------------------
-    def split(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
+    def split(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
+              ) -> tuple[Array, Array]:
         """Return ``(N_q hat, Adot)`` for the state ``u = [q1, q2, A]`` with ``q_hat`` the
         spectra of q1, q2: :math:`\\hat N_q = \\widehat{\\dot q} - L_q \\hat q` in Fourier space,
-        and the full activity rate (Eq. 5) in real space."""
+        and the full activity rate (Eq. 5) in real space. Finite strain: at the displacement
+        spectrum ``disp`` if given (the integrated scheme; its rate is then the mechanics'
+        ``udot_hat``), else in force balance."""
         self.stats["rhs"] += 1
         eq = self.pde
         g = eq.spectral
         if isinstance(eq.mechanics, LinearMechanics):
             return self._split_linear(u, q_hat, t)
-        rate, mech, _ = eq.rates(u[0], u[1], u[2], t)
+        rate, mech, _ = eq.rates(u[0], u[1], u[2], t, u_hat=disp)
         self._last_mech = mech
         self.stats["newton"] += mech.iterations
         if not np.all(np.isfinite(rate)):
@@ -273,11 +282,15 @@ class ETDSolver(SolverBase):
             mech.u_hat, mech.udot_hat = self._finite_restore
 
     def _finish(self, u: Array, q_hat: Array, new_q_hat: Array, new_A: Array, err_q: Array,
-                err_A: Array) -> tuple[Array, float]:
+                err_A: Array, new_disp: Array | None = None, err_disp: Array | None = None
+                ) -> tuple[Array, float]:
         """The new state, its spectra remembered for the next step, and the error estimate
         of ``err_q`` (spectra) and ``err_A`` (real space): the largest pointwise error
         (``error_norm = "max"``, two inverse transforms) or the RMS over the grid, maximum
-        over the three fields."""
+        over the three fields. With the integrated displacement, ``new_disp`` is kept for the
+        projection of an accepted step, and the error ``err_disp`` (spectrum) counts by its
+        strain, each component of :math:`\\nabla e_u` like a field (four inverse
+        transforms)."""
         g = self.pde.spectral
         new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
         self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
@@ -286,7 +299,40 @@ class ETDSolver(SolverBase):
         else:
             err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]),
                       float(np.sqrt(np.mean(err_A**2))))
+        self._pending_disp = new_disp
+        if err_disp is not None:
+            strain = g.inverse(kern.grad_hat_kernel(err_disp, g.kx, g.ky))
+            err = max(err, float(np.abs(strain).max()) if self.error_norm == "max"
+                      else float(np.sqrt(np.mean(strain**2, axis=(2, 3))).max()))
         return new, err
+
+    def _project(self, new: Array, t: float) -> None:
+        """Put the integrated displacement of an accepted step back onto force balance
+        (Eq. 3): Newton from it, usually no or one iteration; it becomes the mechanics'
+        displacement, from which the next step starts."""
+        disp, self._pending_disp = self._pending_disp, None
+        if disp is None:
+            return
+        state = self.pde.mechanics.solve(new[0], new[1], u_guess=disp, t=t)
+        self.stats["newton"] += state.iterations
+        self.stats["projections"] += 1
+
+    def _retry(self, exc: SimulationFailure, h_try: float, t: float) -> float:
+        """A failed stage or projection: the step size to retry with (h / 4), or raise
+        ``exc`` when the failure is the run's (fixed steps, an ill-posed accepted state, or a
+        step at the retry floor)."""
+        # a too-large step can throw a stage out of the well-posed range: retry smaller; a
+        # failure that persists at small steps is the run's, and so is an ill-posed accepted
+        # state (a shorter step cannot change it)
+        self._restore_finite()
+        self._pending_disp = None
+        if (not self.adaptive or isinstance(exc, IllPosed)
+                or h_try <= self.retry_floor * self.dt_max):
+            raise exc
+        log.debug("step %g at t = %g failed (%s): retrying with h / 4", h_try, t, exc)
+        self.stats["rejected"] += 1
+        self.stats["stage_failures"] += 1
+        return self._quantize(h_try / 4)
 
     def _quantize(self, h: float) -> float:
         """Round a proposed step down onto the ladder dt_max * 2^(-j/8), so that only a few
@@ -314,17 +360,7 @@ class ETDSolver(SolverBase):
                     if not np.all(np.isfinite(new)):
                         raise SimulationFailure("nan", "non-finite state after a step", t)
                 except SimulationFailure as exc:
-                    # a too-large step can throw a stage out of the well-posed range: retry
-                    # smaller; a failure that persists at small steps is the run's, and so is
-                    # an ill-posed accepted state (a shorter step cannot change it)
-                    self._restore_finite()
-                    if (not self.adaptive or isinstance(exc, IllPosed)
-                            or h_try <= self.retry_floor * self.dt_max):
-                        raise
-                    log.debug("step %g at t = %g failed (%s): retrying with h / 4", h_try, t, exc)
-                    self.stats["rejected"] += 1
-                    self.stats["stage_failures"] += 1
-                    h = self._quantize(h_try / 4)
+                    h = self._retry(exc, h_try, t)
                     continue
                 if self.adaptive:
                     fac = 2.0 if err == 0 else float(np.clip(
@@ -332,6 +368,7 @@ class ETDSolver(SolverBase):
                     if err > self.tolerance:
                         self.stats["rejected"] += 1
                         self._restore_finite()
+                        self._pending_disp = None
                         # a rejected step is retried at most half as long: the estimate
                         # near the stability limit does not scale as h^p (measured: repeated
                         # rejections at 0.9 (tol/err)^(1/p))
@@ -341,6 +378,12 @@ class ETDSolver(SolverBase):
                                 "step_size_collapsed",
                                 f"adaptive time step fell below {self.dt_min:g}", t)
                         continue
+                try:
+                    self._project(new, t + h_try)
+                except SimulationFailure as exc:
+                    h = self._retry(exc, h_try, t)
+                    continue
+                if self.adaptive:
                     if h_try == min(h, self.dt_max):  # not shortened to hit t_end
                         h = self._quantize(min(h_try * fac, self.dt_max))
                     else:
@@ -371,7 +414,9 @@ class ETDRK2Solver(ETDSolver):
         q_hat = self._spectrum(u[:2])
         A = u[2]
         self._finite_restore = None
-        Nq0, Adot0 = self.split(u, q_hat, t)
+        mech = self.pde.mechanics
+        d0 = mech.u_hat if self.integrated else None
+        Nq0, Adot0 = self.split(u, q_hat, t, d0)
         self.check_wellposed(u, t)
         finite = self._save_finite()
         E, phi1, phi2 = self._phis(h)
@@ -380,12 +425,22 @@ class ETDRK2Solver(ETDSolver):
         aq_hat = E * q_hat + h * phi1 * Nq0
         aA = A + h * phi1A * Adot0  # = e^{L h} A + h phi1 (Adot - L A)
         a = np.concatenate([g.inverse(aq_hat), aA[None]])
-        if finite is not None:  # first-order predictor of the displacement
-            finite.u_hat = finite.u_hat + h * finite.udot_hat
-        Nqa, Adota = self.split(a, aq_hat, t + h)
+        da = None
+        if finite is not None:  # the displacement: ETD with L = 0, i.e. Heun's method
+            V0 = finite.udot_hat
+            if self.integrated:
+                da = d0 + h * V0
+            else:  # first-order predictor of Newton's start
+                finite.u_hat = finite.u_hat + h * V0
+        Nqa, Adota = self.split(a, aq_hat, t + h, da)
         corr_q = h * phi2 * (Nqa - Nq0)
         corr_A = h * phi2A * (Adota - Adot0 - LA * (aA - A))
-        return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A)
+        if da is None:
+            return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A)
+        assert finite is not None
+        corr_d = 0.5 * h * (finite.udot_hat - V0)
+        return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A,
+                            da + corr_d, corr_d)
 
 
 class ETDRK4Solver(ETDSolver):
@@ -419,38 +474,64 @@ class ETDRK4Solver(ETDSolver):
         def combo_A(Ea: Array, x: Array, w: tuple[Array, ...], N: tuple[Array, ...]) -> Array:
             return comb(Ea, x[None], h, w, tuple(n[None] for n in N))[0]
 
-        def rhs(q_s: Array, A_s: Array, t_s: float) -> tuple[Array, Array]:
-            """Stage (q spectra, A) -> (N_q hat, N_A) with N_A = Adot - L_A A."""
+        mech = self.pde.mechanics
+        integrated = self.integrated
+
+        def rhs(q_s: Array, A_s: Array, t_s: float, d_s: Array | None
+                ) -> tuple[Array, Array]:
+            """Stage (q spectra, A[, displacement spectrum]) -> (N_q hat, N_A) with
+            N_A = Adot - L_A A (the displacement rate is then the mechanics' udot_hat)."""
             stage = np.empty((3,) + A_s.shape)
             g.inverse(q_s, out=stage[:2])
             stage[2] = A_s
-            Nq, Adot = self.split(stage, q_s, t_s)
+            Nq, Adot = self.split(stage, q_s, t_s, d_s)
             return Nq, Adot - LA * A_s
 
-        Nq_u, Adot_u = self.split(u, q_hat, t)
+        d0 = mech.u_hat if integrated else None
+        Nq_u, Adot_u = self.split(u, q_hat, t, d0)
         self.check_wellposed(u, t)
         NA_u = Adot_u - LA * A
         finite = self._save_finite()
+        # the integrated displacement (L = 0: the weights become the classical RK4's,
+        # phi_k(0) = 1/k!): d_a = d + h/2 V_u, d_b = d + h/2 V_a, d_c = d + h V_b
+        V: list[Array] = []
+        d_a = d_b = d_c = None
         if finite is not None:
-            finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
+            V.append(finite.udot_hat)
+            if integrated:
+                d_a = d0 + 0.5 * h * V[0]
+            else:  # Newton's start: the displacement extrapolated with its rate
+                finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
         # stage a (t + h/2): ETD1 half step
         Nq_a, NA_a = rhs(combo_q(E2, q_hat, wq["a"], (Nq_u,)),
-                         combo_A(EA2, A, wA["a"], (NA_u,)), t + 0.5 * h)
+                         combo_A(EA2, A, wA["a"], (NA_u,)), t + 0.5 * h, d_a)
+        if integrated:
+            V.append(finite.udot_hat)
+            d_b = d0 + 0.5 * h * V[1]
         # stage b (t + h/2): Krogstad's correction with phi_2, a + h phi_2(h/2) (N_a - N_u)
         Nq_b, NA_b = rhs(combo_q(E2, q_hat, wq["b"], (Nq_u, Nq_a)),
-                         combo_A(EA2, A, wA["b"], (NA_u, NA_a)), t + 0.5 * h)
-        if finite is not None:
+                         combo_A(EA2, A, wA["b"], (NA_u, NA_a)), t + 0.5 * h, d_b)
+        if integrated:
+            V.append(finite.udot_hat)
+            d_c = d0 + h * V[2]
+        elif finite is not None:
             finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
         # stage c (t + h)
         Nq_c, NA_c = rhs(combo_q(E, q_hat, wq["c"], (Nq_u, Nq_b)),
-                         combo_A(EA, A, wA["c"], (NA_u, NA_b)), t + h)
+                         combo_A(EA, A, wA["c"], (NA_u, NA_b)), t + h, d_c)
         # the fourth-order combination
         new_q_hat = combo_q(E, q_hat, wq["new"], (Nq_u, Nq_a, Nq_b, Nq_c))
         new_A = combo_A(EA, A, wA["new"], (NA_u, NA_a, NA_b, NA_c))
         # embedded estimate: the same weights with N_a in place of (N_a + N_b)/2, i.e. the
         # Cox-Matthews third-order weights on the first-order midpoint stage: O(h^3)
-        return self._finish(u, q_hat, new_q_hat, new_A, h * wq["new"][1] * (Nq_b - Nq_a),
-                            h * wA["new"][1] * (NA_b - NA_a))
+        err_q = h * wq["new"][1] * (Nq_b - Nq_a)
+        err_A = h * wA["new"][1] * (NA_b - NA_a)
+        if not integrated:
+            return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A)
+        V.append(finite.udot_hat)
+        new_d = d0 + (h / 6.0) * (V[0] + 2.0 * V[1] + 2.0 * V[2] + V[3])
+        return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A, new_d,
+                            (h / 3.0) * (V[2] - V[1]))
 
     @staticmethod
     def _weights_from(f1: Array, f2: Array, f3: Array, g1: Array, g2: Array

@@ -36,92 +36,92 @@ def _imul_compiled(c, z):  # pragma: no cover - compiled
     return lambda c, z: complex(-c * z.imag, c * z.real)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
+def _dS(d00, d01, d11, i00, i01, i11, s1_00, s1_01, s1_11, s3_00, s3_01, s3_11, J, I1, CQ,
+        qq, a, b, kappa, B, Bp):  # pragma: no cover - compiled
+    """The increment of the second Piola stress S (symmetric: components 00, 01, 11) for the
+    symmetric increment dC = [[d00, d01], [d01, d11]] of C (:func:`tangent_kernel`)."""
+    c = i00 * d00 + 2.0 * i01 * d01 + i11 * d11  # C^-1 : dC
+    dCQ = d00 * a + 2.0 * d01 * b - d11 * a  # dC : Q
+    trdC = d00 + d11
+    t00 = d00 * i00 + d01 * i01  # dC C^-1
+    t01 = d00 * i01 + d01 * i11
+    t10 = d01 * i00 + d11 * i01
+    t11 = d01 * i01 + d11 * i11
+    e00 = -(i00 * t00 + i01 * t10)  # dC^-1 = -C^-1 dC C^-1
+    e01 = -(i00 * t01 + i01 * t11)
+    e11 = -(i01 * t01 + i11 * t11)
+    k1 = kappa * (2.0 * J - 1.0) * 0.5 * J * c
+    k2 = kappa * (J * J - J)
+    b1 = 0.5 * B * dCQ / J
+    b2 = 0.5 * B * CQ / J
+    p1 = Bp * qq * 0.5 * J * c
+    p2 = Bp * qq * J
+    out00 = (-0.5 * c * (s1_00 + s3_00) + (-0.5 * trdC * i00 - 0.5 * I1 * e00) / J
+             + k1 * i00 + k2 * e00 + b1 * i00 + b2 * e00 - p1 * i00 - p2 * e00)
+    out01 = (-0.5 * c * (s1_01 + s3_01) + (-0.5 * trdC * i01 - 0.5 * I1 * e01) / J
+             + k1 * i01 + k2 * e01 + b1 * i01 + b2 * e01 - p1 * i01 - p2 * e01)
+    out11 = (-0.5 * c * (s1_11 + s3_11) + (-0.5 * trdC * i11 - 0.5 * I1 * e11) / J
+             + k1 * i11 + k2 * e11 + b1 * i11 + b2 * e11 - p1 * i11 - p2 * e11)
+    return out00, out01, out11
+
+
+@njit(cache=True, error_model="numpy")
 def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compiled
     r""":math:`K_{iJkL} = \partial P_{iJ}/\partial F_{kL}`, the same formulas as
     :func:`model.constitutive.first_piola_increment` applied to the four unit directions
-    :math:`dF = e_k \otimes e_L`, evaluated point by point."""
+    :math:`dF = e_k \otimes e_L` (then :math:`dC = dF^T F + F^T dF`, symmetric), evaluated
+    point by point with scalars: :math:`dP = dF\, S + F\, dS`."""
     nx, ny = q1.shape
     K = np.empty((2, 2, 2, 2, nx, ny))
-    Fp = np.empty((2, 2))
-    Q = np.empty((2, 2))
-    C = np.empty((2, 2))
-    Ci = np.empty((2, 2))
-    S = np.empty((2, 2))
-    S1 = np.empty((2, 2))
-    S3 = np.empty((2, 2))
-    dC = np.empty((2, 2))
-    dCi = np.empty((2, 2))
-    tmp = np.empty((2, 2))
-    dS = np.empty((2, 2))
     for x in range(nx):
         for y in range(ny):
-            for a in range(2):
-                for b in range(2):
-                    Fp[a, b] = F[a, b, x, y]
-            Q[0, 0] = q1[x, y]
-            Q[0, 1] = q2[x, y]
-            Q[1, 0] = q2[x, y]
-            Q[1, 1] = -q1[x, y]
-            for a in range(2):
-                for b in range(2):
-                    C[a, b] = Fp[0, a] * Fp[0, b] + Fp[1, a] * Fp[1, b]
-            J = Fp[0, 0] * Fp[1, 1] - Fp[0, 1] * Fp[1, 0]
-            I1 = C[0, 0] + C[1, 1]
-            detC = C[0, 0] * C[1, 1] - C[0, 1] * C[1, 0]
-            Ci[0, 0] = C[1, 1] / detC
-            Ci[1, 1] = C[0, 0] / detC
-            Ci[0, 1] = -C[0, 1] / detC
-            Ci[1, 0] = -C[1, 0] / detC
-            qq = 2.0 * (q1[x, y] ** 2 + q2[x, y] ** 2)
-            CQ = 0.0
-            for a in range(2):
-                for b in range(2):
-                    CQ += C[a, b] * Q[a, b]
-            for a in range(2):
-                for b in range(2):
-                    eye = 1.0 if a == b else 0.0
-                    S1[a, b] = (eye - 0.5 * I1 * Ci[a, b]) / J
-                    S3[a, b] = -B * (Q[a, b] - 0.5 * CQ * Ci[a, b]) / J
-                    S[a, b] = (S1[a, b] + kappa * (J - 1.0) * J * Ci[a, b] + S3[a, b]
-                               - Bp * qq * J * Ci[a, b] + alpha * Q[a, b])
+            f00 = F[0, 0, x, y]
+            f01 = F[0, 1, x, y]
+            f10 = F[1, 0, x, y]
+            f11 = F[1, 1, x, y]
+            a = q1[x, y]  # Q = [[a, b], [b, -a]]
+            b = q2[x, y]
+            c00 = f00 * f00 + f10 * f10  # C = F^T F
+            c01 = f00 * f01 + f10 * f11
+            c11 = f01 * f01 + f11 * f11
+            J = f00 * f11 - f01 * f10
+            I1 = c00 + c11
+            detC = c00 * c11 - c01 * c01
+            i00 = c11 / detC
+            i01 = -c01 / detC
+            i11 = c00 / detC
+            qq = 2.0 * (a * a + b * b)
+            CQ = c00 * a + 2.0 * c01 * b - c11 * a
+            s1_00 = (1.0 - 0.5 * I1 * i00) / J
+            s1_01 = (-0.5 * I1 * i01) / J
+            s1_11 = (1.0 - 0.5 * I1 * i11) / J
+            s3_00 = -B * (a - 0.5 * CQ * i00) / J
+            s3_01 = -B * (b - 0.5 * CQ * i01) / J
+            s3_11 = -B * (-a - 0.5 * CQ * i11) / J
+            iso = kappa * (J - 1.0) * J - Bp * qq * J
+            S00 = s1_00 + iso * i00 + s3_00 + alpha * a
+            S01 = s1_01 + iso * i01 + s3_01 + alpha * b
+            S11 = s1_11 + iso * i11 + s3_11 - alpha * a
             for k in range(2):
+                fk0 = f00 if k == 0 else f10
+                fk1 = f01 if k == 0 else f11
                 for L in range(2):
                     # dC_ab = delta_aL F_kb + delta_bL F_ka
-                    for a in range(2):
-                        for b in range(2):
-                            dC[a, b] = ((Fp[k, b] if a == L else 0.0)
-                                        + (Fp[k, a] if b == L else 0.0))
-                    c = 0.0
-                    dCQ = 0.0
-                    for a in range(2):
-                        for b in range(2):
-                            c += Ci[a, b] * dC[a, b]
-                            dCQ += dC[a, b] * Q[a, b]
-                    trdC = dC[0, 0] + dC[1, 1]
-                    for a in range(2):
-                        for b in range(2):
-                            tmp[a, b] = dC[a, 0] * Ci[0, b] + dC[a, 1] * Ci[1, b]
-                    for a in range(2):
-                        for b in range(2):
-                            dCi[a, b] = -(Ci[a, 0] * tmp[0, b] + Ci[a, 1] * tmp[1, b])
-                    for a in range(2):
-                        for b in range(2):
-                            dS1 = -0.5 * c * S1[a, b] + (-0.5 * trdC * Ci[a, b]
-                                                         - 0.5 * I1 * dCi[a, b]) / J
-                            dS2 = kappa * ((2.0 * J - 1.0) * 0.5 * J * c * Ci[a, b]
-                                           + (J * J - J) * dCi[a, b])
-                            dS3 = -0.5 * c * S3[a, b] + B * (0.5 * dCQ * Ci[a, b]
-                                                             + 0.5 * CQ * dCi[a, b]) / J
-                            dS4 = -Bp * qq * (0.5 * J * c * Ci[a, b] + J * dCi[a, b])
-                            dS[a, b] = dS1 + dS2 + dS3 + dS4
-                    for i in range(2):
-                        for j in range(2):
-                            # dP = dF S + F dS, (dF S)_ij = delta_ik S_Lj
-                            v = Fp[i, 0] * dS[0, j] + Fp[i, 1] * dS[1, j]
-                            if i == k:
-                                v += S[L, j]
-                            K[i, j, k, L, x, y] = v
+                    if L == 0:
+                        d00, d01, d11 = 2.0 * fk0, fk1, 0.0
+                    else:
+                        d00, d01, d11 = 0.0, fk0, 2.0 * fk1
+                    ds00, ds01, ds11 = _dS(d00, d01, d11, i00, i01, i11, s1_00, s1_01, s1_11,
+                                           s3_00, s3_01, s3_11, J, I1, CQ, qq, a, b, kappa,
+                                           B, Bp)
+                    # (dF S)_ij = delta_ik S_Lj, (F dS)_ij = F_i0 dS_0j + F_i1 dS_1j
+                    SL0 = S00 if L == 0 else S01
+                    SL1 = S01 if L == 0 else S11
+                    K[0, 0, k, L, x, y] = f00 * ds00 + f01 * ds01 + (SL0 if k == 0 else 0.0)
+                    K[0, 1, k, L, x, y] = f00 * ds01 + f01 * ds11 + (SL1 if k == 0 else 0.0)
+                    K[1, 0, k, L, x, y] = f10 * ds00 + f11 * ds01 + (SL0 if k == 1 else 0.0)
+                    K[1, 1, k, L, x, y] = f10 * ds01 + f11 * ds11 + (SL1 if k == 1 else 0.0)
     return K
 
 
@@ -350,7 +350,7 @@ def linear_response(q1h, q2h, isoh, kx, ky, khx, khy, inv_k2, amb, a, kappa,
 # --- finite-strain stress and spectral operators (references: model.constitutive,
 #     model.fourier.SpectralGrid, model.mechanics) ----------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _stress_point(a, b, c, d, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # pragma: no cover
     """First Piola stress at one point, F = [[a, b], [c, d]]; if ``active`` the full Eq. (2)
     stress for Q = (q1, q2), else the Q-increment :math:`\\partial P/\\partial Q : dQ` for
@@ -383,7 +383,7 @@ def _stress_point(a, b, c, d, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # p
     return (a * S00 + b * S01, a * S01 + b * S11, c * S00 + d * S01, c * S01 + d * S11)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _stress_field(F, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # pragma: no cover
     """:func:`_stress_point` at every grid point, as a (2, 2, nx, ny) array."""
     nx, ny = q1.shape

@@ -194,7 +194,7 @@ class Numerics:
     displacement: str = "integrated"
     newton_tol: float = 1e-6
     max_newton: int = 30
-    spin_tol: float = 1e-3
+    spin_tol: float = 1e-2
 
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:

@@ -444,6 +444,45 @@ def neg_div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
+    r""":math:`i k_j \hat T_{ij}` (reference: :meth:`model.fourier.SpectralGrid.div_hat`)."""
+    nx, ny = kx.shape
+    out = np.empty((2, nx, ny), dtype=np.complex128)
+    for i in range(2):
+        for x in range(nx):
+            for y in range(ny):
+                out[i, x, y] = imul(1.0, rmul(kx[x, y], T[i, 0, x, y])
+                                    + rmul(ky[x, y], T[i, 1, x, y]))
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def strain_measures_kernel(F, P):  # pragma: no cover - compiled
+    r"""From F and P, point by point: the deviatoric part of :math:`\bar E = \tfrac12 (J^{-1}
+    C - I)` as ((E11 - E22)/2, E12), J - 1 and tr P (reference:
+    :meth:`model.mechanics.FiniteMechanics._state_reference`)."""
+    nx, ny = F.shape[2], F.shape[3]
+    dev = np.empty((2, nx, ny))
+    Jm1 = np.empty((nx, ny))
+    trP = np.empty((nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            f00 = F[0, 0, x, y]
+            f01 = F[0, 1, x, y]
+            f10 = F[1, 0, x, y]
+            f11 = F[1, 1, x, y]
+            J = f00 * f11 - f01 * f10
+            c00 = f00 * f00 + f10 * f10
+            c01 = f00 * f01 + f10 * f11
+            c11 = f01 * f01 + f11 * f11
+            dev[0, x, y] = 0.25 * (c00 - c11) / J
+            dev[1, x, y] = 0.5 * c01 / J
+            Jm1[x, y] = J - 1.0
+            trP[x, y] = P[0, 0, x, y] + P[1, 1, x, y]
+    return dev, Jm1, trP
+
+
+@njit(cache=True)
 def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
     """Green operator of the isotropic reference medium, :math:`(I - a \\hat k \\hat k)
     \\hat b / k^2` (reference: ``model.mechanics._Mechanics._green``)."""

@@ -45,6 +45,7 @@ from .fourier import SpectralGrid
 from .kernels import (
     apply_tangent_kernel,
     apply_tangent_spin_kernel,
+    div_hat_kernel,
     first_piola_kernel,
     grad_hat_kernel,
     green_kernel,
@@ -52,6 +53,7 @@ from .kernels import (
     linear_response,
     neg_div_hat_kernel,
     q_increment_kernel,
+    strain_measures_kernel,
     symbol_combination,
     tangent_kernel,
 )
@@ -94,6 +96,10 @@ class _Mechanics:
         self.spin_iterations = 0
         self.cg_iterations = 0  # Newton's CG iterations (finite mechanics only)
         self.omega_hat: Array | None = None
+        #: transforms by part of the work (stored with each run as fft_<part>): "saves" the
+        #: observables at saved times; finite strain also "rate_solve" (the displacement-rate
+        #: GMRES), "newton_cg" (Newton's corrections), "force_balance" (Newton's residuals)
+        self.fft_parts: dict[str, int] = {"saves": 0}
         self.moduli = cl.Moduli.from_params(params)
         self.Fbar = applied_deformation(params.eps)
         g = grid
@@ -330,6 +336,10 @@ class FiniteMechanics(_Mechanics):
         self.compiled = grid.fft.plans is not None
         self._weights = grid.weights / n**2  # Parseval weights of the half spectrum
         self._workspace: tuple[Array, Array] | None = None
+        self.fft_parts.update(rate_solve=0, newton_cg=0, force_balance=0)
+        #: (u_hat, q1, q2, F, P) of the last converged solve, which :meth:`state_at` reuses
+        #: when asked for the same displacement and order (the first stage after a projection)
+        self._solution: tuple[Array, Array, Array, Array, Array] | None = None
 
     def _tangent(self, F: Array, q1: Array, q2: Array) -> Array:
         """The tangent dP/dF by the numba kernel (reference: ``constitutive.tangent``)."""
@@ -361,10 +371,13 @@ class FiniteMechanics(_Mechanics):
                 K, b_hat, x0, g.kx, g.ky, self._khat[0], self._khat[1], self._inv_k2, self._a,
                 self._weights, *g.fft.plans, rtol, self.max_cg)
             g.fft.count += 8 * nop
+            self.fft_parts["newton_cg"] += 8 * nop
             return x, it, code == 0
+        count = g.fft.count
         x, it, status = krylov.pcg(self._operator(K), b_hat, x0,
                                    lambda r: self._green(r, self._a), g.inner, rtol=rtol,
                                    maxiter=self.max_cg)
+        self.fft_parts["newton_cg"] += g.fft.count - count
         return x, it, status == "ok"
 
     def _udot_gmres(self, K: Array, E: Array, b: Array) -> tuple[Array, int, bool]:
@@ -380,25 +393,31 @@ class FiniteMechanics(_Mechanics):
                 self._inv_k2, self._a, self._weights, *g.fft.plans, self.spin_tol,
                 self.max_cg, *self._workspace)
             g.fft.count += 8 * nop
+            self.fft_parts["rate_solve"] += 8 * nop
             return x, it, ok
 
         def A(v_hat: Array) -> Array:
             G = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))
             return neg_div_hat_kernel(g.forward(apply_tangent_spin_kernel(K, G, E)), g.kx, g.ky)
 
+        count = g.fft.count
         x, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
                                      g.inner, rtol=self.spin_tol, maxiter=self.max_cg)
+        self.fft_parts["rate_solve"] += g.fft.count - count
         return x, it, status == "ok"
 
     def _evaluate(self, u_hat: Array, q1: Array, q2: Array
                   ) -> tuple[Array, Array, Array, float]:
+        count = self.grid.fft.count
         F = self.deformation(u_hat)
         J = T.det(F)
         if not np.all(J > 0):
+            self.fft_parts["force_balance"] += self.grid.fft.count - count
             return F, F, F, np.inf
         m = self.moduli  # P by the numba kernel (reference: constitutive.first_piola)
         P = first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
         P_hat = self.grid.forward(P)
+        self.fft_parts["force_balance"] += self.grid.fft.count - count
         return F, P, P_hat, self.residual(P, P_hat)
 
     def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
@@ -445,25 +464,39 @@ class FiniteMechanics(_Mechanics):
                     f"(residual {res:.3g})", t)
             u_hat, F, P, P_hat, res = trial, F_t, P_t, P_hat_t, res_t
         self.u_hat = u_hat
+        self._solution = (u_hat, q1.copy(), q2.copy(), F, P)
         return self._state(F, P, u_hat, iterations=it, residual=res, K=K)
 
     @staticmethod
     def _state(F: Array, P: Array, u_hat: Array, *, iterations: int = 0,
                residual: float = float("nan"), K: Array | None = None) -> MechanicalState:
-        """The :class:`MechanicalState` of the deformation ``F`` with stress ``P``."""
+        """The :class:`MechanicalState` of the deformation ``F`` with stress ``P`` (its
+        strain measures by :func:`model.kernels.strain_measures_kernel`)."""
+        Ebar_dev, Jm1, trP = strain_measures_kernel(np.ascontiguousarray(F),
+                                                    np.ascontiguousarray(P))
+        return MechanicalState(F=F, P=P, Ebar_dev=Ebar_dev, Jm1=Jm1, trP=trP, u_hat=u_hat,
+                               iterations=iterations, residual=residual, extras={"K": K})
+
+    @staticmethod
+    def _state_reference(F: Array, P: Array) -> tuple[Array, Array, Array]:
+        r"""numpy reference of the strain measures of :meth:`_state`: (deviatoric part of
+        :math:`\bar E = \tfrac12 (J^{-1} C - I)`, J - 1, tr P)."""
         J = T.det(F)
         C = T.matmul(T.transpose(F), F)
         Ebar_dev = np.stack([0.25 * (C[0, 0] - C[1, 1]) / J, 0.5 * C[0, 1] / J])
-        return MechanicalState(F=F, P=P, Ebar_dev=Ebar_dev, Jm1=J - 1.0, trP=T.trace(P),
-                               u_hat=u_hat, iterations=iterations, residual=residual,
-                               extras={"K": K})
+        return Ebar_dev, J - 1.0, T.trace(P)
 
     def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None
                  ) -> MechanicalState:
         """The mechanical state at the displacement ``u_hat`` as given, without solving the
         force balance (the stages of the integrated-displacement scheme, where u is part of
         the integrated state: docs/model.md, section 4). Its ``residual`` is not computed
-        (NaN). Raises ``J<=0`` where the deformation folds."""
+        (NaN). Raises ``J<=0`` where the deformation folds. The deformation and stress of the
+        last solve are reused when ``u_hat`` is its solution for the same q."""
+        sol = self._solution
+        if (sol is not None and u_hat is sol[0] and np.array_equal(q1, sol[1])
+                and np.array_equal(q2, sol[2])):
+            return self._state(sol[3], sol[4], u_hat)
         F = self.deformation(u_hat)
         if not np.all(T.det(F) > 0):
             raise SimulationFailure("J<=0", "the integrated displacement has J <= 0", t)
@@ -491,9 +524,9 @@ class FiniteMechanics(_Mechanics):
         # dP/dQ : dQ by the numba kernel (reference: constitutive.first_piola_q_increment)
         E = q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, m.B, m.B_prime, m.alpha)
         mech.extras["E"] = E
-        b = g.div_hat(g.forward(q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
-                                                   np.ascontiguousarray(R[1]), m.B, m.B_prime,
-                                                   m.alpha)))
+        b = div_hat_kernel(g.forward(q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
+                                                        np.ascontiguousarray(R[1]), m.B,
+                                                        m.B_prime, m.alpha)), g.kx, g.ky)
 
         udot, it, ok = self._udot_gmres(K, E, b)
         self.spin_iterations += it

@@ -88,13 +88,18 @@ class ActiveNematicPDE(PDEBase):
         return super().solve(state, *args, **kwargs)
 
     # --- pieces of the right-hand side (readable reference) ----------------------------
-    def molecular_field(self, q1: Array, q2: Array, A: Array, mech: MechanicalState) -> Array:
-        """:math:`H` (components H11, H12), the negative variational derivative of Eq. (1)."""
+    def molecular_field(self, q1: Array, q2: Array, A: Array, mech: MechanicalState,
+                        q_hat: Array | None = None) -> Array:
+        """:math:`H` (components H11, H12), the negative variational derivative of Eq. (1);
+        ``q_hat``, the spectra of q1, q2 if known, saves two transforms."""
         p = self.params
+        g = self.spectral
         QQ = 2.0 * (q1**2 + q2**2)
         bulk = A + p.A0 + p.C * QQ - 2.0 * p.B_prime * mech.Jm1
-        lap1 = self.spectral.laplacian(q1)
-        lap2 = self.spectral.laplacian(q2)
+        if q_hat is None:
+            lap1, lap2 = g.laplacian(q1), g.laplacian(q2)
+        else:
+            lap1, lap2 = g.inverse(-g.k2 * q_hat)
         return np.stack([-bulk * q1 + p.B * mech.Ebar_dev[0] + p.K * lap1,
                          -bulk * q2 + p.B * mech.Ebar_dev[1] + p.K * lap2])
 
@@ -111,15 +116,17 @@ class ActiveNematicPDE(PDEBase):
         return (-p.zeta * A - p.chi * mech.trP - p.s * A * A * A) / p.tau
 
     def rates(self, q1: Array, q2: Array, A: Array, t: float | None = None,
-              u_hat: Array | None = None) -> tuple[Array, MechanicalState, Array]:
+              u_hat: Array | None = None, q_hat: Array | None = None
+              ) -> tuple[Array, MechanicalState, Array]:
         """Return ``(d/dt [q1, q2, A], mechanical state, omega)``: with the displacement in
         force balance (Eq. 3, solved), or at the given displacement spectrum ``u_hat``
-        (finite mechanics only; the integrated-displacement stages of the solver)."""
+        (finite mechanics only; the integrated-displacement stages of the solver).
+        ``q_hat``: the spectra of q1, q2 if known (saves transforms)."""
         if u_hat is None:
             mech = self.mechanics.solve(q1, q2, t=t)
         else:
             mech = self.mechanics.state_at(u_hat, q1, q2, t)
-        H = self.molecular_field(q1, q2, A, mech)
+        H = self.molecular_field(q1, q2, A, mech, q_hat)
         qd1, qd2, omega = self.corotational_rates(q1, q2, H, mech, t)
         return np.stack([qd1, qd2, self.activity_rate(A, mech)]), mech, omega
 

@@ -136,6 +136,7 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
 
     def record(st, t: float) -> None:
         d = st.data
+        parts, count = dict(eq.mechanics.fft_parts), grid.fft.count
         mech = eq.mechanics.solve(d[0], d[1], t=t)
         residual = mech.residual if not linear else eq.mechanics.residual(mech.P)
         obs = snapshot_observables(d[0], d[1], d[2], mech.F, residual, params, grid,
@@ -149,6 +150,9 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
             C = T.matmul(T.transpose(mech.F), mech.F)
             I1bar = T.trace(C) / T.det(mech.F)
             snaps.append((float(t), np.stack([d[0], d[1], d[2], u[0], u[1], I1bar])))
+        # every transform of a save counts as the save's (the parts are disjoint)
+        eq.mechanics.fft_parts.update(parts)
+        eq.mechanics.fft_parts["saves"] += grid.fft.count - count
 
     if progress is not None:
         solver.on_step = lambda t, h: progress(min(t / numerics.t_final, 1.0))
@@ -233,6 +237,7 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
         "solver_spin_iterations": int(solver.pde.mechanics.spin_iterations),
         "solver_cg_iterations": int(solver.pde.mechanics.cg_iterations),
         "fft_count": int(solver.pde.spectral.fft.count),
+        **{f"fft_{k}": int(v) for k, v in solver.pde.mechanics.fft_parts.items()},
     }
     attrs.update({f"param_{k}": _attr(v) for k, v in params.to_dict().items()})
     attrs["param_alpha_minus_B"] = params.alpha_minus_B

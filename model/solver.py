@@ -164,7 +164,7 @@ class ETDSolver(SolverBase):
         g = eq.spectral
         if isinstance(eq.mechanics, LinearMechanics):
             return self._split_linear(u, q_hat, t)
-        rate, mech, _ = eq.rates(u[0], u[1], u[2], t, u_hat=disp)
+        rate, mech, _ = eq.rates(u[0], u[1], u[2], t, u_hat=disp, q_hat=q_hat)
         self._last_mech = mech
         self.stats["newton"] += mech.iterations
         if not np.all(np.isfinite(rate)):

@@ -1,0 +1,107 @@
+"""Finite strain against linear mechanics, side by side: CPU time, steps and transforms per step
+by part of the work, for the finite-strain schemes (``displacement`` "integrated", the default,
+and "equilibrium", Newton at every stage) and the linear run, at the Fig. 2 parameters. Not a
+test: the numbers depend on the machine and its load, so each finite run is timed at the same
+time as a linear run (two processes, one per core) and the ratio is of CPU times.
+
+    .venv/bin/python benchmarks/bench_finite.py                      # 128^2, alpha - B = 1, 0.6
+    .venv/bin/python benchmarks/bench_finite.py --sizes 64 --t-final 100   # quick
+
+Writes benchmarks/bench_finite.json (or ``--out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+CHILD = r"""
+import json, sys, time
+cfg = json.loads(sys.argv[1])
+from model.parameters import Parameters, Numerics
+from model.simulate import run
+params = Parameters.from_dict({"alpha_minus_B": cfg["amb"]})
+extra = {"displacement": cfg["displacement"]} if cfg["mechanics"] == "finite" else {}
+num = Numerics(resolution=cfg["N"], t_final=cfg["t_final"], mechanics=cfg["mechanics"],
+               save_every=cfg["t_final"] / 10, **extra)
+run(params, num.replace(t_final=1.0, save_every=1.0), 0)  # load the cached kernels, plan
+t0, c0 = time.perf_counter(), time.process_time()
+ds = run(params, num, 0)
+a = ds.attrs
+out = {"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+       "status": a["status"], "steps": int(a["solver_steps"]),
+       "rejected": int(a["solver_rejected"]), "rhs": int(a["solver_rhs"]),
+       "newton": int(a["solver_newton"]), "spin_iterations": int(a["solver_spin_iterations"]),
+       "cg_iterations": int(a["solver_cg_iterations"]), "ffts": int(a["fft_count"]),
+       "parts": {k[4:]: int(v) for k, v in a.items()
+                 if k.startswith("fft_") and k not in ("fft_count", "fft_backend", "fft_plans")},
+       **{k: float(ds[k].values[-1]) for k in ("sigma2_S", "cos2theta", "lambda")}}
+print("RESULT " + json.dumps(out))
+"""
+
+
+def start(cfg: dict) -> subprocess.Popen:
+    env = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    import os
+    return subprocess.Popen([sys.executable, "-c", CHILD, json.dumps(cfg)], cwd=HERE.parent,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, **env})
+
+
+def result(proc: subprocess.Popen, cfg: dict) -> dict:
+    stdout, stderr = proc.communicate()
+    for line in stdout.splitlines():
+        if line.startswith("RESULT "):
+            return {**cfg, **json.loads(line[7:])}
+    raise RuntimeError(f"benchmark child failed:\n{stdout}\n{stderr}")
+
+
+def side_by_side(a: dict, b: dict) -> tuple[dict, dict]:
+    pa, pb = start(a), start(b)
+    return result(pa, a), result(pb, b)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="128")
+    ap.add_argument("--amb", default="1.0,0.6", help="alpha - B values")
+    ap.add_argument("--t-final", type=float, default=300.0)
+    ap.add_argument("--out", default=str(HERE / "bench_finite.json"))
+    args = ap.parse_args()
+    rows = []
+    print(f"{'N':>4s} {'a-B':>4s} {'run':12s} {'cpu s':>7s} {'steps':>6s} {'FFT/step':>8s} "
+          f"{'rate':>6s} {'N-CG':>6s} {'N-res':>6s} {'saves':>6s} {'rest':>6s} "
+          f"{'x linear':>8s} {'sigma2_S':>9s}")
+    for n in (int(s) for s in args.sizes.split(",")):
+        for amb in (float(s) for s in args.amb.split(",")):
+            base = {"N": n, "amb": amb, "t_final": args.t_final}
+            for disp in ("integrated", "equilibrium"):
+                fin, lin = side_by_side({**base, "mechanics": "finite", "displacement": disp},
+                                        {**base, "mechanics": "linear", "displacement": ""})
+                fin["ratio_cpu"] = fin["cpu_s"] / lin["cpu_s"]
+                for r, label in ((fin, disp), (lin, "linear")):
+                    steps = max(r["steps"], 1)
+                    parts = {k: v / steps for k, v in r["parts"].items()}
+                    rest = r["ffts"] / steps - sum(parts.values())
+                    ratio = f"{r['ratio_cpu']:8.2f}" if "ratio_cpu" in r else f"{'':8s}"
+                    print(f"{n:4d} {amb:4.1f} {label:12s} {r['cpu_s']:7.1f} {r['steps']:6d} "
+                          f"{r['ffts'] / steps:8.1f} {parts.get('rate_solve', 0):6.1f} "
+                          f"{parts.get('newton_cg', 0):6.1f} "
+                          f"{parts.get('force_balance', 0):6.1f} {parts['saves']:6.1f} "
+                          f"{rest:6.1f} {ratio} {r['sigma2_S']:9.5f}", flush=True)
+                    rows.append(r)
+    meta = {"python": platform.python_version(), "machine": platform.machine(),
+            "time": time.strftime("%Y-%m-%dT%H:%M:%S"), "rows": rows}
+    Path(args.out).write_text(json.dumps(meta, indent=1))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

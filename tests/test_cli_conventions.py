@@ -8,6 +8,7 @@ import logging
 import time
 from types import SimpleNamespace
 
+import click
 import typer.main
 from rich.console import Console
 from rich.progress import Progress
@@ -16,7 +17,7 @@ from typer.testing import CliRunner
 from sweep.cli import _ProgressEvents, app
 
 
-def invoke(*args: str):
+def invoke(*args: object):
     return CliRunner().invoke(app, [str(a) for a in args])
 
 
@@ -38,6 +39,7 @@ def test_shell_completion_is_offered():
 
 def test_every_command_takes_verbose_and_quiet():
     group = typer.main.get_command(app)
+    assert isinstance(group, click.Group)
     assert len(group.commands) >= 7
     for name, command in group.commands.items():
         opts = {o for p in command.params for o in getattr(p, "opts", [])}
@@ -45,8 +47,11 @@ def test_every_command_takes_verbose_and_quiet():
 
 
 def test_run_has_a_dashboard_switch():
-    command = typer.main.get_command(app).commands["run"]
-    opts = {o for p in command.params for o in getattr(p, "opts", []) + getattr(p, "secondary_opts", [])}
+    group = typer.main.get_command(app)
+    assert isinstance(group, click.Group)
+    command = group.commands["run"]
+    opts = {o for p in command.params
+            for o in getattr(p, "opts", []) + getattr(p, "secondary_opts", [])}
     assert {"--dashboard", "--no-dashboard"} <= opts
 
 

@@ -200,7 +200,8 @@ def test_phi_functions_match_their_integral_definition():
     numpy_phis = phi_functions(z, 3)
     for i, zi in enumerate(z):
         exact = [math.exp(zi)] + [
-            quad(lambda s, k=k, zi=zi: math.exp((1 - s) * zi) * s ** (k - 1) / math.factorial(k - 1),
+            quad(lambda s, k=k, zi=zi: (math.exp((1 - s) * zi) * s ** (k - 1)
+                                        / math.factorial(k - 1)),
                  0, 1, epsabs=0, epsrel=1e-13, limit=200)[0] for k in (1, 2, 3)]
         np.testing.assert_allclose([p[i] for p in numpy_phis], exact, rtol=1e-11)
         np.testing.assert_allclose(kern._phi0123(zi), exact, rtol=1e-11)

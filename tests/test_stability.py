@@ -320,6 +320,7 @@ def _simulated_rate(p: Parameters, mode: tuple[int, int], incompressible: bool, 
     ph = _cos_mode(n, mode)
     state = make_state(*(base + amp * v[:, None, None] * ph))
     final = Controller(ETDRK2Solver(eq), t_range=T, tracker=None).run(state, dt)
+    assert final is not None
     c = 2 * np.mean((final.data - base) * ph, axis=(1, 2))
     return math.log(float(np.dot(c, v)) / amp) / T
 

@@ -8,7 +8,7 @@ import logging
 import time
 from types import SimpleNamespace
 
-import click
+import typer.core
 import typer.main
 from rich.console import Console
 from rich.progress import Progress
@@ -39,7 +39,7 @@ def test_shell_completion_is_offered():
 
 def test_every_command_takes_verbose_and_quiet():
     group = typer.main.get_command(app)
-    assert isinstance(group, click.Group)
+    assert isinstance(group, typer.core.TyperGroup)
     assert len(group.commands) >= 7
     for name, command in group.commands.items():
         opts = {o for p in command.params for o in getattr(p, "opts", [])}
@@ -48,7 +48,7 @@ def test_every_command_takes_verbose_and_quiet():
 
 def test_run_has_a_dashboard_switch():
     group = typer.main.get_command(app)
-    assert isinstance(group, click.Group)
+    assert isinstance(group, typer.core.TyperGroup)
     command = group.commands["run"]
     opts = {o for p in command.params
             for o in getattr(p, "opts", []) + getattr(p, "secondary_opts", [])}

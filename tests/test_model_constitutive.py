@@ -8,8 +8,6 @@ import pytest
 from model import constitutive as cl
 from model import tensors as T
 
-pytestmark = pytest.mark.usefixtures("raise_fp_errors")
-
 M = cl.Moduli(kappa=7.0, B=0.5, B_prime=0.3, alpha=1.3)
 M_PASSIVE = cl.Moduli(kappa=7.0, B=0.5, B_prime=0.3, alpha=0.0)
 

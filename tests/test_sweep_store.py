@@ -22,7 +22,18 @@ from sweep.store import (
     file_stamp,
     netcdf_attr,
     read_lock_holder,
+    series_time,
 )
+
+
+def test_series_time_reads_both_run_file_schemas():
+    """Run files name their time axis t; files of schema 1 called it time."""
+    current = xr.Dataset({"sigma2_S": ("t", [0.0, 0.1])}, coords={"t": [0.0, 2.0]})
+    schema_1 = xr.Dataset({"sigma2_S": ("time", [0.0, 0.1])}, coords={"time": [0.0, 3.0]})
+    assert series_time(current).values.tolist() == [0.0, 2.0]
+    assert series_time(schema_1).values.tolist() == [0.0, 3.0]
+    with pytest.raises(KeyError):
+        series_time(xr.Dataset({"sigma2_S": ("s", [0.0])}))
 
 
 def dataset() -> xr.Dataset:

@@ -177,6 +177,10 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
         ds[f"{name}_count"] = xr.Variable(sd, count, {
             "long_name": f"number of seeds with a value of {name}", "units": "1"})
 
+    for var in ds.data_vars.values():  # the per-seed values do not pool seeds
+        if "seed" in var.dims:
+            var.encoding["coordinates"] = None
+
     swept = {a.name for a in campaign.axes}
     first = expansion.points[0]
     params = first.parameters.to_dict()

@@ -103,6 +103,7 @@ def test_phase_file_seed_statistics(files):
     # the name in cell_methods is a scalar coordinate variable of the statistics (CF 7.3)
     assert variables["realization"]["_dims"] == ()
     assert "realization" in variables["sigma2_S_mean"]["coordinates"].split()
+    assert "realization" not in variables["sigma2_S"].get("coordinates", "")  # per seed
 
 
 def test_phase_file_text_is_char_arrays_read_back_as_strings(files):

@@ -360,7 +360,7 @@ def test_onset_in_seeded_simulation_within_5_percent():
     for factor in (0.95, 1.05):
         ds = run(p0.replace(eps=factor * eps_c), num, seed=3)
         assert ds.attrs["status"] == "ok"
-        s = ds["sigma2_S"].sel(time=[30.0, 60.0]).values
+        s = ds["sigma2_S"].sel(t=[30.0, 60.0]).values
         trend[factor] = s[1] / s[0]
     assert trend[0.95] < 1 < trend[1.05]
 

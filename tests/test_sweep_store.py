@@ -147,7 +147,7 @@ def test_is_complete_checks_the_file(tmp_path):
     store = CampaignStore(tmp_path, "c")
     store.ensure()
     path = store.runs_dir / "a.nc"
-    atomic_to_netcdf(dataset().rename(field="sigma2_S").assign_coords(time=[0.0]), path)
+    atomic_to_netcdf(dataset().rename(field="sigma2_S").assign_coords(t=[0.0]), path)
     rec = {**record("a"), **file_stamp(path)}
     store.write_record(rec)
     assert store.is_complete("a", store.read_record("a"))

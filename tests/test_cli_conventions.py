@@ -176,3 +176,24 @@ def test_local_dashboard_on_loopback_or_off():
     assert link.startswith("http://127.0.0.1:")
     with dask_client(ExecutionSpec(workers=1), dashboard=False) as client:
         assert dashboard_link(client) is None  # the HTTP server answers 404 for the page
+
+
+def test_dashboard_link_of_an_external_scheduler():
+    """A scheduler the campaign connects to (execution.scheduler) serves its own dashboard:
+    its link is found the same way, and none when that scheduler serves no dashboard."""
+    from distributed import LocalCluster
+
+    from sweep.execute import dashboard_link, dask_client
+    from sweep.spec import ExecutionSpec
+
+    for served in (True, False):
+        with LocalCluster(n_workers=0, processes=False, dashboard_address="127.0.0.1:0",
+                          scheduler_kwargs={"dashboard": served}) as cluster:
+            spec = ExecutionSpec(scheduler=cluster.scheduler_address)
+            with dask_client(spec, dashboard=True) as client:
+                link = dashboard_link(client)
+        if served:  # a link that answered (HTTP 200) while the scheduler ran
+            assert link is not None
+            assert link.startswith("http://")
+        else:
+            assert link is None

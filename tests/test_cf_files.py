@@ -1,6 +1,7 @@
 """The netCDF files (run files, phase.nc, fits.nc) follow the CF conventions: checked
-attribute by attribute, and by compliance-checker's cf:1.11 suite (a test dependency: the
-`test` extra) on small real files."""
+attribute by attribute, by compliance-checker's cf:1.11 suite and by cfchecks (test
+dependencies: the `test` extra; cfchecks also needs the UDUNITS-2 C library) on small real
+files."""
 
 from __future__ import annotations
 

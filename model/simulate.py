@@ -1,7 +1,7 @@
 """One simulation: ``run(params, numerics, seed) -> xarray.Dataset``, the one entry that
 :mod:`sweep` calls.
 
-The Dataset is self-describing: time series of every observable (dim ``time``), snapshots of
+The Dataset is self-describing: time series of every observable (dim ``t``), snapshots of
 the fields (dims ``snapshot_time, x, y``), per-run scalars (values at ``t_final``, time and
 pattern size at the first peak of sigma2_S by the growth-peak rule and by the paper's
 literal rule, the smallest well-posedness margin, wall time) and, as attributes, every parameter
@@ -53,7 +53,9 @@ class _TrackerTimeIsExpected(logging.Filter):
 
 logging.getLogger("pde.solvers.controller").addFilter(_TrackerTimeIsExpected())
 
-SCHEMA_VERSION = 1
+#: Layout of the Dataset (and run file): 2 names the time-series dimension ``t`` (1 called it
+#: ``time``, which CF reserves for calendar time; readers take either).
+SCHEMA_VERSION = 2
 SERIES = ("mean_S", "sigma2_S", "cos2theta", "lambda", "lambda_mean", "mean_I1bar", "min_J",
           "mean_A", "free_energy", "residual", "rate_margin")
 #: CF units: the model is dimensionless (lengths in units of the domain size L, times in units
@@ -180,7 +182,7 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     t = np.array([r["time"] for r in rows], dtype=float)
     data_vars: dict[str, Any] = {}
     for name in (*SERIES, "steps"):
-        data_vars[name] = ("time", np.array([r[name] for r in rows], dtype=float),
+        data_vars[name] = ("t", np.array([r[name] for r in rows], dtype=float),
                            {"long_name": LONG_NAMES.get(name, "accepted time steps"),
                             "units": UNITS.get(name, "1")})
     fields = ("q1", "q2", "A", "u1", "u2", "I1bar")
@@ -242,7 +244,9 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     attrs.update({f"param_{k}": _attr(v) for k, v in params.to_dict().items()})
     attrs["param_alpha_minus_B"] = params.alpha_minus_B
     attrs.update({f"num_{k}": _attr(v) for k, v in numerics.to_dict().items()})
-    coords = {"time": ("time", t, {"units": "1", "long_name": "time t, in units of tau"}),
+    # the dimensionless time is "t", not "time": CF (and its checkers) take a coordinate named
+    # time for a calendar time ("<unit> since <epoch>")
+    coords = {"t": ("t", t, {"units": "1", "long_name": "time t, in units of tau"}),
               "snapshot_time": ("snapshot_time", snap_t, {
                   "units": "1", "long_name": "time of the snapshot, in units of tau"}),
               "x": ("x", x, {"units": "1",

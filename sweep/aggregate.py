@@ -148,6 +148,11 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
         "standard_name": "realization",
         "long_name": "random seed of the initial director field", "units": "1"})
 
+    # the seed statistics (X_mean, X_std) pool the seeds: their cell_methods name this scalar
+    # coordinate variable (CF 7.3: "realization: mean")
+    coords["realization"] = xr.Variable((), np.int64(len(campaign.seeds)), {
+        "long_name": "number of seeds pooled by the seed statistics (X_mean, X_std); the "
+                     "seeds are the seed coordinate", "units": "1"})
     ds = xr.Dataset(coords=coords)
     ds["status"] = xr.Variable(dims, status.reshape(shape), {
         "long_name": "run status", "flag_values": np.array([0, 1, 2], dtype=np.int8),
@@ -162,7 +167,7 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
                                               "source_variable": src})
         mean, std, count = _seed_stats(values)
         sd = dims[:-1]
-        # CF cell_methods name the collapsed axis by its standard_name (seed: realization)
+        # CF cell_methods name the collapsed seed axis by the scalar coordinate "realization"
         ds[f"{name}_mean"] = xr.Variable(sd, mean, {
             "long_name": f"seed mean of {name}", "units": "1",
             "cell_methods": "realization: mean"})
@@ -171,6 +176,10 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
             "cell_methods": "realization: standard_deviation"})
         ds[f"{name}_count"] = xr.Variable(sd, count, {
             "long_name": f"number of seeds with a value of {name}", "units": "1"})
+
+    for var in ds.data_vars.values():  # the per-seed values do not pool seeds
+        if "seed" in var.dims:
+            var.encoding["coordinates"] = None
 
     swept = {a.name for a in campaign.axes}
     first = expansion.points[0]

@@ -700,12 +700,12 @@ def aggregate_cmd(
 
 
 # --------------------------------------------------------------------------- other commands
-# Commands written elsewhere live in their own modules and are registered here:
-#   sweep/cli_simulate.py   `nematic simulate`  (the lead engineer; registers itself with
-#                           `from sweep.cli import app` and `@app.command()`)
-#   sweep/cli_stability.py  `nematic stability` (issue 3; defines `stability`, registered here)
-#   sweep/cli_figures.py    `nematic figures`   (issue 5; either convention works)
-# A module that does not exist yet is skipped; any other import error is raised.
+# Commands defined in their own modules, imported here (module -> the function registered
+# as the command, or None for a module that registers itself with `@app.command()`):
+#   sweep/cli_simulate.py   `nematic simulate`  (registers itself)
+#   sweep/cli_stability.py  `nematic stability`
+#   sweep/cli_figures.py    `nematic figures`
+# A module that is missing is skipped; any other import error is raised.
 PLUGIN_MODULES: dict[str, str | None] = {
     "sweep.cli_simulate": None,
     "sweep.cli_stability": "stability",

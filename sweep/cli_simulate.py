@@ -131,7 +131,7 @@ def simulate(
             error(err, exc)
             raise typer.Exit(EXIT_BAD_INPUT) from None
     last = {k: float(ds[k].values[-1]) for k in ("sigma2_S", "cos2theta", "lambda")} \
-        if ds.sizes["time"] else {}
+        if ds.sizes["t"] else {}
     summary = ", ".join(f"{k} = {v:.4g}" for k, v in last.items())
     wall = float(ds["wall_time"])
     steps = int(ds.attrs.get("solver_steps", 0))
@@ -140,5 +140,5 @@ def simulate(
         err.print(f"[red]run failed[/red] at t = {t_fail:.4g}: {ds.attrs['reason']}: "
                   f"{ds.attrs['detail']} (last saved: {summary}; {wall:.1f} s)")
         raise typer.Exit(EXIT_FAILED_RUNS)
-    console.print(f"t = {float(ds['time'].values[-1]):g}: {summary}; {steps} steps, "
+    console.print(f"t = {float(ds['t'].values[-1]):g}: {summary}; {steps} steps, "
                   f"wall time {wall:.2f} s")

@@ -55,7 +55,7 @@ from model.errors import NematicError
 
 from . import fits as F
 from .spec import AMB, Campaign
-from .store import atomic_path
+from .store import atomic_path, series_time
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -286,7 +286,7 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
             continue
         drawn_seed = s if drawn_seed is None else drawn_seed
         colour = cmap(rank / max(len(picks) - 1, 1))
-        times, series = run["time"].values, run["sigma2_S"].values.astype(float)
+        times, series = series_time(run).values, run["sigma2_S"].values.astype(float)
         # t = 0 is left out: S = S0 is uniform there (sigma2_S = 0 up to round-off)
         ok = np.isfinite(series) & (series > 0) & (times > 0)
         ax_b.plot(times[ok], series[ok], color=colour, lw=1.4, label=_fmt(float(x[i])))

@@ -110,7 +110,7 @@ from model.errors import NematicError
 
 from .provenance import code_version, git_commit, library_versions_text
 from .spec import AMB
-from .store import PHASE, atomic_to_netcdf, now_iso
+from .store import PHASE, atomic_to_netcdf, now_iso, series_time
 
 log = logging.getLogger(__name__)
 
@@ -957,7 +957,7 @@ def _run_growth(path: Path) -> float:
     """log10 sigma2_S(t_final) / sigma2_S(t_final / 2) of one run file (NaN if unreadable)."""
     try:
         with xr.open_dataset(path) as run:
-            t = run["time"].values.astype(float)
+            t = series_time(run).values.astype(float)
             s = run["sigma2_S"].values.astype(float)
     except (OSError, KeyError, ValueError) as e:
         log.warning("stability: cannot read %s (%s)", path, e)

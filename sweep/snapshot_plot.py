@@ -16,6 +16,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from .store import series_time
+
 #: |I1bar - 2| below this (or at least BACKGROUND_MAX) is shown times a power of ten.
 BACKGROUND_MIN, BACKGROUND_MAX = 1e-2, 1e3
 BACKGROUND_NAME = r"$\bar I_1 = \mathrm{tr}\,C / J$"
@@ -102,7 +104,7 @@ def snapshot_figure(ds: xr.Dataset, path: str | Path, index: int = -1) -> Path:
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10, 4.2),
                                   gridspec_kw={"width_ratios": [1.35, 1]})
     draw_snapshot(ax, ds, index)
-    ax2.plot(ds["time"].values, ds["sigma2_S"].values, color="C3")
+    ax2.plot(series_time(ds).values, ds["sigma2_S"].values, color="C3")
     ax2.set_xlabel("t / tau")
     ax2.set_ylabel(r"$\sigma^2_S$")
     amb = ds.attrs.get("param_alpha_minus_B", float("nan"))

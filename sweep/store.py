@@ -55,11 +55,13 @@ MANIFEST_VERSION = 4
 MANIFEST_KEYS = ("status", "reason", "detail", "t_failed", "seed", "wall_time", "nc_bytes",
                  "nc_sha256", "nc_mtime_ns", "scalars", "code_version", "git_commit",
                  "finished")
-#: Variables every run file holds (checked when a file without a checksum is verified).
-RUN_FILE_VARIABLES = ("time", "sigma2_S")
+#: Variables every run file holds (checked when a file without a checksum is verified; the
+#: time axis is ``t``, or ``time`` in files of schema 1: see :func:`series_time`).
+RUN_FILE_VARIABLES = ("sigma2_S",)
 MAX_DETAIL = 500
 #: Reasons of records that say the result could not be stored, not that the run failed:
-#: such runs are redone by default (records of this kind are no longer written).
+#: such runs are redone by default (the worker writes no such record; a results folder may
+#: still hold some).
 RETRYABLE_REASONS = ("write_error",)
 
 Record = dict[str, Any]
@@ -283,6 +285,11 @@ def netcdf_problem(path: Path, variables: Iterable[str] = ()) -> str | None:
     if missing:
         return f"it lacks the variable(s) {', '.join(missing)}"
     return None
+
+
+def series_time(run: xr.Dataset) -> xr.DataArray:
+    """The time coordinate of a run's series: ``t`` (``time`` in run files of schema 1)."""
+    return run["t"] if "t" in run.variables else run["time"]
 
 
 # --------------------------------------------------------------------------- run records

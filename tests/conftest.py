@@ -1,5 +1,5 @@
-"""Shared fixtures: a seeded rng, floating-point errors raised in model code paths, the
-small real campaign run once per session (campaign-manager tests)."""
+"""Shared fixtures: a seeded rng, floating-point errors raised in every test, the small real
+campaign run once per session (campaign-manager tests)."""
 
 from __future__ import annotations
 
@@ -16,13 +16,20 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(20250407)
 
 
-@pytest.fixture
-def raise_fp_errors():
-    """``np.seterr(all="raise")`` for the duration of a test (the model must not produce
-    overflow/invalid operations on healthy inputs)."""
-    old = np.seterr(all="raise")
-    yield
-    np.seterr(**old)
+@pytest.fixture(autouse=True)
+def raise_fp_errors(request):
+    """Floating-point errors raise in every test: division by zero, overflow and invalid
+    operations are ``FloatingPointError`` (underflow to zero is not an error). Code that
+    expects them says so locally with ``np.errstate``; a test that feeds non-finite or
+    degenerate data on purpose opts out with ``@pytest.mark.allow_fp_errors("why")``."""
+    marker = request.node.get_closest_marker("allow_fp_errors")
+    if marker is not None:
+        if not (marker.args and str(marker.args[0]).strip()):
+            pytest.fail("@pytest.mark.allow_fp_errors needs a reason")
+        yield
+        return
+    with np.errstate(divide="raise", over="raise", invalid="raise", under="ignore"):
+        yield
 
 
 @pytest.fixture(scope="session")

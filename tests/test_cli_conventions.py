@@ -8,6 +8,7 @@ import logging
 import time
 from types import SimpleNamespace
 
+import typer.core
 import typer.main
 from rich.console import Console
 from rich.progress import Progress
@@ -16,7 +17,7 @@ from typer.testing import CliRunner
 from sweep.cli import _ProgressEvents, app
 
 
-def invoke(*args: str):
+def invoke(*args: object):
     return CliRunner().invoke(app, [str(a) for a in args])
 
 
@@ -38,6 +39,7 @@ def test_shell_completion_is_offered():
 
 def test_every_command_takes_verbose_and_quiet():
     group = typer.main.get_command(app)
+    assert isinstance(group, typer.core.TyperGroup)
     assert len(group.commands) >= 7
     for name, command in group.commands.items():
         opts = {o for p in command.params for o in getattr(p, "opts", [])}
@@ -45,8 +47,11 @@ def test_every_command_takes_verbose_and_quiet():
 
 
 def test_run_has_a_dashboard_switch():
-    command = typer.main.get_command(app).commands["run"]
-    opts = {o for p in command.params for o in getattr(p, "opts", []) + getattr(p, "secondary_opts", [])}
+    group = typer.main.get_command(app)
+    assert isinstance(group, typer.core.TyperGroup)
+    command = group.commands["run"]
+    opts = {o for p in command.params
+            for o in getattr(p, "opts", []) + getattr(p, "secondary_opts", [])}
     assert {"--dashboard", "--no-dashboard"} <= opts
 
 
@@ -171,3 +176,24 @@ def test_local_dashboard_on_loopback_or_off():
     assert link.startswith("http://127.0.0.1:")
     with dask_client(ExecutionSpec(workers=1), dashboard=False) as client:
         assert dashboard_link(client) is None  # the HTTP server answers 404 for the page
+
+
+def test_dashboard_link_of_an_external_scheduler():
+    """A scheduler the campaign connects to (execution.scheduler) serves its own dashboard:
+    its link is found the same way, and none when that scheduler serves no dashboard."""
+    from distributed import LocalCluster
+
+    from sweep.execute import dashboard_link, dask_client
+    from sweep.spec import ExecutionSpec
+
+    for served in (True, False):
+        with LocalCluster(n_workers=0, processes=False, dashboard_address="127.0.0.1:0",
+                          scheduler_kwargs={"dashboard": served}) as cluster:
+            spec = ExecutionSpec(scheduler=cluster.scheduler_address)
+            with dask_client(spec, dashboard=True) as client:
+                link = dashboard_link(client)
+        if served:  # a link that answered (HTTP 200) while the scheduler ran
+            assert link is not None
+            assert link.startswith("http://")
+        else:
+            assert link is None

@@ -25,7 +25,7 @@ def test_simulate_writes_netcdf_and_png(tmp_path):
     assert ds.attrs["param_K"] == 5e-5
     assert ds.attrs["num_resolution"] == 32
     assert ds["q1"].shape == (1, 32, 32)
-    assert float(ds["time"][-1]) == 4.0
+    assert float(ds["t"][-1]) == 4.0
     ds.close()
     assert png.stat().st_size > 10_000
     assert png.read_bytes()[:4] == b"\x89PNG"

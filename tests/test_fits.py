@@ -35,7 +35,7 @@ def subcritical_sigma2(rng, x, x0, n_seeds, spread=0.02):
 
 # --------------------------------------------------------------------------- transition
 @pytest.mark.parametrize("x0", [0.43, 0.5501, 0.78])
-def test_transition_recovers_the_jump_within_its_interval(rng, raise_fp_errors, x0):
+def test_transition_recovers_the_jump_within_its_interval(rng, x0):
     x = np.linspace(0.1, 1.0, 10)
     f = fits.fit_transition(x, subcritical_sigma2(rng, x, x0, 20), n_boot=300, rng=rng)
     assert f.lower <= x0 <= f.upper

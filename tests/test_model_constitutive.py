@@ -8,8 +8,6 @@ import pytest
 from model import constitutive as cl
 from model import tensors as T
 
-pytestmark = pytest.mark.usefixtures("raise_fp_errors")
-
 M = cl.Moduli(kappa=7.0, B=0.5, B_prime=0.3, alpha=1.3)
 M_PASSIVE = cl.Moduli(kappa=7.0, B=0.5, B_prime=0.3, alpha=0.0)
 
@@ -200,7 +198,8 @@ def test_phi_functions_match_their_integral_definition():
     numpy_phis = phi_functions(z, 3)
     for i, zi in enumerate(z):
         exact = [math.exp(zi)] + [
-            quad(lambda s, k=k, zi=zi: math.exp((1 - s) * zi) * s ** (k - 1) / math.factorial(k - 1),
+            quad(lambda s, k=k, zi=zi: (math.exp((1 - s) * zi) * s ** (k - 1)
+                                        / math.factorial(k - 1)),
                  0, 1, epsabs=0, epsrel=1e-13, limit=200)[0] for k in (1, 2, 3)]
         np.testing.assert_allclose([p[i] for p in numpy_phis], exact, rtol=1e-11)
         np.testing.assert_allclose(kern._phi0123(zi), exact, rtol=1e-11)

@@ -142,15 +142,16 @@ def test_compiled_spin_gmres_from_zero_meets_its_tolerance(rng):
     b = g.forward(rng.standard_normal((n, n)))
     w = g.weights / n**2
     V, LZ = fast_linear.workspace(n)
-    x, j, its, ok, nop = fast_linear.spin_gmres(b, np.zeros_like(b), q1, q2, m1, m2, w,
-                                                *g.fft.plans, 1e-6, 100, V, LZ)
+    # (numba's Dispatcher type does not carry the compiled function's signature)
+    x, j, its, ok, nop = fast_linear.spin_gmres(  # type: ignore[call-arg, misc]
+        b, np.zeros_like(b), q1, q2, m1, m2, w, *g.fft.plans, 1e-6, 100, V, LZ)
     assert ok
     assert its > 2
     assert nop == its  # no application for the zero start's residual
     Ax, jx = np.empty_like(b), np.empty((2,) + b.shape, complex)
-    fast_linear._spin_operator(x, q1, q2, m1, m2, *g.fft.plans, np.empty((n, n)),
-                               np.empty((2, n, n)), fftw_native.aligned_empty(b.shape, complex),
-                               Ax, jx)
+    fast_linear._spin_operator(  # type: ignore[call-arg, misc]
+        x, q1, q2, m1, m2, *g.fft.plans, np.empty((n, n)), np.empty((2, n, n)),
+        fftw_native.aligned_empty(b.shape, complex), Ax, jx)
     r = b - Ax
     assert np.sqrt(krylov.weighted_inner(r, r, w)) <= 1.01e-6 * np.sqrt(
         krylov.weighted_inner(b, b, w))

@@ -14,7 +14,8 @@ from model.parameters import Numerics, Parameters
 from model.simulate import run
 
 
-def _uniform(S: float, theta: float, n: int = 4, F: np.ndarray | None = None):
+def _uniform(S: float, theta: float, n: int = 4, F: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     q1 = np.full((n, n), S * np.cos(2 * theta))
     q2 = np.full((n, n), S * np.sin(2 * theta))
     if F is None:
@@ -23,7 +24,7 @@ def _uniform(S: float, theta: float, n: int = 4, F: np.ndarray | None = None):
     return F, q1, q2
 
 
-def _symbol(F, q1, q2, p: Parameters):
+def _symbol(F, q1, q2, p: Parameters) -> tuple[np.ndarray, np.ndarray]:
     """The tangent and E exactly as FiniteMechanics.corotational builds them."""
     K = tangent_kernel(F, q1, q2, p.kappa, p.B, p.B_prime, p.alpha)
     E = q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, p.B, p.B_prime, p.alpha)
@@ -92,6 +93,7 @@ def test_linear_margin_is_the_spin_amplification_of_the_linear_solver():
         kx, ky = 2 * np.pi * np.array(mode)
         R = np.stack([np.cos(kx * x[:, None] + ky * x[None, :]), np.zeros((n, n))])
         qdot_hat = mech.corotational_hat(q1, q2, g.forward(R))
+        assert mech.omega_hat is not None  # kept by corotational_hat
         omega = g.inverse(mech.omega_hat)
         # the spin without feedback: omega0 = Omega[R]; with feedback: omega0 / (1 + ...)
         omega0 = g.inverse(mech.spin_multiplier(g.forward(R[0]), g.forward(R[1])))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -27,3 +28,14 @@ def test_readme_snippet_runs(index):
     if "ds" in namespace:
         assert namespace["ds"].attrs["status"] == "ok"
         assert namespace["ds"].sizes["x"] == 48
+
+
+def test_the_setup_puts_nematic_on_path_before_the_docs_use_it():
+    """The docs write plain ``nematic``: the README's set-up says how it gets on PATH, and
+    bootstrap.sh's last line says it too."""
+    text = README.read_text()
+    bash = "\n".join(re.findall(r"```bash\n(.*?)```", text, flags=re.S))
+    assert "source .venv/bin/activate" in bash
+    assert (Path(sys.executable).parent / "nematic").exists()  # activate puts this dir on PATH
+    bootstrap = (README.parent / "scripts" / "bootstrap.sh").read_text()
+    assert "source .venv/bin/activate" in bootstrap

@@ -320,6 +320,7 @@ def _simulated_rate(p: Parameters, mode: tuple[int, int], incompressible: bool, 
     ph = _cos_mode(n, mode)
     state = make_state(*(base + amp * v[:, None, None] * ph))
     final = Controller(ETDRK2Solver(eq), t_range=T, tracker=None).run(state, dt)
+    assert final is not None
     c = 2 * np.mean((final.data - base) * ph, axis=(1, 2))
     return math.log(float(np.dot(c, v)) / amp) / T
 
@@ -359,7 +360,7 @@ def test_onset_in_seeded_simulation_within_5_percent():
     for factor in (0.95, 1.05):
         ds = run(p0.replace(eps=factor * eps_c), num, seed=3)
         assert ds.attrs["status"] == "ok"
-        s = ds["sigma2_S"].sel(time=[30.0, 60.0]).values
+        s = ds["sigma2_S"].sel(t=[30.0, 60.0]).values
         trend[factor] = s[1] / s[0]
     assert trend[0.95] < 1 < trend[1.05]
 

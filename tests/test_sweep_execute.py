@@ -31,7 +31,7 @@ from sweep.execute import RunTask, execute_run
 from sweep.store import CampaignLock, read_lock_holder
 
 
-def invoke(*args: str):
+def invoke(*args: object):
     return CliRunner().invoke(app, [str(a) for a in args])
 
 

@@ -284,8 +284,8 @@ def test_a_result_that_cannot_be_written_is_kept_and_moved_in(tmp_path, monkeypa
     from sweep.execute import RunTask, execute_run, import_spool, spool_dir
 
     def fake_run(params, numerics, seed):  # the storage is under test, not the model
-        return xr.Dataset({"sigma2_S": ("time", [0.0, 0.1]), "sigma2_S_final": ((), 0.1)},
-                          coords={"time": [0.0, 1.0]}, attrs={"status": "ok", "seed": seed})
+        return xr.Dataset({"sigma2_S": ("t", [0.0, 0.1]), "sigma2_S_final": ((), 0.1)},
+                          coords={"t": [0.0, 1.0]}, attrs={"status": "ok", "seed": seed})
 
     monkeypatch.setattr(model.simulate, "run", fake_run)
     monkeypatch.setenv("NEMATIC_SPOOL", str(tmp_path / "spool"))

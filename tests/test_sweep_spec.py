@@ -77,6 +77,7 @@ def test_figures_empty_list_means_none_and_absent_means_default(tmp_path):
     assert [p.name for p in empty.fits] == ["scaling"]  # the fits are unaffected
     listed = load_campaign(write(tmp_path, base + "figures: [fig3, {fig2: {seed: 1}}]\n",
                                  "listed.yaml"))
+    assert listed.figures is not None
     assert [(p.name, dict(p.options)) for p in listed.figures] == [("fig3", {}),
                                                                     ("fig2", {"seed": 1})]
     runner = CliRunner()
@@ -87,13 +88,15 @@ def test_figures_empty_list_means_none_and_absent_means_default(tmp_path):
 
 
 def test_seed_list_and_geomspace(tmp_path):
-    c = parse_campaign("name: g\nsweep: {axes: {K: {geomspace: [1.0e-5, 1.0e-3, 3]}}}\nseeds: [3, 1, 7]")
+    c = parse_campaign("name: g\nsweep: {axes: {K: {geomspace: [1.0e-5, 1.0e-3, 3]}}}\n"
+                       "seeds: [3, 1, 7]")
     assert c.seeds == (3, 1, 7)
     np.testing.assert_allclose(c.dims[0].axes[0].values, [1e-5, 1e-4, 1e-3])
 
 
 def test_numerics_axis_and_int_values():
-    c = parse_campaign("name: n\nsweep: {axes: {resolution: [32, 64], mechanics: [linear, finite]}}\n"
+    c = parse_campaign("name: n\n"
+                       "sweep: {axes: {resolution: [32, 64], mechanics: [linear, finite]}}\n"
                        "seeds: 1\nparameters: {noise_modes: 8}")
     assert c.dims[0].axes[0].values == (32, 64)
     assert all(isinstance(v, int) for v in c.dims[0].axes[0].values)
@@ -138,6 +141,7 @@ def test_jobqueue_cluster_section_builds_a_job_script():
                     walltime: "00:30:00", processes: 2}
         """)
     assert c.execution.mode == "cluster"
+    assert c.execution.cluster is not None
     assert c.execution.cluster.jobs == 3
     cluster = make_cluster(c.execution)  # starts a scheduler, submits nothing
     try:
@@ -164,7 +168,8 @@ BAD = {
     "impossible value": ("parameters: {K: -1}\n", ["parameters.K", "-1", ">= 0"]),
     "resolution below the initial noise": ("parameters: {noise_modes: 40}\n",
                                            ["numerics.resolution", "noise_modes"]),
-    "odd resolution": ("numerics: {resolution: 33, t_final: 4}\n", ["numerics.resolution", "33", "even"]),
+    "odd resolution": ("numerics: {resolution: 33, t_final: 4}\n",
+                       ["numerics.resolution", "33", "even"]),
     "unequal zip lengths": (
         "sweep: {axes: {K: [1.0e-4, 1.0e-3], eps: [0, 0.1, 0.2]}, zip: [[K, eps]]}\n",
         ["sweep.zip[0]", "K has 2", "eps has 3", "equal length"]),

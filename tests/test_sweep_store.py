@@ -22,7 +22,18 @@ from sweep.store import (
     file_stamp,
     netcdf_attr,
     read_lock_holder,
+    series_time,
 )
+
+
+def test_series_time_reads_both_run_file_schemas():
+    """Run files name their time axis t; files of schema 1 called it time."""
+    current = xr.Dataset({"sigma2_S": ("t", [0.0, 0.1])}, coords={"t": [0.0, 2.0]})
+    schema_1 = xr.Dataset({"sigma2_S": ("time", [0.0, 0.1])}, coords={"time": [0.0, 3.0]})
+    assert series_time(current).values.tolist() == [0.0, 2.0]
+    assert series_time(schema_1).values.tolist() == [0.0, 3.0]
+    with pytest.raises(KeyError):
+        series_time(xr.Dataset({"sigma2_S": ("s", [0.0])}))
 
 
 def dataset() -> xr.Dataset:
@@ -70,6 +81,7 @@ def test_lock_excludes_a_second_holder(tmp_path):
     first.acquire(command="nematic run c.yaml")
     try:
         holder = read_lock_holder(path)
+        assert holder is not None
         assert holder["pid"] == os.getpid()
         assert holder["command"] == "nematic run c.yaml"
         with pytest.raises(CampaignLocked, match=f"pid {os.getpid()}"):
@@ -88,8 +100,11 @@ def test_a_killed_holder_releases_the_lock(tmp_path):
             "print('locked', flush=True); time.sleep(60)")
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE)
     try:
+        assert proc.stdout is not None
         assert proc.stdout.readline().strip() == b"locked"
-        assert read_lock_holder(path)["pid"] == proc.pid
+        holder = read_lock_holder(path)
+        assert holder is not None
+        assert holder["pid"] == proc.pid
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
     finally:
@@ -132,34 +147,34 @@ def test_is_complete_checks_the_file(tmp_path):
     store = CampaignStore(tmp_path, "c")
     store.ensure()
     path = store.runs_dir / "a.nc"
-    atomic_to_netcdf(dataset().rename(field="sigma2_S").assign_coords(time=[0.0]), path)
+    atomic_to_netcdf(dataset().rename(field="sigma2_S").assign_coords(t=[0.0]), path)
     rec = {**record("a"), **file_stamp(path)}
     store.write_record(rec)
     assert store.is_complete("a", store.read_record("a"))
     content = path.read_bytes()
     path.write_bytes(content[:100])
-    assert "truncated" in store.check_run_file("a", rec)
+    assert "truncated" in str(store.check_run_file("a", rec))
     path.unlink()
-    assert "missing" in store.check_run_file("a", rec)
+    assert "missing" in str(store.check_run_file("a", rec))
     # same size, other bytes: the mtime changed, so the checksum is compared
     path.write_bytes(b"\0" * 4096 + content[4096:])
-    assert "corrupt" in store.check_run_file("a", rec)
+    assert "corrupt" in str(store.check_run_file("a", rec))
     # ... even when the mtime is put back, on --verify
     os.utime(path, ns=(rec["nc_mtime_ns"], rec["nc_mtime_ns"]))
     assert store.check_run_file("a", rec) is None
-    assert "corrupt" in store.check_run_file("a", rec, verify=True)
+    assert "corrupt" in str(store.check_run_file("a", rec, verify=True))
     # intact content with a new mtime (a copy): accepted, and the record refreshed
     path.write_bytes(content)
     assert store.check_run_file("a", rec) is None
     store.refresh_stamp("a")
-    assert store.read_record("a")["nc_mtime_ns"] == path.stat().st_mtime_ns
+    assert (store.read_record("a") or {}).get("nc_mtime_ns") == path.stat().st_mtime_ns
     # a record without a checksum (older records): the file must open and hold the run
     legacy = {k: v for k, v in rec.items() if k not in ("nc_sha256", "nc_mtime_ns")}
     assert store.check_run_file("a", legacy) is None
     path.write_bytes(b"\0" * 4096 + content[4096:])
-    assert "unreadable" in store.check_run_file("a", legacy)
+    assert "unreadable" in str(store.check_run_file("a", legacy))
     for bad in ("abc", "10", -1, 1.5, True, [10]):
-        assert "malformed" in store.check_run_file("a", {**rec, "nc_bytes": bad})
+        assert "malformed" in str(store.check_run_file("a", {**rec, "nc_bytes": bad}))
     crashed = record("b", status="failed", nc_bytes=None)  # raised: the record is all
     assert store.is_complete("b", crashed)
     assert not store.is_complete("c", None)

@@ -28,7 +28,7 @@ from pde.pdes.base import PDEBase
 
 from .errors import SimulationFailure
 from .fourier import SpectralGrid
-from .mechanics import MechanicalState, make_mechanics
+from .mechanics import FiniteMechanics, MechanicalState, make_mechanics
 from .parameters import Numerics, Parameters
 
 Array = np.ndarray
@@ -122,10 +122,13 @@ class ActiveNematicPDE(PDEBase):
         force balance (Eq. 3, solved), or at the given displacement spectrum ``u_hat``
         (finite mechanics only; the integrated-displacement stages of the solver).
         ``q_hat``: the spectra of q1, q2 if known (saves transforms)."""
+        mechanics = self.mechanics
         if u_hat is None:
-            mech = self.mechanics.solve(q1, q2, t=t)
+            mech = mechanics.solve(q1, q2, t=t)
+        elif isinstance(mechanics, FiniteMechanics):
+            mech = mechanics.state_at(u_hat, q1, q2, t)
         else:
-            mech = self.mechanics.state_at(u_hat, q1, q2, t)
+            raise ValueError("a given displacement needs finite mechanics")
         H = self.molecular_field(q1, q2, A, mech, q_hat)
         qd1, qd2, omega = self.corotational_rates(q1, q2, H, mech, t)
         return np.stack([qd1, qd2, self.activity_rate(A, mech)]), mech, omega

@@ -266,6 +266,12 @@ class ETDSolver(SolverBase):
                 f"wave vector at {np.degrees(phi):.0f} deg)", t)
         return margin
 
+    def _integrated_mechanics(self) -> FiniteMechanics | None:
+        """The finite mechanics whose displacement is integrated with the state, or None
+        (linear mechanics, or ``displacement = "equilibrium"``)."""
+        mech = self.pde.mechanics
+        return mech if self.integrated and isinstance(mech, FiniteMechanics) else None
+
     def _save_finite(self) -> FiniteMechanics | None:
         """Remember the finite-strain warm start after the step's first right-hand side (so a
         rejected step can put it back); returns the finite mechanics, or None if linear."""
@@ -414,8 +420,8 @@ class ETDRK2Solver(ETDSolver):
         q_hat = self._spectrum(u[:2])
         A = u[2]
         self._finite_restore = None
-        mech = self.pde.mechanics
-        d0 = mech.u_hat if self.integrated else None
+        fin = self._integrated_mechanics()
+        d0 = fin.u_hat if fin is not None else None
         Nq0, Adot0 = self.split(u, q_hat, t, d0)
         self.check_wellposed(u, t)
         finite = self._save_finite()
@@ -425,20 +431,19 @@ class ETDRK2Solver(ETDSolver):
         aq_hat = E * q_hat + h * phi1 * Nq0
         aA = A + h * phi1A * Adot0  # = e^{L h} A + h phi1 (Adot - L A)
         a = np.concatenate([g.inverse(aq_hat), aA[None]])
-        da = None
-        if finite is not None:  # the displacement: ETD with L = 0, i.e. Heun's method
-            V0 = finite.udot_hat
-            if self.integrated:
-                da = d0 + h * V0
-            else:  # first-order predictor of Newton's start
-                finite.u_hat = finite.u_hat + h * V0
+        # the displacement: ETD with L = 0, i.e. Heun's method
+        da = V0 = None
+        if fin is not None and d0 is not None:
+            V0 = fin.udot_hat
+            da = d0 + h * V0
+        elif finite is not None:  # first-order predictor of Newton's start
+            finite.u_hat = finite.u_hat + h * finite.udot_hat
         Nqa, Adota = self.split(a, aq_hat, t + h, da)
         corr_q = h * phi2 * (Nqa - Nq0)
         corr_A = h * phi2A * (Adota - Adot0 - LA * (aA - A))
-        if da is None:
+        if fin is None or da is None or V0 is None:
             return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A)
-        assert finite is not None
-        corr_d = 0.5 * h * (finite.udot_hat - V0)
+        corr_d = 0.5 * h * (fin.udot_hat - V0)
         return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A,
                             da + corr_d, corr_d)
 
@@ -474,8 +479,7 @@ class ETDRK4Solver(ETDSolver):
         def combo_A(Ea: Array, x: Array, w: tuple[Array, ...], N: tuple[Array, ...]) -> Array:
             return comb(Ea, x[None], h, w, tuple(n[None] for n in N))[0]
 
-        mech = self.pde.mechanics
-        integrated = self.integrated
+        fin = self._integrated_mechanics()
 
         def rhs(q_s: Array, A_s: Array, t_s: float, d_s: Array | None
                 ) -> tuple[Array, Array]:
@@ -487,7 +491,7 @@ class ETDRK4Solver(ETDSolver):
             Nq, Adot = self.split(stage, q_s, t_s, d_s)
             return Nq, Adot - LA * A_s
 
-        d0 = mech.u_hat if integrated else None
+        d0 = fin.u_hat if fin is not None else None
         Nq_u, Adot_u = self.split(u, q_hat, t, d0)
         self.check_wellposed(u, t)
         NA_u = Adot_u - LA * A
@@ -496,23 +500,22 @@ class ETDRK4Solver(ETDSolver):
         # phi_k(0) = 1/k!): d_a = d + h/2 V_u, d_b = d + h/2 V_a, d_c = d + h V_b
         V: list[Array] = []
         d_a = d_b = d_c = None
-        if finite is not None:
-            V.append(finite.udot_hat)
-            if integrated:
-                d_a = d0 + 0.5 * h * V[0]
-            else:  # Newton's start: the displacement extrapolated with its rate
-                finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
+        if fin is not None and d0 is not None:
+            V.append(fin.udot_hat)
+            d_a = d0 + 0.5 * h * V[0]
+        elif finite is not None:  # Newton's start: the displacement extrapolated with its rate
+            finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
         # stage a (t + h/2): ETD1 half step
         Nq_a, NA_a = rhs(combo_q(E2, q_hat, wq["a"], (Nq_u,)),
                          combo_A(EA2, A, wA["a"], (NA_u,)), t + 0.5 * h, d_a)
-        if integrated:
-            V.append(finite.udot_hat)
+        if fin is not None and d0 is not None:
+            V.append(fin.udot_hat)
             d_b = d0 + 0.5 * h * V[1]
         # stage b (t + h/2): Krogstad's correction with phi_2, a + h phi_2(h/2) (N_a - N_u)
         Nq_b, NA_b = rhs(combo_q(E2, q_hat, wq["b"], (Nq_u, Nq_a)),
                          combo_A(EA2, A, wA["b"], (NA_u, NA_a)), t + 0.5 * h, d_b)
-        if integrated:
-            V.append(finite.udot_hat)
+        if fin is not None and d0 is not None:
+            V.append(fin.udot_hat)
             d_c = d0 + h * V[2]
         elif finite is not None:
             finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
@@ -526,9 +529,9 @@ class ETDRK4Solver(ETDSolver):
         # Cox-Matthews third-order weights on the first-order midpoint stage: O(h^3)
         err_q = h * wq["new"][1] * (Nq_b - Nq_a)
         err_A = h * wA["new"][1] * (NA_b - NA_a)
-        if not integrated:
+        if fin is None or d0 is None:
             return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A)
-        V.append(finite.udot_hat)
+        V.append(fin.udot_hat)
         new_d = d0 + (h / 6.0) * (V[0] + 2.0 * V[1] + 2.0 * V[2] + V[3])
         return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A, new_d,
                             (h / 3.0) * (V[2] - V[1]))

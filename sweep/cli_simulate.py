@@ -6,6 +6,7 @@ Exit codes: 0 the run succeeded, 1 the run failed (the reason and time are print
 
 from __future__ import annotations
 
+from dataclasses import fields
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -29,6 +30,10 @@ from .errors import CampaignError, StoreError
 from .limits import available_memory, check_run_memory
 from .spec import MAX_SEED, parse_assignments
 from .store import atomic_to_netcdf, probe_write, storage_cause
+
+#: the names ``--set`` accepts, from the dataclasses themselves (so the help cannot drift)
+_PARAMETER_NAMES = ", ".join([f.name for f in fields(Parameters)] + ["alpha_minus_B"])
+_NUMERICS_NAMES = ", ".join(f.name for f in fields(Numerics))
 
 
 def output_problem(path: Path) -> str | None:
@@ -60,10 +65,7 @@ def _keep_elsewhere(ds: Any, out: Path) -> Path | None:
 def simulate(
     set_: Annotated[list[str] | None, typer.Option(
         "--set", metavar="NAME=VALUE",
-        help="A model parameter (S0, A0, B, B_prime, C, K, kappa, alpha, alpha_minus_B, chi, "
-             "zeta, s, gamma, tau, eps, noise_modes, noise_amplitude) or numerics field "
-             "(resolution, t_final, dt, adaptive, tolerance, dt_max, save_every, "
-             "snapshot_times, mechanics, incompressible, newton_tol, max_newton, spin_tol). "
+        help=f"A model parameter ({_PARAMETER_NAMES}) or numerics field ({_NUMERICS_NAMES}). "
              "Repeatable.")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the random initial director field.")] = 0,
     out: Annotated[Path | None, typer.Option(

@@ -80,10 +80,12 @@ start() {
     step "munge round trip ok"
 
     # 3. slurm.conf (rewritten each time: idempotent)
-    local mem_free realmem cpus changed=0
-    mem_free=$(awk '/MemAvailable/ {print int($2/1024)}' /proc/meminfo)
-    realmem=$(( mem_free * 8 / 10 / 1024 * 1024 ))
-    [ "$realmem" -ge 1024 ] || realmem=$(( mem_free * 8 / 10 ))
+    # half the memory (MB), rounded down to GB: stable from one start to the next, so that
+    # the configuration does not change (and the daemons need no restart) on a second start
+    local mem_total realmem cpus changed=0
+    mem_total=$(awk '/MemTotal/ {print int($2/1024)}' /proc/meminfo)
+    realmem=$(( mem_total / 2 / 1024 * 1024 ))
+    [ "$realmem" -ge 1024 ] || realmem=$(( mem_total / 2 ))
     cpus=${SLURM_CPUS:-$(nproc)}
     step "writing /etc/slurm/slurm.conf (CPUs=$cpus RealMemory=$realmem)"
     mkdir -p /etc/slurm
@@ -129,9 +131,13 @@ EOF
     chmod 644 /etc/slurm/slurm.conf
 
     # 4. daemons
+    if [ "$changed" = 1 ] && { alive "$STATE/slurmctld.pid" || alive "$STATE/slurmd.pid"; }; then
+        step "configuration changed: restarting the daemons"
+        stop_pid slurmd "$STATE/slurmd.pid"
+        stop_pid slurmctld "$STATE/slurmctld.pid"
+    fi
     if alive "$STATE/slurmctld.pid"; then
         step "slurmctld already running (pid $(cat "$STATE/slurmctld.pid"))"
-        if [ "$changed" = 1 ]; then step "configuration changed: scontrol reconfigure"; scontrol reconfigure; fi
     else
         step "starting slurmctld"
         slurmctld -i || die "slurmctld did not start (see $STATE/log/slurmctld.log)"

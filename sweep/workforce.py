@@ -128,6 +128,7 @@ class JobWatch:
         self.cluster = cluster
         self.kind = spec.kind
         self.log_directory = log_directory
+        #: ids of the jobs whose worker joined
         self.joined: set[str] = set()
         #: jobs that ended before their worker joined, since a worker last joined
         self.failed_starts = 0
@@ -159,10 +160,10 @@ class JobWatch:
         """Note which jobs' workers joined, find the jobs that ended and replace them."""
         jobs = {name: str(getattr(job, "job_id", None) or "")
                 for name, job in list(self.cluster.workers.items())}
-        for wname in worker_names:
+        for wname in worker_names:  # a replacement job has its predecessor's name
             job = wname if wname in jobs else wname.rsplit("-", 1)[0]
-            if job in jobs and job not in self.joined:
-                self.joined.add(job)
+            if jobs.get(job) and jobs[job] not in self.joined:
+                self.joined.add(jobs[job])
                 self.failed_starts = 0
         queued = self._queued() if jobs else None
         ended = [] if queued is None else [
@@ -172,7 +173,7 @@ class JobWatch:
             jid = jobs[name]
             self.ended += 1
             self.last_ended = jid
-            if name in self.joined:
+            if jid in self.joined:
                 log.warning("batch job %s (%s) ended; submitting a replacement", jid, name)
             else:
                 self.failed_starts += 1

@@ -477,23 +477,33 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
         run, task, i = tasks.pop(fut.key)
         try:
             record = fut.result(timeout=RESULT_WAIT)
-        except TimeoutError:
-            # Finished, but its result went with its worker (a batch job ended): dask would
-            # recompute it; the record on disk says what happened, else the run goes again.
-            fut.cancel()
+        except OSError as e:
+            # Finished, but its result did not arrive: it went with its worker (a batch job
+            # ended; dask would recompute it), or the connection to the scheduler broke
+            # (TimeoutError, CommClosedError). Not the run's fault: the record on disk says
+            # what happened, else the run goes again (or stays pending).
+            with contextlib.suppress(Exception):
+                fut.cancel()
             record = store.read_record(run.run_id)
             if record is None:
-                log.warning("the result of run %s was lost with its worker; it runs again",
-                            run.run_id)
-                queue.append(i)
+                if client.status == "running":
+                    log.warning("the result of run %s was lost with its worker (%s); it "
+                                "runs again", run.run_id, type(e).__name__)
+                    queue.append(i)
+                else:
+                    summary.lost.append(run)
                 return True
         except CancelledError as e:  # the cluster went away under the run: not its fault
             (log.debug if summary.lost else log.warning)(
                 "run %s was cancelled by dask (%s); rerun to redo it", run.run_id,
                 " ".join(str(e).split()))
             summary.lost.append(run)
-            if client.status not in ("running", "connecting"):
-                queue.clear()  # the client is closed: nothing more can be submitted
+            if client.status != "running":  # the futures are gone with the connection
+                if queue or tasks:
+                    log.warning("the connection to %s is lost (client %s): the %d run(s) "
+                                "left stay pending", force.where, client.status,
+                                len(queue) + len(tasks) + 1)
+                queue.clear()  # nothing more can be submitted
             return True
         except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
             record = _lost_task_record(task, e)

@@ -434,6 +434,9 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
         try:
             yield Workforce(client, f"the dask scheduler at {execution.scheduler}")
         finally:
+            if client.status != "running":  # the scheduler is gone: its reconnection
+                # attempts, cancelled by close(), are no news (nor are their tracebacks)
+                logging.getLogger("distributed.client").setLevel(logging.CRITICAL)
             with contextlib.suppress(Exception):
                 client.close(timeout=10)
         return

@@ -230,3 +230,33 @@ def test_a_wrong_python_fails_fast_quoting_the_worker_error(slurm, tmp_path):
     assert "No module named 'distributed'" in out, out
     assert "python or job_script_prologue" in out
     wait_for(lambda: not queue(), 60, "the jobs to end with the campaign")
+
+
+def docs_slurm_example() -> str:
+    """The SLURM campaign of docs/campaigns.md (the yaml block starting `name: fig2-slurm`)."""
+    text = (ROOT / "docs" / "campaigns.md").read_text()
+    start = text.index("```yaml\nname: fig2-slurm\n") + len("```yaml\n")
+    return text[start:text.index("```", start)]
+
+
+def test_the_docs_slurm_example_runs_on_one_machine(slurm, tmp_path):
+    """As the docs say for one machine: interface lo, 2 jobs of 1 core, this checkout's venv
+    (activated by the prologue), the job logs where the YAML puts them; the grid reduced."""
+    venv = Path(sys.prefix)
+    text = docs_slurm_example()
+    for old, new in [("interface: ib0", "interface: lo"), ("jobs: 4 ", "jobs: 2 "),
+                     ("cores: 8 ", "cores: 1 "), ("processes: 8 ", "processes: 1 "),
+                     ("memory: 16GB", "memory: 1GB"),
+                     ("/shared/me/nematic-logs", str(tmp_path / "logs")),
+                     ("/shared/me/nematic/.venv", str(venv)),
+                     ("num: 17", "num: 2")]:
+        assert old in text, old
+        text = text.replace(old, new)
+    path = tmp_path / "fig2-slurm.yaml"
+    path.write_text(text)
+    rc, out, took = nematic(["run", path, "--results", tmp_path / "results", "--seeds", "1",
+                             "--set", "resolution=32", "--set", "t_final=2"])
+    print(f"the docs' SLURM example (reduced) in {took:.0f} s")
+    assert rc == 0, out
+    assert "2 run(s) in" in out, out
+    assert list((tmp_path / "logs").glob("dask-worker-*.err"))

@@ -239,6 +239,8 @@ def test_the_local_scheduler_takes_only_clients_with_the_campaign_credentials():
         address = force.client.scheduler.address
         assert address.startswith("tls://127.0.0.1:")
         assert force.client.submit(sum, [1, 2]).result(timeout=60) == 3
+        http = force.client.cluster.scheduler.http_server  # dashboard, health, metrics
+        assert {s.getsockname()[0] for s in http._sockets.values()} == {"127.0.0.1"}
         with pytest.raises(OSError, match="Connection reset|timed out|Timed out"):
             Client(address.replace("tls://", "tcp://"), timeout=3)  # plain tcp
         with pytest.raises(OSError, match="TLS certificate does not match"):
@@ -310,3 +312,17 @@ def test_a_tls_scheduler_without_credentials_is_refused(tmp_path):
     finally:
         cluster.close()
 
+
+
+def test_the_docs_slurm_example_is_a_valid_campaign(tmp_path):
+    from test_slurm import docs_slurm_example
+
+    from sweep.spec import load_campaign
+
+    path = tmp_path / "fig2-slurm.yaml"
+    path.write_text(docs_slurm_example())
+    c = load_campaign(path)
+    assert c.execution.cluster is not None
+    assert c.execution.cluster.options["job_script_prologue"] == [
+        "source /shared/me/nematic/.venv/bin/activate"]
+    assert (c.execution.give_up_after, c.execution.tls) == (300, True)

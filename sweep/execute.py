@@ -32,7 +32,7 @@ from model.parameters import Numerics, Parameters
 
 from .errors import ClusterError, StorageError, StoreError
 from .expand import Expansion, RunSpec
-from .spec import CLUSTER_KINDS, ExecutionSpec, StoreSpec
+from .spec import ExecutionSpec, StoreSpec
 from .store import (
     RETRYABLE_REASONS,
     CampaignStore,
@@ -47,6 +47,8 @@ from .workforce import (
     CHECK_EVERY,
     Supervisor,
     Workforce,
+    jobqueue_options,
+    make_jobqueue,
     open_cluster,
 )
 
@@ -351,14 +353,18 @@ def dask_client(execution: ExecutionSpec, *, timeout: float = 30.0,
         yield force.client
 
 
-def make_cluster(execution: ExecutionSpec) -> Any:
-    """The dask-jobqueue cluster object of ``execution.cluster`` (not scaled: no job is
-    submitted), e.g. to inspect ``job_script()``."""
-    import dask_jobqueue
+def make_cluster(execution: ExecutionSpec, campaign_dir: Path | None = None) -> Any:
+    """The dask-jobqueue cluster of ``execution.cluster`` as ``nematic run`` makes it (TLS,
+    dashboard, job logs; not scaled: no job is submitted), e.g. to inspect ``job_script()``.
+    Without ``campaign_dir`` the TLS credential files go to a private folder of the
+    temporary directory."""
+    import tempfile
 
     assert execution.cluster is not None
-    cls = getattr(dask_jobqueue, CLUSTER_KINDS[execution.cluster.kind])
-    return cls(**dict(execution.cluster.options))
+    if campaign_dir is None:
+        campaign_dir = Path(tempfile.gettempdir()) / f"nematic-jobscript-{os.getuid()}"
+    options, _ = jobqueue_options(execution.cluster, execution, campaign_dir)
+    return make_jobqueue(execution.cluster, options)
 
 
 # --------------------------------------------------------------------------- the driver

@@ -447,7 +447,9 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
         log.info("starting a dask-jobqueue %s (job logs in %s)", cls_name, logs)
         with make_jobqueue(spec, options) as cluster:
             if spec.adapt:
-                cluster.adapt(minimum_jobs=spec.adapt[0], maximum_jobs=spec.adapt[1])
+                # at least one job: the driver submits runs once a worker has passed the
+                # check, and dask's adaptive scaling starts jobs only for submitted runs
+                cluster.adapt(minimum_jobs=max(1, spec.adapt[0]), maximum_jobs=spec.adapt[1])
             else:
                 cluster.scale(jobs=spec.jobs)
             with Client(cluster) as client:

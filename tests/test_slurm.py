@@ -63,7 +63,7 @@ execution:
   give_up_after: {give_up}
   cluster:
     kind: slurm
-    jobs: 2
+    {scale}
     cores: 1
     processes: 1
     memory: 1GB
@@ -75,11 +75,12 @@ execution:
 
 def slurm_campaign(folder: Path, name: str, *, values: str = "[0.1, 0.2]", seeds: int = 2,
                    t_final: float = 2.0, python: str = sys.executable, give_up: float = 120,
-                   extra: str = "") -> Path:
+                   extra: str = "", scale: str = "jobs: 2") -> Path:
     path = write_campaign(folder, name=name, values=values, seeds=seeds, t_final=t_final,
                           workers=1)
     text = path.read_text().replace("execution: {workers: 1}\n", "")
-    path.write_text(text + CLUSTER.format(python=python, give_up=give_up, extra=extra))
+    path.write_text(text + CLUSTER.format(python=python, give_up=give_up, extra=extra,
+                                              scale=scale))
     return path
 
 
@@ -157,8 +158,10 @@ def test_one_job_cancelled_mid_campaign(slurm, tmp_path):
     assert all(r["status"] == "ok" for r in recs.values())
 
 
-def test_every_job_cancelled_is_replaced(slurm, tmp_path):
-    path = slurm_campaign(tmp_path, "all-cancelled", values="[0.1, 0.15, 0.2]", t_final=4.0)
+@pytest.mark.parametrize("scale", ["jobs: 2", "adapt: {minimum_jobs: 0, maximum_jobs: 2}"])
+def test_every_job_cancelled_is_replaced(slurm, tmp_path, scale):
+    path = slurm_campaign(tmp_path, "all-cancelled", values="[0.1, 0.15, 0.2]", t_final=4.0,
+                          scale=scale)
     results, log = tmp_path / "results", tmp_path / "log"
     runs = results / "all-cancelled" / "runs"
     driver = run_in_background(path, results, log)

@@ -7,9 +7,11 @@ disk (:func:`plan_runs`), submits the remaining runs through a bounded window, r
 result as it arrives and can be interrupted at any point: everything it needs to resume is on
 disk, nothing is kept in dask.
 
-Clusters (:func:`dask_client`): an embedded ``LocalCluster`` (default), an existing scheduler
-(``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster (``execution.cluster``).
-The results folder must be visible at the same path from every worker (a shared filesystem).
+Clusters (:mod:`sweep.workforce`): an embedded ``LocalCluster`` (default), an existing
+scheduler (``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster
+(``execution.cluster``), watched while the runs go (workers checked as they join, lost batch
+jobs replaced, a bounded give-up). The results folder must be visible at the same path from
+every worker (a shared filesystem).
 """
 
 from __future__ import annotations

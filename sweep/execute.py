@@ -7,9 +7,11 @@ disk (:func:`plan_runs`), submits the remaining runs through a bounded window, r
 result as it arrives and can be interrupted at any point: everything it needs to resume is on
 disk, nothing is kept in dask.
 
-Clusters (:func:`dask_client`): an embedded ``LocalCluster`` (default), an existing scheduler
-(``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster (``execution.cluster``).
-The results folder must be visible at the same path from every worker (a shared filesystem).
+Clusters (:mod:`sweep.workforce`): an embedded ``LocalCluster`` (default), an existing
+scheduler (``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster
+(``execution.cluster``), watched while the runs go (workers checked as they join, lost batch
+jobs replaced, a bounded give-up). The results folder must be visible at the same path from
+every worker (a shared filesystem).
 """
 
 from __future__ import annotations
@@ -18,7 +20,6 @@ import contextlib
 import logging
 import math
 import os
-import signal
 import socket
 import time
 import traceback
@@ -33,7 +34,7 @@ from model.parameters import Numerics, Parameters
 
 from .errors import ClusterError, StorageError, StoreError
 from .expand import Expansion, RunSpec
-from .spec import CLUSTER_KINDS, ExecutionSpec, StoreSpec
+from .spec import ExecutionSpec, StoreSpec
 from .store import (
     RETRYABLE_REASONS,
     CampaignStore,
@@ -44,6 +45,14 @@ from .store import (
     now_iso,
     record_from_dataset,
 )
+from .workforce import (
+    CHECK_EVERY,
+    Supervisor,
+    Workforce,
+    jobqueue_options,
+    make_jobqueue,
+    open_cluster,
+)
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -51,11 +60,10 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: Runs in flight per worker thread (keeps the scheduler's queue short for 10^5 runs).
-INFLIGHT_PER_THREAD = 4
-MIN_INFLIGHT = 8
-#: How often the submission window follows the cluster's size (seconds).
-WINDOW_REFRESH = 10.0
+#: How long the driver sleeps when no result is ready (seconds).
+POLL = 0.2
+#: How long the driver waits for the result of a finished run to arrive (seconds).
+RESULT_WAIT = 10.0
 #: How often the driver refreshes the manifest while running (seconds).
 MANIFEST_EVERY = 300.0
 #: Run-file attributes added by the campaign manager.
@@ -243,15 +251,6 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
     return out
 
 
-def worker_environment() -> dict[str, Any]:
-    """Run on every worker before a campaign: proves the code is importable there."""
-    import model.simulate  # noqa: F401 - the import is the check
-
-    from .provenance import environment
-
-    return environment()
-
-
 # --------------------------------------------------------------------------- planning
 @dataclass
 class Plan:
@@ -346,94 +345,28 @@ def _mtime(store: CampaignStore, run_id: str) -> int | None:
 
 
 # --------------------------------------------------------------------------- clusters
-def local_worker_count(execution: ExecutionSpec) -> int:
-    if execution.workers:
-        return execution.workers
-    n = os.cpu_count() or 1
-    return max(1, n // max(1, execution.threads_per_worker))
-
-
 @contextlib.contextmanager
 def dask_client(execution: ExecutionSpec, *, timeout: float = 30.0,
-                dashboard: bool = False) -> Iterator[Client]:
-    """A dask ``Client`` for the campaign's execution section (closed on exit). A local
-    cluster serves the dask dashboard on 127.0.0.1 (a free port) if ``dashboard``; a
-    scheduler or a batch cluster serves its own (see :func:`dashboard_link`)."""
-    from distributed import Client, LocalCluster
-
-    if execution.scheduler:
-        log.info("connecting to the dask scheduler at %s", execution.scheduler)
-        try:
-            client = Client(execution.scheduler, timeout=timeout)
-        except OSError as e:
-            raise ClusterError(f"cannot reach the dask scheduler at {execution.scheduler}: "
-                               f"{e}") from None
-        try:
-            yield client
-        finally:
-            client.close()
-        return
-    if execution.cluster is not None:
-        import dask_jobqueue
-
-        spec = execution.cluster
-        cls = getattr(dask_jobqueue, CLUSTER_KINDS[spec.kind])
-        log.info("starting a dask-jobqueue %s", cls.__name__)
-        try:
-            jobqueue = cls(**dict(spec.options))
-        except (ValueError, TypeError, OSError) as e:
-            raise ClusterError(f"cannot set up the {cls.__name__} of execution.cluster: "
-                               f"{e}") from None
-        with jobqueue as cluster:
-            if spec.adapt:
-                cluster.adapt(minimum_jobs=spec.adapt[0], maximum_jobs=spec.adapt[1])
-            else:
-                cluster.scale(jobs=spec.jobs)
-            with Client(cluster) as client:
-                yield client
-        return
-    n = local_worker_count(execution)
-    log.info("starting a local dask cluster: %d worker process(es)", n)
-    kwargs: dict[str, Any] = {}
-    if execution.memory_limit:
-        kwargs["memory_limit"] = execution.memory_limit
-    with _workers_ignore_sigint():
-        cluster = LocalCluster(n_workers=n, threads_per_worker=execution.threads_per_worker,
-                               processes=True,
-                               # the scheduler's HTTP server (health, metrics; the dashboard
-                               # if asked for) on the loopback interface, a free port
-                               dashboard_address="127.0.0.1:0",
-                               scheduler_kwargs={"dashboard": dashboard},
-                               silence_logs=logging.ERROR, **kwargs)
-    with cluster, Client(cluster) as client:
-        yield client
+                dashboard: bool = False, campaign_dir: Path | None = None) -> Iterator[Client]:
+    """A dask ``Client`` for the campaign's execution section (closed on exit); see
+    :func:`sweep.workforce.open_cluster`."""
+    with open_cluster(execution, timeout=timeout, dashboard=dashboard,
+                      campaign_dir=campaign_dir) as force:
+        yield force.client
 
 
-@contextlib.contextmanager
-def _workers_ignore_sigint() -> Iterator[None]:
-    """Start local worker processes with SIGINT ignored (the disposition is inherited across
-    exec, and Python then installs no KeyboardInterrupt handler): a terminal's Ctrl-C reaches
-    the whole process group, but only the driver should react, by cancelling the runs and
-    closing the cluster cleanly."""
-    try:
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:  # not the main thread: leave signals alone
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
-def make_cluster(execution: ExecutionSpec) -> Any:
-    """The dask-jobqueue cluster object of ``execution.cluster`` (not scaled: no job is
-    submitted), e.g. to inspect ``job_script()``."""
-    import dask_jobqueue
+def make_cluster(execution: ExecutionSpec, campaign_dir: Path | None = None) -> Any:
+    """The dask-jobqueue cluster of ``execution.cluster`` as ``nematic run`` makes it (TLS,
+    dashboard, job logs; not scaled: no job is submitted), e.g. to inspect ``job_script()``.
+    Without ``campaign_dir`` the TLS credential files go to a private folder of the
+    temporary directory."""
+    import tempfile
 
     assert execution.cluster is not None
-    cls = getattr(dask_jobqueue, CLUSTER_KINDS[execution.cluster.kind])
-    return cls(**dict(execution.cluster.options))
+    if campaign_dir is None:
+        campaign_dir = Path(tempfile.gettempdir()) / f"nematic-jobscript-{os.getuid()}"
+    options, _ = jobqueue_options(execution.cluster, execution, campaign_dir)
+    return make_jobqueue(execution.cluster, options)
 
 
 # --------------------------------------------------------------------------- the driver
@@ -497,19 +430,26 @@ def _lost_task_record(task: RunTask, exc: BaseException) -> Record:
     return _failure(task, reason, detail, tb, math.nan)
 
 
-def run_campaign(expansion: Expansion, store: CampaignStore, client: Client, plan: Plan,
-                 events: RunEvents | None = None, *,
+def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Workforce,
+                 plan: Plan, events: RunEvents | None = None, *,
                  clock: Callable[[], float] = time.monotonic) -> RunSummary:
-    """Run ``plan.todo`` on ``client``; return when all are done or on Ctrl-C
-    (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set)."""
+    """Run ``plan.todo`` on the cluster; return when all are done or on Ctrl-C
+    (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set).
+
+    Waits (bounded) for the first worker, checks every worker that joins and sizes the
+    submission window from the accepted workers (:class:`~sweep.workforce.Supervisor`).
+    Raises :class:`ClusterError` when the workers cannot run the model or none is left for
+    ``execution.give_up_after`` seconds (the runs in flight stay pending)."""
     from distributed import as_completed
 
     campaign = expansion.campaign
+    force = client if isinstance(client, Workforce) else Workforce(client, "the dask cluster")
+    client = force.client
     t0 = clock()
     summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
                          failed_before=len(plan.failed))
-    if campaign.execution.mode != "local":
-        wait_for_workers(client, campaign.execution)
+    watch = Supervisor(force, campaign.execution, clock=clock)
+    watch.wait_for_first()
     if events and hasattr(events, "warming"):
         events.warming()
     warm0 = clock()
@@ -517,80 +457,108 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client, pla
     log.info("warm-up on %d host(s) in %.1f s: %s", len(warmed), clock() - warm0, warmed)
     if events and hasattr(events, "warmed"):
         events.warmed(warmed, clock() - warm0)
-    try:
-        info = client.run(worker_environment)
-        workers = max(1, sum(client.nthreads().values()))
-    except Exception as e:  # noqa: BLE001 - a worker that cannot import the code is fatal
-        raise ClusterError(f"the dask workers cannot run the model ({type(e).__name__}: {e});"
-                           " install this package in the workers' environment") from e
-    for addr, env in info.items():
-        log.debug("worker %s: %s", addr, env)
+    watch.check()
     if events:
-        events.started(plan, len(expansion), workers)
+        events.started(plan, len(expansion), max(1, watch.threads))
     queue = list(reversed(plan.todo))
-    tasks: dict[Any, tuple[RunSpec, RunTask]] = {}
+    tasks: dict[Any, tuple[RunSpec, RunTask, int]] = {}
+    attempts: dict[int, int] = {}
     ac = as_completed()
     last_manifest = clock()
-    sizing = {"window": max(MIN_INFLIGHT, INFLIGHT_PER_THREAD * workers), "at": clock()}
-
-    def window() -> int:
-        # Adaptive clusters (dask-jobqueue) grow and shrink: follow their thread count.
-        if clock() - sizing["at"] > WINDOW_REFRESH:
-            with contextlib.suppress(Exception):
-                threads = sum(client.nthreads().values())
-                sizing["window"] = max(MIN_INFLIGHT, INFLIGHT_PER_THREAD * threads)
-            sizing["at"] = clock()
-        return int(sizing["window"])
 
     def submit_more() -> None:
-        while queue and ac.count() < window():
-            run = expansion.run(queue.pop())
+        while queue and ac.count() < watch.window:
+            i = queue.pop()
+            run = expansion.run(i)
             task = RunTask.from_spec(run, store, campaign.name, campaign.store)
-            fut = client.submit(execute_run, task, key=f"nematic-run-{run.run_id}", pure=False)
-            tasks[fut.key] = (run, task)
+            # a run that goes again (its result was lost) gets a new key: the old one may
+            # still be being released
+            again = attempts[i] = attempts.get(i, -1) + 1
+            key = f"nematic-run-{run.run_id}" + (f"-{again}" if again else "")
+            fut = client.submit(execute_run, task, key=key, pure=False)
+            tasks[fut.key] = (run, task, i)
             ac.add(fut)
             summary.submitted += 1
 
+    def handle(fut: Any) -> bool:
+        """Take one finished future; ``False`` to stop the campaign."""
+        run, task, i = tasks.pop(fut.key)
+        try:
+            record = fut.result(timeout=RESULT_WAIT)
+        except OSError as e:
+            # Finished, but its result did not arrive: it went with its worker (a batch job
+            # ended; dask would recompute it), or the connection to the scheduler broke
+            # (TimeoutError, CommClosedError). Not the run's fault: the record on disk says
+            # what happened, else the run goes again (or stays pending).
+            with contextlib.suppress(Exception):
+                fut.cancel()
+            record = store.read_record(run.run_id)
+            if record is None:
+                if client.status == "running":
+                    log.warning("the result of run %s was lost with its worker (%s); it "
+                                "runs again", run.run_id, type(e).__name__)
+                    queue.append(i)
+                else:
+                    summary.lost.append(run)
+                return True
+        except CancelledError as e:  # the cluster went away under the run: not its fault
+            (log.debug if summary.lost else log.warning)(
+                "run %s was cancelled by dask (%s); rerun to redo it", run.run_id,
+                " ".join(str(e).split()))
+            summary.lost.append(run)
+            if client.status != "running":  # the futures are gone with the connection
+                if queue or tasks:
+                    log.warning("the connection to %s is lost (client %s): the %d run(s) "
+                                "left stay pending", force.where, client.status,
+                                len(queue) + len(tasks) + 1)
+                queue.clear()  # nothing more can be submitted
+            return True
+        except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
+            record = _lost_task_record(task, e)
+            record.update(parameters=task.parameters, numerics=task.numerics,
+                          coords=task.coords, campaign=task.campaign)
+            store.write_record(record)
+        fut.release()
+        if record.get("status") == UNSAVED:
+            # The results folder cannot take results: stop instead of burning every run.
+            # The runs in flight are cancelled: they stay pending, as this one does.
+            summary.unsaved.append((run, record))
+            summary.storage_error = str(record.get("storage_error") or "")
+            queue.clear()
+            with contextlib.suppress(Exception):
+                client.cancel(list(ac.futures))
+            return False
+        if record.get("status") == "ok":
+            summary.ok += 1
+        else:
+            summary.failed.append((run, record))
+        wall = record.get("wall_time")
+        if isinstance(wall, (int, float)) and math.isfinite(wall):
+            summary.run_time += float(wall)
+        if events:
+            events.finished_run(run, record)
+        return True
+
     try:
         submit_more()
-        for fut in ac:
-            run, task = tasks.pop(fut.key)
-            try:
-                record = fut.result()
-            except CancelledError as e:  # the cluster went away under the run: not its fault
-                (log.debug if summary.lost else log.warning)(
-                    "run %s was cancelled by dask (%s); rerun to redo it", run.run_id,
-                    " ".join(str(e).split()))
-                summary.lost.append(run)
-                if client.status not in ("running", "connecting"):
-                    queue.clear()  # the client is closed: nothing more can be submitted
-                submit_more()
-                continue
-            except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
-                record = _lost_task_record(task, e)
-                record.update(parameters=task.parameters, numerics=task.numerics,
-                              coords=task.coords, campaign=task.campaign)
-                store.write_record(record)
-            fut.release()
-            if record.get("status") == UNSAVED:
-                # The results folder cannot take results: stop instead of burning every run.
-                # The runs in flight are cancelled: they stay pending, as this one does.
-                summary.unsaved.append((run, record))
-                summary.storage_error = str(record.get("storage_error") or "")
-                queue.clear()
-                with contextlib.suppress(Exception):
-                    client.cancel(list(ac.futures))
-                break
-            if record.get("status") == "ok":
-                summary.ok += 1
+        going = True
+        while going and (tasks or queue):
+            if ac.has_ready():
+                for fut in ac.next_batch(block=False):
+                    if not handle(fut):
+                        going = False
+                        break
             else:
-                summary.failed.append((run, record))
-            wall = record.get("wall_time")
-            if isinstance(wall, (int, float)) and math.isfinite(wall):
-                summary.run_time += float(wall)
-            if events:
-                events.finished_run(run, record)
-            submit_more()
+                time.sleep(POLL)
+            if going and clock() - watch.last_check >= CHECK_EVERY:
+                try:
+                    watch.check()
+                except ClusterError:
+                    with contextlib.suppress(Exception):
+                        client.cancel(list(ac.futures))
+                    raise
+            if going:
+                submit_more()
             if clock() - last_manifest > MANIFEST_EVERY:
                 store.scan()
                 last_manifest = clock()
@@ -601,41 +569,6 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client, pla
             client.cancel(list(ac.futures))
     summary.wall_time = clock() - t0
     return summary
-
-
-#: While waiting for workers: a line this often (seconds).
-WAIT_REPORT_EVERY = 60.0
-
-
-def wait_for_workers(client: Client, execution: ExecutionSpec) -> None:
-    """Return once the cluster has a worker. Without one after ``execution.wait_for_workers``
-    seconds raise :class:`ClusterError` (0: wait for ever); say so every
-    :data:`WAIT_REPORT_EVERY` seconds meanwhile."""
-    limit = execution.wait_for_workers
-    where = (f"the dask scheduler at {execution.scheduler}" if execution.scheduler
-             else "the dask-jobqueue cluster")
-    t0 = time.monotonic()
-    last: float | None = None
-    step = 1.0  # the first look is short, so that the waiting line comes at once
-    while True:
-        left = limit - (time.monotonic() - t0) if limit else step
-        try:
-            client.wait_for_workers(1, timeout=max(0.5, min(step, left)))
-            return
-        except (TimeoutError, OSError):
-            step = 5.0
-        now = time.monotonic()
-        if last is None or now - last >= WAIT_REPORT_EVERY:
-            log.warning("waiting for a dask worker to join %s (%.0f s so far%s)", where,
-                        now - t0, f", giving up after {limit:g} s" if limit else "")
-            last = now
-        if limit and now - t0 >= limit:
-            hint = (f"start workers with `dask worker {execution.scheduler} --nthreads 1` "
-                    "from this package's environment" if execution.scheduler
-                    else "check the batch system's queue")
-            raise ClusterError(f"no dask worker joined {where} within {limit:g} s "
-                               f"(execution.wait_for_workers); {hint}, or raise the wait "
-                               "(0 waits for ever)")
 
 
 class DriveEvents(RunEvents, Protocol):
@@ -666,10 +599,11 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
     summary = None
     if plan.todo:
         try:
-            with dask_client(campaign.execution, dashboard=dashboard) as client:
+            with open_cluster(campaign.execution, dashboard=dashboard,
+                              campaign_dir=store.root) as force:
                 if dashboard and events and hasattr(events, "dashboard"):
-                    events.dashboard(dashboard_link(client))
-                summary = run_campaign(expansion, store, client, plan, events)
+                    events.dashboard(dashboard_link(force.client))
+                summary = run_campaign(expansion, store, force, plan, events)
         except KeyboardInterrupt:  # while the cluster was starting or closing
             summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
                                  failed_before=len(plan.failed), interrupted=True)

@@ -70,10 +70,14 @@ STORE_KEYS = ("snapshot_times", "snapshot_fields", "snapshot_dtype")
 SNAPSHOT_FIELDS = ("q1", "q2", "A", "u1", "u2", "I1bar")
 SNAPSHOT_DTYPES = ("float64", "float32")
 EXECUTION_KEYS = ("workers", "threads_per_worker", "memory_limit", "scheduler", "cluster",
-                  "wait_for_workers")
+                  "wait_for_workers", "give_up_after", "security")
+SECURITY_KEYS = ("tls", "reason")
 #: Default of ``execution.wait_for_workers``: how long a driver on an external scheduler or a
 #: batch cluster waits for its first worker before giving up (seconds).
 DEFAULT_WORKER_WAIT = 600.0
+#: Default of ``execution.give_up_after``: how long a running campaign goes on without any
+#: usable worker (every job ended, the scheduler unreachable) before the driver gives up.
+DEFAULT_GIVE_UP = 120.0
 CLUSTER_KINDS = {
     "slurm": "SLURMCluster", "pbs": "PBSCluster", "sge": "SGECluster", "lsf": "LSFCluster",
     "oar": "OARCluster", "moab": "MoabCluster", "htcondor": "HTCondorCluster",
@@ -179,6 +183,12 @@ class ExecutionSpec:
     cluster: ClusterSpec | None = None
     #: seconds to wait for a first worker (scheduler / cluster); 0: wait for ever
     wait_for_workers: float = DEFAULT_WORKER_WAIT
+    #: seconds without any usable worker (or scheduler) after which a started campaign stops
+    give_up_after: float = DEFAULT_GIVE_UP
+    #: TLS with per-campaign temporary credentials for a scheduler the driver starts
+    tls: bool = True
+    #: why the campaign opted out of TLS (required with ``security: {tls: false}``)
+    insecure_reason: str | None = None
 
     @property
     def mode(self) -> str:
@@ -795,9 +805,42 @@ def _check_execution(c: _Checker, raw: Any) -> ExecutionSpec:
         c.bad(("execution", "wait_for_workers"), wait, "a number of seconds >= 0 (0: wait "
               "for ever, with a line every minute)")
         wait = DEFAULT_WORKER_WAIT
+    give_up = ex.get("give_up_after", DEFAULT_GIVE_UP)
+    if not _is_number(give_up) or not 0 < give_up < math.inf:
+        c.bad(("execution", "give_up_after"), give_up, "a number of seconds > 0 (how long a "
+              "running campaign goes on without any usable worker)")
+        give_up = DEFAULT_GIVE_UP
+    tls, reason = _check_security(c, ex.get("security"))
+    if tls and cluster is not None and cluster.options.get("protocol") not in (None, "tls://"):
+        c.add(("execution", "cluster", "protocol"), f"{cluster.options['protocol']!r} is not "
+              "encrypted: the scheduler uses TLS ('tls://') unless execution.security says "
+              "{tls: false, reason: ...}")
     return ExecutionSpec(workers=workers, threads_per_worker=int(tpw),
                          memory_limit=None if memory is None else str(memory),
-                         scheduler=scheduler, cluster=cluster, wait_for_workers=float(wait))
+                         scheduler=scheduler, cluster=cluster, wait_for_workers=float(wait),
+                         give_up_after=float(give_up), tls=tls, insecure_reason=reason)
+
+
+def _check_security(c: _Checker, raw: Any) -> tuple[bool, str | None]:
+    """``execution.security``: TLS on (default), or ``{tls: false, reason: ...}``."""
+    if raw is None:
+        return True, None
+    path: Path_ = ("execution", "security")
+    sec = c.mapping(path, raw, SECURITY_KEYS)
+    tls = sec.get("tls", True)
+    if not isinstance(tls, bool):
+        c.bad((*path, "tls"), tls, "true or false")
+        return True, None
+    reason = sec.get("reason")
+    if reason is not None and (not isinstance(reason, str) or not reason.strip()):
+        c.bad((*path, "reason"), reason, "a sentence saying why the scheduler may run "
+              "without TLS")
+        return tls, None
+    if not tls and reason is None:
+        c.add((*path, "tls"), "turning TLS off needs a stated reason: add "
+              "'reason: <why plain tcp is acceptable here>' (without TLS anyone who can "
+              "reach the scheduler can run code as you)")
+    return tls, None if reason is None else reason.strip()
 
 
 def _check_cluster(c: _Checker, raw: Any) -> ClusterSpec | None:

@@ -151,6 +151,8 @@ def test_jobqueue_cluster_section_builds_a_job_script():
     assert "#SBATCH -p short" in script
     assert "#SBATCH -t 00:30:00" in script
     assert "--nworkers 2" in script
+    assert "--protocol tls://" in script or "tls://" in script  # TLS by default
+    assert "--tls-ca-file" in script
 
 
 # ----------------------------------------------------------------------------- bad input

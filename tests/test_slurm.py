@@ -1,0 +1,265 @@
+"""Campaigns on a real one-node SLURM (scripts/slurm_local.sh) through execution.cluster:
+the local run's phase.nc, jobs cancelled mid-campaign (one; all, replaced), replacements
+that keep dying and a wrong `python` (a bounded, non-zero exit naming the job logs and
+quoting the worker's error; a rerun resumes). TLS is on (the default) in all of them.
+
+Marked `slurm` (run with ``pytest -m slurm``; .ci/run does): the fixture installs the
+Debian packages and starts the daemons, so it needs root and apt-get; elsewhere the tests
+are skipped with the reason.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import xarray as xr
+from sweep_helpers import kill_group, records, run_ids, start_driver, wait_for, write_campaign
+
+pytestmark = pytest.mark.slurm
+
+ROOT = Path(__file__).resolve().parent.parent
+SCRIPT = ROOT / "scripts" / "slurm_local.sh"
+
+
+def _why_not() -> str | None:
+    if sys.platform != "linux":
+        return "a one-node SLURM is started on Linux only"
+    if os.geteuid() != 0:
+        return "starting SLURM (apt-get install, daemons) needs root"
+    if shutil.which("slurmctld") is None and shutil.which("apt-get") is None:
+        return "SLURM is not installed and there is no apt-get to install it"
+    return None
+
+
+@pytest.fixture(scope="module")
+def slurm():
+    """A running one-node SLURM; stopped afterwards unless it was running before."""
+    why = _why_not()
+    if why:
+        pytest.skip(why)
+    was_up = subprocess.run(["bash", str(SCRIPT), "status"], capture_output=True).returncode == 0
+    t0 = time.monotonic()
+    start = subprocess.run(["bash", str(SCRIPT), "start"], capture_output=True, text=True,
+                           timeout=600)
+    assert start.returncode == 0, start.stdout + start.stderr
+    print(f"SLURM started in {time.monotonic() - t0:.0f} s")
+    try:
+        yield
+    finally:
+        subprocess.run(["scancel", "-u", "root"], capture_output=True)
+        if not was_up:
+            subprocess.run(["bash", str(SCRIPT), "stop"], capture_output=True, timeout=120)
+
+
+CLUSTER = """\
+execution:
+  give_up_after: {give_up}
+  cluster:
+    kind: slurm
+    {scale}
+    cores: 1
+    processes: 1
+    memory: 1GB
+    walltime: "00:10:00"
+    interface: lo
+    python: {python}
+{extra}"""
+
+
+def slurm_campaign(folder: Path, name: str, *, values: str = "[0.1, 0.2]", seeds: int = 2,
+                   t_final: float = 2.0, python: str = sys.executable, give_up: float = 120,
+                   extra: str = "", scale: str = "jobs: 2") -> Path:
+    path = write_campaign(folder, name=name, values=values, seeds=seeds, t_final=t_final,
+                          workers=1)
+    text = path.read_text().replace("execution: {workers: 1}\n", "")
+    path.write_text(text + CLUSTER.format(python=python, give_up=give_up, extra=extra,
+                                              scale=scale))
+    return path
+
+
+def nematic(args: list[object], timeout: float = 300) -> tuple[int, str, float]:
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "sweep", *map(str, args), "--no-figures"],
+                          capture_output=True, text=True, timeout=timeout,
+                          env=dict(os.environ, COLUMNS="300"))
+    text = proc.stdout + proc.stderr
+    assert "Traceback" not in text, text
+    return proc.returncode, " ".join(text.split()), time.monotonic() - t0
+
+
+def queue() -> list[str]:
+    out = subprocess.run(["squeue", "-h", "-o", "%i"], capture_output=True, text=True,
+                         check=True).stdout
+    return out.split()
+
+
+def cancel_all_jobs() -> list[str]:
+    jobs = queue()
+    subprocess.run(["scancel", *jobs], check=True)
+    return jobs
+
+
+def run_in_background(path: Path, results: Path, log: Path) -> subprocess.Popen:
+    return start_driver(["run", str(path), "--results", str(results), "--no-figures"], log)
+
+
+def wait_for_records(runs: Path, n: int, driver: subprocess.Popen, log: Path) -> None:
+    wait_for(lambda: len(list(runs.glob("*.json"))) >= n or driver.poll() is not None, 180,
+             f"{n} finished run(s)")
+    assert driver.poll() is None, log.read_text()
+
+
+def test_slurm_campaign_gives_the_local_phase_nc_with_tls(slurm, tmp_path):
+    path = slurm_campaign(tmp_path / "slurm", "twin")
+    local = write_campaign(tmp_path / "local", name="twin", values="[0.1, 0.2]", seeds=2,
+                           workers=1)
+    rc, out, _ = nematic(["run", local, "--results", tmp_path / "local-results"])
+    assert rc == 0, out
+    rc, out, took = nematic(["run", path, "--results", tmp_path / "results"])
+    print(f"SLURM campaign (2 jobs, 4 runs) in {took:.0f} s")
+    assert rc == 0, out
+    with xr.open_dataset(tmp_path / "local-results" / "twin" / "phase.nc") as a, \
+            xr.open_dataset(tmp_path / "results" / "twin" / "phase.nc") as b:
+        xr.testing.assert_equal(a.load(), b.load())  # bitwise data, dims and coords
+    folder = tmp_path / "results" / "twin"
+    # the workers ran in the batch jobs, over TLS, with credentials only the owner reads
+    hosts = {r["host"] for r in records(folder / "runs").values()}
+    assert hosts
+    logs = "".join(p.read_text() for p in (folder / "jobs").glob("*.err"))
+    assert "Registered to:      tls://" in logs or "Registered to: tls://" in " ".join(
+        logs.split()), logs[-2000:]
+    assert stat.S_IMODE((folder / "tls").stat().st_mode) == 0o700
+    assert not list((folder / "tls").iterdir())  # removed with the cluster
+    wait_for(lambda: not queue(), 60, "the jobs to end with the campaign")
+
+
+def test_one_job_cancelled_mid_campaign(slurm, tmp_path):
+    path = slurm_campaign(tmp_path, "one-cancelled", values="[0.1, 0.15, 0.2]", t_final=4.0)
+    results, log = tmp_path / "results", tmp_path / "log"
+    runs = results / "one-cancelled" / "runs"
+    driver = run_in_background(path, results, log)
+    try:
+        wait_for_records(runs, 1, driver, log)
+        victim = queue()[0]
+        subprocess.run(["scancel", victim], check=True)
+        rc = driver.wait(timeout=240)
+    finally:
+        kill_group(driver)
+    assert rc == 0, log.read_text()
+    recs = records(runs)
+    assert sorted(recs) == sorted(run_ids(path))
+    assert all(r["status"] == "ok" for r in recs.values())
+
+
+@pytest.mark.parametrize("scale", ["jobs: 2", "adapt: {minimum_jobs: 0, maximum_jobs: 2}"])
+def test_every_job_cancelled_is_replaced(slurm, tmp_path, scale):
+    path = slurm_campaign(tmp_path, "all-cancelled", values="[0.1, 0.15, 0.2]", t_final=4.0,
+                          scale=scale)
+    results, log = tmp_path / "results", tmp_path / "log"
+    runs = results / "all-cancelled" / "runs"
+    driver = run_in_background(path, results, log)
+    try:
+        wait_for_records(runs, 1, driver, log)
+        cancelled = cancel_all_jobs()
+        rc = driver.wait(timeout=240)
+    finally:
+        kill_group(driver)
+    text = " ".join(log.read_text().split())
+    assert rc == 0, text
+    assert "submitting a replacement" in text, text
+    for job in cancelled:
+        assert f"batch job {job} (" in text, text
+    recs = records(runs)
+    assert sorted(recs) == sorted(run_ids(path))
+    assert all(r["status"] == "ok" for r in recs.values())
+
+
+def test_replacements_that_keep_dying_end_the_driver_then_a_rerun_resumes(slurm, tmp_path):
+    """Once a marker file exists every new job dies in its prologue (a broken node): after
+    every job is cancelled the driver gives up quickly, naming the job logs and quoting the
+    error; without the marker a rerun completes the campaign."""
+    marker = tmp_path / "broken"
+    prologue = (f"    job_script_prologue: ['if [ -e {marker} ]; then echo \"error: node "
+                f"broken ({marker} exists)\" >&2; exit 1; fi']\n")
+    path = slurm_campaign(tmp_path, "dying", values="[0.1, 0.15, 0.2]", t_final=4.0,
+                          extra=prologue)
+    results, log = tmp_path / "results", tmp_path / "log"
+    runs = results / "dying" / "runs"
+    driver = run_in_background(path, results, log)
+    try:
+        wait_for_records(runs, 1, driver, log)
+        marker.touch()
+        cancel_all_jobs()
+        t0 = time.monotonic()
+        rc = driver.wait(timeout=240)
+        took = time.monotonic() - t0
+    finally:
+        kill_group(driver)
+    text = " ".join(log.read_text().split())
+    print(f"gave up {took:.0f} s after every job was cancelled")
+    assert rc == 2, text
+    assert took < 120, text
+    assert f"job logs: {results / 'dying' / 'jobs'}" in text, text
+    assert f"last worker error: 'error: node broken ({marker} exists)'" in text, text
+    assert "rerun the same command" in text
+    done = len(records(runs))
+    assert 1 <= done < 6
+    marker.unlink()
+    rc, out, _ = nematic(["run", path, "--results", results])
+    assert rc == 0, out
+    assert f"{done} done" in out, out
+    assert len(records(runs)) == 6
+
+
+def test_a_wrong_python_fails_fast_quoting_the_worker_error(slurm, tmp_path):
+    bare = tmp_path / "bare"  # an interpreter without the project (nor dask)
+    subprocess.run([sys.base_prefix + "/bin/python3", "-m", "venv", "--without-pip",
+                    str(bare)], check=True)
+    path = slurm_campaign(tmp_path, "wrong-python", python=str(bare / "bin" / "python"))
+    rc, out, took = nematic(["run", path, "--results", tmp_path / "results"], timeout=240)
+    print(f"a wrong python refused in {took:.0f} s")
+    assert rc == 2, out
+    assert took < 90, out
+    assert "every batch job of the dask-jobqueue SLURMCluster ends before its dask worker " \
+           "joins" in out, out
+    assert f"job logs: {tmp_path / 'results' / 'wrong-python' / 'jobs'}" in out
+    assert "No module named 'distributed'" in out, out
+    assert "python or job_script_prologue" in out
+    wait_for(lambda: not queue(), 60, "the jobs to end with the campaign")
+
+
+def docs_slurm_example() -> str:
+    """The SLURM campaign of docs/campaigns.md (the yaml block starting `name: fig2-slurm`)."""
+    text = (ROOT / "docs" / "campaigns.md").read_text()
+    start = text.index("```yaml\nname: fig2-slurm\n") + len("```yaml\n")
+    return text[start:text.index("```", start)]
+
+
+def test_the_docs_slurm_example_runs_on_one_machine(slurm, tmp_path):
+    """As the docs say for one machine: interface lo, 2 jobs of 1 core, this checkout's venv
+    (activated by the prologue), the job logs where the YAML puts them; the grid reduced."""
+    venv = Path(sys.prefix)
+    text = docs_slurm_example()
+    for old, new in [("interface: ib0", "interface: lo"), ("jobs: 4 ", "jobs: 2 "),
+                     ("cores: 8 ", "cores: 1 "), ("processes: 8 ", "processes: 1 "),
+                     ("memory: 16GB", "memory: 1GB"),
+                     ("/shared/me/nematic-logs", str(tmp_path / "logs")),
+                     ("/shared/me/nematic/.venv", str(venv)),
+                     ("num: 17", "num: 2")]:
+        assert old in text, old
+        text = text.replace(old, new)
+    path = tmp_path / "fig2-slurm.yaml"
+    path.write_text(text)
+    rc, out, took = nematic(["run", path, "--results", tmp_path / "results", "--seeds", "1",
+                             "--set", "resolution=32", "--set", "t_final=2"])
+    print(f"the docs' SLURM example (reduced) in {took:.0f} s")
+    assert rc == 0, out
+    assert "2 run(s) in" in out, out
+    assert list((tmp_path / "logs").glob("dask-worker-*.err"))

@@ -40,6 +40,20 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+
+class _GatherEndedByClose(logging.Filter):
+    """Drop asyncio's "Task exception was never retrieved" report of a result fetch that a
+    closing client ended (distributed's ``AllExit``): a fetch given up after its timeout leaves
+    such a task behind, and its end at shutdown is expected, not an error (the run's record
+    on disk holds the result)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return not (exc is not None and type(exc).__name__ == "AllExit")
+
+
+logging.getLogger("asyncio").addFilter(_GatherEndedByClose())
+
 #: Runs in flight per worker thread (keeps the scheduler's queue short for 10^5 runs).
 INFLIGHT_PER_THREAD = 4
 MIN_INFLIGHT = 8

@@ -160,7 +160,9 @@ def test_one_job_cancelled_mid_campaign(slurm, tmp_path):
 
 @pytest.mark.parametrize("scale", ["jobs: 2", "adapt: {minimum_jobs: 0, maximum_jobs: 2}"])
 def test_every_job_cancelled_is_replaced(slurm, tmp_path, scale):
-    path = slurm_campaign(tmp_path, "all-cancelled", values="[0.1, 0.15, 0.2]", t_final=4.0,
+    # long enough that runs remain when every job is cancelled after the first record
+    path = slurm_campaign(tmp_path, "all-cancelled", values="[0.1, 0.12, 0.14, 0.16, 0.18, 0.2]",
+                          t_final=12.0,
                           scale=scale)
     results, log = tmp_path / "results", tmp_path / "log"
     runs = results / "all-cancelled" / "runs"
@@ -173,6 +175,7 @@ def test_every_job_cancelled_is_replaced(slurm, tmp_path, scale):
         kill_group(driver)
     text = " ".join(log.read_text().split())
     assert rc == 0, text
+    assert "Traceback" not in text, text
     assert "submitting a replacement" in text, text
     for job in cancelled:
         assert f"batch job {job} (" in text, text

@@ -226,7 +226,9 @@ def test_the_last_worker_error_of_the_job_logs(tmp_path):
     (tmp_path / "dask-worker-2.out").write_text("")
     t = time.time()
     os.utime(old, (t - 10, t - 10))
-    line, where = last_worker_error(tmp_path)
+    found = last_worker_error(tmp_path)
+    assert found is not None
+    line, where = found
     assert where == new
     assert "No module named 'distributed'" in line
 
@@ -236,10 +238,15 @@ def test_the_local_scheduler_takes_only_clients_with_the_campaign_credentials():
     from distributed import Client, Security
 
     with open_cluster(ExecutionSpec(workers=1)) as force:
-        address = force.client.scheduler.address
+        client = force.client
+        assert client is not None
+        assert client.scheduler is not None
+        address = client.scheduler.address
+        assert address is not None
         assert address.startswith("tls://127.0.0.1:")
-        assert force.client.submit(sum, [1, 2]).result(timeout=60) == 3
-        http = force.client.cluster.scheduler.http_server  # dashboard, health, metrics
+        assert client.submit(sum, [1, 2]).result(timeout=60) == 3
+        assert client.cluster is not None
+        http = client.cluster.scheduler.http_server  # dashboard, health, metrics
         assert {s.getsockname()[0] for s in http._sockets.values()} == {"127.0.0.1"}
         with pytest.raises(OSError, match="Connection reset|timed out|Timed out"):
             Client(address.replace("tls://", "tcp://"), timeout=3)  # plain tcp
@@ -259,7 +266,10 @@ def test_tls_can_be_turned_off_only_with_a_reason(tmp_path):
                        "'a private network'}}\n")
     assert (c.execution.tls, c.execution.insecure_reason) == (False, "a private network")
     with open_cluster(c.execution) as force:
-        assert force.client.scheduler.address.startswith("tcp://127.0.0.1:")
+        client = force.client
+        assert client is not None
+        assert client.scheduler is not None
+        assert str(client.scheduler.address).startswith("tcp://127.0.0.1:")
     with pytest.raises(CampaignError, match="'tcp://' is not encrypted"):
         parse_campaign(base + "execution: {cluster: {kind: slurm, protocol: 'tcp://'}}\n")
     with pytest.raises(CampaignError, match="execution.give_up_after"):

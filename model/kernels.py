@@ -66,6 +66,18 @@ def _dS(d00, d01, d11, i00, i01, i11, s1_00, s1_01, s1_11, s3_00, s3_01, s3_11, 
     return out00, out01, out11
 
 
+@njit(cache=True, inline="always")
+def _point_kinematics(F, x, y):  # pragma: no cover - compiled
+    """At grid point (x, y): F's components f00, f01, f10, f11, J = det F and the components
+    c00, c01, c11 of C = F^T F."""
+    f00 = F[0, 0, x, y]
+    f01 = F[0, 1, x, y]
+    f10 = F[1, 0, x, y]
+    f11 = F[1, 1, x, y]
+    return (f00, f01, f10, f11, f00 * f11 - f01 * f10, f00 * f00 + f10 * f10,
+            f00 * f01 + f10 * f11, f01 * f01 + f11 * f11)
+
+
 @njit(cache=True, error_model="numpy")
 def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compiled
     r""":math:`K_{iJkL} = \partial P_{iJ}/\partial F_{kL}`, the same formulas as
@@ -76,16 +88,9 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
     K = np.empty((2, 2, 2, 2, nx, ny))
     for x in range(nx):
         for y in range(ny):
-            f00 = F[0, 0, x, y]
-            f01 = F[0, 1, x, y]
-            f10 = F[1, 0, x, y]
-            f11 = F[1, 1, x, y]
+            f00, f01, f10, f11, J, c00, c01, c11 = _point_kinematics(F, x, y)
             a = q1[x, y]  # Q = [[a, b], [b, -a]]
             b = q2[x, y]
-            c00 = f00 * f00 + f10 * f10  # C = F^T F
-            c01 = f00 * f01 + f10 * f11
-            c11 = f01 * f01 + f11 * f11
-            J = f00 * f11 - f01 * f10
             I1 = c00 + c11
             detC = c00 * c11 - c01 * c01
             i00 = c11 / detC
@@ -467,14 +472,7 @@ def strain_measures_kernel(F, P):  # pragma: no cover - compiled
     trP = np.empty((nx, ny))
     for x in range(nx):
         for y in range(ny):
-            f00 = F[0, 0, x, y]
-            f01 = F[0, 1, x, y]
-            f10 = F[1, 0, x, y]
-            f11 = F[1, 1, x, y]
-            J = f00 * f11 - f01 * f10
-            c00 = f00 * f00 + f10 * f10
-            c01 = f00 * f01 + f10 * f11
-            c11 = f01 * f01 + f11 * f11
+            _, _, _, _, J, c00, c01, c11 = _point_kinematics(F, x, y)
             dev[0, x, y] = 0.25 * (c00 - c11) / J
             dev[1, x, y] = 0.5 * c01 / J
             Jm1[x, y] = J - 1.0

@@ -137,8 +137,6 @@ class ETDSolver(SolverBase):
         self._workspace = fast_linear.workspace(g.n) if self.compiled else ()
         self._symbols = (mech.response_symbols()
                          if isinstance(mech, LinearMechanics) and self.compiled else None)
-        #: finite strain with the displacement integrated with the state (Numerics.displacement)
-        self.integrated = isinstance(mech, FiniteMechanics) and num.displacement == "integrated"
         #: the integrated displacement spectrum at the end of the last step (projected onto
         #: force balance when the step is accepted)
         self._pending_disp: Array | None = None
@@ -270,7 +268,8 @@ class ETDSolver(SolverBase):
         """The finite mechanics whose displacement is integrated with the state, or None
         (linear mechanics, or ``displacement = "equilibrium"``)."""
         mech = self.pde.mechanics
-        return mech if self.integrated and isinstance(mech, FiniteMechanics) else None
+        integrated = self.pde.numerics.displacement == "integrated"
+        return mech if integrated and isinstance(mech, FiniteMechanics) else None
 
     def _save_finite(self) -> FiniteMechanics | None:
         """Remember the finite-strain warm start after the step's first right-hand side (so a
@@ -282,7 +281,9 @@ class ETDSolver(SolverBase):
         return mech
 
     def _restore_finite(self) -> None:
-        """Put the finite-strain displacement warm start back to the step's start."""
+        """Undo a rejected or failed step's finite-strain work: the displacement and its rate
+        back to the step's start, the integrated displacement it produced dropped."""
+        self._pending_disp = None
         mech = self.pde.mechanics
         if isinstance(mech, FiniteMechanics) and self._finite_restore is not None:
             mech.u_hat, mech.udot_hat = self._finite_restore
@@ -331,7 +332,6 @@ class ETDSolver(SolverBase):
         # failure that persists at small steps is the run's, and so is an ill-posed accepted
         # state (a shorter step cannot change it)
         self._restore_finite()
-        self._pending_disp = None
         if (not self.adaptive or isinstance(exc, IllPosed)
                 or h_try <= self.retry_floor * self.dt_max):
             raise exc
@@ -374,7 +374,6 @@ class ETDSolver(SolverBase):
                     if err > self.tolerance:
                         self.stats["rejected"] += 1
                         self._restore_finite()
-                        self._pending_disp = None
                         # a rejected step is retried at most half as long: the estimate
                         # near the stability limit does not scale as h^p (measured: repeated
                         # rejections at 0.9 (tol/err)^(1/p))

@@ -371,13 +371,10 @@ class FiniteMechanics(_Mechanics):
                 K, b_hat, x0, g.kx, g.ky, self._khat[0], self._khat[1], self._inv_k2, self._a,
                 self._weights, *g.fft.plans, rtol, self.max_cg)
             g.fft.count += 8 * nop
-            self.fft_parts["newton_cg"] += 8 * nop
             return x, it, code == 0
-        count = g.fft.count
         x, it, status = krylov.pcg(self._operator(K), b_hat, x0,
                                    lambda r: self._green(r, self._a), g.inner, rtol=rtol,
                                    maxiter=self.max_cg)
-        self.fft_parts["newton_cg"] += g.fft.count - count
         return x, it, status == "ok"
 
     def _udot_gmres(self, K: Array, E: Array, b: Array) -> tuple[Array, int, bool]:
@@ -393,17 +390,14 @@ class FiniteMechanics(_Mechanics):
                 self._inv_k2, self._a, self._weights, *g.fft.plans, self.spin_tol,
                 self.max_cg, *self._workspace)
             g.fft.count += 8 * nop
-            self.fft_parts["rate_solve"] += 8 * nop
             return x, it, ok
 
         def A(v_hat: Array) -> Array:
             G = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))
             return neg_div_hat_kernel(g.forward(apply_tangent_spin_kernel(K, G, E)), g.kx, g.ky)
 
-        count = g.fft.count
         x, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
                                      g.inner, rtol=self.spin_tol, maxiter=self.max_cg)
-        self.fft_parts["rate_solve"] += g.fft.count - count
         return x, it, status == "ok"
 
     def _evaluate(self, u_hat: Array, q1: Array, q2: Array
@@ -444,7 +438,9 @@ class FiniteMechanics(_Mechanics):
             # a residual near tol, as in the projection of an integrated displacement, needs
             # little: a cap of cg_rtol = 0.1 instead of 1e-3 halves its CG work, measured)
             rtol = float(np.clip(0.5 * self.tol / res, 1e-8, self.cg_rtol))
+            count = self.grid.fft.count
             du, ncg, ok = self._pcg(K, b, rtol)
+            self.fft_parts["newton_cg"] += self.grid.fft.count - count
             self.cg_iterations += ncg
             if not ok and ncg < self.max_cg:
                 raise SimulationFailure(
@@ -528,7 +524,9 @@ class FiniteMechanics(_Mechanics):
                                                         np.ascontiguousarray(R[1]), m.B,
                                                         m.B_prime, m.alpha)), g.kx, g.ky)
 
+        count = g.fft.count
         udot, it, ok = self._udot_gmres(K, E, b)
+        self.fft_parts["rate_solve"] += g.fft.count - count
         self.spin_iterations += it
         if not ok:
             raise SimulationFailure(

@@ -5,7 +5,10 @@ The deformation is :math:`F = \bar F + \nabla \tilde u` with a periodic fluctuat
 (the paper's :math:`\epsilon_{11} = \epsilon = -\epsilon_{22}`; at small strain the mean
 displacement gradient is exactly that).
 
-Two solvers share one interface (:meth:`solve`, :meth:`spin`):
+Two solvers share one interface, :class:`Mechanics` (what the time stepper and the PDE call:
+:meth:`~Mechanics.solve`, :meth:`~Mechanics.state_at`, :meth:`~Mechanics.corotational`,
+:meth:`~Mechanics.rate_margin`, and the warm start's :meth:`~Mechanics.checkpoint`,
+:meth:`~Mechanics.restore`, :meth:`~Mechanics.predict`):
 
 * :class:`LinearMechanics`: small strain, one exact Fourier solve with the Green operator of
   the isotropic medium (shear modulus 1, 2-D bulk modulus kappa, or incompressible by
@@ -88,11 +91,31 @@ def applied_deformation(eps: float) -> Array:
     return np.array([[1.0 + eps, 0.0], [0.0, 1.0 - eps]])
 
 
-class _Mechanics:
-    def __init__(self, params, grid: SpectralGrid, *, spin_tol: float = 1e-8):
+class Mechanics:
+    """The interface the solver and the PDE call; the base of both mechanics.
+
+    ``backend`` ("compiled" or "numpy", from ``Numerics.backend``) chooses the compiled
+    Krylov solves where native FFTW is available (:attr:`compiled`); the numpy path is their
+    reference. ``integrated`` is True when the displacement is part of the integrated state
+    (finite strain with ``Numerics.displacement = "integrated"``): the solver then carries
+    :attr:`u_hat` through the stages with its rate :attr:`udot_hat` and projects it with
+    :meth:`solve` once per step.
+    """
+
+    #: the displacement is integrated with the state (only finite mechanics can)
+    integrated = False
+    #: where :attr:`integrated`: the displacement spectrum (Newton's warm start, or the
+    #: integrated displacement) and its rate, the solution of the last rate solve
+    u_hat: Array
+    udot_hat: Array
+
+    def __init__(self, params, grid: SpectralGrid, *, spin_tol: float = 1e-8,
+                 backend: str = "compiled"):
         self.params = params
         self.grid = grid
         self.spin_tol = spin_tol
+        #: compiled code runs the Krylov solves (native FFTW available and backend "compiled")
+        self.compiled = backend == "compiled" and grid.fft.plans is not None
         self.spin_iterations = 0
         self.cg_iterations = 0  # Newton's CG iterations (finite mechanics only)
         self.omega_hat: Array | None = None
@@ -109,6 +132,39 @@ class _Mechanics:
         self._inv_k2 = np.where(g.active, 1.0 / np.where(g.active, g.kd2, 1.0), 0.0)
         self._khat = kh
 
+    # --- the interface (the defaults: a mechanics without a warm start) ----------------
+    def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
+              t: float | None = None) -> MechanicalState:
+        """The mechanical state in force balance (Eq. 3) for the order q1, q2."""
+        raise NotImplementedError
+
+    def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None
+                 ) -> MechanicalState:
+        """The mechanical state at a given displacement (only where :attr:`integrated`)."""
+        raise ValueError(f"{type(self).__name__} does not integrate the displacement")
+
+    def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
+                     t: float | None = None) -> tuple[Array, Array]:
+        """``(Qdot components, omega)``: :math:`\\dot Q = R + 2 \\omega J q` with the spin
+        slaved to :math:`\\dot Q` (Eq. 4)."""
+        raise NotImplementedError
+
+    def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None
+                    ) -> tuple[float, int, float]:
+        """The well-posedness margin of the rate problem, its flat grid index and the
+        wave-vector angle of the minimum (:mod:`model.wellposedness`)."""
+        raise NotImplementedError
+
+    def checkpoint(self) -> None:
+        """Remember the warm start (displacement and its rate) at the start of a step."""
+
+    def restore(self) -> None:
+        """Put the warm start of the last :meth:`checkpoint` back (a rejected step)."""
+
+    def predict(self, dt: float) -> None:
+        """Move Newton's warm start ``dt`` ahead along the displacement rate."""
+
+    # --- shared helpers ----------------------------------------------------------------
     def _green(self, b_hat: Array, a: float) -> Array:
         """:math:`(I - a \\hat k \\hat k) \\hat b / k^2` (numba kernel)."""
         return green_kernel(b_hat, self._khat[0], self._khat[1], self._inv_k2, a)
@@ -135,7 +191,7 @@ class _Mechanics:
         return g.inverse(0.5j * (g.kx * udot_hat[1] - g.ky * udot_hat[0]))
 
 
-class LinearMechanics(_Mechanics):
+class LinearMechanics(Mechanics):
     """Small-strain force balance, solved exactly in Fourier space.
 
     .. math::
@@ -151,16 +207,18 @@ class LinearMechanics(_Mechanics):
     """
 
     def __init__(self, params, grid: SpectralGrid, *, incompressible: bool = False,
-                 spin_tol: float = 1e-8):
-        super().__init__(params, grid, spin_tol=spin_tol)
+                 spin_tol: float = 1e-8, backend: str = "compiled"):
+        super().__init__(params, grid, spin_tol=spin_tol, backend=backend)
         self.incompressible = incompressible
         k = params.kappa
         self._a = 1.0 if incompressible else k / (k + 1.0)
         self.ebar = np.array([[params.eps, 0.0], [0.0, -params.eps]])
-        kx, ky = self._khat  # the spin symbols m1, m2 of spin_multiplier
+        kx, ky = self._khat
         c = -0.5 * (self.moduli.alpha - self.moduli.B)
-        self._spin_symbols = (c * (-2.0 * kx * ky), c * (kx**2 - ky**2))
-        self._zero_hat = np.zeros(grid.k2.shape, dtype=complex)
+        #: the spin symbols (m1, m2) of :meth:`spin_multiplier`
+        self.spin_symbols = (c * (-2.0 * kx * ky), c * (kx**2 - ky**2))
+        #: a zero half spectrum (the spin solve's start; read, never written)
+        self.zero_hat = np.zeros(grid.k2.shape, dtype=complex)
         self.spin_maxiter = 100  # GMRES iterations of the spin solve before spin_diverged
 
     def _eigenstress(self, q1: Array, q2: Array) -> Array:
@@ -171,7 +229,9 @@ class LinearMechanics(_Mechanics):
             tau = tau - m.B_prime * T.ddot(Q, Q) * T.identity(q1.shape)
         return tau
 
-    def solve(self, q1: Array, q2: Array, **_: object) -> MechanicalState:
+    def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
+              t: float | None = None) -> MechanicalState:
+        """The small-strain state: one exact Fourier solve (``u_guess`` is not needed)."""
         g = self.grid
         tau = self._eigenstress(q1, q2)
         tau_hat = g.forward(tau)
@@ -201,7 +261,7 @@ class LinearMechanics(_Mechanics):
         :meth:`spectral_response_reference` (tested to agree, and with :meth:`solve`).
         """
         g, m = self.grid, self.moduli
-        iso = -m.B_prime * QQ_hat if QQ_hat is not None else self._zero_hat
+        iso = -m.B_prime * QQ_hat if QQ_hat is not None else self.zero_hat
         return linear_response(q_hat[0], q_hat[1], iso, g.kx, g.ky, self._khat[0],
                                self._khat[1], self._inv_k2, m.alpha - m.B, self._a,
                                self.params.kappa, self.incompressible,
@@ -213,7 +273,7 @@ class LinearMechanics(_Mechanics):
         :func:`model.fast_linear.linear_split`: the responses to unit spectra; the response is
         linear and every factor i of a derivative meets another one, so they are real."""
         g, m = self.grid, self.moduli
-        one, zero = np.ones(g.k2.shape, dtype=complex), self._zero_hat
+        one, zero = np.ones(g.k2.shape, dtype=complex), self.zero_hat
         cols = []
         for q1h, q2h, iso in ((one, zero, zero), (zero, one, zero), (zero, zero, one)):
             dev, tr_e, tr_s = linear_response(q1h, q2h, iso, g.kx, g.ky, self._khat[0],
@@ -257,7 +317,7 @@ class LinearMechanics(_Mechanics):
         """Fourier symbol of the spin: :math:`\\hat\\omega = -\\tfrac12 (\\alpha - B)\\,
         \\hat t \\cdot \\hat{\\dot Q} \\cdot \\hat k`, :math:`\\hat t = (-\\hat k_2, \\hat k_1)`
         (the isotropic B' part of the eigenstress is curl free)."""
-        m1, m2 = self._spin_symbols
+        m1, m2 = self.spin_symbols
         return m1 * qdot1_hat + m2 * qdot2_hat
 
     def corotational_hat(self, q1: Array, q2: Array, R_hat: Array, t: float | None = None
@@ -277,14 +337,14 @@ class LinearMechanics(_Mechanics):
             j = g.forward(jaumann_products(g.inverse(omega_hat), q1, q2))
             return symbol_combination(omega_hat, m1, m2, j[0], j[1]), j
 
-        m1, m2 = self._spin_symbols
-        b = symbol_combination(self._zero_hat, -m1, -m2, R_hat[0], R_hat[1])
+        m1, m2 = self.spin_symbols
+        b = symbol_combination(self.zero_hat, -m1, -m2, R_hat[0], R_hat[1])
         # from zero: its residual is b, no operator application; a warm start from the last
         # spin costs one application for its residual and saves fewer iterations (the spin
         # follows the stage-specific part of Qdot): 4534 iterations + 1256 residuals against
         # 4940 iterations for a linear 128^2 run to t = 300 (-11 % transforms, measured)
         omega_hat, it, status, j_hat = krylov.gmres_aux(
-            operator, b, self._zero_hat, lambda r: r, g.inner, rtol=self.spin_tol,
+            operator, b, self.zero_hat, lambda r: r, g.inner, rtol=self.spin_tol,
             maxiter=self.spin_maxiter)
         self.accept_spin(omega_hat, it, status == "ok", t)
         return R_hat + j_hat
@@ -317,12 +377,14 @@ class LinearMechanics(_Mechanics):
         return self.grid.inverse(qdot_hat), self.grid.inverse(self.omega_hat)
 
 
-class FiniteMechanics(_Mechanics):
+class FiniteMechanics(Mechanics):
     """Finite-strain force balance by Newton-Krylov (see the module docstring)."""
 
     def __init__(self, params, grid: SpectralGrid, *, tol: float = 1e-8, max_newton: int = 30,
-                 cg_rtol: float = 0.1, max_cg: int = 200, spin_tol: float = 1e-8):
-        super().__init__(params, grid, spin_tol=spin_tol)
+                 cg_rtol: float = 0.1, max_cg: int = 200, spin_tol: float = 1e-8,
+                 backend: str = "compiled", integrated: bool = True):
+        super().__init__(params, grid, spin_tol=spin_tol, backend=backend)
+        self.integrated = integrated
         self.tol = tol
         self.max_newton = max_newton
         self.cg_rtol = cg_rtol
@@ -332,14 +394,23 @@ class FiniteMechanics(_Mechanics):
         n = grid.n
         self.u_hat = np.zeros((2, n, n // 2 + 1), dtype=complex)  # warm start
         self.udot_hat = np.zeros_like(self.u_hat)
-        #: Krylov solves compiled with native FFTW (model.fast_finite); False: numpy reference
-        self.compiled = grid.fft.plans is not None
+        self._checkpoint: tuple[Array, Array] | None = None
         self._weights = grid.weights / n**2  # Parseval weights of the half spectrum
         self._workspace: tuple[Array, Array] | None = None
         self.fft_parts.update(rate_solve=0, newton_cg=0, force_balance=0)
         #: (u_hat, q1, q2, F, P) of the last converged solve, which :meth:`state_at` reuses
         #: when asked for the same displacement and order (the first stage after a projection)
         self._solution: tuple[Array, Array, Array, Array, Array] | None = None
+
+    def checkpoint(self) -> None:
+        self._checkpoint = (self.u_hat.copy(), self.udot_hat.copy())
+
+    def restore(self) -> None:
+        if self._checkpoint is not None:
+            self.u_hat, self.udot_hat = self._checkpoint
+
+    def predict(self, dt: float) -> None:
+        self.u_hat = self.u_hat + dt * self.udot_hat
 
     def _tangent(self, F: Array, q1: Array, q2: Array) -> Array:
         """The tangent dP/dF by the numba kernel (reference: ``constitutive.tangent``)."""
@@ -556,9 +627,11 @@ class FiniteMechanics(_Mechanics):
         return wp.finite_margin(K, E, m.kappa)
 
 
-def make_mechanics(params, numerics, grid: SpectralGrid) -> LinearMechanics | FiniteMechanics:
+def make_mechanics(params, numerics, grid: SpectralGrid) -> Mechanics:
+    """The mechanics ``numerics.mechanics`` names, with its tolerances and backend."""
     if numerics.mechanics == "linear":
         return LinearMechanics(params, grid, incompressible=numerics.incompressible,
-                               spin_tol=numerics.spin_tol)
+                               spin_tol=numerics.spin_tol, backend=numerics.backend)
     return FiniteMechanics(params, grid, tol=numerics.newton_tol, max_newton=numerics.max_newton,
-                           spin_tol=numerics.spin_tol)
+                           spin_tol=numerics.spin_tol, backend=numerics.backend,
+                           integrated=numerics.displacement == "integrated")

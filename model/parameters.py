@@ -28,6 +28,10 @@ SCHEMES = ("etdrk4", "etdrk2")
 ERROR_NORMS = ("max", "rms")
 #: how the finite-strain displacement is found at the stages of a step (Numerics.displacement)
 DISPLACEMENT = ("integrated", "equilibrium")
+#: how the numerics are executed: "compiled" (numba + native FFTW, where FFTW loads; the numpy
+#: path otherwise) or "numpy" (the readable reference). Results agree to rounding (tested), so
+#: the backend is not part of a run's identity.
+BACKENDS = ("compiled", "numpy")
 
 
 def _suggest(name: str, valid: list[str]) -> str:
@@ -177,6 +181,9 @@ class Numerics:
         newton_tol: force-balance residual tolerance (see docs/model.md, "Residual").
         max_newton: Newton iterations allowed per solve before failing.
         spin_tol: relative GMRES tolerance of the Jaumann spin solve.
+        backend: "compiled" (the Krylov solves and the linear right-hand side as compiled
+            functions with native FFTW, where FFTW loads) or "numpy" (their readable
+            reference); results agree to rounding.
     """
 
     resolution: int = 128
@@ -195,6 +202,7 @@ class Numerics:
     newton_tol: float = 1e-6
     max_newton: int = 30
     spin_tol: float = 1e-2
+    backend: str = "compiled"
 
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:
@@ -226,6 +234,8 @@ class Numerics:
             raise ParameterError("mechanics", self.mechanics, " or ".join(MECHANICS))
         if self.displacement not in DISPLACEMENT:
             raise ParameterError("displacement", self.displacement, " or ".join(DISPLACEMENT))
+        if self.backend not in BACKENDS:
+            raise ParameterError("backend", self.backend, " or ".join(BACKENDS))
         for name in ("adaptive", "incompressible"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(name, getattr(self, name), "true or false")

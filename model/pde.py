@@ -1,8 +1,10 @@
 r"""The py-pde PDE class: paper Eqs. (3)-(5) with a readable numpy ``evolution_rate``.
 
 State: a :class:`pde.FieldCollection` of three scalar fields ``q1, q2, A`` on the periodic
-unit square. The displacement is not a state variable: it is slaved to Q by quasi-static
-force balance (Eq. 3), solved on every evaluation by :mod:`model.mechanics`.
+unit square. The displacement is slaved to Q by quasi-static force balance (Eq. 3), solved on
+every evaluation of :meth:`ActiveNematicPDE.evolution_rate` by :mod:`model.mechanics` (the
+time stepper may instead integrate it with the state: :meth:`ActiveNematicPDE.rates` with a
+given displacement; docs/model.md, section 4).
 
 Equations (tensor conventions: docs/model.md):
 
@@ -28,7 +30,7 @@ from pde.pdes.base import PDEBase
 
 from .errors import SimulationFailure
 from .fourier import SpectralGrid
-from .mechanics import FiniteMechanics, MechanicalState, make_mechanics
+from .mechanics import MechanicalState, make_mechanics
 from .parameters import Numerics, Parameters
 
 Array = np.ndarray
@@ -125,10 +127,8 @@ class ActiveNematicPDE(PDEBase):
         mechanics = self.mechanics
         if u_hat is None:
             mech = mechanics.solve(q1, q2, t=t)
-        elif isinstance(mechanics, FiniteMechanics):
-            mech = mechanics.state_at(u_hat, q1, q2, t)
         else:
-            raise ValueError("a given displacement needs finite mechanics")
+            mech = mechanics.state_at(u_hat, q1, q2, t)
         H = self.molecular_field(q1, q2, A, mech, q_hat)
         qd1, qd2, omega = self.corotational_rates(q1, q2, H, mech, t)
         return np.stack([qd1, qd2, self.activity_rate(A, mech)]), mech, omega

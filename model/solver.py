@@ -66,11 +66,11 @@ from collections.abc import Callable
 import numpy as np
 from pde.solvers.base import SolverBase
 
-from . import fast_linear
 from . import kernels as kern
 from .errors import IllPosed, SimulationFailure
-from .mechanics import FiniteMechanics, LinearMechanics, MechanicalState
+from .mechanics import MechanicalState, Mechanics
 from .pde import ActiveNematicPDE
+from .split import make_split
 
 log = logging.getLogger(__name__)
 Array = np.ndarray
@@ -123,27 +123,22 @@ class ETDSolver(SolverBase):
         self.error_norm = num.error_norm
         p, g = pde.params, pde.spectral
         self.Lq = -(p.A0 + p.K * g.k2) / p.gamma  # the q1, q2 symbol (Fourier space)
-        self._zeros = np.zeros((g.n, g.n))
         self._known: list[tuple[Array, Array]] = []
-        #: the finite-strain warm start (u_hat, udot_hat) at the start of the current step
-        self._finite_restore: tuple[Array, Array] | None = None
         self._phi_cache: dict[tuple[float, int], tuple[Array, ...]] = {}
         self.on_step: Callable[[float, float], None] | None = None
-        mech = pde.mechanics
-        #: the linear right-hand side as one compiled function (native FFTW only); False: the
-        #: numpy reference path
-        self.compiled = isinstance(mech, LinearMechanics) and g.fft.plans is not None
-        self._weights = g.weights / g.n**2  # Parseval weights of the half spectrum
-        self._workspace = fast_linear.workspace(g.n) if self.compiled else ()
-        self._symbols = (mech.response_symbols()
-                         if isinstance(mech, LinearMechanics) and self.compiled else None)
+        #: the split right-hand side (model.split: spectral for linear mechanics, compiled
+        #: where the mechanics is)
+        self._split = make_split(pde.mechanics, pde, self.Lq)
+        #: whether the mechanics' warm start was checkpointed in the current step (after its
+        #: first right-hand side)
+        self._checkpointed = False
         #: the integrated displacement spectrum at the end of the last step (projected onto
         #: force balance when the step is accepted)
         self._pending_disp: Array | None = None
         self.stats = {"steps": 0, "rejected": 0, "stage_failures": 0, "rhs": 0, "newton": 0,
                       "projections": 0}
-        #: the finite mechanical state of the last right-hand side (its tangent and E serve
-        #: the well-posedness check of the step's start)
+        #: the mechanical state of the last force-balance right-hand side (its tangent and E
+        #: serve the well-posedness check of the step's start)
         self._last_mech: MechanicalState | None = None
         #: smallest well-posedness margin over the accepted states (model.wellposedness)
         self.margin_min = float("inf")
@@ -153,63 +148,14 @@ class ETDSolver(SolverBase):
     def split(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
               ) -> tuple[Array, Array]:
         """Return ``(N_q hat, Adot)`` for the state ``u = [q1, q2, A]`` with ``q_hat`` the
-        spectra of q1, q2: :math:`\\hat N_q = \\widehat{\\dot q} - L_q \\hat q` in Fourier space,
-        and the full activity rate (Eq. 5) in real space. Finite strain: at the displacement
-        spectrum ``disp`` if given (the integrated scheme; its rate is then the mechanics'
-        ``udot_hat``), else in force balance."""
+        spectra of q1, q2 (:mod:`model.split`). Where the mechanics integrates the
+        displacement: at the displacement spectrum ``disp`` (its rate is then the mechanics'
+        ``udot_hat``)."""
         self.stats["rhs"] += 1
-        eq = self.pde
-        g = eq.spectral
-        if isinstance(eq.mechanics, LinearMechanics):
-            return self._split_linear(u, q_hat, t)
-        rate, mech, _ = eq.rates(u[0], u[1], u[2], t, u_hat=disp, q_hat=q_hat)
-        self._last_mech = mech
-        self.stats["newton"] += mech.iterations
-        if not np.all(np.isfinite(rate)):
-            raise SimulationFailure("nan", "non-finite rate", t)
-        return g.forward(rate[:2]) - self.Lq * q_hat, rate[2]
-
-    def _split_linear(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
-        """Linear-mechanics fast path: every linear map of q stays in Fourier space. Runs as
-        one compiled function (:func:`model.fast_linear.linear_split`) where native FFTW is
-        available and ``self.compiled`` is set; the numpy code below is its reference."""
-        if self.compiled:
-            return self._split_linear_compiled(u, q_hat, t)
-        eq = self.pde
-        p, g, mech = eq.params, eq.spectral, eq.mechanics
-        assert isinstance(mech, LinearMechanics)
-        q1, q2, A = u
-        QQ_hat = g.forward(2.0 * (q1**2 + q2**2)) if p.B_prime else None
-        dev_hat, tr_e_hat, tr_sigma_hat = mech.spectral_response(q_hat, QQ_hat)
-        if p.B_prime:
-            tr_e, tr_sigma = g.inverse(np.stack([tr_e_hat, tr_sigma_hat]))
-        else:
-            tr_e, tr_sigma = self._zeros, g.inverse(tr_sigma_hat)
-        H_hat = g.forward(kern.bulk_terms(q1, q2, A, tr_e, p.C, 2.0 * p.B_prime)) + p.B * dev_hat
-        Lq_hat = self.Lq * q_hat
-        R_hat = H_hat
-        R_hat /= p.gamma
-        R_hat += Lq_hat  # H / gamma, full
-        qdot_hat = mech.corotational_hat(q1, q2, R_hat, t)  # R + 2 omega J q
-        qdot_hat -= Lq_hat
-        Adot = kern.activity_rate(A, tr_sigma, p.zeta, p.chi, p.s, p.tau)
-        return qdot_hat, Adot
-
-    def _split_linear_compiled(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
-        """:meth:`_split_linear` by :func:`model.fast_linear.linear_split`."""
-        eq = self.pde
-        p, g, mech = eq.params, eq.spectral, eq.mechanics
-        assert isinstance(mech, LinearMechanics)
-        assert g.fft.plans is not None
-        m1, m2 = mech._spin_symbols
-        x0 = mech._zero_hat  # zero start (LinearMechanics.corotational_hat); copied, not written
-        Nq, Adot, omega_hat, its, ok, nfft = fast_linear.linear_split(
-            u[0], u[1], u[2], np.ascontiguousarray(q_hat), x0, self.Lq, m1, m2,
-            self._symbols, self._weights, *g.fft.plans, p.eps * g.n**2, p.B, p.B_prime, p.C,
-            p.gamma, p.zeta, p.chi, p.s, p.tau, mech.spin_tol, mech.spin_maxiter,
-            *self._workspace)
-        g.fft.count += nfft
-        mech.accept_spin(omega_hat, its, ok, t)
+        Nq, Adot, mech = self._split(u, q_hat, t, disp)
+        if mech is not None:
+            self._last_mech = mech
+            self.stats["newton"] += mech.iterations
         return Nq, Adot
 
     def full_rate(self, u: Array, t: float = 0.0) -> Array:
@@ -248,10 +194,8 @@ class ETDSolver(SolverBase):
         :class:`model.errors.IllPosed` when it is <= 0, naming the value and the place."""
         if t == self._checked_at:  # a rejected step retried from the same state
             return self.margin_min
-        mech = self.pde.mechanics
-        state = self._last_mech if isinstance(mech, FiniteMechanics) else None
         self._checked_at = t
-        margin, idx, phi = mech.rate_margin(u[0], u[1], state)
+        margin, idx, phi = self.pde.mechanics.rate_margin(u[0], u[1], self._last_mech)
         self.margin_min = min(self.margin_min, margin)
         if margin <= 0.0:
             n = self.pde.spectral.n
@@ -264,29 +208,23 @@ class ETDSolver(SolverBase):
                 f"wave vector at {np.degrees(phi):.0f} deg)", t)
         return margin
 
-    def _integrated_mechanics(self) -> FiniteMechanics | None:
-        """The finite mechanics whose displacement is integrated with the state, or None
-        (linear mechanics, or ``displacement = "equilibrium"``)."""
+    def _integrated_mechanics(self) -> Mechanics | None:
+        """The mechanics if it integrates the displacement with the state, else None."""
         mech = self.pde.mechanics
-        integrated = self.pde.numerics.displacement == "integrated"
-        return mech if integrated and isinstance(mech, FiniteMechanics) else None
+        return mech if mech.integrated else None
 
-    def _save_finite(self) -> FiniteMechanics | None:
-        """Remember the finite-strain warm start after the step's first right-hand side (so a
-        rejected step can put it back); returns the finite mechanics, or None if linear."""
-        mech = self.pde.mechanics
-        if not isinstance(mech, FiniteMechanics):
-            return None
-        self._finite_restore = (mech.u_hat.copy(), mech.udot_hat.copy())
-        return mech
+    def _checkpoint(self) -> None:
+        """Remember the mechanics' warm start after the step's first right-hand side (so a
+        rejected step can put it back)."""
+        self.pde.mechanics.checkpoint()
+        self._checkpointed = True
 
-    def _restore_finite(self) -> None:
-        """Undo a rejected or failed step's finite-strain work: the displacement and its rate
-        back to the step's start, the integrated displacement it produced dropped."""
+    def _restore(self) -> None:
+        """Undo a rejected or failed step's mechanical work: the warm start back to the
+        step's start (if it got that far), the integrated displacement it produced dropped."""
         self._pending_disp = None
-        mech = self.pde.mechanics
-        if isinstance(mech, FiniteMechanics) and self._finite_restore is not None:
-            mech.u_hat, mech.udot_hat = self._finite_restore
+        if self._checkpointed:
+            self.pde.mechanics.restore()
 
     def _finish(self, u: Array, q_hat: Array, new_q_hat: Array, new_A: Array, err_q: Array,
                 err_A: Array, new_disp: Array | None = None, err_disp: Array | None = None
@@ -331,7 +269,7 @@ class ETDSolver(SolverBase):
         # a too-large step can throw a stage out of the well-posed range: retry smaller; a
         # failure that persists at small steps is the run's, and so is an ill-posed accepted
         # state (a shorter step cannot change it)
-        self._restore_finite()
+        self._restore()
         if (not self.adaptive or isinstance(exc, IllPosed)
                 or h_try <= self.retry_floor * self.dt_max):
             raise exc
@@ -373,7 +311,7 @@ class ETDSolver(SolverBase):
                         0.9 * (self.tolerance / err) ** (1.0 / self.error_order), 0.2, 2.0))
                     if err > self.tolerance:
                         self.stats["rejected"] += 1
-                        self._restore_finite()
+                        self._restore()
                         # a rejected step is retried at most half as long: the estimate
                         # near the stability limit does not scale as h^p (measured: repeated
                         # rejections at 0.9 (tol/err)^(1/p))
@@ -418,12 +356,12 @@ class ETDRK2Solver(ETDSolver):
         g = self.pde.spectral
         q_hat = self._spectrum(u[:2])
         A = u[2]
-        self._finite_restore = None
+        self._checkpointed = False
         fin = self._integrated_mechanics()
         d0 = fin.u_hat if fin is not None else None
         Nq0, Adot0 = self.split(u, q_hat, t, d0)
         self.check_wellposed(u, t)
-        finite = self._save_finite()
+        self._checkpoint()
         E, phi1, phi2 = self._phis(h)
         p = self.pde.params
         LA, phi1A, phi2A = kern.activity_exponential(A, h, p.zeta, p.s, p.tau)
@@ -435,8 +373,8 @@ class ETDRK2Solver(ETDSolver):
         if fin is not None and d0 is not None:
             V0 = fin.udot_hat
             da = d0 + h * V0
-        elif finite is not None:  # first-order predictor of Newton's start
-            finite.u_hat = finite.u_hat + h * finite.udot_hat
+        else:  # first-order predictor of Newton's start
+            self.pde.mechanics.predict(h)
         Nqa, Adota = self.split(a, aq_hat, t + h, da)
         corr_q = h * phi2 * (Nqa - Nq0)
         corr_A = h * phi2A * (Adota - Adot0 - LA * (aA - A))
@@ -462,7 +400,7 @@ class ETDRK4Solver(ETDSolver):
         """One Krogstad ETDRK4 step; returns (new state, error estimate)."""
         g = self.pde.spectral
         p = self.pde.params
-        self._finite_restore = None
+        self._checkpointed = False
         q_hat = self._spectrum(u[:2])
         A = u[2]
         E, E2, wq = self._krogstad_weights(h)
@@ -494,7 +432,7 @@ class ETDRK4Solver(ETDSolver):
         Nq_u, Adot_u = self.split(u, q_hat, t, d0)
         self.check_wellposed(u, t)
         NA_u = Adot_u - LA * A
-        finite = self._save_finite()
+        self._checkpoint()
         # the integrated displacement (L = 0: the weights become the classical RK4's,
         # phi_k(0) = 1/k!): d_a = d + h/2 V_u, d_b = d + h/2 V_a, d_c = d + h V_b
         V: list[Array] = []
@@ -502,8 +440,8 @@ class ETDRK4Solver(ETDSolver):
         if fin is not None and d0 is not None:
             V.append(fin.udot_hat)
             d_a = d0 + 0.5 * h * V[0]
-        elif finite is not None:  # Newton's start: the displacement extrapolated with its rate
-            finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
+        else:  # Newton's start: the displacement extrapolated with its rate
+            self.pde.mechanics.predict(0.5 * h)
         # stage a (t + h/2): ETD1 half step
         Nq_a, NA_a = rhs(combo_q(E2, q_hat, wq["a"], (Nq_u,)),
                          combo_A(EA2, A, wA["a"], (NA_u,)), t + 0.5 * h, d_a)
@@ -516,8 +454,8 @@ class ETDRK4Solver(ETDSolver):
         if fin is not None and d0 is not None:
             V.append(fin.udot_hat)
             d_c = d0 + h * V[2]
-        elif finite is not None:
-            finite.u_hat = finite.u_hat + 0.5 * h * finite.udot_hat
+        else:
+            self.pde.mechanics.predict(0.5 * h)
         # stage c (t + h)
         Nq_c, NA_c = rhs(combo_q(E, q_hat, wq["c"], (Nq_u, Nq_b)),
                          combo_A(EA, A, wA["c"], (NA_u, NA_b)), t + h, d_c)

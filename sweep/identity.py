@@ -9,7 +9,8 @@ model's defaults filled in, ``alpha_minus_B`` resolved into ``alpha``), each val
 of its SHA-256.
 
 Anything that changes a run's result or its file changes the id, so an id names one file's
-content; the code version does not enter (it is recorded in the file instead).
+content; the code version and the backend (:data:`EXECUTION_ONLY`: compiled or numpy, equal
+to rounding) do not enter (they are recorded in the file instead).
 Bump :data:`SCHEMA_VERSION` only when the canonical form itself changes.
 """
 
@@ -55,6 +56,15 @@ def canonical_value(value: Any) -> Any:
     raise TypeError(f"cannot canonicalise {value!r} of type {type(value).__name__}")
 
 
+#: numerics that choose how a run is executed, not what it computes (results agree to
+#: rounding): recorded in the run file, not part of the identity
+EXECUTION_ONLY = ("backend",)
+
+
+def _identity_numerics(numerics: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in numerics.items() if k not in EXECUTION_ONLY}
+
+
 def _dumps(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
 
@@ -64,7 +74,7 @@ def canonical_json(parameters: Mapping[str, Any], numerics: Mapping[str, Any],
     """The canonical text that is hashed. The mappings are taken as given: pass complete
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`."""
     return _dumps({
-        "numerics": canonical_value(dict(numerics)),
+        "numerics": canonical_value(_identity_numerics(numerics)),
         "parameters": canonical_value(dict(parameters)),
         "schema": SCHEMA_VERSION,
         "seed": canonical_value(int(seed)),
@@ -96,7 +106,7 @@ class PointHasher:
 
     def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
         head = _dumps({
-            "numerics": canonical_value(dict(numerics)),
+            "numerics": canonical_value(_identity_numerics(numerics)),
             "parameters": canonical_value(dict(parameters)),
             "schema": SCHEMA_VERSION,
         })

@@ -137,7 +137,7 @@ def test_compiled_spin_gmres_from_zero_meets_its_tolerance(rng):
     n = 32
     g = SpectralGrid(n)
     mech = LinearMechanics(Parameters.from_dict({"alpha_minus_B": 1.0}), g)
-    m1, m2 = mech._spin_symbols
+    m1, m2 = mech.spin_symbols
     q1, q2 = 0.3 * rng.standard_normal((2, n, n))
     b = g.forward(rng.standard_normal((n, n)))
     w = g.weights / n**2

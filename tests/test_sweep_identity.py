@@ -98,6 +98,13 @@ def test_defaults_written_or_not_are_one_run():
     assert run_id_for({}, {}, 0) == run_id_for(Parameters().to_dict(), Numerics().to_dict(), 0)
 
 
+def test_backend_is_not_part_of_the_identity():
+    """compiled and numpy runs agree to rounding: one run, and the goldens stay."""
+    assert hash_canonical(P, dict(N, backend="numpy"), 0) == GOLDEN[0]
+    assert PointHasher(P, dict(N, backend="compiled"))(49) == GOLDEN[49]
+    assert run_id_for({}, {"backend": "numpy"}, 3) == run_id_for({}, {}, 3)
+
+
 def test_point_hasher_equals_hash_canonical():
     h = PointHasher(P, N)
     for seed in (0, 1, 49, 12345678901):

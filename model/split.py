@@ -1,0 +1,118 @@
+r"""The split right-hand side of the exponential integrators (:mod:`model.solver`).
+
+For the state ``u = [q1, q2, A]`` with ``q_hat`` the spectra of q1, q2, a split returns
+:math:`\hat N_q = \widehat{\dot q} - L_q \hat q` (Fourier space, :math:`L_q = -(A_0 + K k^2)/
+\gamma`) and the full activity rate :math:`\dot A` (Eq. 5, real space), with the mechanical
+state it used (or None):
+
+* :class:`ForceBalanceSplit`, for any mechanics: the PDE's readable
+  :meth:`model.pde.ActiveNematicPDE.rates` (force balance solved, or, where the mechanics
+  integrates the displacement, the state at the given displacement), transformed.
+* :class:`SpectralSplit`, for :class:`model.mechanics.LinearMechanics`: every linear map of q
+  stays in Fourier space (the small-strain response as Fourier symbols); one compiled function,
+  :func:`model.fast_linear.linear_split`, where the mechanics is compiled, and its numpy
+  reference otherwise (tested to agree with each other and with ``evolution_rate``).
+
+:func:`make_split` chooses by the mechanics' type (``functools.singledispatch``).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from . import fast_linear
+from . import kernels as kern
+from .errors import SimulationFailure
+from .mechanics import LinearMechanics, MechanicalState, Mechanics
+from .pde import ActiveNematicPDE
+
+Array = np.ndarray
+
+
+class ForceBalanceSplit:
+    """The split from :meth:`model.pde.ActiveNematicPDE.rates` (any mechanics)."""
+
+    def __init__(self, pde: ActiveNematicPDE, Lq: Array):
+        self.pde = pde
+        self.Lq = Lq
+
+    def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
+                 ) -> tuple[Array, Array, MechanicalState | None]:
+        """``(N_q hat, Adot, mechanical state)`` at the displacement spectrum ``disp`` if
+        given (the integrated scheme), else in force balance."""
+        rate, mech, _ = self.pde.rates(u[0], u[1], u[2], t, u_hat=disp, q_hat=q_hat)
+        if not np.all(np.isfinite(rate)):
+            raise SimulationFailure("nan", "non-finite rate", t)
+        return self.pde.spectral.forward(rate[:2]) - self.Lq * q_hat, rate[2], mech
+
+
+class SpectralSplit:
+    """The linear-mechanics split with every linear map of q in Fourier space."""
+
+    def __init__(self, pde: ActiveNematicPDE, mech: LinearMechanics, Lq: Array):
+        self.pde = pde
+        self.mech = mech
+        self.Lq = Lq
+        g = pde.spectral
+        self._zeros = np.zeros((g.n, g.n))
+        self._weights = g.weights / g.n**2  # Parseval weights of the half spectrum
+        self._workspace = fast_linear.workspace(g.n) if mech.compiled else ()
+        self._symbols = mech.response_symbols() if mech.compiled else None
+
+    def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
+                 ) -> tuple[Array, Array, MechanicalState | None]:
+        """``(N_q hat, Adot, None)``; by :func:`model.fast_linear.linear_split` where the
+        mechanics is compiled, else by :meth:`reference`."""
+        if disp is not None:
+            raise ValueError("a given displacement needs finite mechanics")
+        if not self.mech.compiled:
+            return (*self.reference(u, q_hat, t), None)
+        eq, mech = self.pde, self.mech
+        p, g = eq.params, eq.spectral
+        assert g.fft.plans is not None
+        m1, m2 = mech.spin_symbols
+        Nq, Adot, omega_hat, its, ok, nfft = fast_linear.linear_split(
+            u[0], u[1], u[2], np.ascontiguousarray(q_hat), mech.zero_hat, self.Lq, m1, m2,
+            self._symbols, self._weights, *g.fft.plans, p.eps * g.n**2, p.B, p.B_prime, p.C,
+            p.gamma, p.zeta, p.chi, p.s, p.tau, mech.spin_tol, mech.spin_maxiter,
+            *self._workspace)
+        g.fft.count += nfft
+        mech.accept_spin(omega_hat, its, ok, t)
+        return Nq, Adot, None
+
+    def reference(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
+        """numpy reference of :func:`model.fast_linear.linear_split`."""
+        eq, mech = self.pde, self.mech
+        p, g = eq.params, eq.spectral
+        q1, q2, A = u
+        QQ_hat = g.forward(2.0 * (q1**2 + q2**2)) if p.B_prime else None
+        dev_hat, tr_e_hat, tr_sigma_hat = mech.spectral_response(q_hat, QQ_hat)
+        if p.B_prime:
+            tr_e, tr_sigma = g.inverse(np.stack([tr_e_hat, tr_sigma_hat]))
+        else:
+            tr_e, tr_sigma = self._zeros, g.inverse(tr_sigma_hat)
+        H_hat = g.forward(kern.bulk_terms(q1, q2, A, tr_e, p.C, 2.0 * p.B_prime)) + p.B * dev_hat
+        Lq_hat = self.Lq * q_hat
+        R_hat = H_hat
+        R_hat /= p.gamma
+        R_hat += Lq_hat  # H / gamma, full
+        qdot_hat = mech.corotational_hat(q1, q2, R_hat, t)  # R + 2 omega J q
+        qdot_hat -= Lq_hat
+        Adot = kern.activity_rate(A, tr_sigma, p.zeta, p.chi, p.s, p.tau)
+        return qdot_hat, Adot
+
+
+Split = ForceBalanceSplit | SpectralSplit
+
+
+@functools.singledispatch
+def make_split(mech: Mechanics, pde: ActiveNematicPDE, Lq: Array) -> Split:
+    """The split for the PDE's mechanics ``mech``: :class:`ForceBalanceSplit` in general."""
+    return ForceBalanceSplit(pde, Lq)
+
+
+@make_split.register
+def _(mech: LinearMechanics, pde: ActiveNematicPDE, Lq: Array) -> Split:
+    return SpectralSplit(pde, mech, Lq)

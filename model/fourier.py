@@ -15,20 +15,20 @@ import logging
 import numpy as np
 import scipy.fft
 
-from . import fftw_native
+from .compiled import fftw
 
 log = logging.getLogger(__name__)
 
 Array = np.ndarray
 
-#: FFTW through :mod:`model.fftw_native` (2.5-3x faster than numpy's FFT at 128^2 here, and
+#: FFTW through :mod:`model.compiled.fftw` (2.5-3x faster than numpy's FFT at 128^2 here, and
 #: callable from compiled code); scipy.fft where the FFTW library cannot be loaded.
 #: FFTW_MEASURE at run time would time candidate algorithms and may pick a different one in
 #: another process (seen: a campaign's local and dask-cluster runs differed in the last digits),
 #: so results would not be bitwise reproducible across processes. The plans therefore come from
 #: wisdom shipped with the code (FFTW_PATIENT, made once) or, for sizes it does not hold, from
-#: FFTW_ESTIMATE: both deterministic (:mod:`model.fftw_native`).
-HAVE_FFTW = fftw_native.AVAILABLE
+#: FFTW_ESTIMATE: both deterministic (:mod:`model.compiled.fftw`).
+HAVE_FFTW = fftw.AVAILABLE
 
 
 class FFT:
@@ -45,9 +45,9 @@ class FFT:
             raise ValueError(f"unknown FFT backend {backend!r} (fftw, scipy)")
         self.backend = backend
         #: the (r2c, c2r) plans for compiled code (None for scipy)
-        self.plans = fftw_native.plans(n) if backend == "fftw" else None
+        self.plans = fftw.plans(n) if backend == "fftw" else None
         #: where the plans came from: "wisdom", "estimate" (FFTW), or "" (scipy)
-        self.plan_source = fftw_native.plan_source(n) if backend == "fftw" else ""
+        self.plan_source = fftw.plan_source(n) if backend == "fftw" else ""
         self.count = 0  # number of 2-D transforms performed (for the benchmark)
 
     def forward(self, a: Array) -> Array:
@@ -60,7 +60,7 @@ class FFT:
         n = self.n
         src = np.ascontiguousarray(a, dtype=np.float64).reshape(k, n, n)
         out = np.empty((k, n, n // 2 + 1), dtype=np.complex128)
-        fftw_native.rfft2_many(self.plans[0], src, out)
+        fftw.rfft2_many(self.plans[0], src, out)
         return out.reshape(lead + (n, n // 2 + 1))
 
     def inverse(self, a: Array, out: Array | None = None) -> Array:
@@ -81,7 +81,7 @@ class FFT:
             out = np.empty(lead + (n, n), dtype=np.float64)
         elif out.shape != lead + (n, n) or not out.flags.c_contiguous:
             raise ValueError(f"out must be C-contiguous of shape {lead + (n, n)}")
-        fftw_native.irfft2_many(self.plans[1], src, out.reshape(k, n, n))
+        fftw.irfft2_many(self.plans[1], src, out.reshape(k, n, n))
         return out
 
 

@@ -40,26 +40,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import constitutive as cl
-from . import fast_finite, krylov
+from . import krylov
 from . import tensors as T
 from . import wellposedness as wp
+from .backend import kernels
+from .compiled import finite_krylov
 from .errors import SimulationFailure
 from .fourier import SpectralGrid
-from .kernels import (
-    apply_tangent_kernel,
-    apply_tangent_spin_kernel,
-    div_hat_kernel,
-    first_piola_kernel,
-    grad_hat_kernel,
-    green_kernel,
-    jaumann_products,
-    linear_response,
-    neg_div_hat_kernel,
-    q_increment_kernel,
-    strain_measures_kernel,
-    symbol_combination,
-    tangent_kernel,
-)
 
 log = logging.getLogger(__name__)
 Array = np.ndarray
@@ -114,6 +101,8 @@ class Mechanics:
         self.params = params
         self.grid = grid
         self.spin_tol = spin_tol
+        #: the pointwise and spectral kernels of the backend (model.backend)
+        self.k = kernels(backend)
         #: compiled code runs the Krylov solves (native FFTW available and backend "compiled")
         self.compiled = backend == "compiled" and grid.fft.plans is not None
         self.spin_iterations = 0
@@ -166,14 +155,8 @@ class Mechanics:
 
     # --- shared helpers ----------------------------------------------------------------
     def _green(self, b_hat: Array, a: float) -> Array:
-        """:math:`(I - a \\hat k \\hat k) \\hat b / k^2` (numba kernel)."""
-        return green_kernel(b_hat, self._khat[0], self._khat[1], self._inv_k2, a)
-
-    def _green_reference(self, b_hat: Array, a: float) -> Array:
-        """numpy reference of :meth:`_green`."""
-        kh = self._khat
-        kb = kh[0] * b_hat[0] + kh[1] * b_hat[1]
-        return (b_hat - a * kh * kb) * self._inv_k2
+        """:math:`(I - a \\hat k \\hat k) \\hat b / k^2` (the backend's ``green_kernel``)."""
+        return self.k.green_kernel(b_hat, self._khat[0], self._khat[1], self._inv_k2, a)
 
     def residual(self, P: Array, P_hat: Array | None = None) -> float:
         """:math:`\\lVert \\hat k_J \\hat P_{iJ} \\rVert / \\max(1, \\mathrm{RMS}\\, P)`."""
@@ -257,12 +240,12 @@ class LinearMechanics(Mechanics):
         """Fast path of :meth:`solve` for the time stepper, all from the spectra of q1, q2
         (and of Q:Q when B' != 0): returns ``(dev e hat (2 comps), tr e hat, tr sigma hat)``.
 
-        The numba kernel :func:`model.kernels.linear_response`; its readable reference is
-        :meth:`spectral_response_reference` (tested to agree, and with :meth:`solve`).
+        The backend's ``linear_response`` (:mod:`model.compiled.spectral`, or its numpy twin
+        in :mod:`model.reference_kernels`; tested to agree, and with :meth:`solve`).
         """
         g, m = self.grid, self.moduli
         iso = -m.B_prime * QQ_hat if QQ_hat is not None else self.zero_hat
-        return linear_response(q_hat[0], q_hat[1], iso, g.kx, g.ky, self._khat[0],
+        return self.k.linear_response(q_hat[0], q_hat[1], iso, g.kx, g.ky, self._khat[0],
                                self._khat[1], self._inv_k2, m.alpha - m.B, self._a,
                                self.params.kappa, self.incompressible,
                                self.params.eps * g.n**2)
@@ -270,13 +253,14 @@ class LinearMechanics(Mechanics):
     def response_symbols(self) -> Array:
         """The real symbols ``S[r, c]`` of :meth:`spectral_response` (outputs r: dev e (2
         components), tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat), for
-        :func:`model.fast_linear.linear_split`: the responses to unit spectra; the response is
-        linear and every factor i of a derivative meets another one, so they are real."""
+        :func:`model.compiled.linear_rhs.linear_split`: the responses to unit spectra; the
+        response is linear and every factor i of a derivative meets another one, so they are
+        real."""
         g, m = self.grid, self.moduli
         one, zero = np.ones(g.k2.shape, dtype=complex), self.zero_hat
         cols = []
         for q1h, q2h, iso in ((one, zero, zero), (zero, one, zero), (zero, zero, one)):
-            dev, tr_e, tr_s = linear_response(q1h, q2h, iso, g.kx, g.ky, self._khat[0],
+            dev, tr_e, tr_s = self.k.linear_response(q1h, q2h, iso, g.kx, g.ky, self._khat[0],
                                               self._khat[1], self._inv_k2, m.alpha - m.B,
                                               self._a, self.params.kappa, self.incompressible,
                                               0.0)
@@ -284,34 +268,6 @@ class LinearMechanics(Mechanics):
         S = np.stack(cols, axis=1)
         assert np.all(S.imag == 0.0)
         return np.ascontiguousarray(S.real)
-
-    def spectral_response_reference(self, q_hat: Array, QQ_hat: Array | None
-                                    ) -> tuple[Array, Array, Array]:
-        """numpy reference of :meth:`spectral_response`."""
-        g, m = self.grid, self.moduli
-        amb = m.alpha - m.B
-        t11 = amb * q_hat[0]
-        t12 = amb * q_hat[1]
-        iso = -m.B_prime * QQ_hat if QQ_hat is not None else 0.0
-        # b_i = i k_j tau_ij ; tau = [[t11 + iso, t12], [t12, -t11 + iso]]
-        b = np.stack([1j * (g.kx * (t11 + iso) + g.ky * t12),
-                      1j * (g.kx * t12 + g.ky * (-t11 + iso))])
-        u = self._green(b, self._a)
-        e11 = 1j * g.kx * u[0]
-        e22 = 1j * g.ky * u[1]
-        e12 = 0.5j * (g.ky * u[0] + g.kx * u[1])
-        dev = np.stack([0.5 * (e11 - e22), e12])
-        dev[0, 0, 0] += self.params.eps * g.n**2  # the applied mean strain diag(eps, -eps)
-        tr_e = e11 + e22
-        tr_tau = 2.0 * iso if QQ_hat is not None else 0.0
-        if self.incompressible:
-            kh = self._khat
-            p_hat = (kh[0] ** 2 - kh[1] ** 2) * t11 + 2 * kh[0] * kh[1] * t12 + \
-                (iso if QQ_hat is not None else 0.0) * g.active
-            tr_sigma = -2.0 * p_hat + tr_tau
-        else:
-            tr_sigma = 2.0 * self.params.kappa * tr_e + tr_tau
-        return dev, tr_e, tr_sigma
 
     def spin_multiplier(self, qdot1_hat: Array, qdot2_hat: Array) -> Array:
         """Fourier symbol of the spin: :math:`\\hat\\omega = -\\tfrac12 (\\alpha - B)\\,
@@ -334,11 +290,11 @@ class LinearMechanics(Mechanics):
 
         def operator(omega_hat: Array) -> tuple[Array, Array]:
             """``(I - M) omega_hat`` and the Jaumann rate ``2 omega J q`` (hat) it used."""
-            j = g.forward(jaumann_products(g.inverse(omega_hat), q1, q2))
-            return symbol_combination(omega_hat, m1, m2, j[0], j[1]), j
+            j = g.forward(self.k.jaumann_products(g.inverse(omega_hat), q1, q2))
+            return self.k.symbol_combination(omega_hat, m1, m2, j[0], j[1]), j
 
         m1, m2 = self.spin_symbols
-        b = symbol_combination(self.zero_hat, -m1, -m2, R_hat[0], R_hat[1])
+        b = self.k.symbol_combination(self.zero_hat, -m1, -m2, R_hat[0], R_hat[1])
         # from zero: its residual is b, no operator application; a warm start from the last
         # spin costs one application for its residual and saves fewer iterations (the spin
         # follows the stage-specific part of Qdot): 4534 iterations + 1256 residuals against
@@ -360,7 +316,7 @@ class LinearMechanics(Mechanics):
 
     def accept_spin(self, omega_hat: Array, iterations: int, converged: bool,
                     t: float | None) -> None:
-        """Book a spin solve (here or in :func:`model.fast_linear.linear_split`): count its
+        """Book a spin solve (here or in :func:`model.compiled.linear_rhs.linear_split`): count its
         iterations, fail the run if it did not converge, keep the spin (``omega_hat``, which
         :meth:`corotational` returns)."""
         self.spin_iterations += iterations
@@ -413,32 +369,33 @@ class FiniteMechanics(Mechanics):
         self.u_hat = self.u_hat + dt * self.udot_hat
 
     def _tangent(self, F: Array, q1: Array, q2: Array) -> Array:
-        """The tangent dP/dF by the numba kernel (reference: ``constitutive.tangent``)."""
+        """The tangent dP/dF (the backend's ``tangent_kernel``)."""
         m = self.moduli
-        return tangent_kernel(np.ascontiguousarray(F), np.ascontiguousarray(q1),
+        return self.k.tangent_kernel(np.ascontiguousarray(F), np.ascontiguousarray(q1),
                               np.ascontiguousarray(q2), m.kappa, m.B, m.B_prime, m.alpha)
 
     def deformation(self, u_hat: Array) -> Array:
         g = self.grid
-        return self.Fbar[:, :, None, None] + g.inverse(grad_hat_kernel(u_hat, g.kx, g.ky))
+        return self.Fbar[:, :, None, None] + g.inverse(self.k.grad_hat_kernel(u_hat, g.kx, g.ky))
 
     def _operator(self, K: Array):
         g = self.grid
 
         def A(v_hat: Array) -> Array:
-            dF = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))
-            return neg_div_hat_kernel(g.forward(apply_tangent_kernel(K, dF)), g.kx, g.ky)
+            k = self.k
+            dF = g.inverse(k.grad_hat_kernel(v_hat, g.kx, g.ky))
+            return k.neg_div_hat_kernel(g.forward(k.apply_tangent_kernel(K, dF)), g.kx, g.ky)
 
         return A
 
     def _pcg(self, K: Array, b_hat: Array, rtol: float) -> tuple[Array, int, bool]:
-        """Newton's correction from zero: compiled (:func:`model.fast_finite.pcg`) or the
+        """Newton's correction from zero: compiled (:func:`model.finite_krylov.pcg`) or the
         numpy reference (:func:`model.krylov.pcg` on :meth:`_operator`)."""
         g = self.grid
         x0 = np.zeros_like(b_hat)
         if self.compiled:
             assert g.fft.plans is not None
-            x, it, code, nop = fast_finite.pcg(
+            x, it, code, nop = finite_krylov.pcg(
                 K, b_hat, x0, g.kx, g.ky, self._khat[0], self._khat[1], self._inv_k2, self._a,
                 self._weights, *g.fft.plans, rtol, self.max_cg)
             g.fft.count += 8 * nop
@@ -450,13 +407,13 @@ class FiniteMechanics(Mechanics):
 
     def _udot_gmres(self, K: Array, E: Array, b: Array) -> tuple[Array, int, bool]:
         """The displacement-rate solve, warm-started: compiled
-        (:func:`model.fast_finite.gmres`) or the numpy reference (:func:`model.krylov.gmres`)."""
+        (:func:`model.finite_krylov.gmres`) or the numpy reference (:func:`model.krylov.gmres`)."""
         g = self.grid
         if self.compiled:
             assert g.fft.plans is not None
             if self._workspace is None:
-                self._workspace = fast_finite.workspace(g.n)
-            x, it, ok, nop = fast_finite.gmres(
+                self._workspace = finite_krylov.workspace(g.n)
+            x, it, ok, nop = finite_krylov.gmres(
                 K, E, b, self.udot_hat, g.kx, g.ky, self._khat[0], self._khat[1],
                 self._inv_k2, self._a, self._weights, *g.fft.plans, self.spin_tol,
                 self.max_cg, *self._workspace)
@@ -464,8 +421,10 @@ class FiniteMechanics(Mechanics):
             return x, it, ok
 
         def A(v_hat: Array) -> Array:
-            G = g.inverse(grad_hat_kernel(v_hat, g.kx, g.ky))
-            return neg_div_hat_kernel(g.forward(apply_tangent_spin_kernel(K, G, E)), g.kx, g.ky)
+            k = self.k
+            G = g.inverse(k.grad_hat_kernel(v_hat, g.kx, g.ky))
+            return k.neg_div_hat_kernel(g.forward(k.apply_tangent_spin_kernel(K, G, E)), g.kx,
+                                        g.ky)
 
         x, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
                                      g.inner, rtol=self.spin_tol, maxiter=self.max_cg)
@@ -479,8 +438,8 @@ class FiniteMechanics(Mechanics):
         if not np.all(J > 0):
             self.fft_parts["force_balance"] += self.grid.fft.count - count
             return F, F, F, np.inf
-        m = self.moduli  # P by the numba kernel (reference: constitutive.first_piola)
-        P = first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
+        m = self.moduli
+        P = self.k.first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
         P_hat = self.grid.forward(P)
         self.fft_parts["force_balance"] += self.grid.fft.count - count
         return F, P, P_hat, self.residual(P, P_hat)
@@ -534,24 +493,14 @@ class FiniteMechanics(Mechanics):
         self._solution = (u_hat, q1.copy(), q2.copy(), F, P)
         return self._state(F, P, u_hat, iterations=it, residual=res, K=K)
 
-    @staticmethod
-    def _state(F: Array, P: Array, u_hat: Array, *, iterations: int = 0,
+    def _state(self, F: Array, P: Array, u_hat: Array, *, iterations: int = 0,
                residual: float = float("nan"), K: Array | None = None) -> MechanicalState:
         """The :class:`MechanicalState` of the deformation ``F`` with stress ``P`` (its
-        strain measures by :func:`model.kernels.strain_measures_kernel`)."""
-        Ebar_dev, Jm1, trP = strain_measures_kernel(np.ascontiguousarray(F),
+        strain measures by the backend's ``strain_measures_kernel``)."""
+        Ebar_dev, Jm1, trP = self.k.strain_measures_kernel(np.ascontiguousarray(F),
                                                     np.ascontiguousarray(P))
         return MechanicalState(F=F, P=P, Ebar_dev=Ebar_dev, Jm1=Jm1, trP=trP, u_hat=u_hat,
                                iterations=iterations, residual=residual, extras={"K": K})
-
-    @staticmethod
-    def _state_reference(F: Array, P: Array) -> tuple[Array, Array, Array]:
-        r"""numpy reference of the strain measures of :meth:`_state`: (deviatoric part of
-        :math:`\bar E = \tfrac12 (J^{-1} C - I)`, J - 1, tr P)."""
-        J = T.det(F)
-        C = T.matmul(T.transpose(F), F)
-        Ebar_dev = np.stack([0.25 * (C[0, 0] - C[1, 1]) / J, 0.5 * C[0, 1] / J])
-        return Ebar_dev, J - 1.0, T.trace(P)
 
     def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None
                  ) -> MechanicalState:
@@ -568,7 +517,7 @@ class FiniteMechanics(Mechanics):
         if not np.all(T.det(F) > 0):
             raise SimulationFailure("J<=0", "the integrated displacement has J <= 0", t)
         m = self.moduli
-        P = first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
+        P = self.k.first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
         return self._state(F, P, u_hat)
 
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
@@ -588,12 +537,11 @@ class FiniteMechanics(Mechanics):
             K = self._tangent(mech.F, q1, q2)
             mech.extras["K"] = K
         F = np.ascontiguousarray(mech.F)
-        # dP/dQ : dQ by the numba kernel (reference: constitutive.first_piola_q_increment)
-        E = q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, m.B, m.B_prime, m.alpha)
+        E = self.k.q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, m.B, m.B_prime, m.alpha)
         mech.extras["E"] = E
-        b = div_hat_kernel(g.forward(q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
-                                                        np.ascontiguousarray(R[1]), m.B,
-                                                        m.B_prime, m.alpha)), g.kx, g.ky)
+        dP = self.k.q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
+                                       np.ascontiguousarray(R[1]), m.B, m.B_prime, m.alpha)
+        b = self.k.div_hat_kernel(g.forward(dP), g.kx, g.ky)
 
         count = g.fft.count
         udot, it, ok = self._udot_gmres(K, E, b)
@@ -622,9 +570,9 @@ class FiniteMechanics(Mechanics):
             K = self._tangent(mech.F, q1, q2)
         E = mech.extras.get("E")
         if E is None:
-            E = q_increment_kernel(np.ascontiguousarray(mech.F), q1, q2, -2.0 * q2, 2.0 * q1,
+            E = self.k.q_increment_kernel(np.ascontiguousarray(mech.F), q1, q2, -2.0 * q2, 2.0 * q1,
                                    m.B, m.B_prime, m.alpha)
-        return wp.finite_margin(K, E, m.kappa)
+        return wp.finite_margin(K, E, m.kappa, samples=self.k.finite_margin_kernel)
 
 
 def make_mechanics(params, numerics, grid: SpectralGrid) -> Mechanics:

@@ -64,7 +64,8 @@ class ActiveNematicPDE(PDEBase):
 
     def _build(self, numerics: Numerics) -> None:
         self.numerics = numerics
-        self.spectral = SpectralGrid(numerics.resolution)
+        self.spectral = SpectralGrid(numerics.resolution,
+                                     fft_backend="scipy" if numerics.backend == "numpy" else "auto")
         self.mechanics = make_mechanics(self.params, numerics, self.spectral)
 
     def use_grid_of(self, state: FieldCollection) -> None:

@@ -49,10 +49,10 @@ def _fftw_version() -> str:
     import ctypes
 
     try:
-        from . import fftw_native
+        from .compiled import fftw
     except ImportError:
         return ""
-    lib = getattr(fftw_native, "_LIB", None)
+    lib = getattr(fftw, "_LIB", None)
     if lib is None:
         return ""
     try:

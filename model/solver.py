@@ -50,53 +50,31 @@ retried with h/4; if it still fails at ``h <= 1e-3 dt_max`` the failure is the r
 In linear mechanics the Jaumann spin is computed with the spectral symbol of
 :meth:`model.mechanics.LinearMechanics.spin_multiplier`, reusing the transforms the step needs
 anyway, and the whole right-hand side runs as one compiled function
-(:mod:`model.fast_linear`) where native FFTW is available (its numpy reference otherwise); the
-stage algebra is one compiled pass per stage (:func:`model.kernels.etd_combination`); finite
-mechanics uses the generic :meth:`ActiveNematicPDE.rates` path with the displacement-rate solve
-(its Krylov solves compiled, :mod:`model.fast_finite`), and warm-starts Newton from the last
-stage's displacement plus its rate times the time offset.
+(:mod:`model.compiled.linear_rhs`) where native FFTW is available and ``Numerics.backend`` is
+"compiled" (its numpy reference otherwise: :mod:`model.split`); the stage algebra is one pass per
+stage (the backend's ``etd_combination``); finite mechanics uses the generic
+:meth:`ActiveNematicPDE.rates` path with the displacement-rate solve (its Krylov solves compiled,
+:mod:`model.compiled.finite_krylov`), with the displacement integrated with the state or Newton
+warm-started from the last stage's displacement plus its rate times the time offset.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable
 
 import numpy as np
 from pde.solvers.base import SolverBase
 
-from . import kernels as kern
+from .backend import kernels
 from .errors import IllPosed, SimulationFailure
 from .mechanics import MechanicalState, Mechanics
 from .pde import ActiveNematicPDE
+from .reference_kernels import phi_functions
 from .split import make_split
 
 log = logging.getLogger(__name__)
 Array = np.ndarray
-
-
-def phi_functions(z: Array, kmax: int = 2) -> tuple[Array, ...]:
-    """:math:`e^z, \\varphi_1(z), \\ldots, \\varphi_{k_{max}}(z)` (real ``z``),
-    :math:`\\varphi_k(z) = \\sum_j z^j / (j + k)!`: the Taylor series for ``|z| < 1``, the
-    recursion :math:`\\varphi_{k+1} = (\\varphi_k - 1/k!)/z` otherwise (the branches of
-    :func:`model.kernels._phi0123`)."""
-    z = np.asarray(z, dtype=float)
-    small = np.abs(z) < 1.0
-    zt = np.where(small, z, 0.0)
-    zr = np.where(small, 1.0, z)
-    out = [np.exp(z)]
-    prev = np.expm1(zr)  # phi_0 - 1 on the recursion branch
-    for k in range(1, kmax + 1):
-        rec = prev / zr if k == 1 else (prev - 1.0 / math.factorial(k - 1)) / zr
-        taylor = np.zeros_like(z)
-        term = np.ones_like(z)
-        for j in range(20):
-            taylor += term / math.prod(range(j + 1, j + k + 1))
-            term = term * zt / (j + 1)
-        out.append(np.where(small, taylor, rec))
-        prev = rec
-    return tuple(out)
 
 
 class ETDSolver(SolverBase):
@@ -123,6 +101,8 @@ class ETDSolver(SolverBase):
         self.error_norm = num.error_norm
         p, g = pde.params, pde.spectral
         self.Lq = -(p.A0 + p.K * g.k2) / p.gamma  # the q1, q2 symbol (Fourier space)
+        #: the pointwise kernels of the backend (model.backend)
+        self.k = kernels(num.backend)
         self._known: list[tuple[Array, Array]] = []
         self._phi_cache: dict[tuple[float, int], tuple[Array, ...]] = {}
         self.on_step: Callable[[float, float], None] | None = None
@@ -246,7 +226,7 @@ class ETDSolver(SolverBase):
                       float(np.sqrt(np.mean(err_A**2))))
         self._pending_disp = new_disp
         if err_disp is not None:
-            strain = g.inverse(kern.grad_hat_kernel(err_disp, g.kx, g.ky))
+            strain = g.inverse(self.k.grad_hat_kernel(err_disp, g.kx, g.ky))
             err = max(err, float(np.abs(strain).max()) if self.error_norm == "max"
                       else float(np.sqrt(np.mean(strain**2, axis=(2, 3))).max()))
         return new, err
@@ -364,7 +344,7 @@ class ETDRK2Solver(ETDSolver):
         self._checkpoint()
         E, phi1, phi2 = self._phis(h)
         p = self.pde.params
-        LA, phi1A, phi2A = kern.activity_exponential(A, h, p.zeta, p.s, p.tau)
+        LA, phi1A, phi2A = self.k.activity_exponential(A, h, p.zeta, p.s, p.tau)
         aq_hat = E * q_hat + h * phi1 * Nq0
         aA = A + h * phi1A * Adot0  # = e^{L h} A + h phi1 (Adot - L A)
         a = np.concatenate([g.inverse(aq_hat), aA[None]])
@@ -404,11 +384,11 @@ class ETDRK4Solver(ETDSolver):
         q_hat = self._spectrum(u[:2])
         A = u[2]
         E, E2, wq = self._krogstad_weights(h)
-        LA, W = kern.activity_krogstad(A, h, p.zeta, p.s, p.tau)  # pointwise L_A: no cache
+        LA, W = self.k.activity_krogstad(A, h, p.zeta, p.s, p.tau)  # pointwise L_A: no cache
         EA, EA2 = W[0], W[1]
         wA = {"a": (W[2],), "b": (W[3], W[4]), "c": (W[5], W[6]),
               "new": (W[7], W[8], W[8], W[9])}
-        comb = kern.etd_combination
+        comb = self.k.etd_combination
 
         def combo_q(Eq: Array, x: Array, w: tuple[Array, ...], N: tuple[Array, ...]) -> Array:
             return comb(Eq, x, h, w, N)

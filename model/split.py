@@ -10,7 +10,7 @@ state it used (or None):
   integrates the displacement, the state at the given displacement), transformed.
 * :class:`SpectralSplit`, for :class:`model.mechanics.LinearMechanics`: every linear map of q
   stays in Fourier space (the small-strain response as Fourier symbols); one compiled function,
-  :func:`model.fast_linear.linear_split`, where the mechanics is compiled, and its numpy
+  :func:`model.compiled.linear_rhs.linear_split`, where the mechanics is compiled, and its numpy
   reference otherwise (tested to agree with each other and with ``evolution_rate``).
 
 :func:`make_split` chooses by the mechanics' type (``functools.singledispatch``).
@@ -22,8 +22,7 @@ import functools
 
 import numpy as np
 
-from . import fast_linear
-from . import kernels as kern
+from .compiled import linear_rhs
 from .errors import SimulationFailure
 from .mechanics import LinearMechanics, MechanicalState, Mechanics
 from .pde import ActiveNematicPDE
@@ -58,12 +57,12 @@ class SpectralSplit:
         g = pde.spectral
         self._zeros = np.zeros((g.n, g.n))
         self._weights = g.weights / g.n**2  # Parseval weights of the half spectrum
-        self._workspace = fast_linear.workspace(g.n) if mech.compiled else ()
+        self._workspace = linear_rhs.workspace(g.n) if mech.compiled else ()
         self._symbols = mech.response_symbols() if mech.compiled else None
 
     def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
                  ) -> tuple[Array, Array, MechanicalState | None]:
-        """``(N_q hat, Adot, None)``; by :func:`model.fast_linear.linear_split` where the
+        """``(N_q hat, Adot, None)``; by :func:`model.compiled.linear_rhs.linear_split` where the
         mechanics is compiled, else by :meth:`reference`."""
         if disp is not None:
             raise ValueError("a given displacement needs finite mechanics")
@@ -73,7 +72,7 @@ class SpectralSplit:
         p, g = eq.params, eq.spectral
         assert g.fft.plans is not None
         m1, m2 = mech.spin_symbols
-        Nq, Adot, omega_hat, its, ok, nfft = fast_linear.linear_split(
+        Nq, Adot, omega_hat, its, ok, nfft = linear_rhs.linear_split(
             u[0], u[1], u[2], np.ascontiguousarray(q_hat), mech.zero_hat, self.Lq, m1, m2,
             self._symbols, self._weights, *g.fft.plans, p.eps * g.n**2, p.B, p.B_prime, p.C,
             p.gamma, p.zeta, p.chi, p.s, p.tau, mech.spin_tol, mech.spin_maxiter,
@@ -83,7 +82,7 @@ class SpectralSplit:
         return Nq, Adot, None
 
     def reference(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
-        """numpy reference of :func:`model.fast_linear.linear_split`."""
+        """numpy reference of :func:`model.compiled.linear_rhs.linear_split`."""
         eq, mech = self.pde, self.mech
         p, g = eq.params, eq.spectral
         q1, q2, A = u
@@ -93,14 +92,14 @@ class SpectralSplit:
             tr_e, tr_sigma = g.inverse(np.stack([tr_e_hat, tr_sigma_hat]))
         else:
             tr_e, tr_sigma = self._zeros, g.inverse(tr_sigma_hat)
-        H_hat = g.forward(kern.bulk_terms(q1, q2, A, tr_e, p.C, 2.0 * p.B_prime)) + p.B * dev_hat
+        H_hat = g.forward(mech.k.bulk_terms(q1, q2, A, tr_e, p.C, 2.0 * p.B_prime)) + p.B * dev_hat
         Lq_hat = self.Lq * q_hat
         R_hat = H_hat
         R_hat /= p.gamma
         R_hat += Lq_hat  # H / gamma, full
         qdot_hat = mech.corotational_hat(q1, q2, R_hat, t)  # R + 2 omega J q
         qdot_hat -= Lq_hat
-        Adot = kern.activity_rate(A, tr_sigma, p.zeta, p.chi, p.s, p.tau)
+        Adot = mech.k.activity_rate(A, tr_sigma, p.zeta, p.chi, p.s, p.tau)
         return qdot_hat, Adot
 
 

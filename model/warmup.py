@@ -20,8 +20,11 @@ from typing import Any
 from .parameters import Numerics, Parameters
 
 #: Modules holding the compiled kernels.
-KERNEL_MODULES = ("model.kernels", "model.krylov", "model.fast_linear", "model.fast_finite",
-                  "model.fftw_native")
+KERNEL_MODULES = ("model.compiled.arith", "model.compiled.constitutive",
+                  "model.compiled.spectral", "model.compiled.etd", "model.compiled.rates",
+                  "model.compiled.wellposedness", "model.compiled.krylov",
+                  "model.compiled.linear_rhs", "model.compiled.finite_krylov",
+                  "model.compiled.fftw")
 WARM_RESOLUTION = 16
 WARM_T_FINAL = 0.5
 

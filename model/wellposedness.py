@@ -36,14 +36,15 @@ uniform Q = S (2 n n - I) at F = I (B' = 0) the symbol gives in closed form
 Small strain has no geometric stiffness and its symbol depends on Q alone, so its margin is
 exactly :math:`1 - (\alpha - B) \max S` (compressible; with the incompressible projection the
 same factor multiplies the shear symbol). Finite strain uses the tangent and E of the current
-deformation, point by point (:func:`finite_margin`, compiled; :func:`finite_symbol` is its
-numpy reference).
+deformation, point by point (:func:`finite_margin`; its sampling compiled in
+:mod:`model.compiled.wellposedness`, with :func:`finite_margin_samples` the numpy twin).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
-from numba import njit
 
 Array = np.ndarray
 
@@ -68,85 +69,29 @@ def finite_symbol_det(K: Array, E: Array, phi: float) -> Array:
     return M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
 
 
-@njit(cache=True)
-def _finite_margin_kernel(K, E, cos_t, sin_t, scale):  # pragma: no cover - compiled
-    r"""(min over points and sampled directions of det M / scale, flat index, angle index).
-
-    A point is sampled only if it can beat the minimum so far: each entry of M is
-    :math:`a + b \cos 2\phi + c \sin 2\phi`, so :math:`\det M = d_0 + d_2 \cdot
-    (\cos 2\phi, \sin 2\phi) + d_4 \cdot (\cos 4\phi, \sin 4\phi)` is bounded below by
-    :math:`d_0 - |d_2| - |d_4|`; a point whose bound is not below the minimum cannot lower it
-    (the comparison is strict), so the result is that of sampling every point."""
-    nx, ny = E.shape[2], E.shape[3]
-    na = cos_t.shape[0]
-    best = np.inf
-    best_i = 0
-    best_a = 0
-    ent = np.empty((2, 2, 3))  # M_ik = ent[i, k, 0] c^2 + ent[i, k, 1] c s + ent[i, k, 2] s^2
-    tri = np.empty((2, 2, 3))  # M_ik = tri[i, k, 0] + tri[i, k, 1] cos 2phi + tri[..., 2] sin
-    for x in range(nx):
-        for y in range(ny):
-            for i in range(2):
-                for k in range(2):
-                    ent[i, k, 0] = K[i, 0, k, 0, x, y]
-                    ent[i, k, 1] = K[i, 0, k, 1, x, y] + K[i, 1, k, 0, x, y]
-                    ent[i, k, 2] = K[i, 1, k, 1, x, y]
-                e0 = 0.5 * E[i, 0, x, y]
-                e1 = 0.5 * E[i, 1, x, y]
-                # (E k)_i t_k / 2 with t = (-s, c)
-                ent[i, 0, 1] -= e0
-                ent[i, 0, 2] -= e1
-                ent[i, 1, 0] += e0
-                ent[i, 1, 1] += e1
-            for i in range(2):
-                for k in range(2):
-                    tri[i, k, 0] = 0.5 * (ent[i, k, 0] + ent[i, k, 2])
-                    tri[i, k, 1] = 0.5 * (ent[i, k, 0] - ent[i, k, 2])
-                    tri[i, k, 2] = 0.5 * ent[i, k, 1]
-            d0 = 0.0
-            d2c = 0.0
-            d2s = 0.0
-            d4c = 0.0
-            d4s = 0.0
-            size = 0.0
-            for sign, (i1, k1, i2, k2) in ((1.0, (0, 0, 1, 1)), (-1.0, (0, 1, 1, 0))):
-                a1, b1, c1 = tri[i1, k1, 0], tri[i1, k1, 1], tri[i1, k1, 2]
-                a2, b2, c2 = tri[i2, k2, 0], tri[i2, k2, 1], tri[i2, k2, 2]
-                d0 += sign * (a1 * a2 + 0.5 * (b1 * b2 + c1 * c2))
-                d2c += sign * (a1 * b2 + b1 * a2)
-                d2s += sign * (a1 * c2 + c1 * a2)
-                d4c += sign * 0.5 * (b1 * b2 - c1 * c2)
-                d4s += sign * 0.5 * (b1 * c2 + c1 * b2)
-                size += (abs(a1) + abs(b1) + abs(c1)) * (abs(a2) + abs(b2) + abs(c2))
-            bound = d0 - np.hypot(d2c, d2s) - np.hypot(d4c, d4s) - 1e-12 * size
-            if bound / scale >= best:
-                continue
-            for a in range(na):
-                c = cos_t[a]
-                s = sin_t[a]
-                cc = c * c
-                cs = c * s
-                ss = s * s
-                m00 = ent[0, 0, 0] * cc + ent[0, 0, 1] * cs + ent[0, 0, 2] * ss
-                m01 = ent[0, 1, 0] * cc + ent[0, 1, 1] * cs + ent[0, 1, 2] * ss
-                m10 = ent[1, 0, 0] * cc + ent[1, 0, 1] * cs + ent[1, 0, 2] * ss
-                m11 = ent[1, 1, 0] * cc + ent[1, 1, 1] * cs + ent[1, 1, 2] * ss
-                d = (m00 * m11 - m01 * m10) / scale
-                if d < best:
-                    best = d
-                    best_i = x * ny + y
-                    best_a = a
-    return best, best_i, best_a
+def finite_margin_samples(K: Array, E: Array, cos_t: Array, sin_t: Array, scale: float
+                          ) -> tuple[float, int, int]:
+    """(min over points and the sampled directions of det M / scale, flat index, angle
+    index), the first in (x, y, angle) order among equal minima: every point sampled (numpy
+    twin of :func:`model.compiled.wellposedness.finite_margin_kernel`, which skips the points
+    that cannot beat the minimum)."""
+    angles = np.arctan2(sin_t, cos_t)
+    D = np.stack([finite_symbol_det(K, E, float(p)) for p in angles], axis=-1) / scale
+    flat = int(np.argmin(D))  # (x, y, angle) order
+    point, ia = divmod(flat, len(angles))
+    return float(D.flat[flat]), point, ia
 
 
-def finite_margin(K: Array, E: Array, kappa: float, n_angles: int = N_ANGLES
+def finite_margin(K: Array, E: Array, kappa: float, n_angles: int = N_ANGLES,
+                  samples: Callable[..., tuple[float, int, int]] = finite_margin_samples
                   ) -> tuple[float, int, float]:
     """The finite-strain margin :math:`\\min_x \\min_\\phi \\det M / (\\kappa + 1)` (module
-    docstring) with the flat grid index and the direction angle of its minimum. The sampled
-    minimum is refined at its point by a parabola in phi through three samples."""
+    docstring) with the flat grid index and the direction angle of its minimum, sampled by
+    ``samples`` (:func:`finite_margin_samples` or its compiled twin). The sampled minimum is
+    refined at its point by a parabola in phi through three samples."""
     angles = np.arange(n_angles) * (np.pi / n_angles)
-    m, idx, ia = _finite_margin_kernel(np.ascontiguousarray(K), np.ascontiguousarray(E),
-                                       np.cos(angles), np.sin(angles), kappa + 1.0)
+    m, idx, ia = samples(np.ascontiguousarray(K), np.ascontiguousarray(E), np.cos(angles),
+                         np.sin(angles), kappa + 1.0)
     _nx, ny = E.shape[2], E.shape[3]
     x, y = divmod(int(idx), ny)
     dphi = np.pi / n_angles

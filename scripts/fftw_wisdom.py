@@ -6,7 +6,7 @@
 Plans every N x N real transform pair with FFTW_PATIENT (FFTW times candidate algorithms) and
 writes FFTW's wisdom, atomically. Every later process imports it and plans from it without
 timing anything, so all processes run the same algorithm and results stay bitwise
-reproducible (model/fftw_native.py). Run it on a quiet machine: the timings choose the plans.
+reproducible (model/compiled/fftw.py). Run it on a quiet machine: the timings choose the plans.
 Sizes not in the file get FFTW_ESTIMATE plans (deterministic as well, slower at 128^2).
 """
 
@@ -17,7 +17,7 @@ import sys
 import tempfile
 import time
 
-from model import fftw_native
+from model.compiled import fftw as fftw_native
 
 SIZES = [16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512]
 

@@ -83,8 +83,22 @@ def test_rotation_invariance_of_energy(rng):
     np.testing.assert_allclose(cl.energy_density(Fr, Qr, M_PASSIVE), W, atol=1e-13)
 
 
+def test_every_compiled_kernel_has_a_numpy_twin_with_its_signature():
+    """model.backend swaps the two kernel modules: the same names, the same parameters."""
+    import inspect
+
+    from model import reference_kernels as twin
+    from model.compiled import kernels as kern
+
+    assert sorted(kern.__all__) == sorted(twin.__all__)
+    for name in kern.__all__:
+        compiled = getattr(kern, name)
+        params = inspect.signature(getattr(compiled, "py_func", compiled)).parameters
+        assert list(params) == list(inspect.signature(getattr(twin, name)).parameters), name
+
+
 def test_numba_tangent_kernel_matches_numpy_reference(rng):
-    from model.kernels import tangent_kernel
+    from model.compiled.kernels import tangent_kernel
 
     F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 8, 8))
     q = 0.4 * rng.standard_normal((2, 8, 8))
@@ -94,7 +108,7 @@ def test_numba_tangent_kernel_matches_numpy_reference(rng):
 
 
 def test_numba_apply_tangent_matches_numpy_reference(rng):
-    from model.kernels import apply_tangent_kernel
+    from model.compiled.kernels import apply_tangent_kernel
 
     K = rng.standard_normal((2, 2, 2, 2, 6, 6))
     dF = rng.standard_normal((2, 2, 6, 6))
@@ -115,14 +129,16 @@ def test_numba_linear_response_matches_numpy_reference(rng, incompressible, B_pr
     q = 0.2 * rng.standard_normal((2, 16, 16))
     q_hat = g.forward(q)
     QQ_hat = g.forward(2 * (q[0] ** 2 + q[1] ** 2)) if B_prime else None
+    numpy_twin = LinearMechanics(Parameters(B_prime=B_prime, eps=0.03, alpha=1.3), g,
+                                 incompressible=incompressible, backend="numpy")
     for fast, ref in zip(mech.spectral_response(q_hat, QQ_hat),
-                         mech.spectral_response_reference(q_hat, QQ_hat), strict=True):
+                         numpy_twin.spectral_response(q_hat, QQ_hat), strict=True):
         np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
 
 
 def test_numba_pointwise_stepper_kernels_match_numpy(rng):
-    from model import kernels as kern
-    from model.solver import phi_functions
+    from model.compiled import kernels as kern
+    from model.reference_kernels import phi_functions
 
     q1, q2, A, tr = 0.3 * rng.standard_normal((4, 8, 8))
     A[0, 0] = 0.0  # the small-|z| branch
@@ -146,7 +162,7 @@ def test_numba_pointwise_stepper_kernels_match_numpy(rng):
 
 
 def test_numba_finite_strain_kernels_match_numpy_references(rng):
-    from model import kernels as kern
+    from model.compiled import kernels as kern
 
     M = cl.Moduli(kappa=10.0, B=0.5, B_prime=0.2, alpha=1.5)
     F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 6, 6))
@@ -168,10 +184,9 @@ def test_numba_finite_strain_kernels_match_numpy_references(rng):
 
 
 def test_numba_spectral_kernels_match_numpy_references(rng):
-    from model import kernels as kern
+    from model import reference_kernels as twin
+    from model.compiled import kernels as kern
     from model.fourier import SpectralGrid
-    from model.mechanics import FiniteMechanics
-    from model.parameters import Parameters
 
     g = SpectralGrid(16)
     v = g.forward(rng.standard_normal((2, 16, 16)))
@@ -179,9 +194,15 @@ def test_numba_spectral_kernels_match_numpy_references(rng):
     np.testing.assert_allclose(kern.grad_hat_kernel(v, g.kx, g.ky), g.grad_hat(v), rtol=1e-15)
     np.testing.assert_allclose(kern.neg_div_hat_kernel(Th, g.kx, g.ky), -g.div_hat(Th),
                                rtol=1e-14, atol=1e-12)
-    mech = FiniteMechanics(Parameters(), g)
-    np.testing.assert_allclose(mech._green(v, 0.7), mech._green_reference(v, 0.7),
+    kh, inv_k2 = g.khat, np.where(g.active, 1.0 / np.where(g.active, g.kd2, 1.0), 0.0)
+    np.testing.assert_allclose(kern.green_kernel(v, kh[0], kh[1], inv_k2, 0.7),
+                               twin.green_kernel(v, kh[0], kh[1], inv_k2, 0.7),
                                rtol=1e-14, atol=1e-16)
+    for name in ("grad_hat_kernel", "neg_div_hat_kernel", "div_hat_kernel"):
+        arg = v if name == "grad_hat_kernel" else Th
+        np.testing.assert_allclose(getattr(twin, name)(arg, g.kx, g.ky),
+                                   getattr(kern, name)(arg, g.kx, g.ky), rtol=1e-14,
+                                   atol=1e-12)
 
 
 def test_phi_functions_match_their_integral_definition():
@@ -191,8 +212,8 @@ def test_phi_functions_match_their_integral_definition():
 
     from scipy.integrate import quad
 
-    from model import kernels as kern
-    from model.solver import phi_functions
+    from model.compiled import etd
+    from model.reference_kernels import phi_functions
 
     z = np.array([-60.0, -7.3, -1.0001, -0.9999, -0.3, -1e-9, 0.0, 0.4])
     numpy_phis = phi_functions(z, 3)
@@ -202,12 +223,14 @@ def test_phi_functions_match_their_integral_definition():
                                         / math.factorial(k - 1)),
                  0, 1, epsabs=0, epsrel=1e-13, limit=200)[0] for k in (1, 2, 3)]
         np.testing.assert_allclose([p[i] for p in numpy_phis], exact, rtol=1e-11)
-        np.testing.assert_allclose(kern._phi0123(zi), exact, rtol=1e-11)
+        np.testing.assert_allclose(etd._phi0123(zi), exact, rtol=1e-11)
 
 
 def test_etdrk4_activity_weights_match_numpy(rng):
-    from model import kernels as kern
-    from model.solver import ETDRK4Solver, phi_functions
+    from model import reference_kernels as twin
+    from model.compiled import kernels as kern
+    from model.reference_kernels import phi_functions
+    from model.solver import ETDRK4Solver
 
     A = 0.5 * rng.standard_normal((8, 8))
     A[0, 0] = 0.0
@@ -221,16 +244,19 @@ def test_etdrk4_activity_weights_match_numpy(rng):
     w = ETDRK4Solver._weights_from(f1, f2, f3, g1, g2)
     ref = [E, E2, *w["a"], *w["b"], *w["c"], w["new"][0], w["new"][1], w["new"][3]]
     np.testing.assert_allclose(W, np.stack(ref), rtol=1e-12, atol=1e-15)
+    L2, W2 = twin.activity_krogstad(A, h, zeta, s, tau)
+    np.testing.assert_allclose(W2, W, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(L2, L, rtol=1e-15)
 
 
 def test_numba_strain_measures_and_divergence_match_numpy_references(rng):
+    from model.compiled.kernels import div_hat_kernel, strain_measures_kernel
     from model.fourier import SpectralGrid
-    from model.kernels import div_hat_kernel, strain_measures_kernel
-    from model.mechanics import FiniteMechanics
+    from model.reference_kernels import strain_measures_kernel as strain_measures_twin
 
     F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 8, 8))
     P = rng.standard_normal((2, 2, 8, 8))
-    for fast, ref in zip(strain_measures_kernel(F, P), FiniteMechanics._state_reference(F, P),
+    for fast, ref in zip(strain_measures_kernel(F, P), strain_measures_twin(F, P),
                          strict=True):
         np.testing.assert_allclose(fast, ref, rtol=1e-13, atol=1e-14)
     g = SpectralGrid(8)

@@ -3,6 +3,10 @@ passive free-energy decay, symmetry, determinism."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from pde import FieldCollection
@@ -29,8 +33,9 @@ def _final(ds):
     ("finite", False, False, 0.1)])
 def test_fast_split_rate_equals_numpy_reference(mechanics, incompressible, compiled, B_prime):
     """ETDRK2's L u + N(u) is the PDE's readable ``evolution_rate`` (different code paths):
-    both the compiled paths (native FFTW: the whole linear right-hand side, model.fast_linear;
-    the finite-strain Krylov solves, model.fast_finite) and their numpy references."""
+    both the compiled paths (native FFTW: the whole linear right-hand side,
+    model.compiled.linear_rhs; the finite-strain Krylov solves, model.compiled.finite_krylov)
+    and their numpy references."""
     if compiled and not HAVE_FFTW:
         pytest.skip("native FFTW not available")
     linear = mechanics == "linear"
@@ -64,6 +69,25 @@ def test_numpy_backend_runs_the_same_trajectory(mechanics, scheme):
     assert ours.attrs["status"] == ref.attrs["status"] == "ok"
     np.testing.assert_array_equal(ours["steps"].values, ref["steps"].values)
     np.testing.assert_allclose(_final(ours), _final(ref), rtol=0, atol=1e-11)
+
+
+def test_numpy_backend_runs_no_compiled_code():
+    """``backend = "numpy"`` is the readable path all through: a fresh process running both
+    mechanics with it calls no numba kernel (none compiled, none loaded from the cache)."""
+    code = (
+        "import json\n"
+        "from model.parameters import Numerics, Parameters\n"
+        "from model.simulate import run\n"
+        "from model.warmup import compile_counts\n"
+        "p = Parameters.from_dict({'noise_modes': 6, 'alpha_minus_B': 1.0, 'eps': 0.02})\n"
+        "for mech in ('linear', 'finite'):\n"
+        "    ds = run(p, Numerics(resolution=16, t_final=1.0, save_every=0.5, mechanics=mech,\n"
+        "                         backend='numpy'), 0)\n"
+        "    assert ds.attrs['status'] == 'ok'\n"
+        "print(json.dumps(compile_counts()))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600, check=True).stdout
+    assert json.loads(out.strip().splitlines()[-1]) == {"compiled": 0, "loaded": 0}
 
 
 @pytest.mark.parametrize(("solver", "dt", "atol"), [

@@ -1,4 +1,4 @@
-"""Transforms: the native FFTW path (model.fftw_native) against scipy.fft, on aligned,
+"""Transforms: the native FFTW path (model.compiled.fftw) against scipy.fft, on aligned,
 misaligned and multi-field arrays, and the compiled-kernel symbols against their reference."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.fft
 
-from model import fftw_native
+from model.compiled import fftw as fftw_native
 from model.fourier import FFT, SpectralGrid
 
 pytestmark = pytest.mark.skipif(not fftw_native.AVAILABLE, reason="native FFTW not available")
@@ -95,7 +95,7 @@ def _run(code: str, env: dict[str, str]) -> str:
 
 _TRANSFORM = """
 import hashlib, numpy as np
-from model import fftw_native as fx
+from model.compiled import fftw as fx
 n = {n}
 f, i = fx.plans(n)
 a = np.random.default_rng(1).standard_normal((n, n))
@@ -110,7 +110,7 @@ def test_shipped_wisdom_plans_are_the_same_in_every_process(tmp_path):
     it without timing: their transforms are bitwise identical; a size the wisdom does not hold
     gets FFTW_ESTIMATE's plan (also deterministic)."""
     wisdom = tmp_path / "wisdom.txt"
-    _run(f"from model import fftw_native as fx; open({str(wisdom)!r}, 'w').write("
+    _run(f"from model.compiled import fftw as fx; open({str(wisdom)!r}, 'w').write("
          "fx.patient_wisdom([16]))", {"NEMATIC_FFTW_WISDOM": ""})
     env = {"NEMATIC_FFTW_WISDOM": str(wisdom)}
     one, two = (_run(_TRANSFORM.format(n=16), env) for _ in range(2))
@@ -123,7 +123,7 @@ def test_shipped_wisdom_plans_are_the_same_in_every_process(tmp_path):
 
 def test_the_shipped_wisdom_holds_the_campaign_sizes():
     """The wisdom file in the package covers the resolutions the campaigns use (when this FFTW
-    build accepts it: elsewhere plans fall back to FFTW_ESTIMATE, see model.fftw_native)."""
+    build accepts it: elsewhere plans fall back to FFTW_ESTIMATE, see model.compiled.fftw)."""
     assert fftw_native.WISDOM_FILE is not None
     text = fftw_native.WISDOM_FILE.read_text()
     assert text.startswith("(fftw-3")

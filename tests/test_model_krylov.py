@@ -1,4 +1,4 @@
-"""The compiled Krylov pieces shared by the fast solvers (model.krylov): the weighted inner
+"""The compiled Krylov pieces shared by the fast solvers (model.compiled.krylov): the weighted inner
 product against its numpy definition, the fused update + inner product and the fused
 Gram-Schmidt step against their plain, unfused sequence (bitwise), the vectorised sums'
 independence of alignment, and the Arnoldi orthogonality they produce."""
@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from model import krylov
+from model.compiled import krylov as ck
 
 
 def _spectra(rng, shape):
@@ -20,10 +21,10 @@ def test_weighted_inner_matches_its_definition(shape, rng):
     w = rng.random(shape[-2:])
     a, b = _spectra(rng, shape), _spectra(rng, shape)
     expected = float(np.sum(np.broadcast_to(w, shape) * (np.conj(a) * b).real))
-    got = krylov.weighted_inner(a, b, w)
+    got = ck.weighted_inner(a, b, w)
     assert got == pytest.approx(expected, rel=1e-13, abs=1e-13)
-    assert krylov.weighted_inner(a, b, w) == got  # deterministic
-    assert krylov.weighted_inner(b, a, w) == got  # symmetric (real part)
+    assert ck.weighted_inner(a, b, w) == got  # deterministic
+    assert ck.weighted_inner(b, a, w) == got  # symmetric (real part)
 
 
 @pytest.mark.parametrize("shape", [(16, 9), (2, 30, 16)])
@@ -31,17 +32,17 @@ def test_axpy_inner_is_bitwise_the_two_steps(shape, rng):
     w = rng.random(shape[-2:])
     y, x, a = (_spectra(rng, shape) for _ in range(3))
     y_plain = y.copy()
-    krylov.axpy(y_plain, -0.37, x)
-    expected = krylov.weighted_inner(a, y_plain, w)
-    got = krylov.axpy_inner(y, -0.37, x, a, w)
+    ck.axpy(y_plain, -0.37, x)
+    expected = ck.weighted_inner(a, y_plain, w)
+    got = ck.axpy_inner(y, -0.37, x, a, w)
     assert np.array_equal(y, y_plain)
     assert got == expected
     # with a = y itself: the squared norm of the updated vector
     y2 = y_plain.copy()
-    krylov.axpy(y2, 0.5, x)
-    expected2 = krylov.weighted_inner(y2, y2, w)
+    ck.axpy(y2, 0.5, x)
+    expected2 = ck.weighted_inner(y2, y2, w)
     y3 = y_plain.copy()
-    assert krylov.axpy_inner(y3, 0.5, x, y3, w) == expected2
+    assert ck.axpy_inner(y3, 0.5, x, y3, w) == expected2
     assert np.array_equal(y3, y2)
     assert expected2 > 0
 
@@ -52,17 +53,17 @@ def test_the_vectorised_sums_do_not_depend_on_alignment(rng):
     shape = (2, 64, 33)
     w = rng.random(shape[-2:])
     a, b = _spectra(rng, shape), _spectra(rng, shape)
-    ref = krylov.weighted_inner(a, b, w)
+    ref = ck.weighted_inner(a, b, w)
     a_copy = a.copy()
-    ref_norm = krylov.axpy_inner(a_copy, 0.3, b, a_copy, w)
+    ref_norm = ck.axpy_inner(a_copy, 0.3, b, a_copy, w)
     n = a.size
     for offset in range(8):  # complex128 views starting 0, 16, ..., 112 bytes into a buffer
         buf = np.empty(2 * n + 16, dtype=complex)
         a2 = buf[offset:offset + n].reshape(shape)
         b2 = buf[n + 8 + offset:n + 8 + offset + n].reshape(shape)
         a2[...], b2[...] = a, b
-        assert krylov.weighted_inner(a2, b2, w) == ref
-        assert krylov.axpy_inner(a2, 0.3, b2, a2, w) == ref_norm
+        assert ck.weighted_inner(a2, b2, w) == ref
+        assert ck.axpy_inner(a2, 0.3, b2, a2, w) == ref_norm
 
 
 @pytest.mark.parametrize("shape", [(16, 9), (2, 30, 16)])
@@ -74,24 +75,24 @@ def test_mgs_column_is_modified_gram_schmidt(shape, rng):
         v = _spectra(rng, shape)
         if i:
             H = np.zeros((k + 2, k + 1))
-            krylov.mgs_column(V, v, H, i - 1, w)
-        krylov.scaled(V[i], v, np.sqrt(krylov.weighted_inner(v, v, w)))
-    gram = np.array([[krylov.weighted_inner(V[i], V[j], w) for j in range(k + 1)]
+            ck.mgs_column(V, v, H, i - 1, w)
+        ck.scaled(V[i], v, np.sqrt(ck.weighted_inner(v, v, w)))
+    gram = np.array([[ck.weighted_inner(V[i], V[j], w) for j in range(k + 1)]
                      for i in range(k + 1)])
     np.testing.assert_allclose(gram, np.eye(k + 1), atol=1e-12)
     wv = _spectra(rng, shape)
     plain, H_plain = wv.copy(), np.zeros((k + 2, k + 1))
     for i in range(k + 1):  # the textbook loop
-        H_plain[i, k] = krylov.weighted_inner(V[i], plain, w)
+        H_plain[i, k] = ck.weighted_inner(V[i], plain, w)
         plain -= H_plain[i, k] * V[i]
     H = np.zeros((k + 2, k + 1))
-    norm = krylov.mgs_column(V, wv, H, k, w)
+    norm = ck.mgs_column(V, wv, H, k, w)
     np.testing.assert_array_equal(H, H_plain)
     np.testing.assert_array_equal(wv, plain)
-    assert norm == np.sqrt(krylov.weighted_inner(plain, plain, w))
+    assert norm == np.sqrt(ck.weighted_inner(plain, plain, w))
     # the remainder is orthogonal to the basis
     for i in range(k + 1):
-        assert abs(krylov.weighted_inner(V[i], wv, w)) < 1e-12 * norm
+        assert abs(ck.weighted_inner(V[i], wv, w)) < 1e-12 * norm
 
 
 def test_gmres_from_zero_needs_no_operator_application_for_its_residual(rng):
@@ -127,7 +128,8 @@ def test_gmres_from_zero_needs_no_operator_application_for_its_residual(rng):
 
 
 def test_compiled_spin_gmres_from_zero_meets_its_tolerance(rng):
-    from model import fast_linear, fftw_native
+    from model.compiled import fftw as fftw_native
+    from model.compiled import linear_rhs as fast_linear
     from model.fourier import SpectralGrid
     from model.mechanics import LinearMechanics
     from model.parameters import Parameters
@@ -153,8 +155,8 @@ def test_compiled_spin_gmres_from_zero_meets_its_tolerance(rng):
         x, q1, q2, m1, m2, *g.fft.plans, np.empty((n, n)), np.empty((2, n, n)),
         fftw_native.aligned_empty(b.shape, complex), Ax, jx)
     r = b - Ax
-    assert np.sqrt(krylov.weighted_inner(r, r, w)) <= 1.01e-6 * np.sqrt(
-        krylov.weighted_inner(b, b, w))
+    assert np.sqrt(ck.weighted_inner(r, r, w)) <= 1.01e-6 * np.sqrt(
+        ck.weighted_inner(b, b, w))
     np.testing.assert_allclose(j, jx, atol=1e-10 * np.abs(jx).max())  # accumulated = direct
 
 
@@ -165,7 +167,7 @@ def test_axpy_sum_is_bitwise_the_axpys(rng):
     x0 = _spectra(rng, shape)
     plain = x0.copy()
     for i in range(4):
-        krylov.axpy(plain, y[i], B[i])
+        ck.axpy(plain, y[i], B[i])
     fused = x0.copy()
-    krylov.axpy_sum(fused, y, B, 4)  # the first m = 4 of the 5 basis vectors
+    ck.axpy_sum(fused, y, B, 4)  # the first m = 4 of the 5 basis vectors
     assert np.array_equal(fused, plain)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from model import wellposedness as wp
+from model.compiled.kernels import q_increment_kernel, tangent_kernel
 from model.fourier import SpectralGrid
-from model.kernels import q_increment_kernel, tangent_kernel
 from model.mechanics import LinearMechanics
 from model.parameters import Numerics, Parameters
 from model.simulate import run

@@ -1,6 +1,6 @@
 r"""The linear-mechanics right-hand side as one compiled function (numba + native FFTW).
 
-Computes exactly what :meth:`model.solver.ETDSolver._split_linear` computes (its readable numpy
+Computes exactly what :meth:`model.split.SpectralSplit.reference` computes (its readable numpy
 path, which stays the reference and the fallback, tested to agree): from the state q1, q2, A
 and the spectra of q1, q2,
 
@@ -12,15 +12,15 @@ and the spectra of q1, q2,
     \dot A = (-\zeta A - \chi\, \mathrm{tr}\,\sigma - s A^3)/\tau \quad (\text{Eq. 5}),
 
 with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (Eq. 4; A0 and the Frank term are in
-:math:`L_q`), the small-strain response of :func:`model.kernels.linear_response` (as its real
-Fourier symbols ``S``, :meth:`model.mechanics.LinearMechanics.response_symbols`, applied point
-by point), and the spin
-equation (the Jaumann term, :meth:`model.mechanics.LinearMechanics.corotational_hat`) solved by
-the same restarted GMRES as :func:`model.krylov.gmres_aux` (Saad Alg. 9.5, no preconditioner,
-started from zero, Givens-rotated residual, modified Gram-Schmidt, Parseval inner product), here
-without leaving compiled code: the transforms run through :mod:`model.fftw_native`.
+:math:`L_q`), the small-strain response of :func:`model.compiled.spectral.linear_response`
+(as its real Fourier symbols ``S``, :meth:`model.mechanics.LinearMechanics.response_symbols`,
+applied point by point), and the spin equation (the Jaumann term,
+:meth:`model.mechanics.LinearMechanics.corotational_hat`) solved by the same restarted GMRES
+as :func:`model.krylov.gmres_aux` (Saad Alg. 9.5, no preconditioner, started from zero,
+Givens-rotated residual, modified Gram-Schmidt, Parseval inner product), here without leaving
+compiled code: the transforms run through :mod:`model.compiled.fftw`.
 
-Only built where :data:`model.fftw_native.AVAILABLE`.
+Only built where :data:`model.compiled.fftw.AVAILABLE`.
 """
 
 from __future__ import annotations
@@ -28,9 +28,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from . import fftw_native as fx
-from .kernels import activity_rate, bulk_terms, rmul
+from . import fftw as fx
+from .arith import rmul
 from .krylov import arnoldi_column, axpy_sum, scaled, solve_upper, weighted_inner
+from .rates import activity_rate, bulk_terms
 
 Array = np.ndarray
 

@@ -5,7 +5,7 @@ ourselves (``fftw_plan_dft_r2c_2d`` / ``c2r_2d``, FFTW_ESTIMATE: chosen from the
 results are bitwise reproducible across processes) and run them with FFTW's new-array execute
 functions, declared to numba as external symbols (``numba.types.ExternalFunction``). So a
 whole right-hand side, Krylov loop included, can run as one compiled function
-(:mod:`model.fast_linear`), and compiled kernels are still cached on disk (the symbols are
+(:mod:`model.compiled.linear_rhs`), and compiled kernels are still cached on disk (the symbols are
 resolved by name when the cache is loaded, not baked in as addresses).
 
 Conventions as :mod:`model.fourier`: real ``(N, N)`` fields, half spectra ``(N, N//2 + 1)``,
@@ -42,6 +42,7 @@ import threading
 from pathlib import Path
 
 import numpy as np
+from numba import njit, types
 
 log = logging.getLogger(__name__)
 
@@ -185,93 +186,92 @@ def patient_wisdom(sizes: list[int]) -> str:
         return ctypes.string_at(_LIB.fftw_export_wisdom_to_string()).decode()
 
 
-if AVAILABLE:
-    from numba import njit, types
+# FFTW's execute functions as external symbols: resolved by name when a compiled function is
+# linked (so compiling needs the library loaded: AVAILABLE), not when this module is imported
+_r2c = types.ExternalFunction(
+    "fftw_execute_dft_r2c", types.void(types.uintp, types.uintp, types.uintp))
+_c2r = types.ExternalFunction(
+    "fftw_execute_dft_c2r", types.void(types.uintp, types.uintp, types.uintp))
+_alignment_of = types.ExternalFunction("fftw_alignment_of", types.intc(types.uintp))
 
-    _r2c = types.ExternalFunction(
-        "fftw_execute_dft_r2c", types.void(types.uintp, types.uintp, types.uintp))
-    _c2r = types.ExternalFunction(
-        "fftw_execute_dft_c2r", types.void(types.uintp, types.uintp, types.uintp))
-    _alignment_of = types.ExternalFunction("fftw_alignment_of", types.intc(types.uintp))
+@njit(cache=True)
+def _aligned_real(n):  # pragma: no cover - compiled
+    raw = np.empty(n * n + 8)
+    off = ((-raw.ctypes.data) % 64) // 8
+    return raw[off:off + n * n].reshape((n, n))
 
-    @njit(cache=True)
-    def _aligned_real(n):  # pragma: no cover - compiled
-        raw = np.empty(n * n + 8)
-        off = ((-raw.ctypes.data) % 64) // 8
-        return raw[off:off + n * n].reshape((n, n))
+@njit(cache=True)
+def aligned_half(n):  # pragma: no cover - compiled
+    """An uninitialised 64-byte aligned (N, N // 2 + 1) half spectrum (in compiled code)."""
+    m = n // 2 + 1
+    raw = np.empty(n * m + 4, dtype=np.complex128)
+    off = ((-raw.ctypes.data) % 64) // 16
+    return raw[off:off + n * m].reshape((n, m))
 
-    @njit(cache=True)
-    def aligned_half(n):  # pragma: no cover - compiled
-        """An uninitialised 64-byte aligned (N, N // 2 + 1) half spectrum (in compiled code)."""
-        m = n // 2 + 1
-        raw = np.empty(n * m + 4, dtype=np.complex128)
-        off = ((-raw.ctypes.data) % 64) // 16
-        return raw[off:off + n * m].reshape((n, m))
+@njit(cache=True)
+def _usable(a):  # pragma: no cover - compiled
+    return a.flags.c_contiguous and _alignment_of(a.ctypes.data) == 0
 
-    @njit(cache=True)
-    def _usable(a):  # pragma: no cover - compiled
-        return a.flags.c_contiguous and _alignment_of(a.ctypes.data) == 0
+@njit(cache=True)
+def rfft2(plan, src, dst):  # pragma: no cover - compiled
+    """``dst[...] = rfft2(src)`` for one (N, N) field (unnormalised)."""
+    if _usable(src) and _usable(dst):
+        _r2c(plan, src.ctypes.data, dst.ctypes.data)
+        return
+    n = src.shape[0]
+    a = _aligned_real(n)
+    a[:, :] = src
+    b = aligned_half(n)
+    _r2c(plan, a.ctypes.data, b.ctypes.data)
+    dst[:, :] = b
 
-    @njit(cache=True)
-    def rfft2(plan, src, dst):  # pragma: no cover - compiled
-        """``dst[...] = rfft2(src)`` for one (N, N) field (unnormalised)."""
-        if _usable(src) and _usable(dst):
-            _r2c(plan, src.ctypes.data, dst.ctypes.data)
-            return
-        n = src.shape[0]
-        a = _aligned_real(n)
-        a[:, :] = src
-        b = aligned_half(n)
-        _r2c(plan, a.ctypes.data, b.ctypes.data)
-        dst[:, :] = b
+@njit(cache=True)
+def irfft2(plan, src, dst):  # pragma: no cover - compiled
+    """``dst[...] = irfft2(src)`` for one (N, N // 2 + 1) half spectrum (divides by N^2);
+    ``src`` is left intact (FFTW's c2r destroys its input: it works on a copy)."""
+    irfft2_via(plan, src, dst, aligned_half(dst.shape[0]))
 
-    @njit(cache=True)
-    def irfft2(plan, src, dst):  # pragma: no cover - compiled
-        """``dst[...] = irfft2(src)`` for one (N, N // 2 + 1) half spectrum (divides by N^2);
-        ``src`` is left intact (FFTW's c2r destroys its input: it works on a copy)."""
-        irfft2_via(plan, src, dst, aligned_half(dst.shape[0]))
-
-    @njit(cache=True)
-    def irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
-        """:func:`irfft2` through the caller's scratch half spectrum (overwritten; it may be
-        ``src`` itself, which is then destroyed): a hot loop then allocates nothing (a fresh
-        133 kB scratch per 128^2 transform costs ~15 % of its time, measured)."""
-        n = dst.shape[0]
-        scale = 1.0 / (n * n)
-        if unscaled_irfft2_via(plan, src, dst, scratch):
-            for x in range(n):
-                for y in range(n):
-                    dst[x, y] *= scale
-            return
-        a = _aligned_real(n)
-        unscaled_irfft2_via(plan, src, a, scratch)
+@njit(cache=True)
+def irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
+    """:func:`irfft2` through the caller's scratch half spectrum (overwritten; it may be
+    ``src`` itself, which is then destroyed): a hot loop then allocates nothing (a fresh
+    133 kB scratch per 128^2 transform costs ~15 % of its time, measured)."""
+    n = dst.shape[0]
+    scale = 1.0 / (n * n)
+    if unscaled_irfft2_via(plan, src, dst, scratch):
         for x in range(n):
             for y in range(n):
-                dst[x, y] = a[x, y] * scale
+                dst[x, y] *= scale
+        return
+    a = _aligned_real(n)
+    unscaled_irfft2_via(plan, src, a, scratch)
+    for x in range(n):
+        for y in range(n):
+            dst[x, y] = a[x, y] * scale
 
-    @njit(cache=True)
-    def unscaled_irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
-        """FFTW's c2r of ``src`` into ``dst`` through ``scratch`` (as :func:`irfft2_via`),
-        *not* divided by N^2: for a caller that folds 1/N^2 (a power of two for the even N
-        used, so exactly) into its next pass over the result. Returns False, doing nothing,
-        if ``dst`` is not aligned for the plan."""
-        if not _usable(dst):
-            return False
-        b = scratch if _usable(scratch) else aligned_half(dst.shape[0])
-        if b.ctypes.data != src.ctypes.data:
-            b[:, :] = src
-        _c2r(plan, b.ctypes.data, dst.ctypes.data)
-        return True
+@njit(cache=True)
+def unscaled_irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
+    """FFTW's c2r of ``src`` into ``dst`` through ``scratch`` (as :func:`irfft2_via`),
+    *not* divided by N^2: for a caller that folds 1/N^2 (a power of two for the even N
+    used, so exactly) into its next pass over the result. Returns False, doing nothing,
+    if ``dst`` is not aligned for the plan."""
+    if not _usable(dst):
+        return False
+    b = scratch if _usable(scratch) else aligned_half(dst.shape[0])
+    if b.ctypes.data != src.ctypes.data:
+        b[:, :] = src
+    _c2r(plan, b.ctypes.data, dst.ctypes.data)
+    return True
 
-    @njit(cache=True)
-    def rfft2_many(plan, src, dst):  # pragma: no cover - compiled
-        """:func:`rfft2` over the leading axis of ``(k, N, N)`` -> ``(k, N, N//2 + 1)``."""
-        for j in range(src.shape[0]):
-            rfft2(plan, src[j], dst[j])
+@njit(cache=True)
+def rfft2_many(plan, src, dst):  # pragma: no cover - compiled
+    """:func:`rfft2` over the leading axis of ``(k, N, N)`` -> ``(k, N, N//2 + 1)``."""
+    for j in range(src.shape[0]):
+        rfft2(plan, src[j], dst[j])
 
-    @njit(cache=True)
-    def irfft2_many(plan, src, dst):  # pragma: no cover - compiled
-        """:func:`irfft2` over the leading axis of ``(k, N, N//2 + 1)`` -> ``(k, N, N)``."""
-        scratch = aligned_half(dst.shape[1])
-        for j in range(src.shape[0]):
-            irfft2_via(plan, src[j], dst[j], scratch)
+@njit(cache=True)
+def irfft2_many(plan, src, dst):  # pragma: no cover - compiled
+    """:func:`irfft2` over the leading axis of ``(k, N, N//2 + 1)`` -> ``(k, N, N)``."""
+    scratch = aligned_half(dst.shape[1])
+    for j in range(src.shape[0]):
+        irfft2_via(plan, src[j], dst[j], scratch)

@@ -14,7 +14,7 @@ the Parseval inner product of half spectra. They are the same algorithms, step f
 ``FiniteMechanics`` (the readable reference and the fallback, tested to agree); here the whole
 loop, its eight transforms per operator application included, stays in compiled code.
 
-Only used where :data:`model.fftw_native.AVAILABLE`.
+Only used where :data:`model.compiled.fftw.AVAILABLE`.
 """
 
 from __future__ import annotations
@@ -22,9 +22,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from . import fftw_native as fx
-from .kernels import apply_tangent_kernel, apply_tangent_spin_kernel, green_kernel, imul
+from . import fftw as fx
+from .arith import imul
+from .constitutive import apply_tangent_kernel, apply_tangent_spin_kernel
 from .krylov import arnoldi_column, axpy, axpy_sum, scaled, solve_upper, weighted_inner
+from .spectral import green_kernel
 
 Array = np.ndarray
 

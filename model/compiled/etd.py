@@ -1,0 +1,119 @@
+"""The pointwise pieces of the exponential integrators (numba): phi functions of the
+activity's local Jacobian and the stage combinations.
+
+numpy twin: :mod:`model.reference_kernels` (its ``phi_functions``); tested to agree in
+``tests/test_model_constitutive.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .arith import rmul
+
+#: 1/j! for j = 0..21, the Taylor coefficients of the phi functions
+_RECIP_FACT = np.array([1.0 / float(np.prod(np.arange(1, j + 1))) for j in range(22)])
+
+
+@njit(cache=True)
+def _phi123_from(z, em1):  # pragma: no cover - compiled
+    """:math:`\varphi_{1,2,3}(z)` given :math:`e^z - 1`: Taylor series (Horner, 19 terms:
+    truncation < 1e-17) for |z| < 1, the recursion :math:`\varphi_{k+1} = (\varphi_k - 1/k!)/z`
+    otherwise (the same branches as :func:`model.reference_kernels.phi_functions`)."""
+    if abs(z) < 1.0:
+        p1 = 0.0
+        p2 = 0.0
+        p3 = 0.0
+        for j in range(18, -1, -1):  # phi_k = sum_j z^j / (j + k)!
+            p1 = p1 * z + _RECIP_FACT[j + 1]
+            p2 = p2 * z + _RECIP_FACT[j + 2]
+            p3 = p3 * z + _RECIP_FACT[j + 3]
+        return p1, p2, p3
+    p1 = em1 / z
+    p2 = (p1 - 1.0) / z
+    p3 = (p2 - 0.5) / z
+    return p1, p2, p3
+
+
+@njit(cache=True)
+def _phi0123(z):  # pragma: no cover - compiled
+    """:math:`e^z, \varphi_1(z), \varphi_2(z), \varphi_3(z)` of a real scalar."""
+    p1, p2, p3 = _phi123_from(z, np.expm1(z))
+    return np.exp(z), p1, p2, p3
+
+
+@njit(cache=True)
+def activity_exponential(A, h, zeta, s, tau):  # pragma: no cover - compiled
+    r"""The pointwise Jacobian :math:`L_A = -(\zeta + 3 s A^2)/\tau` of the local part of
+    Eq. (5) and :math:`\varphi_1(h L_A), \varphi_2(h L_A)`; returns ``(L_A, phi1, phi2)``."""
+    nx, ny = A.shape
+    L = np.empty((nx, ny))
+    p1 = np.empty((nx, ny))
+    p2 = np.empty((nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = A[x, y]
+            lam = -(zeta + 3.0 * s * a * a) / tau
+            L[x, y] = lam
+            _, p1[x, y], p2[x, y], _ = _phi0123(lam * h)
+    return L, p1, p2
+
+
+@njit(cache=True)
+def activity_krogstad(A, h, zeta, s, tau):  # pragma: no cover - compiled
+    r"""For the ETDRK4 step of the activity: :math:`L_A = -(\zeta + 3 s A^2)/\tau` and,
+    point by point, Krogstad's weights (:meth:`model.solver.ETDRK4Solver._weights_from`) from
+    :math:`f_k = \varphi_k(z)`, :math:`g_k = \varphi_k(z/2)` at :math:`z = h L_A`:
+    ``W[0:2]`` = :math:`e^{z}, e^{z/2}`; ``W[2]`` = g1/2 (stage a); ``W[3:5]`` = g1/2 - g2, g2
+    (stage b); ``W[5:7]`` = f1 - 2 f2, 2 f2 (stage c); ``W[7:10]`` = f1 - 3 f2 + 4 f3,
+    2 f2 - 4 f3, 4 f3 - f2 (the update). Returns ``(L_A, W)``; one pass, no temporaries."""
+    nx, ny = A.shape
+    L = np.empty((nx, ny))
+    W = np.empty((10, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = A[x, y]
+            lam = -(zeta + 3.0 * s * a * a) / tau
+            L[x, y] = lam
+            z = lam * h
+            # one transcendental per point: e^z - 1 = (e^{z/2} - 1)(e^{z/2} + 1), with
+            # e^{z/2} from exp where it is small (1 + expm1 would lose its relative accuracy)
+            if z < -1.0:
+                e_half = np.exp(0.5 * z)
+                em1_half = e_half - 1.0
+            else:
+                em1_half = np.expm1(0.5 * z)
+                e_half = 1.0 + em1_half
+            f1, f2, f3 = _phi123_from(z, em1_half * (e_half + 1.0))
+            g1, g2, _ = _phi123_from(0.5 * z, em1_half)
+            W[0, x, y] = e_half * e_half
+            W[1, x, y] = e_half
+            W[2, x, y] = 0.5 * g1
+            W[3, x, y] = 0.5 * g1 - g2
+            W[4, x, y] = g2
+            W[5, x, y] = f1 - 2.0 * f2
+            W[6, x, y] = 2.0 * f2
+            W[7, x, y] = f1 - 3.0 * f2 + 4.0 * f3
+            W[8, x, y] = 2.0 * f2 - 4.0 * f3
+            W[9, x, y] = 4.0 * f3 - f2
+    return L, W
+
+
+@njit(cache=True)
+def etd_combination(E, x, h, coef, terms):  # pragma: no cover - compiled
+    r""":math:`E x + h \sum_k c_k N_k` in one pass: an ETD stage or update. For the q spectra
+    ``x``, ``terms[k]`` are ``(2, N, N//2 + 1)`` and ``E``, ``coef[k]`` real symbols
+    ``(N, N//2 + 1)``; for A everything is ``(N, N)`` (then a leading axis of length 1 is
+    added by the caller). ``coef`` and ``terms`` are tuples of equal length."""
+    nc, nx, ny = x.shape
+    out = np.empty_like(x)
+    m = len(coef)
+    for c in range(nc):
+        for i in range(nx):
+            for j in range(ny):
+                acc = rmul(coef[0][i, j], terms[0][c, i, j])
+                for k in range(1, m):
+                    acc += rmul(coef[k][i, j], terms[k][c, i, j])
+                out[c, i, j] = rmul(E[i, j], x[c, i, j]) + rmul(h, acc)
+    return out

@@ -1,0 +1,51 @@
+"""Pointwise terms of the rates of Eqs. (4)-(5) (numba).
+
+numpy twin: :mod:`model.reference_kernels` (the expressions of
+:meth:`model.pde.ActiveNematicPDE.molecular_field` and ``activity_rate``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def bulk_terms(q1, q2, A, tr_e, C, two_Bp):  # pragma: no cover - compiled
+    r"""``[-b q1, -b q2]`` with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (the
+    non-constant part of the Landau-de Gennes bulk term in H, Eq. 4; ``A0`` is in L_q)."""
+    nx, ny = q1.shape
+    out = np.empty((2, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = q1[x, y]
+            b = q2[x, y]
+            bulk = A[x, y] + C * 2.0 * (a * a + b * b) - two_Bp * tr_e[x, y]
+            out[0, x, y] = -bulk * a
+            out[1, x, y] = -bulk * b
+    return out
+
+
+@njit(cache=True)
+def activity_rate(A, trP, zeta, chi, s, tau):  # pragma: no cover - compiled
+    r"""Paper Eq. (5): :math:`(-\zeta A - \chi\, \mathrm{tr} P - s A^3)/\tau`."""
+    nx, ny = A.shape
+    out = np.empty((nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = A[x, y]
+            out[x, y] = (-zeta * a - chi * trP[x, y] - s * a * a * a) / tau
+    return out
+
+
+@njit(cache=True)
+def jaumann_products(omega, q1, q2):  # pragma: no cover - compiled
+    r"""The corotational rate :math:`2 \omega J q = [-2 \omega q_2, 2 \omega q_1]`."""
+    nx, ny = q1.shape
+    out = np.empty((2, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            w = 2.0 * omega[x, y]
+            out[0, x, y] = -w * q2[x, y]
+            out[1, x, y] = w * q1[x, y]
+    return out

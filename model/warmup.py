@@ -1,8 +1,9 @@
 """Compile the model's numba kernels once, before any real run needs them.
 
 The kernels are compiled on first use and cached on disk (``cache=True``: ``*.nbi`` /
-``*.nbc`` files in ``model/__pycache__``), so only the first run on a machine (or after a
-change to a kernel's source) pays the compilation, about a minute. Without a warm-up, every
+``*.nbc`` files in a folder named by the hash of the compiled sources,
+:func:`model.compiled.cache_dir`), so only the first run on a machine (or after a change to
+the compiled code) pays the compilation, about a minute. Without a warm-up, every
 worker of a campaign's first run compiles the same kernels at the same time. :func:`warm_up`
 runs a tiny simulation (16^2, to t = 0.5) of each kind a campaign uses, in one process;
 afterwards every other process loads the compiled code from the cache.

@@ -3,6 +3,8 @@ the campaign's runs start), not by every worker at once (:mod:`model.warmup`).""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from sweep_helpers import write_campaign
 
@@ -36,6 +38,28 @@ def test_warm_up_runs_a_tiny_simulation_and_counts_kernels():
     assert info["errors"] == []
     counts = compile_counts()
     assert counts["compiled"] + counts["loaded"] > 0  # the run used compiled kernels
+
+
+def test_the_numba_cache_is_named_by_the_compiled_sources(tmp_path, monkeypatch):
+    """A change to any compiled module starts a fresh cache (numba alone would keep the stale
+    machine code of a function whose callee in another file changed)."""
+    import shutil
+
+    import numba
+
+    import model.compiled as compiled
+
+    here = compiled.cache_dir()
+    assert here.name == f"numba-{compiled.source_digest()}"
+    if not __import__("os").environ.get("NUMBA_CACHE_DIR"):
+        assert str(here) == numba.config.CACHE_DIR
+    copy = tmp_path / "compiled"
+    shutil.copytree(Path(compiled.__file__).parent, copy,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    assert compiled.source_digest(copy) == compiled.source_digest()
+    krylov = copy / "krylov.py"
+    krylov.write_text(krylov.read_text() + "\n# an edit\n")
+    assert compiled.source_digest(copy) != compiled.source_digest()
 
 
 @pytest.mark.slow

@@ -19,4 +19,44 @@ module                 numpy twin
 =====================  ===================================================================
 
 Nothing here imports the classes that call it.
+
+**The disk cache.** numba invalidates a cached function only when its own source file changes,
+not when a function it calls from another file does (``linear_rhs`` calls ``krylov``, ``etd``
+calls ``arith``, and the one GMRES reaches its operators through overloads defined elsewhere),
+so a change in one module could leave stale machine code in another's cache. Importing this
+package therefore points numba's cache (``numba.config.CACHE_DIR``) at a folder named by a
+hash of every source file here, ``model/compiled/__pycache__/numba-<hash>`` (or
+``~/.cache/nematic/numba-<hash>`` where the package folder is not writable): any change to
+the compiled code starts a fresh cache. A ``NUMBA_CACHE_DIR`` set in the environment is used
+as given.
 """
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numba
+
+
+def source_digest(folder: Path | None = None) -> str:
+    """A hash of every module of this package (names and contents), or of ``folder``'s."""
+    h = hashlib.sha256()
+    for path in sorted((folder or Path(__file__).parent).glob("*.py")):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cache_dir() -> Path:
+    """The numba cache folder of this version of the compiled code."""
+    here = Path(__file__).parent
+    name = f"numba-{source_digest()}"
+    if os.access(here, os.W_OK):
+        return here / "__pycache__" / name
+    return Path.home() / ".cache" / "nematic" / name
+
+
+if not os.environ.get("NUMBA_CACHE_DIR"):
+    numba.config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]

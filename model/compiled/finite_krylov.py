@@ -19,13 +19,17 @@ Only used where :data:`model.compiled.fftw.AVAILABLE`.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
 from . import fftw as fx
+from . import krylov
 from .arith import imul
 from .constitutive import apply_tangent_kernel, apply_tangent_spin_kernel
-from .krylov import arnoldi_column, axpy, axpy_sum, scaled, solve_upper, weighted_inner
+from .krylov import apply_operator, precondition
 from .spectral import green_kernel
 
 Array = np.ndarray
@@ -55,106 +59,102 @@ def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, out):  # pragma: no co
                 out[i, x, y] -= imul(ky[x, y], work_hat[x, y])
 
 
+class NewtonOperator(NamedTuple):
+    """Newton's tangent operator :math:`-\\mathrm{Div}(\\mathbb K : \\nabla v)` of
+    :func:`_operator` (no spin term) and its Green preconditioner, for the compiled
+    :func:`model.compiled.krylov.pcg`."""
+
+    K: Array
+    kx: Array
+    ky: Array
+    khx: Array
+    khy: Array
+    inv_k2: Array
+    a: float
+    pf: int
+    pi: int
+    work_hat: Array
+    G: Array
+
+
+@overload(apply_operator)
+def _apply_newton(op, x, out, aux):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is NewtonOperator:  # the named tuple type
+        def impl(op, x, out, aux):  # no auxiliary output
+            _operator(x, op.K, op.K[0, 0], False, op.kx, op.ky, op.pf, op.pi, op.work_hat,
+                      op.G, out)
+        return impl
+    return None
+
+
+@overload(precondition)
+def _precondition_newton(op, v, out):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is NewtonOperator:  # the named tuple type
+        def impl(op, v, out):
+            out[...] = green_kernel(v, op.khx, op.khy, op.inv_k2, op.a)
+        return impl
+    return None
+
+
 @njit(cache=True)
 def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pragma: no cover
-    """Preconditioned CG for Newton's correction; returns ``(x, iterations, status,
-    operator applications)``, status 0 ok, 1 maxiter, 2 indefinite (as
-    :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
+    """Newton's correction by :func:`model.compiled.krylov.pcg`, preconditioned by the Green
+    operator; returns ``(x, iterations, status, operator applications)``, status 0 ok,
+    1 maxiter, 2 indefinite (as :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
     n = K.shape[4]
-    work_hat = np.empty(kx.shape, dtype=np.complex128)
-    G = np.empty((2, 2, n, n))
-    x = x0.copy()
-    nop = 0
-    if np.any(x != 0):
-        Ax = np.empty_like(b)
-        _operator(x, K, K[0, 0], False, kx, ky, pf, pi, work_hat, G, Ax)
-        nop += 1
-        r = b - Ax
-    else:
-        r = b.copy()
-    z = green_kernel(r, khx, khy, inv_k2, a)
-    p = z.copy()
-    rz = weighted_inner(r, z, w)
-    ref = np.sqrt(abs(weighted_inner(b, green_kernel(b, khx, khy, inv_k2, a), w)))
-    if ref == 0.0:
-        ref = 1.0
-    Ap = np.empty_like(b)
-    for it in range(maxiter + 1):
-        if np.sqrt(abs(rz)) <= rtol * ref:
-            return x, it, 0, nop
-        if it == maxiter:
-            break
-        _operator(p, K, K[0, 0], False, kx, ky, pf, pi, work_hat, G, Ap)
-        nop += 1
-        pAp = weighted_inner(p, Ap, w)
-        if pAp <= 0:
-            return x, it, 2, nop
-        step = rz / pAp
-        axpy(x, step, p)
-        axpy(r, -step, Ap)
-        z = green_kernel(r, khx, khy, inv_k2, a)
-        rz_new = weighted_inner(r, z, w)
-        p = z + (rz_new / rz) * p
-        rz = rz_new
-    return x, maxiter, 1, nop
+    op = NewtonOperator(K, kx, ky, khx, khy, inv_k2, a, pf, pi,
+                        np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)))
+    return krylov.pcg(op, b, x0, w, rtol, maxiter)
+
+
+class RateOperator(NamedTuple):
+    """The displacement-rate operator of :func:`_operator` (with the spin term) and its
+    Green preconditioner, for the compiled :func:`model.compiled.krylov.gmres`."""
+
+    K: Array
+    E: Array
+    kx: Array
+    ky: Array
+    khx: Array
+    khy: Array
+    inv_k2: Array
+    a: float
+    pf: int
+    pi: int
+    work_hat: Array
+    G: Array
+
+
+@overload(apply_operator)
+def _apply_rate(op, x, out, aux):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is RateOperator:  # the named tuple type
+        def impl(op, x, out, aux):  # no auxiliary output
+            _operator(x, op.K, op.E, True, op.kx, op.ky, op.pf, op.pi, op.work_hat, op.G, out)
+        return impl
+    return None
+
+
+@overload(precondition)
+def _precondition_rate(op, v, out):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is RateOperator:  # the named tuple type
+        def impl(op, v, out):
+            out[...] = green_kernel(v, op.khx, op.khy, op.inv_k2, op.a)
+        return impl
+    return None
 
 
 @njit(cache=True)
 def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V, Z
           ):  # pragma: no cover
-    """Right-preconditioned restarted GMRES for the displacement rate; returns ``(x,
-    iterations, converged, operator applications)``. ``V`` (restart + 1 spectra) and ``Z``
-    (restart) are caller-owned work arrays."""
+    """The displacement rate by :func:`model.compiled.krylov.gmres`, right-preconditioned by
+    the Green operator; returns ``(x, iterations, converged, operator applications)``. ``V``
+    (restart + 1 spectra) and ``Z`` (restart) are caller-owned work arrays."""
     n = K.shape[4]
-    restart = Z.shape[0]
-    work_hat = np.empty(kx.shape, dtype=np.complex128)
-    G = np.empty((2, 2, n, n))
-    Ax = np.empty_like(b)
-    wv = np.empty_like(b)
-    H = np.zeros((restart + 1, restart))
-    g = np.zeros(restart + 1)
-    cs = np.zeros(restart)
-    sn = np.zeros(restart)
-    x = x0.copy()
-    bnorm = np.sqrt(weighted_inner(b, b, w))
-    if bnorm == 0.0:
-        bnorm = 1.0
-    total = 0
-    nop = 0
-    zero_start = not np.any(x)  # then r = b: no operator application
-    while True:
-        if zero_start:
-            Ax[...] = 0.0
-            zero_start = False
-        else:
-            _operator(x, K, E, True, kx, ky, pf, pi, work_hat, G, Ax)
-            nop += 1
-        r = b - Ax
-        beta = np.sqrt(weighted_inner(r, r, w))
-        if beta <= rtol * bnorm:
-            return x, total, True, nop
-        if total >= maxiter:
-            return x, total, False, nop
-        scaled(V[0], r, beta)
-        H[:, :] = 0.0
-        g[:] = 0.0
-        g[0] = beta
-        k = 0
-        h_next = 0.0
-        for k in range(restart):
-            Z[k] = green_kernel(V[k], khx, khy, inv_k2, a)
-            _operator(Z[k], K, E, True, kx, ky, pf, pi, work_hat, G, wv)
-            nop += 1
-            h_next = arnoldi_column(V, wv, H, g, cs, sn, k, w)
-            total += 1
-            if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
-                break
-            scaled(V[k + 1], wv, h_next)
-        m = k + 1
-        y = solve_upper(H, g, m)
-        axpy_sum(x, y, Z, m)
-        if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
-            return x, total, True, nop
+    op = RateOperator(K, E, kx, ky, khx, khy, inv_k2, a, pf, pi,
+                      np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)))
+    x, _, its, ok, nop = krylov.gmres(op, b, x0, w, rtol, maxiter, V, Z,
+                                      np.empty((Z.shape[0], 0), dtype=np.complex128))
+    return x, its, ok, nop
 
 
 def workspace(n: int, restart: int = 30) -> tuple[Array, Array]:

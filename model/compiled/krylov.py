@@ -182,3 +182,133 @@ def scaled(dst, x, alpha):  # pragma: no cover - compiled
     xf = x.reshape(-1)
     for i in range(df.size):  # component by component (numba would divide as complex)
         df[i] = complex(xf[i].real / alpha, xf[i].imag / alpha)
+
+
+# --- the one compiled GMRES and PCG -------------------------------------------------------
+
+def apply_operator(op, x, out, aux):  # pragma: no cover - compiled through its overloads
+    """``out = A x`` (and ``aux = L x``, the operator's auxiliary linear output, where it has
+    one) for the operator ``op``, a named tuple of its data: implemented for each operator
+    type by an ``@overload`` in the module that defines it (resolved at compile time, so the
+    GMRES below stays cacheable: no function is passed at run time)."""
+    raise NotImplementedError("apply_operator runs compiled, through its overloads")
+
+
+def precondition(op, v, out):  # pragma: no cover - compiled through its overloads
+    """``out = M v``, the right preconditioner of ``op`` (a no-op where ``out`` is ``v``: the
+    unpreconditioned operators pass the Krylov basis as its own preconditioned basis)."""
+    raise NotImplementedError("precondition runs compiled, through its overloads")
+
+
+@njit(cache=True)
+def gmres(op, b, x0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - compiled
+    """Right-preconditioned restarted GMRES (Saad Alg. 9.5) for the operator ``op`` from
+    ``x0``, with the Parseval-weighted inner product ``w``: the same algorithm, step for step,
+    as :func:`model.krylov._gmres` (its numpy twin). Returns ``(x, L x, iterations,
+    converged, operator applications)``.
+
+    A zero ``x0`` costs no operator application (its residual is ``b``, its ``L x`` zero).
+    The auxiliary output ``L x`` is accumulated from the ``L z`` of the basis, so a converged
+    cycle needs no extra application. Work arrays, caller-owned (megabytes are not allocated
+    on every call): ``V`` the Krylov basis (restart + 1 spectra), ``Z`` its preconditioned
+    basis (restart spectra; ``V`` itself for an unpreconditioned operator), ``LZ`` the
+    auxiliary outputs of ``Z`` (restart entries; zero-sized where the operator has none)."""
+    restart = V.shape[0] - 1
+    shape = b.shape
+    Ax = np.empty(shape, dtype=np.complex128)
+    Lx = np.empty(LZ.shape[1:], dtype=np.complex128)
+    wv = np.empty(shape, dtype=np.complex128)
+    H = np.zeros((restart + 1, restart))
+    g = np.zeros(restart + 1)
+    cs = np.zeros(restart)
+    sn = np.zeros(restart)
+    x = x0.copy()
+    bnorm = np.sqrt(weighted_inner(b, b, w))
+    if bnorm == 0.0:
+        bnorm = 1.0
+    total = 0
+    nop = 0
+    zero_start = not np.any(x)  # then r = b and L x = 0: no operator application
+    while True:
+        if zero_start:
+            Ax[...] = 0.0
+            Lx[...] = 0.0
+            zero_start = False
+        else:
+            apply_operator(op, x, Ax, Lx)
+            nop += 1
+        r = b - Ax
+        beta = np.sqrt(weighted_inner(r, r, w))
+        if beta <= rtol * bnorm:
+            return x, Lx, total, True, nop
+        if total >= maxiter:
+            return x, Lx, total, False, nop
+        scaled(V[0], r, beta)
+        H[:, :] = 0.0
+        g[:] = 0.0
+        g[0] = beta
+        k = 0
+        h_next = 0.0
+        for k in range(restart):
+            precondition(op, V[k], Z[k])
+            apply_operator(op, Z[k], wv, LZ[k])
+            nop += 1
+            h_next = arnoldi_column(V, wv, H, g, cs, sn, k, w)
+            total += 1
+            if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
+                break
+            scaled(V[k + 1], wv, h_next)
+        m = k + 1
+        y = solve_upper(H, g, m)
+        axpy_sum(x, y, Z, m)  # one pass each, bitwise m axpys
+        axpy_sum(Lx, y, LZ, m)
+        if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
+            return x, Lx, total, True, nop
+
+
+@njit(cache=True)
+def pcg(op, b, x0, w, rtol, maxiter):  # pragma: no cover - compiled
+    """Preconditioned conjugate gradients (Saad Alg. 9.1) for the symmetric positive definite
+    operator ``op`` from ``x0``: the same algorithm, step for step, as
+    :func:`model.krylov.pcg` (its numpy twin). Stops when the preconditioned residual norm
+    :math:`\\sqrt{r \\cdot M r}` falls below ``rtol`` times that of ``b``. Returns ``(x,
+    iterations, status, operator applications)``, status 0 ok, 1 maxiter, 2 indefinite (a
+    direction of non-positive curvature)."""
+    x = x0.copy()
+    nop = 0
+    no_aux = np.empty(0, dtype=np.complex128)
+    if np.any(x != 0):
+        Ax = np.empty_like(b)
+        apply_operator(op, x, Ax, no_aux)
+        nop += 1
+        r = b - Ax
+    else:
+        r = b.copy()
+    z = np.empty_like(b)
+    precondition(op, r, z)
+    p = z.copy()
+    rz = weighted_inner(r, z, w)
+    Mb = np.empty_like(b)
+    precondition(op, b, Mb)
+    ref = np.sqrt(abs(weighted_inner(b, Mb, w)))
+    if ref == 0.0:
+        ref = 1.0
+    Ap = np.empty_like(b)
+    for it in range(maxiter + 1):
+        if np.sqrt(abs(rz)) <= rtol * ref:
+            return x, it, 0, nop
+        if it == maxiter:
+            break
+        apply_operator(op, p, Ap, no_aux)
+        nop += 1
+        pAp = weighted_inner(p, Ap, w)
+        if pAp <= 0:
+            return x, it, 2, nop
+        step = rz / pAp
+        axpy(x, step, p)
+        axpy(r, -step, Ap)
+        precondition(op, r, z)
+        rz_new = weighted_inner(r, z, w)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return x, maxiter, 1, nop

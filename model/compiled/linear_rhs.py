@@ -25,12 +25,15 @@ Only built where :data:`model.compiled.fftw.AVAILABLE`.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
 from . import fftw as fx
 from .arith import rmul
-from .krylov import arnoldi_column, axpy_sum, scaled, solve_upper, weighted_inner
+from .krylov import apply_operator, gmres, precondition
 from .rates import activity_rate, bulk_terms
 
 Array = np.ndarray
@@ -58,70 +61,52 @@ def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, out, jout
             out[i, j] = x[i, j] - (rmul(m1[i, j], jout[0, i, j]) + rmul(m2[i, j], jout[1, i, j]))
 
 
+class SpinOperator(NamedTuple):
+    """The spin operator :math:`I - M` of :func:`_spin_operator` for the compiled
+    :func:`model.compiled.krylov.gmres` (no preconditioner; the auxiliary output is the
+    Jaumann rate): the state's q1, q2, the spin symbols, the plans and the work arrays."""
+
+    q1: Array
+    q2: Array
+    m1: Array
+    m2: Array
+    pf: int
+    pi: int
+    omega: Array
+    prod: Array
+    scratch: Array
+
+
+@overload(apply_operator)
+def _apply_spin(op, x, out, aux):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is SpinOperator:  # the named tuple type
+        def impl(op, x, out, aux):
+            _spin_operator(x, op.q1, op.q2, op.m1, op.m2, op.pf, op.pi, op.omega, op.prod,
+                           op.scratch, out, aux)
+        return impl
+    return None
+
+
+@overload(precondition)
+def _precondition_spin(op, v, out):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is SpinOperator:  # the named tuple type
+        def impl(op, v, out):  # unpreconditioned: out is v (the basis is its own)
+            pass
+        return impl
+    return None
+
+
 @njit(cache=True)
 def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragma: no cover
-    """Solve :math:`(I - M)\\hat\\omega = b` by restarted GMRES from ``x0`` (a zero ``x0``
-    costs no operator application: the residual is ``b``); returns
-    ``(omega_hat, j_hat, iterations, converged, operator applications)`` with ``j_hat`` the
-    spectra of :math:`2\\omega J q` at the solution (accumulated from the basis: no extra operator
-    application). The same algorithm, step for step, as :func:`model.krylov._gmres`; the
+    """Solve :math:`(I - M)\\hat\\omega = b` by :func:`model.compiled.krylov.gmres` from
+    ``x0``; returns ``(omega_hat, j_hat, iterations, converged, operator applications)`` with
+    ``j_hat`` the spectra of :math:`2\\omega J q` at the solution (the auxiliary output). The
     Krylov basis ``V`` (restart + 1 spectra) and its Jaumann rates ``LZ`` (restart pairs) are
-    caller-owned work arrays (so that megabytes are not allocated on every call)."""
+    caller-owned work arrays."""
     n = q1.shape[0]
-    restart = LZ.shape[0]
-    shape = b.shape
-    omega = np.empty((n, n))
-    prod = np.empty((2, n, n))
-    scratch = fx.aligned_half(n)
-    Ax = np.empty(shape, dtype=np.complex128)
-    x = x0.copy()
-    Lx = np.empty((2,) + shape, dtype=np.complex128)
-    wv = np.empty(shape, dtype=np.complex128)
-    H = np.zeros((restart + 1, restart))
-    g = np.zeros(restart + 1)
-    cs = np.zeros(restart)
-    sn = np.zeros(restart)
-    bnorm = np.sqrt(weighted_inner(b, b, w))
-    if bnorm == 0.0:
-        bnorm = 1.0
-    total = 0
-    nop = 0
-    zero_start = not np.any(x)  # then r = b and L x = 0: no operator application
-    while True:
-        if zero_start:
-            Ax[:, :] = 0.0
-            Lx[:, :, :] = 0.0
-            zero_start = False
-        else:
-            _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, Ax, Lx)
-            nop += 1
-        r = b - Ax
-        beta = np.sqrt(weighted_inner(r, r, w))
-        if beta <= rtol * bnorm:
-            return x, Lx, total, True, nop
-        if total >= maxiter:
-            return x, Lx, total, False, nop
-        scaled(V[0], r, beta)
-        H[:, :] = 0.0
-        g[:] = 0.0
-        g[0] = beta
-        k = 0
-        h_next = 0.0
-        for k in range(restart):
-            _spin_operator(V[k], q1, q2, m1, m2, pf, pi, omega, prod, scratch, wv,
-                           LZ[k])
-            nop += 1
-            h_next = arnoldi_column(V, wv, H, g, cs, sn, k, w)
-            total += 1
-            if abs(g[k + 1]) <= rtol * bnorm or total >= maxiter or h_next <= 1e-14 * beta:
-                break
-            scaled(V[k + 1], wv, h_next)
-        m = k + 1
-        y = solve_upper(H, g, m)
-        axpy_sum(x, y, V, m)  # one pass each, bitwise m axpys
-        axpy_sum(Lx, y, LZ, m)
-        if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
-            return x, Lx, total, True, nop
+    op = SpinOperator(q1, q2, m1, m2, pf, pi, np.empty((n, n)), np.empty((2, n, n)),
+                      fx.aligned_half(n))
+    return gmres(op, b, x0, w, rtol, maxiter, V, V, LZ)
 
 
 def workspace(n: int, restart: int = 30) -> tuple[Array, Array]:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from sweep_helpers import group_alive, kill_group, start_driver, wait_for
 from typer.testing import CliRunner
 
 from model.parameters import Parameters
@@ -29,8 +30,6 @@ from sweep.refine.plan import first_round, next_round, points_of, run_bound, wil
 from sweep.refine.rounds import read_plan, replay
 from sweep.spec import Overrides, load_campaign, parse_campaign
 from sweep.store import CampaignStore
-
-from sweep_helpers import group_alive, kill_group, start_driver, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGA1_ADAPTIVE = ROOT / "campaigns" / "figA1_adaptive.yaml"
@@ -58,7 +57,7 @@ refine:
   patterned_above: 0.0
   rounds: 4
   min_spacing: 0.025
-  seeds: {{initial: 2, add: 1}}
+  seeds: {{initial: {initial}, add: 1}}
 execution: {{workers: 2}}
 """
 
@@ -71,10 +70,10 @@ def flat(text: str) -> str:
     return " ".join(text.split())
 
 
-def a1(folder: Path, name: str, chi: str, seeds: int) -> Path:
+def a1(folder: Path, name: str, chi: str, seeds: int, initial: int = 2) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.yaml"
-    path.write_text(A1.format(name=name, chi=chi, seeds=seeds))
+    path.write_text(A1.format(name=name, chi=chi, seeds=seeds, initial=initial))
     return path
 
 
@@ -277,7 +276,8 @@ def test_refined_points_keep_the_grid_run_identity():
                                             1: (1.0 if r.x > 0.2 else -1.0)}
                             for r in first_round(c).runs})
     assert {r.x for r in nxt.runs} == {0.25}
-    assert (0.2 + 0.3) / 2 == 0.25 and (0.1 + 0.2) != 0.3
+    assert (0.2 + 0.3) / 2 == 0.25
+    assert (0.1 + 0.2) != 0.3
 
 
 def test_validate_prints_the_first_round_and_a_bound():
@@ -295,7 +295,8 @@ def test_the_fig2_refine_variant_validates_at_full_and_reduced_size():
         assert result.exit_code == 0, result.output
         assert "round 0 (the grid): 5 points x 4 seed(s) = 20 runs" in flat(result.output)
     c = load_campaign(FIG2_ADAPTIVE, Overrides(settings={"resolution": 64}))
-    assert c.refine is not None and c.refine.criterion == "jump"
+    assert c.refine is not None
+    assert c.refine.criterion == "jump"
     # its refined values 0.4, 0.45 (halving 0.3-0.5) are the full Fig. 2 grid's runs
     full = expand(load_campaign(ROOT / "campaigns" / "fig2.yaml"))
     namer = replay(load_campaign(FIG2_ADAPTIVE), CampaignStore(Path("/nonexistent"), "x")).namer
@@ -320,9 +321,10 @@ def theory(chi: float) -> float:
 
 @pytest.fixture(scope="module")
 def refined(tmp_path_factory):
-    """A refined Fig. A1 campaign at chi = 10, run to its end by `nematic run`."""
+    """A refined Fig. A1 campaign at chi = 10 with one seed, run to its end by `nematic
+    run`."""
     folder = tmp_path_factory.mktemp("refine")
-    path = a1(folder, "a1", "[10.0]", 2)
+    path = a1(folder, "a1", "[10.0]", 1, initial=1)
     results = folder / "results"
     result = invoke("run", path, "--results", results, "--no-dashboard")
     return path, results, result
@@ -332,8 +334,8 @@ def test_refinement_converges_to_the_linear_stability_boundary(refined):
     path, results, result = refined
     assert result.exit_code == 0, result.output
     out = flat(result.output)
-    assert "round 1: 2 runs: 1 new point(s)" in out
-    assert "boundary: eps 0 (0/2 patterned) | 0.2 (2/2 patterned)" in out
+    assert "round 1: 1 runs: 1 new point(s)" in out
+    assert "boundary: eps 0 (0/1 patterned) | 0.2 (1/1 patterned)" in out
     assert "refinement finished after round 3" in out
     eps_c = theory(10.0)
     assert 0.1 < eps_c < 0.125  # 0.1071: the closed form of docs/stability.md
@@ -344,12 +346,15 @@ def test_refinement_converges_to_the_linear_stability_boundary(refined):
     assert lo <= eps_c <= hi
     assert hi - lo <= 0.025 + 1e-12  # the smallest spacing
     assert np.allclose(phase.eps.values, [0.0, 0.1, 0.125, 0.15, 0.2, 0.4])
-    assert phase.seed_count.values.tolist() == [[2, 2, 2, 2, 2, 2]]
+    assert phase.seed_count.values.tolist() == [[1, 1, 1, 1, 1, 1]]
     assert phase.refine_round.values.tolist() == [[0, 1, 3, 2, 0, 0]]
-    assert phase.attrs["refine_finished"] == 1 and phase.attrs["n_ok"] == 12
+    assert phase.attrs["refine_finished"] == 1
+    assert phase.attrs["n_ok"] == 6
     plan = read_plan(CampaignStore(results, "a1"))
-    assert plan is not None and plan["finished"] and plan["n_runs"] == 12
-    assert [r["n_runs"] for r in plan["rounds"]] == [6, 2, 2, 2]
+    assert plan is not None
+    assert plan["finished"]
+    assert plan["n_runs"] == 6
+    assert [r["n_runs"] for r in plan["rounds"]] == [3, 1, 1, 1]
 
 
 def test_status_and_aggregate_of_a_refined_campaign(refined):
@@ -357,13 +362,14 @@ def test_status_and_aggregate_of_a_refined_campaign(refined):
     result = invoke("status", path, "--results", results)
     assert result.exit_code == 0, result.output
     out = flat(result.output)
-    assert "12 done, 0 failed, 0 pending of 12" in out
-    assert "round 0: 6 runs (3 new point(s), 0 with more seeds); done" in out
-    assert "round 3: 2 runs (1 new point(s), 0 with more seeds); done" in out
+    assert "6 done, 0 failed, 0 pending of 6" in out
+    assert "round 0: 3 runs (3 new point(s), 0 with more seeds); done" in out
+    assert "round 3: 1 runs (1 new point(s), 0 with more seeds); done" in out
     assert "finished: converged" in out
     result = invoke("status", path, "--results", results, "--json")
     data = json.loads(result.output)
-    assert data["done"] == 12 and [r["pending"] for r in data["refine"]["rounds"]] == [0] * 4
+    assert data["done"] == 6
+    assert [r["pending"] for r in data["refine"]["rounds"]] == [0] * 4
     before = xr.load_dataset(results / "a1" / "phase.nc")
     result = invoke("aggregate", path, "--results", results)
     assert result.exit_code == 0, result.output
@@ -404,12 +410,14 @@ def test_a_killed_driver_resumes_to_the_same_plan_and_seeds_stop_where_they_agre
     finally:
         kill_group(proc)
     at_kill = read_plan(store)
-    assert at_kill is not None and not at_kill["finished"]
+    assert at_kill is not None
+    assert not at_kill["finished"]
 
     result = invoke("run", path, "--results", results, "--no-dashboard")
     assert result.exit_code == 0, result.output
     final = read_plan(store)
-    assert final is not None and final["finished"]
+    assert final is not None
+    assert final["finished"]
 
     def runs(plan):
         return [[(r["run_id"], r["why"]) for r in rnd["runs"]] for rnd in plan["rounds"]]

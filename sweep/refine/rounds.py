@@ -210,7 +210,8 @@ class Refinement:
 
     def to_dict(self) -> dict[str, Any]:
         """The plan file's content (the why of every run, its status and outcome)."""
-        assert self.campaign.refine is not None and self.namer is not None
+        assert self.campaign.refine is not None
+        assert self.namer is not None
         rounds = []
         for rnd in self.rounds:
             runs = []

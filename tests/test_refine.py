@@ -175,6 +175,14 @@ refine:
 """
 
 
+def test_a_refinement_that_may_exceed_max_runs_is_refused():
+    text = LINE_CAMPAIGN.replace("seeds: 4", "seeds: 4\nlimits: {max_runs: 200}")
+    found = problems(text)
+    assert len(found) == 1, found
+    assert "refine.min_spacing" in found[0]
+    assert "may reach 264 runs; allowed: at most 200 (limits.max_runs)" in found[0]
+
+
 def simulate(campaign, outcome) -> list:
     """Rounds of ``campaign`` with ``outcome(line, x, seed)`` in place of runs."""
     rounds = [first_round(campaign)]

@@ -221,9 +221,20 @@ def check_refine(c: _Checker, raw: Any, dims: Sequence[Dim],
 
     if len(c.problems) > before or not isinstance(axis, str):
         return None
-    return RefineSpec(
+    spec = RefineSpec(
         axis=axis, observable=observable, source=sources[observable], criterion=criterion,
         patterned_above=None if patterned is None else float(patterned),
         fraction=(float(fraction[0]), float(fraction[1])), jump=float(jump),
         rounds=int(rounds), min_spacing=float(spacing), initial=int(initial), add=int(add),
         max_width=float(width), confidence=float(confidence))
+    # the union grid phase.nc holds (and the most runs) is bounded like a grid
+    from .plan import points_bound
+
+    lines = math.prod(len(d) for d in dims if d.name != axis)
+    bound = lines * points_bound(values, spec) * n_seeds
+    if bound > c.max_runs:
+        c.add((*path, "min_spacing"), f"got {spacing!r}: the refined grid may reach {bound} "
+              f"runs; allowed: at most {c.max_runs} (limits.max_runs): a larger smallest "
+              "spacing, fewer rounds or a smaller grid")
+        return None
+    return spec

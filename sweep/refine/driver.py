@@ -27,7 +27,8 @@ log = logging.getLogger(__name__)
 
 
 def _merge(total: RunSummary, part: RunSummary) -> None:
-    total.total += part.total - part.skipped
+    """Add one round's summary to the session's."""
+    total.total = part.total
     total.submitted += part.submitted
     total.ok += part.ok
     total.failed.extend(part.failed)
@@ -56,6 +57,9 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
     announced = -1
     stuck_at: tuple[int, int] | None = None
     retry = retry_failed
+    assert campaign.refine is not None
+    say(f"campaign {campaign.name}: adaptive, refining {campaign.refine.axis} in rounds -> "
+        f"{store.root}")
     with contextlib.ExitStack() as stack:
         force = None
         try:
@@ -95,12 +99,9 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                         events.dashboard(dashboard_link(force.client))
                 summary = run_campaign(runs, store, force, plan, events)
                 if total is None:
-                    total = RunSummary(total=len(runs), skipped=summary.skipped,
+                    total = RunSummary(total=0, skipped=summary.skipped,
                                        failed_before=summary.failed_before)
-                    _merge(total, summary)
-                    total.total = summary.total
-                else:
-                    _merge(total, summary)
+                _merge(total, summary)
                 if summary.interrupted or summary.storage_error or summary.lost:
                     break
         except KeyboardInterrupt:  # while the cluster was starting or closing

@@ -221,14 +221,21 @@ def run_bound(campaign: Campaign) -> int:
     """An upper bound on the campaign's runs: every cell of the grid split to the smallest
     spacing (or as far as the rounds go) and every point run with every seed."""
     spec = _spec(campaign)
-    xs = sorted(campaign.dims[refined_dim(campaign)].axes[0].values)
-    per_line = len(xs)
+    xs = campaign.dims[refined_dim(campaign)].axes[0].values
+    return len(lines(campaign)) * points_bound(xs, spec) * len(campaign.seeds)
+
+
+def points_bound(values: Sequence[float], spec: RefineSpec) -> int:
+    """The most points one line can have: its grid values and every midpoint the rounds can
+    add down to the smallest spacing."""
+    xs = sorted(float(v) for v in values)
+    total = len(xs)
     for a, b in zip(xs, xs[1:], strict=False):
         depth = 0
         while depth < spec.rounds and (b - a) / 2 ** (depth + 1) >= spec.min_spacing * (1 - 1e-9):
             depth += 1
-        per_line += 2 ** depth - 1
-    return len(lines(campaign)) * per_line * len(campaign.seeds)
+        total += 2 ** depth - 1
+    return total
 
 
 def _spec(campaign: Campaign) -> RefineSpec:

@@ -254,6 +254,42 @@ def test_sequential_seeds_are_added_only_where_the_seeds_disagree():
     assert hi - lo > 0.6
 
 
+def test_failed_runs_are_run_but_not_classified():
+    c = parse_campaign(LINE_CAMPAIGN, "p.yaml")
+    nan = math.nan
+    # chi = 10: eps = 0.2 failed for both seeds; its neighbours 0.1 (stable) and 0.3
+    # (unstable) make the boundary cell; nothing is split around the failed point itself
+    outcomes = {((1,), x): {0: v, 1: v} for x, v in
+                ((0.0, -1.0), (0.1, -1.0), (0.2, nan), (0.3, 1.0), (0.4, 1.0))}
+    nxt = next_round(c, 1, outcomes)
+    # the cell 0.1-0.3 has its midpoint 0.2 already: no new point, and a failed point gets
+    # no seeds (it is not uncertain: nothing was classified)
+    assert nxt.runs == ()
+    outcomes[((1,), 0.2)] = {0: nan, 1: 1.0}  # one seed failed, one unstable: 1/1
+    nxt = next_round(c, 1, outcomes)
+    assert {(r.x, r.seed) for r in nxt.runs} == {(0.15, 0), (0.15, 1), (0.2, 2), (0.2, 3)}
+    assert next(r.why for r in nxt.runs if r.x == 0.2) == (
+        "uncertain: 1/1 patterned, interval 0.73 wider than 0.6")
+
+
+def test_the_jump_criterion_splits_where_the_geometric_mean_jumps():
+    text = LINE_CAMPAIGN.replace("patterned_above: 0.0\n  observable: growth",
+                                 "criterion: jump\n  jump: 10\n  observable: sigma2_S")
+    c = parse_campaign(text, "p.yaml")
+    assert c.refine is not None
+    assert c.refine.criterion == "jump"
+    sig = {0.0: 1e-12, 0.1: 2e-12, 0.2: 1e-3, 0.3: 2e-3, 0.4: 3e-3}
+    outcomes = {((0,), x): {0: v, 1: v * 1.1} for x, v in sig.items()}
+    nxt = next_round(c, 1, outcomes)
+    assert {(r.x, r.seed) for r in nxt.runs} == {(0.15, 0), (0.15, 1)}
+    assert "log10 mean" in nxt.runs[0].why
+    # seeds a decade and more apart at a point: uncertain (max_width 0.6 decades)
+    outcomes[((0,), 0.4)] = {0: 1e-3, 1: 1e-1}
+    nxt = next_round(c, 1, outcomes)
+    assert {(r.x, r.seed) for r in nxt.runs if r.why.startswith("uncertain")} == {
+        (0.4, 2), (0.4, 3)}
+
+
 def test_the_run_bound_holds_for_any_outcomes():
     c = parse_campaign(LINE_CAMPAIGN, "p.yaml")
     bound = run_bound(c)
@@ -390,6 +426,13 @@ def test_status_and_aggregate_of_a_refined_campaign(refined):
     assert "run(s) in" not in result.output
 
 
+def test_the_refined_phase_file_passes_the_cf_checker(refined, tmp_path):
+    from test_cf_files import _checker_messages
+
+    _, results, _ = refined
+    assert _checker_messages(results / "a1" / "phase.nc", tmp_path) == []
+
+
 @pytest.mark.slow
 def test_a_killed_driver_resumes_to_the_same_plan_and_seeds_stop_where_they_agree(tmp_path):
     """`nematic run` killed (SIGKILL) in round 1, resumed: the plan equals the replay of the
@@ -420,6 +463,10 @@ def test_a_killed_driver_resumes_to_the_same_plan_and_seeds_stop_where_they_agre
     at_kill = read_plan(store)
     assert at_kill is not None
     assert not at_kill["finished"]
+    status = invoke("status", path, "--results", results)
+    assert status.exit_code == 0, status.output
+    assert "in progress" in flat(status.output)
+    assert "pending" in flat(status.output)
 
     result = invoke("run", path, "--results", results, "--no-dashboard")
     assert result.exit_code == 0, result.output

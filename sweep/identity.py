@@ -30,6 +30,19 @@ from .spec import SIGNIFICANT_DIGITS
 
 SCHEMA_VERSION = 1
 ID_LENGTH = 16
+#: Numerics fields that change nothing while early stop is off (``steady_tol = 0``): left
+#: out of the canonical text then, so a run keeps the id it had before they existed.
+EARLY_STOP = ("steady_tol", "steady_window")
+
+
+def identity_numerics(numerics: Mapping[str, Any]) -> dict[str, Any]:
+    """The numerics as they enter the canonical text: without the early-stop fields while
+    early stop is off."""
+    out = dict(numerics)
+    if not out.get("steady_tol"):
+        for name in EARLY_STOP:
+            out.pop(name, None)
+    return out
 
 
 def canonical_value(value: Any) -> Any:
@@ -64,7 +77,7 @@ def canonical_json(parameters: Mapping[str, Any], numerics: Mapping[str, Any],
     """The canonical text that is hashed. The mappings are taken as given: pass complete
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`."""
     return _dumps({
-        "numerics": canonical_value(dict(numerics)),
+        "numerics": canonical_value(identity_numerics(numerics)),
         "parameters": canonical_value(dict(parameters)),
         "schema": SCHEMA_VERSION,
         "seed": canonical_value(int(seed)),
@@ -96,7 +109,7 @@ class PointHasher:
 
     def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
         head = _dumps({
-            "numerics": canonical_value(dict(numerics)),
+            "numerics": canonical_value(identity_numerics(numerics)),
             "parameters": canonical_value(dict(parameters)),
             "schema": SCHEMA_VERSION,
         })

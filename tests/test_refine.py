@@ -259,7 +259,7 @@ def test_failed_runs_are_run_but_not_classified():
     nan = math.nan
     # chi = 10: eps = 0.2 failed for both seeds; its neighbours 0.1 (stable) and 0.3
     # (unstable) make the boundary cell; nothing is split around the failed point itself
-    outcomes = {((1,), x): {0: v, 1: v} for x, v in
+    outcomes: dict = {((1,), x): {0: v, 1: v} for x, v in
                 ((0.0, -1.0), (0.1, -1.0), (0.2, nan), (0.3, 1.0), (0.4, 1.0))}
     nxt = next_round(c, 1, outcomes)
     # the cell 0.1-0.3 has its midpoint 0.2 already: no new point, and a failed point gets
@@ -279,7 +279,7 @@ def test_the_jump_criterion_splits_where_the_geometric_mean_jumps():
     assert c.refine is not None
     assert c.refine.criterion == "jump"
     sig = {0.0: 1e-12, 0.1: 2e-12, 0.2: 1e-3, 0.3: 2e-3, 0.4: 3e-3}
-    outcomes = {((0,), x): {0: v, 1: v * 1.1} for x, v in sig.items()}
+    outcomes: dict = {((0,), x): {0: v, 1: v * 1.1} for x, v in sig.items()}
     nxt = next_round(c, 1, outcomes)
     assert {(r.x, r.seed) for r in nxt.runs} == {(0.15, 0), (0.15, 1)}
     assert "log10 mean" in nxt.runs[0].why

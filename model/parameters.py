@@ -184,6 +184,12 @@ class Numerics:
         backend: "compiled" (the Krylov solves and the linear right-hand side as compiled
             functions with native FFTW, where FFTW loads) or "numpy" (their readable
             reference); results agree to rounding.
+        steady_tol: early stop (0, the default: off): at a save time t, the run ends when
+            sigma2_S and mean_S each changed by at most this fraction of the larger of their
+            two values between t - ``steady_window`` and t (the saved values; a relaxing run,
+            whose sigma2_S decays geometrically, never counts as steady).
+        steady_window: the time span of that comparison (units of tau; with steady_tol > 0
+            at least save_every and below t_final).
     """
 
     resolution: int = 128
@@ -203,6 +209,8 @@ class Numerics:
     max_newton: int = 30
     spin_tol: float = 1e-2
     backend: str = "compiled"
+    steady_tol: float = 0.0
+    steady_window: float = 50.0
 
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:
@@ -224,6 +232,15 @@ class Numerics:
                      "spin_tol"):
             if number(name) <= 0:
                 raise ParameterError(name, getattr(self, name), "a number > 0")
+        if number("steady_tol") < 0:
+            raise ParameterError("steady_tol", self.steady_tol, "a number >= 0 (0: no early "
+                                 "stop)")
+        if number("steady_window") <= 0:
+            raise ParameterError("steady_window", self.steady_window, "a number > 0")
+        if self.steady_tol > 0 and not self.save_every <= self.steady_window < self.t_final:
+            raise ParameterError(
+                "steady_window", self.steady_window, f"at least save_every "
+                f"({self.save_every}) and below t_final ({self.t_final}) when steady_tol > 0")
         if number("max_newton", integer=True) < 1:
             raise ParameterError("max_newton", self.max_newton, "an integer >= 1")
         if self.error_norm not in ERROR_NORMS:

@@ -8,6 +8,11 @@ literal rule, the smallest well-posedness margin, wall time) and, as attributes,
 (``param_<name>``), every numerics field (``num_<name>``), the seed, the code version, the git
 commit and the status. A run that fails (J <= 0, no convergence, NaN, ...) does not raise: it
 returns what it computed up to the failure with ``status = "failed"`` and the ``reason``.
+
+Early stop (numerics ``steady_tol > 0``; off by default): the run ends at the first save time
+where the observables are steady (:func:`steady`); it is ok, its series and snapshots end
+there (the fields at that time are stored), the scalars ``stopped_early`` (1) and
+``t_stopped`` say so, and the ``*_final`` scalars are the values at ``t_stopped``.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import logging
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -23,6 +29,7 @@ import numpy as np
 import xarray as xr
 from pde.solvers import Controller
 from pde.trackers import CallbackTracker
+from pde.trackers.base import FinishedSimulation
 
 from . import __version__
 from . import tensors as T
@@ -97,8 +104,38 @@ SCALARS = {
                             "(the paper's literal rule), in units of L", "1"),
     "rate_margin_min": ("smallest well-posedness margin of the rate problem over the run",
                         "1"),
+    "stopped_early": ("1 if the run ended before t_final because sigma2_S and mean_S were "
+                      "steady (numerics steady_tol, steady_window), else 0; the *_final "
+                      "values are then those at t_stopped", "1"),
+    "t_stopped": ("time the run ended early (steady observables); NaN if it ran to t_final, "
+                  "in units of tau", "1"),
     "wall_time": ("wall-clock time of the run", "s"),
 }
+#: Observables whose steadiness ends a run early (numerics steady_tol > 0).
+STEADY = ("sigma2_S", "mean_S")
+
+
+def steady(rows: list[dict[str, float]], numerics: Numerics) -> bool:
+    """Whether the run may end at the last saved row: early stop is on, the row is before
+    t_final and every :data:`STEADY` observable changed by at most ``steady_tol`` of the
+    larger of its two values since the last saved row at least ``steady_window`` earlier."""
+    tol, window = numerics.steady_tol, numerics.steady_window
+    if tol <= 0 or not rows:
+        return False
+    now = rows[-1]
+    t = now["time"]
+    if t >= numerics.t_final - 1e-9 * numerics.t_final or t < window - 1e-9:
+        return False
+    before = [r for r in rows if r["time"] <= t - window + 1e-9 * max(window, 1.0)]
+    if not before:
+        return False
+    then = before[-1]
+    for name in STEADY:
+        a, b = then[name], now[name]
+        if not (math.isfinite(a) and math.isfinite(b)) or abs(b - a) > tol * max(abs(a),
+                                                                                abs(b)):
+            return False
+    return True
 
 
 def _attr(value: Any) -> Any:
@@ -134,6 +171,7 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
                                            12)}
     rows: list[dict[str, float]] = []
     snaps: list[tuple[float, np.ndarray]] = []
+    stopped = [math.nan]  # the time the run ended early
 
     def record(st, t: float) -> None:
         d = st.data
@@ -146,7 +184,8 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
         obs["time"] = float(t)
         obs["steps"] = float(solver.stats["steps"])
         rows.append(obs)
-        if float(np.round(t, 12)) in snap_set:
+        stop = steady(rows, numerics)
+        if stop or float(np.round(t, 12)) in snap_set:  # an early end stores its fields
             u = grid.inverse(mech.u_hat)
             C = T.matmul(T.transpose(mech.F), mech.F)
             I1bar = T.trace(C) / T.det(mech.F)
@@ -154,6 +193,9 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
         # every transform of a save counts as the save's (the parts are disjoint)
         eq.mechanics.fft_parts.update(parts)
         eq.mechanics.fft_parts["saves"] += grid.fft.count - count
+        if stop:
+            stopped[0] = float(t)
+            raise FinishedSimulation("steady")
 
     if progress is not None:
         solver.on_step = lambda t, h: progress(min(t / numerics.t_final, 1.0))
@@ -172,12 +214,12 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
     wall = time.perf_counter() - wall0
     return _to_dataset(rows, snaps, grid.x, params, numerics, seed, solver,
                        status=status, reason=reason, detail=detail, t_failed=t_failed,
-                       wall=wall)
+                       wall=wall, t_stopped=stopped[0])
 
 
 def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: int,
                 solver: ETDSolver, *, status: str, reason: str, detail: str,
-                t_failed: float, wall: float) -> xr.Dataset:
+                t_failed: float, wall: float, t_stopped: float = math.nan) -> xr.Dataset:
     t = np.array([r["time"] for r in rows], dtype=float)
     data_vars: dict[str, Any] = {}
     for name in (*SERIES, "steps"):
@@ -216,6 +258,8 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     margin = min(solver.margin_min, float(np.nanmin(rates)) if np.any(np.isfinite(rates))
                  else np.inf)
     scalars["rate_margin_min"] = margin if np.isfinite(margin) else float("nan")
+    scalars["stopped_early"] = float(math.isfinite(t_stopped))
+    scalars["t_stopped"] = t_stopped
     scalars["wall_time"] = wall
     for name, value in scalars.items():
         long_name, units = SCALARS[name]

@@ -221,7 +221,12 @@ def write_phase(expansion: Expansion, store: CampaignStore,
     """Build and atomically write ``results/<name>/phase.nc``; return the Dataset."""
     if records is None:
         records = store.scan()
-    ds = build_phase(expansion, records, store)
+    if getattr(expansion, "refinement", None) is not None:  # an adaptive campaign's rounds
+        from .refine.rounds import refined_phase
+
+        ds = refined_phase(expansion, records, store)  # type: ignore[arg-type]
+    else:
+        ds = build_phase(expansion, records, store)
     store.root.mkdir(parents=True, exist_ok=True)
     # text variables as classic char arrays (read back as str), not netCDF-4 vlen strings,
     # which older CF checkers (cfchecks, CF <= 1.8) reject

@@ -254,6 +254,11 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
                  else ", ".join(p.name for p in c.figures) or "none")
         console.print("  fits: " + (", ".join(p.name for p in c.fits) or "none")
                       + "; figures: " + shown)
+    if c.refine is not None:  # an adaptive campaign: its first round and a bound (sweep/refine)
+        from .refine.report import validation_lines
+
+        for line in validation_lines(c):
+            console.print(f"  {line}", markup=False)
 
 
 # --------------------------------------------------------------------------- run
@@ -327,6 +332,7 @@ class _ProgressEvents:
         self.console.print(f"workers ready in {seconds:.0f} s ({what})", soft_wrap=True)
 
     def started(self, plan: Any, total: int, workers: int) -> None:
+        self.ok = self.failed = 0  # per call: a refined campaign runs one call per round
         self.skipped = len(plan.done) + len(plan.failed)
         self.total = total
         self.workers = max(1, workers)
@@ -460,8 +466,17 @@ def run(
         try:
             with _sigterm_as_interrupt(), progress:
                 try:
-                    plan, summary = drive(expansion, store, retry_failed=retry_failed,
-                                          verify=verify, events=events, dashboard=dashboard)
+                    if c.refine is None:
+                        plan, summary = drive(expansion, store, retry_failed=retry_failed,
+                                              verify=verify, events=events,
+                                              dashboard=dashboard)
+                    else:  # an adaptive campaign: rounds planned from the results
+                        from .refine.driver import drive_rounds
+
+                        plan, summary, expansion = drive_rounds(
+                            c, store, retry_failed=retry_failed, verify=verify, events=events,
+                            dashboard=dashboard,
+                            say=lambda line: say.print(line, markup=False))
                 finally:
                     events.close()
         except (ClusterError, StoreError) as e:
@@ -542,8 +557,8 @@ def repair_products(campaign: Campaign, results: Path, console: Console, *,
     recompute it), each with a message. Returns whether ``fits.nc`` was removed. Raises
     :class:`CampaignLocked` if a driver holds the campaign while phase.nc must be rebuilt."""
     from .aggregate import write_phase
-    from .expand import expand
     from .fits import FITS
+    from .refine.rounds import expansion_for
     from .store import CampaignStore, netcdf_problem
 
     store = CampaignStore(results, campaign.name)
@@ -555,7 +570,7 @@ def repair_products(campaign: Campaign, results: Path, console: Console, *,
             lock = store.lock()
             lock.acquire(command=" ".join(sys.argv))
             try:
-                write_phase(expand(campaign), store)
+                write_phase(expansion_for(campaign, store), store)
             finally:
                 lock.release()
     fits_path = store.root / FITS
@@ -601,7 +616,7 @@ def status(
     Counts are given overall and per sweep value. Only the run records are read (no netCDF),
     so it answers in seconds for 10^5 runs, also while the campaign runs.
     """
-    from .expand import expand
+    from .refine.rounds import expansion_for
     from .status import campaign_status
     from .store import CampaignStore
 
@@ -609,9 +624,13 @@ def status(
     _setup_logging(_err_console(), verbose, quiet)
     c = _load(_err_console(), campaign, set_, seeds, name)
     store = CampaignStore(results, c.name)
-    report = campaign_status(expand(c), store, workers=workers)
+    expansion = expansion_for(c, store)
+    report = campaign_status(expansion, store, workers=workers)
+    refinement = getattr(expansion, "refinement", None)  # an adaptive campaign's rounds
     if as_json:
-        typer.echo(json.dumps(report.to_dict(), default=str))
+        from .refine.rounds import status_dict
+
+        typer.echo(json.dumps({**report.to_dict(), **status_dict(refinement)}, default=str))
         return
     pct = 100.0 * report.done / max(report.total, 1)
     console.print(f"campaign [bold]{report.campaign}[/] ({report.folder}): "
@@ -619,6 +638,11 @@ def status(
                   f"{report.pending} pending of {report.total} ({pct:.0f}% done)")
     if quiet:
         return
+    if refinement is not None:
+        from .refine.report import status_lines
+
+        for line in status_lines(refinement):
+            console.print(line, markup=False)
     if report.running:
         console.print(f"running: pid {report.running.get('pid')} on "
                       f"{report.running.get('host')} since {report.running.get('started')}")
@@ -673,7 +697,7 @@ def aggregate_cmd(
     driver aggregates when it ends).
     """
     from .aggregate import write_phase
-    from .expand import expand
+    from .refine.rounds import expansion_for
     from .store import CampaignStore
 
     err = _err_console()
@@ -688,7 +712,7 @@ def aggregate_cmd(
     try:
         lock.acquire(command=" ".join(sys.argv))
         try:
-            ds = write_phase(expand(c), store)
+            ds = write_phase(expansion_for(c, store), store)
         finally:
             lock.release()
     except (CampaignLocked, StoreError) as e:

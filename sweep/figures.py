@@ -646,6 +646,19 @@ def _anisotropy_panel(ax: Axes, res: Results, ds: xr.Dataset, axes: Sequence[str
 
 
 # --------------------------------------------------------------------------- figA1
+def _ran(phase: xr.Dataset, act: str, strain: str, shape: tuple[int, ...]) -> np.ndarray:
+    """Whether any seed was run at each (activity, strain) point (from phase.nc's
+    ``seed_count`` where a refined campaign wrote it; every point otherwise)."""
+    if "seed_count" not in phase:
+        return np.ones(shape, dtype=bool)
+    try:
+        count = F.with_dim(F.with_dim(phase, act), strain)["seed_count"]
+        ran = (count > 0).transpose(act, strain).values
+    except (KeyError, ValueError, F.FitError):
+        return np.ones(shape, dtype=bool)
+    return ran if ran.shape == shape else np.ones(shape, dtype=bool)
+
+
 def figA1(res: Results, options: Mapping[str, Any]) -> Figure:
     """Paper Fig. A1 (module docstring)."""
     from matplotlib.figure import Figure
@@ -666,7 +679,10 @@ def figA1(res: Results, options: Mapping[str, Any]) -> Figure:
     stable = frac == 0
     unstable = frac == 1
     mixed = (frac > 0) & (frac < 1)
-    unknown = ~np.isfinite(frac)
+    # "no data": points whose runs are missing or unclassified; points where no seed was
+    # planned (a refined campaign's phase.nc: its axis is the union of every value run) are
+    # left blank
+    unknown = ~np.isfinite(frac) & _ran(res.phase, act, strain, frac.shape)
     ax.scatter(A[stable], E[stable], s=30, facecolors="none", edgecolors="tab:blue", lw=1.1,
                label="stable", zorder=3)
     ax.scatter(A[unstable], E[unstable], s=30, color="tab:red", label="unstable", zorder=3)

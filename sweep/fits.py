@@ -83,7 +83,8 @@ Registered fits (:data:`REGISTRY`; a campaign lists them under ``fits:``, option
     when it failed with a reason in ``unstable_reasons`` (default ``spin_diverged``, the
     linear model losing well-posedness in the patterned state); the fraction of unstable seeds
     per (activity, strain) point; the simulated critical strain per activity (first strain
-    with a majority of unstable seeds; interval from the grid) and the theory
+    with a majority of unstable seeds; interval from the grid: down to the strain before it
+    that has classified runs) and the theory
     (:func:`model.stability.critical_eps_closed_form`, docs/stability.md Eq. (S10), and the
     paper's Eq. (6) as printed) on the grid and on a fine activity axis ``activity_fine``.
 
@@ -1042,7 +1043,10 @@ def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None =
         if hit.size:
             j = int(hit[0])
             eps_hi[i] = e[order][j]
-            eps_lo[i] = e[order][j - 1] if j > 0 else e[order][j]
+            # the last strain below it that has classified runs (a refined campaign's
+            # phase.nc has strains that were not run at every activity)
+            below = np.nonzero(np.isfinite(f[:j]))[0]
+            eps_lo[i] = e[order][below[-1]] if below.size else e[order][j]
             eps_sim[i] = 0.5 * (eps_lo[i] + eps_hi[i])
     incompressible = bool(options.get("incompressible",
                                       int(ds.attrs.get("num_incompressible", 0))))

@@ -31,6 +31,22 @@ from .spec import SIGNIFICANT_DIGITS
 
 SCHEMA_VERSION = 1
 ID_LENGTH = 16
+#: Numerics fields that change nothing while early stop is off (``steady_tol = 0``): left
+#: out of the canonical text then, so a run keeps the id it had before they existed.
+EARLY_STOP = ("steady_tol", "steady_window")
+#: Numerics fields that choose how a run is executed, not what it computes (the backends
+#: agree to rounding): recorded in the run file, never part of the identity.
+EXECUTION_ONLY = ("backend",)
+
+
+def identity_numerics(numerics: Mapping[str, Any]) -> dict[str, Any]:
+    """The numerics as they enter the canonical text: without the execution-only fields, and
+    without the early-stop fields while early stop is off."""
+    out = {k: v for k, v in numerics.items() if k not in EXECUTION_ONLY}
+    if not out.get("steady_tol"):
+        for name in EARLY_STOP:
+            out.pop(name, None)
+    return out
 
 
 def canonical_value(value: Any) -> Any:
@@ -56,15 +72,6 @@ def canonical_value(value: Any) -> Any:
     raise TypeError(f"cannot canonicalise {value!r} of type {type(value).__name__}")
 
 
-#: numerics that choose how a run is executed, not what it computes (results agree to
-#: rounding): recorded in the run file, not part of the identity
-EXECUTION_ONLY = ("backend",)
-
-
-def _identity_numerics(numerics: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in numerics.items() if k not in EXECUTION_ONLY}
-
-
 def _dumps(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
 
@@ -74,7 +81,7 @@ def canonical_json(parameters: Mapping[str, Any], numerics: Mapping[str, Any],
     """The canonical text that is hashed. The mappings are taken as given: pass complete
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`."""
     return _dumps({
-        "numerics": canonical_value(_identity_numerics(numerics)),
+        "numerics": canonical_value(identity_numerics(numerics)),
         "parameters": canonical_value(dict(parameters)),
         "schema": SCHEMA_VERSION,
         "seed": canonical_value(int(seed)),
@@ -106,7 +113,7 @@ class PointHasher:
 
     def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
         head = _dumps({
-            "numerics": canonical_value(_identity_numerics(numerics)),
+            "numerics": canonical_value(identity_numerics(numerics)),
             "parameters": canonical_value(dict(parameters)),
             "schema": SCHEMA_VERSION,
         })

@@ -41,7 +41,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -51,10 +51,13 @@ from model.parameters import Numerics, Parameters
 from .errors import CampaignError, Problem
 from .limits import DEFAULT_MAX_RUNS, max_local_workers, parse_size
 
+if TYPE_CHECKING:
+    from .refine.config import RefineSpec
+
 log = logging.getLogger(__name__)
 
 TOP_KEYS = ("name", "description", "parameters", "numerics", "sweep", "seeds", "store", "fits",
-            "figures", "execution", "limits")
+            "figures", "execution", "limits", "refine")
 LIMITS_KEYS = ("max_runs", "run_memory")
 #: Largest campaign file read (bytes), and most YAML nodes after aliases are expanded: a
 #: file of anchors that refer to anchors (a "billion laughs") is refused before it is built.
@@ -229,6 +232,8 @@ class Campaign:
     source: str = "<string>"
     text: str = ""
     overrides: tuple[str, ...] = ()
+    #: the ``refine:`` section (an adaptive campaign: sweep/refine), or ``None``
+    refine: RefineSpec | None = None
 
     @property
     def axes(self) -> tuple[Axis, ...]:
@@ -1003,10 +1008,14 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     figures = (None if doc.get("figures") is None
                else _check_products(c, doc.get("figures"), "figures"))
     execution = _check_execution(c, doc.get("execution"))
+    from .refine.config import check_refine  # local import: sweep.refine imports this module
+
+    refine = check_refine(c, doc.get("refine"), dims, seeds)
     campaign = Campaign(
         name=name, description=description, parameters=params, numerics=numerics,
         dims=dims, seeds=seeds, store=store, fits=fits, figures=figures, execution=execution,
         limits=limits, source=source, text=text, overrides=overrides.describe(),
+        refine=refine,
     )
     # Sizes first, by arithmetic: nothing below is built for a grid that is too large.
     before_bounds = len(c.problems)

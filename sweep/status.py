@@ -84,9 +84,10 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     finished: list[tuple[str, str]] = []  # (finish time, host:pid)
     unreadable: list[dict[str, str]] = []
     n_unreadable = 0
+    planned = getattr(expansion, "planned", None)  # a refined campaign: its planned runs
     for i, rid in enumerate(expansion.run_ids):
         rec = records.get(rid)
-        if rec is None:
+        if rec is None or (planned is not None and not planned[i]):
             continue
         problem = store.check_run_file(rid, rec)
         if problem is not None:  # the driver will redo it: pending
@@ -112,6 +113,9 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
                                  "t_failed": rec.get("t_failed")})
         if rec.get("finished"):
             finished.append((str(rec["finished"]), f"{rec.get('host')}:{rec.get('pid')}"))
+    if planned is not None:
+        state[~planned] = 3
+        n = int(planned.sum())
     done, failed = int((state == 0).sum()), int((state == 1).sum())
     pending = n - done - failed
 

@@ -52,7 +52,7 @@ def test_the_numba_cache_is_named_by_the_compiled_sources(tmp_path, monkeypatch)
     here = compiled.cache_dir()
     assert here.name == f"numba-{compiled.source_digest()}"
     if not __import__("os").environ.get("NUMBA_CACHE_DIR"):
-        assert str(here) == numba.config.CACHE_DIR
+        assert str(here) == numba.config.CACHE_DIR  # type: ignore[attr-defined]
     copy = tmp_path / "compiled"
     shutil.copytree(Path(compiled.__file__).parent, copy,
                     ignore=shutil.ignore_patterns("__pycache__"))

@@ -1,0 +1,14 @@
+"""Adaptive campaigns: a campaign's ``refine:`` section refines one sweep axis where the
+outcome changes and adds seeds where it is uncertain, in rounds planned from the run
+records on disk.
+
+- :mod:`sweep.refine.config`: the ``refine:`` section (:class:`RefineSpec`) and its check.
+- :mod:`sweep.refine.plan`: the pure planning (the first round; the next round from the
+  outcomes of the runs so far; the upper bound on the run count).
+- :mod:`sweep.refine.rounds`: the outcomes read from the results folder, the replay of the
+  rounds from them (:func:`replay`), the plan file ``refine.json`` and the expansions the
+  rest of :mod:`sweep` runs, counts and aggregates.
+- :mod:`sweep.refine.driver`: ``nematic run`` of a refined campaign (run a round, plan the
+  next, until no cell is left to refine or the rounds are used).
+- :mod:`sweep.refine.report`: the text ``validate`` and ``status`` print.
+"""

@@ -1,0 +1,127 @@
+"""``nematic run`` of a refined campaign: rounds of runs on one dask cluster.
+
+The loop (:func:`drive_rounds`): replay the rounds from the folder
+(:func:`sweep.refine.rounds.replay`), record the plan (``refine.json``) and print a new
+round's plan; stop when the replay says the campaign is finished; else run the planned runs
+that are not done (:func:`sweep.execute.plan_runs` and :func:`~sweep.execute.run_campaign`,
+as for a grid) and go round again. Every decision is taken by the replay from the files, so
+an interrupted or killed driver resumes to the same plan.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from ..errors import StoreError
+from ..execute import REMOTE_TMP_AGE, Plan, RunSummary, dashboard_link, plan_runs, run_campaign
+from ..spec import Campaign
+from ..store import CampaignStore
+from ..workforce import open_cluster
+from .report import round_lines
+from .rounds import RefinedExpansion, Refinement, replay, write_plan
+
+log = logging.getLogger(__name__)
+
+
+def _merge(total: RunSummary, part: RunSummary) -> None:
+    """Add one round's summary to the session's."""
+    total.total = part.total
+    total.submitted += part.submitted
+    total.ok += part.ok
+    total.failed.extend(part.failed)
+    total.lost.extend(part.lost)
+    total.unsaved.extend(part.unsaved)
+    total.storage_error = total.storage_error or part.storage_error
+    total.interrupted = total.interrupted or part.interrupted
+    total.wall_time += part.wall_time
+    total.run_time += part.run_time
+
+
+def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = False,
+                 verify: bool = False, events: Any = None, dashboard: bool = False,
+                 say: Callable[[str], None] = print
+                 ) -> tuple[Plan, RunSummary | None, RefinedExpansion]:
+    """Run a refined campaign to its end (or to an interruption) while holding its lock.
+
+    Returns the plan of what was on disk when it started (for the failures found there), the
+    summary of the runs done by this call (``None`` if none was to do) and the union grid of
+    the rounds for ``phase.nc``. ``say`` prints each round's plan."""
+    local = campaign.execution.mode == "local"
+    store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
+    store.save_campaign_text(campaign.text, campaign.overrides)
+    total: RunSummary | None = None
+    first: Plan | None = None
+    announced = -1
+    stuck_at: tuple[int, int] | None = None
+    retry = retry_failed
+    assert campaign.refine is not None
+    say(f"campaign {campaign.name}: adaptive, refining {campaign.refine.axis} in rounds -> "
+        f"{store.root}")
+    with contextlib.ExitStack() as stack:
+        force = None
+        try:
+            while True:
+                ref = replay(campaign, store)
+                _record(store, ref)
+                if ref.current.number > announced:
+                    for number in range(announced + 1, ref.current.number + 1):
+                        for line in round_lines(ref, number):
+                            say(line)
+                    announced = ref.current.number
+                if ref.finished:
+                    say(f"refinement finished after round {ref.current.number}: {ref.stop}; "
+                        f"{ref.n_runs} runs")
+                    break
+                runs = ref.run_list()
+                plan = plan_runs(runs, store, retry_failed=retry, verify=verify)
+                retry = verify = False
+                if first is None:
+                    first = plan
+                if not plan.todo:
+                    # every planned run is on disk: the replay plans the next round; if it
+                    # does not move on, the files changed under the driver
+                    where = (ref.current.number, len(ref.pending))
+                    if where == stuck_at:
+                        raise StoreError(f"round {where[0]} of {campaign.name}: "
+                                         f"{where[1]} run(s) stay unfinished although their "
+                                         "records are on disk; check the folder "
+                                         f"{store.root} (nematic status)")
+                    stuck_at = where
+                    continue
+                stuck_at = None
+                if force is None:
+                    force = stack.enter_context(open_cluster(
+                        campaign.execution, dashboard=dashboard, campaign_dir=store.root))
+                    if dashboard and events is not None and hasattr(events, "dashboard"):
+                        events.dashboard(dashboard_link(force.client))
+                summary = run_campaign(runs, store, force, plan, events)
+                if total is None:
+                    total = RunSummary(total=0, skipped=summary.skipped,
+                                       failed_before=summary.failed_before)
+                _merge(total, summary)
+                if summary.interrupted or summary.storage_error or summary.lost:
+                    break
+        except KeyboardInterrupt:  # while the cluster was starting or closing
+            if total is None:
+                total = RunSummary(total=0, skipped=0)
+            total.interrupted = True
+        finally:
+            if local and force is not None:
+                stack.close()  # the local workers are gone: clean what they left
+                store.clean_temporaries()
+    store.scan()
+    final = replay(campaign, store)
+    with contextlib.suppress(StoreError):
+        _record(store, final)
+    if first is None:
+        first = Plan(todo=[], done=[], failed=[], records={})
+    return first, total, final.expansion()
+
+
+def _record(store: CampaignStore, ref: Refinement) -> None:
+    write_plan(store, ref)
+    log.info("refine: round %d, %d runs planned, %d pending", ref.current.number, ref.n_runs,
+             len(ref.pending))

@@ -1,0 +1,385 @@
+"""A refined campaign's rounds, replayed from the results folder.
+
+:func:`replay` rebuilds every round from the files: round 0 is the grid; while every run
+planned so far has finished (a record whose file is intact), the next round is planned from
+their outcomes (:func:`sweep.refine.plan.next_round`). It stops at the first round with
+runs still to do, when a round plans nothing (converged) or when the rounds are used. So a
+killed driver resumes to the same plan, and two machines with the same run files make the
+same plan: the plan file ``refine.json`` records it (written atomically by the driver) but
+is never read back to decide anything.
+
+Runs keep the campaign's identity (:mod:`sweep.identity`): a refined point is a grid point
+of a campaign whose refined axis holds it, so a refined value equal to a value of another
+campaign's grid is the same run (the same file).
+
+The expansions the rest of :mod:`sweep` works on: :class:`RunList` (the planned runs, for
+:func:`sweep.execute.run_campaign`) and :class:`RefinedExpansion` (the grid whose refined
+axis is the sorted union of every value run, with a mask of the planned runs, for
+``phase.nc`` and ``nematic status``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..expand import Expansion, GridPoint, RunSpec, make_point
+from ..identity import PointHasher
+from ..spec import Axis, Campaign, Dim
+from ..store import RETRYABLE_REASONS, CampaignStore, Record, atomic_write_text, dumps
+from .plan import (
+    Line,
+    Point,
+    Round,
+    first_round,
+    next_round,
+    points_of,
+    refined_dim,
+    run_bound,
+)
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+log = logging.getLogger(__name__)
+
+#: The plan file in the results folder.
+PLAN_FILE = "refine.json"
+PLAN_VERSION = 1
+RunKey = tuple[Line, float, int]
+
+
+# --------------------------------------------------------------------------- outcomes
+def run_growth(path: Any) -> float:
+    """log10 sigma2_S(t_final) / sigma2_S(t_final / 2) of a run file (NaN if it cannot be
+    read or has fewer than two saved times): the stability fit's criterion (Fig. A1)."""
+    import xarray as xr
+
+    from ..store import series_time
+
+    try:
+        with xr.open_dataset(path, engine="netcdf4") as run:
+            t = series_time(run).values.astype(float)
+            s = run["sigma2_S"].values.astype(float)
+    except (OSError, KeyError, ValueError) as e:
+        log.warning("refine: cannot read %s (%s)", path, e)
+        return math.nan
+    if t.size < 2:
+        return math.nan
+    half = int(np.argmin(np.abs(t - 0.5 * t[-1])))
+    if half == t.size - 1:
+        return math.nan
+    floor = 1e-300
+    return float(np.log10(max(s[-1], floor)) - np.log10(max(s[half], floor)))
+
+
+class Outcomes:
+    """The outcome of each run from the results folder: ``None`` while it has not finished
+    (no record, a file that is missing or damaged, a result that was not stored), NaN when
+    it failed or has no value, else the observable."""
+
+    def __init__(self, store: CampaignStore, source: str,
+                 records: Mapping[str, Record] | None = None):
+        self.store = store
+        self.source = source
+        self.records = store.scan() if records is None else records
+        self._growth: dict[tuple[str, Any], float] = {}
+
+    def __call__(self, run_id: str) -> float | None:
+        rec = self.records.get(run_id)
+        if rec is None or not self.store.is_complete(run_id, rec):
+            return None
+        if rec.get("status") != "ok":
+            return None if rec.get("reason") in RETRYABLE_REASONS else math.nan
+        if self.source == "growth":
+            key = (run_id, rec.get("nc_sha256"))
+            if key not in self._growth:
+                self._growth[key] = run_growth(self.store.nc_path(run_id))
+            return self._growth[key]
+        value = (rec.get("scalars") or {}).get(self.source)
+        try:
+            return math.nan if value is None else float(value)
+        except (TypeError, ValueError):
+            return math.nan
+
+
+class RunNamer:
+    """Coordinates, model objects and run_ids of points (line, x) of a refined campaign."""
+
+    def __init__(self, campaign: Campaign):
+        self.campaign = campaign
+        self.k = refined_dim(campaign)
+        self.axis = campaign.dims[self.k].name
+        self._others = [d for i, d in enumerate(campaign.dims) if i != self.k]
+        self._points: dict[Point, tuple[GridPoint, PointHasher]] = {}
+
+    def coords(self, line: Line, x: float) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        it = iter(line)
+        for i, d in enumerate(self.campaign.dims):
+            if i == self.k:
+                out[self.axis] = x
+            else:
+                j = next(it)
+                for a in d.axes:
+                    out[a.name] = a.values[j]
+        return out
+
+    def point(self, line: Line, x: float) -> tuple[GridPoint, PointHasher]:
+        key = (line, x)
+        if key not in self._points:
+            index = (*line[:self.k], -1, *line[self.k:])
+            p = make_point(self.campaign, index, self.coords(line, x))
+            self._points[key] = (p, PointHasher(p.parameters.to_dict(), p.numerics.to_dict()))
+        return self._points[key]
+
+    def run_id(self, line: Line, x: float, seed: int) -> str:
+        return self.point(line, x)[1](seed)
+
+
+# --------------------------------------------------------------------------- replay
+@dataclass
+class Refinement:
+    """The rounds of a refined campaign as the results folder gives them."""
+
+    campaign: Campaign
+    rounds: list[Round]
+    #: run -> its run_id, and its outcome (None: not finished)
+    run_ids: dict[RunKey, str]
+    outcomes: dict[RunKey, float | None]
+    #: no further round will be planned (converged, or the rounds are used)
+    finished: bool = False
+    #: why it finished ("converged: ...", "rounds used: ...") or ""
+    stop: str = ""
+    namer: RunNamer | None = field(default=None, repr=False)
+
+    @property
+    def current(self) -> Round:
+        return self.rounds[-1]
+
+    @property
+    def axis(self) -> str:
+        assert self.campaign.refine is not None
+        return self.campaign.refine.axis
+
+    def keys(self) -> Iterator[tuple[Round, RunKey]]:
+        for rnd in self.rounds:
+            for r in rnd.runs:
+                yield rnd, (r.line, r.x, r.seed)
+
+    @property
+    def n_runs(self) -> int:
+        return sum(len(r.runs) for r in self.rounds)
+
+    @property
+    def pending(self) -> list[RunKey]:
+        return [k for _, k in self.keys() if self.outcomes.get(k) is None]
+
+    def union_campaign(self) -> Campaign:
+        """The campaign whose refined axis holds the sorted union of every value run."""
+        k = refined_dim(self.campaign)
+        values = sorted({x for _, x in points_of(self.rounds)}
+                        | set(self.campaign.dims[k].axes[0].values))
+        dims = list(self.campaign.dims)
+        dims[k] = Dim(dims[k].name, (Axis(self.axis, tuple(values)),))
+        return dataclasses.replace(self.campaign, dims=tuple(dims))
+
+    def expansion(self) -> RefinedExpansion:
+        return RefinedExpansion(self)
+
+    def run_list(self) -> RunList:
+        """Every run planned so far, in plan order."""
+        dense = self.expansion()
+        ids = [self.run_ids[k] for _, k in self.keys()]
+        return RunList(dense.campaign, [dense.run(dense.position[rid]) for rid in ids])
+
+    def first_round_of(self) -> dict[Point, int]:
+        """The round in which each point was first run."""
+        out: dict[Point, int] = {}
+        for rnd in self.rounds:
+            for r in rnd.runs:
+                out.setdefault(r.point, rnd.number)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plan file's content (the why of every run, its status and outcome)."""
+        assert self.campaign.refine is not None
+        assert self.namer is not None
+        rounds = []
+        for rnd in self.rounds:
+            runs = []
+            for r in rnd.runs:
+                key = (r.line, r.x, r.seed)
+                value = self.outcomes.get(key)
+                runs.append({"coords": self.namer.coords(r.line, r.x), "seed": r.seed,
+                             "run_id": self.run_ids[key], "why": r.why,
+                             "state": "pending" if value is None else "done",
+                             "outcome": value})
+            rounds.append({"round": rnd.number, "n_runs": len(rnd.runs),
+                           "new_points": len(rnd.new_points),
+                           "seeded_points": len(rnd.seeded_points), "runs": runs})
+        return {"version": PLAN_VERSION, "campaign": self.campaign.name,
+                "refine": self.campaign.refine.to_dict(),
+                "seeds": list(self.campaign.seeds), "finished": self.finished,
+                "stop": self.stop, "n_runs": self.n_runs, "n_pending": len(self.pending),
+                "run_bound": run_bound(self.campaign), "rounds": rounds}
+
+
+def replay(campaign: Campaign, store: CampaignStore,
+           records: Mapping[str, Record] | None = None) -> Refinement:
+    """The rounds of ``campaign`` from the run records and files in ``store`` (see the
+    module docstring). A pure function of the folder's run files."""
+    spec = campaign.refine
+    if spec is None:
+        raise ValueError(f"campaign {campaign.name} has no refine: section")
+    namer = RunNamer(campaign)
+    outcome = Outcomes(store, spec.source, records)
+    ref = Refinement(campaign, [first_round(campaign)], {}, {}, namer=namer)
+    values: dict[Point, dict[int, float]] = {}
+    while True:
+        rnd = ref.current
+        missing = False
+        for r in rnd.runs:
+            key = (r.line, r.x, r.seed)
+            rid = ref.run_ids[key] = namer.run_id(r.line, r.x, r.seed)
+            value = ref.outcomes[key] = outcome(rid)
+            if value is None:
+                missing = True
+            else:
+                values.setdefault(r.point, {})[r.seed] = value
+        if missing:
+            return ref
+        if rnd.number >= spec.rounds:
+            ref.finished, ref.stop = True, f"rounds used ({spec.rounds} after the grid)"
+            return ref
+        nxt = next_round(campaign, rnd.number + 1, values)
+        if not nxt.runs:
+            ref.finished, ref.stop = True, ("converged: no boundary cell wider than twice "
+                                            "the smallest spacing, no uncertain point with "
+                                            "seeds left")
+            return ref
+        ref.rounds.append(nxt)
+
+
+def write_plan(store: CampaignStore, ref: Refinement) -> None:
+    """Write ``refine.json`` atomically."""
+    atomic_write_text(store.root / PLAN_FILE, dumps(ref.to_dict()) + "\n")
+
+
+def read_plan(store: CampaignStore) -> dict[str, Any] | None:
+    """The plan file as recorded (``None`` if absent or unreadable): for people and tests;
+    the driver replays the rounds from the run files instead."""
+    try:
+        data = json.loads((store.root / PLAN_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+# --------------------------------------------------------------------------- expansions
+class RunList(Expansion):
+    """The planned runs of a refined campaign as an :class:`~sweep.expand.Expansion` (what
+    :func:`sweep.execute.plan_runs` and :func:`~sweep.execute.run_campaign` take)."""
+
+    def __init__(self, campaign: Campaign, runs: list[RunSpec]):  # noqa: D107
+        self.campaign = campaign
+        self.seeds = campaign.seeds
+        self._runs = list(runs)
+        points: dict[int, GridPoint] = {}
+        for r in self._runs:
+            points.setdefault(id(r.point), r.point)
+        self.points = list(points.values())
+        self.run_ids = [r.run_id for r in self._runs]
+        self.position = {rid: i for i, rid in enumerate(self.run_ids)}
+
+    def __len__(self) -> int:
+        return len(self._runs)
+
+    def run(self, i: int) -> RunSpec:
+        return self._runs[i]
+
+
+class RefinedExpansion(Expansion):
+    """The grid of a refined campaign (its refined axis the sorted union of the values run)
+    with every seed; :attr:`planned` marks the runs of the plan. ``phase.nc`` holds only
+    the planned runs (NaN elsewhere) and ``nematic status`` counts only them."""
+
+    def __init__(self, refinement: Refinement):  # noqa: D107
+        super().__init__(refinement.union_campaign())
+        self.refinement = refinement
+        planned = set(refinement.run_ids.values())
+        self.planned = np.fromiter((rid in planned for rid in self.run_ids), dtype=bool,
+                                   count=len(self.run_ids))
+
+
+def refined_phase(expansion: RefinedExpansion, records: Mapping[str, Record],
+                  store: CampaignStore | None = None) -> xr.Dataset:
+    """phase.nc of a refined campaign: :func:`sweep.aggregate.build_phase` on the union grid
+    from the planned runs' records, with ``seed_count`` (seeds run at each point, ok or
+    failed; 0 where the point was not run) and ``refine_round`` (the round that first ran
+    the point; -1 where it was not run) over the sweep dims, and the plan's summary as
+    attributes (``refine_*``)."""
+    import xarray as xr
+
+    from ..aggregate import STATUS_MISSING, build_phase
+
+    ref = expansion.refinement
+    planned = {rid for rid, keep in zip(expansion.run_ids, expansion.planned, strict=True)
+               if keep}
+    ds = build_phase(expansion, {k: v for k, v in records.items() if k in planned}, store)
+    sweep_dims = [d.name for d in expansion.campaign.dims]
+    ran = ds["status"] != STATUS_MISSING
+    count = ran.sum("seed").astype(np.int32)
+    ds["seed_count"] = xr.Variable(sweep_dims, count.values, {
+        "long_name": "number of seeds run at the point (ok or failed); 0: the point was not "
+                     "run", "units": "1"})
+    first = ref.first_round_of()
+    namer = ref.namer
+    assert namer is not None
+    k = refined_dim(ref.campaign)
+    union = expansion.campaign.dims[k].axes[0].values
+    col = {x: i for i, x in enumerate(union)}
+    rounds = np.full(expansion.campaign.shape, -1, dtype=np.int32)
+    for (line, x), number in first.items():
+        index = (*line[:k], col[x], *line[k:])
+        rounds[index] = number
+    ds["refine_round"] = xr.Variable(sweep_dims, rounds, {
+        "long_name": "refinement round that first ran the point (0: the grid); -1: not run",
+        "units": "1"})
+    spec = ref.campaign.refine
+    assert spec is not None
+    ds.attrs.update({
+        "refine_axis": spec.axis, "refine_observable": spec.observable,
+        "refine_criterion": spec.criterion, "refine_rounds": len(ref.rounds),
+        "refine_finished": int(ref.finished), "refine_stop": ref.stop,
+        "refine_runs_planned": ref.n_runs, "refine_spec": json.dumps(spec.to_dict()),
+    })
+    return ds
+
+
+def expansion_for(campaign: Campaign, store: CampaignStore) -> Expansion:
+    """What ``status``, ``aggregate`` and the figures work on: the grid (``expand``), or
+    for a refined campaign the union grid of its rounds replayed from ``store``."""
+    from ..expand import expand
+
+    if campaign.refine is None:
+        return expand(campaign)
+    return replay(campaign, store).expansion()
+
+
+def status_dict(refinement: Refinement | None) -> dict[str, Any]:
+    """The rounds for ``nematic status --json`` (empty for a grid campaign)."""
+    if refinement is None:
+        return {}
+    plan = refinement.to_dict()
+    for rnd in plan["rounds"]:
+        rnd["pending"] = sum(1 for r in rnd["runs"] if r["state"] == "pending")
+        del rnd["runs"]
+    return {"refine": plan}

@@ -24,10 +24,11 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from .campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from .expand import Expansion
+from .files import atomic_to_netcdf
 from .provenance import code_version, git_commit, library_versions_text
-from .spec import AMB, NUMERICS_TYPES, PARAMETER_TYPES
-from .store import RETRYABLE_REASONS, CampaignStore, Record, atomic_to_netcdf, now_iso
+from .store import RETRYABLE_REASONS, CampaignStore, Record, now_iso
 
 log = logging.getLogger(__name__)
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from sweep.snapshot_plot import background, draw_snapshot, snapshot_figure
+from sweep.figures.snapshot import background, draw_snapshot, snapshot_figure
 
 
 def run_dataset(i1bar: np.ndarray) -> xr.Dataset:

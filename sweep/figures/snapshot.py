@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from .store import series_time
+from ..files import series_time
 
 #: |I1bar - 2| below this (or at least BACKGROUND_MAX) is shown times a power of ten.
 BACKGROUND_MIN, BACKGROUND_MAX = 1e-2, 1e3

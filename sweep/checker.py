@@ -26,14 +26,12 @@ def format_path(path: KeyPath) -> str:
     return out
 
 
-
 def suggest(name: str, valid: Sequence[str]) -> str:
     """``" (did you mean 'x'?)"`` for the closest valid name, or ``""``."""
     lowered = {v.lower(): v for v in valid}
     close = [lowered[name.lower()]] if name.lower() in lowered else []
     close = close or difflib.get_close_matches(name, list(valid), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ""
-
 
 
 class Checker:

@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 TMP_SUFFIX = ".tmp"
 
 
+# --------------------------------------------------------------------------- atomic writes
 def temporary_path(path: Path) -> Path:
     """A unique hidden name next to ``path`` (same filesystem, so the rename is atomic)."""
     return path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}{TMP_SUFFIX}")

@@ -34,16 +34,38 @@ NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 
 def read_limits(c: Checker, raw: Any, read: Mapping[str, Any]) -> LimitsSpec:
     """``limits:``; read first, as the checker's ``max_runs`` bounds the sections after it."""
-    limits = _check_limits(c, raw)
-    c.max_runs = limits.max_runs
-    return limits
+    lim = c.mapping(("limits",), raw, LIMITS_KEYS)
+    max_runs = lim.get("max_runs", DEFAULT_MAX_RUNS)
+    if not is_int(max_runs) or max_runs < 1:
+        c.bad(("limits", "max_runs"), max_runs, "an integer >= 1 (the most runs a campaign "
+              "may have)")
+        max_runs = DEFAULT_MAX_RUNS
+    memory = None
+    if lim.get("run_memory") is not None:
+        memory = parse_size(lim["run_memory"])
+        if memory is None:
+            c.bad(("limits", "run_memory"), lim["run_memory"], "a size such as '8GB' (the "
+                  "most memory one run may need)")
+    c.max_runs = int(max_runs)
+    return LimitsSpec(max_runs=int(max_runs), run_memory=memory)
 
 
 def read_name(c: Checker, raw: Any, read: Mapping[str, Any]) -> str:
-    return _check_name(c, raw, ("name",)) or "invalid"
+    """``name:`` (default: the file's stem); the results go to ``results/<name>/``."""
+    path: KeyPath = ("name",)
+    allowed = ("letters, digits, '.', '_' or '-', starting with a letter or digit, at most 100 "
+               "characters (the results go to results/<name>/)")
+    if raw is None:
+        c.add(path, f"missing; allowed: {allowed}")
+        return "invalid"
+    if not isinstance(raw, str) or not NAME_RE.match(raw) or ".." in raw:
+        c.bad(path, raw, allowed)
+        return "invalid"
+    return raw
 
 
 def read_description(c: Checker, raw: Any, read: Mapping[str, Any]) -> str:
+    """``description:``, free text."""
     description = raw or ""
     if not isinstance(description, str):
         c.bad(("description",), description, "a string")
@@ -67,36 +89,6 @@ def read_numerics(c: Checker, raw: Any, read: Mapping[str, Any]) -> dict[str, An
     return numerics
 
 
-def read_store(c: Checker, raw: Any, read: Mapping[str, Any]) -> StoreSpec:
-    """``store:``; its ``snapshot_times`` joins the base ``numerics`` read before it."""
-    return _check_store(c, raw, read["numerics"])
-
-
-def read_seeds(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[int, ...]:
-    return _check_seeds(c, raw)
-
-
-def read_fits(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Product, ...]:
-    return _check_products(c, raw, "fits")
-
-
-def read_figures(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Product, ...] | None:
-    """``figures:``; absent (or null): ``None``, every figure that applies; ``[]``: none."""
-    return None if raw is None else _check_products(c, raw, "figures")
-
-
-def _check_name(c: Checker, value: Any, path: KeyPath) -> str | None:
-    allowed = ("letters, digits, '.', '_' or '-', starting with a letter or digit, at most 100 "
-               "characters (the results go to results/<name>/)")
-    if value is None:
-        c.add(path, f"missing; allowed: {allowed}")
-        return None
-    if not isinstance(value, str) or not NAME_RE.match(value) or ".." in value:
-        c.bad(path, value, allowed)
-        return None
-    return value
-
-
 def _check_settings(c: Checker, raw: Any, section: str, types: Mapping[str, str],
                     other: Mapping[str, str], other_section: str) -> dict[str, Any]:
     if raw is None:
@@ -117,7 +109,36 @@ def _check_settings(c: Checker, raw: Any, section: str, types: Mapping[str, str]
     return out
 
 
-def _check_seeds(c: Checker, raw: Any) -> tuple[int, ...]:
+def read_store(c: Checker, raw: Any, read: Mapping[str, Any]) -> StoreSpec:
+    """``store:``; its ``snapshot_times`` joins the base ``numerics`` read before it."""
+    numerics = read["numerics"]
+    store = c.mapping(("store",), raw, STORE_KEYS)
+    if "snapshot_times" in store:
+        if "snapshot_times" in numerics:
+            c.add(("store", "snapshot_times"), "set in both 'store:' and 'numerics:'; keep one")
+        else:
+            numerics["snapshot_times"] = store["snapshot_times"]
+    fields: tuple[str, ...] | None = None
+    if "snapshot_fields" in store:
+        raw_fields = store["snapshot_fields"]
+        if not isinstance(raw_fields, Sequence) or isinstance(raw_fields, str):
+            c.bad(("store", "snapshot_fields"), raw_fields,
+                  "a list of field names from " + ", ".join(SNAPSHOT_FIELDS))
+        else:
+            for i, f in enumerate(raw_fields):
+                if f not in SNAPSHOT_FIELDS:
+                    c.bad(("store", "snapshot_fields", i), f, "one of "
+                          + ", ".join(SNAPSHOT_FIELDS) + suggest(str(f), SNAPSHOT_FIELDS))
+            fields = tuple(f for f in SNAPSHOT_FIELDS if f in raw_fields)
+    dtype = store.get("snapshot_dtype", "float64")
+    if dtype not in SNAPSHOT_DTYPES:
+        c.bad(("store", "snapshot_dtype"), dtype, " or ".join(SNAPSHOT_DTYPES))
+        dtype = "float64"
+    return StoreSpec(snapshot_fields=fields, snapshot_dtype=dtype)
+
+
+def read_seeds(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[int, ...]:
+    """``seeds:``: a count, a list, or ``{count: N, start: S}`` (default 50 seeds from 0)."""
     path: KeyPath = ("seeds",)
     if raw is None:
         return tuple(range(DEFAULT_SEEDS))
@@ -157,30 +178,14 @@ def _check_seeds(c: Checker, raw: Any) -> tuple[int, ...]:
     return ()
 
 
-def _check_store(c: Checker, raw: Any, numerics: dict[str, Any]) -> StoreSpec:
-    store = c.mapping(("store",), raw, STORE_KEYS)
-    if "snapshot_times" in store:
-        if "snapshot_times" in numerics:
-            c.add(("store", "snapshot_times"), "set in both 'store:' and 'numerics:'; keep one")
-        else:
-            numerics["snapshot_times"] = store["snapshot_times"]
-    fields: tuple[str, ...] | None = None
-    if "snapshot_fields" in store:
-        raw_fields = store["snapshot_fields"]
-        if not isinstance(raw_fields, Sequence) or isinstance(raw_fields, str):
-            c.bad(("store", "snapshot_fields"), raw_fields,
-                  "a list of field names from " + ", ".join(SNAPSHOT_FIELDS))
-        else:
-            for i, f in enumerate(raw_fields):
-                if f not in SNAPSHOT_FIELDS:
-                    c.bad(("store", "snapshot_fields", i), f, "one of "
-                          + ", ".join(SNAPSHOT_FIELDS) + suggest(str(f), SNAPSHOT_FIELDS))
-            fields = tuple(f for f in SNAPSHOT_FIELDS if f in raw_fields)
-    dtype = store.get("snapshot_dtype", "float64")
-    if dtype not in SNAPSHOT_DTYPES:
-        c.bad(("store", "snapshot_dtype"), dtype, " or ".join(SNAPSHOT_DTYPES))
-        dtype = "float64"
-    return StoreSpec(snapshot_fields=fields, snapshot_dtype=dtype)
+def read_fits(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Product, ...]:
+    """``fits:``: names of registered fits, or ``{name: {options}}``."""
+    return _check_products(c, raw, "fits")
+
+
+def read_figures(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Product, ...] | None:
+    """``figures:``; absent (or null): ``None``, every figure that applies; ``[]``: none."""
+    return None if raw is None else _check_products(c, raw, "figures")
 
 
 def _check_products(c: Checker, raw: Any, kind: str) -> tuple[Product, ...]:
@@ -209,22 +214,6 @@ def _check_products(c: Checker, raw: Any, kind: str) -> tuple[Product, ...]:
             continue
         out.append(Product(name, options))
     return tuple(out)
-
-
-def _check_limits(c: Checker, raw: Any) -> LimitsSpec:
-    lim = c.mapping(("limits",), raw, LIMITS_KEYS)
-    max_runs = lim.get("max_runs", DEFAULT_MAX_RUNS)
-    if not is_int(max_runs) or max_runs < 1:
-        c.bad(("limits", "max_runs"), max_runs, "an integer >= 1 (the most runs a campaign "
-              "may have)")
-        max_runs = DEFAULT_MAX_RUNS
-    memory = None
-    if lim.get("run_memory") is not None:
-        memory = parse_size(lim["run_memory"])
-        if memory is None:
-            c.bad(("limits", "run_memory"), lim["run_memory"], "a size such as '8GB' (the "
-                  "most memory one run may need)")
-    return LimitsSpec(max_runs=int(max_runs), run_memory=memory)
 
 
 #: Options of fits and figures that name a sweep axis, and those that map axes to values.

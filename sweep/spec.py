@@ -28,8 +28,8 @@ key path, the value and what is allowed (with the closest valid name for unknown
 raised together as one :class:`~sweep.errors.CampaignError` before anything runs.
 
 Each top-level section has one reader (:data:`SECTIONS`, in the order they are read); a new
-section is a reader function, a row of that table and a field of
-:class:`~sweep.campaign.Campaign`.
+section is a reader function, a row of that table, its key in :data:`TOP_KEYS` and a field
+of :class:`~sweep.campaign.Campaign`.
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ from .sections import (
 from .sweep_section import read_sweep
 from .yaml_input import read_document
 
+#: The top-level keys, in the order error messages list them.
 TOP_KEYS = ("name", "description", "parameters", "numerics", "sweep", "seeds", "store", "fits",
             "figures", "execution", "limits")
 
@@ -243,7 +244,6 @@ def run_memory_limit(campaign: Campaign) -> tuple[int | None, str]:
     return per, f"one local worker's share of this machine's memory ({workers} worker(s))"
 
 
-
 def _check_memory(c: Checker, campaign: Campaign) -> None:
     """Refuse a grid whose largest run needs more memory than a worker has (estimated from
     the resolution and the mechanics: :func:`sweep.limits.run_memory_bytes`)."""
@@ -262,7 +262,7 @@ def _check_memory(c: Checker, campaign: Campaign) -> None:
             need = run_memory_bytes(int(n), str(mech))
             if need > limit:
                 path: KeyPath = (("sweep", "axes", "resolution") if "resolution" in axes
-                               else ("numerics", "resolution"))
+                                 else ("numerics", "resolution"))
                 c.add(path, f"got {n}: one run ({mech} mechanics) needs about "
                       f"{fmt_bytes(need)}, more than {what} allows ({fmt_bytes(limit)}); "
                       "allowed: a lower resolution, or more memory per run (limits.run_memory,"

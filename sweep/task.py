@@ -197,7 +197,7 @@ def execute_run(task: RunTask) -> Record:
             return _unsaved(task, e, ds, encoding, time.perf_counter() - t0)
         except Exception as e:  # noqa: BLE001 - a bug, not the storage: recorded as failed
             record = failure_record(task, "write_error", f"{type(e).__name__}: {e}",
-                              traceback.format_exc(), time.perf_counter() - t0)
+                                    traceback.format_exc(), time.perf_counter() - t0)
     record.update(parameters=task.parameters, numerics=task.numerics, coords=task.coords,
                   campaign=task.campaign, pid=os.getpid())
     try:

@@ -104,7 +104,6 @@ def _walk(node: yaml.Node, path: KeyPath, lines: dict[KeyPath, int], dups: list[
             _walk(item, (*path, i), lines, dups)
 
 
-
 def read_document(text: str, source: str) -> tuple[yaml.Node | None, Any, dict[KeyPath, int],
                                                    list[KeyPath]]:
     """``text`` parsed: its root node (``None`` for an empty document), the document, the line

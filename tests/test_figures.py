@@ -11,7 +11,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import xarray as xr
-from sweep.produce import draw, plan, produce, regenerate
 from typer.testing import CliRunner
 
 from sweep.aggregate import write_phase
@@ -20,6 +19,7 @@ from sweep.cli import app
 from sweep.cli.products import regenerate_figures
 from sweep.errors import FigureError
 from sweep.expand import expand
+from sweep.figures.produce import draw, plan, produce, regenerate
 from sweep.figures.registry import option_problems
 from sweep.spec import load_campaign, parse_campaign
 from sweep.store import CampaignStore
@@ -138,8 +138,8 @@ def test_fig2_and_fig3_render_and_fits_are_written(sizes):
 
 def test_fig2_options_pick_the_snapshot_and_the_other_dims(sizes):
     paths = draw("fig2", sizes.root, {"select": {"K": 1e-3}, "seed": 1, "curves": 2,
-                                              "snapshot": {"alpha_minus_B": 1.0, "seed": 1,
-                                                           "time": 1.5}, "yscale": "log"})
+                                      "snapshot": {"alpha_minus_B": 1.0, "seed": 1,
+                                                   "time": 1.5}, "yscale": "log"})
     assert_figure(paths, "fig2", sizes.root)
     with pytest.raises(FigureError, match="unknown option 'snapshots'"):
         draw("fig2", sizes.root, {"snapshots": []})

@@ -1,5 +1,5 @@
 """Fits recover known values from synthetic phase diagrams with noise, within their stated
-intervals (sweep/fits.py). Synthetic data are fine here: these test the estimators; the
+intervals (sweep/analysis/). Synthetic data are fine here: these test the estimators; the
 figures are tested on real runs in tests/test_figures.py."""
 
 from __future__ import annotations
@@ -255,7 +255,7 @@ def test_peak_check_with_swept_t_final_and_without_t_peak(rng):
     assert np.isnan(out["alpha_cr"].values[0])
     assert np.all(np.isfinite(out["alpha_cr"][1:]))
     assert fit_notes(out)[0].startswith(f"alpha_cr/scaling: {AMB.size * 3} of "
-                                             f"{lam.size} patterned run(s) left out")
+                                        f"{lam.size} patterned run(s) left out")
     blind = alpha_cr(ds.drop_vars("t_peak"), {"n_boot": 10})
     assert blind["alpha_cr"].attrs["fit_n_unpeaked"] == 0
     assert blind["alpha_cr"].attrs["fit_peak_check"] == "not done: phase.nc has no t_peak"
@@ -279,7 +279,7 @@ def test_alpha_cr_is_bounded_at_zero(rng, method):
     above 0, never below."""
     lam = acr_sizes(rng, -0.3)
     free = alpha_cr(size_phase(lam), {"method": method, "n_boot": 100,
-                                           "alpha_cr_min": None})
+                                      "alpha_cr_min": None})
     np.testing.assert_allclose(free["alpha_cr"].values, -0.3, atol=0.1)
     assert np.all(free["alpha_cr_upper"].values < 0)  # the data push it below zero
     np.testing.assert_array_equal(free["alpha_cr_at_bound"].values, 0)
@@ -296,7 +296,7 @@ def test_alpha_cr_is_bounded_at_zero(rng, method):
     assert np.isfinite(float(out["scaling_exponent"]))
     np.testing.assert_allclose(out["scaling_x"].values, K_TRUE[:, None] / AMB[None, :])
     assert fit_notes(out)[-1] == ("alpha_cr at its bound 0.0 for K = 1e-05, 3e-05, "
-                                       "0.0001, 0.0003 (the unbounded fit would put it lower)")
+                                  "0.0001, 0.0003 (the unbounded fit would put it lower)")
 
     zero = alpha_cr(size_phase(acr_sizes(rng, 0.0, n_seeds=10)),
                          {"method": method, "n_boot": 200})
@@ -334,7 +334,7 @@ def test_bounded_linear_fit_is_the_constrained_least_squares_optimum(rng):
     assert inside == free
     # nonlinear: no admissible alpha_cr when the bound is at or above the smallest alpha - B
     assert np.isnan(alpha_cr_from_sizes(amb, lam, 1e-4, method="nonlinear",
-                                             alpha_cr_min=0.5).alpha_cr)
+                                        alpha_cr_min=0.5).alpha_cr)
 
 
 # --------------------------------------------------------------------------- anisotropy
@@ -423,11 +423,11 @@ def test_option_problems_for_campaign_validation():
     assert any("unknown option 'axes'" in p for p in problems)
     assert any("n_boot = 0" in p for p in problems)
     problems = option_problems("scaling", {"alpha_cr_min": "zero", "require_peak": 1,
-                                                "peak_margin": -1})
+                                           "peak_margin": -1})
     assert any("alpha_cr_min = 'zero'" in p for p in problems)
     assert any("require_peak = 1" in p for p in problems)
     assert any("peak_margin = -1" in p for p in problems)
     assert option_problems("alpha_cr", {"alpha_cr_min": None, "require_peak": False,
-                                             "peak_margin": 0}) == []
+                                        "peak_margin": 0}) == []
     assert option_problems("nope", {}) == [
         "unknown fit 'nope'; registered: alpha_cr, anisotropy, scaling, stability, transition"]

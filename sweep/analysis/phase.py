@@ -106,7 +106,7 @@ def coord_copy(ds: xr.Dataset, dims: Sequence[str]) -> dict[str, xr.Variable]:
 
 
 def variable(dims: Sequence[str], data: Any, long_name: str, units: str = "1",
-         **attrs: Any) -> xr.Variable:
+             **attrs: Any) -> xr.Variable:
     return xr.Variable(tuple(dims), np.asarray(data), {"long_name": long_name, "units": units,
                                                        **attrs})
 

@@ -52,7 +52,6 @@ def patterned_level(sigma2: ArrayLike, *, min_gap: float = 2.0) -> float:
     return float(10 ** (0.5 * (lv[k] + lv[k + 1])))
 
 
-
 class AlphaCrFit(NamedTuple):
     """:func:`alpha_cr_from_sizes` for one K: the critical activity, the prefactor c and
     whether the bound ``alpha_cr >= alpha_cr_min`` is active (the unbounded optimum is
@@ -194,7 +193,6 @@ def peak_not_reached(t_peak: ArrayLike, t_final: ArrayLike, save_every: ArrayLik
         return np.isfinite(tp) & (tp >= tf - margin * se - 1e-9 * np.abs(tf))
 
 
-
 def _run_setting(ds: xr.Dataset, name: str) -> xr.DataArray | None:
     """A numerics setting of the runs (``t_final``, ``save_every``) over the phase diagram:
     the coordinate ``name`` when swept (a dim, a zipped coordinate, or a scalar left by
@@ -314,15 +312,15 @@ def _alpha_cr_vars(data: _SizeData, fit: SizeScaling, boot: Array, boot_at_bound
         "fit_alpha_cr_min": "none" if bound is None else bound,
         **data.peak_attrs}
     res["alpha_cr"] = variable(["K"], fit.alpha_cr, "critical activity alpha_cr from the pattern "
-                           "sizes (paper Eq. 7)", **attrs)
+                               "sizes (paper Eq. 7)", **attrs)
     res["alpha_cr_lower"] = variable(["K"], lo_hi[:, 0], "alpha_cr seed-bootstrap interval, "
-                                 "lower end")
+                                     "lower end")
     res["alpha_cr_upper"] = variable(["K"], lo_hi[:, 1], "alpha_cr seed-bootstrap interval, "
-                                 "upper end")
+                                     "upper end")
     res["alpha_cr_std"] = variable(["K"], finite_std(boot.T), "alpha_cr seed-bootstrap standard "
-                               "deviation")
+                                   "deviation")
     res["alpha_cr_prefactor"] = variable(["K"], fit.prefactor_K, "c in lambda = c (K / (alpha - B "
-                                     "- alpha_cr))^(1/2) at this K", "L")
+                                         "- alpha_cr))^(1/2) at this K", "L")
     res["alpha_cr_at_bound"] = variable(
         ["K"], fit.at_bound.astype(np.int8), "1 if alpha_cr is at its lower bound "
         "alpha_cr_min (the unbounded fit would put it below), 0 otherwise",
@@ -332,17 +330,17 @@ def _alpha_cr_vars(data: _SizeData, fit: SizeScaling, boot: Array, boot_at_bound
     with np.errstate(invalid="ignore", divide="ignore"):
         frac = np.where(finite > 0, boot_at_bound.sum(axis=0) / np.maximum(finite, 1), np.nan)
     res["alpha_cr_bound_fraction"] = variable(["K"], frac, "fraction of the bootstrap replicates "
-                                          "(with a fit) whose alpha_cr is at its lower bound")
+                                              "(with a fit) whose alpha_cr is at its lower bound")
     res["alpha_cr_n_points"] = variable(["K"], counts.astype(np.int32), "alpha - B values with a "
-                                    "pattern used in the fit")
+                                        "pattern used in the fit")
     res["alpha_cr_unpeaked_count"] = variable(
         ["K", AMB], data.unpeaked, "patterned runs left out of the alpha_cr and scaling fits "
         "because the first peak of sigma2_S(t) was not reached by t_final "
         f"({data.peak_attrs['fit_peak_check']})",
         fit_peak_check=data.peak_attrs["fit_peak_check"])
     res["alpha_cr_n_unpeaked"] = variable(["K"], data.unpeaked.sum(axis=1).astype(np.int32),
-                                      "patterned runs at this K left out of the fits: first "
-                                      "peak of sigma2_S(t) not reached by t_final")
+                                          "patterned runs at this K left out of the fits: first "
+                                          "peak of sigma2_S(t) not reached by t_final")
     return res
 
 
@@ -382,14 +380,14 @@ def _size_fit(phase: xr.Dataset, options: Mapping[str, Any], with_scaling: bool)
     dims2 = ["K", AMB]
     res["scaling_x"] = variable(dims2, fit.x, "K / (alpha - B - alpha_cr(K))")
     res["scaling_lambda_mean"] = variable(dims2, mean, "seed mean of the pattern size over the "
-                                      "patterned runs that reached their peak", "L")
+                                          "patterned runs that reached their peak", "L")
     res["scaling_lambda_std"] = variable(dims2, finite_std(lam), "seed standard deviation "
-                                     "(ddof = 1) of the pattern size over the patterned runs "
-                                     "that reached their peak", "L")
+                                         "(ddof = 1) of the pattern size over the patterned runs "
+                                         "that reached their peak", "L")
     res["scaling_lambda_count"] = variable(dims2, np.isfinite(lam).sum(-1).astype(np.int32),
-                                       "patterned runs that reached their peak at this point")
+                                           "patterned runs that reached their peak at this point")
     res["scaling_used"] = variable(dims2, fit.used.astype(np.int8), "1 if the point enters the "
-                               "exponent fit")
+                                   "exponent fit")
     lo, hi = percentiles(beta_b, conf)
     n_K = int(np.any(fit.used, axis=1).sum())
     attrs: dict[str, Any] = {
@@ -399,13 +397,13 @@ def _size_fit(phase: xr.Dataset, options: Mapping[str, Any], with_scaling: bool)
         "fit_n_alpha_cr_at_bound": int(fit.at_bound.sum()),
         **data.peak_attrs}
     res["scaling_exponent"] = variable([], fit.exponent, "exponent beta of lambda = c (K / (alpha"
-                                   " - B - alpha_cr))^beta (paper Eq. 7: 1/2)", **attrs)
+                                       " - B - alpha_cr))^beta (paper Eq. 7: 1/2)", **attrs)
     res["scaling_exponent_lower"] = variable([], lo, "scaling exponent, seed-bootstrap interval "
-                                         "lower end")
+                                             "lower end")
     res["scaling_exponent_upper"] = variable([], hi, "scaling exponent, seed-bootstrap interval "
-                                         "upper end")
+                                             "upper end")
     res["scaling_exponent_std"] = variable([], finite_std(beta_b[None, :])[0],
-                                       "scaling exponent, seed-bootstrap standard deviation")
+                                           "scaling exponent, seed-bootstrap standard deviation")
     res["scaling_prefactor"] = variable([], fit.prefactor, "prefactor c of the scaling fit", "L")
     if n_K < 2:
         log.warning("scaling: %d value(s) of K with a pattern; the exponent then mostly "

@@ -137,7 +137,7 @@ def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None =
             ours[k] = critical_eps_closed_form(p, incompressible=incompressible)
             paper[k] = paper_eq6(p)
         return np.where(np.isfinite(ours), ours, np.nan), np.where(np.isfinite(paper),
-                                                                     paper, np.nan)
+                                                                   paper, np.nan)
 
     th, th_paper = theory(a)
     fth, fth_paper = theory(fine)
@@ -156,26 +156,26 @@ def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None =
              "fit_incompressible": int(incompressible),
              "fit_mechanics": str(ds.attrs.get("num_mechanics", ""))}
     res["stability_growth"] = variable(dims, growth, "log10 sigma2_S(t_final) / "
-                                   "sigma2_S(t_final / 2) (decades)", "1")
+                                       "sigma2_S(t_final / 2) (decades)", "1")
     res["stability_unstable"] = variable(dims, unstable, "1 unstable, 0 stable, -1 unknown "
-                                     "(missing, or failed for another reason)", **attrs)
+                                         "(missing, or failed for another reason)", **attrs)
     res["stability_fraction_unstable"] = variable([act, strain], frac, "fraction of classified "
-                                              "seeds that are unstable")
+                                                  "seeds that are unstable")
     res["stability_eps_c_sim"] = variable([act], eps_sim, "simulated critical strain: midpoint "
-                                      "between the last stable and the first unstable strain",
-                                      fit_fraction=frac_needed)
+                                          "between the last stable and the first unstable strain",
+                                          fit_fraction=frac_needed)
     res["stability_eps_c_sim_lower"] = variable([act], eps_lo, "simulated critical strain, grid "
-                                            "interval lower end")
+                                                "interval lower end")
     res["stability_eps_c_sim_upper"] = variable([act], eps_hi, "simulated critical strain, grid "
-                                            "interval upper end")
+                                                "interval upper end")
     res["stability_eps_c_theory"] = variable([act], th, "critical strain of the linear stability "
-                                         "analysis (docs/stability.md Eq. S10); NaN: none")
+                                             "analysis (docs/stability.md Eq. S10); NaN: none")
     res["stability_eps_c_paper"] = variable([act], th_paper, "critical strain of paper Eq. (6) "
-                                        "as printed")
+                                            "as printed")
     res["stability_theory_fine"] = variable(["activity_fine"], fth, "critical strain of the linear "
-                                        "stability analysis on the fine activity axis")
+                                            "stability analysis on the fine activity axis")
     res["stability_paper_fine"] = variable(["activity_fine"], fth_paper, "paper Eq. (6) as printed "
-                                       "on the fine activity axis")
+                                           "on the fine activity axis")
     return res
 
 

@@ -73,7 +73,6 @@ def bootstrap_seed_means(values: ArrayLike, n_boot: int, rng: np.random.Generato
     return out.reshape(n_boot, *shape)
 
 
-
 def fit_line(x: ArrayLike, y: ArrayLike) -> tuple[float, float]:
     """Least-squares ``y = slope x + intercept`` over the finite pairs; NaN below 2 distinct x."""
     xa, ya = np.asarray(x, dtype=float), np.asarray(y, dtype=float)

@@ -1,5 +1,6 @@
 """The ``nematic`` application (typer) and what its commands share: error handling (every
 command is :func:`guarded`), the common options, logging, loading the campaign.
+
 Exit codes: :data:`EXIT_OK`, :data:`EXIT_FAILED_RUNS`, :data:`EXIT_BAD_INPUT`,
 :data:`EXIT_INTERRUPTED` (:mod:`sweep.cli`).
 """
@@ -48,7 +49,7 @@ def guarded(command: Callable[..., Any]) -> Callable[..., Any]:
                 raise
             code, text = _describe_error(e)
             err_console().print(f"[bold red]error:[/] {escape(text)} (--debug shows the "
-                                 "traceback)", soft_wrap=True, highlight=False, markup=True)
+                                "traceback)", soft_wrap=True, highlight=False, markup=True)
             raise typer.Exit(code) from None
 
     return wrapper
@@ -164,8 +165,8 @@ def _parse_seeds(text: str | None) -> int | list[int] | None:
 
 
 def load(console: Console, path: Path, settings: list[str] | None, seeds: str | None,
-          name: str | None, scheduler: str | None = None,
-          workers: int | None = None) -> Campaign:
+         name: str | None, scheduler: str | None = None,
+         workers: int | None = None) -> Campaign:
     try:
         overrides = Overrides(settings=parse_assignments(settings or []),
                               seeds=_parse_seeds(seeds), name=name, scheduler=scheduler,

@@ -42,6 +42,7 @@ from .products import regenerate_figures, repair_products
 from .progress import ProgressEvents
 
 
+# --------------------------------------------------------------------------- validate
 def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
              set_: SetOpt = None, seeds: SeedsOpt = None, name: NameOpt = None,
              verbose: VerboseOpt = False, quiet: QuietOpt = False) -> None:
@@ -74,6 +75,7 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
                       + "; figures: " + shown)
 
 
+# --------------------------------------------------------------------------- run
 def run(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),
@@ -212,6 +214,7 @@ def storage_message(store: Any, e: OSError) -> str:
     return str(storage_error(Path(e.filename) if e.filename else store.root, e))
 
 
+# --------------------------------------------------------------------------- status
 def status(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),

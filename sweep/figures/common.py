@@ -37,7 +37,6 @@ STYLE = {
 }
 
 
-
 # --------------------------------------------------------------------------- reading results
 class Results:
     """The results folder of one campaign, read-only: phase.nc, fits.nc and the run files."""
@@ -138,7 +137,7 @@ def default_select(ds: xr.Dataset, keep: Sequence[str], choice: Mapping[str, Any
 
 
 def safe_snapshot(ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool = True,
-                   arrows: int = 24) -> None:
+                  arrows: int = 24) -> None:
     """:func:`sweep.figures.snapshot.draw_snapshot` (without its title), tolerating a run without
     I1bar stored (then a plain background), with compact colour bars: S (quivers) on the
     right, I1bar (background) below."""
@@ -167,7 +166,6 @@ def safe_snapshot(ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool 
     if has_i1 and ax.images:
         background_colorbar(fig, ax.images[0], cax=ax.inset_axes((0.1, -0.09, 0.8, 0.04)),
                             orientation="horizontal")
-
 
 
 def invalid_options(name: str, options: Mapping[str, Any], allowed: Sequence[str]) -> list[str]:

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 FIG2_OPTIONS = ("select", "seed", "curves", "snapshot", "yscale")
 
-# --------------------------------------------------------------------------- fig2
+
 def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
     """Paper Fig. 2 (docs/campaigns.md)."""
     from matplotlib import colormaps
@@ -91,7 +91,7 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
     drawn_seed = None
     for rank, i in enumerate(picks):
         run, s = ok_run(res, ds.isel({AMB: int(i)}), seed_b if seed_b is not None
-                         else drawn_seed)
+                        else drawn_seed)
         if run is None:
             continue
         drawn_seed = s if drawn_seed is None else drawn_seed

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
 FIG3_OPTIONS: tuple[str, ...] = ()
 
-# --------------------------------------------------------------------------- fig3
+
 def fig3(res: Results, options: Mapping[str, Any]) -> Figure:
     """Paper Fig. 3 (docs/campaigns.md)."""
     from matplotlib import colormaps
@@ -116,7 +116,7 @@ def fig3(res: Results, options: Mapping[str, Any]) -> Figure:
             ins.plot(K[at_bound & okk], acr[at_bound & okk], "o", mfc="none", mec="tab:red",
                      ms=8, mew=1.2, label=f"at bound ({fmt(float(bound))})")
     if ("transition_location" in f and "K" in f["transition_location"].dims
-            and f["transition_location"].attrs.get("fit_axis", AMB) == AMB):
+        and f["transition_location"].attrs.get("fit_axis", AMB) == AMB):
         tl = f["transition_location"].sel(K=K, method="nearest").values
         tlo = f["transition_lower"].sel(K=K, method="nearest").values
         thi = f["transition_upper"].sel(K=K, method="nearest").values

@@ -40,7 +40,6 @@ FIG4_SNAPSHOTS: tuple[dict[str, float], ...] = (
 )
 
 
-# --------------------------------------------------------------------------- fig4
 def _activity(ds: xr.Dataset) -> tuple[str | None, float]:
     """The sweep dim that carries the activity chi (alpha - B) and its scale factor."""
     if is_swept(ds, "chi"):

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 
 FIGA1_OPTIONS: tuple[str, ...] = ()
 
-# --------------------------------------------------------------------------- figA1
+
 def figA1(res: Results, options: Mapping[str, Any]) -> Figure:
     """Paper Fig. A1 (docs/campaigns.md)."""
     from matplotlib.figure import Figure

@@ -20,6 +20,7 @@ KeyPath = tuple[str | int, ...]
 
 
 def format_path(path: KeyPath) -> str:
+    """``("sweep", "axes", "chi", 2)`` -> ``"sweep.axes.chi[2]"``."""
     out = ""
     for p in path:
         out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))

@@ -21,10 +21,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from sweep.execute import dask_client, plan_runs, run_campaign
+from sweep.execute import dask_client, run_campaign
 from sweep.expand import expand
-from sweep.spec import Overrides, load_campaign, parse_assignments
+from sweep.plan import plan_runs
+from sweep.spec import Overrides, load_campaign
 from sweep.store import CampaignStore
+from sweep.yaml_input import parse_assignments
 
 ROOT = Path(__file__).resolve().parent.parent
 

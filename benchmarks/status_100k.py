@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from sweep.expand import expand
+from sweep.files import dumps
 from sweep.spec import load_campaign
 from sweep.status import campaign_status
-from sweep.store import CampaignStore, dumps
+from sweep.store import CampaignStore
 
 CAMPAIGN = """\
 name: big

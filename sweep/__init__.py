@@ -1,20 +1,25 @@
 """The campaign manager: declarative YAML campaigns fanned out over dask, resumable on disk,
-aggregated into netCDF phase diagrams.
+aggregated into netCDF phase diagrams, fits and the paper's figures.
 
-Module map (imports go down this list, never up):
+Module map (docs/architecture.md has one line per module and the direction of imports):
 
-- :mod:`sweep.errors`     the exception hierarchy (bad input, locked campaign)
-- :mod:`sweep.spec`       campaign YAML -> validated :class:`~sweep.spec.Campaign`
+- :mod:`sweep.errors`, :mod:`sweep.limits`  the exceptions; bounds checked before anything runs
+- :mod:`sweep.campaign`   a validated campaign as frozen data, and the names it is checked against
+- :mod:`sweep.spec`       campaign YAML -> :class:`~sweep.campaign.Campaign` (with
+  :mod:`sweep.yaml_input`, :mod:`sweep.checker` and one reader per section:
+  :mod:`sweep.sections`, :mod:`sweep.sweep_section`, :mod:`sweep.execution_section`)
 - :mod:`sweep.identity`   run_id: hash of canonical parameters + seed + numerics + schema
 - :mod:`sweep.expand`     Campaign -> grid points and runs (with their run_ids)
-- :mod:`sweep.store`      results/<name>/: atomic run files, per-run records, manifest, lock
-- :mod:`sweep.execute`    the worker task and the dask driver (local, scheduler, jobqueue)
+- :mod:`sweep.files`, :mod:`sweep.store`  atomic files; results/<name>/: records, manifest, lock
+- :mod:`sweep.task`, :mod:`sweep.plan`, :mod:`sweep.execute`  the worker task, what remains to
+  do, the dask driver; :mod:`sweep.clusters`, :mod:`sweep.workforce` start and watch the cluster
 - :mod:`sweep.status`     done / failed / pending counts without opening the netCDF files
 - :mod:`sweep.aggregate`  results/<name>/phase.nc
+- :mod:`sweep.analysis`   the fits (fits.nc); :mod:`sweep.figures` the paper's figures
 - :mod:`sweep.provenance` code version and git commit
-- :mod:`sweep.cli`        the ``nematic`` program (typer; also ``python -m sweep``): parses
-  and calls; ``cli_simulate``, ``cli_stability``, ``cli_figures`` add their commands to it
+- :mod:`sweep.cli`        the ``nematic`` program (typer; also ``python -m sweep``)
 
 It knows the physics only through :class:`model.parameters.Parameters`,
-:class:`model.parameters.Numerics` and :func:`model.simulate.run`.
+:class:`model.parameters.Numerics`, :func:`model.simulate.run` and a few more entries
+(:mod:`model.stability`, :mod:`model.warmup`, :mod:`model.errors`).
 """

@@ -24,10 +24,11 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from .campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from .expand import Expansion
+from .files import atomic_to_netcdf
 from .provenance import code_version, git_commit, library_versions_text
-from .spec import AMB, NUMERICS_TYPES, PARAMETER_TYPES
-from .store import RETRYABLE_REASONS, CampaignStore, Record, atomic_to_netcdf, now_iso
+from .store import RETRYABLE_REASONS, CampaignStore, Record, now_iso
 
 log = logging.getLogger(__name__)
 
@@ -221,12 +222,9 @@ def write_phase(expansion: Expansion, store: CampaignStore,
     """Build and atomically write ``results/<name>/phase.nc``; return the Dataset."""
     if records is None:
         records = store.scan()
-    if getattr(expansion, "refinement", None) is not None:  # an adaptive campaign's rounds
-        from .refine.rounds import refined_phase
-
-        ds = refined_phase(expansion, records, store)  # type: ignore[arg-type]
-    else:
-        ds = build_phase(expansion, records, store)
+    # an adaptive campaign's expansion builds its own (sweep.refine.rounds.RefinedExpansion)
+    own = getattr(expansion, "build_phase", None)
+    ds = own(records, store) if own is not None else build_phase(expansion, records, store)
     store.root.mkdir(parents=True, exist_ok=True)
     # text variables as classic char arrays (read back as str), not netCDF-4 vlen strings,
     # which older CF checkers (cfchecks, CF <= 1.8) reject

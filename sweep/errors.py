@@ -1,6 +1,14 @@
 """The campaign manager's exceptions. They extend the model's hierarchy
 (:class:`model.errors.NematicError`), so a caller can catch everything this project raises
-on purpose with one class. Every message names the bad value, what is allowed and the fix."""
+on purpose with one class. Every message names the bad value, what is allowed and the fix.
+
+- :class:`CampaignError` an invalid campaign file or command-line override
+- :class:`CampaignLocked` another driver runs the campaign
+- :class:`StoreError` an unusable results folder; :class:`StorageError` a file that cannot
+  be written
+- :class:`ClusterError` no usable dask cluster
+- :class:`FitError`, :class:`FigureError` a fit or figure that these results cannot give
+"""
 
 from __future__ import annotations
 
@@ -52,3 +60,11 @@ class StorageError(StoreError):
 
 class ClusterError(NematicError, RuntimeError):
     """The dask cluster cannot be reached or its workers cannot run the model. Exit code 2."""
+
+
+class FitError(NematicError, ValueError):
+    """A fit cannot be done on this phase diagram (missing axis, bad option, no data)."""
+
+
+class FigureError(NematicError, ValueError):
+    """A figure cannot be drawn from these results (missing axis, fit or file; bad option)."""

@@ -11,16 +11,14 @@ import itertools
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, check_compatible
 
+from .campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES, Campaign
+from .checker import Checker
 from .identity import PointHasher
-from .spec import AMB, NUMERICS_TYPES, PARAMETER_TYPES, Campaign
-
-if TYPE_CHECKING:
-    from .spec import _Checker
 
 log = logging.getLogger(__name__)
 
@@ -80,7 +78,7 @@ def make_point(campaign: Campaign, index: tuple[int, ...], coords: dict[str, Any
     return point
 
 
-def check_points(campaign: Campaign, checker: _Checker) -> None:
+def check_points(campaign: Campaign, checker: Checker) -> None:
     """Build the model's objects at every grid point; report each distinct
     :class:`~model.errors.ParameterError` at the key path that caused it."""
     axis_names = {a.name for a in campaign.axes}

@@ -3,7 +3,7 @@ identity schema version (after signac's ``calc_id``).
 
 Canonical form (:func:`canonical_json`): the *complete* parameter and numerics dicts (the
 model's defaults filled in, ``alpha_minus_B`` resolved into ``alpha``), each value normalised
-(floats to :data:`~sweep.spec.SIGNIFICANT_DIGITS` significant digits and written as strings, so
+(floats to :data:`~sweep.campaign.SIGNIFICANT_DIGITS` significant digits and written as strings, so
 ``0.3`` and ``0.30000000000000004``, ``1e-5`` and ``0.00001``, ``1`` and ``1.0`` are one value;
 ``-0.0`` is ``0``), keys sorted, compact JSON. The id is the first :data:`ID_LENGTH` hex digits
 of its SHA-256.
@@ -27,7 +27,7 @@ import numpy as np
 
 from model.parameters import Numerics, Parameters
 
-from .spec import SIGNIFICANT_DIGITS
+from .campaign import SIGNIFICANT_DIGITS
 
 SCHEMA_VERSION = 1
 ID_LENGTH = 16

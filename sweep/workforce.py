@@ -1,11 +1,5 @@
-"""The driver's workers: starting the campaign's dask cluster and watching it while it runs.
-
-:func:`open_cluster` starts (or connects to) the cluster of a campaign's ``execution``
-section: an embedded ``LocalCluster``, an external scheduler or a dask-jobqueue cluster. A
-scheduler the driver starts itself uses TLS with temporary credentials made for this campaign
-(``distributed.Security.temporary()``; a batch job reads the worker's copy from files that
-only the campaign's owner can read, in ``<campaign>/tls``), unless ``execution.security``
-opts out with a stated reason, and serves its dashboard on 127.0.0.1 only.
+"""The driver's workers: watching the campaign's dask cluster while it runs (the cluster is
+started by :mod:`sweep.clusters`).
 
 :class:`Supervisor` is what the driver asks, every couple of seconds, while runs are in
 flight: it checks each worker that joins (it imports the model, its code version is the
@@ -24,16 +18,15 @@ import logging
 import math
 import os
 import re
-import signal
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .campaign import ClusterSpec, ExecutionSpec
 from .errors import ClusterError
-from .spec import CLUSTER_KINDS, ClusterSpec, ExecutionSpec
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -360,149 +353,3 @@ class Supervisor:
                                    f"{limit:g} s (execution.wait_for_workers){self._logs()}; "
                                    f"{hint}, or raise the wait (0 waits for ever)")
             time.sleep(0.5 if now - t0 < 5 else 1.0)
-
-
-# --------------------------------------------------------------------------- clusters
-def local_worker_count(execution: ExecutionSpec) -> int:
-    if execution.workers:
-        return execution.workers
-    n = os.cpu_count() or 1
-    return max(1, n // max(1, execution.threads_per_worker))
-
-
-def _security(execution: ExecutionSpec) -> Any:
-    if not execution.tls:
-        log.warning("the campaign's dask scheduler runs without TLS (execution.security: %s)",
-                    execution.insecure_reason)
-        return None
-    from distributed import Security
-
-    try:
-        return Security.temporary()
-    except ImportError as e:
-        raise ClusterError(f"TLS for the dask scheduler needs the 'cryptography' package "
-                           f"({e}); install it, or set execution.security: {{tls: false, "
-                           "reason: ...}") from None
-
-
-def private_dir(path: Path) -> Path:
-    """``path`` created if needed, readable by its owner only (0700)."""
-    path.mkdir(parents=True, exist_ok=True)
-    os.chmod(path, 0o700)
-    return path
-
-
-def jobqueue_options(spec: ClusterSpec, execution: ExecutionSpec,
-                     campaign_dir: Path | None) -> tuple[dict[str, Any], Path | None]:
-    """The keyword arguments of the dask-jobqueue class (security, the dashboard on
-    127.0.0.1, the job logs in the campaign's folder unless the YAML says otherwise) and the
-    job log folder."""
-    options = dict(spec.options)
-    if options.get("log_directory") is None and campaign_dir is not None:
-        options["log_directory"] = str(campaign_dir / JOB_LOGS)
-    logs = Path(os.path.expandvars(str(options["log_directory"]))).expanduser() \
-        if options.get("log_directory") else None
-    if logs is not None:
-        with contextlib.suppress(OSError):
-            logs.mkdir(parents=True, exist_ok=True)
-    scheduler_options = dict(options.get("scheduler_options") or {})
-    scheduler_options.setdefault("dashboard_address", "127.0.0.1:0")
-    options["scheduler_options"] = scheduler_options
-    security = _security(execution)
-    if security is not None:
-        options["security"] = security
-        if options.get("shared_temp_directory") is None:
-            if campaign_dir is None:
-                raise ClusterError("TLS credentials for the batch jobs need the campaign's "
-                                   "folder (or execution.cluster.shared_temp_directory)")
-            options["shared_temp_directory"] = str(private_dir(campaign_dir / TLS_DIR))
-    return options, logs
-
-
-def make_jobqueue(spec: ClusterSpec, options: dict[str, Any]) -> Any:
-    import dask_jobqueue
-
-    cls = getattr(dask_jobqueue, CLUSTER_KINDS[spec.kind])
-    try:
-        return cls(**options)
-    except (ValueError, TypeError, OSError, RuntimeError) as e:
-        raise ClusterError(f"cannot set up the {cls.__name__} of execution.cluster: "
-                           f"{e}") from None
-
-
-@contextlib.contextmanager
-def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: bool = False,
-                 campaign_dir: Path | None = None) -> Iterator[Workforce]:
-    """The campaign's cluster (closed on exit): an external scheduler, a dask-jobqueue
-    cluster (jobs submitted here; logs and TLS credentials in ``campaign_dir``) or a local
-    cluster (its dashboard on 127.0.0.1, a free port, if ``dashboard``)."""
-    from distributed import Client, LocalCluster
-
-    if execution.scheduler:
-        log.info("connecting to the dask scheduler at %s", execution.scheduler)
-        try:
-            client = Client(execution.scheduler, timeout=timeout)
-        except (OSError, ValueError, TypeError) as e:
-            raise ClusterError(f"cannot reach the dask scheduler at {execution.scheduler}: "
-                               f"{e}") from None
-        try:
-            yield Workforce(client, f"the dask scheduler at {execution.scheduler}")
-        finally:
-            if client.status != "running":  # the scheduler is gone: its reconnection
-                # attempts, cancelled by close(), are no news (nor are their tracebacks)
-                logging.getLogger("distributed.client").setLevel(logging.CRITICAL)
-            with contextlib.suppress(Exception):
-                client.close(timeout=10)
-        return
-    if execution.cluster is not None:
-        spec = execution.cluster
-        options, logs = jobqueue_options(spec, execution, campaign_dir)
-        cls_name = CLUSTER_KINDS[spec.kind]
-        log.info("starting a dask-jobqueue %s (job logs in %s)", cls_name, logs)
-        with make_jobqueue(spec, options) as cluster:
-            if spec.adapt:
-                # at least one job: the driver submits runs once a worker has passed the
-                # check, and dask's adaptive scaling starts jobs only for submitted runs
-                cluster.adapt(minimum_jobs=max(1, spec.adapt[0]), maximum_jobs=spec.adapt[1])
-            else:
-                cluster.scale(jobs=spec.jobs)
-            with Client(cluster) as client:
-                yield Workforce(client, f"the dask-jobqueue {cls_name}",
-                                JobWatch(cluster, spec, logs))
-        return
-    n = local_worker_count(execution)
-    log.info("starting a local dask cluster: %d worker process(es)", n)
-    kwargs: dict[str, Any] = {}
-    if execution.memory_limit:
-        kwargs["memory_limit"] = execution.memory_limit
-    security = _security(execution)
-    if security is not None:
-        kwargs.update(security=security, protocol="tls://")
-    with _workers_ignore_sigint():
-        cluster = LocalCluster(n_workers=n, threads_per_worker=execution.threads_per_worker,
-                               processes=True, host="127.0.0.1",
-                               # the scheduler's HTTP server (health, metrics; the dashboard
-                               # if asked for) on the loopback interface, a free port
-                               dashboard_address="127.0.0.1:0",
-                               scheduler_kwargs={"dashboard": dashboard},
-                               silence_logs=logging.ERROR, **kwargs)
-    with cluster, Client(cluster) as client:
-        yield Workforce(client, "the local dask cluster")
-
-
-@contextlib.contextmanager
-def _workers_ignore_sigint() -> Iterator[None]:
-    """Start local worker processes with SIGINT ignored (the disposition is inherited across
-    exec, and Python then installs no KeyboardInterrupt handler): a terminal's Ctrl-C reaches
-    the whole process group, but only the driver should react, by cancelling the runs and
-    closing the cluster cleanly."""
-    try:
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:  # not the main thread: leave signals alone
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-

@@ -16,11 +16,11 @@ from sweep_helpers import write_campaign
 
 from model.fourier import HAVE_FFTW
 from sweep.aggregate import write_phase
-from sweep.execute import RunTask, execute_run
+from sweep.analysis.fits_file import write_fits
 from sweep.expand import expand
-from sweep.fits import write_fits
 from sweep.spec import load_campaign
 from sweep.store import CampaignStore
+from sweep.task import RunTask, execute_run
 
 LIBRARIES = ("numpy", "py-pde", "numba", "xarray", "dask") + (("fftw",) if HAVE_FFTW else ())
 

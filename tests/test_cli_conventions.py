@@ -14,7 +14,8 @@ from rich.console import Console
 from rich.progress import Progress
 from typer.testing import CliRunner
 
-from sweep.cli import _ProgressEvents, app
+from sweep.cli import app
+from sweep.cli.progress import ProgressEvents
 
 
 def invoke(*args: object):
@@ -111,7 +112,7 @@ def _events(clock):
     buf = io.StringIO()
     console = Console(file=buf, force_terminal=False, width=200)
     progress = Progress(console=console, disable=True)
-    events = _ProgressEvents(console, progress, SimpleNamespace(root="r"), clock=clock)
+    events = ProgressEvents(console, progress, SimpleNamespace(root="r"), clock=clock)
     return events, buf
 
 
@@ -167,8 +168,8 @@ def test_py_pde_tracker_time_warning_is_not_printed(caplog):
 
 
 def test_local_dashboard_on_loopback_or_off():
+    from sweep.campaign import ExecutionSpec
     from sweep.execute import dashboard_link, dask_client
-    from sweep.spec import ExecutionSpec
 
     with dask_client(ExecutionSpec(workers=1), dashboard=True) as client:
         link = dashboard_link(client)
@@ -183,8 +184,8 @@ def test_dashboard_link_of_an_external_scheduler():
     its link is found the same way, and none when that scheduler serves no dashboard."""
     from distributed import LocalCluster
 
+    from sweep.campaign import ExecutionSpec
     from sweep.execute import dashboard_link, dask_client
-    from sweep.spec import ExecutionSpec
 
     for served in (True, False):
         with LocalCluster(n_workers=0, processes=False, dashboard_address="127.0.0.1:0",

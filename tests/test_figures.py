@@ -13,14 +13,17 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from sweep import figures
 from sweep.aggregate import write_phase
-from sweep.cli import _regenerate_figures, app
-from sweep.execute import RunTask, execute_run
+from sweep.analysis.fits_file import FITS, fit_notes
+from sweep.cli import app
+from sweep.cli.products import regenerate_figures
+from sweep.errors import FigureError
 from sweep.expand import expand
-from sweep.fits import FITS
+from sweep.figures.produce import draw, plan, produce, regenerate
+from sweep.figures.registry import option_problems
 from sweep.spec import load_campaign, parse_campaign
 from sweep.store import CampaignStore
+from sweep.task import RunTask, execute_run
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -111,15 +114,15 @@ def assert_figure(paths: list[Path], name: str, root: Path) -> None:
 
 
 def test_registry_names_match_the_campaign_schema():
-    from sweep.spec import registry_names
+    from sweep.sections import registry
 
-    assert registry_names("figures") == ["fig2", "fig3", "fig4", "figA1"]
-    assert set(registry_names("fits") or ()) >= {"transition", "alpha_cr", "scaling", "anisotropy",
-                                           "stability"}
+    assert sorted(registry("figures")) == ["fig2", "fig3", "fig4", "figA1"]
+    assert set(registry("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy",
+                                     "stability"}
 
 
 def test_fig2_and_fig3_render_and_fits_are_written(sizes):
-    out = figures.produce(sizes.campaign, sizes.results)
+    out = produce(sizes.campaign, sizes.results)
     assert out.failures == {}
     names = sorted({p.stem for p in out.paths})
     assert names == ["fig2", "fig3"]
@@ -134,16 +137,16 @@ def test_fig2_and_fig3_render_and_fits_are_written(sizes):
 
 
 def test_fig2_options_pick_the_snapshot_and_the_other_dims(sizes):
-    paths = figures.draw("fig2", sizes.root, {"select": {"K": 1e-3}, "seed": 1, "curves": 2,
-                                              "snapshot": {"alpha_minus_B": 1.0, "seed": 1,
-                                                           "time": 1.5}, "yscale": "log"})
+    paths = draw("fig2", sizes.root, {"select": {"K": 1e-3}, "seed": 1, "curves": 2,
+                                      "snapshot": {"alpha_minus_B": 1.0, "seed": 1,
+                                                   "time": 1.5}, "yscale": "log"})
     assert_figure(paths, "fig2", sizes.root)
-    with pytest.raises(figures.FigureError, match="unknown option 'snapshots'"):
-        figures.draw("fig2", sizes.root, {"snapshots": []})
+    with pytest.raises(FigureError, match="unknown option 'snapshots'"):
+        draw("fig2", sizes.root, {"snapshots": []})
 
 
 def test_fig4_renders_in_3d_with_the_caption_snapshots(phase4):
-    out = figures.produce(phase4.campaign, phase4.results)  # no figures listed: auto
+    out = produce(phase4.campaign, phase4.results)  # no figures listed: auto
     assert out.failures == {}
     assert_figure(out.paths, "fig4", phase4.root)
     with xr.open_dataset(phase4.root / FITS) as f:
@@ -151,12 +154,12 @@ def test_fig4_renders_in_3d_with_the_caption_snapshots(phase4):
 
 
 def test_fig4_in_2d_when_one_axis_is_fixed(phase4):
-    paths = figures.draw("fig4", phase4.root, {"select": {"K": 1e-4}})
+    paths = draw("fig4", phase4.root, {"select": {"K": 1e-4}})
     assert_figure(paths, "fig4", phase4.root)
 
 
 def test_figA1_renders_with_the_theory_line(stab):
-    paths = figures.regenerate(stab.campaign, stab.results)
+    paths = regenerate(stab.campaign, stab.results)
     assert_figure(paths, "figA1", stab.root)
     with xr.open_dataset(stab.root / FITS) as f:
         unstable = f["stability_unstable"].values
@@ -183,7 +186,7 @@ def test_cli_figures(sizes, tmp_path):
     empty = runner.invoke(app, ["figures", str(sizes.path), "--results", str(tmp_path)])
     assert empty.exit_code == 2
     assert "no phase diagram" in empty.output
-    assert figures.regenerate(sizes.campaign, tmp_path) == []
+    assert regenerate(sizes.campaign, tmp_path) == []
 
 
 def test_plan_figures_listed_empty_or_default(sizes):
@@ -191,20 +194,20 @@ def test_plan_figures_listed_empty_or_default(sizes):
     plans every figure that applies to the grid, --only wins over both."""
     phase = xr.open_dataset(sizes.root / "phase.nc").load()
     base = SIZES.replace("figures: [fig2, fig3]\n", "")
-    fits_, figs = figures.plan(parse_campaign(base + "figures: []\n"), phase)
+    fits_, figs = plan(parse_campaign(base + "figures: []\n"), phase)
     assert figs == []
     assert [name for name, _ in fits_] == ["scaling", "transition"]
     fits_line = next(line for line in base.splitlines() if line.startswith("fits:"))
     no_fits = base.replace(fits_line, "fits: []")
-    assert figures.plan(parse_campaign(no_fits + "figures: []\n"), phase) == ([], [])
-    _, figs = figures.plan(parse_campaign(base), phase)
+    assert plan(parse_campaign(no_fits + "figures: []\n"), phase) == ([], [])
+    _, figs = plan(parse_campaign(base), phase)
     assert [name for name, _ in figs] == ["fig2", "fig3"]  # the default: what applies
-    _, figs = figures.plan(parse_campaign(base + "figures: []\n"), phase, names=["fig3"])
+    _, figs = plan(parse_campaign(base + "figures: []\n"), phase, names=["fig3"])
     assert figs == [("fig3", {})]
 
 
 def test_empty_figures_list_draws_nothing_after_a_run(sizes, tmp_path):
-    """The hook of `nematic run` (sweep.cli._regenerate_figures) with figures: [] writes the
+    """The hook of `nematic run` (sweep.cli.products.regenerate_figures) with figures: [] writes the
     campaign's fits and no figure; `nematic figures` says so, and --only still draws."""
     path = tmp_path / "campaign.yaml"
     path.write_text(SIZES.replace("figures: [fig2, fig3]", "figures: []"))
@@ -214,7 +217,7 @@ def test_empty_figures_list_draws_nothing_after_a_run(sizes, tmp_path):
     root = results / campaign.name
     root.mkdir(parents=True)
     shutil.copy(sizes.root / "phase.nc", root / "phase.nc")
-    assert _regenerate_figures(campaign, results) == []
+    assert regenerate_figures(campaign, results) == []
     assert not (root / "figures").exists()
     with xr.open_dataset(root / FITS) as f:
         assert "scaling_exponent" in f
@@ -239,7 +242,7 @@ def test_cli_figures_prints_the_fit_notes(sizes):
     out = " ".join(result.output.split())
     with xr.open_dataset(sizes.root / FITS) as f:
         n = f["alpha_cr"].attrs["fit_n_unpeaked"]
-        notes = figures.F.fit_notes(f)
+        notes = fit_notes(f)
     assert n > 0  # t_final = 2: the patterns are still growing (growth rate > 10 % of its max)
     assert f"note: alpha_cr/scaling: {n} of" in out
     assert len(notes) >= 1
@@ -250,7 +253,7 @@ def test_cli_figures_prints_the_fit_notes(sizes):
 def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(stab):
     """fig2 needs alpha - B swept; this grid sweeps chi and eps: exit 1 with the reason,
     figA1 still drawn (from the fits.nc on disk: --no-fits)."""
-    figures.produce(stab.campaign, stab.results, names=["figA1"])  # fits.nc present
+    produce(stab.campaign, stab.results, names=["figA1"])  # fits.nc present
     result = CliRunner().invoke(app, ["figures", str(stab.path), "--results",
                                       str(stab.results), "--only", "fig2", "--only", "figA1",
                                       "--no-fits"])
@@ -261,11 +264,11 @@ def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(stab):
 
 
 def test_option_problems_for_campaign_validation():
-    assert figures.option_problems("fig2", {"seed": 3, "yscale": "log"}) == []
-    assert figures.option_problems("fig3", {"seed": 3}) == [
+    assert option_problems("fig2", {"seed": 3, "yscale": "log"}) == []
+    assert option_problems("fig3", {"seed": 3}) == [
         "unknown option 'seed'; allowed: none"]
-    problems = figures.option_problems("fig4", {"snapshots": [{"K": 1e-6}, 3]})
+    problems = option_problems("fig4", {"snapshots": [{"K": 1e-6}, 3]})
     assert len(problems) == 1
     assert "snapshots" in problems[0]
-    assert figures.option_problems("fig2", {"yscale": "symlog"}) == [
+    assert option_problems("fig2", {"yscale": "symlog"}) == [
         "yscale = 'symlog'; expected 'linear' or 'log'"]

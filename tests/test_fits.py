@@ -1,5 +1,5 @@
 """Fits recover known values from synthetic phase diagrams with noise, within their stated
-intervals (sweep/fits.py). Synthetic data are fine here: these test the estimators; the
+intervals (sweep/analysis/). Synthetic data are fine here: these test the estimators; the
 figures are tested on real runs in tests/test_figures.py."""
 
 from __future__ import annotations
@@ -8,8 +8,21 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from sweep import fits
-from sweep.store import atomic_to_netcdf
+from sweep.analysis.anisotropy import anisotropy
+from sweep.analysis.fits_file import compute_fits, fit_notes, load_fits, write_fits
+from sweep.analysis.registry import option_problems, resolve
+from sweep.analysis.sizes import (
+    alpha_cr,
+    alpha_cr_from_sizes,
+    patterned_level,
+    peak_not_reached,
+    scaling,
+    size_scaling,
+)
+from sweep.analysis.statistics import bootstrap_seed_means
+from sweep.analysis.transition import fit_transition, transition
+from sweep.errors import FitError
+from sweep.files import atomic_to_netcdf
 
 
 def phase(data: dict[str, np.ndarray], coords: dict[str, np.ndarray], **attrs) -> xr.Dataset:
@@ -37,7 +50,7 @@ def subcritical_sigma2(rng, x, x0, n_seeds, spread=0.02):
 @pytest.mark.parametrize("x0", [0.43, 0.5501, 0.78])
 def test_transition_recovers_the_jump_within_its_interval(rng, x0):
     x = np.linspace(0.1, 1.0, 10)
-    f = fits.fit_transition(x, subcritical_sigma2(rng, x, x0, 20), n_boot=300, rng=rng)
+    f = fit_transition(x, subcritical_sigma2(rng, x, x0, 20), n_boot=300, rng=rng)
     assert f.lower <= x0 <= f.upper
     assert f.grid_lower <= x0 <= f.grid_upper
     assert f.upper - f.lower <= 0.2 + 1e-12  # at most two grid cells with this seed spread
@@ -52,7 +65,7 @@ def test_transition_interval_widens_when_seeds_disagree(rng):
     brackets, so the interval covers both."""
     x = np.linspace(0.1, 1.0, 10)
     v = subcritical_sigma2(rng, x, 0.5, 6, spread=0.08)
-    f = fits.fit_transition(x, v, n_boot=500, rng=rng)
+    f = fit_transition(x, v, n_boot=500, rng=rng)
     assert f.lower <= 0.5 <= f.upper
     assert np.any((f.fraction_high > 0) & (f.fraction_high < 1))
 
@@ -60,7 +73,7 @@ def test_transition_interval_widens_when_seeds_disagree(rng):
 def test_transition_on_unsorted_axis_and_falling_observable(rng):
     x = np.array([0.3, 0.1, 0.2, 0.5, 0.4])
     v = np.where(x[:, None] < 0.33, 1e-2, 1e-9) * np.exp(0.1 * rng.standard_normal((5, 4)))
-    f = fits.fit_transition(x, v, n_boot=100, rng=rng)
+    f = fit_transition(x, v, n_boot=100, rng=rng)
     assert (f.grid_lower, f.grid_upper) == (0.3, 0.4)
     assert f.direction == -1
     assert f.location == pytest.approx(0.35)
@@ -69,7 +82,7 @@ def test_transition_on_unsorted_axis_and_falling_observable(rng):
 def test_no_transition_below_min_jump(rng):
     x = np.linspace(0, 1, 6)
     v = 1e-3 * np.exp(0.3 * rng.standard_normal((6, 5)))
-    f = fits.fit_transition(x, v, n_boot=50, rng=rng)
+    f = fit_transition(x, v, n_boot=50, rng=rng)
     assert np.isnan(f.location)
 
 
@@ -80,7 +93,7 @@ def test_transition_dataset_fit_per_other_dim(rng):
     sig = np.stack([subcritical_sigma2(rng, x, x0, 8) for x0 in truth.values()])
     sig[0, 3, 2] = np.nan
     ds = phase({"sigma2_S": sig}, {"K": np.array(list(truth)), "alpha_minus_B": x})
-    out = fits.transition(ds, {"n_boot": 200})
+    out = transition(ds, {"n_boot": 200})
     assert out["transition_location"].dims == ("K",)
     for k, x0 in truth.items():
         row = out.sel(K=k)
@@ -110,7 +123,7 @@ def size_phase(lam, sigma2=None):
 
 @pytest.mark.parametrize("method", ["linear", "nonlinear"])
 def test_alpha_cr_recovered_within_interval(rng, method):
-    out = fits.alpha_cr(size_phase(sizes(rng)), {"method": method, "n_boot": 200})
+    out = alpha_cr(size_phase(sizes(rng)), {"method": method, "n_boot": 200})
     lo, hi = out["alpha_cr_lower"].values, out["alpha_cr_upper"].values
     assert np.all((lo <= ACR_TRUE) & (hi >= ACR_TRUE)), (lo, out["alpha_cr"].values, hi)
     assert np.all(hi - lo < 0.1)
@@ -119,7 +132,7 @@ def test_alpha_cr_recovered_within_interval(rng, method):
 
 
 def test_scaling_exponent_recovered_within_bootstrap_interval(rng):
-    out = fits.scaling(size_phase(sizes(rng)), {"n_boot": 300})
+    out = scaling(size_phase(sizes(rng)), {"n_boot": 300})
     beta = float(out["scaling_exponent"])
     lo, hi = float(out["scaling_exponent_lower"]), float(out["scaling_exponent_upper"])
     assert lo <= 0.5 <= hi
@@ -135,7 +148,7 @@ def test_power_law_fit_recovers_other_exponents(rng):
     """The exponent fit itself is not tied to 1/2: with alpha_cr given, any exponent."""
     for beta in (0.35, 0.5, 0.8):
         lam = sizes(rng, exponent=beta).mean(-1)
-        f = fits.size_scaling(K_TRUE, AMB, lam, alpha_cr=ACR_TRUE)
+        f = size_scaling(K_TRUE, AMB, lam, alpha_cr=ACR_TRUE)
         assert f.exponent == pytest.approx(beta, abs=0.02)
 
 
@@ -147,21 +160,21 @@ def test_relaxed_runs_are_excluded_from_the_size_fits(rng):
     lam_bad = lam.copy()
     lam_bad[:, 0, :5] = 0.01  # nonsense sizes...
     sigma2[:, 0, :5] = 1e-12  # ...of relaxed runs
-    assert fits.patterned_level(sigma2) == pytest.approx(10**-7)
-    clean = fits.scaling(size_phase(lam, sigma2), {"n_boot": 100})
-    dirty = fits.scaling(size_phase(lam_bad, sigma2), {"n_boot": 100})
+    assert patterned_level(sigma2) == pytest.approx(10**-7)
+    clean = scaling(size_phase(lam, sigma2), {"n_boot": 100})
+    dirty = scaling(size_phase(lam_bad, sigma2), {"n_boot": 100})
     assert float(dirty["scaling_exponent"]) == pytest.approx(float(clean["scaling_exponent"]),
                                                              abs=1e-12)
-    assert fits.patterned_level(np.full(5, 1e-2)) == 0.0  # no gap: every run counts
+    assert patterned_level(np.full(5, 1e-2)) == 0.0  # no gap: every run counts
 
 
 def test_size_fit_asks_for_select_when_another_dim_varies(rng):
     lam = sizes(rng, n_seeds=3)
     ds = phase({"lambda_peak": np.stack([lam, lam]), "sigma2_S": np.full((2, *lam.shape), 0.1)},
                {"eps": np.array([0.0, 0.1]), "K": K_TRUE, "alpha_minus_B": AMB})
-    with pytest.raises(fits.FitError, match="select"):
-        fits.scaling(ds, {"n_boot": 10})
-    out = fits.scaling(ds, {"n_boot": 10, "select": {"eps": 0.1}})
+    with pytest.raises(FitError, match="select"):
+        scaling(ds, {"n_boot": 10})
+    out = scaling(ds, {"n_boot": 10, "select": {"eps": 0.1}})
     assert np.isfinite(float(out["scaling_exponent"]))
 
 
@@ -187,7 +200,7 @@ def test_runs_without_a_peak_are_left_out_and_counted(rng):
     t_peak[3, 0, 4], sigma2[3, 0, 4] = 100.0, 1e-12  # relaxed run: not patterned anyway
     ds = phase({"lambda_peak": bad, "sigma2_S": sigma2, "t_peak": t_peak},
                {"K": K_TRUE, "alpha_minus_B": AMB}, num_t_final=100.0, num_save_every=1.0)
-    out = fits.scaling(ds, {"n_boot": 100})
+    out = scaling(ds, {"n_boot": 100})
 
     expected = flagged.sum(-1)
     expected[3, 0] = 0
@@ -206,7 +219,7 @@ def test_runs_without_a_peak_are_left_out_and_counted(rng):
     clean = lam.copy()
     clean[flagged] = np.nan
     clean[3, 0, 4] = np.nan
-    ref = fits.scaling(phase({"lambda_peak": clean, "sigma2_S": np.full(lam.shape, 1e-2)},
+    ref = scaling(phase({"lambda_peak": clean, "sigma2_S": np.full(lam.shape, 1e-2)},
                              {"K": K_TRUE, "alpha_minus_B": AMB}), {"n_boot": 100})
     for name in ("alpha_cr", "alpha_cr_lower", "alpha_cr_upper", "scaling_exponent",
                  "scaling_exponent_lower", "scaling_exponent_upper", "scaling_lambda_mean"):
@@ -216,14 +229,14 @@ def test_runs_without_a_peak_are_left_out_and_counted(rng):
                   & (out["alpha_cr_upper"].values >= ACR_TRUE))
 
     # require_peak: false keeps them (and the fit moves), peak_margin: 0 keeps t < t_final
-    kept = fits.scaling(ds, {"n_boot": 10, "require_peak": False})
+    kept = scaling(ds, {"n_boot": 10, "require_peak": False})
     assert kept["scaling_exponent"].attrs["fit_n_unpeaked"] == 0
     assert int(kept["alpha_cr_unpeaked_count"].sum()) == 0
     assert float(kept["scaling_exponent"]) != pytest.approx(float(out["scaling_exponent"]))
-    strict = fits.alpha_cr(ds, {"n_boot": 10, "peak_margin": 0})
+    strict = alpha_cr(ds, {"n_boot": 10, "peak_margin": 0})
     assert strict["alpha_cr"].attrs["fit_n_unpeaked"] == 3
     # an observable at t_final has no peak to reach: nothing is left out by default
-    lam_final = fits.alpha_cr(ds.assign(lambda_final=ds["lambda_peak"]),
+    lam_final = alpha_cr(ds.assign(lambda_final=ds["lambda_peak"]),
                               {"n_boot": 10, "observable": "lambda_final"})
     assert lam_final["alpha_cr"].attrs["fit_n_unpeaked"] == 0
 
@@ -237,18 +250,18 @@ def test_peak_check_with_swept_t_final_and_without_t_peak(rng):
     ds = phase({"lambda_peak": lam, "sigma2_S": np.full(lam.shape, 1e-2), "t_peak": t_peak},
                {"K": K_TRUE, "alpha_minus_B": AMB}, num_save_every=2.0)
     ds = ds.assign_coords(t_final=("K", t_final))
-    out = fits.alpha_cr(ds, {"n_boot": 10})
+    out = alpha_cr(ds, {"n_boot": 10})
     np.testing.assert_array_equal(out["alpha_cr_n_unpeaked"].values, [AMB.size * 3, 0, 0, 0])
     assert np.isnan(out["alpha_cr"].values[0])
     assert np.all(np.isfinite(out["alpha_cr"][1:]))
-    assert fits.fit_notes(out)[0].startswith(f"alpha_cr/scaling: {AMB.size * 3} of "
-                                             f"{lam.size} patterned run(s) left out")
-    blind = fits.alpha_cr(ds.drop_vars("t_peak"), {"n_boot": 10})
+    assert fit_notes(out)[0].startswith(f"alpha_cr/scaling: {AMB.size * 3} of "
+                                        f"{lam.size} patterned run(s) left out")
+    blind = alpha_cr(ds.drop_vars("t_peak"), {"n_boot": 10})
     assert blind["alpha_cr"].attrs["fit_n_unpeaked"] == 0
     assert blind["alpha_cr"].attrs["fit_peak_check"] == "not done: phase.nc has no t_peak"
-    assert "not looked for" in fits.fit_notes(blind)[0]
+    assert "not looked for" in fit_notes(blind)[0]
     np.testing.assert_array_equal(
-        fits.peak_not_reached([10.0, 98.0, 99.0, 100.0, np.nan], 100.0, 2.0),
+        peak_not_reached([10.0, 98.0, 99.0, 100.0, np.nan], 100.0, 2.0),
         [False, True, True, True, False])
 
 
@@ -265,14 +278,14 @@ def test_alpha_cr_is_bounded_at_zero(rng, method):
     default fit stops at the bound 0 and says so; a true alpha_cr of 0 is found at or just
     above 0, never below."""
     lam = acr_sizes(rng, -0.3)
-    free = fits.alpha_cr(size_phase(lam), {"method": method, "n_boot": 100,
-                                           "alpha_cr_min": None})
+    free = alpha_cr(size_phase(lam), {"method": method, "n_boot": 100,
+                                      "alpha_cr_min": None})
     np.testing.assert_allclose(free["alpha_cr"].values, -0.3, atol=0.1)
     assert np.all(free["alpha_cr_upper"].values < 0)  # the data push it below zero
     np.testing.assert_array_equal(free["alpha_cr_at_bound"].values, 0)
     assert free["alpha_cr"].attrs["fit_alpha_cr_min"] == "none"
 
-    out = fits.scaling(size_phase(lam), {"method": method, "n_boot": 100})
+    out = scaling(size_phase(lam), {"method": method, "n_boot": 100})
     np.testing.assert_array_equal(out["alpha_cr"].values, 0.0)
     np.testing.assert_array_equal(out["alpha_cr_at_bound"].values, 1)
     np.testing.assert_array_equal(out["alpha_cr_lower"].values, 0.0)
@@ -282,10 +295,10 @@ def test_alpha_cr_is_bounded_at_zero(rng, method):
     assert out["scaling_exponent"].attrs["fit_n_alpha_cr_at_bound"] == K_TRUE.size
     assert np.isfinite(float(out["scaling_exponent"]))
     np.testing.assert_allclose(out["scaling_x"].values, K_TRUE[:, None] / AMB[None, :])
-    assert fits.fit_notes(out)[-1] == ("alpha_cr at its bound 0.0 for K = 1e-05, 3e-05, "
-                                       "0.0001, 0.0003 (the unbounded fit would put it lower)")
+    assert fit_notes(out)[-1] == ("alpha_cr at its bound 0.0 for K = 1e-05, 3e-05, "
+                                  "0.0001, 0.0003 (the unbounded fit would put it lower)")
 
-    zero = fits.alpha_cr(size_phase(acr_sizes(rng, 0.0, n_seeds=10)),
+    zero = alpha_cr(size_phase(acr_sizes(rng, 0.0, n_seeds=10)),
                          {"method": method, "n_boot": 200})
     assert np.all(zero["alpha_cr"].values >= 0)
     assert np.all(zero["alpha_cr_lower"].values >= 0)
@@ -302,7 +315,7 @@ def test_bounded_linear_fit_is_the_constrained_least_squares_optimum(rng):
     lam = 2.0 * (1e-4 / (amb + 0.4)) ** 0.5 * np.exp(0.03 * rng.standard_normal(amb.size))
     y = lam**-2.0
     for bound in (0.0, 0.2):
-        f = fits.alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=bound)
+        f = alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=bound)
         assert f.at_bound
         assert f.alpha_cr == bound
         m = 1.0 / (f.prefactor**2 * 1e-4)
@@ -314,14 +327,14 @@ def test_bounded_linear_fit_is_the_constrained_least_squares_optimum(rng):
 
         assert float(((y - m * (amb - bound)) ** 2).sum()) == pytest.approx(rss(bound))
         assert all(rss(a) >= rss(bound) for a in np.linspace(bound, 0.49, 50))
-    free = fits.alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=None)
+    free = alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=None)
     assert free.alpha_cr < 0
     assert not free.at_bound
-    inside = fits.alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=-5.0)
+    inside = alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=-5.0)
     assert inside == free
     # nonlinear: no admissible alpha_cr when the bound is at or above the smallest alpha - B
-    assert np.isnan(fits.alpha_cr_from_sizes(amb, lam, 1e-4, method="nonlinear",
-                                             alpha_cr_min=0.5).alpha_cr)
+    assert np.isnan(alpha_cr_from_sizes(amb, lam, 1e-4, method="nonlinear",
+                                        alpha_cr_min=0.5).alpha_cr)
 
 
 # --------------------------------------------------------------------------- anisotropy
@@ -331,7 +344,7 @@ def test_anisotropy_slope_recovered_within_interval(rng):
     slopes = np.array([0.5, 4.0])
     cos = (slopes[:, None, None] * eps[None, :, None] + 0.02
            + 0.03 * rng.standard_normal((2, 5, 20)))
-    out = fits.anisotropy(phase({"cos2theta": cos}, {"chi": chi, "eps": eps}), {"n_boot": 400})
+    out = anisotropy(phase({"cos2theta": cos}, {"chi": chi, "eps": eps}), {"n_boot": 400})
     lo, hi = out["anisotropy_slope_lower"].values, out["anisotropy_slope_upper"].values
     assert np.all((lo <= slopes) & (slopes <= hi))
     assert np.all(hi - lo < 1.0)
@@ -342,7 +355,7 @@ def test_anisotropy_with_one_seed_has_no_interval(rng):
     """A single seed has no seed-to-seed spread: the interval is NaN, not of zero width."""
     eps = np.linspace(0.0, 0.1, 5)
     cos = 2.0 * eps[None, :, None] + 0.01 * rng.standard_normal((1, 5, 1))
-    out = fits.anisotropy(phase({"cos2theta": cos}, {"chi": np.array([5.0]), "eps": eps}),
+    out = anisotropy(phase({"cos2theta": cos}, {"chi": np.array([5.0]), "eps": eps}),
                           {"n_boot": 50})
     assert np.isfinite(out["anisotropy_slope"].values).all()
     assert np.isnan(out["anisotropy_slope_lower"].values).all()
@@ -352,7 +365,7 @@ def test_anisotropy_with_one_seed_has_no_interval(rng):
 # --------------------------------------------------------------------------- plumbing
 def test_bootstrap_seed_means_handle_missing_runs(rng):
     v = np.array([[1.0, 2.0, np.nan], [np.nan, np.nan, np.nan], [5.0, 5.0, 5.0]])
-    b = fits.bootstrap_seed_means(v, 200, rng)
+    b = bootstrap_seed_means(v, 200, rng)
     assert b.shape == (200, 3)
     assert np.all((b[:, 0] >= 1) & (b[:, 0] <= 2))
     assert set(np.unique(b[:, 0])) == {1.0, 1.5, 2.0}
@@ -362,27 +375,27 @@ def test_bootstrap_seed_means_handle_missing_runs(rng):
 
 def test_same_phase_same_fits(rng):
     ds = size_phase(sizes(rng, n_seeds=5))
-    a, _ = fits.compute_fits(ds, [("scaling", {"n_boot": 50})])
-    b, _ = fits.compute_fits(ds, [("scaling", {"n_boot": 50})])
+    a, _ = compute_fits(ds, [("scaling", {"n_boot": 50})])
+    b, _ = compute_fits(ds, [("scaling", {"n_boot": 50})])
     xr.testing.assert_identical(a.drop_attrs(), b.drop_attrs())
 
 
 def test_resolve_merges_included_fits_and_rejects_unknown():
-    out = fits.resolve([("alpha_cr", {"method": "nonlinear"}), ("scaling", {"n_boot": 10}),
+    out = resolve([("alpha_cr", {"method": "nonlinear"}), ("scaling", {"n_boot": 10}),
                         ("transition", {}), ("transition", {"axis": "chi"})])
     assert out == [("scaling", {"method": "nonlinear", "n_boot": 10}), ("transition", {})]
-    with pytest.raises(fits.FitError, match="unknown fit 'scalling'"):
-        fits.resolve([("scalling", {})])
+    with pytest.raises(FitError, match="unknown fit 'scalling'"):
+        resolve([("scalling", {})])
 
 
 def test_bad_options_are_named(rng):
     ds = size_phase(sizes(rng, n_seeds=3))
-    with pytest.raises(fits.FitError, match="unknown option 'n_bot'"):
-        fits.scaling(ds, {"n_bot": 10})
-    with pytest.raises(fits.FitError, match="method"):
-        fits.alpha_cr(ds, {"method": "cubic", "n_boot": 5})
-    with pytest.raises(fits.FitError, match="'chi' is neither swept"):
-        fits.transition(ds, {"axis": "chi"})
+    with pytest.raises(FitError, match="unknown option 'n_bot'"):
+        scaling(ds, {"n_bot": 10})
+    with pytest.raises(FitError, match="method"):
+        alpha_cr(ds, {"method": "cubic", "n_boot": 5})
+    with pytest.raises(FitError, match="'chi' is neither swept"):
+        transition(ds, {"axis": "chi"})
 
 
 def test_fits_nc_round_trip(rng, tmp_path):
@@ -390,12 +403,12 @@ def test_fits_nc_round_trip(rng, tmp_path):
     recorded, not fatal."""
     ds = size_phase(sizes(rng, n_seeds=4), sigma2=10 ** rng.uniform(-3, -1, (4, 6, 4)))
     atomic_to_netcdf(ds.assign_attrs(campaign="synthetic"), tmp_path / "phase.nc")
-    path, failures = fits.write_fits(tmp_path, [("scaling", {"n_boot": 20}),
+    path, failures = write_fits(tmp_path, [("scaling", {"n_boot": 20}),
                                                 ("transition", {"n_boot": 20, "min_jump": 0.1}),
                                                 ("anisotropy", {})])
     assert path == tmp_path / "fits.nc"
     assert set(failures) == {"anisotropy"}  # no eps axis and no cos2theta
-    back = fits.load_fits(tmp_path)
+    back = load_fits(tmp_path)
     assert back["alpha_cr"].dims == ("K",)
     assert back["scaling_x"].dims == ("K", "alpha_minus_B")
     assert back["scaling_exponent"].attrs["fit"] == "scaling"
@@ -405,16 +418,16 @@ def test_fits_nc_round_trip(rng, tmp_path):
 
 
 def test_option_problems_for_campaign_validation():
-    assert fits.option_problems("scaling", {"method": "nonlinear", "n_boot": 50}) == []
-    problems = fits.option_problems("transition", {"axes": "chi", "n_boot": 0})
+    assert option_problems("scaling", {"method": "nonlinear", "n_boot": 50}) == []
+    problems = option_problems("transition", {"axes": "chi", "n_boot": 0})
     assert any("unknown option 'axes'" in p for p in problems)
     assert any("n_boot = 0" in p for p in problems)
-    problems = fits.option_problems("scaling", {"alpha_cr_min": "zero", "require_peak": 1,
-                                                "peak_margin": -1})
+    problems = option_problems("scaling", {"alpha_cr_min": "zero", "require_peak": 1,
+                                           "peak_margin": -1})
     assert any("alpha_cr_min = 'zero'" in p for p in problems)
     assert any("require_peak = 1" in p for p in problems)
     assert any("peak_margin = -1" in p for p in problems)
-    assert fits.option_problems("alpha_cr", {"alpha_cr_min": None, "require_peak": False,
-                                             "peak_margin": 0}) == []
-    assert fits.option_problems("nope", {}) == [
+    assert option_problems("alpha_cr", {"alpha_cr_min": None, "require_peak": False,
+                                        "peak_margin": 0}) == []
+    assert option_problems("nope", {}) == [
         "unknown fit 'nope'; registered: alpha_cr, anisotropy, scaling, stability, transition"]

@@ -22,10 +22,10 @@ from typer.testing import CliRunner
 
 from model.parameters import Parameters
 from model.stability import critical_eps_closed_form
+from sweep.analysis.stability import stability
 from sweep.cli import app
 from sweep.errors import CampaignError
 from sweep.expand import expand
-from sweep.fits import stability
 from sweep.refine.plan import first_round, next_round, points_of, run_bound, wilson
 from sweep.refine.rounds import read_plan, replay
 from sweep.spec import Overrides, load_campaign, parse_campaign
@@ -506,7 +506,7 @@ def test_the_fig2_refine_variant_runs_at_small_size(tmp_path):
     """campaigns/fig2_adaptive.yaml at 32^2, linear mechanics, 6 seeds: the jump criterion
     refines alpha - B around the sigma2_S jump; the transition fit reads the refined phase.nc
     and places the jump in a cell of the smallest spacing (0.05)."""
-    from sweep.fits import transition
+    from sweep.analysis.transition import transition
 
     results = tmp_path / "results"
     result = invoke("run", FIG2_ADAPTIVE, *SMALL_FIG2, "--results", results, "--no-dashboard",

@@ -1,4 +1,4 @@
-"""The snapshot picture (sweep/snapshot_plot.py: fig2 panel (a), `nematic simulate --png`):
+"""The snapshot picture (sweep/figures/snapshot.py: fig2 panel (a), `nematic simulate --png`):
 the I1bar background's colour bar has plain, short tick labels however close I1bar is to 2
 (no offset "+2", no "1e-5" multiplier), and its label says what the numbers are."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from sweep.snapshot_plot import background, draw_snapshot, snapshot_figure
+from sweep.figures.snapshot import background, draw_snapshot, snapshot_figure
 
 
 def run_dataset(i1bar: np.ndarray) -> xr.Dataset:

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from model import stability as st
 from model.parameters import Numerics, Parameters
-from sweep.cli_stability import stability
+from sweep.cli.stability import stability
 
 TWO_PI = 2.0 * math.pi
 

@@ -68,7 +68,7 @@ import json, resource, sys, time
 resource.setrlimit(resource.RLIMIT_AS, (2**30, 2**30))
 from sweep.errors import CampaignError
 from sweep.spec import parse_campaign
-import sweep.fits, sweep.figures  # the registries, imported before the clock starts
+import sweep.analysis.registry, sweep.figures.registry  # imported before the clock starts
 cases = json.load(sys.stdin)
 out = {}
 for name, text in cases.items():

@@ -12,7 +12,8 @@ from typer.testing import CliRunner
 
 from sweep.cli import app
 from sweep.errors import CampaignError
-from sweep.spec import Overrides, load_campaign, parse_assignments, parse_campaign
+from sweep.spec import Overrides, load_campaign, parse_campaign
+from sweep.yaml_input import parse_assignments
 
 GOOD = """
 name: good

@@ -14,16 +14,8 @@ import pytest
 import xarray as xr
 
 from sweep.errors import CampaignLocked
-from sweep.store import (
-    CampaignLock,
-    CampaignStore,
-    atomic_to_netcdf,
-    atomic_write_text,
-    file_stamp,
-    netcdf_attr,
-    read_lock_holder,
-    series_time,
-)
+from sweep.files import atomic_to_netcdf, atomic_write_text, file_stamp, netcdf_attr, series_time
+from sweep.store import CampaignLock, CampaignStore, read_lock_holder
 
 
 def test_series_time_reads_both_run_file_schemas():
@@ -217,7 +209,7 @@ def test_storage_cause_names_the_fault(tmp_path):
     import errno
     import resource
 
-    from sweep.store import storage_cause
+    from sweep.files import storage_cause
 
     target = tmp_path / "runs" / "a.nc"
     target.parent.mkdir()

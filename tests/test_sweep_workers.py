@@ -18,16 +18,14 @@ from pathlib import Path
 import pytest
 from sweep_helpers import kill_group, records, run_ids, start_driver, wait_for, write_campaign
 
+from sweep.campaign import ClusterSpec, ExecutionSpec
+from sweep.clusters import jobqueue_options, make_jobqueue, open_cluster
 from sweep.errors import ClusterError
-from sweep.spec import ClusterSpec, ExecutionSpec
 from sweep.workforce import (
     MIN_INFLIGHT,
     Supervisor,
     Workforce,
-    jobqueue_options,
     last_worker_error,
-    make_jobqueue,
-    open_cluster,
     window_size,
 )
 

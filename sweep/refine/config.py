@@ -24,7 +24,7 @@
 sigma2_S(t_final / 2), read from the run file; with ``patterned_above: 0`` a run is
 "patterned" (unstable) when sigma2_S grows over the second half of the run.
 
-The checks add their problems to the campaign's checker (:class:`sweep.spec._Checker`), so
+The checks add their problems to the campaign's checker (:class:`sweep.checker.Checker`), so
 a mistake here is reported with the file, line, key path, value and what is allowed, in the
 same pass as every other problem of the file.
 """
@@ -32,14 +32,20 @@ same pass as every other problem of the file.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping, Sequence
+from typing import Any
 
-from ..spec import AXIS_TYPES, Dim, suggest
-
-if TYPE_CHECKING:
-    from ..spec import _Checker
+from ..campaign import (
+    AXIS_TYPES,
+    DEFAULT_CONFIDENCE,
+    DEFAULT_FRACTION,
+    DEFAULT_JUMP,
+    DEFAULT_MAX_WIDTH,
+    DEFAULT_ROUNDS,
+    Dim,
+    RefineSpec,
+)
+from ..checker import Checker, suggest
 
 KEYS = ("axis", "observable", "criterion", "patterned_above", "fraction", "jump", "rounds",
         "min_spacing", "seeds")
@@ -48,43 +54,6 @@ CRITERIA = ("fraction", "jump")
 #: The derived observable read from the run files (the stability fit's criterion).
 GROWTH = "growth"
 MAX_ROUNDS = 50
-DEFAULT_ROUNDS = 4
-DEFAULT_FRACTION = (0.1, 0.9)
-DEFAULT_JUMP = 10.0
-DEFAULT_MAX_WIDTH = 0.6
-DEFAULT_CONFIDENCE = 0.9
-
-
-@dataclass(frozen=True)
-class RefineSpec:
-    """A validated ``refine:`` section (see the module docstring).
-
-    ``source`` is the run scalar the observable is read from (``sigma2_S_final`` for
-    ``sigma2_S``), or ``growth``. ``initial`` / ``add`` are seed counts: a point gets the
-    campaign's first ``initial`` seeds, then ``add`` more per round while it is uncertain, up
-    to all of the campaign's seeds."""
-
-    axis: str
-    observable: str
-    source: str
-    criterion: str = "fraction"
-    patterned_above: float | None = None
-    fraction: tuple[float, float] = DEFAULT_FRACTION
-    jump: float = DEFAULT_JUMP
-    rounds: int = DEFAULT_ROUNDS
-    min_spacing: float = 0.0
-    initial: int = 1
-    add: int = 1
-    max_width: float = DEFAULT_MAX_WIDTH
-    confidence: float = DEFAULT_CONFIDENCE
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"axis": self.axis, "observable": self.observable, "source": self.source,
-                "criterion": self.criterion, "patterned_above": self.patterned_above,
-                "fraction": list(self.fraction), "jump": self.jump, "rounds": self.rounds,
-                "min_spacing": self.min_spacing,
-                "seeds": {"initial": self.initial, "add": self.add,
-                          "max_width": self.max_width, "confidence": self.confidence}}
 
 
 def _number(v: Any) -> bool:
@@ -107,7 +76,13 @@ def observable_sources() -> dict[str, str]:
     return out
 
 
-def check_refine(c: _Checker, raw: Any, dims: Sequence[Dim],
+def read_refine(c: Checker, raw: Any, read: Mapping[str, Any]) -> RefineSpec | None:
+    """The reader of the ``refine:`` section (a row of :data:`sweep.spec.SECTIONS`): needs the
+    ``sweep`` and ``seeds`` sections read before it."""
+    return check_refine(c, raw, read.get("sweep") or (), read.get("seeds") or ())
+
+
+def check_refine(c: Checker, raw: Any, dims: Sequence[Dim],
                  seeds: Sequence[int]) -> RefineSpec | None:
     """The ``refine:`` section as a :class:`RefineSpec`, or ``None`` when there is none (or
     it has problems, which are added to ``c``)."""

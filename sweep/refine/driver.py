@@ -15,11 +15,12 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
+from ..campaign import Campaign
+from ..clusters import open_cluster
 from ..errors import StoreError
-from ..execute import REMOTE_TMP_AGE, Plan, RunSummary, dashboard_link, plan_runs, run_campaign
-from ..spec import Campaign
+from ..execute import REMOTE_TMP_AGE, RunSummary, dashboard_link, run_campaign
+from ..plan import Plan, plan_runs
 from ..store import CampaignStore
-from ..workforce import open_cluster
 from .report import round_lines
 from .rounds import RefinedExpansion, Refinement, replay, write_plan
 

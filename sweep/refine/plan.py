@@ -30,8 +30,7 @@ import statistics
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
-from ..spec import Campaign, normalise_float
-from .config import RefineSpec
+from ..campaign import Campaign, RefineSpec, normalise_float
 
 Line = tuple[int, ...]
 Point = tuple[Line, float]

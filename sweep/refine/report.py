@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 from .plan import first_round, points_of, run_bound
 
 if TYPE_CHECKING:
-    from ..spec import Campaign
+    from ..campaign import Campaign
     from .rounds import Refinement
 
 #: Points listed per round (the plan file has them all).

@@ -30,10 +30,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..campaign import Axis, Campaign, Dim
 from ..expand import Expansion, GridPoint, RunSpec, make_point
+from ..files import atomic_write_text, dumps
 from ..identity import PointHasher
-from ..spec import Axis, Campaign, Dim
-from ..store import RETRYABLE_REASONS, CampaignStore, Record, atomic_write_text, dumps
+from ..store import RETRYABLE_REASONS, CampaignStore, Record
 from .plan import (
     Line,
     Point,
@@ -62,7 +63,7 @@ def run_growth(path: Any) -> float:
     read or has fewer than two saved times): the stability fit's criterion (Fig. A1)."""
     import xarray as xr
 
-    from ..store import series_time
+    from ..files import series_time
 
     try:
         with xr.open_dataset(path, engine="netcdf4") as run:
@@ -317,6 +318,12 @@ class RefinedExpansion(Expansion):
         planned = set(refinement.run_ids.values())
         self.planned = np.fromiter((rid in planned for rid in self.run_ids), dtype=bool,
                                    count=len(self.run_ids))
+
+    def build_phase(self, records: Mapping[str, Record], store: CampaignStore | None = None
+                    ) -> xr.Dataset:
+        """phase.nc's dataset (:func:`refined_phase`), which
+        :func:`sweep.aggregate.write_phase` asks the expansion for."""
+        return refined_phase(self, records, store)
 
 
 def refined_phase(expansion: RefinedExpansion, records: Mapping[str, Record],

@@ -2,9 +2,8 @@
 I1bar = tr C / J background. Reads only a run Dataset (as written by ``model.simulate.run``).
 
 The background shows I1bar - 2 (I1bar >= 2 in 2-D, = 2 without shear), scaled by a power of
-ten that the colour bar's label states when it is small: I1bar itself differs from 2 by
-~1e-5 in a weakly strained pattern, which gave tick labels like "2.00001" or an offset "+2"
-with a "1e-5" multiplier.
+ten that the colour bar's label states when it is small (I1bar differs from 2 by ~1e-5 in a
+weakly strained pattern): the tick labels stay short, without an offset or a multiplier.
 """
 
 from __future__ import annotations
@@ -16,7 +15,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from .store import series_time
+from ..files import series_time
 
 #: |I1bar - 2| below this (or at least BACKGROUND_MAX) is shown times a power of ten.
 BACKGROUND_MIN, BACKGROUND_MAX = 1e-2, 1e3

@@ -1,6 +1,6 @@
 """``nematic figures``: fits and figures of a campaign from its results folder.
 
-Only parses and calls :func:`sweep.figures.produce`; registers itself on :data:`sweep.cli.app`.
+Only parses and calls :func:`sweep.figures.produce.produce`.
 Exit codes: 0 every fit and figure was produced, 1 some failed (listed), 2 bad input (invalid
 campaign, unknown figure name, no phase.nc yet).
 """
@@ -13,7 +13,9 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from .cli import (
+from ..errors import CampaignLocked, FigureError, StoreError
+from ..files import probe_write, storage_cause
+from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
     CampaignArg,
@@ -23,18 +25,14 @@ from .cli import (
     SeedsOpt,
     SetOpt,
     VerboseOpt,
-    _err_console,
-    _load,
-    _setup_logging,
-    app,
+    err_console,
     error,
-    repair_products,
+    load,
+    setup_logging,
 )
-from .errors import CampaignLocked, StoreError
-from .store import probe_write, storage_cause
+from .products import repair_products
 
 
-@app.command()
 def figures(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),
@@ -59,12 +57,12 @@ def figures(
     if everything was produced, 1 if a fit or figure failed (listed), 2 on bad input or
     when the campaign has no phase.nc yet.
     """
-    from .figures import FigureError, produce
+    from ..figures.produce import produce
 
     console = Console(highlight=False, soft_wrap=True, quiet=quiet)
-    err = _err_console()
-    _setup_logging(err, verbose, quiet)
-    c = _load(err, campaign, set_, seeds, name)
+    err = err_console()
+    setup_logging(err, verbose, quiet)
+    c = load(err, campaign, set_, seeds, name)
     root = results / c.name
     problem = probe_write(root) if root.is_dir() else None
     if problem is not None:

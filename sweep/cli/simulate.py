@@ -1,6 +1,6 @@
 """``nematic simulate``: one run of the model, with a progress bar, a summary and a picture.
 
-Only parses and calls :func:`model.simulate.run`; registers itself on :data:`sweep.cli.app`.
+Only parses and calls :func:`model.simulate.run`.
 Exit codes: 0 the run succeeded, 1 the run failed (the reason and time are printed), 2 bad input.
 """
 
@@ -17,19 +17,12 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, check_compatible, split_settings
 
-from .cli import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED_RUNS,
-    QuietOpt,
-    VerboseOpt,
-    _setup_logging,
-    app,
-    error,
-)
-from .errors import CampaignError, StoreError
-from .limits import available_memory, check_run_memory
-from .spec import MAX_SEED, parse_assignments
-from .store import atomic_to_netcdf, probe_write, storage_cause
+from ..campaign import MAX_SEED
+from ..errors import CampaignError, StoreError
+from ..files import atomic_to_netcdf, probe_write, storage_cause
+from ..limits import available_memory, check_run_memory
+from ..yaml_input import parse_assignments
+from .app import EXIT_BAD_INPUT, EXIT_FAILED_RUNS, QuietOpt, VerboseOpt, error, setup_logging
 
 #: the names ``--set`` accepts, from the dataclasses themselves (so the help cannot drift)
 _PARAMETER_NAMES = ", ".join([f.name for f in fields(Parameters)] + ["alpha_minus_B"])
@@ -61,7 +54,6 @@ def _keep_elsewhere(ds: Any, out: Path) -> Path | None:
     return path
 
 
-@app.command()
 def simulate(
     set_: Annotated[list[str] | None, typer.Option(
         "--set", metavar="NAME=VALUE",
@@ -80,7 +72,7 @@ def simulate(
     """Run one simulation of paper Eqs. (1)-(5) and print sigma2_S, <cos 2 theta>, lambda."""
     console = Console(highlight=False, soft_wrap=True)
     err = Console(stderr=True, highlight=False, soft_wrap=True)
-    _setup_logging(err, verbose, quiet)
+    setup_logging(err, verbose, quiet)
     try:
         settings = parse_assignments(set_ or [])
         pdict, ndict = split_settings(settings)
@@ -125,7 +117,7 @@ def simulate(
                                      "it could not be kept elsewhere either"))
             raise typer.Exit(EXIT_BAD_INPUT) from None
     if png is not None and ds.sizes.get("snapshot_time", 0):
-        from .snapshot_plot import snapshot_figure
+        from ..figures.snapshot import snapshot_figure
 
         try:
             snapshot_figure(ds, png)

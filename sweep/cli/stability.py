@@ -1,7 +1,7 @@
 """``nematic stability``: the critical strain and the growth rate of the linear-mechanics model.
 
 The command only parses and calls :mod:`model.stability`; the physics and its conventions are
-in ``docs/stability.md``. The lead registers it on the app with ``app.command()(stability)``.
+in ``docs/stability.md``.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ import typer
 
 from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, split_settings
+
+from .app import err_console, error, setup_logging
 
 _TRUE = {"true", "yes", "on"}
 _FALSE = {"false", "no", "off"}
@@ -77,9 +79,7 @@ def stability(
 ) -> None:
     """Critical applied shear eps (closed form and numerical bisection), the critical
     wavevector, and the leading growth rate at the given eps (paper Eq. 6, Fig. A1)."""
-    from .cli import _err_console, _setup_logging, error
-
-    _setup_logging(_err_console(), verbose, quiet)
+    setup_logging(err_console(), verbose, quiet)
     try:
         values = parse_settings(list(set_ or []))
         pvals, nvals = split_settings(values)
@@ -90,7 +90,7 @@ def stability(
                                  "'linear' (the stability analysis is of the small-strain model)")
         params = Parameters.from_dict(pvals)
     except (ValueError, TypeError) as exc:
-        error(_err_console(), exc)
+        error(err_console(), exc)
         raise typer.Exit(code=2) from None
 
     inc = numerics.incompressible

@@ -1,0 +1,222 @@
+"""A validated campaign as immutable data: :class:`Campaign` and its parts, and the names
+and constants they are checked against (the model's parameter and numerics fields, the
+largest seed, the significant digits of swept values).
+
+:mod:`sweep.spec` builds a :class:`Campaign` from YAML; everything else reads it. This module
+imports nothing of the parsers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from model.parameters import Numerics, Parameters
+
+from .limits import DEFAULT_MAX_RUNS
+
+AMB = "alpha_minus_B"
+#: Significant digits kept when normalising swept floats (and in run identity).
+SIGNIFICANT_DIGITS = 12
+DEFAULT_SEEDS = 50
+MAX_SEED = 2**63 - 1
+#: Default of ``execution.wait_for_workers``: how long a driver on an external scheduler or a
+#: batch cluster waits for its first worker before giving up (seconds).
+DEFAULT_WORKER_WAIT = 600.0
+#: Default of ``execution.give_up_after``: how long a running campaign goes on without any
+#: usable worker (every job ended, the scheduler unreachable) before the driver gives up.
+DEFAULT_GIVE_UP = 120.0
+#: ``execution.cluster.kind`` -> the dask-jobqueue class.
+CLUSTER_KINDS = {
+    "slurm": "SLURMCluster", "pbs": "PBSCluster", "sge": "SGECluster", "lsf": "LSFCluster",
+    "oar": "OARCluster", "moab": "MoabCluster", "htcondor": "HTCondorCluster",
+}
+
+
+# --------------------------------------------------------------------------- the model's names
+def _field_types(cls: type) -> dict[str, str]:
+    return {f.name: str(f.type) for f in dataclasses.fields(cls)}
+
+
+PARAMETER_TYPES: dict[str, str] = {**_field_types(Parameters), AMB: "float"}
+NUMERICS_TYPES: dict[str, str] = _field_types(Numerics)
+#: Numerics fields that may be swept (scalars only).
+SWEEPABLE_NUMERICS = tuple(n for n, t in NUMERICS_TYPES.items()
+                           if t in ("int", "float", "bool", "str"))
+AXIS_TYPES: dict[str, str] = {**PARAMETER_TYPES,
+                              **{n: NUMERICS_TYPES[n] for n in SWEEPABLE_NUMERICS}}
+
+
+def normalise_float(x: float) -> float:
+    """Round to :data:`SIGNIFICANT_DIGITS` significant digits: 0.30000000000000004 -> 0.3."""
+    y = float(f"{float(x):.{SIGNIFICANT_DIGITS}g}")
+    return 0.0 if y == 0 else y
+
+
+# --------------------------------------------------------------------------- the parsed objects
+@dataclass(frozen=True)
+class Axis:
+    """One swept name and its (normalised) values."""
+
+    name: str
+    values: tuple[Any, ...]
+
+
+@dataclass(frozen=True)
+class Dim:
+    """One dimension of the grid: a single axis, or a zip group of axes of equal length.
+
+    A zip group's dimension is named after its first axis; the others are coordinates on it.
+    """
+
+    name: str
+    axes: tuple[Axis, ...]
+
+    def __len__(self) -> int:
+        return len(self.axes[0].values)
+
+
+@dataclass(frozen=True)
+class Product:
+    """A fit or figure to produce, with its options."""
+
+    name: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class StoreSpec:
+    """What the run files keep: ``snapshot_fields`` (``None`` = every snapshot variable the
+    model writes) in ``snapshot_dtype``."""
+
+    snapshot_fields: tuple[str, ...] | None = None
+    snapshot_dtype: str = "float64"
+
+
+@dataclass(frozen=True)
+class ClusterSpec:
+    """A dask-jobqueue cluster: ``kind`` (slurm, pbs, ...), ``jobs`` to start (or ``adapt``
+    bounds) and the options passed to the dask-jobqueue class (cores, memory, walltime, ...)."""
+
+    kind: str
+    jobs: int = 1
+    adapt: tuple[int, int] | None = None
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ExecutionSpec:
+    workers: int | None = None
+    threads_per_worker: int = 1
+    memory_limit: str | None = None
+    scheduler: str | None = None
+    cluster: ClusterSpec | None = None
+    #: seconds to wait for a first worker (scheduler / cluster); 0: wait for ever
+    wait_for_workers: float = DEFAULT_WORKER_WAIT
+    #: seconds without any usable worker (or scheduler) after which a started campaign stops
+    give_up_after: float = DEFAULT_GIVE_UP
+    #: TLS with per-campaign temporary credentials for a scheduler the driver starts
+    tls: bool = True
+    #: why the campaign opted out of TLS (required with ``security: {tls: false}``)
+    insecure_reason: str | None = None
+
+    @property
+    def mode(self) -> str:
+        """"local", "scheduler" or "cluster"."""
+        if self.scheduler:
+            return "scheduler"
+        return "cluster" if self.cluster else "local"
+
+
+@dataclass(frozen=True)
+class LimitsSpec:
+    """Ceilings checked before the grid is built: ``max_runs`` (runs = product of the axis
+    lengths x seeds) and ``run_memory`` (bytes one run may use; default: what one worker
+    has, see :func:`run_memory_limit`)."""
+
+    max_runs: int = DEFAULT_MAX_RUNS
+    run_memory: int | None = None
+
+
+#: Defaults of the ``refine:`` section (an adaptive campaign, :mod:`sweep.refine`).
+DEFAULT_ROUNDS = 4
+DEFAULT_FRACTION = (0.1, 0.9)
+DEFAULT_JUMP = 10.0
+DEFAULT_MAX_WIDTH = 0.6
+DEFAULT_CONFIDENCE = 0.9
+
+
+@dataclass(frozen=True)
+class RefineSpec:
+    """A validated ``refine:`` section (:mod:`sweep.refine.config`).
+
+    ``source`` is the run scalar the observable is read from (``sigma2_S_final`` for
+    ``sigma2_S``), or ``growth``. ``initial`` / ``add`` are seed counts: a point gets the
+    campaign's first ``initial`` seeds, then ``add`` more per round while it is uncertain, up
+    to all of the campaign's seeds."""
+
+    axis: str
+    observable: str
+    source: str
+    criterion: str = "fraction"
+    patterned_above: float | None = None
+    fraction: tuple[float, float] = DEFAULT_FRACTION
+    jump: float = DEFAULT_JUMP
+    rounds: int = DEFAULT_ROUNDS
+    min_spacing: float = 0.0
+    initial: int = 1
+    add: int = 1
+    max_width: float = DEFAULT_MAX_WIDTH
+    confidence: float = DEFAULT_CONFIDENCE
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"axis": self.axis, "observable": self.observable, "source": self.source,
+                "criterion": self.criterion, "patterned_above": self.patterned_above,
+                "fraction": list(self.fraction), "jump": self.jump, "rounds": self.rounds,
+                "min_spacing": self.min_spacing,
+                "seeds": {"initial": self.initial, "add": self.add,
+                          "max_width": self.max_width, "confidence": self.confidence}}
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A validated campaign. ``parameters`` / ``numerics`` are the base values as written
+    (validated by the model's own objects at every grid point). ``figures`` is ``None`` when
+    the file has no ``figures:`` (or ``figures: null``): draw every registered figure that
+    applies to the grid; an empty tuple (``figures: []``) draws none."""
+
+    name: str
+    description: str
+    parameters: Mapping[str, Any]
+    numerics: Mapping[str, Any]
+    dims: tuple[Dim, ...]
+    seeds: tuple[int, ...]
+    store: StoreSpec
+    fits: tuple[Product, ...]
+    figures: tuple[Product, ...] | None
+    execution: ExecutionSpec
+    limits: LimitsSpec = field(default_factory=lambda: LimitsSpec())
+    source: str = "<string>"
+    text: str = ""
+    overrides: tuple[str, ...] = ()
+    #: the ``refine:`` section (an adaptive campaign: sweep/refine), or ``None``
+    refine: RefineSpec | None = None
+
+    @property
+    def axes(self) -> tuple[Axis, ...]:
+        return tuple(a for d in self.dims for a in d.axes)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(len(d) for d in self.dims)
+
+    @property
+    def n_points(self) -> int:
+        return math.prod(self.shape)
+
+    @property
+    def n_runs(self) -> int:
+        return self.n_points * len(self.seeds)

@@ -1,0 +1,33 @@
+"""The ``nematic`` program (typer; also ``python -m sweep``): parses the command line, calls
+:mod:`sweep` and prints.
+
+Exit codes: 0 success; 1 some runs failed (they are listed); 2 bad input (invalid campaign,
+unreachable scheduler) or refused to start (the campaign is locked by another driver);
+130 interrupted (Ctrl-C / SIGTERM; rerun the same command to resume).
+
+:data:`COMMANDS` is every command, in the order ``nematic --help`` lists them; each is a
+plain function in its group's module, registered on :data:`~sweep.cli.app.app` here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from . import campaigns, figures, simulate, stability
+from .app import app
+
+COMMANDS: dict[str, Callable[..., Any]] = {
+    "validate": campaigns.validate,
+    "run": campaigns.run,
+    "status": campaigns.status,
+    "aggregate": campaigns.aggregate,
+    "simulate": simulate.simulate,
+    "stability": stability.stability,
+    "figures": figures.figures,
+}
+
+for _name, _command in COMMANDS.items():
+    app.command(_name)(_command)
+
+__all__ = ["COMMANDS", "app"]

@@ -1,0 +1,209 @@
+"""The ``nematic`` application (typer) and what its commands share: error handling (every
+command is :func:`guarded`), the common options, logging, loading the campaign.
+
+Exit codes: :data:`EXIT_OK`, :data:`EXIT_FAILED_RUNS`, :data:`EXIT_BAD_INPUT`,
+:data:`EXIT_INTERRUPTED` (:mod:`sweep.cli`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import logging
+import math
+import signal
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Annotated, Any
+
+import click
+import typer
+from rich.console import Console
+from rich.logging import RichHandler
+from rich.markup import escape
+
+from ..campaign import Campaign
+from ..errors import CampaignError
+from ..spec import Overrides, load_campaign
+from ..yaml_input import parse_assignments, parse_value
+
+EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: Show Python tracebacks of errors (``nematic --debug ...`` or ``NEMATIC_DEBUG=1``).
+DEBUG = {"on": False}
+
+
+def guarded(command: Callable[..., Any]) -> Callable[..., Any]:
+    """A command that turns errors into one line on stderr instead of a traceback: bad
+    input, files that cannot be read or written and similar errors exit 2 (the file and
+    cause named), anything else exits 1 as an internal error. ``--debug`` (or a command's
+    ``--verbose``) lets the exception through, with its traceback."""
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except (typer.Exit, click.exceptions.ClickException, click.exceptions.Abort,
+                KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as e:
+            if DEBUG["on"] or kwargs.get("verbose"):
+                raise
+            code, text = _describe_error(e)
+            err_console().print(f"[bold red]error:[/] {escape(text)} (--debug shows the "
+                                "traceback)", soft_wrap=True, highlight=False, markup=True)
+            raise typer.Exit(code) from None
+
+    return wrapper
+
+
+def _describe_error(e: Exception) -> tuple[int, str]:
+    from model.errors import NematicError
+
+    from ..files import storage_cause
+
+    if isinstance(e, NematicError):
+        return EXIT_BAD_INPUT, str(e)
+    if isinstance(e, MemoryError):
+        return EXIT_BAD_INPUT, ("not enough memory (lower the resolution, or give the process "
+                                "more memory)")
+    if isinstance(e, OSError):
+        where = str(e.filename) if e.filename else ""
+        cause = storage_cause(Path(where), e) if where else (e.strerror or str(e))
+        return EXIT_BAD_INPUT, f"{where + ': ' if where else ''}{cause}"
+    return EXIT_FAILED_RUNS, f"internal error: {type(e).__name__}: {' '.join(str(e).split())}"
+
+
+class _App(typer.Typer):
+    """A Typer whose commands are :func:`guarded`."""
+
+    def command(self, *args: Any, **kwargs: Any  # type: ignore[override]
+                ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+        register = super().command(*args, **kwargs)
+
+        def decorator(f: Callable[..., Any]) -> Callable[..., Any]:
+            register(guarded(f))
+            return f
+
+        return decorator
+
+
+app = _App(
+    name="nematic",
+    help="Active nematic solids: run the model, sweep it, aggregate phase diagrams.",
+    no_args_is_help=True,
+    add_completion=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",
+)
+
+
+# --------------------------------------------------------------------------- shared options
+CampaignArg = Annotated[Path, typer.Argument(help="The campaign YAML file.", show_default=False)]
+ResultsOpt = Annotated[Path, typer.Option(
+    "--results", envvar="NEMATIC_RESULTS",
+    help="Folder holding `results/NAME/` for every campaign.")]
+SetOpt = Annotated[list[str] | None, typer.Option(
+    "--set", metavar="NAME=VALUE",
+    help="Override a base parameter or numerics value (repeatable), e.g. --set resolution=64.")]
+SeedsOpt = Annotated[str | None, typer.Option(
+    "--seeds", help="Override the seeds: a count (5) or a list (0,1,2).")]
+NameOpt = Annotated[str | None, typer.Option(
+    "--name", help="Override the campaign name (and so its results folder).")]
+VerboseOpt = Annotated[bool, typer.Option(
+    "--verbose", "-v", help="Also log details (INFO messages, library warnings).")]
+QuietOpt = Annotated[bool, typer.Option(
+    "--quiet", "-q", help="Only results and errors: no progress, no warnings.")]
+
+
+def error(console: Console, message: object) -> None:
+    """One error line, ``error: MESSAGE``, the same for every command. The message is
+    printed literally (no rich markup: ``[start, stop, num]`` stays as it is)."""
+    console.print(f"[bold red]error:[/] {escape(str(message))}", highlight=False,
+                  soft_wrap=True)
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        from ..provenance import code_version, git_commit
+
+        typer.echo(f"nematic {code_version()} (git {git_commit()})")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(version: Annotated[bool, typer.Option(
+        "--version", callback=_version_callback, is_eager=True,
+        help="Print the version and exit.")] = False,
+          debug: Annotated[bool, typer.Option(
+        "--debug", envvar="NEMATIC_DEBUG",
+        help="Show the Python traceback of an error (by default one line says what went "
+        "wrong).")] = False) -> None:
+    """Active nematic solids: run the model, sweep it, aggregate phase diagrams."""
+    DEBUG["on"] = debug
+
+
+def setup_logging(console: Console, verbose: bool, quiet: bool = False) -> None:
+    import distributed  # noqa: F401 - configures its loggers on import: quieten them after
+
+    level = logging.INFO if verbose else logging.ERROR if quiet else logging.WARNING
+    handler = RichHandler(console=console, show_path=False, show_time=verbose)
+    handler.setLevel(level)
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if isinstance(h, RichHandler):
+            root.removeHandler(h)
+    root.addHandler(handler)
+    root.setLevel(level)
+    for noisy in ("distributed", "tornado", "asyncio", "bokeh"):
+        logging.getLogger(noisy).setLevel(logging.ERROR)
+
+
+def _parse_seeds(text: str | None) -> int | list[int] | None:
+    if text is None:
+        return None
+    value = parse_value(text if "," not in text or "[" in text else f"[{text}]")
+    return value  # validated with the rest of the campaign
+
+
+def load(console: Console, path: Path, settings: list[str] | None, seeds: str | None,
+         name: str | None, scheduler: str | None = None,
+         workers: int | None = None) -> Campaign:
+    try:
+        overrides = Overrides(settings=parse_assignments(settings or []),
+                              seeds=_parse_seeds(seeds), name=name, scheduler=scheduler,
+                              workers=workers)
+        return load_campaign(path, overrides)
+    except CampaignError as e:
+        error(console, e)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+
+
+def err_console() -> Console:
+    return Console(stderr=True, highlight=False, soft_wrap=True)
+
+
+def fmt_time(seconds: float | None) -> str:
+    if seconds is None or not math.isfinite(seconds):
+        return "unknown"
+    seconds = int(round(seconds))
+    h, rem = divmod(seconds, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM (a batch system ending the driver's job) stops as cleanly as Ctrl-C."""
+    def handler(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+

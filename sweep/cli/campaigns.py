@@ -1,0 +1,353 @@
+"""The campaign commands: ``nematic validate``, ``run``, ``status`` and ``aggregate``."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+)
+from rich.table import Table
+
+from ..errors import CampaignLocked, ClusterError, StoreError
+from .app import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED_RUNS,
+    EXIT_INTERRUPTED,
+    CampaignArg,
+    NameOpt,
+    QuietOpt,
+    ResultsOpt,
+    SeedsOpt,
+    SetOpt,
+    VerboseOpt,
+    err_console,
+    error,
+    fmt_time,
+    load,
+    setup_logging,
+    sigterm_as_interrupt,
+)
+from .products import regenerate_figures, repair_products
+from .progress import ProgressEvents
+
+
+# --------------------------------------------------------------------------- validate
+def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
+             set_: SetOpt = None, seeds: SeedsOpt = None, name: NameOpt = None,
+             verbose: VerboseOpt = False, quiet: QuietOpt = False) -> None:
+    """Check a campaign file without running anything.
+
+    Exit 0 if it is valid (a summary of the grid is printed), 2 with every problem listed
+    (file:line, key path, value, what is allowed) otherwise.
+    """
+    console = Console(highlight=False, soft_wrap=True, quiet=quiet)
+    setup_logging(err_console(), verbose, quiet)
+    c = load(err_console(), campaign, set_, seeds, name)
+    console.print(f"[green]valid[/]: campaign [bold]{escape(c.name)}[/] ({escape(str(campaign))})")
+    for d in c.dims:
+        for a in d.axes:
+            vals = ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in a.values[:8])
+            more = ", ..." if len(a.values) > 8 else ""
+            zipped = f" (zipped with {d.name})" if a.name != d.name else ""
+            console.print(f"  axis {a.name}{zipped}: {len(a.values)} values "
+                          f"{escape(f'[{vals}{more}]')}")
+    console.print(f"  seeds: {len(c.seeds)}; grid points: {c.n_points}; runs: {c.n_runs}")
+    ex = c.execution
+    where = {"local": f"local dask cluster ({ex.workers or 'one per core'} worker(s))",
+             "scheduler": f"dask scheduler {ex.scheduler}",
+             "cluster": f"dask-jobqueue {ex.cluster.kind if ex.cluster else ''}"}[ex.mode]
+    console.print(f"  execution: {where}; results: {results / c.name}")
+    if c.fits or c.figures is not None:
+        shown = ("every one that applies" if c.figures is None
+                 else ", ".join(p.name for p in c.figures) or "none")
+        console.print("  fits: " + (", ".join(p.name for p in c.fits) or "none")
+                      + "; figures: " + shown)
+    if c.refine is not None:  # an adaptive campaign: its first round and a bound (sweep/refine)
+        from ..refine.report import validation_lines
+
+        for line in validation_lines(c):
+            console.print(f"  {line}", markup=False)
+
+
+# --------------------------------------------------------------------------- run
+def run(
+    campaign: CampaignArg,
+    results: ResultsOpt = Path("results"),
+    set_: SetOpt = None,
+    seeds: SeedsOpt = None,
+    name: NameOpt = None,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Use the dask scheduler at this address (tcp://HOST:PORT) instead "
+        "of the campaign's execution section.")] = None,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", help="Local worker processes (default: the campaign's, else one per "
+        "core).")] = None,
+    retry_failed: Annotated[bool, typer.Option(
+        "--retry-failed", help="Also redo runs that failed before.")] = False,
+    verify: Annotated[bool, typer.Option(
+        "--verify", help="Checksum every finished run's file (by default only files whose "
+        "size or mtime changed are), and redo the corrupt ones.")] = False,
+    aggregate: Annotated[bool, typer.Option(
+        "--aggregate/--no-aggregate", help="Write phase.nc at the end.")] = True,
+    figures: Annotated[bool, typer.Option(
+        "--figures/--no-figures", help="After phase.nc, write fits.nc and the figures "
+        "(as 'nematic figures' does).")] = True,
+    dashboard: Annotated[bool, typer.Option(
+        "--dashboard/--no-dashboard", help="Serve the dask dashboard (local cluster: on "
+        "127.0.0.1, a free port) and print its link.")] = True,
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
+) -> None:
+    """Run a campaign on dask, resuming where it stopped.
+
+    Finished runs are skipped, the rest run on a local dask cluster (default), a scheduler or
+    a dask-jobqueue cluster; one netCDF per run, phase.nc at the end. Exit 0 if every run
+    succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 130 when
+    interrupted (rerun to resume).
+    """
+    from ..aggregate import write_phase
+    from ..execute import describe_failure, drive
+    from ..expand import expand
+    from ..store import CampaignStore
+
+    err = err_console()
+    setup_logging(err, verbose, quiet)
+    c = load(err, campaign, set_, seeds, name, scheduler, workers)
+    say = Console(stderr=True, highlight=False, soft_wrap=True, quiet=quiet)
+    store = CampaignStore(results, c.name)
+    lock = store.lock()
+    try:
+        store.ensure()
+        lock.acquire(command=" ".join(sys.argv))
+    except (CampaignLocked, StoreError) as e:
+        error(err, e)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+    try:
+        expansion = expand(c)
+        progress = Progress(
+            TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+            TextColumn("{task.fields[counts]}"), TimeElapsedColumn(),
+            TextColumn("ETA {task.fields[eta]}"), console=err, transient=False,
+            disable=quiet or not err.is_terminal)
+        events = ProgressEvents(say, progress, store)
+        try:
+            with sigterm_as_interrupt(), progress:
+                try:
+                    if c.refine is None:
+                        plan, summary = drive(expansion, store, retry_failed=retry_failed,
+                                              verify=verify, events=events,
+                                              dashboard=dashboard)
+                    else:  # an adaptive campaign: rounds planned from the results
+                        from ..refine.driver import drive_rounds
+
+                        plan, summary, expansion = drive_rounds(
+                            c, store, retry_failed=retry_failed, verify=verify, events=events,
+                            dashboard=dashboard,
+                            say=lambda line: say.print(line, markup=False))
+                finally:
+                    events.close()
+        except (ClusterError, StoreError) as e:
+            error(err, e)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
+            error(err, storage_message(store, e))
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except KeyboardInterrupt:  # before any run was submitted
+            err.print("[yellow]interrupted[/]; rerun the same command to resume")
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+        if summary is not None and summary.storage_error is not None:
+            kept = [str(rec.get("saved_to")) for _, rec in summary.unsaved
+                    if rec.get("saved_to")]
+            err.print(f"[bold red]error: results cannot be written[/]: "
+                      f"{escape(summary.storage_error)}. "
+                      f"Stopped after {summary.completed} stored run(s) this session; the "
+                      f"other runs stay pending (not failed). "
+                      + (f"{len(kept)} computed result(s) kept in "
+                         f"{Path(kept[0]).parent} (moved in by the next run). " if kept
+                         else "")
+                      + "Fix the storage and rerun the same command.",
+                      soft_wrap=True, highlight=False)
+            raise typer.Exit(EXIT_BAD_INPUT)
+        if summary is not None and summary.interrupted:
+            err.print(f"[yellow]interrupted[/] after {summary.completed} run(s) "
+                      f"({summary.ok} ok, {len(summary.failed)} failed); rerun the same "
+                      "command to resume")
+            raise typer.Exit(EXIT_INTERRUPTED)
+        if summary is not None and summary.wall_time > 0:
+            say.print(f"{summary.completed} run(s) in {fmt_time(summary.wall_time)} "
+                      f"(sum of run times {fmt_time(summary.run_time)})")
+        if aggregate:
+            try:
+                write_phase(expansion, store)
+                say.print(f"phase diagram: {escape(str(store.phase_path))}")
+                if figures:
+                    repair_products(c, results, err, phase=False)
+                    for figure in regenerate_figures(c, results):
+                        say.print(f"figure: {escape(str(figure))}")
+            except StoreError as e:
+                error(err, f"{e}; the runs are stored, rerun the same command (or nematic "
+                      "aggregate) once the folder can be written")
+                raise typer.Exit(EXIT_BAD_INPUT) from None
+        failures = [] if summary is None else summary.failed
+        n_failed = len(failures) + len(plan.failed)
+        if summary is not None and summary.lost:
+            err.print(f"[yellow]{len(summary.lost)} run(s) were cancelled by dask[/] (the "
+                      "scheduler or cluster went away); rerun the same command to do them")
+            if not n_failed:
+                raise typer.Exit(EXIT_FAILED_RUNS)
+        if n_failed:
+            err.print(f"[red]{n_failed} run(s) failed[/]:")
+            for r, rec in failures[:20]:
+                err.print(f"  {describe_failure(r, rec)}", soft_wrap=True, highlight=False,
+                          markup=False)
+            if len(failures) > 20:
+                err.print(f"  ... and {len(failures) - 20} more")
+            if plan.failed:
+                err.print(f"  ... and {len(plan.failed)} earlier failure(s); "
+                          "--retry-failed redoes them")
+            err.print(f"details: nematic status {campaign}")
+            raise typer.Exit(EXIT_FAILED_RUNS)
+    finally:
+        lock.release()
+
+
+def storage_message(store: Any, e: OSError) -> str:
+    from ..files import storage_error
+
+    return str(storage_error(Path(e.filename) if e.filename else store.root, e))
+
+
+# --------------------------------------------------------------------------- status
+def status(
+    campaign: CampaignArg,
+    results: ResultsOpt = Path("results"),
+    set_: SetOpt = None,
+    seeds: SeedsOpt = None,
+    name: NameOpt = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", help="Concurrency assumed for the ETA (default: the processes seen "
+        "finishing runs under the running driver, else the local worker count).")] = None,
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
+) -> None:
+    """Show done / failed / pending runs, failure reasons and an ETA.
+
+    Counts are given overall and per sweep value. Only the run records are read (no netCDF),
+    so it answers in seconds for 10^5 runs, also while the campaign runs.
+    """
+    from ..refine.rounds import expansion_for
+    from ..status import campaign_status
+    from ..store import CampaignStore
+
+    console = Console(highlight=False, soft_wrap=True)
+    setup_logging(err_console(), verbose, quiet)
+    c = load(err_console(), campaign, set_, seeds, name)
+    store = CampaignStore(results, c.name)
+    expansion = expansion_for(c, store)
+    report = campaign_status(expansion, store, workers=workers)
+    refinement = getattr(expansion, "refinement", None)  # an adaptive campaign's rounds
+    if as_json:
+        from ..refine.rounds import status_dict
+
+        typer.echo(json.dumps({**report.to_dict(), **status_dict(refinement)}, default=str))
+        return
+    pct = 100.0 * report.done / max(report.total, 1)
+    console.print(f"campaign [bold]{report.campaign}[/] ({report.folder}): "
+                  f"[green]{report.done} done[/], [red]{report.failed} failed[/], "
+                  f"{report.pending} pending of {report.total} ({pct:.0f}% done)")
+    if quiet:
+        return
+    if refinement is not None:
+        from ..refine.report import status_lines
+
+        for line in status_lines(refinement):
+            console.print(line, markup=False)
+    if report.running:
+        console.print(f"running: pid {report.running.get('pid')} on "
+                      f"{report.running.get('host')} since {report.running.get('started')}")
+    if report.pending:
+        basis = f" ({report.eta_basis})" if report.eta_basis else ""
+        console.print(f"ETA: {fmt_time(report.eta_seconds)}{basis}")
+    if report.median_run_time is not None and report.mean_run_time is not None:
+        console.print(f"run time: median {report.median_run_time:.3g} s, mean "
+                      f"{report.mean_run_time:.3g} s (successful runs)")
+    for ax in report.per_axis:
+        table = Table(title=f"by {ax.dim}", title_justify="left", show_edge=False)
+        for col in (ax.dim, "done", "failed", "pending"):
+            table.add_column(col, justify="right")
+        for row in zip(ax.labels, ax.done, ax.failed, ax.pending, strict=True):
+            table.add_row(*map(str, row))
+        console.print(table)
+    if report.reasons:
+        console.print("[red]failures by reason[/]: "
+                      + ", ".join(f"{k}: {v}" for k, v in report.reasons.items()))
+        for ex in report.examples:
+            coords = ", ".join(f"{k}={v}" for k, v in ex["coords"].items())
+            t = ex.get("t_failed")
+            at = f" at t = {t:.4g}" if isinstance(t, (int, float)) else ""
+            detail = str(ex["detail"]).strip().splitlines()
+            console.print(f"  {ex['run_id']} ({coords}): {ex['reason']}{at}"
+                          + (f": {detail[-1]}" if detail else ""), soft_wrap=True)
+        console.print(f"  (full records with tracebacks: {store.runs_dir}/<run_id>.json)")
+    if report.unreadable:
+        console.print(f"[yellow]{report.unreadable} run(s) pending because their file is "
+                      "missing, truncated or corrupt[/] (the next 'nematic run' redoes them):")
+        for ex in report.unreadable_examples:
+            console.print(f"  {ex['run_id']}: {ex['problem']}", markup=False)
+    if report.foreign_runs:
+        console.print(f"{report.foreign_runs} run record(s) in the folder belong to other "
+                      "grids (kept, not counted)")
+
+
+# --------------------------------------------------------------------------- aggregate
+def aggregate(
+    campaign: CampaignArg,
+    results: ResultsOpt = Path("results"),
+    set_: SetOpt = None,
+    seeds: SeedsOpt = None,
+    name: NameOpt = None,
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
+) -> None:
+    """Write `results/NAME/phase.nc` from the runs on disk.
+
+    Missing and failed runs are NaN. Refuses while a driver is running the campaign (the
+    driver aggregates when it ends).
+    """
+    from ..aggregate import write_phase
+    from ..refine.rounds import expansion_for
+    from ..store import CampaignStore
+
+    err = err_console()
+    setup_logging(err, verbose, quiet)
+    c = load(err, campaign, set_, seeds, name)
+    store = CampaignStore(results, c.name)
+    if not store.runs_dir.is_dir():
+        error(err, f"no results for campaign {c.name} in {store.root}; run it first "
+              f"(nematic run {campaign})")
+        raise typer.Exit(EXIT_BAD_INPUT)
+    lock = store.lock()
+    try:
+        lock.acquire(command=" ".join(sys.argv))
+        try:
+            ds = write_phase(expansion_for(c, store), store)
+        finally:
+            lock.release()
+    except (CampaignLocked, StoreError) as e:
+        error(err, e)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+    Console(highlight=False, soft_wrap=True, quiet=quiet).print(
+        f"wrote {store.phase_path}: {ds.attrs['n_ok']} ok, {ds.attrs['n_failed']} failed, "
+        f"{ds.attrs['n_missing']} missing of {ds.attrs['n_runs']} runs")

@@ -1,0 +1,54 @@
+"""Fits and figures around a campaign command: an unreadable phase.nc rebuilt, an unreadable
+fits.nc removed (:func:`repair_products`), and the figures drawn after a run."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from rich.console import Console
+
+from ..campaign import Campaign
+
+
+def repair_products(campaign: Campaign, results: Path, console: Console, *,
+                    phase: bool = True) -> bool:
+    """Before fits and figures are drawn: an unreadable ``phase.nc`` is rebuilt from the run
+    records (taking the campaign's lock) and an unreadable ``fits.nc`` removed (the fits
+    recompute it), each with a message. Returns whether ``fits.nc`` was removed. Raises
+    :class:`CampaignLocked` if a driver holds the campaign while phase.nc must be rebuilt."""
+    from ..aggregate import write_phase
+    from ..analysis.fits_file import FITS
+    from ..files import netcdf_problem
+    from ..refine.rounds import expansion_for
+    from ..store import CampaignStore
+
+    store = CampaignStore(results, campaign.name)
+    if phase and store.phase_path.exists():
+        problem = netcdf_problem(store.phase_path, ("status", "run_id"))
+        if problem is not None:
+            console.print(f"[yellow]{store.phase_path}: {problem}[/]; rebuilding it from the "
+                          "run records", soft_wrap=True, highlight=False)
+            lock = store.lock()
+            lock.acquire(command=" ".join(sys.argv))
+            try:
+                write_phase(expansion_for(campaign, store), store)
+            finally:
+                lock.release()
+    fits_path = store.root / FITS
+    if fits_path.exists():
+        problem = netcdf_problem(fits_path)
+        if problem is not None:
+            console.print(f"[yellow]{fits_path}: {problem}[/]; removing it (the fits "
+                          "recompute it)", soft_wrap=True, highlight=False)
+            fits_path.unlink()
+            return True
+    return False
+
+
+def regenerate_figures(campaign: Campaign, results: Path) -> list[Path]:
+    """Fits and figures after a run (:func:`sweep.figures.produce.regenerate`, which logs and
+    never raises for a figure it cannot draw)."""
+    from ..figures.produce import regenerate
+
+    return list(regenerate(campaign, results))

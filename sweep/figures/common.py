@@ -1,0 +1,192 @@
+"""What the figures share: the results folder read once (:class:`Results`), picking grid
+points and runs, number formats, labels and style, a run's snapshot in a panel, and the
+check of a figure's options."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import xarray as xr
+
+from ..analysis.fits_file import FITS, load_fits, load_phase
+from ..analysis.phase import select, sweep_dims, with_dim
+from ..campaign import AMB
+from ..errors import FigureError, FitError
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+log = logging.getLogger(__name__)
+
+FIGURES = "figures"
+FORMATS = ("png", "pdf")
+PNG_DPI = 160
+LABELS = {
+    AMB: r"$\alpha - B$", "alpha": r"$\alpha$", "B": r"$B$", "K": r"$K$", "chi": r"$\chi$",
+    "eps": r"$\epsilon$", "sigma2_S": r"$\sigma^2_S$", "cos2theta": r"$\langle\cos 2\theta\rangle$",
+    "activity": r"$\chi(\alpha - B)$",
+}
+STYLE = {
+    "font.size": 9, "axes.titlesize": 10, "axes.labelsize": 10, "legend.fontsize": 8,
+    "xtick.labelsize": 8.5, "ytick.labelsize": 8.5, "legend.framealpha": 0.85,
+    "axes.grid": False,
+}
+
+
+# --------------------------------------------------------------------------- reading results
+class Results:
+    """The results folder of one campaign, read-only: phase.nc, fits.nc and the run files."""
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        try:
+            self.phase = load_phase(self.root)
+        except FitError as e:
+            raise FigureError(str(e)) from None
+        self.fits = load_fits(self.root)
+        self._runs: dict[str, xr.Dataset | None] = {}
+
+    @property
+    def name(self) -> str:
+        return str(self.phase.attrs.get("campaign", self.root.name))
+
+    def run(self, run_id: str) -> xr.Dataset | None:
+        """``runs/<run_id>.nc`` loaded into memory (cached), or ``None`` if it is missing."""
+        if run_id not in self._runs:
+            path = self.root / "runs" / f"{run_id}.nc"
+            try:
+                with xr.open_dataset(path) as ds:
+                    self._runs[run_id] = ds.load()
+            except (OSError, ValueError) as e:
+                log.warning("cannot read run file %s: %s", path, e)
+                self._runs[run_id] = None
+        return self._runs[run_id]
+
+    def fit(self, *names: str) -> xr.Dataset:
+        """The fits Dataset, checked to hold every variable in ``names``."""
+        missing = [n for n in names if n not in self.fits]
+        if missing:
+            raise FigureError(f"{self.root / FITS} has no {', '.join(missing)}: "
+                              "run `nematic figures` (it writes the fits first)")
+        return self.fits
+
+
+def nearest_point(ds: xr.Dataset, where: Mapping[str, Any]) -> xr.Dataset:
+    """``ds`` at the nearest grid values of ``where`` (names absent from ``ds`` are ignored)."""
+    for name, value in where.items():
+        if name in ds.coords and ds[name].ndim == 1:
+            ds = with_dim(ds, name).sel({name: value}, method="nearest")
+    return ds
+
+
+def ok_run(res: Results, point: xr.Dataset, seed: int | None = None
+            ) -> tuple[xr.Dataset | None, int | None]:
+    """The run file of ``point`` (a phase.nc slice over seeds) for ``seed`` or the first seed
+    that succeeded (and has snapshots)."""
+    seeds = point["seed"].values
+    order = list(range(seeds.size))
+    if seed is not None:
+        order = [i for i in order if int(seeds[i]) == int(seed)] + order
+    for i in order:
+        if int(point["status"].values[i]) != 1:
+            continue
+        run = res.run(str(point["run_id"].values[i]))
+        if run is not None:
+            return run, int(seeds[i])
+    return None, None
+
+
+def fmt(value: float) -> str:
+    if not math.isfinite(value):
+        return "nan"
+    return f"{value:.3g}"
+
+
+def fmt_sci(value: float) -> str:
+    """``1e-06`` -> ``10^{-6}`` (mathtext), other numbers with 3 significant digits."""
+    if value != 0 and math.isfinite(value):
+        e = math.log10(abs(value))
+        if abs(e - round(e)) < 1e-9 and abs(e) >= 3:
+            return rf"$10^{{{int(round(e))}}}$"
+        if abs(e) >= 3:
+            m, ex = f"{value:.2e}".split("e")
+            return rf"${float(m):g}\times10^{{{int(ex)}}}$"
+    return f"{value:.3g}"
+
+
+def describe(ds: xr.Dataset, names: Sequence[str]) -> str:
+    parts = []
+    for n in names:
+        if n in ds.coords and ds[n].ndim == 0:
+            parts.append(f"{LABELS.get(n, n)} = {fmt_sci(float(ds[n]))}")
+    return ", ".join(parts)
+
+
+def default_select(ds: xr.Dataset, keep: Sequence[str], choice: Mapping[str, Any] | None
+                    ) -> xr.Dataset:
+    """``ds`` with every sweep dim except ``keep`` fixed: ``choice`` or its first value."""
+    ds = select(ds, choice)
+    for d in sweep_dims(ds):
+        if d not in keep:
+            ds = ds.isel({d: 0})
+    return ds
+
+
+def safe_snapshot(ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool = True,
+                  arrows: int = 24) -> None:
+    """:func:`sweep.figures.snapshot.draw_snapshot` (without its title), tolerating a run without
+    I1bar stored (then a plain background), with compact colour bars: S (quivers) on the
+    right, I1bar (background) below."""
+    from matplotlib.ticker import MaxNLocator
+
+    from .snapshot import background_colorbar, draw_snapshot
+
+    if run.sizes.get("snapshot_time", 0) == 0 or "q1" not in run or "q2" not in run:
+        ax.text(0.5, 0.5, "no snapshot stored", ha="center", va="center",
+                transform=ax.transAxes)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        return
+    has_i1 = "I1bar" in run
+    if not has_i1:
+        run = run.assign(I1bar=xr.zeros_like(run["q1"]) + 2.0)
+    quiver = draw_snapshot(ax, run, index, colorbar=False, arrows=arrows)
+    ax.set_title("")
+    if not colorbar:
+        return
+    fig = ax.figure
+    cb = fig.colorbar(quiver, cax=ax.inset_axes((1.03, 0.1, 0.045, 0.8)))
+    cb.set_label("S (quivers)")
+    cb.locator = MaxNLocator(5)
+    cb.update_ticks()
+    if has_i1 and ax.images:
+        background_colorbar(fig, ax.images[0], cax=ax.inset_axes((0.1, -0.09, 0.8, 0.04)),
+                            orientation="horizontal")
+
+
+def invalid_options(name: str, options: Mapping[str, Any], allowed: Sequence[str]) -> list[str]:
+    """What is wrong with the ``options`` of figure ``name``, whose options are ``allowed``:
+    one message per problem, empty if none."""
+    out = [f"unknown option {key!r}; allowed: {', '.join(allowed) or 'none'}"
+           for key in options if key not in allowed]
+    if "yscale" in allowed and options.get("yscale", "linear") not in ("linear", "log"):
+        out.append(f"yscale = {options['yscale']!r}; expected 'linear' or 'log'")
+    for key in ("select", "snapshot"):
+        if options.get(key) is not None and not isinstance(options[key], Mapping):
+            out.append(f"{key} = {options[key]!r}; expected a mapping {{sweep axis: value}}")
+    snaps = options.get("snapshots")
+    if snaps is not None and (not isinstance(snaps, Sequence) or isinstance(snaps, str)
+                              or not all(isinstance(t, Mapping) for t in snaps)):
+        out.append(f"snapshots = {snaps!r}; expected a list of mappings {{sweep axis: value}}")
+    return out
+
+
+def check_options(name: str, options: Mapping[str, Any], allowed: Sequence[str]) -> None:
+    """Raise :class:`FigureError` naming every problem of :func:`invalid_options`."""
+    problems = invalid_options(name, options, allowed)
+    if problems:
+        raise FigureError(f"figure {name!r}: " + "; ".join(problems))

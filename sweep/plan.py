@@ -1,0 +1,108 @@
+"""What remains to do: every run of a campaign classified from what is on disk (done,
+failed, to do), with unusable files discarded, unindexed ones adopted and spooled results
+moved in."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from dataclasses import dataclass, field
+
+from .expand import Expansion
+from .files import atomic_path
+from .store import RETRYABLE_REASONS, CampaignStore, Record
+from .task import spool_dir
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Plan:
+    """What is on disk for a campaign's runs, and what remains to do (run positions)."""
+
+    todo: list[int]
+    done: list[int]
+    failed: list[int]
+    records: dict[str, Record]
+    adopted: int = 0
+    #: results moved in from the spool (written elsewhere when the folder could not be)
+    unspooled: int = 0
+    #: runs whose record or file was unusable (missing, truncated, corrupt): (run_id, why)
+    redone: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def discarded(self) -> int:
+        return len(self.redone)
+
+
+def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
+              verify: bool = False) -> Plan:
+    """Classify every run: done (skipped), failed (skipped unless ``retry_failed``), to do.
+
+    A record whose file is missing, truncated or corrupt (:meth:`CampaignStore.check_run_file`;
+    ``verify`` checksums every file) is discarded and its run redone; a ``.nc`` without a
+    record is adopted if it opens, else deleted; a record of a result that could not be
+    written (reason ``write_error``) is redone.
+    """
+    unspooled = import_spool(store)
+    records = store.scan()
+    plan = Plan(todo=[], done=[], failed=[], records=records, unspooled=unspooled)
+    for i, rid in enumerate(expansion.run_ids):
+        rec = records.get(rid)
+        if rec is None and rid in store.nc_present:
+            rec = store.adopt(rid)
+            if rec is not None:
+                plan.adopted += 1
+        problem = None if rec is None else store.check_run_file(rid, rec, verify=verify)
+        if rec is not None and problem is not None:
+            log.warning("run %s: %s; it will be redone", rid, problem)
+            store.discard(rid)
+            records.pop(rid, None)
+            plan.redone.append((rid, problem))
+            rec = None
+        elif rec is not None and rec.get("nc_bytes") is not None and (
+                not rec.get("nc_sha256") or rec.get("nc_mtime_ns") != _mtime(store, rid)):
+            store.refresh_stamp(rid)  # intact, but copied or checksum-less: stat next time
+        if rec is None:
+            plan.todo.append(i)
+        elif rec.get("status") == "ok":
+            plan.done.append(i)
+        elif retry_failed or rec.get("reason") in RETRYABLE_REASONS:
+            plan.todo.append(i)
+        else:
+            plan.failed.append(i)
+    return plan
+
+
+def import_spool(store: CampaignStore) -> int:
+    """Move the results the workers kept in :func:`spool_dir` (the folder could not be
+    written) into the results folder, where the plan adopts them; return how many. Raises
+    :class:`StorageError` if the folder still cannot be written."""
+    import shutil
+
+    spool = spool_dir(store.runs_dir)
+    try:
+        files = sorted(spool.glob("*.nc"))
+    except OSError:
+        return 0
+    n = 0
+    for src in files:
+        target = store.nc_path(src.stem)
+        if not target.exists() and store.read_record(src.stem) is None:
+            with atomic_path(target) as tmp:
+                shutil.copyfile(src, tmp)
+            n += 1
+        with contextlib.suppress(OSError):
+            src.unlink()
+    with contextlib.suppress(OSError):
+        spool.rmdir()
+    if n:
+        log.info("moved %d result(s) kept in %s into %s", n, spool, store.runs_dir)
+    return n
+
+
+def _mtime(store: CampaignStore, run_id: str) -> int | None:
+    try:
+        return store.nc_path(run_id).stat().st_mtime_ns
+    except OSError:
+        return None

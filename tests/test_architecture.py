@@ -1,0 +1,117 @@
+"""The shape of the code, read from the source with ``ast``: the imports inside ``sweep/``
+form no cycle, ``model/`` never imports ``sweep``, ``sweep/`` loads no module through
+``importlib``, and no file of ``sweep/`` is longer than :data:`MAX_LINES` lines."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+MAX_LINES = 500
+
+
+def module_name(path: Path, root: Path = ROOT) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def imported_modules(path: Path, root: Path = ROOT) -> set[str]:
+    """Every module ``path`` imports (absolute names; ``from X import name`` counts as
+    ``X.name`` when that is a module of the project, else as ``X``)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    package = module_name(path, root).split(".")
+    if path.name != "__init__.py":
+        package = package[:-1]
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1]
+                target = ".".join([*base, *([node.module] if node.module else [])])
+            else:
+                target = node.module or ""
+            out.add(target)
+            out.update(f"{target}.{alias.name}" for alias in node.names)
+    return out
+
+
+def project_graph(package: str) -> dict[str, set[str]]:
+    """Module -> the modules of ``package`` it imports."""
+    files = sorted((ROOT / package).rglob("*.py"))
+    names = {module_name(f) for f in files}
+    return {module_name(f): {m for m in imported_modules(f) if m in names} - {module_name(f)}
+            for f in files}
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import cycle of ``graph`` (its modules in order, the first repeated), or None."""
+    state: dict[str, int] = {}  # 1 on the current path, 2 done
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return [*stack[stack.index(nxt):], nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def test_sweep_imports_form_no_cycle() -> None:
+    cycle = find_cycle(project_graph("sweep"))
+    assert cycle is None, "import cycle in sweep/: " + " -> ".join(cycle or [])
+
+
+def test_model_never_imports_sweep() -> None:
+    bad = {f"{module_name(f)} imports {m}" for f in (ROOT / "model").rglob("*.py")
+           for m in imported_modules(f) if m == "sweep" or m.startswith("sweep.")}
+    assert not bad, sorted(bad)
+
+
+def test_sweep_uses_no_importlib() -> None:
+    bad = [module_name(f) for f in (ROOT / "sweep").rglob("*.py")
+           if any(m == "importlib" or m.startswith("importlib.") for m in imported_modules(f))]
+    assert not bad, f"importlib in {bad}: import modules by name, in plain sight"
+
+
+def test_sweep_files_are_short() -> None:
+    long = {str(f.relative_to(ROOT)): n for f in (ROOT / "sweep").rglob("*.py")
+            if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    assert not long, f"files over {MAX_LINES} lines (split them by concept): {long}"
+
+
+def test_the_cycle_finder_finds_cycles() -> None:
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+@pytest.mark.parametrize(("source", "expected"), [
+    ("from .spec import AMB\n", {"sweep.spec", "sweep.spec.AMB"}),
+    ("from . import fits\n", {"sweep", "sweep.fits"}),
+    ("import importlib\n", {"importlib"}),
+])
+def test_imports_are_resolved(tmp_path: Path, source: str, expected: set[str]) -> None:
+    (tmp_path / "sweep").mkdir()
+    path = tmp_path / "sweep" / "expand.py"
+    path.write_text(source)
+    assert imported_modules(path, tmp_path) == expected

@@ -59,12 +59,15 @@ def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, out):  # pragma: no co
                 out[i, x, y] -= imul(ky[x, y], work_hat[x, y])
 
 
-class NewtonOperator(NamedTuple):
-    """Newton's tangent operator :math:`-\\mathrm{Div}(\\mathbb K : \\nabla v)` of
-    :func:`_operator` (no spin term) and its Green preconditioner, for the compiled
-    :func:`model.compiled.krylov.pcg`."""
+class TangentOperator(NamedTuple):
+    """:math:`-\\mathrm{Div}(\\mathbb K : \\nabla v\\, [+ E\\, \\omega(v)])` of
+    :func:`_operator` (the E term if ``spin``: the displacement rate; without it Newton's
+    tangent) and its Green preconditioner, for the compiled :func:`model.compiled.krylov.pcg`
+    and :func:`model.compiled.krylov.gmres`."""
 
     K: Array
+    E: Array
+    spin: bool
     kx: Array
     ky: Array
     khx: Array
@@ -78,18 +81,18 @@ class NewtonOperator(NamedTuple):
 
 
 @overload(apply_operator)
-def _apply_newton(op, x, out, aux):  # pragma: no cover - compiled
-    if getattr(op, "instance_class", None) is NewtonOperator:  # the named tuple type
+def _apply_tangent(op, x, out, aux):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is TangentOperator:  # the named tuple type
         def impl(op, x, out, aux):  # no auxiliary output
-            _operator(x, op.K, op.K[0, 0], False, op.kx, op.ky, op.pf, op.pi, op.work_hat,
-                      op.G, out)
+            _operator(x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, op.G,
+                      out)
         return impl
     return None
 
 
 @overload(precondition)
-def _precondition_newton(op, v, out):  # pragma: no cover - compiled
-    if getattr(op, "instance_class", None) is NewtonOperator:  # the named tuple type
+def _precondition_tangent(op, v, out):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is TangentOperator:  # the named tuple type
         def impl(op, v, out):
             out[...] = green_kernel(v, op.khx, op.khy, op.inv_k2, op.a)
         return impl
@@ -102,45 +105,9 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
     operator; returns ``(x, iterations, status, operator applications)``, status 0 ok,
     1 maxiter, 2 indefinite (as :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
     n = K.shape[4]
-    op = NewtonOperator(K, kx, ky, khx, khy, inv_k2, a, pf, pi,
-                        np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)))
+    op = TangentOperator(K, K[0, 0], False, kx, ky, khx, khy, inv_k2, a, pf, pi,
+                         np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)))
     return krylov.pcg(op, b, x0, w, rtol, maxiter)
-
-
-class RateOperator(NamedTuple):
-    """The displacement-rate operator of :func:`_operator` (with the spin term) and its
-    Green preconditioner, for the compiled :func:`model.compiled.krylov.gmres`."""
-
-    K: Array
-    E: Array
-    kx: Array
-    ky: Array
-    khx: Array
-    khy: Array
-    inv_k2: Array
-    a: float
-    pf: int
-    pi: int
-    work_hat: Array
-    G: Array
-
-
-@overload(apply_operator)
-def _apply_rate(op, x, out, aux):  # pragma: no cover - compiled
-    if getattr(op, "instance_class", None) is RateOperator:  # the named tuple type
-        def impl(op, x, out, aux):  # no auxiliary output
-            _operator(x, op.K, op.E, True, op.kx, op.ky, op.pf, op.pi, op.work_hat, op.G, out)
-        return impl
-    return None
-
-
-@overload(precondition)
-def _precondition_rate(op, v, out):  # pragma: no cover - compiled
-    if getattr(op, "instance_class", None) is RateOperator:  # the named tuple type
-        def impl(op, v, out):
-            out[...] = green_kernel(v, op.khx, op.khy, op.inv_k2, op.a)
-        return impl
-    return None
 
 
 @njit(cache=True)
@@ -150,8 +117,8 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
     the Green operator; returns ``(x, iterations, converged, operator applications)``. ``V``
     (restart + 1 spectra) and ``Z`` (restart) are caller-owned work arrays."""
     n = K.shape[4]
-    op = RateOperator(K, E, kx, ky, khx, khy, inv_k2, a, pf, pi,
-                      np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)))
+    op = TangentOperator(K, E, True, kx, ky, khx, khy, inv_k2, a, pf, pi,
+                         np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)))
     x, _, its, ok, nop = krylov.gmres(op, b, x0, w, rtol, maxiter, V, Z,
                                       np.empty((Z.shape[0], 0), dtype=np.complex128))
     return x, its, ok, nop

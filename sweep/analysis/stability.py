@@ -20,7 +20,7 @@ from ..errors import FitError
 from ..files import series_time
 from .options import check_options
 from .phase import fixed_parameter, is_swept, other_dims, select, variable, with_dim
-from .statistics import Array, log10
+from .statistics import Array
 
 log = logging.getLogger(__name__)
 
@@ -28,21 +28,24 @@ STABILITY_OPTIONS = ("activity", "strain", "unstable_reasons", "fraction", "n_fi
                      "incompressible")
 
 
-def _run_growth(path: Path) -> float:
-    """log10 sigma2_S(t_final) / sigma2_S(t_final / 2) of one run file (NaN if unreadable)."""
+def run_growth(path: Path) -> float:
+    """log10 sigma2_S(t_final) / sigma2_S(t_final / 2) of a run file (NaN if it cannot be
+    read or has fewer than two saved times): the stability fit's criterion (Fig. A1), also
+    the observable ``growth`` of an adaptive campaign (:mod:`sweep.refine`)."""
     try:
-        with xr.open_dataset(path) as run:
+        with xr.open_dataset(path, engine="netcdf4") as run:
             t = series_time(run).values.astype(float)
             s = run["sigma2_S"].values.astype(float)
     except (OSError, KeyError, ValueError) as e:
-        log.warning("stability: cannot read %s (%s)", path, e)
+        log.warning("cannot read %s (%s)", path, e)
         return math.nan
     if t.size < 2:
         return math.nan
     half = int(np.argmin(np.abs(t - 0.5 * t[-1])))
     if half == t.size - 1:
         return math.nan
-    return float(log10(s[-1]) - log10(s[half]))
+    floor = 1e-300  # sigma2_S = 0 exactly (S0 = 0 and no noise) is as small as it gets
+    return float(np.log10(max(s[-1], floor)) - np.log10(max(s[half], floor)))
 
 
 def stability_parameters(phase: xr.Dataset, coords: Mapping[str, float]) -> Any:
@@ -96,7 +99,7 @@ def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None =
     unstable = np.full(status.shape, -1, dtype=np.int8)
     for idx in np.ndindex(status.shape):
         if status[idx] == 1:
-            g = _run_growth(root / "runs" / f"{rids[idx]}.nc")
+            g = run_growth(root / "runs" / f"{rids[idx]}.nc")
             growth[idx] = g
             if math.isfinite(g):
                 unstable[idx] = int(g > 0)

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..analysis.stability import run_growth
 from ..campaign import Axis, Campaign, Dim
 from ..expand import Expansion, GridPoint, RunSpec, make_point
 from ..files import atomic_write_text, dumps
@@ -58,29 +59,6 @@ RunKey = tuple[Line, float, int]
 
 
 # --------------------------------------------------------------------------- outcomes
-def run_growth(path: Any) -> float:
-    """log10 sigma2_S(t_final) / sigma2_S(t_final / 2) of a run file (NaN if it cannot be
-    read or has fewer than two saved times): the stability fit's criterion (Fig. A1)."""
-    import xarray as xr
-
-    from ..files import series_time
-
-    try:
-        with xr.open_dataset(path, engine="netcdf4") as run:
-            t = series_time(run).values.astype(float)
-            s = run["sigma2_S"].values.astype(float)
-    except (OSError, KeyError, ValueError) as e:
-        log.warning("refine: cannot read %s (%s)", path, e)
-        return math.nan
-    if t.size < 2:
-        return math.nan
-    half = int(np.argmin(np.abs(t - 0.5 * t[-1])))
-    if half == t.size - 1:
-        return math.nan
-    floor = 1e-300
-    return float(np.log10(max(s[-1], floor)) - np.log10(max(s[half], floor)))
-
-
 class Outcomes:
     """The outcome of each run from the results folder: ``None`` while it has not finished
     (no record, a file that is missing or damaged, a result that was not stored), NaN when

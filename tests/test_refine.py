@@ -337,7 +337,7 @@ def test_the_fig2_refine_variant_validates_at_full_and_reduced_size():
     for extra in ([], SMALL_FIG2):
         result = invoke("validate", FIG2_ADAPTIVE, *extra)
         assert result.exit_code == 0, result.output
-        assert "round 0 (the grid): 5 points x 4 seed(s) = 20 runs" in flat(result.output)
+        assert "round 0 (the grid): 5 points x 2 seed(s) = 10 runs" in flat(result.output)
     c = load_campaign(FIG2_ADAPTIVE, Overrides(settings={"resolution": 64}))
     assert c.refine is not None
     assert c.refine.criterion == "jump"

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set up everything on a fresh machine: a virtual environment in .venv with the package
 # (editable) and its test extras, then the model's numba kernels compiled once (cached on
-# disk in model/__pycache__, so that no run, and no campaign worker, compiles them again).
+# disk in model/compiled/__pycache__, so that no run, and no campaign worker, compiles them again).
 # Idempotent: a second call only checks that it is up to date (the kernels load in seconds).
 set -euo pipefail
 cd "$(dirname "$0")/.."

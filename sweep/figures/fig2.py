@@ -135,7 +135,12 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
     t_final = res.phase.attrs.get("num_t_final")
     ax_c.set_ylabel(rf"$\sigma^2_S$ at $t/\tau$ = {float(t_final):g}" if t_final is not None
                     else r"$\sigma^2_S(t_{\rm final})$")
-    ax_c.set_title(f"(c) {int(ds['seed'].size)} seeds", loc="left")
+    # an adaptive campaign runs different numbers of seeds per point (phase.nc's seed_count)
+    counts = (ds["seed_count"].values[ds["seed_count"].values > 0] if "seed_count" in ds
+              else np.array([ds["seed"].size]))
+    lo, hi = (int(counts.min()), int(counts.max())) if counts.size else (0, 0)
+    ax_c.set_title(f"(c) {hi} seeds" if lo == hi else f"(c) {lo}-{hi} seeds per point",
+                   loc="left")
     ax_c.legend(loc="lower right" if yscale == "log" else "best")
     fig.suptitle(f"{res.name}: paper Fig. 2" + (f" ({where})" if where else ""), fontsize=10)
     return fig

@@ -158,6 +158,13 @@ def test_fig4_in_2d_when_one_axis_is_fixed(phase4):
     assert_figure(paths, "fig4", phase4.root)
 
 
+def test_fig4_forced_on_an_alpha_minus_b_by_k_grid(sizes):
+    """The caption's snapshots name chi; on a grid of alpha - B and K the unnamed axis is
+    taken at its first value (this raised a TypeError before)."""
+    paths = draw("fig4", sizes.root, {})
+    assert_figure(paths, "fig4", sizes.root)
+
+
 def test_figA1_renders_with_the_theory_line(stab):
     paths = regenerate(stab.campaign, stab.results)
     assert_figure(paths, "figA1", stab.root)

@@ -140,7 +140,11 @@ def fig4(res: Results, options: Mapping[str, Any]) -> Figure:
         if not isinstance(target, Mapping):
             raise FigureError(f"fig4: snapshots[{n - 1}] = {target!r}; expected a mapping "
                               "{dim: value}")
-        point = nearest_point(ds, {k: v for k, v in target.items() if k in axes})
+        where = {k: v for k, v in target.items() if k in axes}
+        # an axis the target does not name (e.g. alpha - B where the snapshots name chi) is
+        # taken at its first grid value
+        where.update({a: float(ds[a].values.ravel()[0]) for a in axes if a not in where})
+        point = nearest_point(ds, where)
         key = tuple(float(point[a]) for a in axes)
         sub = fig.add_subplot(slots[n - 1])
         run, seed = ok_run(res, point)

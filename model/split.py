@@ -57,8 +57,15 @@ class SpectralSplit:
         g = pde.spectral
         self._zeros = np.zeros((g.n, g.n))
         self._weights = g.weights / g.n**2  # Parseval weights of the half spectrum
-        self._workspace = linear_rhs.workspace(g.n) if mech.compiled else ()
-        self._symbols = mech.response_symbols() if mech.compiled else None
+        #: the compiled right-hand side's fixed data (None: the numpy reference)
+        self._rhs_data: linear_rhs.LinearRHS | None = None
+        if mech.compiled:
+            p = pde.params
+            assert g.fft.plans is not None
+            self._rhs_data = linear_rhs.LinearRHS(
+                Lq, *mech.spin_symbols, mech.response_symbols(), self._weights, *g.fft.plans,
+                p.eps * g.n**2, p.B, p.B_prime, p.C, p.gamma, p.zeta, p.chi, p.s, p.tau,
+                mech.spin_tol, mech.spin_maxiter, *linear_rhs.workspace(g.n))
 
     def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
                  ) -> tuple[Array, Array, MechanicalState | None]:
@@ -66,17 +73,11 @@ class SpectralSplit:
         mechanics is compiled, else by :meth:`reference`."""
         if disp is not None:
             raise ValueError("a given displacement needs finite mechanics")
-        if not self.mech.compiled:
+        if self._rhs_data is None:
             return (*self.reference(u, q_hat, t), None)
-        eq, mech = self.pde, self.mech
-        p, g = eq.params, eq.spectral
-        assert g.fft.plans is not None
-        m1, m2 = mech.spin_symbols
+        mech, g = self.mech, self.pde.spectral
         Nq, Adot, omega_hat, its, ok, nfft = linear_rhs.linear_split(
-            u[0], u[1], u[2], np.ascontiguousarray(q_hat), mech.zero_hat, self.Lq, m1, m2,
-            self._symbols, self._weights, *g.fft.plans, p.eps * g.n**2, p.B, p.B_prime, p.C,
-            p.gamma, p.zeta, p.chi, p.s, p.tau, mech.spin_tol, mech.spin_maxiter,
-            *self._workspace)
+            u[0], u[1], u[2], np.ascontiguousarray(q_hat), mech.zero_hat, self._rhs_data)
         g.fft.count += nfft
         mech.accept_spin(omega_hat, its, ok, t)
         return Nq, Adot, None

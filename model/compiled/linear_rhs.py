@@ -116,18 +116,47 @@ def workspace(n: int, restart: int = 30) -> tuple[Array, Array]:
             np.empty((restart, 2) + shape, dtype=np.complex128))
 
 
+class LinearRHS(NamedTuple):
+    """What :func:`linear_split` needs besides the state, fixed for a run: the symbols
+    (``Lq``, the spin symbols ``m1``, ``m2``, the small-strain response ``S``), the Parseval
+    weights ``w``, the FFTW plans, the applied mean strain ``mean_dev`` (eps N^2), the
+    constants of Eqs. (4)-(5), the spin solve's tolerance and iteration cap, and its work
+    arrays ``V``, ``LZ`` (:func:`workspace`)."""
+
+    Lq: Array
+    m1: Array
+    m2: Array
+    S: Array
+    w: Array
+    pf: int
+    pi: int
+    mean_dev: float
+    B: float
+    Bp: float
+    C: float
+    gamma: float
+    zeta: float
+    chi: float
+    s: float
+    tau: float
+    spin_tol: float
+    maxiter: int
+    V: Array
+    LZ: Array
+
+
 @njit(cache=True)
-def linear_split(q1, q2, A, q_hat, omega_hat, Lq, m1, m2, S, w,
-                 pf, pi, mean_dev, B, Bp, C, gamma,
-                 zeta, chi, s, tau, spin_tol, maxiter, V, LZ):  # pragma: no cover
+def linear_split(q1, q2, A, q_hat, omega_hat, rhs_data):  # pragma: no cover
     """``(N_q hat, Adot, omega_hat, spin iterations, converged, transforms)`` for the state
-    (see the module docstring); ``omega_hat`` is the start of the spin solve (zeros from the
-    solver: no operator application for its residual), ``V``, ``LZ`` the work arrays of
-    :func:`spin_gmres`. The small-strain response ``S[r, c]`` (outputs r: dev e (2 comps),
-    tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat; the symbols of
+    (see the module docstring) and the run's fixed data ``rhs_data`` (a :class:`LinearRHS`);
+    ``omega_hat`` is the start of the spin solve (zeros from the solver: no operator
+    application for its residual). The small-strain response ``S[r, c]`` (outputs r: dev e
+    (2 comps), tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat; the symbols of
     :meth:`model.mechanics.LinearMechanics.response_symbols`) is applied point by point where
     it is used, so that no response spectra are stored (the passes over memory, not the
     arithmetic, are what this costs); with B' = 0 the Q:Q column and tr e are skipped."""
+    (Lq, m1, m2, S, w, pf, pi, mean_dev, B, Bp, C, gamma, zeta, chi, s, tau, spin_tol, maxiter,
+     V, LZ) = rhs_data
     n = q1.shape[0]
     shape = q_hat.shape[1:]
     nx, ny = shape

@@ -13,6 +13,7 @@ afterwards every other process loads the compiled code from the cache.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from collections.abc import Iterable
@@ -83,6 +84,11 @@ def warm_up(kinds: Iterable[tuple[Parameters, Numerics]] | None = None) -> dict[
 def main() -> int:  # pragma: no cover - exercised by scripts/bootstrap.sh
     print("compiling the model's numba kernels (cached on disk; about a minute the first "
           "time, a few seconds when already cached) ...", flush=True)
+    if not os.environ.get("NUMBA_CACHE_DIR"):  # the hashed folders are ours to tidy
+        from .compiled import prune_stale_caches
+
+        for path in prune_stale_caches():
+            print(f"removed the kernel cache of an earlier version: {path}", flush=True)
     info = warm_up()
     print(f"kernels ready in {info['seconds']:.0f} s ({info['compiled']} compiled, "
           f"{info['loaded']} loaded from the cache)", flush=True)

@@ -64,6 +64,20 @@ def test_the_numba_cache_is_named_by_the_compiled_sources(tmp_path, monkeypatch)
     assert compiled.source_digest(copy) != compiled.source_digest()
 
 
+def test_stale_kernel_caches_are_pruned_and_the_current_one_kept(tmp_path):
+    from model.compiled import prune_stale_caches
+
+    current = tmp_path / "numba-current"
+    (current / "x").mkdir(parents=True)
+    for name in ("numba-old1", "numba-old2"):
+        (tmp_path / name / "y").mkdir(parents=True)
+    (tmp_path / "other").mkdir()
+    removed = prune_stale_caches(current)
+    assert sorted(p.name for p in removed) == ["numba-old1", "numba-old2"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["numba-current", "other"]
+    assert (current / "x").is_dir()
+
+
 @pytest.mark.slow
 def test_the_second_worker_compiles_nothing(tmp_path, monkeypatch):
     """With an empty numba cache (NUMBA_CACHE_DIR: a fresh folder) a two-worker campaign

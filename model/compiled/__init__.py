@@ -28,13 +28,15 @@ package therefore points numba's cache (``numba.config.CACHE_DIR``) at a folder 
 hash of every source file here, ``model/compiled/__pycache__/numba-<hash>`` (or
 ``~/.cache/nematic/numba-<hash>`` where the package folder is not writable): any change to
 the compiled code starts a fresh cache. A ``NUMBA_CACHE_DIR`` set in the environment is used
-as given.
+as given. :func:`prune_stale_caches` (run by ``python -m model.warmup``, so by
+``scripts/bootstrap.sh``) removes the folders of earlier versions.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 from pathlib import Path
 
 import numba
@@ -56,6 +58,18 @@ def cache_dir() -> Path:
     if os.access(here, os.W_OK):
         return here / "__pycache__" / name
     return Path.home() / ".cache" / "nematic" / name
+
+
+def prune_stale_caches(current: Path | None = None) -> list[Path]:
+    """Remove the ``numba-<hash>`` folders beside ``current`` (default :func:`cache_dir`)
+    that belong to other versions of the compiled code; returns what was removed."""
+    current = current or cache_dir()
+    if not current.parent.is_dir():
+        return []
+    stale = [p for p in current.parent.glob("numba-*") if p.is_dir() and p != current]
+    for p in stale:
+        shutil.rmtree(p, ignore_errors=True)
+    return stale
 
 
 if not os.environ.get("NUMBA_CACHE_DIR"):

@@ -171,7 +171,7 @@ class Mechanics:
     def spin_from_rate(self, udot_hat: Array) -> Array:
         """:math:`\\omega = \\tfrac12 (\\partial_1 \\dot u_2 - \\partial_2 \\dot u_1)`."""
         g = self.grid
-        return g.inverse(0.5j * (g.kx * udot_hat[1] - g.ky * udot_hat[0]))
+        return g.inverse(self.k.spin_hat_kernel(udot_hat, g.kx, g.ky))
 
 
 class LinearMechanics(Mechanics):
@@ -553,7 +553,7 @@ class FiniteMechanics(Mechanics):
                 f"in {it} iterations: loss of ellipticity", t)
         self.udot_hat = udot
         omega = self.spin_from_rate(udot)
-        return np.stack([R[0] - 2.0 * omega * q2, R[1] + 2.0 * omega * q1]), omega
+        return R + self.k.jaumann_products(omega, q1, q2), omega
 
 
     def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None

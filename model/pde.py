@@ -93,30 +93,26 @@ class ActiveNematicPDE(PDEBase):
     # --- pieces of the right-hand side (readable reference) ----------------------------
     def molecular_field(self, q1: Array, q2: Array, A: Array, mech: MechanicalState,
                         q_hat: Array | None = None) -> Array:
-        """:math:`H` (components H11, H12), the negative variational derivative of Eq. (1);
-        ``q_hat``, the spectra of q1, q2 if known, saves two transforms."""
+        """:math:`H` (components H11, H12), the negative variational derivative of Eq. (1)
+        (the backend's ``molecular_field_kernel``); ``q_hat``, the spectra of q1, q2 if known,
+        saves two transforms."""
         p = self.params
         g = self.spectral
-        QQ = 2.0 * (q1**2 + q2**2)
-        bulk = A + p.A0 + p.C * QQ - 2.0 * p.B_prime * mech.Jm1
-        if q_hat is None:
-            lap1, lap2 = g.laplacian(q1), g.laplacian(q2)
-        else:
-            lap1, lap2 = g.inverse(-g.k2 * q_hat)
-        return np.stack([-bulk * q1 + p.B * mech.Ebar_dev[0] + p.K * lap1,
-                         -bulk * q2 + p.B * mech.Ebar_dev[1] + p.K * lap2])
+        lap = g.inverse(-g.k2 * (g.forward(np.stack([q1, q2])) if q_hat is None else q_hat))
+        return self.mechanics.k.molecular_field_kernel(q1, q2, A, mech.Jm1, mech.Ebar_dev, lap,
+                                                       p.A0, p.C, 2.0 * p.B_prime, p.B, p.K)
 
     def corotational_rates(self, q1: Array, q2: Array, H: Array, mech: MechanicalState,
-                           t: float | None = None) -> tuple[Array, Array, Array]:
-        r"""Solve :math:`\dot Q = H/\gamma + W Q - Q W` with the spin slaved to
-        :math:`\dot Q` through the displacement rate (see :mod:`model.mechanics`)."""
-        qdot, omega = self.mechanics.corotational(mech, q1, q2, H / self.params.gamma, t)
-        return qdot[0], qdot[1], omega
+                           t: float | None = None) -> tuple[Array, Array]:
+        r"""``(Qdot components, omega)``: :math:`\dot Q = H/\gamma + W Q - Q W` with the spin
+        slaved to :math:`\dot Q` through the displacement rate (see :mod:`model.mechanics`)."""
+        return self.mechanics.corotational(mech, q1, q2, H / self.params.gamma, t)
 
     def activity_rate(self, A: Array, mech: MechanicalState) -> Array:
-        """Paper Eq. (5): :math:`(-\\zeta A - \\chi\\, \\mathrm{tr} P - s A^3)/\\tau`."""
+        r"""Paper Eq. (5): :math:`(-\zeta A - \chi\, \mathrm{tr} P - s A^3)/\tau` (the
+        backend's ``activity_rate``)."""
         p = self.params
-        return (-p.zeta * A - p.chi * mech.trP - p.s * A * A * A) / p.tau
+        return self.mechanics.k.activity_rate(A, mech.trP, p.zeta, p.chi, p.s, p.tau)
 
     def rates(self, q1: Array, q2: Array, A: Array, t: float | None = None,
               u_hat: Array | None = None, q_hat: Array | None = None
@@ -131,8 +127,10 @@ class ActiveNematicPDE(PDEBase):
         else:
             mech = mechanics.state_at(u_hat, q1, q2, t)
         H = self.molecular_field(q1, q2, A, mech, q_hat)
-        qd1, qd2, omega = self.corotational_rates(q1, q2, H, mech, t)
-        return np.stack([qd1, qd2, self.activity_rate(A, mech)]), mech, omega
+        rate = np.empty((3,) + A.shape)
+        rate[:2], omega = self.corotational_rates(q1, q2, H, mech, t)
+        rate[2] = self.activity_rate(A, mech)
+        return rate, mech, omega
 
     def evolution_rate(self, state: FieldCollection, t: float = 0) -> FieldCollection:  # type: ignore[override]
         self.use_grid_of(state)

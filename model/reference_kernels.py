@@ -21,8 +21,9 @@ __all__ = [
     "activity_exponential", "activity_krogstad", "activity_rate", "apply_tangent_kernel",
     "apply_tangent_spin_kernel", "bulk_terms", "div_hat_kernel", "etd_combination",
     "finite_margin_kernel", "first_piola_kernel", "grad_hat_kernel", "green_kernel",
-    "jaumann_products", "linear_response", "neg_div_hat_kernel", "q_increment_kernel",
-    "strain_measures_kernel", "symbol_combination", "tangent_kernel",
+    "jaumann_products", "linear_response", "molecular_field_kernel", "neg_div_hat_kernel",
+    "q_increment_kernel", "spin_hat_kernel", "strain_measures_kernel", "symbol_combination",
+    "tangent_kernel",
 ]
 
 
@@ -83,6 +84,11 @@ def div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:  # noqa: N803 (the 
     return 1j * (kx * T[:, 0] + ky * T[:, 1])
 
 
+def spin_hat_kernel(v: Array, kx: Array, ky: Array) -> Array:
+    r""":math:`\tfrac{i}{2} (k_1 \hat v_2 - k_2 \hat v_1)`."""
+    return 0.5j * (kx * v[1] - ky * v[0])
+
+
 def neg_div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:  # noqa: N803
     r""":math:`-i k_j \hat T_{ij}`."""
     return -div_hat_kernel(T, kx, ky)
@@ -129,6 +135,15 @@ def bulk_terms(q1: Array, q2: Array, A: Array, tr_e: Array, C: float, two_Bp: fl
     r"""``[-b q1, -b q2]``, :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e`."""
     bulk = A + C * 2.0 * (q1 * q1 + q2 * q2) - two_Bp * tr_e
     return np.stack([-bulk * q1, -bulk * q2])
+
+
+def molecular_field_kernel(q1: Array, q2: Array, A: Array, Jm1: Array, Ebar_dev: Array,
+                           lap: Array, A0: float, C: float, two_Bp: float, B: float, K: float
+                           ) -> Array:
+    r"""H of Eq. (4): :math:`-(A + A_0 + C\, Q:Q - 2 B' (J - 1)) q + B\, \mathrm{dev}\, \bar E
+    + K \nabla^2 q`."""
+    bulk = A + A0 + C * 2.0 * (q1**2 + q2**2) - two_Bp * Jm1
+    return np.stack([-bulk * q1, -bulk * q2]) + B * Ebar_dev + K * lap
 
 
 def activity_rate(A: Array, trP: Array, zeta: float, chi: float, s: float, tau: float

@@ -13,13 +13,14 @@ from .constitutive import (
     tangent_kernel,
 )
 from .etd import activity_exponential, activity_krogstad, etd_combination
-from .rates import activity_rate, bulk_terms, jaumann_products
+from .rates import activity_rate, bulk_terms, jaumann_products, molecular_field_kernel
 from .spectral import (
     div_hat_kernel,
     grad_hat_kernel,
     green_kernel,
     linear_response,
     neg_div_hat_kernel,
+    spin_hat_kernel,
     symbol_combination,
 )
 from .wellposedness import finite_margin_kernel
@@ -28,6 +29,7 @@ __all__ = [
     "activity_exponential", "activity_krogstad", "activity_rate", "apply_tangent_kernel",
     "apply_tangent_spin_kernel", "bulk_terms", "div_hat_kernel", "etd_combination",
     "finite_margin_kernel", "first_piola_kernel", "grad_hat_kernel", "green_kernel",
-    "jaumann_products", "linear_response", "neg_div_hat_kernel", "q_increment_kernel",
-    "strain_measures_kernel", "symbol_combination", "tangent_kernel",
+    "jaumann_products", "linear_response", "molecular_field_kernel", "neg_div_hat_kernel",
+    "q_increment_kernel", "spin_hat_kernel", "strain_measures_kernel", "symbol_combination",
+    "tangent_kernel",
 ]

@@ -27,6 +27,24 @@ def bulk_terms(q1, q2, A, tr_e, C, two_Bp):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def molecular_field_kernel(q1, q2, A, Jm1, Ebar_dev, lap, A0, C, two_Bp, B, K
+                           ):  # pragma: no cover - compiled
+    r"""The molecular field H (components H11, H12) of Eq. (4):
+    :math:`-(A + A_0 + C\, Q:Q - 2 B' (J - 1)) q + B\, \mathrm{dev}\, \bar E + K \nabla^2 q`
+    (``lap`` the Laplacians of q1, q2, ``Ebar_dev`` the two components of dev E-bar)."""
+    nx, ny = q1.shape
+    out = np.empty((2, nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            a = q1[x, y]
+            b = q2[x, y]
+            bulk = A[x, y] + A0 + C * 2.0 * (a * a + b * b) - two_Bp * Jm1[x, y]
+            out[0, x, y] = -bulk * a + B * Ebar_dev[0, x, y] + K * lap[0, x, y]
+            out[1, x, y] = -bulk * b + B * Ebar_dev[1, x, y] + K * lap[1, x, y]
+    return out
+
+
+@njit(cache=True)
 def activity_rate(A, trP, zeta, chi, s, tau):  # pragma: no cover - compiled
     r"""Paper Eq. (5): :math:`(-\zeta A - \chi\, \mathrm{tr} P - s A^3)/\tau`."""
     nx, ny = A.shape

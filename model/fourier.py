@@ -11,6 +11,7 @@ Nyquist mode is not defined on a real grid); the Laplacian uses the exact ``-|k|
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 import scipy.fft
@@ -53,7 +54,7 @@ class FFT:
     def forward(self, a: Array) -> Array:
         """``rfft2`` over the last two axes (unnormalised)."""
         lead = a.shape[:-2]
-        k = int(np.prod(lead, dtype=int))
+        k = math.prod(lead)  # (np.prod costs ~30 us a call)
         self.count += k
         if self.plans is None:
             return scipy.fft.rfftn(a, axes=(-2, -1), workers=1)
@@ -67,7 +68,7 @@ class FFT:
         """``irfft2`` over the last two axes (divides by N^2), into ``out`` if given (a
         C-contiguous float array of the result's shape, e.g. a slice of a larger state)."""
         lead = a.shape[:-2]
-        k = int(np.prod(lead, dtype=int))
+        k = math.prod(lead)  # (np.prod costs ~30 us a call)
         self.count += k
         n = self.n
         if self.plans is None:

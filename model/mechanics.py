@@ -160,13 +160,10 @@ class Mechanics:
 
     def residual(self, P: Array, P_hat: Array | None = None) -> float:
         """:math:`\\lVert \\hat k_J \\hat P_{iJ} \\rVert / \\max(1, \\mathrm{RMS}\\, P)`."""
-        g = self.grid
         if P_hat is None:
-            P_hat = g.forward(P)
-        kh = self._khat
-        r = kh[0] * P_hat[:, 0] + kh[1] * P_hat[:, 1]
-        scale = max(1.0, float(np.sqrt(np.mean(np.sum(P**2, axis=(0, 1))))))
-        return g.rms_hat(r) / scale
+            P_hat = self.grid.forward(P)
+        return float(self.k.balance_residual_kernel(P, P_hat, self._khat[0], self._khat[1],
+                                                    self.grid.weights))
 
     def spin_from_rate(self, udot_hat: Array) -> Array:
         """:math:`\\omega = \\tfrac12 (\\partial_1 \\dot u_2 - \\partial_2 \\dot u_1)`."""
@@ -376,7 +373,10 @@ class FiniteMechanics(Mechanics):
 
     def deformation(self, u_hat: Array) -> Array:
         g = self.grid
-        return self.Fbar[:, :, None, None] + g.inverse(self.k.grad_hat_kernel(u_hat, g.kx, g.ky))
+        F = g.inverse(self.k.grad_hat_kernel(u_hat, g.kx, g.ky))
+        F[0, 0] += self.Fbar[0, 0]  # F-bar is diagonal
+        F[1, 1] += self.Fbar[1, 1]
+        return F
 
     def _operator(self, K: Array):
         g = self.grid

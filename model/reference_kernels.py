@@ -19,11 +19,11 @@ Array = np.ndarray
 
 __all__ = [
     "activity_exponential", "activity_krogstad", "activity_rate", "apply_tangent_kernel",
-    "apply_tangent_spin_kernel", "bulk_terms", "div_hat_kernel", "etd_combination",
-    "finite_margin_kernel", "first_piola_kernel", "grad_hat_kernel", "green_kernel",
-    "jaumann_products", "linear_response", "molecular_field_kernel", "neg_div_hat_kernel",
-    "q_increment_kernel", "spin_hat_kernel", "strain_measures_kernel", "symbol_combination",
-    "tangent_kernel",
+    "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "div_hat_kernel",
+    "etd_combination", "finite_margin_kernel", "first_piola_kernel", "grad_hat_kernel",
+    "green_kernel", "jaumann_products", "linear_response", "molecular_field_kernel",
+    "neg_div_hat_kernel", "q_increment_kernel", "spin_hat_kernel", "strain_measures_kernel",
+    "symbol_combination", "tangent_kernel",
 ]
 
 
@@ -82,6 +82,15 @@ def grad_hat_kernel(v: Array, kx: Array, ky: Array) -> Array:
 def div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:  # noqa: N803 (the tensor T)
     r""":math:`i k_j \hat T_{ij}`."""
     return 1j * (kx * T[:, 0] + ky * T[:, 1])
+
+
+def balance_residual_kernel(P: Array, P_hat: Array, khx: Array, khy: Array, weights: Array
+                            ) -> float:
+    r""":math:`\lVert \hat k_J \hat P_{iJ} \rVert / \max(1, \mathrm{RMS}\, P)`."""
+    n = P.shape[2]
+    r = khx * P_hat[:, 0] + khy * P_hat[:, 1]
+    norm = float(np.sqrt(np.sum(weights * np.abs(r) ** 2))) / n**2
+    return norm / max(1.0, float(np.sqrt(np.mean(np.sum(P**2, axis=(0, 1))))))
 
 
 def spin_hat_kernel(v: Array, kx: Array, ky: Array) -> Array:

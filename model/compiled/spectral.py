@@ -85,6 +85,29 @@ def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def balance_residual_kernel(P, P_hat, khx, khy, weights):  # pragma: no cover - compiled
+    r"""The force-balance residual :math:`\lVert \hat k_J \hat P_{iJ} \rVert /
+    \max(1, \mathrm{RMS}\, P)` (:meth:`model.mechanics.Mechanics.residual`): the RMS of
+    Div P in the :math:`H^{-1}` norm from the half spectrum ``P_hat`` (Parseval ``weights``)
+    over the RMS stress, floored at the shear modulus 1."""
+    nx, ny = khx.shape
+    s = 0.0
+    for i in range(2):
+        for x in range(nx):
+            for y in range(ny):
+                r = rmul(khx[x, y], P_hat[i, 0, x, y]) + rmul(khy[x, y], P_hat[i, 1, x, y])
+                s += weights[x, y] * (r.real * r.real + r.imag * r.imag)
+    n = P.shape[2]
+    p2 = 0.0
+    for i in range(2):
+        for j in range(2):
+            for x in range(n):
+                for y in range(P.shape[3]):
+                    p2 += P[i, j, x, y] * P[i, j, x, y]
+    return np.sqrt(s) / (n * n) / max(1.0, np.sqrt(p2 / (n * P.shape[3])))
+
+
+@njit(cache=True)
 def symbol_combination(x, m1, m2, a, b):  # pragma: no cover - compiled
     r""":math:`x - (m_1 a + m_2 b)` for half spectra ``a, b`` and real symbols ``m1, m2``
     (``x`` may be a zero array): the spin multiplier of the linear mechanics, fused."""

@@ -99,40 +99,38 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
 
 
 @njit(cache=True)
-def apply_tangent_kernel(K, dF):  # pragma: no cover - compiled
-    """:math:`dP_{iJ} = K_{iJkL} dF_{kL}` point by point (reference:
-    :func:`model.constitutive.apply_tangent`)."""
+def apply_tangent_into(K, dF, E, spin, out):  # pragma: no cover - compiled
+    r"""``out`` = :math:`K : dF\, [+ E\, \omega(dF)]`, :math:`\omega = \tfrac12 (dF_{10} -
+    dF_{01})` (the E term if ``spin``), point by point: the two kernels below without their
+    allocation (the Krylov operators reuse one buffer)."""
     nx, ny = dF.shape[2], dF.shape[3]
-    out = np.empty((2, 2, nx, ny))
     for i in range(2):
         for j in range(2):
             for x in range(nx):
                 for y in range(ny):
-                    out[i, j, x, y] = (K[i, j, 0, 0, x, y] * dF[0, 0, x, y]
-                                       + K[i, j, 0, 1, x, y] * dF[0, 1, x, y]
-                                       + K[i, j, 1, 0, x, y] * dF[1, 0, x, y]
-                                       + K[i, j, 1, 1, x, y] * dF[1, 1, x, y])
+                    v = (K[i, j, 0, 0, x, y] * dF[0, 0, x, y] + K[i, j, 0, 1, x, y] * dF[0, 1, x, y]
+                         + K[i, j, 1, 0, x, y] * dF[1, 0, x, y]
+                         + K[i, j, 1, 1, x, y] * dF[1, 1, x, y])
+                    if spin:
+                        v += E[i, j, x, y] * (0.5 * (dF[1, 0, x, y] - dF[0, 1, x, y]))
+                    out[i, j, x, y] = v
+
+
+@njit(cache=True)
+def apply_tangent_kernel(K, dF):  # pragma: no cover - compiled
+    """:math:`dP_{iJ} = K_{iJkL} dF_{kL}` point by point (reference:
+    :func:`model.constitutive.apply_tangent`)."""
+    out = np.empty(dF.shape)
+    apply_tangent_into(K, dF, dF, False, out)
     return out
 
 
 @njit(cache=True)
 def apply_tangent_spin_kernel(K, G, E):  # pragma: no cover - compiled
-    """:math:`K : G + E\\, \\omega(G)` with :math:`\\omega = \\tfrac12 (G_{10} - G_{01})`: the
+    r""":math:`K : G + E\, \omega(G)` with :math:`\omega = \tfrac12 (G_{10} - G_{01})`: the
     rate-form stress of the displacement-rate (spin) problem, point by point."""
-    nx, ny = G.shape[2], G.shape[3]
-    out = np.empty((2, 2, nx, ny))
-    for x in range(nx):
-        for y in range(ny):
-            g00 = G[0, 0, x, y]
-            g01 = G[0, 1, x, y]
-            g10 = G[1, 0, x, y]
-            g11 = G[1, 1, x, y]
-            w = 0.5 * (g10 - g01)
-            for i in range(2):
-                for j in range(2):
-                    out[i, j, x, y] = (K[i, j, 0, 0, x, y] * g00 + K[i, j, 0, 1, x, y] * g01
-                                       + K[i, j, 1, 0, x, y] * g10 + K[i, j, 1, 1, x, y] * g11
-                                       + E[i, j, x, y] * w)
+    out = np.empty(G.shape)
+    apply_tangent_into(K, G, E, True, out)
     return out
 
 

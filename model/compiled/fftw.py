@@ -195,7 +195,7 @@ _c2r = types.ExternalFunction(
 _alignment_of = types.ExternalFunction("fftw_alignment_of", types.intc(types.uintp))
 
 @njit(cache=True)
-def _aligned_real(n):  # pragma: no cover - compiled
+def aligned_real(n):  # pragma: no cover - compiled
     raw = np.empty(n * n + 8)
     off = ((-raw.ctypes.data) % 64) // 8
     return raw[off:off + n * n].reshape((n, n))
@@ -219,7 +219,7 @@ def rfft2(plan, src, dst):  # pragma: no cover - compiled
         _r2c(plan, src.ctypes.data, dst.ctypes.data)
         return
     n = src.shape[0]
-    a = _aligned_real(n)
+    a = aligned_real(n)
     a[:, :] = src
     b = aligned_half(n)
     _r2c(plan, a.ctypes.data, b.ctypes.data)
@@ -243,7 +243,7 @@ def irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
             for y in range(n):
                 dst[x, y] *= scale
         return
-    a = _aligned_real(n)
+    a = aligned_real(n)
     unscaled_irfft2_via(plan, src, a, scratch)
     for x in range(n):
         for y in range(n):

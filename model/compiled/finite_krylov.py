@@ -28,7 +28,7 @@ from numba.extending import overload
 from . import fftw as fx
 from . import krylov
 from .arith import imul
-from .constitutive import apply_tangent_kernel, apply_tangent_spin_kernel
+from .constitutive import apply_tangent_into
 from .krylov import apply_operator, precondition
 from .spectral import green_kernel
 
@@ -36,18 +36,27 @@ Array = np.ndarray
 
 
 @njit(cache=True)
-def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, out):  # pragma: no cover
+def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, P, out):  # pragma: no cover
     """``out`` = :math:`-\\mathrm{Div}(\\mathbb K : \\nabla v\\, [+ E\\, \\omega(v)])` for the
-    spectrum ``v`` (the E term if ``spin``): 4 inverse and 4 forward transforms."""
+    spectrum ``v`` (the E term if ``spin``): 4 inverse and 4 forward transforms. ``G`` and
+    ``P`` are work arrays (the gradient and the stress). The inverse transforms' 1/N^2 is
+    folded into the gradient's symbol: a power of two, so the result is bitwise that of
+    scaling after the transform."""
     nx, ny = kx.shape
+    n = G.shape[2]
+    scale = 1.0 / (n * n)
     for i in range(2):
         for j in range(2):
             for x in range(nx):
                 for y in range(ny):
                     k = kx[x, y] if j == 0 else ky[x, y]
-                    work_hat[x, y] = imul(k, v[i, x, y])
-            fx.irfft2_via(pi, work_hat, G[i, j], work_hat)  # work_hat is rebuilt each time
-    P = apply_tangent_spin_kernel(K, G, E) if spin else apply_tangent_kernel(K, G)
+                    work_hat[x, y] = imul(k * scale, v[i, x, y])
+            # work_hat is rebuilt each time, so the transform may destroy it
+            if not fx.unscaled_irfft2_via(pi, work_hat, G[i, j], work_hat):
+                a = fx.aligned_real(n)  # G not aligned for the plan: through a copy
+                fx.unscaled_irfft2_via(pi, work_hat, a, work_hat)
+                G[i, j] = a
+    apply_tangent_into(K, G, E, spin, P)
     for i in range(2):
         fx.rfft2(pf, P[i, 0], work_hat)
         for x in range(nx):
@@ -78,6 +87,7 @@ class TangentOperator(NamedTuple):
     pi: int
     work_hat: Array
     G: Array
+    P: Array
 
 
 @overload(apply_operator)
@@ -85,7 +95,7 @@ def _apply_tangent(op, x, out, aux):  # pragma: no cover - compiled
     if getattr(op, "instance_class", None) is TangentOperator:  # the named tuple type
         def impl(op, x, out, aux):  # no auxiliary output
             _operator(x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, op.G,
-                      out)
+                      op.P, out)
         return impl
     return None
 
@@ -106,7 +116,8 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
     1 maxiter, 2 indefinite (as :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
     n = K.shape[4]
     op = TangentOperator(K, K[0, 0], False, kx, ky, khx, khy, inv_k2, a, pf, pi,
-                         np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)))
+                         np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
+                         np.empty((2, 2, n, n)))
     return krylov.pcg(op, b, x0, w, rtol, maxiter)
 
 
@@ -118,7 +129,8 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
     (restart + 1 spectra) and ``Z`` (restart) are caller-owned work arrays."""
     n = K.shape[4]
     op = TangentOperator(K, E, True, kx, ky, khx, khy, inv_k2, a, pf, pi,
-                         np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)))
+                         np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
+                         np.empty((2, 2, n, n)))
     x, _, its, ok, nop = krylov.gmres(op, b, x0, w, rtol, maxiter, V, Z,
                                       np.empty((Z.shape[0], 0), dtype=np.complex128))
     return x, its, ok, nop

@@ -86,7 +86,9 @@ class Mechanics:
     reference. ``integrated`` is True when the displacement is part of the integrated state
     (finite strain with ``Numerics.displacement = "integrated"``): the solver then carries
     :attr:`u_hat` through the stages with its rate :attr:`udot_hat` and projects it with
-    :meth:`solve` once per step.
+    :meth:`solve` once per step; it carries the deformation gradient along (in real space,
+    from :meth:`deformation_of` and the rate's gradient :attr:`udot_grad`), so a stage needs
+    no transform for it.
     """
 
     #: the displacement is integrated with the state (only finite mechanics can)
@@ -95,6 +97,8 @@ class Mechanics:
     #: integrated displacement) and its rate, the solution of the last rate solve
     u_hat: Array
     udot_hat: Array
+    #: the real-space gradient (2, 2, N, N) of :attr:`udot_hat`
+    udot_grad: Array
 
     def __init__(self, params, grid: SpectralGrid, *, spin_tol: float = 1e-8,
                  backend: str = "compiled"):
@@ -123,13 +127,20 @@ class Mechanics:
 
     # --- the interface (the defaults: a mechanics without a warm start) ----------------
     def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
-              t: float | None = None) -> MechanicalState:
-        """The mechanical state in force balance (Eq. 3) for the order q1, q2."""
+              t: float | None = None, F_guess: Array | None = None) -> MechanicalState:
+        """The mechanical state in force balance (Eq. 3) for the order q1, q2 (``u_guess``: a
+        start for an iterative solve, ``F_guess`` its deformation gradient if known)."""
         raise NotImplementedError
 
-    def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None
-                 ) -> MechanicalState:
-        """The mechanical state at a given displacement (only where :attr:`integrated`)."""
+    def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None,
+                 F: Array | None = None) -> MechanicalState:
+        """The mechanical state at a given displacement, whose deformation gradient is ``F``
+        if given (only where :attr:`integrated`)."""
+        raise ValueError(f"{type(self).__name__} does not integrate the displacement")
+
+    def deformation_of(self, u_hat: Array) -> Array:
+        """The deformation gradient of the displacement spectrum ``u_hat`` (only where
+        :attr:`integrated`)."""
         raise ValueError(f"{type(self).__name__} does not integrate the displacement")
 
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
@@ -165,10 +176,6 @@ class Mechanics:
         return float(self.k.balance_residual_kernel(P, P_hat, self._khat[0], self._khat[1],
                                                     self.grid.weights))
 
-    def spin_from_rate(self, udot_hat: Array) -> Array:
-        """:math:`\\omega = \\tfrac12 (\\partial_1 \\dot u_2 - \\partial_2 \\dot u_1)`."""
-        g = self.grid
-        return g.inverse(self.k.spin_hat_kernel(udot_hat, g.kx, g.ky))
 
 
 class LinearMechanics(Mechanics):
@@ -210,8 +217,8 @@ class LinearMechanics(Mechanics):
         return tau
 
     def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
-              t: float | None = None) -> MechanicalState:
-        """The small-strain state: one exact Fourier solve (``u_guess`` is not needed)."""
+              t: float | None = None, F_guess: Array | None = None) -> MechanicalState:
+        """The small-strain state: one exact Fourier solve (no guess is needed)."""
         g = self.grid
         tau = self._eigenstress(q1, q2)
         tau_hat = g.forward(tau)
@@ -347,9 +354,10 @@ class FiniteMechanics(Mechanics):
         n = grid.n
         self.u_hat = np.zeros((2, n, n // 2 + 1), dtype=complex)  # warm start
         self.udot_hat = np.zeros_like(self.u_hat)
+        self.udot_grad = np.zeros((2, 2, n, n))
         self._checkpoint: tuple[Array, Array] | None = None
         self._weights = grid.weights / n**2  # Parseval weights of the half spectrum
-        self._workspace: tuple[Array, Array] | None = None
+        self._workspace: tuple[Array, Array, Array] | None = None
         self.fft_parts.update(rate_solve=0, newton_cg=0, force_balance=0)
         #: (u_hat, q1, q2, F, P) of the last converged solve, which :meth:`state_at` reuses
         #: when asked for the same displacement and order (the first stage after a projection)
@@ -372,6 +380,7 @@ class FiniteMechanics(Mechanics):
                               np.ascontiguousarray(q2), m.kappa, m.B, m.B_prime, m.alpha)
 
     def deformation(self, u_hat: Array) -> Array:
+        """:math:`F = \\bar F + \\nabla u` from the spectrum ``u_hat`` (four transforms)."""
         g = self.grid
         F = g.inverse(self.k.grad_hat_kernel(u_hat, g.kx, g.ky))
         F[0, 0] += self.Fbar[0, 0]  # F-bar is diagonal
@@ -405,35 +414,41 @@ class FiniteMechanics(Mechanics):
                                    maxiter=self.max_cg)
         return x, it, status == "ok"
 
-    def _udot_gmres(self, K: Array, E: Array, b: Array) -> tuple[Array, int, bool]:
-        """The displacement-rate solve, warm-started: compiled
-        (:func:`model.finite_krylov.gmres`) or the numpy reference (:func:`model.krylov.gmres`)."""
+    def _udot_gmres(self, K: Array, E: Array, b: Array) -> tuple[Array, Array, int, bool]:
+        """The displacement-rate solve, warm-started: ``(udot_hat, its real-space gradient,
+        iterations, converged)``, compiled (:func:`model.compiled.finite_krylov.gmres`) or the
+        numpy reference (:func:`model.krylov.gmres_aux`); the gradient comes with the
+        operator applications (no transform of its own)."""
         g = self.grid
         if self.compiled:
             assert g.fft.plans is not None
             if self._workspace is None:
                 self._workspace = finite_krylov.workspace(g.n)
-            x, it, ok, nop = finite_krylov.gmres(
+            x, grad, it, ok, nop = finite_krylov.gmres(
                 K, E, b, self.udot_hat, g.kx, g.ky, self._khat[0], self._khat[1],
                 self._inv_k2, self._a, self._weights, *g.fft.plans, self.spin_tol,
                 self.max_cg, *self._workspace)
             g.fft.count += 8 * nop
-            return x, it, ok
+            return x, grad, it, ok
 
-        def A(v_hat: Array) -> Array:
+        def A(v_hat: Array) -> tuple[Array, Array]:
             k = self.k
             G = g.inverse(k.grad_hat_kernel(v_hat, g.kx, g.ky))
             return k.neg_div_hat_kernel(g.forward(k.apply_tangent_spin_kernel(K, G, E)), g.kx,
-                                        g.ky)
+                                        g.ky), G
 
-        x, it, status = krylov.gmres(A, b, self.udot_hat, lambda r: self._green(r, self._a),
-                                     g.inner, rtol=self.spin_tol, maxiter=self.max_cg)
-        return x, it, status == "ok"
+        x, it, status, grad = krylov.gmres_aux(A, b, self.udot_hat,
+                                               lambda r: self._green(r, self._a), g.inner,
+                                               rtol=self.spin_tol, maxiter=self.max_cg)
+        return x, grad, it, status == "ok"
 
-    def _evaluate(self, u_hat: Array, q1: Array, q2: Array
+    def _evaluate(self, u_hat: Array, q1: Array, q2: Array, F: Array | None = None
                   ) -> tuple[Array, Array, Array, float]:
+        """``(F, P, P_hat, residual)`` at ``u_hat`` (deformation ``F`` if known); an infinite
+        residual where J <= 0."""
         count = self.grid.fft.count
-        F = self.deformation(u_hat)
+        if F is None:
+            F = self.deformation(u_hat)
         J = T.det(F)
         if not np.all(J > 0):
             self.fft_parts["force_balance"] += self.grid.fft.count - count
@@ -445,9 +460,9 @@ class FiniteMechanics(Mechanics):
         return F, P, P_hat, self.residual(P, P_hat)
 
     def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
-              t: float | None = None) -> MechanicalState:
+              t: float | None = None, F_guess: Array | None = None) -> MechanicalState:
         u_hat = self.u_hat if u_guess is None else u_guess
-        F, P, P_hat, res = self._evaluate(u_hat, q1, q2)
+        F, P, P_hat, res = self._evaluate(u_hat, q1, q2, F_guess)
         if not np.isfinite(res):  # the guess is unusable: restart from the homogeneous state
             u_hat = np.zeros_like(u_hat)
             F, P, P_hat, res = self._evaluate(u_hat, q1, q2)
@@ -502,23 +517,30 @@ class FiniteMechanics(Mechanics):
         return MechanicalState(F=F, P=P, Ebar_dev=Ebar_dev, Jm1=Jm1, trP=trP, u_hat=u_hat,
                                iterations=iterations, residual=residual, extras={"K": K})
 
-    def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None
-                 ) -> MechanicalState:
+    def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None,
+                 F: Array | None = None) -> MechanicalState:
         """The mechanical state at the displacement ``u_hat`` as given, without solving the
         force balance (the stages of the integrated-displacement scheme, where u is part of
-        the integrated state: docs/model.md, section 4). Its ``residual`` is not computed
-        (NaN). Raises ``J<=0`` where the deformation folds. The deformation and stress of the
-        last solve are reused when ``u_hat`` is its solution for the same q."""
+        the integrated state: docs/model.md, section 4), with the deformation gradient ``F``
+        if given (else from ``u_hat``). Its ``residual`` is not computed (NaN). Raises
+        ``J<=0`` where the deformation folds. The deformation and stress of the last solve
+        are reused when ``u_hat`` is its solution for the same q."""
         sol = self._solution
         if (sol is not None and u_hat is sol[0] and np.array_equal(q1, sol[1])
                 and np.array_equal(q2, sol[2])):
             return self._state(sol[3], sol[4], u_hat)
-        F = self.deformation(u_hat)
+        if F is None:
+            F = self.deformation(u_hat)
         if not np.all(T.det(F) > 0):
             raise SimulationFailure("J<=0", "the integrated displacement has J <= 0", t)
         m = self.moduli
         P = self.k.first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
         return self._state(F, P, u_hat)
+
+    def deformation_of(self, u_hat: Array) -> Array:
+        """F of ``u_hat``: the last solve's when ``u_hat`` is its solution, else transformed."""
+        sol = self._solution
+        return sol[3] if sol is not None and u_hat is sol[0] else self.deformation(u_hat)
 
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
                      t: float | None = None) -> tuple[Array, Array]:
@@ -544,7 +566,7 @@ class FiniteMechanics(Mechanics):
         b = self.k.div_hat_kernel(g.forward(dP), g.kx, g.ky)
 
         count = g.fft.count
-        udot, it, ok = self._udot_gmres(K, E, b)
+        udot, grad, it, ok = self._udot_gmres(K, E, b)
         self.fft_parts["rate_solve"] += g.fft.count - count
         self.spin_iterations += it
         if not ok:
@@ -552,7 +574,8 @@ class FiniteMechanics(Mechanics):
                 "spin_diverged", "the displacement-rate (Jaumann spin) solve did not converge "
                 f"in {it} iterations: loss of ellipticity", t)
         self.udot_hat = udot
-        omega = self.spin_from_rate(udot)
+        self.udot_grad = grad
+        omega = 0.5 * (grad[1, 0] - grad[0, 1])  # the spin of udot
         return R + self.k.jaumann_products(omega, q1, q2), omega
 
 

@@ -115,17 +115,18 @@ class ActiveNematicPDE(PDEBase):
         return self.mechanics.k.activity_rate(A, mech.trP, p.zeta, p.chi, p.s, p.tau)
 
     def rates(self, q1: Array, q2: Array, A: Array, t: float | None = None,
-              u_hat: Array | None = None, q_hat: Array | None = None
+              u_hat: Array | None = None, q_hat: Array | None = None, F: Array | None = None
               ) -> tuple[Array, MechanicalState, Array]:
         """Return ``(d/dt [q1, q2, A], mechanical state, omega)``: with the displacement in
         force balance (Eq. 3, solved), or at the given displacement spectrum ``u_hat``
-        (finite mechanics only; the integrated-displacement stages of the solver).
-        ``q_hat``: the spectra of q1, q2 if known (saves transforms)."""
+        (finite mechanics only; the integrated-displacement stages of the solver) with its
+        deformation gradient ``F`` if known. ``q_hat``: the spectra of q1, q2 if known (saves
+        transforms)."""
         mechanics = self.mechanics
         if u_hat is None:
             mech = mechanics.solve(q1, q2, t=t)
         else:
-            mech = mechanics.state_at(u_hat, q1, q2, t)
+            mech = mechanics.state_at(u_hat, q1, q2, t, F)
         H = self.molecular_field(q1, q2, A, mech, q_hat)
         rate = np.empty((3,) + A.shape)
         rate[:2], omega = self.corotational_rates(q1, q2, H, mech, t)

@@ -22,7 +22,7 @@ __all__ = [
     "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "div_hat_kernel",
     "etd_combination", "finite_margin_kernel", "first_piola_kernel", "grad_hat_kernel",
     "green_kernel", "jaumann_products", "linear_response", "molecular_field_kernel",
-    "neg_div_hat_kernel", "q_increment_kernel", "spin_hat_kernel", "strain_measures_kernel",
+    "neg_div_hat_kernel", "q_increment_kernel", "strain_measures_kernel",
     "symbol_combination", "tangent_kernel",
 ]
 
@@ -91,11 +91,6 @@ def balance_residual_kernel(P: Array, P_hat: Array, khx: Array, khy: Array, weig
     r = khx * P_hat[:, 0] + khy * P_hat[:, 1]
     norm = float(np.sqrt(np.sum(weights * np.abs(r) ** 2))) / n**2
     return norm / max(1.0, float(np.sqrt(np.mean(np.sum(P**2, axis=(0, 1))))))
-
-
-def spin_hat_kernel(v: Array, kx: Array, ky: Array) -> Array:
-    r""":math:`\tfrac{i}{2} (k_1 \hat v_2 - k_2 \hat v_1)`."""
-    return 0.5j * (kx * v[1] - ky * v[0])
 
 
 def neg_div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:  # noqa: N803

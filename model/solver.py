@@ -112,9 +112,9 @@ class ETDSolver(SolverBase):
         #: whether the mechanics' warm start was checkpointed in the current step (after its
         #: first right-hand side)
         self._checkpointed = False
-        #: the integrated displacement spectrum at the end of the last step (projected onto
-        #: force balance when the step is accepted)
-        self._pending_disp: Array | None = None
+        #: the integrated displacement spectrum at the end of the last step and its
+        #: deformation gradient (projected onto force balance when the step is accepted)
+        self._pending_disp: tuple[Array, Array] | None = None
         self.stats = {"steps": 0, "rejected": 0, "stage_failures": 0, "rhs": 0, "newton": 0,
                       "projections": 0}
         #: the mechanical state of the last force-balance right-hand side (its tangent and E
@@ -125,14 +125,14 @@ class ETDSolver(SolverBase):
         self._checked_at = float("nan")
 
     # --- the split right-hand side -----------------------------------------------------
-    def split(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
-              ) -> tuple[Array, Array]:
+    def split(self, u: Array, q_hat: Array, t: float, disp: Array | None = None,
+              F: Array | None = None) -> tuple[Array, Array]:
         """Return ``(N_q hat, Adot)`` for the state ``u = [q1, q2, A]`` with ``q_hat`` the
         spectra of q1, q2 (:mod:`model.split`). Where the mechanics integrates the
-        displacement: at the displacement spectrum ``disp`` (its rate is then the mechanics'
-        ``udot_hat``)."""
+        displacement: at the displacement spectrum ``disp`` with deformation gradient ``F`` (its
+        rate is then the mechanics' ``udot_hat``, with gradient ``udot_grad``)."""
         self.stats["rhs"] += 1
-        Nq, Adot, mech = self._split(u, q_hat, t, disp)
+        Nq, Adot, mech = self._split(u, q_hat, t, disp, F)
         if mech is not None:
             self._last_mech = mech
             self.stats["newton"] += mech.iterations
@@ -207,15 +207,15 @@ class ETDSolver(SolverBase):
             self.pde.mechanics.restore()
 
     def _finish(self, u: Array, q_hat: Array, new_q_hat: Array, new_A: Array, err_q: Array,
-                err_A: Array, new_disp: Array | None = None, err_disp: Array | None = None
-                ) -> tuple[Array, float]:
+                err_A: Array, new_disp: tuple[Array, Array] | None = None,
+                err_grad: Array | None = None) -> tuple[Array, float]:
         """The new state, its spectra remembered for the next step, and the error estimate
         of ``err_q`` (spectra) and ``err_A`` (real space): the largest pointwise error
         (``error_norm = "max"``, two inverse transforms) or the RMS over the grid, maximum
-        over the three fields. With the integrated displacement, ``new_disp`` is kept for the
-        projection of an accepted step, and the error ``err_disp`` (spectrum) counts by its
-        strain, each component of :math:`\\nabla e_u` like a field (four inverse
-        transforms)."""
+        over the three fields. With the integrated displacement, ``new_disp`` (spectrum and
+        deformation gradient) is kept for the projection of an accepted step, and the
+        displacement's error counts by its strain ``err_grad`` (real space), each component of
+        :math:`\\nabla e_u` like a field."""
         g = self.pde.spectral
         new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
         self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
@@ -225,10 +225,9 @@ class ETDSolver(SolverBase):
             err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]),
                       float(np.sqrt(np.mean(err_A**2))))
         self._pending_disp = new_disp
-        if err_disp is not None:
-            strain = g.inverse(self.k.grad_hat_kernel(err_disp, g.kx, g.ky))
-            err = max(err, float(np.abs(strain).max()) if self.error_norm == "max"
-                      else float(np.sqrt(np.mean(strain**2, axis=(2, 3))).max()))
+        if err_grad is not None:
+            err = max(err, float(np.abs(err_grad).max()) if self.error_norm == "max"
+                      else float(np.sqrt(np.mean(err_grad**2, axis=(2, 3))).max()))
         return new, err
 
     def _project(self, new: Array, t: float) -> None:
@@ -238,7 +237,7 @@ class ETDSolver(SolverBase):
         disp, self._pending_disp = self._pending_disp, None
         if disp is None:
             return
-        state = self.pde.mechanics.solve(new[0], new[1], u_guess=disp, t=t)
+        state = self.pde.mechanics.solve(new[0], new[1], u_guess=disp[0], t=t, F_guess=disp[1])
         self.stats["newton"] += state.iterations
         self.stats["projections"] += 1
 
@@ -348,21 +347,24 @@ class ETDRK2Solver(ETDSolver):
         aq_hat = E * q_hat + h * phi1 * Nq0
         aA = A + h * phi1A * Adot0  # = e^{L h} A + h phi1 (Adot - L A)
         a = np.concatenate([g.inverse(aq_hat), aA[None]])
-        # the displacement: ETD with L = 0, i.e. Heun's method
-        da = V0 = None
+        # the displacement: ETD with L = 0, i.e. Heun's method (its deformation gradient
+        # alongside, in real space, from the rates' gradients)
+        da = V0 = G0 = Fa = None
         if fin is not None and d0 is not None:
-            V0 = fin.udot_hat
+            V0, G0 = fin.udot_hat, fin.udot_grad
             da = d0 + h * V0
+            Fa = fin.deformation_of(d0) + h * G0
         else:  # first-order predictor of Newton's start
             self.pde.mechanics.predict(h)
-        Nqa, Adota = self.split(a, aq_hat, t + h, da)
+        Nqa, Adota = self.split(a, aq_hat, t + h, da, Fa)
         corr_q = h * phi2 * (Nqa - Nq0)
         corr_A = h * phi2A * (Adota - Adot0 - LA * (aA - A))
-        if fin is None or da is None or V0 is None:
+        if fin is None or da is None or V0 is None or G0 is None or Fa is None:
             return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A)
         corr_d = 0.5 * h * (fin.udot_hat - V0)
+        corr_G = 0.5 * h * (fin.udot_grad - G0)
         return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A,
-                            da + corr_d, corr_d)
+                            (da + corr_d, Fa + corr_G), corr_G)
 
 
 class ETDRK4Solver(ETDSolver):
@@ -398,14 +400,15 @@ class ETDRK4Solver(ETDSolver):
 
         fin = self._integrated_mechanics()
 
-        def rhs(q_s: Array, A_s: Array, t_s: float, d_s: Array | None
+        def rhs(q_s: Array, A_s: Array, t_s: float, d_s: Array | None, F_s: Array | None
                 ) -> tuple[Array, Array]:
-            """Stage (q spectra, A[, displacement spectrum]) -> (N_q hat, N_A) with
-            N_A = Adot - L_A A (the displacement rate is then the mechanics' udot_hat)."""
+            """Stage (q spectra, A[, displacement spectrum and its deformation gradient]) ->
+            (N_q hat, N_A) with N_A = Adot - L_A A (the displacement rate is then the
+            mechanics' udot_hat, its gradient udot_grad)."""
             stage = np.empty((3,) + A_s.shape)
             g.inverse(q_s, out=stage[:2])
             stage[2] = A_s
-            Nq, Adot = self.split(stage, q_s, t_s, d_s)
+            Nq, Adot = self.split(stage, q_s, t_s, d_s, F_s)
             return Nq, Adot - LA * A_s
 
         d0 = fin.u_hat if fin is not None else None
@@ -414,31 +417,41 @@ class ETDRK4Solver(ETDSolver):
         NA_u = Adot_u - LA * A
         self._checkpoint()
         # the integrated displacement (L = 0: the weights become the classical RK4's,
-        # phi_k(0) = 1/k!): d_a = d + h/2 V_u, d_b = d + h/2 V_a, d_c = d + h V_b
-        V: list[Array] = []
-        d_a = d_b = d_c = None
+        # phi_k(0) = 1/k!): d_a = d + h/2 V_u, d_b = d + h/2 V_a, d_c = d + h V_b, and its
+        # deformation gradient alongside in real space, F_a = F + h/2 grad V_u, ..., from
+        # the rates' gradients that the rate solves return (no transforms)
+        V: list[Array] = []  # the rates (spectra)
+        G: list[Array] = []  # their gradients
+        d_a = d_b = d_c = F0 = F_a = F_b = F_c = None
         if fin is not None and d0 is not None:
+            F0 = fin.deformation_of(d0)
             V.append(fin.udot_hat)
+            G.append(fin.udot_grad)
             d_a = d0 + 0.5 * h * V[0]
+            F_a = F0 + 0.5 * h * G[0]
         else:  # Newton's start: the displacement extrapolated with its rate
             self.pde.mechanics.predict(0.5 * h)
         # stage a (t + h/2): ETD1 half step
         Nq_a, NA_a = rhs(combo_q(E2, q_hat, wq["a"], (Nq_u,)),
-                         combo_A(EA2, A, wA["a"], (NA_u,)), t + 0.5 * h, d_a)
-        if fin is not None and d0 is not None:
+                         combo_A(EA2, A, wA["a"], (NA_u,)), t + 0.5 * h, d_a, F_a)
+        if fin is not None and d0 is not None and F0 is not None:
             V.append(fin.udot_hat)
+            G.append(fin.udot_grad)
             d_b = d0 + 0.5 * h * V[1]
+            F_b = F0 + 0.5 * h * G[1]
         # stage b (t + h/2): Krogstad's correction with phi_2, a + h phi_2(h/2) (N_a - N_u)
         Nq_b, NA_b = rhs(combo_q(E2, q_hat, wq["b"], (Nq_u, Nq_a)),
-                         combo_A(EA2, A, wA["b"], (NA_u, NA_a)), t + 0.5 * h, d_b)
-        if fin is not None and d0 is not None:
+                         combo_A(EA2, A, wA["b"], (NA_u, NA_a)), t + 0.5 * h, d_b, F_b)
+        if fin is not None and d0 is not None and F0 is not None:
             V.append(fin.udot_hat)
+            G.append(fin.udot_grad)
             d_c = d0 + h * V[2]
+            F_c = F0 + h * G[2]
         else:
             self.pde.mechanics.predict(0.5 * h)
         # stage c (t + h)
         Nq_c, NA_c = rhs(combo_q(E, q_hat, wq["c"], (Nq_u, Nq_b)),
-                         combo_A(EA, A, wA["c"], (NA_u, NA_b)), t + h, d_c)
+                         combo_A(EA, A, wA["c"], (NA_u, NA_b)), t + h, d_c, F_c)
         # the fourth-order combination
         new_q_hat = combo_q(E, q_hat, wq["new"], (Nq_u, Nq_a, Nq_b, Nq_c))
         new_A = combo_A(EA, A, wA["new"], (NA_u, NA_a, NA_b, NA_c))
@@ -446,12 +459,14 @@ class ETDRK4Solver(ETDSolver):
         # Cox-Matthews third-order weights on the first-order midpoint stage: O(h^3)
         err_q = h * wq["new"][1] * (Nq_b - Nq_a)
         err_A = h * wA["new"][1] * (NA_b - NA_a)
-        if fin is None or d0 is None:
+        if fin is None or d0 is None or F0 is None:
             return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A)
         V.append(fin.udot_hat)
+        G.append(fin.udot_grad)
         new_d = d0 + (h / 6.0) * (V[0] + 2.0 * V[1] + 2.0 * V[2] + V[3])
-        return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A, new_d,
-                            (h / 3.0) * (V[2] - V[1]))
+        new_F = F0 + (h / 6.0) * (G[0] + 2.0 * G[1] + 2.0 * G[2] + G[3])
+        return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A, (new_d, new_F),
+                            (h / 3.0) * (G[2] - G[1]))
 
     @staticmethod
     def _weights_from(f1: Array, f2: Array, f3: Array, g1: Array, g2: Array

@@ -37,11 +37,12 @@ class ForceBalanceSplit:
         self.pde = pde
         self.Lq = Lq
 
-    def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
-                 ) -> tuple[Array, Array, MechanicalState | None]:
+    def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None,
+                 F: Array | None = None) -> tuple[Array, Array, MechanicalState | None]:
         """``(N_q hat, Adot, mechanical state)`` at the displacement spectrum ``disp`` if
-        given (the integrated scheme), else in force balance."""
-        rate, mech, _ = self.pde.rates(u[0], u[1], u[2], t, u_hat=disp, q_hat=q_hat)
+        given (the integrated scheme; ``F`` its deformation gradient if known), else in
+        force balance."""
+        rate, mech, _ = self.pde.rates(u[0], u[1], u[2], t, u_hat=disp, q_hat=q_hat, F=F)
         if not np.all(np.isfinite(rate)):
             raise SimulationFailure("nan", "non-finite rate", t)
         return self.pde.spectral.forward(rate[:2]) - self.Lq * q_hat, rate[2], mech
@@ -67,8 +68,8 @@ class SpectralSplit:
                 p.eps * g.n**2, p.B, p.B_prime, p.C, p.gamma, p.zeta, p.chi, p.s, p.tau,
                 mech.spin_tol, mech.spin_maxiter, *linear_rhs.workspace(g.n))
 
-    def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None
-                 ) -> tuple[Array, Array, MechanicalState | None]:
+    def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None,
+                 F: Array | None = None) -> tuple[Array, Array, MechanicalState | None]:
         """``(N_q hat, Adot, None)``; by :func:`model.compiled.linear_rhs.linear_split` where the
         mechanics is compiled, else by :meth:`reference`."""
         if disp is not None:

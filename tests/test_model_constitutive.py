@@ -186,26 +186,6 @@ def test_balance_residual_kernel_matches_numpy_twin(rng):
         np.testing.assert_allclose(kern.balance_residual_kernel(*args), ref, rtol=1e-13)
 
 
-def test_spin_hat_kernel_is_half_the_curl(rng):
-    """The spin spectrum of a displacement (rate): its inverse is (d1 v2 - d2 v1) / 2 of a
-    trigonometric field (curl in closed form), for both backends."""
-    from model import reference_kernels as twin
-    from model.compiled import kernels as kern
-    from model.fourier import SpectralGrid
-
-    n = 32
-    g = SpectralGrid(n)
-    x = (np.arange(n) + 0.5) / n
-    X, Y = np.meshgrid(x, x, indexing="ij")
-    v = np.stack([np.sin(2 * np.pi * Y) * np.cos(2 * np.pi * X), np.cos(4 * np.pi * X)])
-    curl = (-4 * np.pi * np.sin(4 * np.pi * X)
-            - 2 * np.pi * np.cos(2 * np.pi * Y) * np.cos(2 * np.pi * X))
-    v_hat = g.forward(v)
-    for k in (kern, twin):
-        np.testing.assert_allclose(g.inverse(k.spin_hat_kernel(v_hat, g.kx, g.ky)), 0.5 * curl,
-                                   atol=1e-12)
-
-
 def test_numba_finite_strain_kernels_match_numpy_references(rng):
     from model.compiled import kernels as kern
 

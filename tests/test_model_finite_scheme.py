@@ -78,8 +78,9 @@ def test_displacement_error_counts_by_its_strain():
         u = np.zeros((3, n, n))
         q_hat = g.forward(u[:2])
         zero_q = np.zeros_like(q_hat)
-        _, err = solver._finish(u, q_hat, q_hat, u[2], zero_q, u[2], g.forward(field),
-                                g.forward(field))
+        grad = g.inverse(g.grad_hat(g.forward(field)))  # the strain of the error, (2, 2, n, n)
+        _, err = solver._finish(u, q_hat, q_hat, u[2], zero_q, u[2],
+                                (g.forward(field), grad), grad)
         expected = (2 * np.pi * d * np.abs(np.cos(2 * np.pi * g.x)).max() if norm == "max"
                     else 2 * np.pi * d / np.sqrt(2))
         assert err == pytest.approx(expected, rel=1e-9)

@@ -22,7 +22,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 from numba.extending import overload
 
 from . import fftw as fx
@@ -92,12 +92,18 @@ class TangentOperator(NamedTuple):
 
 @overload(apply_operator)
 def _apply_tangent(op, x, out, aux):  # pragma: no cover - compiled
-    if getattr(op, "instance_class", None) is TangentOperator:  # the named tuple type
-        def impl(op, x, out, aux):  # no auxiliary output
-            _operator(x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, op.G,
+    if getattr(op, "instance_class", None) is not TangentOperator:  # the named tuple type
+        return None
+    if isinstance(aux, types.Array) and aux.ndim == 4:
+        def impl(op, x, out, aux):  # the auxiliary output: the real-space gradient of x
+            _operator(x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, aux,
                       op.P, out)
         return impl
-    return None
+
+    def impl_plain(op, x, out, aux):  # no auxiliary output
+        _operator(x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, op.G, op.P,
+                  out)
+    return impl_plain
 
 
 @overload(precondition)
@@ -122,22 +128,24 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
 
 
 @njit(cache=True)
-def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V, Z
+def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V, Z, LZ
           ):  # pragma: no cover
     """The displacement rate by :func:`model.compiled.krylov.gmres`, right-preconditioned by
-    the Green operator; returns ``(x, iterations, converged, operator applications)``. ``V``
-    (restart + 1 spectra) and ``Z`` (restart) are caller-owned work arrays."""
+    the Green operator; returns ``(x, grad x, iterations, converged, operator applications)``
+    with ``grad x`` the real-space gradient (2, 2, N, N) of the solution, accumulated from the
+    gradients every operator application computes anyway (no transform of its own). ``V``
+    (restart + 1 spectra), ``Z`` (restart) and ``LZ`` (restart gradients) are caller-owned
+    work arrays (:func:`workspace`)."""
     n = K.shape[4]
     op = TangentOperator(K, E, True, kx, ky, khx, khy, inv_k2, a, pf, pi,
                          np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
                          np.empty((2, 2, n, n)))
-    x, _, its, ok, nop = krylov.gmres(op, b, x0, w, rtol, maxiter, V, Z,
-                                      np.empty((Z.shape[0], 0), dtype=np.complex128))
-    return x, its, ok, nop
+    return krylov.gmres(op, b, x0, w, rtol, maxiter, V, Z, LZ)
 
 
-def workspace(n: int, restart: int = 30) -> tuple[Array, Array]:
-    """The ``(V, Z)`` work arrays of :func:`gmres` for an N x N grid."""
+def workspace(n: int, restart: int = 30) -> tuple[Array, Array, Array]:
+    """The ``(V, Z, LZ)`` work arrays of :func:`gmres` for an N x N grid."""
     shape = (2, n, n // 2 + 1)
     return (np.empty((restart + 1,) + shape, dtype=np.complex128),
-            np.empty((restart,) + shape, dtype=np.complex128))
+            np.empty((restart,) + shape, dtype=np.complex128),
+            np.empty((restart, 2, 2, n, n)))

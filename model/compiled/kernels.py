@@ -21,7 +21,6 @@ from .spectral import (
     green_kernel,
     linear_response,
     neg_div_hat_kernel,
-    spin_hat_kernel,
     symbol_combination,
 )
 from .wellposedness import finite_margin_kernel
@@ -31,6 +30,6 @@ __all__ = [
     "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "div_hat_kernel",
     "etd_combination", "finite_margin_kernel", "first_piola_kernel", "grad_hat_kernel",
     "green_kernel", "jaumann_products", "linear_response", "molecular_field_kernel",
-    "neg_div_hat_kernel", "q_increment_kernel", "spin_hat_kernel", "strain_measures_kernel",
+    "neg_div_hat_kernel", "q_increment_kernel", "strain_measures_kernel",
     "symbol_combination", "tangent_kernel",
 ]

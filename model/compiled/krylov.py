@@ -170,9 +170,8 @@ def axpy_sum(x, y, B, m):  # pragma: no cover - compiled
         hi = min(lo + block, size)
         for i in range(m):
             c = y[i]
-            for p in range(lo, hi):  # componentwise: the same values as c * (complex)
-                b = Bf[i, p]
-                xf[p] = complex(xf[p].real + c * b.real, xf[p].imag + c * b.imag)
+            for p in range(lo, hi):  # complex: componentwise, the same values as c * b
+                xf[p] = xf[p] + rmul(c, Bf[i, p])
 
 
 @njit(cache=True)
@@ -212,11 +211,12 @@ def gmres(op, b, x0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - compiled
     cycle needs no extra application. Work arrays, caller-owned (megabytes are not allocated
     on every call): ``V`` the Krylov basis (restart + 1 spectra), ``Z`` its preconditioned
     basis (restart spectra; ``V`` itself for an unpreconditioned operator), ``LZ`` the
-    auxiliary outputs of ``Z`` (restart entries; zero-sized where the operator has none)."""
+    auxiliary outputs of ``Z`` (restart entries of the auxiliary output's shape and dtype;
+    zero-sized where the operator has none)."""
     restart = V.shape[0] - 1
     shape = b.shape
     Ax = np.empty(shape, dtype=np.complex128)
-    Lx = np.empty(LZ.shape[1:], dtype=np.complex128)
+    Lx = np.empty(LZ.shape[1:], LZ.dtype)
     wv = np.empty(shape, dtype=np.complex128)
     H = np.zeros((restart + 1, restart))
     g = np.zeros(restart + 1)

@@ -44,18 +44,6 @@ def neg_div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def spin_hat_kernel(v, kx, ky):  # pragma: no cover - compiled
-    r""":math:`\hat\omega = \tfrac{i}{2} (k_1 \hat v_2 - k_2 \hat v_1)`, the spectrum of the
-    spin :math:`\tfrac12 (\partial_1 v_2 - \partial_2 v_1)` of the displacement (rate) ``v``."""
-    nx, ny = kx.shape
-    out = np.empty((nx, ny), dtype=np.complex128)
-    for x in range(nx):
-        for y in range(ny):
-            out[x, y] = imul(0.5, rmul(kx[x, y], v[1, x, y]) - rmul(ky[x, y], v[0, x, y]))
-    return out
-
-
-@njit(cache=True)
 def div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
     r""":math:`i k_j \hat T_{ij}` (reference: :meth:`model.fourier.SpectralGrid.div_hat`)."""
     nx, ny = kx.shape

@@ -177,7 +177,6 @@ class Mechanics:
                                                     self.grid.weights))
 
 
-
 class LinearMechanics(Mechanics):
     """Small-strain force balance, solved exactly in Fourier space.
 
@@ -531,11 +530,12 @@ class FiniteMechanics(Mechanics):
             return self._state(sol[3], sol[4], u_hat)
         if F is None:
             F = self.deformation(u_hat)
-        if not np.all(T.det(F) > 0):
-            raise SimulationFailure("J<=0", "the integrated displacement has J <= 0", t)
         m = self.moduli
         P = self.k.first_piola_kernel(F, q1, q2, m.kappa, m.B, m.B_prime, m.alpha)
-        return self._state(F, P, u_hat)
+        state = self._state(F, P, u_hat)
+        if not state.Jm1.min() > -1.0:  # J <= 0 somewhere (or not finite): P is meaningless
+            raise SimulationFailure("J<=0", "the integrated displacement has J <= 0", t)
+        return state
 
     def deformation_of(self, u_hat: Array) -> Array:
         """F of ``u_hat``: the last solve's when ``u_hat`` is its solution, else transformed."""
@@ -575,9 +575,7 @@ class FiniteMechanics(Mechanics):
                 f"in {it} iterations: loss of ellipticity", t)
         self.udot_hat = udot
         self.udot_grad = grad
-        omega = 0.5 * (grad[1, 0] - grad[0, 1])  # the spin of udot
-        return R + self.k.jaumann_products(omega, q1, q2), omega
-
+        return self.k.corotational_rate(R, grad, q1, q2)
 
     def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None
                     ) -> tuple[float, int, float]:

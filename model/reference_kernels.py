@@ -19,10 +19,10 @@ Array = np.ndarray
 
 __all__ = [
     "activity_exponential", "activity_krogstad", "activity_rate", "apply_tangent_kernel",
-    "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "div_hat_kernel",
-    "etd_combination", "finite_margin_kernel", "first_piola_kernel", "grad_hat_kernel",
-    "green_kernel", "jaumann_products", "linear_response", "molecular_field_kernel",
-    "neg_div_hat_kernel", "q_increment_kernel", "strain_measures_kernel",
+    "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "corotational_rate",
+    "div_hat_kernel", "etd_combination", "finite_margin_kernel", "first_piola_kernel",
+    "grad_hat_kernel", "green_kernel", "jaumann_products", "linear_response",
+    "molecular_field_kernel", "neg_div_hat_kernel", "q_increment_kernel", "strain_measures_kernel",
     "symbol_combination", "tangent_kernel",
 ]
 
@@ -154,6 +154,13 @@ def activity_rate(A: Array, trP: Array, zeta: float, chi: float, s: float, tau: 
                   ) -> Array:
     r"""Paper Eq. (5): :math:`(-\zeta A - \chi\, \mathrm{tr} P - s A^3)/\tau`."""
     return (-zeta * A - chi * trP - s * A * A * A) / tau
+
+
+def corotational_rate(R: Array, grad_v: Array, q1: Array, q2: Array) -> tuple[Array, Array]:
+    r"""``(R + 2 omega J q, omega)``, :math:`\omega = \tfrac12 (\partial_1 v_2 - \partial_2
+    v_1)` from the gradient of v."""
+    omega = 0.5 * (grad_v[1, 0] - grad_v[0, 1])
+    return R + jaumann_products(omega, q1, q2), omega
 
 
 def jaumann_products(omega: Array, q1: Array, q2: Array) -> Array:

@@ -155,6 +155,12 @@ def test_numba_pointwise_stepper_kernels_match_numpy(rng):
                                (-zeta * A - chi * tr - s * A**3) / tau, rtol=1e-14, atol=1e-15)
     np.testing.assert_allclose(kern.jaumann_products(tr, q1, q2),
                                np.stack([-2 * tr * q2, 2 * tr * q1]), rtol=1e-15)
+    R, grad = rng.standard_normal((2, 8, 8)), rng.standard_normal((2, 2, 8, 8))
+    qdot, omega = kern.corotational_rate(R, grad, q1, q2)
+    w = 0.5 * (grad[1, 0] - grad[0, 1])
+    np.testing.assert_allclose(omega, w, rtol=1e-15)
+    np.testing.assert_allclose(qdot, R + np.stack([-2 * w * q2, 2 * w * q1]), rtol=1e-14,
+                               atol=1e-15)
     E0, E1, lap1, lap2 = rng.standard_normal((4, 8, 8))
     A0, B, K = -0.3, 1.2, 1e-3
     H = kern.molecular_field_kernel(q1, q2, A, tr, np.stack([E0, E1]), np.stack([lap1, lap2]),

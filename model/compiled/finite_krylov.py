@@ -30,7 +30,7 @@ from . import krylov
 from .arith import imul
 from .constitutive import apply_tangent_into
 from .krylov import apply_operator, precondition
-from .spectral import green_kernel
+from .spectral import green_into
 
 Array = np.ndarray
 
@@ -110,7 +110,7 @@ def _apply_tangent(op, x, out, aux):  # pragma: no cover - compiled
 def _precondition_tangent(op, v, out):  # pragma: no cover - compiled
     if getattr(op, "instance_class", None) is TangentOperator:  # the named tuple type
         def impl(op, v, out):
-            out[...] = green_kernel(v, op.khx, op.khy, op.inv_k2, op.a)
+            green_into(v, op.khx, op.khy, op.inv_k2, op.a, out)
         return impl
     return None
 

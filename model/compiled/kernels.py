@@ -13,7 +13,13 @@ from .constitutive import (
     tangent_kernel,
 )
 from .etd import activity_exponential, activity_krogstad, etd_combination
-from .rates import activity_rate, bulk_terms, jaumann_products, molecular_field_kernel
+from .rates import (
+    activity_rate,
+    bulk_terms,
+    corotational_rate,
+    jaumann_products,
+    molecular_field_kernel,
+)
 from .spectral import (
     balance_residual_kernel,
     div_hat_kernel,
@@ -27,9 +33,9 @@ from .wellposedness import finite_margin_kernel
 
 __all__ = [
     "activity_exponential", "activity_krogstad", "activity_rate", "apply_tangent_kernel",
-    "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "div_hat_kernel",
-    "etd_combination", "finite_margin_kernel", "first_piola_kernel", "grad_hat_kernel",
-    "green_kernel", "jaumann_products", "linear_response", "molecular_field_kernel",
-    "neg_div_hat_kernel", "q_increment_kernel", "strain_measures_kernel",
+    "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "corotational_rate",
+    "div_hat_kernel", "etd_combination", "finite_margin_kernel", "first_piola_kernel",
+    "grad_hat_kernel", "green_kernel", "jaumann_products", "linear_response",
+    "molecular_field_kernel", "neg_div_hat_kernel", "q_increment_kernel", "strain_measures_kernel",
     "symbol_combination", "tangent_kernel",
 ]

@@ -57,6 +57,23 @@ def activity_rate(A, trP, zeta, chi, s, tau):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def corotational_rate(R, grad_v, q1, q2):  # pragma: no cover - compiled
+    r"""``(Qdot, omega)``: the spin :math:`\omega = \tfrac12 (\partial_1 v_2 - \partial_2 v_1)`
+    of the displacement rate v from its real-space gradient ``grad_v`` (2, 2, N, N), and
+    :math:`\dot Q = R + 2 \omega J q` (Eq. 4), in one pass."""
+    nx, ny = q1.shape
+    qdot = np.empty((2, nx, ny))
+    omega = np.empty((nx, ny))
+    for x in range(nx):
+        for y in range(ny):
+            w = 0.5 * (grad_v[1, 0, x, y] - grad_v[0, 1, x, y])
+            omega[x, y] = w
+            qdot[0, x, y] = R[0, x, y] - 2.0 * w * q2[x, y]
+            qdot[1, x, y] = R[1, x, y] + 2.0 * w * q1[x, y]
+    return qdot, omega
+
+
+@njit(cache=True)
 def jaumann_products(omega, q1, q2):  # pragma: no cover - compiled
     r"""The corotational rate :math:`2 \omega J q = [-2 \omega q_2, 2 \omega q_1]`."""
     nx, ny = q1.shape

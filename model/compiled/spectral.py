@@ -57,11 +57,9 @@ def div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
-    """Green operator of the isotropic reference medium, :math:`(I - a \\hat k \\hat k)
-    \\hat b / k^2` (numpy twin: :func:`model.reference_kernels.green_kernel`)."""
+def green_into(b, khx, khy, inv_k2, a, out):  # pragma: no cover - compiled
+    """:func:`green_kernel` into ``out`` (the Krylov preconditioner: no allocation)."""
     nx, ny = khx.shape
-    out = np.empty((2, nx, ny), dtype=np.complex128)
     for x in range(nx):
         for y in range(ny):
             h1 = khx[x, y]
@@ -69,6 +67,14 @@ def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
             kb = rmul(a, rmul(h1, b[0, x, y]) + rmul(h2, b[1, x, y]))
             out[0, x, y] = rmul(inv_k2[x, y], b[0, x, y] - rmul(h1, kb))
             out[1, x, y] = rmul(inv_k2[x, y], b[1, x, y] - rmul(h2, kb))
+
+
+@njit(cache=True)
+def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
+    """Green operator of the isotropic reference medium, :math:`(I - a \\hat k \\hat k)
+    \\hat b / k^2` (numpy twin: :func:`model.reference_kernels.green_kernel`)."""
+    out = np.empty((2,) + khx.shape, dtype=np.complex128)
+    green_into(b, khx, khy, inv_k2, a, out)
     return out
 
 

@@ -10,6 +10,13 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _bulk(A, q1, q2, C, two_Bp, trace):  # pragma: no cover - compiled
+    """The Landau-de Gennes factor :math:`A + C\\, Q:Q - 2 B' \\mathrm{tr}\\, e` at a point
+    (Q:Q = 2 (q1^2 + q2^2); ``trace`` is tr e, or J - 1 at finite strain)."""
+    return A + C * 2.0 * (q1 * q1 + q2 * q2) - two_Bp * trace
+
+
 @njit(cache=True)
 def bulk_terms(q1, q2, A, tr_e, C, two_Bp):  # pragma: no cover - compiled
     r"""``[-b q1, -b q2]`` with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (the
@@ -18,11 +25,9 @@ def bulk_terms(q1, q2, A, tr_e, C, two_Bp):  # pragma: no cover - compiled
     out = np.empty((2, nx, ny))
     for x in range(nx):
         for y in range(ny):
-            a = q1[x, y]
-            b = q2[x, y]
-            bulk = A[x, y] + C * 2.0 * (a * a + b * b) - two_Bp * tr_e[x, y]
-            out[0, x, y] = -bulk * a
-            out[1, x, y] = -bulk * b
+            bulk = _bulk(A[x, y], q1[x, y], q2[x, y], C, two_Bp, tr_e[x, y])
+            out[0, x, y] = -bulk * q1[x, y]
+            out[1, x, y] = -bulk * q2[x, y]
     return out
 
 
@@ -36,11 +41,9 @@ def molecular_field_kernel(q1, q2, A, Jm1, Ebar_dev, lap, A0, C, two_Bp, B, K
     out = np.empty((2, nx, ny))
     for x in range(nx):
         for y in range(ny):
-            a = q1[x, y]
-            b = q2[x, y]
-            bulk = A[x, y] + A0 + C * 2.0 * (a * a + b * b) - two_Bp * Jm1[x, y]
-            out[0, x, y] = -bulk * a + B * Ebar_dev[0, x, y] + K * lap[0, x, y]
-            out[1, x, y] = -bulk * b + B * Ebar_dev[1, x, y] + K * lap[1, x, y]
+            bulk = _bulk(A[x, y] + A0, q1[x, y], q2[x, y], C, two_Bp, Jm1[x, y])
+            out[0, x, y] = -bulk * q1[x, y] + B * Ebar_dev[0, x, y] + K * lap[0, x, y]
+            out[1, x, y] = -bulk * q2[x, y] + B * Ebar_dev[1, x, y] + K * lap[1, x, y]
     return out
 
 

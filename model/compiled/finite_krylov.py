@@ -10,9 +10,11 @@ The two linear problems of :class:`model.mechanics.FiniteMechanics` (module docs
 
 both preconditioned by the Green operator of the homogeneous isotropic reference medium, with
 the Parseval inner product of half spectra. They are the same algorithms, step for step, as
-:func:`model.krylov.pcg` / :func:`model.krylov.gmres` driven by the numpy operators of
+:func:`model.krylov.pcg` / :func:`model.krylov.gmres_aux` driven by the numpy operators of
 ``FiniteMechanics`` (the readable reference and the fallback, tested to agree); here the whole
-loop, its eight transforms per operator application included, stays in compiled code.
+loop, its eight transforms per operator application included, stays in compiled code. The
+rate's GMRES also returns the real-space gradient of its solution, summed from the gradients of
+its operator applications (the auxiliary output of :func:`model.compiled.krylov.gmres`).
 
 Only used where :data:`model.compiled.fftw.AVAILABLE`.
 """

@@ -195,7 +195,7 @@ _c2r = types.ExternalFunction(
 _alignment_of = types.ExternalFunction("fftw_alignment_of", types.intc(types.uintp))
 
 @njit(cache=True)
-def aligned_real(n):  # pragma: no cover - compiled
+def _aligned_real(n):  # pragma: no cover - compiled
     raw = np.empty(n * n + 8)
     off = ((-raw.ctypes.data) % 64) // 8
     return raw[off:off + n * n].reshape((n, n))
@@ -219,7 +219,7 @@ def rfft2(plan, src, dst):  # pragma: no cover - compiled
         _r2c(plan, src.ctypes.data, dst.ctypes.data)
         return
     n = src.shape[0]
-    a = aligned_real(n)
+    a = _aligned_real(n)
     a[:, :] = src
     b = aligned_half(n)
     _r2c(plan, a.ctypes.data, b.ctypes.data)
@@ -238,16 +238,19 @@ def irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
     133 kB scratch per 128^2 transform costs ~15 % of its time, measured)."""
     n = dst.shape[0]
     scale = 1.0 / (n * n)
-    if unscaled_irfft2_via(plan, src, dst, scratch):
-        for x in range(n):
-            for y in range(n):
-                dst[x, y] *= scale
-        return
-    a = aligned_real(n)
-    unscaled_irfft2_via(plan, src, a, scratch)
+    unscaled_irfft2_into(plan, src, dst, scratch)
     for x in range(n):
         for y in range(n):
-            dst[x, y] = a[x, y] * scale
+            dst[x, y] *= scale
+
+@njit(cache=True)
+def unscaled_irfft2_into(plan, src, dst, scratch):  # pragma: no cover - compiled
+    """:func:`unscaled_irfft2_via` into any ``dst``: directly where it is aligned for the
+    plan, else through an aligned copy."""
+    if not unscaled_irfft2_via(plan, src, dst, scratch):
+        a = _aligned_real(dst.shape[0])
+        unscaled_irfft2_via(plan, src, a, scratch)
+        dst[:, :] = a
 
 @njit(cache=True)
 def unscaled_irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled

@@ -54,10 +54,7 @@ def _operator(v, K, E, spin, kx, ky, pf, pi, work_hat, G, P, out):  # pragma: no
                     k = kx[x, y] if j == 0 else ky[x, y]
                     work_hat[x, y] = imul(k * scale, v[i, x, y])
             # work_hat is rebuilt each time, so the transform may destroy it
-            if not fx.unscaled_irfft2_via(pi, work_hat, G[i, j], work_hat):
-                a = fx.aligned_real(n)  # G not aligned for the plan: through a copy
-                fx.unscaled_irfft2_via(pi, work_hat, a, work_hat)
-                G[i, j] = a
+            fx.unscaled_irfft2_into(pi, work_hat, G[i, j], work_hat)
     apply_tangent_into(K, G, E, spin, P)
     for i in range(2):
         fx.rfft2(pf, P[i, 0], work_hat)

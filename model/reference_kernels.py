@@ -35,18 +35,20 @@ def _moduli(kappa: float, B: float, Bp: float, alpha: float) -> cl.Moduli:
 
 def tangent_kernel(F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float,
                    alpha: float) -> Array:
-    """:func:`model.constitutive.tangent`."""
-    return cl.tangent(F, tensors.nematic(q1, q2), _moduli(kappa, B, Bp, alpha))
+    """:func:`model.constitutive.tangent`, packed (:func:`model.tensors.pack_symmetric`)."""
+    return tensors.pack_symmetric(cl.tangent(F, tensors.nematic(q1, q2),
+                                             _moduli(kappa, B, Bp, alpha)))
 
 
 def apply_tangent_kernel(K: Array, dF: Array) -> Array:
-    """:func:`model.constitutive.apply_tangent`."""
-    return cl.apply_tangent(K, dF)
+    """:func:`model.constitutive.apply_tangent` of the packed tangent ``K``."""
+    return cl.apply_tangent(tensors.unpack_symmetric(K), dF)
 
 
 def apply_tangent_spin_kernel(K: Array, G: Array, E: Array) -> Array:
-    r""":math:`K : G + E\, \omega(G)`, :math:`\omega = \tfrac12 (G_{10} - G_{01})`."""
-    return cl.apply_tangent(K, G) + E * (0.5 * (G[1, 0] - G[0, 1]))
+    r""":math:`K : G + E\, \omega(G)`, :math:`\omega = \tfrac12 (G_{10} - G_{01})` (packed
+    ``K``)."""
+    return cl.apply_tangent(tensors.unpack_symmetric(K), G) + E * (0.5 * (G[1, 0] - G[0, 1]))
 
 
 def first_piola_kernel(F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float,

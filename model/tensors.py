@@ -47,6 +47,26 @@ def identity(shape: tuple[int, ...]) -> Array:
     return eye
 
 
+#: the (a, b) entries, a <= b, of a symmetric 4 x 4 matrix in packed order (row by row)
+PACKED_PAIRS = tuple((a, b) for a in range(4) for b in range(a, 4))
+
+
+def pack_symmetric(K: Array) -> Array:
+    """A major-symmetric fourth-order field ``K[i, J, k, L, ...]`` packed as the upper
+    triangle of the 4 x 4 matrix ``K[2 i + J, 2 k + L]``: shape (10, ...), in
+    :data:`PACKED_PAIRS` order (the layout of the backends' ``tangent_kernel``)."""
+    M = K.reshape(4, 4, *K.shape[4:])
+    return np.stack([M[a, b] for a, b in PACKED_PAIRS])
+
+
+def unpack_symmetric(Kp: Array) -> Array:
+    """The full ``K[i, J, k, L, ...]`` of a packed field (:func:`pack_symmetric`)."""
+    M = np.empty((4, 4, *Kp.shape[1:]))
+    for c, (a, b) in enumerate(PACKED_PAIRS):
+        M[a, b] = M[b, a] = Kp[c]
+    return M.reshape(2, 2, 2, 2, *Kp.shape[1:])
+
+
 def nematic(q1: Array, q2: Array) -> Array:
     """The traceless symmetric tensor ``Q = [[q1, q2], [q2, -q1]]`` (q1 = S cos 2 theta,
     q2 = S sin 2 theta, so Q = S (2 n n - I) and Q : Q = 2 S^2)."""

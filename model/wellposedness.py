@@ -46,6 +46,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from . import tensors
+
 Array = np.ndarray
 
 #: directions sampled on [0, pi) (det M(phi + pi) = det M(phi)); the sampled minimum is
@@ -55,10 +57,11 @@ N_ANGLES = 48
 
 def finite_symbol(K: Array, E: Array, phi: float) -> Array:
     """:math:`M_{ik}(\\hat k(\\phi))` at every point, shape (2, 2, nx, ny): numpy reference of
-    :func:`finite_margin` (``K`` the tangent dP/dF (2, 2, 2, 2, nx, ny), ``E`` (2, 2, nx, ny))."""
+    :func:`finite_margin` (``K`` the tangent dP/dF packed as the backends' ``tangent_kernel``
+    returns it, (10, nx, ny): :func:`model.tensors.pack_symmetric`; ``E`` (2, 2, nx, ny))."""
     k = np.array([np.cos(phi), np.sin(phi)])
     t = np.array([-np.sin(phi), np.cos(phi)])
-    KK = np.einsum("iJkL...,J,L->ik...", K, k, k)
+    KK = np.einsum("iJkL...,J,L->ik...", tensors.unpack_symmetric(K), k, k)
     Ek = np.einsum("iJ...,J->i...", E, k)
     return KK + 0.5 * Ek[:, None] * t[None, :, None, None]
 

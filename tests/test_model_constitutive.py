@@ -49,6 +49,21 @@ def test_tangent_matches_finite_differences_and_is_symmetric(rng):
     np.testing.assert_allclose(cl.apply_tangent(K, dF), fd, atol=1e-7)
     # major symmetry: P derives from a potential at fixed Q (active term = d/dF of alpha C:Q/2)
     np.testing.assert_allclose(K, K.transpose(2, 3, 0, 1, 4), atol=1e-12)
+    # so the packed upper triangle (the backends' layout) determines it
+    np.testing.assert_allclose(T.unpack_symmetric(T.pack_symmetric(K)), K, atol=1e-12)
+
+
+def test_packed_layout_is_the_same_in_both_backends():
+    """The compiled kernels' plane table is the numpy packing's (row-by-row upper triangle)."""
+    from model.compiled.constitutive import PACKED
+
+    for c, (a, b) in enumerate(T.PACKED_PAIRS):
+        assert PACKED[a, b] == PACKED[b, a] == c
+    K = np.arange(16.0).reshape(4, 4)
+    K = (K + K.T).reshape(2, 2, 2, 2)
+    Kp = T.pack_symmetric(K)
+    assert Kp.shape == (10,)
+    np.testing.assert_array_equal(T.unpack_symmetric(Kp), K)
 
 
 def test_q_increment_matches_finite_differences(rng):
@@ -102,18 +117,20 @@ def test_numba_tangent_kernel_matches_numpy_reference(rng):
 
     F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 8, 8))
     q = 0.4 * rng.standard_normal((2, 8, 8))
-    ref = cl.tangent(F, T.nematic(*q), M)
+    ref = T.pack_symmetric(cl.tangent(F, T.nematic(*q), M))
     fast = tangent_kernel(F, q[0], q[1], M.kappa, M.B, M.B_prime, M.alpha)
+    assert fast.shape == (10, 8, 8)
     np.testing.assert_allclose(fast, ref, rtol=1e-13, atol=1e-13)
 
 
 def test_numba_apply_tangent_matches_numpy_reference(rng):
     from model.compiled.kernels import apply_tangent_kernel
 
-    K = rng.standard_normal((2, 2, 2, 2, 6, 6))
+    Kp = rng.standard_normal((10, 6, 6))  # packed: the full tangent is its symmetric matrix
     dF = rng.standard_normal((2, 2, 6, 6))
-    np.testing.assert_allclose(apply_tangent_kernel(K, dF), cl.apply_tangent(K, dF),
-                               rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(apply_tangent_kernel(Kp, dF),
+                               cl.apply_tangent(T.unpack_symmetric(Kp), dF), rtol=1e-14,
+                               atol=1e-14)
 
 
 @pytest.mark.parametrize("incompressible", [False, True])
@@ -210,7 +227,7 @@ def test_numba_finite_strain_kernels_match_numpy_references(rng):
     E = cl.first_piola_q_increment(F, Q, d[0] * np.eye(2)[:, :, None, None], M)
     G = rng.standard_normal((2, 2, 6, 6))
     omega = 0.5 * (G[1, 0] - G[0, 1])
-    np.testing.assert_allclose(kern.apply_tangent_spin_kernel(K, G, E),
+    np.testing.assert_allclose(kern.apply_tangent_spin_kernel(T.pack_symmetric(K), G, E),
                                cl.apply_tangent(K, G) + E * omega, rtol=1e-12, atol=1e-13)
 
 

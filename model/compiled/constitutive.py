@@ -23,13 +23,20 @@ def _point_kinematics(F, x, y):  # pragma: no cover - compiled
             f00 * f01 + f10 * f11, f01 * f01 + f11 * f11)
 
 
-#: points per block of :func:`tangent_kernel` (its 16 output planes are written block by block)
+#: the packed tangent: K as the symmetric 4 x 4 matrix K[2 i + J, 2 k + L], its upper
+#: triangle stored row by row in 10 planes; ``PACKED[a, b]`` is the plane of entry (a, b)
+#: (numpy twin: :func:`model.tensors.pack_symmetric`)
+PACKED = np.array([[0, 1, 2, 3], [1, 4, 5, 6], [2, 5, 7, 8], [3, 6, 8, 9]])
+
+#: points per block of :func:`tangent_kernel` (its 10 output planes are written block by block)
 _BLOCK = 64
 
 
 @njit(cache=True, error_model="numpy")
 def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compiled
-    r""":math:`K_{iJkL} = \partial P_{iJ}/\partial F_{kL}` in closed form, point by point.
+    r""":math:`K_{iJkL} = \partial P_{iJ}/\partial F_{kL}` in closed form, point by point,
+    packed: (10, nx, ny), the upper triangle of the symmetric 4 x 4 matrix
+    :math:`K_{[2i+J][2k+L]}` (:data:`PACKED`).
 
     Differentiating :math:`P = F \mathbf S` (``model.constitutive``) with :math:`dC = dF^T F
     + F^T dF` and :math:`H = F^{-T}` (so :math:`F C^{-1} = H`, :math:`F C^{-1} F^T = I`) gives
@@ -42,20 +49,21 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
     :math:`\beta = g + \kappa (J^2 - J) - B' (Q:Q) J`,
     :math:`\eta = J (\kappa (2 J - 1) - B' (Q:Q)) - g` and :math:`\Sigma = \mathbf S -
     \beta C^{-1}`. The four terms are major-symmetric (the tangent of a hyperelastic stress
-    plus the geometric stiffness of :math:`\alpha Q`). Reference: :func:`model.constitutive.
-    tangent`, the directional derivative :func:`~model.constitutive.first_piola_increment` in
-    the four unit directions (tested to agree to roundoff). The 16 output planes lie 8 N^2
-    bytes apart, on the same cache sets: written point by point they thrash the L1 cache
-    (2.2 ms at 128^2 against 0.8 ms), so a block of points is computed into a small buffer
-    and copied out plane by plane."""
+    plus the geometric stiffness of :math:`\alpha Q`), so 10 of the 16 entries determine K:
+    the Krylov operators read 10 planes instead of 16 per application. Reference:
+    :func:`model.constitutive.tangent`, the directional derivative
+    :func:`~model.constitutive.first_piola_increment` in the four unit directions, packed
+    (tested to agree to roundoff). The output planes lie 8 N^2 bytes apart, on the same
+    cache sets, so writing them point by point thrashes the L1 cache: a block of points is
+    computed into a small buffer and copied out plane by plane."""
     nx, ny = q1.shape
     n = nx * ny
-    K = np.empty((2, 2, 2, 2, nx, ny))
-    Kf = K.reshape((16, n))
+    K = np.empty((10, nx, ny))
+    Kf = K.reshape((10, n))
     Ff = np.ascontiguousarray(F).reshape((4, n))
     qa = np.ascontiguousarray(q1).reshape(n)
     qb = np.ascontiguousarray(q2).reshape(n)
-    buf = np.empty((16, _BLOCK))
+    buf = np.empty((10, _BLOCK))
     for p0 in range(0, n, _BLOCK):
         m = min(_BLOCK, n - p0)
         for o in range(m):
@@ -83,16 +91,20 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
             s = (s00, s01, s01, s11)
             w = ((f00 * (1.0 - B * a) - f01 * B * b) * r, (f01 * (1.0 + B * a) - f00 * B * b) * r,
                  (f10 * (1.0 - B * a) - f11 * B * b) * r, (f11 * (1.0 + B * a) - f10 * B * b) * r)
+            # the loops over range(2) unroll, so every index below is a constant
             for i in range(2):
                 for j in range(2):
                     for k in range(2):
                         for L in range(2):
-                            v = (eta * h[2 * i + j] * h[2 * k + L] - w[2 * i + j] * h[2 * k + L]
-                                 - h[2 * i + j] * w[2 * k + L] - beta * h[2 * i + L] * h[2 * k + j])
+                            ra, cb = 2 * i + j, 2 * k + L
+                            if ra > cb:  # the lower triangle: the same as (cb, ra)
+                                continue
+                            v = (eta * h[ra] * h[cb] - w[ra] * h[cb] - h[ra] * w[cb]
+                                 - beta * h[2 * i + L] * h[2 * k + j])
                             if i == k:
                                 v += s[2 * L + j]
-                            buf[8 * i + 4 * j + 2 * k + L, o] = v
-        for c in range(16):
+                            buf[ra * (7 - ra) // 2 + cb, o] = v  # PACKED[ra, cb]
+        for c in range(10):
             for o in range(m):
                 Kf[c, p0 + o] = buf[c, o]
     return K
@@ -101,25 +113,38 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
 @njit(cache=True)
 def apply_tangent_into(K, dF, E, spin, out):  # pragma: no cover - compiled
     r"""``out`` = :math:`K : dF\, [+ E\, \omega(dF)]`, :math:`\omega = \tfrac12 (dF_{10} -
-    dF_{01})` (the E term if ``spin``), point by point: the two kernels below without their
-    allocation (the Krylov operators reuse one buffer)."""
+    dF_{01})` (the E term if ``spin``), for the packed tangent ``K`` (:func:`tangent_kernel`),
+    row by row (the loop over a row vectorises): the two kernels below without their
+    allocation (the Krylov operators reuse one buffer). Each component is summed in the
+    order :math:`K_{iJ00} dF_{00} + K_{iJ01} dF_{01} + K_{iJ10} dF_{10} + K_{iJ11} dF_{11}`."""
     nx, ny = dF.shape[2], dF.shape[3]
-    for i in range(2):
-        for j in range(2):
-            for x in range(nx):
-                for y in range(ny):
-                    v = (K[i, j, 0, 0, x, y] * dF[0, 0, x, y] + K[i, j, 0, 1, x, y] * dF[0, 1, x, y]
-                         + K[i, j, 1, 0, x, y] * dF[1, 0, x, y]
-                         + K[i, j, 1, 1, x, y] * dF[1, 1, x, y])
-                    if spin:
-                        v += E[i, j, x, y] * (0.5 * (dF[1, 0, x, y] - dF[0, 1, x, y]))
-                    out[i, j, x, y] = v
+    for x in range(nx):
+        k0, k1, k2, k3, k4 = K[0, x], K[1, x], K[2, x], K[3, x], K[4, x]
+        k5, k6, k7, k8, k9 = K[5, x], K[6, x], K[7, x], K[8, x], K[9, x]
+        g0, g1, g2, g3 = dF[0, 0, x], dF[0, 1, x], dF[1, 0, x], dF[1, 1, x]
+        o0, o1, o2, o3 = out[0, 0, x], out[0, 1, x], out[1, 0, x], out[1, 1, x]
+        if spin:
+            e0, e1, e2, e3 = E[0, 0, x], E[0, 1, x], E[1, 0, x], E[1, 1, x]
+            for y in range(ny):
+                a0, a1, a2, a3 = g0[y], g1[y], g2[y], g3[y]
+                om = 0.5 * (a2 - a1)
+                o0[y] = k0[y] * a0 + k1[y] * a1 + k2[y] * a2 + k3[y] * a3 + e0[y] * om
+                o1[y] = k1[y] * a0 + k4[y] * a1 + k5[y] * a2 + k6[y] * a3 + e1[y] * om
+                o2[y] = k2[y] * a0 + k5[y] * a1 + k7[y] * a2 + k8[y] * a3 + e2[y] * om
+                o3[y] = k3[y] * a0 + k6[y] * a1 + k8[y] * a2 + k9[y] * a3 + e3[y] * om
+        else:
+            for y in range(ny):
+                a0, a1, a2, a3 = g0[y], g1[y], g2[y], g3[y]
+                o0[y] = k0[y] * a0 + k1[y] * a1 + k2[y] * a2 + k3[y] * a3
+                o1[y] = k1[y] * a0 + k4[y] * a1 + k5[y] * a2 + k6[y] * a3
+                o2[y] = k2[y] * a0 + k5[y] * a1 + k7[y] * a2 + k8[y] * a3
+                o3[y] = k3[y] * a0 + k6[y] * a1 + k8[y] * a2 + k9[y] * a3
 
 
 @njit(cache=True)
 def apply_tangent_kernel(K, dF):  # pragma: no cover - compiled
-    """:math:`dP_{iJ} = K_{iJkL} dF_{kL}` point by point (reference:
-    :func:`model.constitutive.apply_tangent`)."""
+    """:math:`dP_{iJ} = K_{iJkL} dF_{kL}` point by point for the packed tangent ``K``
+    (reference: :func:`model.constitutive.apply_tangent` of the unpacked tangent)."""
     out = np.empty(dF.shape)
     apply_tangent_into(K, dF, dF, False, out)
     return out
@@ -128,7 +153,7 @@ def apply_tangent_kernel(K, dF):  # pragma: no cover - compiled
 @njit(cache=True)
 def apply_tangent_spin_kernel(K, G, E):  # pragma: no cover - compiled
     r""":math:`K : G + E\, \omega(G)` with :math:`\omega = \tfrac12 (G_{10} - G_{01})`: the
-    rate-form stress of the displacement-rate (spin) problem, point by point."""
+    rate-form stress of the displacement-rate (spin) problem, point by point (packed ``K``)."""
     out = np.empty(G.shape)
     apply_tangent_into(K, G, E, True, out)
     return out

@@ -119,8 +119,8 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
     """Newton's correction by :func:`model.compiled.krylov.pcg`, preconditioned by the Green
     operator; returns ``(x, iterations, status, operator applications)``, status 0 ok,
     1 maxiter, 2 indefinite (as :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
-    n = K.shape[4]
-    op = TangentOperator(K, K[0, 0], False, kx, ky, khx, khy, inv_k2, a, pf, pi,
+    n = K.shape[1]
+    op = TangentOperator(K, np.zeros((2, 2, 1, 1)), False, kx, ky, khx, khy, inv_k2, a, pf, pi,
                          np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
                          np.empty((2, 2, n, n)))
     return krylov.pcg(op, b, x0, w, rtol, maxiter)
@@ -135,7 +135,7 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
     gradients every operator application computes anyway (no transform of its own). ``V``
     (restart + 1 spectra), ``Z`` (restart) and ``LZ`` (restart gradients) are caller-owned
     work arrays (:func:`workspace`)."""
-    n = K.shape[4]
+    n = K.shape[1]
     op = TangentOperator(K, E, True, kx, ky, khx, khy, inv_k2, a, pf, pi,
                          np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
                          np.empty((2, 2, n, n)))

@@ -11,10 +11,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .constitutive import PACKED
+
 
 @njit(cache=True)
 def finite_margin_kernel(K, E, cos_t, sin_t, scale):  # pragma: no cover - compiled
-    r"""(min over points and sampled directions of det M / scale, flat index, angle index).
+    r"""(min over points and sampled directions of det M / scale, flat index, angle index),
+    for the packed tangent ``K`` (:func:`model.compiled.constitutive.tangent_kernel`).
 
     A point is sampled only if it can beat the minimum so far: each entry of M is
     :math:`a + b \cos 2\phi + c \sin 2\phi`, so :math:`\det M = d_0 + d_2 \cdot
@@ -32,9 +35,10 @@ def finite_margin_kernel(K, E, cos_t, sin_t, scale):  # pragma: no cover - compi
         for y in range(ny):
             for i in range(2):
                 for k in range(2):
-                    ent[i, k, 0] = K[i, 0, k, 0, x, y]
-                    ent[i, k, 1] = K[i, 0, k, 1, x, y] + K[i, 1, k, 0, x, y]
-                    ent[i, k, 2] = K[i, 1, k, 1, x, y]
+                    ent[i, k, 0] = K[PACKED[2 * i, 2 * k], x, y]
+                    ent[i, k, 1] = (K[PACKED[2 * i, 2 * k + 1], x, y]
+                                    + K[PACKED[2 * i + 1, 2 * k], x, y])
+                    ent[i, k, 2] = K[PACKED[2 * i + 1, 2 * k + 1], x, y]
                 e0 = 0.5 * E[i, 0, x, y]
                 e1 = 0.5 * E[i, 1, x, y]
                 # (E k)_i t_k / 2 with t = (-s, c)

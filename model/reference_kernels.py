@@ -22,8 +22,8 @@ __all__ = [
     "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "corotational_rate",
     "div_hat_kernel", "etd_combination", "finite_margin_kernel", "first_piola_kernel",
     "grad_hat_kernel", "green_kernel", "jaumann_products", "linear_response",
-    "molecular_field_kernel", "neg_div_hat_kernel", "q_increment_kernel", "strain_measures_kernel",
-    "symbol_combination", "tangent_kernel",
+    "molecular_field_kernel", "neg_div_hat_kernel", "q_increment_kernel", "rk4_update",
+    "rk_stage", "strain_measures_kernel", "symbol_combination", "tangent_kernel",
 ]
 
 
@@ -218,6 +218,16 @@ def etd_combination(E: Array, x: Array, h: float, coef: tuple[Array, ...],
                     terms: tuple[Array, ...]) -> Array:
     r""":math:`E x + h \sum_k c_k N_k`."""
     return E * x + h * sum(c * t for c, t in zip(coef, terms, strict=True))
+
+
+def rk_stage(x0: Array, c: float, v: Array) -> Array:
+    r""":math:`x_0 + c\, v`."""
+    return x0 + c * v
+
+
+def rk4_update(x0: Array, c: float, v0: Array, v1: Array, v2: Array, v3: Array) -> Array:
+    r""":math:`x_0 + c\, (v_0 + 2 v_1 + 2 v_2 + v_3)`."""
+    return x0 + c * (v0 + 2.0 * v1 + 2.0 * v2 + v3)
 
 
 # --- well-posedness (twin of model.compiled.wellposedness) ----------------------------------

@@ -423,12 +423,14 @@ class ETDRK4Solver(ETDSolver):
         V: list[Array] = []  # the rates (spectra)
         G: list[Array] = []  # their gradients
         d_a = d_b = d_c = F0 = F_a = F_b = F_c = None
+        rk = self.k.rk_stage  # x0 + c v in one pass
         if fin is not None and d0 is not None:
-            F0 = fin.deformation_of(d0)
+            d0 = np.ascontiguousarray(d0)
+            F0 = np.ascontiguousarray(fin.deformation_of(d0))
             V.append(fin.udot_hat)
             G.append(fin.udot_grad)
-            d_a = d0 + 0.5 * h * V[0]
-            F_a = F0 + 0.5 * h * G[0]
+            d_a = rk(d0, 0.5 * h, V[0])
+            F_a = rk(F0, 0.5 * h, G[0])
         else:  # Newton's start: the displacement extrapolated with its rate
             self.pde.mechanics.predict(0.5 * h)
         # stage a (t + h/2): ETD1 half step
@@ -437,16 +439,16 @@ class ETDRK4Solver(ETDSolver):
         if fin is not None and d0 is not None and F0 is not None:
             V.append(fin.udot_hat)
             G.append(fin.udot_grad)
-            d_b = d0 + 0.5 * h * V[1]
-            F_b = F0 + 0.5 * h * G[1]
+            d_b = rk(d0, 0.5 * h, V[1])
+            F_b = rk(F0, 0.5 * h, G[1])
         # stage b (t + h/2): Krogstad's correction with phi_2, a + h phi_2(h/2) (N_a - N_u)
         Nq_b, NA_b = rhs(combo_q(E2, q_hat, wq["b"], (Nq_u, Nq_a)),
                          combo_A(EA2, A, wA["b"], (NA_u, NA_a)), t + 0.5 * h, d_b, F_b)
         if fin is not None and d0 is not None and F0 is not None:
             V.append(fin.udot_hat)
             G.append(fin.udot_grad)
-            d_c = d0 + h * V[2]
-            F_c = F0 + h * G[2]
+            d_c = rk(d0, h, V[2])
+            F_c = rk(F0, h, G[2])
         else:
             self.pde.mechanics.predict(0.5 * h)
         # stage c (t + h)
@@ -463,8 +465,8 @@ class ETDRK4Solver(ETDSolver):
             return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A)
         V.append(fin.udot_hat)
         G.append(fin.udot_grad)
-        new_d = d0 + (h / 6.0) * (V[0] + 2.0 * V[1] + 2.0 * V[2] + V[3])
-        new_F = F0 + (h / 6.0) * (G[0] + 2.0 * G[1] + 2.0 * G[2] + G[3])
+        new_d = self.k.rk4_update(d0, h / 6.0, *V)  # d0 + h/6 (V0 + 2 V1 + 2 V2 + V3)
+        new_F = self.k.rk4_update(F0, h / 6.0, *G)
         return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A, (new_d, new_F),
                             (h / 3.0) * (G[2] - G[1]))
 

@@ -192,6 +192,24 @@ def test_numba_pointwise_stepper_kernels_match_numpy(rng):
                                rtol=1e-14)
 
 
+@pytest.mark.parametrize("complex_", [False, True])
+def test_runge_kutta_stage_kernels_are_the_numpy_expressions(rng, complex_):
+    """The integrated displacement's stage and update kernels give numpy's values exactly
+    (spectra and real-space gradients alike)."""
+    from model import reference_kernels as ref
+    from model.compiled import kernels as kern
+
+    shape = (2, 8, 5) if complex_ else (2, 2, 8, 8)
+    x0, v0, v1, v2, v3 = (rng.standard_normal(shape) + (1j * rng.standard_normal(shape)
+                                                       if complex_ else 0.0) for _ in range(5))
+    h = 0.37
+    np.testing.assert_array_equal(kern.rk_stage(x0, 0.5 * h, v0), x0 + 0.5 * h * v0)
+    np.testing.assert_array_equal(kern.rk4_update(x0, h / 6.0, v0, v1, v2, v3),
+                                  x0 + (h / 6.0) * (v0 + 2.0 * v1 + 2.0 * v2 + v3))
+    np.testing.assert_array_equal(ref.rk4_update(x0, h / 6.0, v0, v1, v2, v3),
+                                  kern.rk4_update(x0, h / 6.0, v0, v1, v2, v3))
+
+
 def test_balance_residual_kernel_matches_numpy_twin(rng):
     """The force-balance residual (H^-1 norm of Div P over the floored RMS stress): compiled
     and numpy agree, for stresses below and above the floor of 1."""

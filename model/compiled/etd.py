@@ -117,3 +117,32 @@ def etd_combination(E, x, h, coef, terms):  # pragma: no cover - compiled
                     acc += rmul(coef[k][i, j], terms[k][c, i, j])
                 out[c, i, j] = rmul(E[i, j], x[c, i, j]) + rmul(h, acc)
     return out
+
+
+@njit(cache=True)
+def rk_stage(x0, c, v):  # pragma: no cover - compiled
+    r""":math:`x_0 + c\, v` in one pass (a classical Runge-Kutta stage of the integrated
+    displacement, L = 0: its spectrum or its real-space gradient), the same arithmetic as
+    numpy's ``x0 + c * v`` (a real ``c`` scales a complex ``v`` component by component).
+    C-contiguous arrays of one shape."""
+    out = np.empty_like(x0)
+    of, xf, vf = out.reshape(-1), x0.reshape(-1), v.reshape(-1)
+    for p in range(of.size):
+        of[p] = xf[p] + rmul(c, vf[p])
+    return out
+
+
+@njit(cache=True)
+def rk4_update(x0, c, v0, v1, v2, v3):  # pragma: no cover - compiled
+    r""":math:`x_0 + c\, (v_0 + 2 v_1 + 2 v_2 + v_3)` in one pass (the classical RK4 update of
+    the integrated displacement with c = h/6), summed in numpy's order for the same
+    expression. C-contiguous arrays of one shape."""
+    out = np.empty_like(x0)
+    of, xf = out.reshape(-1), x0.reshape(-1)
+    af, bf, cf, df = v0.reshape(-1), v1.reshape(-1), v2.reshape(-1), v3.reshape(-1)
+    for p in range(of.size):
+        s = af[p] + rmul(2.0, bf[p])
+        s = s + rmul(2.0, cf[p])
+        s = s + df[p]
+        of[p] = xf[p] + rmul(c, s)
+    return out

@@ -12,7 +12,7 @@ from .constitutive import (
     strain_measures_kernel,
     tangent_kernel,
 )
-from .etd import activity_exponential, activity_krogstad, etd_combination
+from .etd import activity_exponential, activity_krogstad, etd_combination, rk4_update, rk_stage
 from .rates import (
     activity_rate,
     bulk_terms,
@@ -36,6 +36,6 @@ __all__ = [
     "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "corotational_rate",
     "div_hat_kernel", "etd_combination", "finite_margin_kernel", "first_piola_kernel",
     "grad_hat_kernel", "green_kernel", "jaumann_products", "linear_response",
-    "molecular_field_kernel", "neg_div_hat_kernel", "q_increment_kernel", "strain_measures_kernel",
-    "symbol_combination", "tangent_kernel",
+    "molecular_field_kernel", "neg_div_hat_kernel", "q_increment_kernel", "rk4_update",
+    "rk_stage", "strain_measures_kernel", "symbol_combination", "tangent_kernel",
 ]

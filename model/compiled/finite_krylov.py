@@ -119,7 +119,7 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
     """Newton's correction by :func:`model.compiled.krylov.pcg`, preconditioned by the Green
     operator; returns ``(x, iterations, status, operator applications)``, status 0 ok,
     1 maxiter, 2 indefinite (as :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
-    n = K.shape[1]
+    n = K.shape[1]  # K packed: (10, n, n); no spin term, so E is a placeholder of E's type
     op = TangentOperator(K, np.zeros((2, 2, 1, 1)), False, kx, ky, khx, khy, inv_k2, a, pf, pi,
                          np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
                          np.empty((2, 2, n, n)))

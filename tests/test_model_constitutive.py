@@ -59,8 +59,8 @@ def test_packed_layout_is_the_same_in_both_backends():
 
     for c, (a, b) in enumerate(T.PACKED_PAIRS):
         assert PACKED[a, b] == PACKED[b, a] == c
-    K = np.arange(16.0).reshape(4, 4)
-    K = (K + K.T).reshape(2, 2, 2, 2)
+    M4 = np.arange(16.0).reshape(4, 4)
+    K = (M4 + M4.T).reshape(2, 2, 2, 2)
     Kp = T.pack_symmetric(K)
     assert Kp.shape == (10,)
     np.testing.assert_array_equal(T.unpack_symmetric(Kp), K)

@@ -201,25 +201,18 @@ def _stress_point(a, b, c, d, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # p
 @njit(cache=True, error_model="numpy")
 def _stress_field(F, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # pragma: no cover
     """:func:`_stress_point` at every grid point, as a (2, 2, nx, ny) array: row by row, over
-    1-D views of the rows, with ``active`` outside the loop over a row, so that loop
-    vectorises (2.5-3x faster than indexing the 4-D arrays point by point; bitwise the
-    same)."""
+    1-D views of the rows, so the loop over a row vectorises (2.5-3x faster than indexing the
+    4-D arrays point by point; bitwise the same)."""
     nx, ny = q1.shape
     P = np.empty((2, 2, nx, ny))
     for x in range(nx):
         f0, f1, f2, f3 = F[0, 0, x], F[0, 1, x], F[1, 0, x], F[1, 1, x]
         qa, qb, da, db = q1[x], q2[x], d1[x], d2[x]
         p0, p1, p2, p3 = P[0, 0, x], P[0, 1, x], P[1, 0, x], P[1, 1, x]
-        if active:
-            for y in range(ny):
-                p0[y], p1[y], p2[y], p3[y] = _stress_point(
-                    f0[y], f1[y], f2[y], f3[y], qa[y], qb[y], qa[y], qb[y], kappa, B, Bp, alpha,
-                    True)
-        else:
-            for y in range(ny):
-                p0[y], p1[y], p2[y], p3[y] = _stress_point(
-                    f0[y], f1[y], f2[y], f3[y], qa[y], qb[y], da[y], db[y], kappa, B, Bp, alpha,
-                    False)
+        for y in range(ny):
+            p0[y], p1[y], p2[y], p3[y] = _stress_point(
+                f0[y], f1[y], f2[y], f3[y], qa[y], qb[y], da[y], db[y], kappa, B, Bp, alpha,
+                active)
     return P
 
 

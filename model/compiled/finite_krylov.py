@@ -115,14 +115,22 @@ def _precondition_tangent(op, v, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _tangent_operator(K, E, spin, kx, ky, khx, khy, inv_k2, a, pf, pi):  # pragma: no cover
+    """The :class:`TangentOperator` of the packed tangent ``K`` (10, N, N), with its work
+    arrays (a half spectrum, the gradient and the stress)."""
+    n = K.shape[1]
+    return TangentOperator(K, E, spin, kx, ky, khx, khy, inv_k2, a, pf, pi,
+                           np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
+                           np.empty((2, 2, n, n)))
+
+
+@njit(cache=True)
 def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pragma: no cover
     """Newton's correction by :func:`model.compiled.krylov.pcg`, preconditioned by the Green
     operator; returns ``(x, iterations, status, operator applications)``, status 0 ok,
     1 maxiter, 2 indefinite (as :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
-    n = K.shape[1]  # K packed: (10, n, n); no spin term, so E is a placeholder of E's type
-    op = TangentOperator(K, np.zeros((2, 2, 1, 1)), False, kx, ky, khx, khy, inv_k2, a, pf, pi,
-                         np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
-                         np.empty((2, 2, n, n)))
+    # no spin term, so E is a placeholder of E's type
+    op = _tangent_operator(K, np.zeros((2, 2, 1, 1)), False, kx, ky, khx, khy, inv_k2, a, pf, pi)
     return krylov.pcg(op, b, x0, w, rtol, maxiter)
 
 
@@ -135,10 +143,7 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
     gradients every operator application computes anyway (no transform of its own). ``V``
     (restart + 1 spectra), ``Z`` (restart) and ``LZ`` (restart gradients) are caller-owned
     work arrays (:func:`workspace`)."""
-    n = K.shape[1]
-    op = TangentOperator(K, E, True, kx, ky, khx, khy, inv_k2, a, pf, pi,
-                         np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
-                         np.empty((2, 2, n, n)))
+    op = _tangent_operator(K, E, True, kx, ky, khx, khy, inv_k2, a, pf, pi)
     return krylov.gmres(op, b, x0, w, rtol, maxiter, V, Z, LZ)
 
 

@@ -352,8 +352,9 @@ class ETDRK2Solver(ETDSolver):
         da = V0 = G0 = Fa = None
         if fin is not None and d0 is not None:
             V0, G0 = fin.udot_hat, fin.udot_grad
-            da = d0 + h * V0
-            Fa = fin.deformation_of(d0) + h * G0
+            d0 = np.ascontiguousarray(d0)
+            da = self.k.rk_stage(d0, h, V0)
+            Fa = self.k.rk_stage(np.ascontiguousarray(fin.deformation_of(d0)), h, G0)
         else:  # first-order predictor of Newton's start
             self.pde.mechanics.predict(h)
         Nqa, Adota = self.split(a, aq_hat, t + h, da, Fa)

@@ -1,6 +1,9 @@
-r"""Seeded, resolution-independent initial conditions.
+r"""Seeded initial conditions: the initial director texture (``Parameters.initial``).
 
-A band-limited complex Gaussian field
+Both textures start from a complex Gaussian field :math:`\psi` with
+:math:`\langle |\psi|^2 \rangle = 1`; they differ in its spectrum.
+
+``initial = "band"`` (resolution independent): a band-limited field
 
 .. math:: \psi(x) = \frac{1}{\sqrt{M}} \sum_{n^2 + m^2 \le n_c^2} c_{nm}\, e^{2\pi i (n x + m y)},
           \qquad c_{nm} \sim \mathcal{CN}(0, 1),
@@ -13,8 +16,14 @@ angle is :math:`2\theta = \arg \psi` (isotropic, correlation length ~ 1/n_c) and
           + a\, (\mathrm{Re}\,\psi, \mathrm{Im}\,\psi), \qquad A = 0,
 
 with :math:`a` = ``noise_amplitude`` (0 by default). Same seed, any resolution: the same
-physical field (the paper's per-node white noise would be erased by the Frank term and would
-make resolution studies meaningless; DESIGN.md).
+physical field, with correlation length ~ L / n_c.
+
+``initial = "per_node"`` (the paper's "initial random orientation", per node of its mesh):
+:math:`\psi_{ij} = (g_{ij} + i h_{ij}) / \sqrt 2` with independent standard normal
+:math:`g, h` at every grid node (white noise), so every node has an independent, uniformly
+distributed director angle and the same :math:`q_1, q_2` formula holds. Its correlation
+length is the grid spacing: it is a different physical field at every resolution (a finer
+grid is a finer texture), and the Frank term erases most of it within t ~ 1 / (K k_max^2).
 """
 
 from __future__ import annotations
@@ -53,9 +62,25 @@ def band_limited_field(seed: int, modes: int, resolution: int) -> Array:
     return np.fft.ifft2(Z) * resolution**2
 
 
+def per_node_field(seed: int, resolution: int) -> Array:
+    r"""The complex white field :math:`\psi` above: independent complex normal values of
+    unit mean square at the ``resolution`` x ``resolution`` nodes, drawn from ``seed`` (real
+    parts of the whole grid first, then the imaginary parts)."""
+    rng = np.random.default_rng(seed)
+    shape = (resolution, resolution)
+    return (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)) / np.sqrt(2.0)
+
+
+def texture_field(params: Parameters, resolution: int, seed: int) -> Array:
+    r"""The complex field :math:`\psi` of the texture ``params.initial``."""
+    if params.initial == "per_node":
+        return per_node_field(seed, resolution)
+    return band_limited_field(seed, params.noise_modes, resolution)
+
+
 def initial_fields(params: Parameters, resolution: int, seed: int) -> tuple[Array, Array, Array]:
     """Return ``(q1, q2, A)`` at t = 0 for the given seed (see module docstring)."""
-    psi = band_limited_field(seed, params.noise_modes, resolution)
+    psi = texture_field(params, resolution, seed)
     angle = np.angle(psi)  # = 2 theta
     q1 = params.S0 * np.cos(angle) + params.noise_amplitude * psi.real
     q2 = params.S0 * np.sin(angle) + params.noise_amplitude * psi.imag

@@ -141,17 +141,24 @@ def first_peak(values: Array, *, significance: float = 0.5) -> int:
 
 
 def growth_peak(values: Array, times: Array | None = None, *, rate_fraction: float = 0.1,
-                min_prominence: float = 0.1) -> int:
-    r"""Fig. 3's "first peak" read robustly, at the **end of the growth phase**: the first
-    sample after the fastest growth from which the logarithmic growth rate
-    :math:`d \ln \sigma^2_S / dt` stays below ``rate_fraction`` of its maximum over the next
-    interval; or, if a local maximum follows within one growth time (the samples from the
-    fastest growth to that point) and is a real overshoot (topographic prominence of at
-    least ``min_prominence`` times the series' range), that maximum. Bumps and creep of
-    the coarsening phase (rates ~1 % of the growth rate) are never taken, however high; a
-    series still growing at its end gives its last sample (fits treat it as not peaked); a
-    series that never grows gives its maximum. Values below 1e-6 of the maximum are ignored
-    (round-off level at the start). ``times`` (default: unit spacing) may be
+                min_prominence: float = 0.1, level: float = 0.25) -> int:
+    r"""Fig. 3's "first peak" read robustly, at the **end of the main growth phase**.
+
+    The main growth phase is the rise that carries the series to its maximum: it starts at
+    the deepest point before the maximum (so a maximum of the relaxing initial texture
+    before that trough, at t ~ 1-5 on fine textures, is never taken). Within it, a growth
+    phase runs from its fastest growth to the first sample from which the logarithmic
+    growth rate :math:`d \ln \sigma^2_S / dt` falls below ``rate_fraction`` of that
+    fastest rate. If that end is still below ``level`` times the maximum, the growth that
+    stalled there was the texture's relaxation, not the pattern's: the search restarts
+    from that sample (the next growth phase, with its own fastest rate). At the end found,
+    if a local maximum follows within one growth time (the samples from the fastest growth
+    to the end) and is a real overshoot (topographic prominence of at least
+    ``min_prominence`` times the series' range), that maximum is returned instead. Bumps and
+    creep of the coarsening phase (rates ~1 % of the growth rate) are never taken, however
+    high; a series still growing at its end gives its last sample (fits treat it as not
+    peaked); a series that never grows gives its maximum. Values below 1e-6 of the maximum
+    are ignored (round-off level at the start). ``times`` (default: unit spacing) may be
     irregular."""
     v = np.asarray(values, dtype=float)
     n = len(v)
@@ -160,19 +167,29 @@ def growth_peak(values: Array, times: Array | None = None, *, rate_fraction: flo
     t = np.arange(n, dtype=float) if times is None else np.asarray(times, dtype=float)
     # values below floor * max carry no growth information (sigma2_S starts at exactly 0
     # for a uniform S0 and leaves round-off level in one step)
-    floor = 1e-6 * float(np.nanmax(v))
+    top = float(np.nanmax(v))
+    floor = 1e-6 * top
+    valid = np.isfinite(v) & (v > floor)
     with np.errstate(divide="ignore", invalid="ignore"):
-        lv = np.where(np.isfinite(v) & (v > floor), np.log(np.where(v > floor, v, 1.0)),
-                      np.nan)
+        lv = np.where(valid, np.log(np.where(valid, v, 1.0)), np.nan)
         rate = np.diff(lv) / np.diff(t)
     w = np.where(np.isfinite(v), v, np.nanmin(v))
-    if n < 2 or not np.any(np.isfinite(rate)) or np.nanmax(rate) <= 0:
-        return int(np.argmax(w))
-    i_fast = int(np.nanargmax(rate))
-    slow = np.nonzero(rate[i_fast:] < rate_fraction * rate[i_fast])[0]
-    if not len(slow):
-        return n - 1
-    end = i_fast + int(slow[0])
+    i_max = int(np.argmax(w))
+    # the main rise starts at the deepest valid sample before the maximum
+    before = np.where(valid[: i_max + 1], w[: i_max + 1], np.inf)
+    start = int(np.argmin(before))
+    while True:
+        window = rate[start:i_max]
+        if n < 2 or not np.any(np.isfinite(window)) or np.nanmax(window) <= 0:
+            return i_max if start == 0 or not np.any(np.isfinite(rate)) else start
+        i_fast = start + int(np.nanargmax(window))
+        slow = np.nonzero(rate[i_fast:] < rate_fraction * rate[i_fast])[0]
+        if not len(slow):
+            return n - 1
+        end = i_fast + int(slow[0])
+        if w[end] >= level * top or end >= i_max:
+            break
+        start = end  # the texture's relaxation stalled here: look for the pattern's growth
     span = float(w.max() - w.min())
     # an overshoot peaks within one growth time (i_fast -> end) of the end of growth
     for i in range(max(end, 1), min(n - 1, 2 * end - i_fast + 2)):

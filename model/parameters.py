@@ -20,6 +20,8 @@ from typing import Any
 from .errors import ParameterError
 
 MECHANICS = ("finite", "linear")
+#: the initial director texture (Parameters.initial; docs/model.md section 5)
+INITIAL = ("band", "per_node")
 #: Most saved times (rows of the time series) and snapshots of one run.
 MAX_SAVES = 1_000_000
 #: Most time steps one run may need at its largest step (t_final / dt_max).
@@ -59,10 +61,13 @@ class Parameters:
         gamma: rotational viscosity of Q, Eq. (4).
         tau: time scale of A, Eq. (5).
         eps: applied macroscopic pure shear, F_bar = diag(1 + eps, 1 - eps).
-        noise_modes: the random initial director field contains the Fourier modes
-            2 pi (n, m) with n^2 + m^2 <= noise_modes^2 (resolution independent).
+        initial: the initial director texture: "band" (a band-limited random field with the
+            Fourier modes 2 pi (n, m), n^2 + m^2 <= noise_modes^2: the same physical field at
+            every resolution) or "per_node" (an independent random orientation at every grid
+            node, the paper's "initial random orientation": resolution dependent by nature).
+        noise_modes: the band of the "band" texture (unused by "per_node").
         noise_amplitude: RMS of an extra Gaussian (q1, q2) perturbation drawn from the same
-            band-limited field (needed when S0 = 0, as in Fig. A1).
+            random field (needed when S0 = 0, as in Fig. A1).
     """
 
     S0: float = 0.1
@@ -79,13 +84,17 @@ class Parameters:
     gamma: float = 1.0
     tau: float = 1.0
     eps: float = 0.0
+    initial: str = "band"
     noise_modes: int = 16
     noise_amplitude: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.type in ("int", int):
+            if f.type in ("str", str):
+                if value not in INITIAL:
+                    raise ParameterError(f.name, value, " or ".join(INITIAL))
+            elif f.type in ("int", int):
                 if isinstance(value, bool) or not isinstance(value, int):
                     if isinstance(value, float) and value.is_integer():
                         object.__setattr__(self, f.name, int(value))
@@ -313,9 +322,10 @@ class Numerics:
 
 
 def check_compatible(params: Parameters, numerics: Numerics) -> None:
-    """Constraints that involve both objects: the grid must resolve the initial noise
-    (resolution > 2 noise_modes, so the same physical field exists at this resolution)."""
-    if numerics.resolution <= 2 * params.noise_modes:
+    """Constraints that involve both objects: the grid must resolve a band-limited initial
+    texture (resolution > 2 noise_modes, so the same physical field exists at this
+    resolution)."""
+    if params.initial == "band" and numerics.resolution <= 2 * params.noise_modes:
         raise ParameterError(
             "resolution", numerics.resolution,
             f"an even integer > 2 * noise_modes = {2 * params.noise_modes} (the initial field "

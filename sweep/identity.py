@@ -37,6 +37,21 @@ EARLY_STOP = ("steady_tol", "steady_window")
 #: Numerics fields that choose how a run is executed, not what it computes (the backends
 #: agree to rounding): recorded in the run file, never part of the identity.
 EXECUTION_ONLY = ("backend",)
+#: The parameter that chooses the initial texture: left out of the canonical text at its
+#: original value ("band", the only texture before the field existed), so those runs keep their
+#: ids; with "per_node" the band's ``noise_modes`` changes nothing and is left out instead.
+TEXTURE, TEXTURE_ORIGINAL = "initial", "band"
+
+
+def identity_parameters(parameters: Mapping[str, Any]) -> dict[str, Any]:
+    """The parameters as they enter the canonical text: without ``initial`` while it is
+    "band", without the unused ``noise_modes`` while it is "per_node"."""
+    out = dict(parameters)
+    if out.get(TEXTURE, TEXTURE_ORIGINAL) == TEXTURE_ORIGINAL:
+        out.pop(TEXTURE, None)
+    else:
+        out.pop("noise_modes", None)
+    return out
 
 
 def identity_numerics(numerics: Mapping[str, Any]) -> dict[str, Any]:
@@ -82,7 +97,7 @@ def canonical_json(parameters: Mapping[str, Any], numerics: Mapping[str, Any],
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`."""
     return _dumps({
         "numerics": canonical_value(identity_numerics(numerics)),
-        "parameters": canonical_value(dict(parameters)),
+        "parameters": canonical_value(identity_parameters(parameters)),
         "schema": SCHEMA_VERSION,
         "seed": canonical_value(int(seed)),
     })
@@ -114,7 +129,7 @@ class PointHasher:
     def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
         head = _dumps({
             "numerics": canonical_value(identity_numerics(numerics)),
-            "parameters": canonical_value(dict(parameters)),
+            "parameters": canonical_value(identity_parameters(parameters)),
             "schema": SCHEMA_VERSION,
         })
         self._prefix = hashlib.sha256((head[:-1] + ',"seed":').encode("ascii"))

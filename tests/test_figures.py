@@ -116,7 +116,7 @@ def assert_figure(paths: list[Path], name: str, root: Path) -> None:
 def test_registry_names_match_the_campaign_schema():
     from sweep.sections import registry
 
-    assert sorted(registry("figures")) == ["fig2", "fig3", "fig4", "figA1"]
+    assert sorted(registry("figures")) == ["fig2", "fig3", "fig3_growth", "fig4", "figA1"]
     assert set(registry("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy",
                                      "stability"}
 
@@ -143,6 +143,13 @@ def test_fig2_options_pick_the_snapshot_and_the_other_dims(sizes):
     assert_figure(paths, "fig2", sizes.root)
     with pytest.raises(FigureError, match="unknown option 'snapshots'"):
         draw("fig2", sizes.root, {"snapshots": []})
+
+
+def test_fig3_growth_draws_lambda_and_sigma2_of_one_seed_with_its_peak(sizes):
+    paths = draw("fig3_growth", sizes.root, {"select": {"K": 1e-3}, "seed": 1, "curves": 2})
+    assert_figure(paths, "fig3_growth", sizes.root)
+    with pytest.raises(FigureError, match="unknown option 'snapshot'"):
+        draw("fig3_growth", sizes.root, {"snapshot": {}})
 
 
 def test_fig4_renders_in_3d_with_the_caption_snapshots(phase4):
@@ -208,7 +215,7 @@ def test_plan_figures_listed_empty_or_default(sizes):
     no_fits = base.replace(fits_line, "fits: []")
     assert plan(parse_campaign(no_fits + "figures: []\n"), phase) == ([], [])
     _, figs = plan(parse_campaign(base), phase)
-    assert [name for name, _ in figs] == ["fig2", "fig3"]  # the default: what applies
+    assert [name for name, _ in figs] == ["fig2", "fig3", "fig3_growth"]  # what applies
     _, figs = plan(parse_campaign(base + "figures: []\n"), phase, names=["fig3"])
     assert figs == [("fig3", {})]
 

@@ -3,6 +3,8 @@ Fig. 3 patterns, and synthetic sigma2_S(t) series."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,8 @@ from model.observables import (
 from model.parameters import Numerics, Parameters
 from model.simulate import run
 from model.stability import max_growth_rate
+
+DATA = Path(__file__).parent / "data"
 
 
 @pytest.mark.parametrize(("mode", "n"), [((3, 4), 64), ((0, 7), 64), ((6, 8), 128), ((1, 1), 32)])
@@ -121,3 +125,41 @@ def test_growth_peak_of_a_monotone_rise_is_at_its_end_and_noise_wiggles_are_skip
     with_nan = _series(t, [])
     with_nan[50:] = np.nan  # a failed run's tail
     assert 10 <= growth_peak(with_nan) < 50
+
+
+def test_growth_peak_skips_an_early_decaying_bump_before_the_main_rise():
+    """A fine texture first relaxes: sigma2_S rises to a small maximum at t ~ 1 and decays
+    to a trough before the pattern grows; the rule reads the end of the later, main rise."""
+    t = np.arange(0.0, 150.0, 0.5)
+    bump = 3e-4 * (t / 1.5) * np.exp(1 - t / 1.5)  # rises and decays over a few tau
+    main = 1e-2 / (1 + np.exp(-(t - 40.0) / 3.0))
+    v = bump + main + 1e-9
+    tp = t[growth_peak(v, t)]
+    assert 44 <= tp <= 55  # after the logistic's 90 % point (46.6), never at the bump
+    assert v[growth_peak(v, t)] > 0.5 * v.max()
+
+
+def test_growth_peak_skips_a_rise_that_stalls_far_below_the_pattern():
+    """The texture's relaxation raises sigma2_S fast to a few % of the pattern's level and
+    stalls; the pattern grows later, more slowly: that later growth's end is the peak."""
+    t = np.arange(0.0, 200.0, 1.0)
+    early = 5e-4 * (1 - np.exp(-t / 1.0))
+    main = 1e-2 / (1 + np.exp(-(t - 60.0) / 6.0))
+    v = early + main
+    assert 70 <= t[growth_peak(v, t)] <= 90
+
+
+@pytest.mark.parametrize(("name", "window"), [
+    # real runs (128^2, linear mechanics; the files' headers say how they were made) on
+    # which the rule without the main-rise search returned t = 0.75, 3 and 4
+    ("per_node_K1e-5_amb1.0_seed0", (35, 50)),
+    ("band32_K1e-5_amb0.6_seed0", (35, 50)),
+    ("band16_K3e-5_amb0.6_seed0", (28, 45)),
+])
+def test_growth_peak_on_real_series_with_early_transients(name, window):
+    data = np.loadtxt(DATA / f"growth_{name}.csv", delimiter=",")
+    t, s, lam = data.T
+    i = growth_peak(s, t)
+    assert window[0] <= t[i] <= window[1]
+    assert s[i] > 0.5 * s.max()
+    assert lam[i] > 0.15  # the pattern's size, not the texture's (~0.02-0.1 L at t < 5)

@@ -122,3 +122,21 @@ def test_expansion_ids_match_single_run_ids():
     c2 = parse_campaign("name: y\nparameters: {B: 0.5}\nsweep: {axes: {alpha: [0.6, 0.9], "
                         "K: [0.0001, 0.001]}}\nseeds: [0, 1, 2]\nnumerics: {resolution: 64}")
     assert expand(c2).run_ids == e.run_ids
+
+
+def test_the_band_texture_keeps_the_ids_it_had_before_initial_existed():
+    # "initial": "band" (the only texture before the field existed) is left out of the
+    # canonical text; the golden hashes above are of dicts without it
+    assert hash_canonical(dict(P, initial="band"), N, 0) == GOLDEN[0]
+    # the model's defaults: the id of this point before `initial` existed
+    assert run_id_for(Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5}),
+                      Numerics(t_final=150, save_every=1), 7) == "702b95bdf3bae1f3"
+
+
+def test_the_per_node_texture_is_another_run_and_ignores_noise_modes():
+    per_node = hash_canonical(dict(P, initial="per_node"), N, 0)
+    assert per_node != GOLDEN[0]
+    # the band's width does not enter the per-node texture, so it does not split its runs
+    assert hash_canonical(dict(P, initial="per_node", noise_modes=48), N, 0) == per_node
+    assert run_id_for(Parameters(initial="per_node", noise_modes=8), Numerics(), 0) == \
+        run_id_for(Parameters(initial="per_node"), Numerics(), 0)

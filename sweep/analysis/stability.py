@@ -58,7 +58,8 @@ def stability_parameters(phase: xr.Dataset, coords: Mapping[str, float]) -> Any:
     for key, value in phase.attrs.items():
         name = key.removeprefix("param_")
         if key.startswith("param_") and name in fields:
-            values[name] = int(value) if name == "noise_modes" else float(value)
+            values[name] = (int(value) if name == "noise_modes" else
+                            str(value) if name == "initial" else float(value))
     values.update({k: float(v) for k, v in coords.items()})
     if AMB in values and "alpha" in values:
         if AMB in coords:

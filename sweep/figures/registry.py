@@ -14,6 +14,7 @@ from ..campaign import AMB
 from .common import Results, invalid_options
 from .fig2 import FIG2_OPTIONS, fig2
 from .fig3 import FIG3_OPTIONS, fig3
+from .fig3_growth import FIG3_GROWTH_OPTIONS, fig3_growth
 from .fig4 import FIG4_OPTIONS, fig4
 from .figA1 import FIGA1_OPTIONS, figA1
 
@@ -69,6 +70,9 @@ REGISTRY: dict[str, FigureSpec] = {
                        _fig2_fits, _swept_all(AMB), FIG2_OPTIONS),
     "fig3": FigureSpec(fig3, "pattern size vs K / (alpha - B - alpha_cr), inset alpha_cr(K)",
                        _fig3_fits, _swept_all(AMB, "K"), FIG3_OPTIONS),
+    "fig3_growth": FigureSpec(fig3_growth, "lambda(t) and sigma2_S(t) for several alpha - B at "
+                              "one K, the growth peak marked", lambda phase: [],
+                              _swept_all(AMB, "K"), FIG3_GROWTH_OPTIONS),
     "fig4": FigureSpec(fig4, "phase diagram over chi (alpha - B), K, eps with snapshots",
                        _fig4_fits, _fig4_applies, FIG4_OPTIONS),
     "figA1": FigureSpec(figA1, "stable/unstable runs in (chi (alpha - B), eps) and the "

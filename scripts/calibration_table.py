@@ -4,7 +4,8 @@ Fig. 2's jump at K = 5e-5, alpha_cr(K) from the sigma2_S jump of every K, and Fi
 lambda_peak at alpha - B = 0.6 and 1.0 for each of Fig. 3's K, with the three targets checked.
 
     python scripts/calibration_table.py results/calib-band16 results/calib-per_node ...
-    python scripts/calibration_table.py --json table.json results/calib-*   # also as JSON
+    python scripts/calibration_table.py --json table.json --figure tradeoff.png results/calib-*
+                                        # also as JSON, and the trade-off figure
 
 A run is "patterned" when sigma2_S(t_final) > 1e-6 (relaxed runs end below 1e-12, patterns
 above 1e-3); lambda_peak is averaged over the patterned seeds only. Targets (the issue's):
@@ -37,17 +38,23 @@ def _sel(da: xr.DataArray, **coords: float) -> xr.DataArray:
     return da.sel({k: v for k, v in coords.items()}, method="nearest", tolerance=1e-12)
 
 
-def lambda_at(phase: xr.Dataset, K: float, amb: float) -> tuple[float, int, int]:
-    """Mean lambda_peak over the patterned seeds at (K, alpha - B), the number of patterned
-    seeds and the number of finished seeds; NaN when the point was not run."""
+def lambda_at(phase: xr.Dataset, K: float, amb: float) -> tuple[float, float, int, int]:
+    """Mean lambda_peak over the patterned seeds at (K, alpha - B), its relative standard
+    error, the number of patterned seeds and the number of finished seeds; NaN when the point
+    was not run or nothing patterned."""
     try:
         sig = _sel(phase["sigma2_S"], K=K, alpha_minus_B=amb).values
         lam = _sel(phase["lambda_peak"], K=K, alpha_minus_B=amb).values
     except KeyError:
-        return math.nan, 0, 0
+        return math.nan, math.nan, 0, 0
     done = np.isfinite(sig)
     pat = done & (sig > PATTERNED) & np.isfinite(lam)
-    return (float(lam[pat].mean()) if pat.any() else math.nan), int(pat.sum()), int(done.sum())
+    n = int(pat.sum())
+    if not n:
+        return math.nan, math.nan, 0, int(done.sum())
+    mean = float(lam[pat].mean())
+    rel = float(lam[pat].std(ddof=1) / math.sqrt(n) / mean) if n > 1 else math.nan
+    return mean, rel, n, int(done.sum())
 
 
 def summarise(folder: Path) -> dict[str, Any]:
@@ -61,29 +68,43 @@ def summarise(folder: Path) -> dict[str, Any]:
     sig = phase["sigma2_S"]
     patterned = (sig > PATTERNED).sum(dim="seed")
     finished = xr.apply_ufunc(np.isfinite, sig).sum(dim="seed")
-    majority = (patterned > 0.5 * finished).any(dim="alpha_minus_B")
+    most = patterned > 0.5 * finished
+    majority = most.any(dim="alpha_minus_B")
+    lowest = float(phase["alpha_minus_B"].min())
+    majority_low = most.sel(alpha_minus_B=lowest)
+    alpha_cr_below = {}
     alpha_cr = {k: float(_sel(loc, K=k)) if bool(_sel(majority, K=k)) else math.nan
                 for k in ks}
+    for k in ks:
+        if bool(_sel(majority_low, K=k)):
+            alpha_cr_below[k] = lowest
     jump = alpha_cr.get(FIG2_K, math.nan)
     interval = (float(_sel(fits["transition_lower"], K=FIG2_K)),
                 float(_sel(fits["transition_upper"], K=FIG2_K))) if FIG2_K in alpha_cr \
         else (math.nan, math.nan)
     lam = {}
     for k in FIG3_K:
-        lo, n_lo, d_lo = lambda_at(phase, k, LOW)
-        hi, n_hi, d_hi = lambda_at(phase, k, HIGH)
-        lam[k] = {"low": lo, "high": hi, "ratio": lo / hi if hi > 0 else math.nan,
+        lo, e_lo, n_lo, d_lo = lambda_at(phase, k, LOW)
+        hi, e_hi, n_hi, d_hi = lambda_at(phase, k, HIGH)
+        ratio = lo / hi if hi > 0 else math.nan
+        lam[k] = {"low": lo, "high": hi, "ratio": ratio,
+                  "ratio_se": ratio * math.hypot(e_lo, e_hi),
                   "patterned_low": n_lo, "patterned_high": n_hi, "runs_low": d_lo,
                   "runs_high": d_hi}
-    finite = [alpha_cr[k] for k in sorted(alpha_cr)]
-    rising = all(math.isfinite(a) and a > 0 for a in finite) and all(
-        b > a for a, b in zip(finite, finite[1:], strict=False))
+    # a K whose every alpha - B patterns has its jump below the grid: its upper bound is the
+    # lowest alpha - B run (alpha_cr > 0 is then not shown, rising can be)
+    below = {k: bool(_sel(majority_low, K=k)) for k in ks}
+    bounds = [alpha_cr[k] if math.isfinite(alpha_cr[k]) or not below[k] else lowest
+              for k in sorted(alpha_cr)]
+    rising = all(math.isfinite(a) and a > 0 for a in bounds) and all(
+        b > a for a, b in zip(bounds, bounds[1:], strict=False))
     ok_jump = JUMP_RANGE[0] <= jump <= JUMP_RANGE[1]
     ok_ratio = all(lam[k]["ratio"] >= RATIO_MIN for k in FIG3_K)
     overrides = json.loads(phase.attrs.get("overrides_json", "{}")) \
         if "overrides_json" in phase.attrs else {}
     return {"setting": folder.name.removeprefix("calib-"), "folder": str(folder),
-            "jump": jump, "jump_interval": interval, "alpha_cr": alpha_cr, "lambda": lam,
+            "jump": jump, "jump_interval": interval, "alpha_cr": alpha_cr,
+            "alpha_cr_below": alpha_cr_below, "lambda": lam,
             "ok_jump": ok_jump, "ok_ratio": ok_ratio, "ok_alpha_cr": rising,
             "ok_all": ok_jump and ok_ratio and rising,
             "runs_ok": int(phase.attrs.get("n_ok", -1)),
@@ -100,16 +121,21 @@ def _mark(ok: bool) -> str:
 
 def markdown(rows: list[dict[str, Any]]) -> str:
     head = ("| setting | jump at K = 5e-5 [interval] | alpha_cr(K) from the jump, K = "
-            "1e-5 / 3e-5 / 5e-5 / 1e-4 | lambda_peak 0.6 / 1.0 (ratio; patterned seeds) at "
+            "1e-5 / 3e-5 / 5e-5 / 1e-4 | lambda_peak 0.6 / 1.0 (ratio ± its standard error; "
+            "patterned seeds) at "
             "K = 1e-5 | at 3e-5 | at 1e-4 | jump in [0.3, 0.5] | ratio >= 1.2 | alpha_cr "
             "rising | runs |")
     lines = [head, "|" + "---|" * 10]
     for r in rows:
-        acr = " / ".join(_f(r["alpha_cr"].get(k, math.nan)) for k in (1e-5, 3e-5, 5e-5, 1e-4))
+        acr = " / ".join(
+            f"< {_f(r['alpha_cr_below'][k])}" if k in r["alpha_cr_below"]
+            and not math.isfinite(r["alpha_cr"].get(k, math.nan))
+            else _f(r["alpha_cr"].get(k, math.nan)) for k in (1e-5, 3e-5, 5e-5, 1e-4))
         cells = []
         for k in FIG3_K:
             q = r["lambda"][k]
-            cells.append(f"{_f(q['low'])} / {_f(q['high'])} ({_f(q['ratio'])}; "
+            cells.append(f"{_f(q['low'])} / {_f(q['high'])} ({_f(q['ratio'])} "
+                         f"± {_f(q['ratio_se'], 1)}; "
                          f"{q['patterned_low']}/{q['runs_low']}, "
                          f"{q['patterned_high']}/{q['runs_high']})")
         lo, hi = r["jump_interval"]
@@ -121,10 +147,43 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def tradeoff_figure(rows: list[dict[str, Any]], path: Path) -> None:
+    """Each setting in the plane (Fig. 2's jump at K = 5e-5, Fig. 3's lambda ratio 0.6 / 1.0 at
+    K = 1e-5), the targets shaded; marker filled where alpha_cr rises with K, and the ratio at
+    K = 3e-5 beside it. A setting without a jump below 1.0 is drawn at the right edge."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7.0, 5.0), layout="constrained")
+    ax = fig.add_subplot()
+    ax.axvspan(*JUMP_RANGE, color="tab:green", alpha=0.10, lw=0)
+    ax.axhspan(RATIO_MIN, 3.0, color="tab:green", alpha=0.10, lw=0)
+    for r in rows:
+        x = r["jump"] if math.isfinite(r["jump"]) else 1.05
+        y = r["lambda"][FIG3_K[0]]["ratio"]
+        if not math.isfinite(y):
+            continue
+        ax.plot([x], [y], "o", ms=8, mec="k",
+                mfc="k" if r["ok_alpha_cr"] else "white")
+        r3 = r["lambda"][FIG3_K[1]]["ratio"]
+        ax.annotate(f"{r['setting']} ({_f(r3, 2)})", (x, y), xytext=(5, 4),
+                    textcoords="offset points", fontsize=7)
+    ax.set_xlim(0.2, 1.1)
+    ax.set_ylim(0.8, max(2.3, ax.get_ylim()[1]))
+    ax.set_xlabel("Fig. 2: jump of sigma2_S(300) at K = 5e-5 (alpha - B; 1.05: none below 1)")
+    ax.set_ylabel("Fig. 3: lambda_peak(0.6) / lambda_peak(1.0) at K = 1e-5")
+    ax.set_title("calibration trade-off: green bands are the targets; filled: alpha_cr rises "
+                 "with K;\nin brackets the ratio at K = 3e-5", fontsize=9, loc="left")
+    fig.savefig(path, dpi=110)
+
+
 def main(argv: list[str]) -> int:
-    out_json = None
-    if argv[:1] == ["--json"]:
-        out_json, argv = Path(argv[1]), argv[2:]
+    out_json = out_fig = None
+    while argv[:1] in (["--json"], ["--figure"]):
+        if argv[0] == "--json":
+            out_json = Path(argv[1])
+        else:
+            out_fig = Path(argv[1])
+        argv = argv[2:]
     rows = []
     for folder in map(Path, argv):
         if not (folder / "fits.nc").exists() or not (folder / "phase.nc").exists():
@@ -134,6 +193,8 @@ def main(argv: list[str]) -> int:
     print(markdown(rows))
     if out_json is not None:
         out_json.write_text(json.dumps(rows, indent=1, default=str) + "\n")
+    if out_fig is not None:
+        tradeoff_figure(rows, out_fig)
     return 0
 
 

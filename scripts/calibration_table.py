@@ -70,14 +70,13 @@ def summarise(folder: Path) -> dict[str, Any]:
     finished = xr.apply_ufunc(np.isfinite, sig).sum(dim="seed")
     most = patterned > 0.5 * finished
     majority = most.any(dim="alpha_minus_B")
+    # a K whose lowest alpha - B already patterns has its jump below the grid: its upper
+    # bound is that lowest value (alpha_cr > 0 is then not shown, rising can be)
     lowest = float(phase["alpha_minus_B"].min())
     majority_low = most.sel(alpha_minus_B=lowest)
-    alpha_cr_below = {}
     alpha_cr = {k: float(_sel(loc, K=k)) if bool(_sel(majority, K=k)) else math.nan
                 for k in ks}
-    for k in ks:
-        if bool(_sel(majority_low, K=k)):
-            alpha_cr_below[k] = lowest
+    alpha_cr_below = {k: lowest for k in ks if bool(_sel(majority_low, K=k))}
     jump = alpha_cr.get(FIG2_K, math.nan)
     interval = (float(_sel(fits["transition_lower"], K=FIG2_K)),
                 float(_sel(fits["transition_upper"], K=FIG2_K))) if FIG2_K in alpha_cr \
@@ -91,10 +90,7 @@ def summarise(folder: Path) -> dict[str, Any]:
                   "ratio_se": ratio * math.hypot(e_lo, e_hi),
                   "patterned_low": n_lo, "patterned_high": n_hi, "runs_low": d_lo,
                   "runs_high": d_hi}
-    # a K whose every alpha - B patterns has its jump below the grid: its upper bound is the
-    # lowest alpha - B run (alpha_cr > 0 is then not shown, rising can be)
-    below = {k: bool(_sel(majority_low, K=k)) for k in ks}
-    bounds = [alpha_cr[k] if math.isfinite(alpha_cr[k]) or not below[k] else lowest
+    bounds = [alpha_cr[k] if math.isfinite(alpha_cr[k]) else alpha_cr_below.get(k, math.nan)
               for k in sorted(alpha_cr)]
     rising = all(math.isfinite(a) and a > 0 for a in bounds) and all(
         b > a for a, b in zip(bounds, bounds[1:], strict=False))

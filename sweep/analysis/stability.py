@@ -4,6 +4,7 @@ files as well as phase.nc."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Mapping
@@ -53,13 +54,14 @@ def stability_parameters(phase: xr.Dataset, coords: Mapping[str, float]) -> Any:
     of phase.nc with the swept values ``coords``."""
     from model.parameters import Parameters
 
-    fields = set(Parameters.names())
+    # each attribute back to its field's type (netCDF stores ints and strings as they are)
+    kinds = {f.name: {"int": int, "str": str}.get(str(f.type), float)
+             for f in dataclasses.fields(Parameters)}
     values: dict[str, Any] = {}
     for key, value in phase.attrs.items():
         name = key.removeprefix("param_")
-        if key.startswith("param_") and name in fields:
-            values[name] = (int(value) if name == "noise_modes" else
-                            str(value) if name == "initial" else float(value))
+        if key.startswith("param_") and name in kinds:
+            values[name] = kinds[name](value)
     values.update({k: float(v) for k, v in coords.items()})
     if AMB in values and "alpha" in values:
         if AMB in coords:

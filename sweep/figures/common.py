@@ -6,14 +6,15 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 import xarray as xr
 
 from ..analysis.fits_file import FITS, load_fits, load_phase
-from ..analysis.phase import select, sweep_dims, with_dim
+from ..analysis.phase import is_swept, select, sweep_dims, with_dim
 from ..campaign import AMB
 from ..errors import FigureError, FitError
 
@@ -98,6 +99,34 @@ def ok_run(res: Results, point: xr.Dataset, seed: int | None = None
         if run is not None:
             return run, int(seeds[i])
     return None, None
+
+
+def activity_line(res: Results, figure: str, options: Mapping[str, Any]
+                  ) -> tuple[xr.Dataset, list[str], np.ndarray]:
+    """phase.nc along alpha - B with every other sweep dim fixed (option ``select``, default
+    their first values), the names of those other dims and the alpha - B values."""
+    if not is_swept(res.phase, AMB):
+        raise FigureError(f"{figure} needs alpha_minus_B (or alpha) as a sweep axis")
+    ds = with_dim(res.phase, AMB)
+    others = [d for d in sweep_dims(ds) if d != AMB]
+    ds = default_select(ds, [AMB], options.get("select"))
+    return ds, others, ds[AMB].values.astype(float)
+
+
+def runs_along(res: Results, ds: xr.Dataset, curves: int, seed: int | None
+               ) -> Iterator[tuple[float, int, xr.Dataset, int]]:
+    """One run per drawn alpha - B of the line ``ds``: at most ``curves`` values spread over
+    the line, each ``(position in [0, 1], index, run, seed)``; the run of ``seed``, or of the
+    first seed that succeeded at the first drawn point (the same seed is tried everywhere)."""
+    n = ds.sizes[AMB]
+    picks = np.unique(np.round(np.linspace(0, n - 1, min(curves, n))).astype(int))
+    drawn = seed
+    for rank, i in enumerate(picks):
+        run, s = ok_run(res, ds.isel({AMB: int(i)}), drawn)
+        if run is None or s is None:
+            continue
+        drawn = s if drawn is None else drawn
+        yield rank / max(len(picks) - 1, 1), int(i), run, s
 
 
 def fmt(value: float) -> str:

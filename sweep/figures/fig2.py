@@ -11,17 +11,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import xarray as xr
 
-from ..analysis.phase import is_swept, sweep_dims, with_dim
 from ..campaign import AMB
-from ..errors import FigureError
 from ..files import series_time
 from .common import (
     Results,
+    activity_line,
     check_options,
-    default_select,
     describe,
     fmt,
     ok_run,
+    runs_along,
     safe_snapshot,
 )
 
@@ -38,12 +37,7 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
 
     check_options("fig2", options, FIG2_OPTIONS)
     yscale = str(options.get("yscale", "linear"))
-    if not is_swept(res.phase, AMB):
-        raise FigureError("fig2 needs alpha_minus_B (or alpha) as a sweep axis")
-    ds = with_dim(res.phase, AMB)
-    others = [d for d in sweep_dims(ds) if d != AMB]
-    ds = default_select(ds, [AMB], options.get("select"))
-    x = ds[AMB].values.astype(float)
+    ds, others, x = activity_line(res, "fig2", options)
     where = describe(ds, others)
 
     trans = _transition_row(res, ds, others)
@@ -84,18 +78,12 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
         ax_a.set_title("(a)", loc="left")
 
     # (b) sigma2_S(t) for several alpha - B
-    n_curves = int(options.get("curves", 8))
-    picks = np.unique(np.round(np.linspace(0, x.size - 1, min(n_curves, x.size))).astype(int))
     cmap = colormaps["viridis"]
-    seed_b = options.get("seed")
     drawn_seed = None
-    for rank, i in enumerate(picks):
-        run, s = ok_run(res, ds.isel({AMB: int(i)}), seed_b if seed_b is not None
-                        else drawn_seed)
-        if run is None:
-            continue
+    for position, i, run, s in runs_along(res, ds, int(options.get("curves", 8)),
+                                          options.get("seed")):
         drawn_seed = s if drawn_seed is None else drawn_seed
-        colour = cmap(rank / max(len(picks) - 1, 1))
+        colour = cmap(position)
         times, series = series_time(run).values, run["sigma2_S"].values.astype(float)
         # t = 0 is left out: S = S0 is uniform there (sigma2_S = 0 up to round-off)
         ok = np.isfinite(series) & (series > 0) & (times > 0)

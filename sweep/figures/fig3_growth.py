@@ -14,11 +14,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..analysis.phase import is_swept, sweep_dims, with_dim
-from ..campaign import AMB
 from ..errors import FigureError
 from ..files import series_time
-from .common import Results, check_options, default_select, describe, fmt, ok_run
+from .common import Results, activity_line, check_options, describe, fmt, runs_along
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -34,26 +32,16 @@ def fig3_growth(res: Results, options: Mapping[str, Any]) -> Figure:
     from matplotlib.figure import Figure
 
     check_options("fig3_growth", options, FIG3_GROWTH_OPTIONS)
-    if not is_swept(res.phase, AMB):
-        raise FigureError("fig3_growth needs alpha_minus_B (or alpha) as a sweep axis")
-    ds = with_dim(res.phase, AMB)
-    others = [d for d in sweep_dims(ds) if d != AMB]
-    ds = default_select(ds, [AMB], options.get("select"))
-    x = ds[AMB].values.astype(float)
-    n_curves = int(options.get("curves", 6))
-    picks = np.unique(np.round(np.linspace(0, x.size - 1, min(n_curves, x.size))).astype(int))
+    ds, others, x = activity_line(res, "fig3_growth", options)
 
     fig = Figure(figsize=(11.0, 4.3), layout="constrained")
     ax_l, ax_s = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
     cmap = colormaps["plasma"]
-    seed = options.get("seed")
     drawn_seed = None
-    for rank, i in enumerate(picks):
-        run, s = ok_run(res, ds.isel({AMB: int(i)}), seed if seed is not None else drawn_seed)
-        if run is None:
-            continue
+    for position, i, run, s in runs_along(res, ds, int(options.get("curves", 6)),
+                                          options.get("seed")):
         drawn_seed = s if drawn_seed is None else drawn_seed
-        colour = cmap(0.85 * rank / max(len(picks) - 1, 1))
+        colour = cmap(0.85 * position)
         times = series_time(run).values
         lam = run["lambda"].values.astype(float)
         sig = run["sigma2_S"].values.astype(float)

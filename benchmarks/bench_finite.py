@@ -33,7 +33,10 @@ import json, sys, time
 cfg = json.loads(sys.argv[1])
 from model.parameters import Parameters, Numerics
 from model.simulate import run
-params = Parameters.from_dict({"alpha_minus_B": cfg["amb"]})
+# a fixed workload (texture band 16, zeta = 1, kappa = 10), so its figures stay comparable when
+# the model's defaults change; band 16 also runs at 64^2
+params = Parameters.from_dict({"alpha_minus_B": cfg["amb"], "noise_modes": 16, "zeta": 1.0,
+                               "kappa": 10.0})
 extra = {"displacement": cfg["displacement"]} if cfg["mechanics"] == "finite" else {}
 num = Numerics(resolution=cfg["N"], t_final=cfg["t_final"], mechanics=cfg["mechanics"],
                save_every=cfg["t_final"] / 10, **extra)

@@ -5,4 +5,4 @@ This package never imports :mod:`sweep`; the campaign manager uses it only throu
 :func:`model.simulate.run`.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

@@ -76,16 +76,16 @@ class Parameters:
     B_prime: float = 0.0
     C: float = 3.0
     K: float = 5e-5
-    kappa: float = 10.0
+    kappa: float = 20.0
     alpha: float = 1.5
     chi: float = 10.0
-    zeta: float = 1.0
+    zeta: float = 0.5
     s: float = 10.0
     gamma: float = 1.0
     tau: float = 1.0
     eps: float = 0.0
     initial: str = "band"
-    noise_modes: int = 16
+    noise_modes: int = 32
     noise_amplitude: float = 0.0
 
     def __post_init__(self) -> None:

@@ -143,42 +143,67 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def tradeoff_figure(rows: list[dict[str, Any]], path: Path) -> None:
+def tradeoff_figure(rows: list[dict[str, Any]], path: Path, chosen: str | None = None) -> None:
     """Each setting in the plane (Fig. 2's jump at K = 5e-5, Fig. 3's lambda ratio 0.6 / 1.0 at
     K = 1e-5), the targets shaded; marker filled where alpha_cr rises with K, and the ratio at
-    K = 3e-5 beside it. A setting without a jump below 1.0 is drawn at the right edge."""
+    K = 3e-5 beside it; the setting named ``chosen`` (the model's defaults) ringed in red. A
+    setting without a jump below 1.0 is drawn at the right edge."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(7.0, 5.0), layout="constrained")
-    ax = fig.add_subplot()
+    fig = Figure(figsize=(10.0, 5.2), layout="constrained")
+    ax, key = fig.subplots(1, 2, width_ratios=[2.2, 1.0])
     ax.axvspan(*JUMP_RANGE, color="tab:green", alpha=0.10, lw=0)
     ax.axhspan(RATIO_MIN, 3.0, color="tab:green", alpha=0.10, lw=0)
-    for r in rows:
+    # the settings near the targets crowd together: drawn again, magnified, in an inset
+    zoom = ax.inset_axes((0.06, 0.42, 0.5, 0.5))
+    zoom.set_xlim(0.35, 0.55)
+    zoom.set_ylim(0.95, 1.23)
+    zoom.axhspan(RATIO_MIN, 3.0, color="tab:green", alpha=0.10, lw=0)
+    zoom.axvspan(*JUMP_RANGE, color="tab:green", alpha=0.10, lw=0)
+    zoom.tick_params(labelsize=7)
+    ax.indicate_inset_zoom(zoom, edgecolor="0.5")
+    legend = []
+    for number, r in enumerate(rows, start=1):
         x = r["jump"] if math.isfinite(r["jump"]) else 1.05
         y = r["lambda"][FIG3_K[0]]["ratio"]
+        r3 = r["lambda"][FIG3_K[1]]["ratio"]
+        legend.append(f"{number:2d}  {r['setting']}  ({_f(r3, 2)})"
+                      + ("  <- defaults" if r["setting"] == chosen else ""))
         if not math.isfinite(y):
             continue
-        ax.plot([x], [y], "o", ms=8, mec="k",
-                mfc="k" if r["ok_alpha_cr"] else "white")
-        r3 = r["lambda"][FIG3_K[1]]["ratio"]
-        ax.annotate(f"{r['setting']} ({_f(r3, 2)})", (x, y), xytext=(5, 4),
-                    textcoords="offset points", fontsize=7)
+        for axes, size in ((ax, 7), (zoom, 6)):
+            axes.plot([x], [y], "o", ms=size, mec="k",
+                      mfc="k" if r["ok_alpha_cr"] else "white")
+            if r["setting"] == chosen:
+                axes.plot([x], [y], "o", ms=2 * size, mfc="none", mec="tab:red", mew=2,
+                          label="the model's defaults" if axes is ax else None)
+        ax.annotate(str(number), (x, y), xytext=(5, 3), textcoords="offset points", fontsize=7)
+        # in the inset: numbers beside the markers, alternating sides where they crowd
+        zoom.annotate(str(number), (x, y), xytext=(6 if number % 2 else -13, -3),
+                      textcoords="offset points", fontsize=7, clip_on=True)
     ax.set_xlim(0.2, 1.1)
     ax.set_ylim(0.8, max(2.3, ax.get_ylim()[1]))
     ax.set_xlabel("Fig. 2: jump of sigma2_S(300) at K = 5e-5 (alpha - B; 1.05: none below 1)")
     ax.set_ylabel("Fig. 3: lambda_peak(0.6) / lambda_peak(1.0) at K = 1e-5")
-    ax.set_title("calibration trade-off: green bands are the targets; filled: alpha_cr rises "
-                 "with K;\nin brackets the ratio at K = 3e-5", fontsize=9, loc="left")
+    if chosen is not None:
+        ax.legend(loc="lower right", fontsize=8)
+    ax.set_title("calibration trade-off: green bands are the targets;\nfilled: alpha_cr rises "
+                 "with K", fontsize=9, loc="left")
+    key.axis("off")
+    key.text(0.0, 1.0, "setting (ratio at K = 3e-5)\n\n" + "\n".join(legend),
+             va="top", ha="left", family="monospace", fontsize=7, transform=key.transAxes)
     fig.savefig(path, dpi=110)
 
 
 def main(argv: list[str]) -> int:
-    out_json = out_fig = None
-    while argv[:1] in (["--json"], ["--figure"]):
+    out_json = out_fig = chosen = None
+    while argv[:1] in (["--json"], ["--figure"], ["--chosen"]):
         if argv[0] == "--json":
             out_json = Path(argv[1])
-        else:
+        elif argv[0] == "--figure":
             out_fig = Path(argv[1])
+        else:
+            chosen = argv[1]
         argv = argv[2:]
     rows = []
     for folder in map(Path, argv):
@@ -190,7 +215,7 @@ def main(argv: list[str]) -> int:
     if out_json is not None:
         out_json.write_text(json.dumps(rows, indent=1, default=str) + "\n")
     if out_fig is not None:
-        tradeoff_figure(rows, out_fig)
+        tradeoff_figure(rows, out_fig, chosen)
     return 0
 
 

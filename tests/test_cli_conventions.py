@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import logging
+import re
 import time
 from types import SimpleNamespace
 
@@ -14,6 +15,7 @@ from rich.console import Console
 from rich.progress import Progress
 from typer.testing import CliRunner
 
+import model
 from sweep.cli import app
 from sweep.cli.progress import ProgressEvents
 
@@ -29,7 +31,10 @@ def flat(text: str) -> str:
 def test_version():
     result = invoke("--version")
     assert result.exit_code == 0, result.output
-    assert result.output.startswith("nematic 0.1.0")
+    # the model's version (each run file records it) and the git commit of the code
+    assert re.match(r"nematic \d+\.\d+\.\d+ \(git ([0-9a-f]{40}(\+dirty)?|unknown)\)",
+                    result.output), result.output
+    assert result.output.split()[1] == model.__version__
 
 
 def test_shell_completion_is_offered():

@@ -93,7 +93,7 @@ def test_bad_early_stop_settings_are_refused(changes, words):
 
 
 def test_early_stop_in_a_campaign_is_checked_like_any_numerics():
-    text = ("name: c\nnumerics: {resolution: 64, t_final: 10, save_every: 1, "
+    text = ("name: c\nnumerics: {resolution: 128, t_final: 10, save_every: 1, "
             "steady_tol: 0.01, steady_window: 20}\nsweep: {axes: {alpha_minus_B: [0.5, 1.0]}}\n")
     with pytest.raises(CampaignError, match="numerics.steady_window"):
         parse_campaign(text, "c.yaml")

@@ -59,7 +59,7 @@ fits: [{anisotropy: {n_boot: 100}}]
 STABILITY = """\
 name: stab
 parameters: {S0: 0.0, A0: 1.0, K: 1.0e-4, alpha_minus_B: 1.0, noise_amplitude: 1.0e-3,
-             noise_modes: 8}
+             noise_modes: 8, zeta: 1.0}  # zeta as campaigns/figA1.yaml
 numerics: {mechanics: linear, incompressible: true, resolution: 32, t_final: 8, save_every: 1,
            tolerance: 1.0e-4}
 sweep:

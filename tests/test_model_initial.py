@@ -20,12 +20,12 @@ def _angles(q1, q2):
 @pytest.mark.parametrize("initial", ["band", "per_node"])
 def test_both_textures_have_uniform_order_and_are_seeded(initial):
     p = Parameters(initial=initial)
-    q1, q2, A = initial_fields(p, 64, seed=3)
+    q1, q2, A = initial_fields(p, 128, seed=3)
     np.testing.assert_allclose(np.hypot(q1, q2), p.S0, rtol=1e-12)  # S = S0 everywhere
     assert not A.any()
-    again = initial_fields(p, 64, seed=3)
+    again = initial_fields(p, 128, seed=3)
     np.testing.assert_array_equal(q1, again[0])
-    other = initial_fields(p, 64, seed=4)
+    other = initial_fields(p, 128, seed=4)
     assert not np.allclose(q1, other[0])
 
 
@@ -43,7 +43,7 @@ def test_per_node_angles_are_uniform_and_independent_between_nodes():
         for lag in (1, 2):
             c = (z * np.conj(np.roll(z, lag, axis=axis))).mean()
             assert abs(c) < 4 / n
-    qb1, qb2, _ = initial_fields(Parameters(initial="band"), n, seed=0)
+    qb1, qb2, _ = initial_fields(Parameters(initial="band", noise_modes=16), n, seed=0)
     zb = np.exp(1j * _angles(qb1, qb2))
     assert abs((zb * np.conj(np.roll(zb, 1, axis=0))).mean()) > 0.8
 

@@ -22,12 +22,12 @@ def test_readme_snippet_runs(index):
     matplotlib.use("Agg")
     namespace: dict = {}
     exec(compile(SNIPPETS[index], f"README.md python snippet {index + 1}", "exec"), namespace)
-    if "final" in namespace:  # the py-pde snippet: the grid came from the 48^2 state
-        assert namespace["final"].data.shape == (3, 48, 48)
-        assert namespace["eq"].numerics.resolution == 48
+    if "final" in namespace:  # the py-pde snippet: the grid came from the 96^2 state
+        assert namespace["final"].data.shape == (3, 96, 96)
+        assert namespace["eq"].numerics.resolution == 96
     if "ds" in namespace:
         assert namespace["ds"].attrs["status"] == "ok"
-        assert namespace["ds"].sizes["x"] == 48
+        assert namespace["ds"].sizes["x"] == 96
 
 
 def test_the_setup_puts_nematic_on_path_before_the_docs_use_it():

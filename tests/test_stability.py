@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 import typer
+import yaml
 from typer.testing import CliRunner
 
 from model import stability as st
@@ -17,12 +19,14 @@ from model.parameters import Numerics, Parameters
 from sweep.cli.stability import stability
 
 TWO_PI = 2.0 * math.pi
+ROOT = Path(__file__).resolve().parents[1]
 
 # Fig. A1 caption: S0 = 0, A0 = 1, gamma/tau = 1, alpha - B = 1, B = 0.5, K = 1e-4; the rest
-# are the Parameters defaults quoted in docs/stability.md §7 (zeta = 1, C = 3, s = 10, B' = 0),
-# written out so that a change of defaults does not silently change these tests.
+# are the constants campaigns/figA1.yaml pins and docs/stability.md §7 quotes (zeta = 1, C = 3,
+# s = 10, B' = 0; kappa = 10 for the compressible column), written out so that a change of
+# defaults does not silently change these tests.
 FIG_A1 = Parameters(S0=0.0, A0=1.0, gamma=1.0, tau=1.0, B=0.5, alpha=1.5, K=1e-4, chi=10.0,
-                    zeta=1.0, C=3.0, s=10.0, B_prime=0.0)
+                    zeta=1.0, C=3.0, s=10.0, B_prime=0.0, kappa=10.0)
 
 # A generic point exercising every term (B' != 0 gives A_b != 0, finite kappa, gamma != tau).
 GENERIC = Parameters(A0=0.7, B=0.5, B_prime=0.3, C=1.3, K=1e-3, kappa=3.0, alpha=1.4, chi=2.0,
@@ -275,11 +279,15 @@ def test_fig_a1_number():
     assert st.paper_eq6(FIG_A1) == pytest.approx(0.20079, abs=5e-6)
 
 
-def test_docs_numbers_use_current_defaults():
-    """docs/stability.md §7 quotes the Fig. A1 numbers for the defaults zeta = 1, C = 3,
-    B' = 0: if this fails, the defaults changed; update the docs' numbers (and FIG_A1)."""
-    d = Parameters()
-    assert (d.zeta, d.C, d.B_prime) == (FIG_A1.zeta, FIG_A1.C, FIG_A1.B_prime)
+@pytest.mark.parametrize("campaign", ["figA1.yaml", "figA1_adaptive.yaml"])
+def test_fig_a1_campaigns_pin_the_documented_constants(campaign):
+    """docs/stability.md §7 quotes the Fig. A1 numbers for zeta = 1, C = 3, B' = 0: the Fig. A1
+    campaigns pin exactly these (not the model's defaults), so the docs, these tests and the
+    simulated points describe one model."""
+    spec = yaml.safe_load((ROOT / "campaigns" / campaign).read_text())
+    p = Parameters.from_dict(spec["parameters"])
+    for name in ("S0", "A0", "gamma", "tau", "B", "alpha", "K", "zeta", "C", "s", "B_prime"):
+        assert getattr(p, name) == pytest.approx(getattr(FIG_A1, name)), name
 
 
 @pytest.mark.parametrize("chi", [3.0, 10.0, 40.0])

@@ -113,14 +113,14 @@ def test_point_hasher_equals_hash_canonical():
 
 def test_expansion_ids_match_single_run_ids():
     c = parse_campaign("name: x\nsweep: {axes: {alpha_minus_B: [0.1, 0.4], K: [1.0e-4, "
-                       "1.0e-3]}}\nseeds: 3\nnumerics: {resolution: 64}")
+                       "1.0e-3]}}\nseeds: 3\nnumerics: {resolution: 128}")
     e = expand(c)
     assert len(set(e.run_ids)) == 12
     for run in e:
         assert run.run_id == run_id_for(run.point.parameters, run.point.numerics, run.seed)
     # the same grid written with alpha instead of alpha_minus_B is the same set of runs
     c2 = parse_campaign("name: y\nparameters: {B: 0.5}\nsweep: {axes: {alpha: [0.6, 0.9], "
-                        "K: [0.0001, 0.001]}}\nseeds: [0, 1, 2]\nnumerics: {resolution: 64}")
+                        "K: [0.0001, 0.001]}}\nseeds: [0, 1, 2]\nnumerics: {resolution: 128}")
     assert expand(c2).run_ids == e.run_ids
 
 
@@ -128,9 +128,24 @@ def test_the_band_texture_keeps_the_ids_it_had_before_initial_existed():
     # "initial": "band" (the only texture before the field existed) is left out of the
     # canonical text; the golden hashes above are of dicts without it
     assert hash_canonical(dict(P, initial="band"), N, 0) == GOLDEN[0]
-    # the model's defaults: the id of this point before `initial` existed
-    assert run_id_for(Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5}),
-                      Numerics(t_final=150, save_every=1), 7) == "702b95bdf3bae1f3"
+    # the constants that were the defaults before `initial` existed (band 16, zeta = 1,
+    # s = 10): the id this point had then
+    old = Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5, "noise_modes": 16,
+                                "zeta": 1.0, "s": 10.0})
+    assert run_id_for(old, Numerics(t_final=150, save_every=1), 7) == "702b95bdf3bae1f3"
+
+
+def test_runs_of_other_defaults_are_other_runs():
+    """The defaults chosen by the joint calibration (band 32, zeta = 0.5, kappa = 20) give the same
+    campaign point new run ids, so results made with the earlier defaults never enter a
+    phase diagram of the current ones."""
+    now = run_id_for(Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5}),
+                     Numerics(t_final=150, save_every=1), 7)
+    assert now != "702b95bdf3bae1f3"
+    for name, value in (("noise_modes", 16), ("zeta", 1.0), ("kappa", 10.0)):
+        one_old = Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5, name: value})
+        assert run_id_for(one_old, Numerics(t_final=150, save_every=1), 7) not in (
+            now, "702b95bdf3bae1f3")
 
 
 def test_the_per_node_texture_is_another_run_and_ignores_noise_modes():

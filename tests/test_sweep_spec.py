@@ -18,7 +18,7 @@ from sweep.yaml_input import parse_assignments
 GOOD = """
 name: good
 description: a test campaign
-parameters: {B: 0.5, chi: 10}
+parameters: {B: 0.5, chi: 10, noise_modes: 16}
 numerics: {resolution: 64, t_final: 4}
 sweep:
   axes:

@@ -3,6 +3,7 @@
 
 Exit codes: 0 success; 1 some runs failed (they are listed); 2 bad input (invalid campaign,
 unreachable scheduler) or refused to start (the campaign is locked by another driver);
+3 stopped early because more runs failed than ``nematic run --max-failures`` allows;
 130 interrupted (Ctrl-C / SIGTERM; rerun the same command to resume).
 
 :data:`COMMANDS` is every command, in the order ``nematic --help`` lists them; each is a

@@ -11,9 +11,7 @@ from typing import Any
 from .campaign import Campaign
 from .errors import StoreError
 from .spec import Overrides, parse_campaign
-from .store import CampaignStore
-
-OVERRIDE_PREFIX = "# override: "
+from .store import OVERRIDE_PREFIX, CampaignStore
 
 
 def stored_overrides(text: str) -> Overrides:

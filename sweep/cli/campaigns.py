@@ -102,6 +102,9 @@ def run(
         help="Stop the campaign (exit 3) once more runs failed in this session than N: a "
         "count (0 stops at the first failure) or a fraction of the runs to do (0.1). Runs "
         "not finished stay pending.")] = None,
+    prune: Annotated[bool, typer.Option(
+        "--prune", help="First remove the orphaned runs: the records and files in the "
+        "results folder of runs this campaign does not plan (after its file changed).")] = False,
     verify: Annotated[bool, typer.Option(
         "--verify", help="Checksum every finished run's file (by default only files whose "
         "size or mtime changed are), and redo the corrupt ones.")] = False,
@@ -119,7 +122,9 @@ def run(
     """Run a campaign on dask, resuming where it stopped.
 
     Finished runs are skipped, the rest run on a local dask cluster (default), a scheduler or
-    a dask-jobqueue cluster; one netCDF per run, phase.nc at the end. Exit 0 if every run
+    a dask-jobqueue cluster; one netCDF per run, phase.nc at the end. If the campaign
+    differs from the one its results were made with, what changed and the new, kept and
+    orphaned runs are printed first. Exit 0 if every run
     succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 3 when
     stopped by `--max-failures`, 130 when interrupted (rerun to resume).
     """
@@ -155,6 +160,8 @@ def run(
             disable=quiet or not err.is_terminal)
         events = ProgressEvents(say, progress, store)
         try:
+            report_changes(say, c, store, expansion if c.refine is None else None,
+                           prune=prune, hint="--prune removes them")
             with sigterm_as_interrupt(), progress:
                 try:
                     if c.refine is None:
@@ -241,6 +248,35 @@ def run(
         lock.release()
 
 
+def report_changes(say: Console, campaign: Any, store: Any, expansion: Any = None, *,
+                   prune: bool = False, hint: str = "") -> dict[str, Any] | None:
+    """Print what changed since the results were made (:mod:`sweep.changes`) and, with
+    ``prune``, remove the orphaned runs (the caller holds the lock); return the changes for
+    ``--json``."""
+    from ..changes import campaign_changes, run_counts
+    from ..changes import prune as prune_runs
+
+    changed = campaign_changes(campaign, store, expansion)
+    if changed is not None:
+        for line in changed.lines():
+            say.print(line, markup=False)
+        if changed.counts.orphaned and not prune and hint:
+            say.print(f"  the orphaned runs are kept; {hint}", markup=False)
+    if prune:
+        if changed is not None:
+            orphaned = changed.counts.orphaned
+        else:
+            from ..refine.rounds import expansion_for
+
+            orphaned = run_counts(campaign, expansion or expansion_for(campaign, store), store,
+                                  store.scan()).orphaned
+        n = prune_runs(store, orphaned)
+        say.print(f"pruned {n} orphaned run(s) (their records and run files) from "
+                  f"{store.runs_dir}" if n else "nothing to prune: every run in the folder "
+                  "is planned by this campaign", markup=False)
+    return None if changed is None else changed.to_dict()
+
+
 def storage_message(store: Any, e: OSError) -> str:
     from ..files import storage_error
 
@@ -263,8 +299,9 @@ def status(
 ) -> None:
     """Show done / failed / pending runs, failure reasons and an ETA.
 
-    Counts are given overall and per sweep value. Only the run records are read (no netCDF),
-    so it answers in seconds for 10^5 runs, also while the campaign runs.
+    Counts are given overall and per sweep value, with what changed if the campaign differs
+    from the one its results were made with. Only the run records are read (no netCDF), so
+    it answers in seconds for 10^5 runs, also while the campaign runs.
     """
     from ..refine.rounds import expansion_for
     from ..status import campaign_status
@@ -278,9 +315,13 @@ def status(
     report = campaign_status(expansion, store, workers=workers)
     refinement = getattr(expansion, "refinement", None)  # an adaptive campaign's rounds
     if as_json:
+        from ..changes import campaign_changes
         from ..refine.rounds import status_dict
 
-        typer.echo(json.dumps({**report.to_dict(), **status_dict(refinement)}, default=str))
+        changed = campaign_changes(c, store, expansion)
+        typer.echo(json.dumps({**report.to_dict(), **status_dict(refinement),
+                               "changes": None if changed is None else changed.to_dict()},
+                              default=str))
         return
     pct = 100.0 * report.done / max(report.total, 1)
     console.print(f"campaign [bold]{report.campaign}[/] ({report.folder}): "
@@ -288,6 +329,8 @@ def status(
                   f"{report.pending} pending of {report.total} ({pct:.0f}% done)")
     if quiet:
         return
+    report_changes(console, c, store, expansion,
+                   hint="'nematic run --prune' removes them")
     if refinement is not None:
         from ..refine.report import status_lines
 

@@ -104,7 +104,8 @@ def run(
         "not finished stay pending.")] = None,
     prune: Annotated[bool, typer.Option(
         "--prune", help="First remove the orphaned runs: the records and files in the "
-        "results folder of runs this campaign does not plan (after its file changed).")] = False,
+        "results folder of runs this campaign does not plan (e.g. values since removed from "
+        "an axis); says how many.")] = False,
     verify: Annotated[bool, typer.Option(
         "--verify", help="Checksum every finished run's file (by default only files whose "
         "size or mtime changed are), and redo the corrupt ones.")] = False,

@@ -17,9 +17,25 @@ Module map (docs/architecture.md has one line per module and the direction of im
 - :mod:`sweep.aggregate`  results/<name>/phase.nc
 - :mod:`sweep.analysis`   the fits (fits.nc); :mod:`sweep.figures` the paper's figures
 - :mod:`sweep.provenance` code version and git commit
+- :mod:`sweep.tables`     :func:`open_campaign`: the results from Python (phase diagram
+  as an xarray Dataset, runs as a pandas table), ``nematic export``
 - :mod:`sweep.cli`        the ``nematic`` program (typer; also ``python -m sweep``)
 
 It knows the physics only through :class:`model.parameters.Parameters`,
 :class:`model.parameters.Numerics`, :func:`model.simulate.run` and a few more entries
 (:mod:`model.stability`, :mod:`model.warmup`, :mod:`model.errors`).
 """
+
+from typing import Any
+
+__all__ = ["open_campaign"]
+
+
+def __getattr__(name: str) -> Any:
+    """``sweep.open_campaign`` (:func:`sweep.tables.open_campaign`), imported on first use so
+    that ``import sweep`` (the command line) does not load pandas."""
+    if name == "open_campaign":
+        from .tables import open_campaign
+
+        return open_campaign
+    raise AttributeError(f"module 'sweep' has no attribute {name!r}")

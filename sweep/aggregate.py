@@ -217,14 +217,20 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
     return ds
 
 
+def phase_dataset(expansion: Expansion, store: CampaignStore,
+                  records: Mapping[str, Record]) -> xr.Dataset:
+    """The phase-diagram Dataset of ``expansion`` (a grid, or an adaptive campaign's union
+    grid, whose expansion builds its own: :class:`sweep.refine.rounds.RefinedExpansion`)."""
+    own = getattr(expansion, "build_phase", None)
+    return own(records, store) if own is not None else build_phase(expansion, records, store)
+
+
 def write_phase(expansion: Expansion, store: CampaignStore,
                 records: Mapping[str, Record] | None = None) -> xr.Dataset:
     """Build and atomically write ``results/<name>/phase.nc``; return the Dataset."""
     if records is None:
         records = store.scan()
-    # an adaptive campaign's expansion builds its own (sweep.refine.rounds.RefinedExpansion)
-    own = getattr(expansion, "build_phase", None)
-    ds = own(records, store) if own is not None else build_phase(expansion, records, store)
+    ds = phase_dataset(expansion, store, records)
     store.root.mkdir(parents=True, exist_ok=True)
     # text variables as classic char arrays (read back as str), not netCDF-4 vlen strings,
     # which older CF checkers (cfchecks, CF <= 1.8) reject

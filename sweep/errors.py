@@ -8,6 +8,7 @@ on purpose with one class. Every message names the bad value, what is allowed an
   be written
 - :class:`ClusterError` no usable dask cluster
 - :class:`FitError`, :class:`FigureError` a fit or figure that these results cannot give
+- :class:`ExportError` a results table that cannot be exported as asked
 """
 
 from __future__ import annotations
@@ -68,3 +69,7 @@ class FitError(NematicError, ValueError):
 
 class FigureError(NematicError, ValueError):
     """A figure cannot be drawn from these results (missing axis, fit or file; bad option)."""
+
+
+class ExportError(NematicError, ValueError):
+    """A results table cannot be exported as asked (unknown format, Parquet without pyarrow)."""

@@ -31,6 +31,7 @@ from .campaign import ExecutionSpec
 from .clusters import jobqueue_options, make_jobqueue, open_cluster
 from .errors import ClusterError
 from .expand import Expansion, RunSpec
+from .failures import FailureLimit
 from .plan import Plan, plan_runs
 from .store import (
     CampaignStore,
@@ -115,6 +116,9 @@ class RunSummary:
     storage_error: str | None = None
     #: results that could not be written where they belong (kept elsewhere if possible)
     unsaved: list[tuple[RunSpec, Record]] = field(default_factory=list)
+    #: why the driver stopped early because too many runs failed (``--max-failures``): the
+    #: runs not finished stay pending
+    stopped: str | None = None
     interrupted: bool = False
     wall_time: float = 0.0
     run_time: float = 0.0
@@ -140,9 +144,13 @@ def _lost_task_record(task: RunTask, exc: BaseException) -> Record:
 
 def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Workforce,
                  plan: Plan, events: RunEvents | None = None, *,
-                 clock: Callable[[], float] = time.monotonic) -> RunSummary:
+                 clock: Callable[[], float] = time.monotonic,
+                 limit: FailureLimit | None = None) -> RunSummary:
     """Run ``plan.todo`` on the cluster; return when all are done or on Ctrl-C
     (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set).
+    A run redone after a failure gets its earlier failures (``plan.history``) in its record.
+    With ``limit``, once more runs failed than it allows the runs in flight are cancelled
+    (they stay pending: a record is written whole or not at all) and ``stopped`` says why.
 
     Waits (bounded) for the first worker, checks every worker that joins and sizes the
     submission window from the accepted workers (:class:`~sweep.workforce.Supervisor`).
@@ -168,6 +176,8 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
     watch.check()
     if events:
         events.started(plan, len(expansion), max(1, watch.threads))
+    if limit is not None:
+        limit.planned += len(plan.todo)
     queue = list(reversed(plan.todo))
     tasks: dict[Any, tuple[RunSpec, RunTask, int]] = {}
     attempts: dict[int, int] = {}
@@ -178,7 +188,8 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
         while queue and ac.count() < watch.window:
             i = queue.pop()
             run = expansion.run(i)
-            task = RunTask.from_spec(run, store, campaign.name, campaign.store)
+            task = RunTask.from_spec(run, store, campaign.name, campaign.store,
+                                     plan.history.get(i))
             # a run that goes again (its result was lost) gets a new key: the old one may
             # still be being released
             again = attempts[i] = attempts.get(i, -1) + 1
@@ -223,8 +234,7 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
             return True
         except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
             record = _lost_task_record(task, e)
-            record.update(parameters=task.parameters, numerics=task.numerics,
-                          coords=task.coords, campaign=task.campaign)
+            record.update(task.identity())
             store.write_record(record)
         fut.release()
         if record.get("status") == UNSAVED:
@@ -245,6 +255,12 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
             summary.run_time += float(wall)
         if events:
             events.finished_run(run, record)
+        if record.get("status") != "ok" and limit is not None and limit.add_failure(record):
+            summary.stopped = limit.message()
+            queue.clear()
+            with contextlib.suppress(Exception):
+                client.cancel(list(ac.futures))
+            return False
         return True
 
     try:
@@ -291,7 +307,8 @@ REMOTE_TMP_AGE = 600.0
 def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
           verify: bool = False,
           events: DriveEvents | None = None,
-          dashboard: bool = False) -> tuple[Plan, RunSummary | None]:
+          dashboard: bool = False,
+          limit: FailureLimit | None = None) -> tuple[Plan, RunSummary | None]:
     """What ``nematic run`` does while holding the campaign's lock: clean up, record the
     campaign text, plan from disk, run what remains on the campaign's dask cluster and
     refresh the manifest. Returns the plan and the summary (``None`` if nothing was to do;
@@ -311,7 +328,7 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
                               campaign_dir=store.root) as force:
                 if dashboard and events and hasattr(events, "dashboard"):
                     events.dashboard(dashboard_link(force.client))
-                summary = run_campaign(expansion, store, force, plan, events)
+                summary = run_campaign(expansion, store, force, plan, events, limit=limit)
         except KeyboardInterrupt:  # while the cluster was starting or closing
             summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
                                  failed_before=len(plan.failed), interrupted=True)

@@ -7,8 +7,10 @@ from __future__ import annotations
 import contextlib
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
 from .expand import Expansion
+from .failures import previous_failures
 from .files import atomic_path
 from .store import RETRYABLE_REASONS, CampaignStore, Record
 from .task import spool_dir
@@ -29,6 +31,9 @@ class Plan:
     unspooled: int = 0
     #: runs whose record or file was unusable (missing, truncated, corrupt): (run_id, why)
     redone: list[tuple[str, str]] = field(default_factory=list)
+    #: failed runs redone (``--retry-failed``): position -> the failures their new record
+    #: keeps as ``previous_failures`` (:func:`sweep.failures.previous_failures`)
+    history: dict[int, list[dict[str, Any]]] = field(default_factory=dict)
 
     @property
     def discarded(self) -> int:
@@ -37,7 +42,8 @@ class Plan:
 
 def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
               verify: bool = False) -> Plan:
-    """Classify every run: done (skipped), failed (skipped unless ``retry_failed``), to do.
+    """Classify every run: done (skipped), failed (skipped unless ``retry_failed``: then
+    its failure goes into :attr:`Plan.history`, kept by its next record), to do.
 
     A record whose file is missing, truncated or corrupt (:meth:`CampaignStore.check_run_file`;
     ``verify`` checksums every file) is discarded and its run redone; a ``.nc`` without a
@@ -69,6 +75,8 @@ def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool 
             plan.done.append(i)
         elif retry_failed or rec.get("reason") in RETRYABLE_REASONS:
             plan.todo.append(i)
+            full = store.read_record(rid)  # the manifest's copy has no traceback
+            plan.history[i] = previous_failures(full if full is not None else rec)
         else:
             plan.failed.append(i)
     return plan

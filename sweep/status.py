@@ -44,6 +44,12 @@ class StatusReport:
     per_axis: list[AxisCounts] = field(default_factory=list)
     reasons: dict[str, int] = field(default_factory=dict)
     examples: list[dict[str, Any]] = field(default_factory=list)
+    #: one entry per failure reason, most frequent first: ``reason``, ``count`` and the first
+    #: failed run of that reason (in the campaign's run order): ``run_id``, ``coords`` (swept
+    #: values and seed), ``parameters`` (the full set, from its record), ``t_failed`` (model
+    #: time), ``finished`` (when), ``detail``, ``record`` (its JSON, with the traceback) and
+    #: ``run_file`` (its partial time series, ``None`` when the run left none)
+    failure_groups: list[dict[str, Any]] = field(default_factory=list)
     mean_run_time: float | None = None
     #: the median of the successful runs' wall times: the ETA's basis (a first run that
     #: compiled the kernels, or a few slow ones, barely move it)
@@ -71,6 +77,17 @@ def _parse_time(text: Any) -> float | None:
         return None
 
 
+def _group(store: CampaignStore, example: dict[str, Any], count: int) -> dict[str, Any]:
+    """A failure reason's entry of :attr:`StatusReport.failure_groups` (reads one record)."""
+    rid = example["run_id"]
+    full = store.read_record(rid) or {}
+    return {"reason": example["reason"], "count": count, "run_id": rid,
+            "coords": example["coords"], "parameters": full.get("parameters") or {},
+            "t_failed": example["t_failed"], "finished": example["finished"],
+            "detail": example["detail"], "record": str(store.record_path(rid)),
+            "run_file": str(store.nc_path(rid)) if example["has_file"] else None}
+
+
 def campaign_status(expansion: Expansion, store: CampaignStore, *,
                     workers: int | None = None) -> StatusReport:
     """The status of every run of ``expansion`` as recorded in ``store``."""
@@ -80,6 +97,7 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     state = np.full(n, 2, dtype=np.int8)  # 0 done, 1 failed, 2 pending
     reasons: Counter[str] = Counter()
     examples: list[dict[str, Any]] = []
+    first: dict[str, dict[str, Any]] = {}  # reason -> its first failed run
     times: list[float] = []
     finished: list[tuple[str, str]] = []  # (finish time, host:pid)
     unreadable: list[dict[str, str]] = []
@@ -106,11 +124,15 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
             state[i] = 1
             reason = str(rec.get("reason") or "unknown")
             reasons[reason] += 1
-            if len(examples) < MAX_EXAMPLES:
+            if len(examples) < MAX_EXAMPLES or reason not in first:
                 run = expansion.run(i)
-                examples.append({"run_id": rid, "coords": run.coords, "reason": reason,
-                                 "detail": rec.get("detail") or "",
-                                 "t_failed": rec.get("t_failed")})
+                example = {"run_id": rid, "coords": run.coords, "reason": reason,
+                           "detail": rec.get("detail") or "", "t_failed": rec.get("t_failed")}
+                if len(examples) < MAX_EXAMPLES:
+                    examples.append(example)
+                if reason not in first:
+                    first[reason] = {**example, "finished": rec.get("finished"),
+                                     "has_file": rec.get("nc_bytes") is not None}
         if rec.get("finished"):
             finished.append((str(rec["finished"]), f"{rec.get('host')}:{rec.get('pid')}"))
     if planned is not None:
@@ -134,6 +156,8 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     report = StatusReport(campaign=campaign.name, folder=str(store.root), total=n, done=done,
                           failed=failed, pending=pending, per_axis=per_axis,
                           reasons=dict(reasons.most_common()), examples=examples,
+                          failure_groups=[_group(store, first[r], k)
+                                          for r, k in reasons.most_common()],
                           foreign_runs=len(set(records) - set(expansion.position)),
                           unreadable=n_unreadable, unreadable_examples=unreadable)
     report.running = read_lock_holder(store.lock_path)

@@ -456,5 +456,13 @@ class CampaignStore:
         return n
 
     def save_campaign_text(self, text: str, overrides: Iterable[str] = ()) -> None:
-        header = "".join(f"# override: {o}\n" for o in overrides)
-        atomic_write_text(self.campaign_copy, header + text)
+        atomic_write_text(self.campaign_copy, campaign_copy_text(text, overrides))
+
+
+#: The header line of the campaign copy that records one command-line override.
+OVERRIDE_PREFIX = "# override: "
+
+
+def campaign_copy_text(text: str, overrides: Iterable[str] = ()) -> str:
+    """The content of ``campaign.yaml``: the overrides as comments, then the campaign text."""
+    return "".join(f"{OVERRIDE_PREFIX}{o}\n" for o in overrides) + text

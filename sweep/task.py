@@ -55,16 +55,30 @@ class RunTask:
     coords: dict[str, Any] = field(default_factory=dict)
     snapshot_fields: tuple[str, ...] | None = None
     snapshot_dtype: str = "float64"
+    #: the earlier failures of a run that is redone (``--retry-failed``), oldest first: its
+    #: new record keeps them as ``previous_failures``
+    previous_failures: tuple[dict[str, Any], ...] = ()
 
     @classmethod
     def from_spec(cls, run: RunSpec, store: CampaignStore, campaign: str,
-                  store_spec: StoreSpec) -> RunTask:
+                  store_spec: StoreSpec,
+                  previous_failures: list[dict[str, Any]] | None = None) -> RunTask:
         return cls(run_id=run.run_id, seed=run.seed,
                    parameters=run.point.parameters.to_dict(),
                    numerics=run.point.numerics.to_dict(),
                    runs_dir=str(store.runs_dir.resolve()), campaign=campaign,
                    coords=dict(run.point.coords), snapshot_fields=store_spec.snapshot_fields,
-                   snapshot_dtype=store_spec.snapshot_dtype)
+                   snapshot_dtype=store_spec.snapshot_dtype,
+                   previous_failures=tuple(previous_failures or ()))
+
+    def identity(self) -> dict[str, Any]:
+        """What every record of this run carries besides the result: its settings, swept
+        values, campaign and earlier failures."""
+        out: dict[str, Any] = {"parameters": self.parameters, "numerics": self.numerics,
+                               "coords": self.coords, "campaign": self.campaign}
+        if self.previous_failures:
+            out["previous_failures"] = list(self.previous_failures)
+        return out
 
 
 def prepare_dataset(ds: xr.Dataset, task: RunTask) -> tuple[xr.Dataset, dict[str, Any]]:
@@ -198,8 +212,7 @@ def execute_run(task: RunTask) -> Record:
         except Exception as e:  # noqa: BLE001 - a bug, not the storage: recorded as failed
             record = failure_record(task, "write_error", f"{type(e).__name__}: {e}",
                                     traceback.format_exc(), time.perf_counter() - t0)
-    record.update(parameters=task.parameters, numerics=task.numerics, coords=task.coords,
-                  campaign=task.campaign, pid=os.getpid())
+    record.update(task.identity(), pid=os.getpid())
     try:
         store.write_record(record)
     except StorageError as e:

@@ -3,6 +3,7 @@
 
 Exit codes: 0 success; 1 some runs failed (they are listed); 2 bad input (invalid campaign,
 unreachable scheduler) or refused to start (the campaign is locked by another driver);
+3 stopped early because more runs failed than ``nematic run --max-failures`` allows;
 130 interrupted (Ctrl-C / SIGTERM; rerun the same command to resume).
 
 :data:`COMMANDS` is every command, in the order ``nematic --help`` lists them; each is a
@@ -14,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, figures, simulate, stability
+from . import campaigns, export, figures, simulate, stability
 from .app import app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
@@ -22,6 +23,7 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "run": campaigns.run,
     "status": campaigns.status,
     "aggregate": campaigns.aggregate,
+    "export": export.export,
     "simulate": simulate.simulate,
     "stability": stability.stability,
     "figures": figures.figures,

@@ -2,7 +2,7 @@
 command is :func:`guarded`), the common options, logging, loading the campaign.
 
 Exit codes: :data:`EXIT_OK`, :data:`EXIT_FAILED_RUNS`, :data:`EXIT_BAD_INPUT`,
-:data:`EXIT_INTERRUPTED` (:mod:`sweep.cli`).
+:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_INTERRUPTED` (:mod:`sweep.cli`).
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ from ..spec import Overrides, load_campaign
 from ..yaml_input import parse_assignments, parse_value
 
 EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: ``nematic run --max-failures``: the campaign stopped early, too many runs failed
+EXIT_TOO_MANY_FAILURES = 3
 #: Show Python tracebacks of errors (``nematic --debug ...`` or ``NEMATIC_DEBUG=1``).
 DEBUG = {"on": False}
 

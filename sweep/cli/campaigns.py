@@ -24,6 +24,7 @@ from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
+    EXIT_TOO_MANY_FAILURES,
     CampaignArg,
     NameOpt,
     QuietOpt,
@@ -94,7 +95,17 @@ def run(
         "--workers", help="Local worker processes (default: the campaign's, else one per "
         "core).")] = None,
     retry_failed: Annotated[bool, typer.Option(
-        "--retry-failed", help="Also redo runs that failed before.")] = False,
+        "--retry-failed", help="Also redo runs that failed before (their new record keeps "
+        "the earlier failures under previous_failures).")] = False,
+    max_failures: Annotated[str | None, typer.Option(
+        "--max-failures", metavar="N",
+        help="Stop the campaign (exit 3) once more runs failed in this session than N: a "
+        "count (0 stops at the first failure) or a fraction of the runs to do (0.1). Runs "
+        "not finished stay pending.")] = None,
+    prune: Annotated[bool, typer.Option(
+        "--prune", help="First remove the orphaned runs: the records and files in the "
+        "results folder of runs this campaign does not plan (e.g. values since removed from "
+        "an axis); says how many.")] = False,
     verify: Annotated[bool, typer.Option(
         "--verify", help="Checksum every finished run's file (by default only files whose "
         "size or mtime changed are), and redo the corrupt ones.")] = False,
@@ -112,18 +123,26 @@ def run(
     """Run a campaign on dask, resuming where it stopped.
 
     Finished runs are skipped, the rest run on a local dask cluster (default), a scheduler or
-    a dask-jobqueue cluster; one netCDF per run, phase.nc at the end. Exit 0 if every run
-    succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 130 when
-    interrupted (rerun to resume).
+    a dask-jobqueue cluster; one netCDF per run, phase.nc at the end. If the campaign
+    differs from the one its results were made with, what changed and the new, kept and
+    orphaned runs are printed first. Exit 0 if every run
+    succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 3 when
+    stopped by `--max-failures`, 130 when interrupted (rerun to resume).
     """
     from ..aggregate import write_phase
     from ..execute import describe_failure, drive
     from ..expand import expand
+    from ..failures import FailureLimit
     from ..store import CampaignStore
 
     err = err_console()
     setup_logging(err, verbose, quiet)
     c = load(err, campaign, set_, seeds, name, scheduler, workers)
+    try:
+        limit = None if max_failures is None else FailureLimit.parse(max_failures)
+    except ValueError as e:
+        error(err, e)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
     say = Console(stderr=True, highlight=False, soft_wrap=True, quiet=quiet)
     store = CampaignStore(results, c.name)
     lock = store.lock()
@@ -142,18 +161,20 @@ def run(
             disable=quiet or not err.is_terminal)
         events = ProgressEvents(say, progress, store)
         try:
+            report_changes(say, c, store, expansion if c.refine is None else None,
+                           prune=prune, hint="--prune removes them")
             with sigterm_as_interrupt(), progress:
                 try:
                     if c.refine is None:
                         plan, summary = drive(expansion, store, retry_failed=retry_failed,
                                               verify=verify, events=events,
-                                              dashboard=dashboard)
+                                              dashboard=dashboard, limit=limit)
                     else:  # an adaptive campaign: rounds planned from the results
                         from ..refine.driver import drive_rounds
 
                         plan, summary, expansion = drive_rounds(
                             c, store, retry_failed=retry_failed, verify=verify, events=events,
-                            dashboard=dashboard,
+                            dashboard=dashboard, limit=limit,
                             say=lambda line: say.print(line, markup=False))
                 finally:
                     events.close()
@@ -179,6 +200,12 @@ def run(
                       + "Fix the storage and rerun the same command.",
                       soft_wrap=True, highlight=False)
             raise typer.Exit(EXIT_BAD_INPUT)
+        if summary is not None and summary.stopped is not None:
+            error(err, f"stopped: {summary.stopped}. {summary.completed} run(s) finished "
+                  "this session; the runs not finished stay pending and phase.nc was not "
+                  f"rewritten. Details: nematic status {campaign}; rerun (with a higher "
+                  "--max-failures, or after a fix) to go on")
+            raise typer.Exit(EXIT_TOO_MANY_FAILURES)
         if summary is not None and summary.interrupted:
             err.print(f"[yellow]interrupted[/] after {summary.completed} run(s) "
                       f"({summary.ok} ok, {len(summary.failed)} failed); rerun the same "
@@ -222,6 +249,35 @@ def run(
         lock.release()
 
 
+def report_changes(say: Console, campaign: Any, store: Any, expansion: Any = None, *,
+                   prune: bool = False, hint: str = "") -> dict[str, Any] | None:
+    """Print what changed since the results were made (:mod:`sweep.changes`) and, with
+    ``prune``, remove the orphaned runs (the caller holds the lock); return the changes for
+    ``--json``."""
+    from ..changes import campaign_changes, run_counts
+    from ..changes import prune as prune_runs
+
+    changed = campaign_changes(campaign, store, expansion)
+    if changed is not None:
+        for line in changed.lines():
+            say.print(line, markup=False)
+        if changed.counts.orphaned and not prune and hint:
+            say.print(f"  the orphaned runs are kept; {hint}", markup=False)
+    if prune:
+        if changed is not None:
+            orphaned = changed.counts.orphaned
+        else:
+            from ..refine.rounds import expansion_for
+
+            orphaned = run_counts(campaign, expansion or expansion_for(campaign, store), store,
+                                  store.scan()).orphaned
+        n = prune_runs(store, orphaned)
+        say.print(f"pruned {n} orphaned run(s) (their records and run files) from "
+                  f"{store.runs_dir}" if n else "nothing to prune: every run in the folder "
+                  "is planned by this campaign", markup=False)
+    return None if changed is None else changed.to_dict()
+
+
 def storage_message(store: Any, e: OSError) -> str:
     from ..files import storage_error
 
@@ -244,8 +300,9 @@ def status(
 ) -> None:
     """Show done / failed / pending runs, failure reasons and an ETA.
 
-    Counts are given overall and per sweep value. Only the run records are read (no netCDF),
-    so it answers in seconds for 10^5 runs, also while the campaign runs.
+    Counts are given overall and per sweep value, with what changed if the campaign differs
+    from the one its results were made with. Only the run records are read (no netCDF), so
+    it answers in seconds for 10^5 runs, also while the campaign runs.
     """
     from ..refine.rounds import expansion_for
     from ..status import campaign_status
@@ -259,9 +316,13 @@ def status(
     report = campaign_status(expansion, store, workers=workers)
     refinement = getattr(expansion, "refinement", None)  # an adaptive campaign's rounds
     if as_json:
+        from ..changes import campaign_changes
         from ..refine.rounds import status_dict
 
-        typer.echo(json.dumps({**report.to_dict(), **status_dict(refinement)}, default=str))
+        changed = campaign_changes(c, store, expansion)
+        typer.echo(json.dumps({**report.to_dict(), **status_dict(refinement),
+                               "changes": None if changed is None else changed.to_dict()},
+                              default=str))
         return
     pct = 100.0 * report.done / max(report.total, 1)
     console.print(f"campaign [bold]{report.campaign}[/] ({report.folder}): "
@@ -269,6 +330,8 @@ def status(
                   f"{report.pending} pending of {report.total} ({pct:.0f}% done)")
     if quiet:
         return
+    report_changes(console, c, store, expansion,
+                   hint="'nematic run --prune' removes them")
     if refinement is not None:
         from ..refine.report import status_lines
 
@@ -293,14 +356,9 @@ def status(
     if report.reasons:
         console.print("[red]failures by reason[/]: "
                       + ", ".join(f"{k}: {v}" for k, v in report.reasons.items()))
-        for ex in report.examples:
-            coords = ", ".join(f"{k}={v}" for k, v in ex["coords"].items())
-            t = ex.get("t_failed")
-            at = f" at t = {t:.4g}" if isinstance(t, (int, float)) else ""
-            detail = str(ex["detail"]).strip().splitlines()
-            console.print(f"  {ex['run_id']} ({coords}): {ex['reason']}{at}"
-                          + (f": {detail[-1]}" if detail else ""), soft_wrap=True)
-        console.print(f"  (full records with tracebacks: {store.runs_dir}/<run_id>.json)")
+        for group in report.failure_groups:
+            for line in failure_group_lines(group):
+                console.print(line, markup=False)
     if report.unreadable:
         console.print(f"[yellow]{report.unreadable} run(s) pending because their file is "
                       "missing, truncated or corrupt[/] (the next 'nematic run' redoes them):")
@@ -309,6 +367,23 @@ def status(
     if report.foreign_runs:
         console.print(f"{report.foreign_runs} run record(s) in the folder belong to other "
                       "grids (kept, not counted)")
+
+
+def failure_group_lines(group: dict[str, Any]) -> list[str]:
+    """``nematic status``'s lines for one failure reason: the count, the first such run
+    (swept values and seed, model time and date of the failure, message) and its files."""
+    coords = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                       for k, v in group["coords"].items())
+    t = group.get("t_failed")
+    at = f" at t = {t:.4g}" if isinstance(t, (int, float)) else ""
+    when = f" on {group['finished']}" if group.get("finished") else ""
+    detail = str(group.get("detail") or "").strip().splitlines()
+    files = f"record (with traceback): {group['record']}"
+    if group.get("run_file"):
+        files += f"; partial run file: {group['run_file']}"
+    return [f"  {group['reason']}: {group['count']} run(s); first: {group['run_id']} "
+            f"({coords}){at}{when}" + (f": {detail[-1]}" if detail else ""),
+            f"    {files}"]
 
 
 # --------------------------------------------------------------------------- aggregate

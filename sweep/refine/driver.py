@@ -19,6 +19,7 @@ from ..campaign import Campaign
 from ..clusters import open_cluster
 from ..errors import StoreError
 from ..execute import REMOTE_TMP_AGE, RunSummary, dashboard_link, run_campaign
+from ..failures import FailureLimit
 from ..plan import Plan, plan_runs
 from ..store import CampaignStore
 from .report import round_lines
@@ -36,6 +37,7 @@ def _merge(total: RunSummary, part: RunSummary) -> None:
     total.lost.extend(part.lost)
     total.unsaved.extend(part.unsaved)
     total.storage_error = total.storage_error or part.storage_error
+    total.stopped = total.stopped or part.stopped
     total.interrupted = total.interrupted or part.interrupted
     total.wall_time += part.wall_time
     total.run_time += part.run_time
@@ -43,13 +45,14 @@ def _merge(total: RunSummary, part: RunSummary) -> None:
 
 def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = False,
                  verify: bool = False, events: Any = None, dashboard: bool = False,
-                 say: Callable[[str], None] = print
+                 say: Callable[[str], None] = print, limit: FailureLimit | None = None
                  ) -> tuple[Plan, RunSummary | None, RefinedExpansion]:
     """Run a refined campaign to its end (or to an interruption) while holding its lock.
 
     Returns the plan of what was on disk when it started (for the failures found there), the
     summary of the runs done by this call (``None`` if none was to do) and the union grid of
-    the rounds for ``phase.nc``. ``say`` prints each round's plan."""
+    the rounds for ``phase.nc``. ``say`` prints each round's plan; ``limit``
+    (``--max-failures``) counts the failures over every round of the session."""
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
     store.save_campaign_text(campaign.text, campaign.overrides)
@@ -98,12 +101,13 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                         campaign.execution, dashboard=dashboard, campaign_dir=store.root))
                     if dashboard and events is not None and hasattr(events, "dashboard"):
                         events.dashboard(dashboard_link(force.client))
-                summary = run_campaign(runs, store, force, plan, events)
+                summary = run_campaign(runs, store, force, plan, events, limit=limit)
                 if total is None:
                     total = RunSummary(total=0, skipped=summary.skipped,
                                        failed_before=summary.failed_before)
                 _merge(total, summary)
-                if summary.interrupted or summary.storage_error or summary.lost:
+                if (summary.interrupted or summary.storage_error or summary.lost
+                        or summary.stopped):
                     break
         except KeyboardInterrupt:  # while the cluster was starting or closing
             if total is None:

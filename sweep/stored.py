@@ -1,0 +1,58 @@
+"""The campaign a results folder was made with: ``results/<name>/campaign.yaml``, the text
+of the last ``nematic run`` with its command-line overrides as header comments
+(:meth:`sweep.store.CampaignStore.save_campaign_text`), read back as a
+:class:`~sweep.campaign.Campaign`."""
+
+from __future__ import annotations
+
+import ast
+from typing import Any
+
+from .campaign import Campaign
+from .errors import StoreError
+from .spec import Overrides, parse_campaign
+from .store import OVERRIDE_PREFIX, CampaignStore
+
+
+def stored_overrides(text: str) -> Overrides:
+    """The overrides a campaign copy's header records (``--set``, ``--seeds``, ``--name``;
+    the execution overrides do not change the runs and are left out)."""
+    settings: dict[str, Any] = {}
+    seeds: Any = None
+    name = None
+    for line in text.splitlines():
+        if not line.startswith(OVERRIDE_PREFIX):
+            break
+        option, _, value = line[len(OVERRIDE_PREFIX):].partition(" ")
+        try:
+            if option == "--set":
+                key, _, literal = value.partition("=")
+                settings[key] = ast.literal_eval(literal)
+            elif option == "--seeds":
+                seeds = ast.literal_eval(value)
+            elif option == "--name":
+                name = value
+        except (ValueError, SyntaxError):
+            continue  # not written by this code: the campaign text alone
+    return Overrides(settings=settings, seeds=seeds, name=name)
+
+
+def stored_text(store: CampaignStore) -> str | None:
+    """The campaign copy's text, or ``None`` when the folder has none."""
+    try:
+        return store.campaign_copy.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as e:
+        raise StoreError(f"cannot read {store.campaign_copy}: {e}") from None
+
+
+def stored_campaign(store: CampaignStore, text: str | None = None) -> Campaign | None:
+    """The campaign of the folder's copy (validated by this code), ``None`` without a copy.
+    Raises :class:`~sweep.errors.CampaignError` when this code does not accept it."""
+    if text is None:
+        text = stored_text(store)
+    if text is None:
+        return None
+    return parse_campaign(text, str(store.campaign_copy), stored_overrides(text),
+                          default_name=store.root.name)

@@ -105,7 +105,7 @@ ResultsOpt = Annotated[Path, typer.Option(
     help="Folder holding `results/NAME/` for every campaign.")]
 SetOpt = Annotated[list[str] | None, typer.Option(
     "--set", metavar="NAME=VALUE",
-    help="Override a base parameter or numerics value (repeatable), e.g. --set resolution=64.")]
+    help="Override a base parameter or numerics value (repeatable), e.g. --set mechanics=linear.")]
 SeedsOpt = Annotated[str | None, typer.Option(
     "--seeds", help="Override the seeds: a count (5) or a list (0,1,2).")]
 NameOpt = Annotated[str | None, typer.Option(

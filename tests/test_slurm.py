@@ -1,7 +1,10 @@
 """Campaigns on a real one-node SLURM (scripts/slurm_local.sh) through execution.cluster:
-the local run's phase.nc, jobs cancelled mid-campaign (one; all, replaced), replacements
-that keep dying and a wrong `python` (a bounded, non-zero exit naming the job logs and
-quoting the worker's error; a rerun resumes). TLS is on (the default) in all of them.
+the local run's phase.nc, jobs cancelled mid-campaign (one; all, replaced; one mid-run, its
+run redone, not failed), workers retiring before a walltime shorter than the campaign, the
+driver as a batch job (the docs' script) stopped by `nematic stop` through scancel and
+resubmitted, replacements that keep dying and a wrong `python` (a bounded, non-zero exit
+naming the job logs and quoting the worker's error; a rerun resumes). TLS is on (the
+default) in all of them.
 
 Marked `slurm` (run with ``pytest -m slurm``; .ci/run does): the fixture installs the
 Debian packages and starts the daemons, so it needs root and apt-get; elsewhere the tests

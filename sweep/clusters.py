@@ -19,9 +19,17 @@ from typing import Any
 
 from .campaign import CLUSTER_KINDS, ClusterSpec, ExecutionSpec
 from .errors import ClusterError
+from .lifetime import worker_lifetime
 from .workforce import JOB_LOGS, TLS_DIR, JobWatch, Workforce
 
 log = logging.getLogger(__name__)
+
+#: A run whose worker is lost under it (the process dies: a batch job cancelled, preempted
+#: or past its walltime, a crash) is run again by the scheduler the driver starts, at most
+#: this many times (dask's ``allowed-failures``); then it stays pending (no record: not a
+#: failure of the run) and the driver says so. A worker that retires (its lifetime,
+#: :mod:`sweep.lifetime`) hands its runs back without counting.
+WORKER_LOSSES = 3
 
 
 def local_worker_count(execution: ExecutionSpec) -> int:
@@ -68,6 +76,11 @@ def jobqueue_options(spec: ClusterSpec, execution: ExecutionSpec,
             logs.mkdir(parents=True, exist_ok=True)
     scheduler_options = dict(options.get("scheduler_options") or {})
     scheduler_options.setdefault("dashboard_address", "127.0.0.1:0")
+    scheduler_options.setdefault("allowed_failures", WORKER_LOSSES)
+    extra, retiring = worker_lifetime(spec.kind, options)
+    if retiring is not None:
+        options["worker_extra_args"] = extra
+        log.info("%s", retiring)
     options["scheduler_options"] = scheduler_options
     security = _security(execution)
     if security is not None:
@@ -145,7 +158,8 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
                                # the scheduler's HTTP server (health, metrics; the dashboard
                                # if asked for) on the loopback interface, a free port
                                dashboard_address="127.0.0.1:0",
-                               scheduler_kwargs={"dashboard": dashboard},
+                               scheduler_kwargs={"dashboard": dashboard,
+                                                 "allowed_failures": WORKER_LOSSES},
                                silence_logs=logging.ERROR, **kwargs)
     with cluster, Client(cluster) as client:
         yield Workforce(client, "the local dask cluster")

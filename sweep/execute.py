@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from .campaign import ExecutionSpec
-from .clusters import jobqueue_options, make_jobqueue, open_cluster
+from .clusters import WORKER_LOSSES, jobqueue_options, make_jobqueue, open_cluster
 from .errors import ClusterError
 from .expand import Expansion, RunSpec
 from .failures import FailureLimit
@@ -112,6 +112,10 @@ class RunSummary:
     failed_before: int = 0
     #: runs whose dask task was cancelled under them (scheduler or cluster gone): no record
     lost: list[RunSpec] = field(default_factory=list)
+    #: runs whose worker was lost under them more than ``WORKER_LOSSES`` times (batch jobs
+    #: cancelled, preempted or past their walltime; or a run that kills its worker): no
+    #: record, they stay pending
+    worker_lost: list[RunSpec] = field(default_factory=list)
     #: why results cannot be stored (the driver stopped: the runs left stay pending)
     storage_error: str | None = None
     #: results that could not be written where they belong (kept elsewhere if possible)
@@ -129,17 +133,17 @@ class RunSummary:
 
 
 def _lost_task_record(task: RunTask, exc: BaseException) -> Record:
+    detail = f"{type(exc).__name__}: {exc}"
+    tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    return failure_record(task, "exception", detail, tb, math.nan)
+
+
+def _worker_lost(exc: BaseException) -> bool:
+    """Whether ``exc`` says the run's worker was lost under it more often than dask retries
+    (:data:`~sweep.clusters.WORKER_LOSSES`): not a failure of the run."""
     from distributed import KilledWorker
 
-    if isinstance(exc, KilledWorker):
-        reason = "killed_worker"
-        detail = (f"the run's worker died repeatedly ({exc}); it may exhaust memory or "
-                  "crash the interpreter")
-    else:
-        reason = "exception"
-        detail = f"{type(exc).__name__}: {exc}"
-    tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
-    return failure_record(task, reason, detail, tb, math.nan)
+    return isinstance(exc, KilledWorker)
 
 
 def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Workforce,
@@ -213,12 +217,16 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
                 fut.cancel()
             record = store.read_record(run.run_id)
             if record is None:
-                if client.status == "running":
+                if client.status != "running":
+                    summary.lost.append(run)
+                elif attempts.get(i, 0) < WORKER_LOSSES:
                     log.warning("the result of run %s was lost with its worker (%s); it "
                                 "runs again", run.run_id, type(e).__name__)
                     queue.append(i)
                 else:
-                    summary.lost.append(run)
+                    log.warning("the result of run %s was lost with its worker %d times; "
+                                "it stays pending", run.run_id, attempts.get(i, 0) + 1)
+                    summary.worker_lost.append(run)
                 return True
         except CancelledError as e:  # the cluster went away under the run: not its fault
             (log.debug if summary.lost else log.warning)(
@@ -233,6 +241,13 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
                 queue.clear()  # nothing more can be submitted
             return True
         except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
+            if _worker_lost(e):  # not the run's failure: it stays pending (no record)
+                log.warning("run %s lost its worker %d times (batch jobs cancelled, "
+                            "preempted or past their walltime, or the run kills its worker: "
+                            "memory?); it stays pending", run.run_id, WORKER_LOSSES + 1)
+                summary.worker_lost.append(run)
+                fut.release()
+                return True
             record = _lost_task_record(task, e)
             record.update(task.identity())
             store.write_record(record)

@@ -66,10 +66,13 @@ MANIFEST_KEYS = ("status", "reason", "detail", "t_failed", "seed", "wall_time", 
 #: time axis is ``t``, or ``time`` in files of schema 1: see :func:`series_time`).
 RUN_FILE_VARIABLES = ("sigma2_S",)
 MAX_DETAIL = 500
-#: Reasons of records that say the result could not be stored, not that the run failed:
-#: such runs are redone by default (the worker writes no such record; a results folder may
-#: still hold some).
-RETRYABLE_REASONS = ("write_error",)
+#: Reasons of records that say the result could not be stored, or that the run's worker
+#: was lost under it, not that the run failed: such runs are redone by default (neither the
+#: worker nor the driver writes such records now; a results folder may still hold some).
+RETRYABLE_REASONS = ("write_error", "killed_worker")
+#: Set by ``nematic run --detach`` for its background driver: where its output goes (kept
+#: in the lock's holder information, shown by ``nematic status``).
+DRIVER_LOG_ENV = "NEMATIC_DRIVER_LOG"
 
 Record = dict[str, Any]
 
@@ -174,6 +177,9 @@ class CampaignLock:
             ) from None
         info = {"pid": os.getpid(), "host": socket.gethostname(), "started": now_iso(),
                 "command": command}
+        for key, var in (("slurm_job", "SLURM_JOB_ID"), ("log", DRIVER_LOG_ENV)):
+            if os.environ.get(var):  # a driver in a batch job; a detached driver's log
+                info[key] = os.environ[var]
         with contextlib.suppress(OSError):  # who holds it is a courtesy (a full disk...)
             os.ftruncate(fd, 0)
             os.pwrite(fd, (json.dumps(info) + "\n").encode(), 0)
@@ -198,7 +204,8 @@ class CampaignLock:
 
 
 def read_lock_holder(path: Path) -> dict[str, Any] | None:
-    """Who holds the lock (pid, host, started, command), or ``None`` if nobody does."""
+    """Who holds the lock (pid, host, started, command; ``slurm_job`` for a driver in a SLURM
+    job, ``log`` for a detached one), or ``None`` if nobody does."""
     import fcntl
 
     try:

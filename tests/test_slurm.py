@@ -1,7 +1,10 @@
 """Campaigns on a real one-node SLURM (scripts/slurm_local.sh) through execution.cluster:
-the local run's phase.nc, jobs cancelled mid-campaign (one; all, replaced), replacements
-that keep dying and a wrong `python` (a bounded, non-zero exit naming the job logs and
-quoting the worker's error; a rerun resumes). TLS is on (the default) in all of them.
+the local run's phase.nc, jobs cancelled mid-campaign (one; all, replaced; one mid-run, its
+run redone, not failed), workers retiring before a walltime shorter than the campaign, the
+driver as a batch job (the docs' script) stopped by `nematic stop` through scancel and
+resubmitted, replacements that keep dying and a wrong `python` (a bounded, non-zero exit
+naming the job logs and quoting the worker's error; a rerun resumes). TLS is on (the
+default) in all of them.
 
 Marked `slurm` (run with ``pytest -m slurm``; .ci/run does): the fixture installs the
 Debian packages and starts the daemons, so it needs root and apt-get; elsewhere the tests
@@ -266,3 +269,121 @@ def test_the_docs_slurm_example_runs_on_one_machine(slurm, tmp_path):
     assert rc == 0, out
     assert "2 run(s) in" in out, out
     assert list((tmp_path / "logs").glob("dask-worker-*.err"))
+
+
+# ----------------------------------------------------------------------------- lost workers
+LOW_PRIORITY = "    job_script_prologue: ['renice -n 19 -p $$ >/dev/null']\n"
+
+
+def test_a_job_cancelled_mid_run_has_its_run_redone_not_failed(slurm, tmp_path):
+    """One job, one worker: once a run is recorded the worker is on the next one, so
+    cancelling the job cuts a run short; that run goes back to pending and is redone by the
+    replacement job, and no run is recorded as failed."""
+    path = slurm_campaign(tmp_path, "cut", values="[0.1, 0.12, 0.14, 0.16, 0.18, 0.2]",
+                          seeds=3, t_final=4.0, scale="jobs: 1", extra=LOW_PRIORITY)
+    results, log = tmp_path / "results", tmp_path / "log"
+    runs = results / "cut" / "runs"
+    driver = run_in_background(path, results, log)
+    try:
+        wait_for_records(runs, 1, driver, log)
+        [victim] = queue()
+        subprocess.run(["scancel", victim], check=True)
+        rc = driver.wait(timeout=300)
+    finally:
+        kill_group(driver)
+    text = " ".join(log.read_text().split())
+    assert rc == 0, text
+    assert f"batch job {victim} (" in text, text
+    assert "submitting a replacement" in text, text
+    recs = records(runs)
+    assert sorted(recs) == sorted(run_ids(path))
+    assert all(r["status"] == "ok" for r in recs.values()), recs
+    assert len({r["pid"] for r in recs.values()}) >= 2  # the replacement's worker did runs
+
+
+def test_workers_retire_before_a_walltime_shorter_than_the_campaign(slurm, tmp_path):
+    """A 30-second walltime (SLURM enforces it as one minute): the workers retire after
+    about 21 s (sweep/lifetime.py), before SLURM would kill them; their jobs are replaced
+    and a campaign several times longer completes with every run ok. (So short a walltime
+    that the campaign outlasts several worker lifetimes however fast the machine is.)"""
+    path = slurm_campaign(tmp_path, "short-walltime", values="{linspace: [0.1, 0.5, 40]}",
+                          seeds=5, t_final=4.0, scale="jobs: 1", give_up=180,
+                          extra=LOW_PRIORITY)
+    path.write_text(path.read_text().replace('walltime: "00:10:00"', 'walltime: "00:00:30"'))
+    results = tmp_path / "results"
+    rc, out, took = nematic(["run", path, "--results", results], timeout=900)
+    folder = results / "short-walltime"
+    logs = sorted((folder / "jobs").glob("*.err"))
+    print(f"200 runs under a 30-second walltime in {took:.0f} s, {len(logs)} job(s)")
+    assert rc == 0, out[-3000:]
+    recs = records(folder / "runs")
+    assert sorted(recs) == sorted(run_ids(path))
+    assert all(r["status"] == "ok" for r in recs.values())
+    jobs = " ".join(p.read_text() for p in logs)
+    assert "Reason: worker-lifetime-reached" in jobs, jobs[-3000:]
+    assert "DUE TO TIME LIMIT" not in jobs, jobs[-3000:]  # retired, not killed
+    assert "ended; submitting a replacement" in out
+    assert len(logs) >= 2
+    assert len({r["pid"] for r in recs.values()}) >= 2
+
+
+# ----------------------------------------------------------------------------- the driver's job
+def docs_driver_script() -> str:
+    """The driver's batch script of docs/campaigns.md (the sh block starting `#!/bin/bash`)."""
+    text = (ROOT / "docs" / "campaigns.md").read_text()
+    start = text.index("```sh\n#!/bin/bash\n") + len("```sh\n")
+    return text[start:text.index("```", start)]
+
+
+def test_the_driver_as_a_batch_job_and_nematic_stop(slurm, tmp_path, monkeypatch):
+    """The docs' batch script runs the driver in a job of its own (its worker jobs beside
+    it); `nematic status` names the job; `nematic stop` from another host (as a login node
+    is) stops it through scancel: exit 130 in its log, the runs not finished pending; the
+    same script submitted again completes the campaign."""
+    from typer.testing import CliRunner
+
+    from sweep.cli import app
+
+    venv = Path(sys.prefix)
+    campaign = slurm_campaign(tmp_path, "fig2-slurm", values="{linspace: [0.1, 0.5, 20]}",
+                              seeds=4, t_final=4.0, scale="jobs: 1", extra=LOW_PRIORITY)
+    script = docs_driver_script()
+    for old, new in [("/shared/me/nematic/.venv", str(venv)),
+                     ("fig2-driver-%j.log", str(tmp_path / "driver-%j.log"))]:
+        assert old in script, old
+        script = script.replace(old, new)
+    (tmp_path / "driver.sh").write_text(script)
+    results = tmp_path / "results"
+    env = dict(os.environ, NEMATIC_RESULTS=str(results), COLUMNS="300")
+
+    def submit() -> str:
+        return subprocess.run(["sbatch", "--parsable", str(tmp_path / "driver.sh")],
+                              cwd=tmp_path, env=env, capture_output=True, text=True,
+                              check=True).stdout.strip()
+
+    runs = results / "fig2-slurm" / "runs"
+    job = submit()
+    wait_for(lambda: len(list(runs.glob("*.json"))) >= 1 or job not in queue(), 300,
+             "a finished run")
+    assert job in queue(), (tmp_path / f"driver-{job}.log").read_text()
+    status = CliRunner().invoke(app, ["status", str(campaign), "--results", str(results)])
+    assert f"SLURM job {job}" in status.output, status.output
+    monkeypatch.setattr("sweep.detach.socket.gethostname", lambda: "login-node")
+    stop = CliRunner().invoke(app, ["stop", "fig2-slurm", "--results", str(results)])
+    text = " ".join(stop.output.split())
+    assert stop.exit_code == 0, text
+    assert f"(scancel --batch --signal=TERM {job})" in text, text
+    wait_for(lambda: job not in queue(), 120, "the driver's job to end")
+    log = " ".join((tmp_path / f"driver-{job}.log").read_text().split())
+    assert "interrupted after" in log, log[-3000:]
+    done = len(records(runs))
+    assert 1 <= done < 80
+    assert all(r["status"] == "ok" for r in records(runs).values())
+    again = submit()
+    wait_for(lambda: again not in queue(), 600, "the resubmitted driver to finish")
+    log = " ".join((tmp_path / f"driver-{again}.log").read_text().split())
+    assert "phase diagram:" in log, log[-3000:]
+    recs = records(runs)
+    assert sorted(recs) == sorted(run_ids(campaign))
+    assert all(r["status"] == "ok" for r in recs.values())
+    wait_for(lambda: not queue(), 60, "the worker jobs to end with the campaign")

@@ -117,6 +117,11 @@ def run(
     dashboard: Annotated[bool, typer.Option(
         "--dashboard/--no-dashboard", help="Serve the dask dashboard (local cluster: on "
         "127.0.0.1, a free port) and print its link.")] = True,
+    detach: Annotated[bool, typer.Option(
+        "--detach", help="Run the driver in the background, in a session of its own "
+        "(closing the terminal or logging out does not end it), its output in "
+        "results/NAME/driver.log; prints how to follow it (`tail -f`, `nematic status`) and "
+        "stop it (`nematic stop NAME`).")] = False,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -127,9 +132,11 @@ def run(
     differs from the one its results were made with, what changed and the new, kept and
     orphaned runs are printed first. Exit 0 if every run
     succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 3 when
-    stopped by `--max-failures`, 130 when interrupted (rerun to resume).
+    stopped by `--max-failures`, 130 when interrupted (rerun to resume). With `--detach`,
+    0 once the driver runs in the background.
     """
     from ..aggregate import write_phase
+    from ..clusters import WORKER_LOSSES
     from ..execute import describe_failure, drive
     from ..expand import expand
     from ..failures import FailureLimit
@@ -143,6 +150,10 @@ def run(
     except ValueError as e:
         error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
+    if detach:
+        from .driver import run_detached
+
+        run_detached(c, results, campaign, quiet)
     say = Console(stderr=True, highlight=False, soft_wrap=True, quiet=quiet)
     store = CampaignStore(results, c.name)
     lock = store.lock()
@@ -231,8 +242,13 @@ def run(
         if summary is not None and summary.lost:
             err.print(f"[yellow]{len(summary.lost)} run(s) were cancelled by dask[/] (the "
                       "scheduler or cluster went away); rerun the same command to do them")
-            if not n_failed:
-                raise typer.Exit(EXIT_FAILED_RUNS)
+        if summary is not None and summary.worker_lost:
+            err.print(f"[yellow]{len(summary.worker_lost)} run(s) lost their worker more "
+                      f"than {WORKER_LOSSES} times[/] (batch jobs cancelled, preempted or past "
+                      "their walltime, or the run kills its worker: memory?); they stay "
+                      "pending: rerun the same command to do them")
+        if summary is not None and (summary.lost or summary.worker_lost) and not n_failed:
+            raise typer.Exit(EXIT_FAILED_RUNS)
         if n_failed:
             err.print(f"[red]{n_failed} run(s) failed[/]:")
             for r, rec in failures[:20]:
@@ -330,6 +346,7 @@ def status(
                   f"{report.pending} pending of {report.total} ({pct:.0f}% done)")
     if quiet:
         return
+    console.print(driver_line(report.running, report.campaign), markup=False)
     report_changes(console, c, store, expansion,
                    hint="'nematic run --prune' removes them")
     if refinement is not None:
@@ -337,9 +354,6 @@ def status(
 
         for line in status_lines(refinement):
             console.print(line, markup=False)
-    if report.running:
-        console.print(f"running: pid {report.running.get('pid')} on "
-                      f"{report.running.get('host')} since {report.running.get('started')}")
     if report.pending:
         basis = f" ({report.eta_basis})" if report.eta_basis else ""
         console.print(f"ETA: {fmt_time(report.eta_seconds)}{basis}")
@@ -367,6 +381,17 @@ def status(
     if report.foreign_runs:
         console.print(f"{report.foreign_runs} run record(s) in the folder belong to other "
                       "grids (kept, not counted)")
+
+
+def driver_line(running: dict[str, Any] | None, name: str) -> str:
+    """Whether a driver holds the campaign (the lock's holder: alive, since the kernel
+    releases the lock when it ends), with its pid, host, start, SLURM job and log."""
+    if running is None:
+        return "driver: none running"
+    job = f", SLURM job {running['slurm_job']}" if running.get("slurm_job") else ""
+    log = f"; log: {running['log']}" if running.get("log") else ""
+    return (f"driver running: pid {running.get('pid')} on {running.get('host')} since "
+            f"{running.get('started')}{job}{log} (nematic stop {name} stops it)")
 
 
 def failure_group_lines(group: dict[str, Any]) -> list[str]:

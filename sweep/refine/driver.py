@@ -35,6 +35,7 @@ def _merge(total: RunSummary, part: RunSummary) -> None:
     total.ok += part.ok
     total.failed.extend(part.failed)
     total.lost.extend(part.lost)
+    total.worker_lost.extend(part.worker_lost)
     total.unsaved.extend(part.unsaved)
     total.storage_error = total.storage_error or part.storage_error
     total.stopped = total.stopped or part.stopped
@@ -107,7 +108,7 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                                        failed_before=summary.failed_before)
                 _merge(total, summary)
                 if (summary.interrupted or summary.storage_error or summary.lost
-                        or summary.stopped):
+                        or summary.worker_lost or summary.stopped):
                     break
         except KeyboardInterrupt:  # while the cluster was starting or closing
             if total is None:

@@ -1,0 +1,44 @@
+"""A run whose worker is lost more often than the scheduler retries it (dask's KilledWorker,
+after ``sweep.clusters.WORKER_LOSSES`` losses) stays pending: no record, not a failure."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from sweep_helpers import write_campaign
+
+import sweep.execute as execute
+from sweep.expand import expand
+from sweep.plan import plan_runs
+from sweep.spec import load_campaign
+from sweep.status import campaign_status
+from sweep.store import CampaignStore
+
+
+def test_a_run_whose_worker_is_lost_too_often_stays_pending(tmp_path, monkeypatch):
+    from distributed import Client, KilledWorker, LocalCluster
+
+    path = write_campaign(tmp_path, values="[0.1, 0.2]", seeds=1, t_final=1.0, workers=1)
+    expansion = expand(load_campaign(path))
+    store = CampaignStore(tmp_path / "results", expansion.campaign.name)
+    store.ensure()
+    plan = plan_runs(expansion, store)
+    victim = expansion.run_ids[0]
+    real = execute.execute_run
+
+    def lost_with_its_worker(task):  # what the scheduler reports after the last retry
+        if task.run_id == victim:
+            raise KilledWorker(f"nematic-run-{victim}",
+                               SimpleNamespace(address="tls://lost:1"), 3)  # type: ignore[arg-type]
+        return real(task)
+
+    monkeypatch.setattr(execute, "execute_run", lost_with_its_worker)
+    with LocalCluster(n_workers=1, processes=False, threads_per_worker=1,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        summary = execute.run_campaign(expansion, store, client, plan)
+    assert [r.run_id for r in summary.worker_lost] == [victim]
+    assert summary.ok == 1
+    assert not summary.failed
+    assert store.read_record(victim) is None
+    report = campaign_status(expansion, store)
+    assert (report.done, report.failed, report.pending) == (1, 0, 1)

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, export, figures, simulate, stability
+from . import campaigns, export, figures, report, simulate, stability
 from .app import app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
@@ -24,6 +24,7 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "status": campaigns.status,
     "aggregate": campaigns.aggregate,
     "export": export.export,
+    "report": report.report,
     "simulate": simulate.simulate,
     "stability": stability.stability,
     "figures": figures.figures,

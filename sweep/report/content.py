@@ -188,7 +188,7 @@ def refine_rounds(plan: Mapping[str, Any] | None) -> dict[str, Any] | None:
                                               "states": []})
             entry["seeds"].append(str(r.get("seed")))
             entry["states"].append(str(r.get("state")))
-        rounds.append({"number": rnd.get("number", len(rounds)), "n_runs": len(runs),
+        rounds.append({"number": rnd.get("round", len(rounds)), "n_runs": len(runs),
                        "points": list(points.values())})
     return {"rounds": rounds, "finished": bool(plan.get("finished")),
             "stop": plan.get("stop") or "", "run_bound": plan.get("run_bound")}

@@ -110,7 +110,7 @@ def run_views(path: Path) -> tuple[str, list[float], list[float]]:
         with np.errstate(all="ignore"):
             safe_snapshot(ax, run, -1, colorbar=False, arrows=16)
         t_snap = float(run["snapshot_time"].values[-1])
-        ax.set_title(f"S (colour) and director, t/tau = {t_snap:g}", fontsize=7)
+        ax.set_title(f"director (colour: S) over I1bar, t/tau = {t_snap:g}", fontsize=7)
         image = png_data_uri(fig)
     return image, t[keep].tolist(), y[keep].tolist()
 
@@ -201,6 +201,7 @@ def _figure(x: Axis, y: Axis | None, title: str, tools: str) -> Any:
     from bokeh.plotting import figure
 
     fig = figure(title=title, width=520 if y is None else 440, height=380, tools=tools,
+                 name="phase_diagram",
                  x_axis_type="log" if x.log else "linear",
                  y_axis_type="log" if y is None or y.log else "linear",
                  x_axis_label=x.name, y_axis_label=f"{SHOWN} (seed mean)" if y is None
@@ -267,7 +268,7 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
         fig.line([cols["x"][i] for i in order], [cols["y"][i] for i in order], line_width=2,
                  color="#1f77b4")
         renderers = [fig.scatter("x", "y", source=source, size=11, color="#1f77b4",
-                                 name="points")]
+                                 name="phase_points")]
         plots.append(fig)
     else:
         finite = [v for v in cols["shown_log"] if math.isfinite(v)]
@@ -287,7 +288,7 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
             view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
             renderers.append(fig.scatter(
                 "x", "y", source=source, view=view, size=16, line_color="black",
-                fill_color={"field": "shown_log", "transform": mapper}, name="points"))
+                fill_color={"field": "shown_log", "transform": mapper}, name="phase_points"))
             fig.add_layout(ColorBar(color_mapper=mapper, width=10), "right")
             plots.append(fig)
     series = ColumnDataSource({"t": [], "y": []}, name="series")

@@ -35,7 +35,7 @@ MAX_POINTS_WITH_RUNS = 200
 #: Facets of a campaign with more than two sweep dims.
 MAX_FACETS = 9
 STATUS_OK, STATUS_FAILED = 1, 2
-SNAPSHOT_INCHES, SNAPSHOT_DPI = 2.6, 80
+SNAPSHOT_INCHES, SNAPSHOT_DPI = 2.6, 100
 HINT = "<p>Click a point of the phase diagram to show one of its runs here.</p>"
 
 #: The one piece of page code: copy the clicked point's run into the run panel.

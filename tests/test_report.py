@@ -158,3 +158,50 @@ def test_hover_texts_give_each_seed_and_skip_points_not_run(tmp_path):
     assert cols["shown"] == [pytest.approx(1e-3)]
     assert cols["snapshot"] == [""]
     assert cols["run_id"] == ["a"]
+
+
+def _phase(shape: dict[str, list], seeds: int = 1) -> xr.Dataset:
+    dims = [*shape, "seed"]
+    size = [len(v) for v in shape.values()] + [seeds]
+    n = int(np.prod(size))
+    return xr.Dataset(
+        {"status": (dims, np.ones(size, dtype=int)),
+         "run_id": (dims, np.array([f"r{i}" for i in range(n)]).reshape(size)),
+         "sigma2_S": (dims, np.linspace(1e-4, 1e-2, n).reshape(size))},
+        coords={**shape, "seed": list(range(seeds))})
+
+
+def _plots(layout) -> list:
+    from bokeh.models import Plot
+
+    return [m for m in layout.select({"type": Plot}) if m.name == "phase_diagram"]
+
+
+def test_one_two_and_more_dims_give_a_line_a_scatter_and_facets(tmp_path):
+    from sweep.report.phase_plot import MAX_FACETS, phase_layout
+
+    layout, embedded, notes = phase_layout(_phase({"alpha_minus_B": [0.1, 0.3, 0.5]}),
+                                           tmp_path)
+    (plot,) = _plots(layout)
+    assert plot.yaxis[0].axis_label == "sigma2_S (seed mean)"
+    assert embedded == 0  # no run files here
+    assert notes == ["0 of 3 points show a run when clicked (at most 200; a run that failed "
+                     "at once may leave nothing to show)"]
+    # 2-D with a text axis: its values become tick labels at 0, 1
+    layout, _, _ = phase_layout(
+        _phase({"alpha_minus_B": [0.1, 0.3], "mechanics": ["linear", "finite"]}), tmp_path)
+    (plot,) = _plots(layout)
+    assert plot.yaxis[0].major_label_overrides == {0: "linear", 1: "finite"}
+    source = layout.select_one({"name": "points"})
+    assert sorted(zip(source.data["x"], source.data["y"], strict=True)) == [
+        (0.1, 0.0), (0.1, 1.0), (0.3, 0.0), (0.3, 1.0)]
+    # 4-D: the first two dims, one facet per combination of the others, at most MAX_FACETS
+    layout, _, notes = phase_layout(
+        _phase({"alpha_minus_B": [0.1, 0.3], "K": [1e-4, 1e-3], "eps": [0.0, 0.1, 0.2],
+                "chi": [1.0, 2.0, 3.0, 4.0]}), tmp_path)
+    plots = _plots(layout)
+    assert len(plots) == MAX_FACETS < 12
+    shown = {p.title.text.split(" at ")[1].split(";")[0] for p in plots}
+    assert shown == {f"eps={e}, chi={c}" for e in ("0", "0.1") for c in (1, 2, 3, 4)} | {
+        "eps=0.2, chi=1"}  # in the grid's order, chi varying fastest
+    assert notes[-1] == f"12 combinations of eps, chi: the first {MAX_FACETS} are shown"

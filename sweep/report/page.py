@@ -109,6 +109,7 @@ def build_report(opened: CampaignResults) -> str:
     from bokeh.embed.bundle import bundle_for_objs_and_resources
     from bokeh.resources import INLINE
 
+    from ..aggregate import phase_dataset
     from ..status import campaign_status
     from .content import gather
     from .phase_plot import phase_layout
@@ -117,8 +118,6 @@ def build_report(opened: CampaignResults) -> str:
     expansion = opened.expansion()
     status = campaign_status(expansion, store)
     records = store.scan(save=False)
-    from ..aggregate import phase_dataset
-
     phase = phase_dataset(expansion, store, records)
     content = gather(opened, phase, status, records)
     layout, _, notes = phase_layout(phase, store.runs_dir)

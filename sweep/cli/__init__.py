@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, driver, export, figures, simulate, stability
+from . import campaigns, driver, export, figures, report, simulate, stability
 from .app import app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
@@ -25,6 +25,7 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "aggregate": campaigns.aggregate,
     "stop": driver.stop,
     "export": export.export,
+    "report": report.report,
     "simulate": simulate.simulate,
     "stability": stability.stability,
     "figures": figures.figures,

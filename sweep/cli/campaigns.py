@@ -39,7 +39,7 @@ from .app import (
     setup_logging,
     sigterm_as_interrupt,
 )
-from .products import regenerate_figures, repair_products
+from .products import regenerate_figures, regenerate_report, repair_products
 from .progress import ProgressEvents
 
 
@@ -113,7 +113,7 @@ def run(
         "--aggregate/--no-aggregate", help="Write phase.nc at the end.")] = True,
     figures: Annotated[bool, typer.Option(
         "--figures/--no-figures", help="After phase.nc, write fits.nc and the figures "
-        "(as 'nematic figures' does).")] = True,
+        "(as 'nematic figures' does), then report.html (as 'nematic report' does).")] = True,
     dashboard: Annotated[bool, typer.Option(
         "--dashboard/--no-dashboard", help="Serve the dask dashboard (local cluster: on "
         "127.0.0.1, a free port) and print its link.")] = True,
@@ -233,6 +233,9 @@ def run(
                     repair_products(c, results, err, phase=False)
                     for figure in regenerate_figures(c, results):
                         say.print(f"figure: {escape(str(figure))}")
+                    page = regenerate_report(c, results)
+                    if page is not None:
+                        say.print(f"report: {escape(str(page))}")
             except StoreError as e:
                 error(err, f"{e}; the runs are stored, rerun the same command (or nematic "
                       "aggregate) once the folder can be written")

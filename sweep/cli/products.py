@@ -52,3 +52,22 @@ def regenerate_figures(campaign: Campaign, results: Path) -> list[Path]:
     from ..figures.produce import regenerate
 
     return list(regenerate(campaign, results))
+
+
+def regenerate_report(campaign: Campaign, results: Path) -> Path | None:
+    """The report after a run's figures (:func:`sweep.report.write_report`): its path, or
+    ``None`` (logged) when it cannot be written; a report never sinks the run it follows."""
+    import logging
+
+    from model.errors import NematicError
+
+    from ..report import write_report
+    from ..tables import CampaignResults
+
+    try:
+        return write_report(CampaignResults(campaign, results))
+    except NematicError as e:
+        logging.getLogger(__name__).warning("report not written: %s", e)
+    except Exception:  # noqa: BLE001 - a bug here must not fail the campaign's runs
+        logging.getLogger(__name__).warning("report not written", exc_info=True)
+    return None

@@ -1,0 +1,261 @@
+"""What the report says, gathered from a campaign's results folder: the summary (question,
+grid, seeds, counts), the figures, the fits as tables, the failures by reason, the
+refinement rounds, the cost and the provenance. Plain data for :mod:`.page`; nothing here
+writes a file."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import xarray as xr
+
+from ..analysis.fits_file import FITS
+from ..figures.common import FIGURES
+from ..status import StatusReport
+
+if TYPE_CHECKING:
+    from ..tables import CampaignResults
+
+#: Failed runs listed under each reason (the count is always complete).
+MAX_FAILED_LISTED = 50
+#: Rows of one fits table (a fit over a long axis is cut, saying so).
+MAX_FIT_ROWS = 200
+HISTOGRAM_BINS = 20
+
+
+@dataclass
+class Table:
+    """A titled table of strings."""
+
+    title: str
+    columns: list[str]
+    rows: list[list[str]]
+    note: str = ""
+
+
+@dataclass
+class Content:
+    """Everything the page shows but the interactive phase diagram."""
+
+    name: str
+    description: str
+    axes: list[tuple[str, str]]
+    seeds: str
+    counts: dict[str, int]
+    figures: list[tuple[str, str]] = field(default_factory=list)
+    fits: list[Table] = field(default_factory=list)
+    failures: list[dict[str, Any]] = field(default_factory=list)
+    refine: dict[str, Any] | None = None
+    cost: dict[str, Any] = field(default_factory=dict)
+    provenance: list[tuple[str, str]] = field(default_factory=list)
+    campaign_yaml: str = ""
+
+
+def fmt(value: Any) -> str:
+    """A value for a table cell: numbers to 4 significant digits, NaN as a dash."""
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return "-" if not math.isfinite(value) else f"{float(value):.4g}"
+    return str(value)
+
+
+def _values(values: Any, limit: int = 12) -> str:
+    shown = [fmt(v) for v in list(values)[:limit]]
+    more = f", ... ({len(values)} values)" if len(values) > limit else ""
+    return ", ".join(shown) + more
+
+
+def summary(opened: CampaignResults, status: StatusReport) -> Content:
+    """The page's head: the campaign's question (its description), grid, seeds and counts."""
+    c = opened.campaign
+    axes = []
+    for d in c.dims:
+        for a in d.axes:
+            zipped = f" (zipped with {d.name})" if a.name != d.name else ""
+            axes.append((f"{a.name}{zipped}", _values(a.values)))
+    return Content(name=c.name, description=" ".join((c.description or "").split()),
+                   axes=axes, seeds=f"{len(c.seeds)}: {_values(c.seeds)}",
+                   counts={"runs": status.total, "done": status.done,
+                           "failed": status.failed, "pending": status.pending})
+
+
+def figure_images(root: Path) -> list[tuple[str, str]]:
+    """The campaign's figures (``figures/*.png``) as (name, data URI), sorted by name."""
+    import base64
+
+    out = []
+    for path in sorted((root / FIGURES).glob("*.png")):
+        data = base64.b64encode(path.read_bytes()).decode("ascii")
+        out.append((path.stem, f"data:image/png;base64,{data}"))
+    return out
+
+
+def _unit(var: xr.DataArray) -> str:
+    units = var.attrs.get("units")
+    return "" if not units or units == "1" else f" [{units}]"
+
+
+def fit_tables(fits: xr.Dataset) -> list[Table]:
+    """``fits.nc`` as tables: one per fit and set of dims. A scalar fit is one row per
+    variable (its value, interval, units and long name); a fit over sweep values is one
+    row per coordinate value, a column per variable (its name and units; the long names
+    in the table's note). Interval ends (``X_lower``, ``X_upper``) stand with ``X``."""
+    groups: dict[tuple[str, tuple[str, ...]], list[str]] = {}
+    for name, var in fits.data_vars.items():
+        fit = str(var.attrs.get("fit", str(name).split("_")[0]))
+        groups.setdefault((fit, tuple(str(d) for d in var.dims)), []).append(str(name))
+    tables = []
+    for (fit, dims), names in groups.items():
+        ends = {n for n in names for s in ("_lower", "_upper")
+                if n.endswith(s) and n[: -len(s)] in names}
+        if not dims:
+            rows = []
+            for n in names:
+                if n in ends:
+                    continue
+                lo, hi = f"{n}_lower", f"{n}_upper"
+                interval = (f"[{fmt(fits[lo].values.item())}, {fmt(fits[hi].values.item())}]"
+                            if lo in ends and hi in ends else "")
+                rows.append([n, fmt(fits[n].values.item()), interval,
+                             str(fits[n].attrs.get("units") or ""),
+                             str(fits[n].attrs.get("long_name") or "")])
+            tables.append(Table(title=fit, rows=rows,
+                                columns=["variable", "value", "interval", "units", "meaning"]))
+            continue
+        ordered = [m for n in names if n not in ends
+                   for m in (n, f"{n}_lower", f"{n}_upper") if m == n or m in ends]
+        headers = [f"{d}{_unit(fits[d])}" if d in fits.coords else d for d in dims]
+        headers += [f"{n}{_unit(fits[n])}" for n in ordered]
+        rows = []
+        size = int(np.prod([fits.sizes[d] for d in dims]))
+        for index in list(np.ndindex(*[fits.sizes[d] for d in dims]))[:MAX_FIT_ROWS]:
+            at = dict(zip(dims, index, strict=True))
+            row = [fmt(fits[d].values[i]) if d in fits.coords else str(i)
+                   for d, i in at.items()]
+            row += [fmt(fits[n].isel(at).values.item()) for n in ordered]
+            rows.append(row)
+        meanings = "; ".join(f"{n}: {fits[n].attrs['long_name']}" for n in ordered
+                             if n not in ends and fits[n].attrs.get("long_name"))
+        cut = f"the first {MAX_FIT_ROWS} of {size} rows. " if size > MAX_FIT_ROWS else ""
+        tables.append(Table(title=f"{fit} over {', '.join(dims)}", columns=headers, rows=rows,
+                            note=cut + meanings))
+    return tables
+
+
+def failure_groups(status: StatusReport, phase: xr.Dataset) -> list[dict[str, Any]]:
+    """The failures by reason, most frequent first: the count, the first run (status's
+    failure group: where its record and traceback are) and the failed runs, each with its
+    swept values and seed."""
+    from ..tables import runs_table
+
+    table = runs_table(phase)
+    failed = table[table["status"] == "failed"]
+    axes = [c for c in table.columns if c not in ("seed", "run_id", "status", "reason")
+            and c in phase.coords]
+    out = []
+    for group in status.failure_groups:
+        rows = failed[failed["reason"] == group["reason"]]
+        runs = [(", ".join(f"{a}={fmt(r[a])}" for a in axes), int(r["seed"]), str(r["run_id"]))
+                for _, r in rows.head(MAX_FAILED_LISTED).iterrows()]
+        detail = str(group.get("detail") or "").strip().splitlines()
+        out.append({"reason": group["reason"], "count": group["count"],
+                    "detail": detail[-1] if detail else "", "record": group["record"],
+                    "t_failed": fmt(group.get("t_failed")), "runs": runs,
+                    "more": max(0, len(rows) - MAX_FAILED_LISTED)})
+    return out
+
+
+def refine_rounds(plan: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """An adaptive campaign's rounds from ``refine.json``: per round its runs, new points and
+    why each point was run."""
+    if not plan or not isinstance(plan.get("rounds"), list):
+        return None
+    rounds: list[dict[str, Any]] = []
+    for rnd in plan["rounds"]:
+        runs = rnd.get("runs") or []
+        points: dict[str, dict[str, Any]] = {}
+        for r in runs:
+            where = ", ".join(f"{k}={fmt(v)}" for k, v in (r.get("coords") or {}).items())
+            entry = points.setdefault(where, {"where": where, "seeds": [], "why": r.get("why"),
+                                              "states": []})
+            entry["seeds"].append(str(r.get("seed")))
+            entry["states"].append(str(r.get("state")))
+        rounds.append({"number": rnd.get("round", len(rounds)), "n_runs": len(runs),
+                       "points": list(points.values())})
+    return {"rounds": rounds, "finished": bool(plan.get("finished")),
+            "stop": plan.get("stop") or "", "run_bound": plan.get("run_bound")}
+
+
+def cost(records: Mapping[str, Mapping[str, Any]], run_ids: set[str]) -> dict[str, Any]:
+    """CPU time: the sum of the campaign's runs' wall times (one core each), their median,
+    and a small histogram of them (a PNG data URI)."""
+    times = np.array([float(r["wall_time"]) for rid, r in records.items()
+                      if rid in run_ids and isinstance(r.get("wall_time"), (int, float))
+                      and math.isfinite(r["wall_time"])])
+    if not times.size:
+        return {"n": 0}
+    from matplotlib.figure import Figure
+
+    from .phase_plot import png_data_uri
+
+    fig = Figure(figsize=(4.0, 2.2), dpi=90)
+    ax = fig.add_axes((0.14, 0.24, 0.82, 0.68))
+    ax.hist(times, bins=min(HISTOGRAM_BINS, max(1, times.size)), color="#1f77b4")
+    ax.set_xlabel("wall time of a run [s]", fontsize=8)
+    ax.set_ylabel("runs", fontsize=8)
+    ax.tick_params(labelsize=7)
+    return {"n": int(times.size), "cpu_hours": float(times.sum() / 3600),
+            "total_seconds": float(times.sum()), "median": float(np.median(times)),
+            "min": float(times.min()), "max": float(times.max()),
+            "histogram": png_data_uri(fig)}
+
+
+def provenance(phase: xr.Dataset, root: Path) -> tuple[list[tuple[str, str]], str]:
+    """(label, value) rows of where the results came from (the aggregating code and the
+    runs' code, library versions), and the campaign copy ``campaign.yaml`` as text."""
+    from ..provenance import code_version, git_commit, library_versions_text
+
+    a = phase.attrs
+    rows = [("runs made by code version(s)", str(a.get("run_code_versions") or "-")),
+            ("runs made at git commit(s)", str(a.get("run_git_commits") or "-")),
+            ("report made by code version", code_version()),
+            ("report made at git commit", str(git_commit() or "-")),
+            ("library versions", library_versions_text())]
+    fixed = [f"{k[len('param_'):]}={fmt(v)}" for k, v in a.items() if k.startswith("param_")]
+    numerics = [f"{k[len('num_'):]}={fmt(v)}" for k, v in a.items() if k.startswith("num_")]
+    rows += [("fixed parameters", ", ".join(fixed) or "-"),
+             ("fixed numerics", ", ".join(numerics) or "-")]
+    if a.get("campaign_overrides"):
+        rows.append(("command-line overrides", str(a["campaign_overrides"])))
+    copy = root / "campaign.yaml"
+    text = copy.read_text(encoding="utf-8") if copy.is_file() else \
+        str(a.get("campaign_yaml") or "")
+    return rows, text
+
+
+def gather(opened: CampaignResults, phase: xr.Dataset, status: StatusReport,
+           records: Mapping[str, Mapping[str, Any]]) -> Content:
+    """Every section of the page but the phase diagram."""
+    from ..analysis.fits_file import load_fits
+    from ..refine.rounds import read_plan
+
+    root = opened.store.root
+    content = summary(opened, status)
+    content.figures = figure_images(root)
+    fits = load_fits(root) if (root / FITS).is_file() else xr.Dataset()
+    content.fits = fit_tables(fits)
+    content.failures = failure_groups(status, phase)
+    if opened.campaign.refine is not None:
+        content.refine = refine_rounds(read_plan(opened.store))
+    ids = {str(r) for r in np.asarray(phase["run_id"].values).ravel() if r}
+    content.cost = cost(records, ids)
+    content.provenance, content.campaign_yaml = provenance(phase, root)
+    return content

@@ -1,0 +1,307 @@
+"""The report's interactive phase diagram (bokeh): one point per grid point that has runs,
+coloured (2-D) or placed (1-D) by the seed mean of sigma2_S. Hovering a point shows its
+parameters and the seed values of the main observables; clicking it shows one of its runs:
+its last snapshot (a small PNG drawn here with :func:`sweep.figures.common.safe_snapshot`,
+embedded as a data URI) and its sigma2_S(t), through a bokeh ``CustomJS`` callback that
+copies the point's columns into the run panel.
+
+1-D campaigns get a line over the axis; 2-D a scatter over the two axes; more dims the first
+two axes, faceted over the combinations of the others (at most :data:`MAX_FACETS`)."""
+
+from __future__ import annotations
+
+import base64
+import io
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..analysis.phase import sweep_dims
+from ..files import series_time
+
+log = logging.getLogger(__name__)
+
+#: The observables whose seed values the hover shows (those phase.nc holds).
+MAIN = ("sigma2_S", "mean_S", "cos2theta", "lambda", "lambda_peak")
+#: The colour (2-D) or height (1-D) of a point: the seed mean of this observable.
+SHOWN = "sigma2_S"
+#: Points whose run (snapshot and series) is embedded; the others show their hover only.
+MAX_POINTS_WITH_RUNS = 200
+#: Facets of a campaign with more than two sweep dims.
+MAX_FACETS = 9
+STATUS_OK, STATUS_FAILED = 1, 2
+SNAPSHOT_INCHES, SNAPSHOT_DPI = 2.6, 100
+HINT = "<p>Click a point of the phase diagram to show one of its runs here.</p>"
+
+#: The one piece of page code: copy the clicked point's run into the run panel.
+ON_TAP = """
+const i = source.selected.indices[0];
+if (i === undefined) { return; }
+const d = source.data;
+series.data = {t: d.series_t[i], y: d.series_y[i]};
+run_plot.title.text = d.run_title[i];
+const img = d.snapshot[i] ? `<img class="snapshot" alt="snapshot of ${d.run_id[i]}" ` +
+    `src="${d.snapshot[i]}">` : "<p>no snapshot stored for this run</p>";
+panel.text = `<div class="run" data-run="${d.run_id[i]}">${img}` +
+    `<p>${d.where[i]}, seed ${d.run_seed[i]}: run ${d.run_id[i]}</p></div>`;
+"""
+
+
+def _label(value: Any) -> str:
+    if isinstance(value, (float, np.floating)):
+        return f"{float(value):.6g}"
+    return str(value)
+
+
+def _numeric(values: np.ndarray) -> bool:
+    return np.issubdtype(np.asarray(values).dtype, np.number)
+
+
+@dataclass
+class Axis:
+    """A plotted sweep dim: positions (numeric values, else indices with tick labels)."""
+
+    name: str
+    values: np.ndarray
+    log: bool = False
+    ticks: dict[int, str] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, phase: xr.Dataset, dim: str) -> Axis:
+        values = np.asarray(phase[dim].values)
+        if not _numeric(values):
+            return cls(dim, np.arange(len(values), dtype=float),
+                       ticks={i: str(v) for i, v in enumerate(values)})
+        v = values.astype(float)
+        finite = v[np.isfinite(v)]
+        log = bool(finite.size > 1 and finite.min() > 0 and finite.max() / finite.min() >= 100)
+        return cls(dim, v, log=log)
+
+
+def png_data_uri(fig: Any) -> str:
+    """A matplotlib figure as a ``data:image/png;base64`` URI (the page embeds every image)."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def run_views(path: Path) -> tuple[str, list[float], list[float]]:
+    """One run's last snapshot as a PNG data URI ("" without a snapshot) and its sigma2_S(t)
+    (non-positive values left out: the panel's axis is logarithmic)."""
+    from matplotlib.figure import Figure
+
+    from ..figures.common import safe_snapshot
+
+    with xr.open_dataset(path) as ds:
+        names = [n for n in ("q1", "q2", "I1bar", "sigma2_S") if n in ds]
+        run = ds[names].load()
+    t = series_time(run).values.astype(float) if "sigma2_S" in run else np.array([])
+    y = run["sigma2_S"].values.astype(float) if "sigma2_S" in run else np.array([])
+    keep = np.isfinite(t) & np.isfinite(y) & (y > 0)
+    image = ""
+    if run.sizes.get("snapshot_time", 0) and "q1" in run and "q2" in run:
+        fig = Figure(figsize=(SNAPSHOT_INCHES, SNAPSHOT_INCHES), dpi=SNAPSHOT_DPI)
+        ax = fig.add_axes((0.02, 0.02, 0.96, 0.88))
+        with np.errstate(all="ignore"):
+            safe_snapshot(ax, run, -1, colorbar=False, arrows=16)
+        t_snap = float(run["snapshot_time"].values[-1])
+        ax.set_title(f"director (colour: S) over I1bar, t/tau = {t_snap:g}", fontsize=7)
+        image = png_data_uri(fig)
+    return image, t[keep].tolist(), y[keep].tolist()
+
+
+def _seed_text(values: np.ndarray, seeds: np.ndarray, status: np.ndarray) -> str:
+    parts = []
+    for s, v, st in zip(seeds, values, status, strict=True):
+        if st == STATUS_OK and np.isfinite(v):
+            parts.append(f"{s}: {v:.3g}")
+        elif st == STATUS_FAILED:
+            parts.append(f"{s}: failed")
+    return ", ".join(parts) or "-"
+
+
+def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[str, list[Any]]:
+    """The points' columns for bokeh: coordinates, hover texts, the seed mean shown, and one
+    run of each point (the first seed that succeeded, else the first with a run file)."""
+    shape = [phase.sizes[d] for d in dims]
+    n_seeds = phase.sizes["seed"]
+    seeds = phase["seed"].values
+
+    def per_point(name: str) -> np.ndarray:
+        return np.asarray(phase[name].transpose(*dims, "seed").values).reshape(-1, n_seeds)
+
+    status = per_point("status").astype(int)
+    run_ids = per_point("run_id")
+    observables = {m: per_point(m).astype(float) for m in MAIN if m in phase}
+    extra = {str(c): str(phase[c].dims[0]) for c in phase.coords
+             if phase[c].ndim == 1 and phase[c].dims[0] in dims and str(c) not in dims}
+    cols: dict[str, list[Any]] = {k: [] for k in (
+        "where", "counts", "shown", "shown_log", "run_id", "run_seed", "run_title",
+        "snapshot", "series_t", "series_y", "facet", *dims,
+        *(f"seeds_{m}" for m in observables))}
+    embedded = 0
+    for flat, index in enumerate(np.ndindex(*shape)):
+        st = status[flat]
+        if not (st > 0).any():  # not run (a refined campaign's union grid)
+            continue
+        at = dict(zip(dims, index, strict=True))
+        coords = {d: phase[d].values[i] for d, i in at.items()}
+        coords.update({c: phase[c].values[at[d]] for c, d in extra.items()})
+        where = ", ".join(f"{k}={_label(v)}" for k, v in coords.items())
+        for d in dims:
+            cols[d].append(_label(phase[d].values[at[d]]))
+        cols["facet"].append(", ".join(f"{d}={_label(phase[d].values[at[d]])}"
+                                       for d in dims[2:]))
+        cols["where"].append(where)
+        cols["counts"].append(f"{int((st == STATUS_OK).sum())} ok, "
+                              f"{int((st == STATUS_FAILED).sum())} failed of {len(st)} seeds")
+        for m, values in observables.items():
+            cols[f"seeds_{m}"].append(_seed_text(values[flat], seeds, st))
+        shown = observables.get(SHOWN)
+        ok = (st == STATUS_OK) & np.isfinite(shown[flat]) if shown is not None else st < 0
+        mean = float(np.mean(shown[flat][ok])) if shown is not None and ok.any() else math.nan
+        cols["shown"].append(mean)
+        cols["shown_log"].append(math.log10(mean) if mean > 0 else math.nan)
+        order = [k for k in range(n_seeds) if st[k] == STATUS_OK] + \
+            [k for k in range(n_seeds) if st[k] == STATUS_FAILED]
+        chosen: int | None = None
+        image = ""
+        t: list[float] = []
+        y: list[float] = []
+        for k in order:
+            path = runs_dir / f"{run_ids[flat][k]}.nc"
+            if embedded < MAX_POINTS_WITH_RUNS and path.is_file():
+                try:
+                    image, t, y = run_views(path)
+                except (OSError, ValueError, KeyError) as e:
+                    log.warning("report: cannot read run file %s: %s", path, e)
+                    continue
+                chosen = k
+                embedded += 1
+                break
+        k = chosen if chosen is not None else (order[0] if order else 0)
+        state = "ok" if st[k] == STATUS_OK else "failed"
+        cols["run_id"].append(str(run_ids[flat][k]))
+        cols["run_seed"].append(int(seeds[k]))
+        cols["run_title"].append(f"sigma2_S(t): seed {int(seeds[k])} ({state})"
+                                 if chosen is not None else "run not embedded")
+        cols["snapshot"].append(image)
+        cols["series_t"].append(t)
+        cols["series_y"].append(y)
+    return cols
+
+
+def _figure(x: Axis, y: Axis | None, title: str, tools: str) -> Any:
+    from bokeh.models import FixedTicker
+    from bokeh.plotting import figure
+
+    fig = figure(title=title, width=520 if y is None else 440, height=380, tools=tools,
+                 name="phase_diagram",
+                 x_axis_type="log" if x.log else "linear",
+                 y_axis_type="log" if y is None or y.log else "linear",
+                 x_axis_label=x.name, y_axis_label=f"{SHOWN} (seed mean)" if y is None
+                 else y.name)
+    for ax, axis in ((fig.xaxis, x), (fig.yaxis, y)):
+        if axis is not None and axis.ticks:
+            ax.ticker = FixedTicker(ticks=list(axis.ticks))
+            ax.major_label_overrides = {k: v for k, v in axis.ticks.items()}
+    return fig
+
+
+def _position(axis: Axis, labels: list[str], phase: xr.Dataset) -> list[float]:
+    lookup = {_label(v): axis.values[i] for i, v in enumerate(phase[axis.name].values)}
+    return [float(lookup[s]) for s in labels]
+
+
+def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]]:
+    """The interactive phase diagram of ``phase``: ``(bokeh layout or None, points with an
+    embedded run, notes)``."""
+    from bokeh.layouts import column, gridplot, row
+    from bokeh.models import (
+        CDSView,
+        ColumnDataSource,
+        CustomJS,
+        GroupFilter,
+        HoverTool,
+        LinearColorMapper,
+        TapTool,
+    )
+    from bokeh.models.annotations.legends import ColorBar
+    from bokeh.models.widgets.markups import Div
+    from bokeh.plotting import figure
+
+    dims = sweep_dims(phase)
+    notes: list[str] = []
+    if not dims:
+        return None, 0, ["no sweep axis: nothing to plot"]
+    cols = point_columns(phase, runs_dir, dims)
+    if not cols["where"]:
+        return None, 0, ["no run has finished yet"]
+    embedded = sum(1 for s, t in zip(cols["snapshot"], cols["series_t"], strict=True) if s or t)
+    if embedded < len(cols["where"]):
+        notes.append(f"{embedded} of {len(cols['where'])} points show a run when clicked "
+                     f"(at most {MAX_POINTS_WITH_RUNS}; a run that failed at once may leave "
+                     "nothing to show)")
+    x_axis = Axis.of(phase, dims[0])
+    y_axis = Axis.of(phase, dims[1]) if len(dims) > 1 else None
+    cols["x"] = _position(x_axis, cols[dims[0]], phase)
+    if y_axis is not None:
+        cols["y"] = _position(y_axis, cols[dims[1]], phase)
+    else:
+        cols["y"] = cols["shown"]
+    source = ColumnDataSource(cols, name="points")
+    tooltips = [(d, f"@{{{d}}}") for d in dims]
+    if len(cols["where"][0].split(", ")) > len(dims):
+        tooltips = [("point", "@where")]
+    tooltips.append(("runs", "@counts"))
+    tooltips += [(f"{m} by seed", f"@{{seeds_{m}}}") for m in MAIN if f"seeds_{m}" in cols]
+    tools = "pan,wheel_zoom,box_zoom,reset,save"
+    plots = []
+    if y_axis is None:
+        fig = _figure(x_axis, None, f"{SHOWN} at t_final over {dims[0]} (click a point)", tools)
+        order = np.argsort(cols["x"])
+        fig.line([cols["x"][i] for i in order], [cols["y"][i] for i in order], line_width=2,
+                 color="#1f77b4")
+        renderers = [fig.scatter("x", "y", source=source, size=11, color="#1f77b4",
+                                 name="phase_points")]
+        plots.append(fig)
+    else:
+        finite = [v for v in cols["shown_log"] if math.isfinite(v)]
+        low, high = (min(finite), max(finite)) if finite else (0.0, 1.0)
+        mapper = LinearColorMapper(palette="Viridis256", low=low,
+                                   high=high if high > low else low + 1, nan_color="#d62728")
+        facets = list(dict.fromkeys(cols["facet"]))
+        if len(facets) > MAX_FACETS:
+            notes.append(f"{len(facets)} combinations of {', '.join(dims[2:])}: the first "
+                         f"{MAX_FACETS} are shown")
+            facets = facets[:MAX_FACETS]
+        renderers = []
+        for facet in facets:
+            title = f"log10 {SHOWN} (seed mean)" + (f" at {facet}" if facet else "") + \
+                "; red: no successful run"
+            fig = _figure(x_axis, y_axis, title, tools)
+            view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
+            renderers.append(fig.scatter(
+                "x", "y", source=source, view=view, size=16, line_color="black",
+                fill_color={"field": "shown_log", "transform": mapper}, name="phase_points"))
+            fig.add_layout(ColorBar(color_mapper=mapper, width=10), "right")
+            plots.append(fig)
+    series = ColumnDataSource({"t": [], "y": []}, name="series")
+    run_plot = figure(title="sigma2_S(t) of the clicked point's run", width=360, height=260,
+                      y_axis_type="log", x_axis_label="t / tau", y_axis_label="sigma2_S",
+                      tools="pan,wheel_zoom,reset,save", name="run_plot")
+    run_plot.line("t", "y", source=series, line_width=2, color="#d62728")
+    panel = Div(text=HINT, width=360, name="run_panel")
+    for fig, renderer in zip(plots, renderers, strict=True):
+        fig.add_tools(HoverTool(renderers=[renderer], tooltips=tooltips),
+                      TapTool(renderers=[renderer]))
+    source.selected.js_on_change("indices", CustomJS(
+        args={"source": source, "series": series, "panel": panel, "run_plot": run_plot},
+        code=ON_TAP))
+    diagram = plots[0] if len(plots) == 1 else gridplot(plots, ncols=3)
+    return row(diagram, column(panel, run_plot)), embedded, notes

@@ -1,0 +1,207 @@
+"""``nematic report``: the page of a real tiny adaptive campaign with failures lists every
+failure reason, failed run and refinement round, is self-contained, and is rewritten by
+``nematic report`` from the campaign's name; the pieces (fit tables, hover texts) from small
+data. The page in a real browser: tests/test_report_browser.py."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from typer.testing import CliRunner
+
+from sweep.cli import app
+from sweep.refine.rounds import read_plan
+from sweep.report.content import fit_tables
+from sweep.report.phase_plot import point_columns
+from sweep.store import CampaignStore
+
+#: 3 x 2 grid points, one seed; alpha - B = 20 fails at once (the finite solver loses
+#: ellipticity: tests/sweep_helpers.py), and one round refines alpha - B between 0.1 and 0.2.
+ADAPTIVE = """\
+name: rep
+description: a tiny grid whose report must list its failures and rounds
+parameters: {noise_modes: 8}
+numerics: {resolution: 32, t_final: 2, save_every: 0.5, snapshot_times: [1]}
+sweep:
+  axes:
+    alpha_minus_B: [0.1, 0.2, 20.0]
+    K: [1.0e-4, 1.0e-3]
+seeds: 1
+figures: []
+refine:
+  axis: alpha_minus_B
+  observable: sigma2_S
+  criterion: jump
+  jump: 1.01
+  rounds: 1
+  min_spacing: 0.05
+execution: {workers: 2}
+"""
+
+
+def invoke(*args: object):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def adaptive(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("report")
+    path = folder / "rep.yaml"
+    path.write_text(ADAPTIVE)
+    results = folder / "results"
+    result = invoke("run", path, "--results", results, "--no-dashboard")
+    return path, results, result
+
+
+def _records(results: Path) -> list[dict]:
+    return [json.loads(p.read_text()) for p in (results / "rep" / "runs").glob("*.json")]
+
+
+def test_run_writes_a_report_listing_every_failure_and_round(adaptive):
+    _, results, result = adaptive
+    assert result.exit_code == 1, result.output  # the alpha - B = 20 runs failed
+    page = results / "rep" / "report.html"
+    assert f"report: {page}" in " ".join(result.output.split())
+    html = page.read_text()
+    assert "a tiny grid whose report must list its failures and rounds" in html
+    failed = [r for r in _records(results) if r["status"] != "ok"]
+    assert len(failed) == 2
+    reasons = {r["reason"] for r in failed}
+    for reason in reasons:
+        count = sum(r["reason"] == reason for r in failed)
+        assert f'<h3 class="failure-reason">{reason}: {count} run(s)</h3>' in html
+    for r in failed:
+        assert f"<td>{r['run_id']}</td>" in html
+    plan = read_plan(CampaignStore(results, "rep"))
+    assert plan is not None
+    assert len(plan["rounds"]) == 2  # the grid and one refined round
+    for rnd in plan["rounds"]:
+        assert (f'<h3 class="refine-round">round {rnd["round"]}: {len(rnd["runs"])} run(s)'
+                in html)
+    assert "boundary: alpha_minus_B 0.1" in html  # why round 1 ran its points
+    assert "8: 6 done, 2 failed, 0 pending" in " ".join(html.split())
+
+
+def test_the_report_is_self_contained(adaptive):
+    _, results, _ = adaptive
+    html = (results / "rep" / "report.html").read_text()
+    assert not re.search(r"<script[^>]*\ssrc=", html)  # bokeh's JavaScript is inlined
+    assert "Bokeh" in html
+    markup = re.sub(r"<script[^>]*>.*?</script>", "", html, flags=re.S)  # the page's own tags
+    assert not re.search(r"<link[^>]*href=", markup)
+    assert not re.search(r"""(src|href)=["']?(https?:|//)""", markup)
+    # the histogram of run times, and one snapshot per grid point that has a run to show
+    assert html.count("data:image/png;base64,") >= 1 + 6
+    assert "<h2 id=\"refine\">" in html
+    assert "(seed mean)" in html
+
+
+def test_nematic_report_from_the_name_and_to_an_output(adaptive, tmp_path):
+    _, results, _ = adaptive
+    page = results / "rep" / "report.html"
+    page.unlink()
+    result = invoke("report", "rep", "--results", results)
+    assert result.exit_code == 0, result.output
+    assert page.is_file()
+    out = tmp_path / "elsewhere" / "r.html"
+    result = invoke("report", "rep", "--results", results, "--output", out)
+    assert result.exit_code == 0, result.output
+    assert "round 1:" in out.read_text()
+    assert not list(out.parent.glob(".*.tmp"))  # written through a temporary, renamed
+
+
+def test_nematic_report_of_an_unknown_campaign_is_one_error_line(tmp_path):
+    result = invoke("report", "nothing", "--results", tmp_path)
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("error: no results of a campaign named 'nothing'")
+
+
+def test_fit_tables_put_intervals_with_their_values_and_label_units():
+    fits = xr.Dataset(
+        {"transition_location": ((), 0.35, {"long_name": "transition location",
+                                            "fit": "transition"}),
+         "transition_location_lower": ((), 0.3, {"fit": "transition"}),
+         "transition_location_upper": ((), 0.4, {"fit": "transition"}),
+         "alpha_cr": (("K",), [0.1, np.nan], {"long_name": "critical activity", "units": "1",
+                                               "fit": "alpha_cr"}),
+         "alpha_cr_lower": (("K",), [0.05, np.nan], {"fit": "alpha_cr"}),
+         "alpha_cr_upper": (("K",), [0.2, np.nan], {"fit": "alpha_cr"}),
+         "wall": (("K",), [3.0, 4.0], {"units": "s", "fit": "alpha_cr"})},
+        coords={"K": ("K", [1e-4, 1e-3], {"units": "1"})})
+    tables = {t.title: t for t in fit_tables(fits)}
+    scalar = tables["transition"]
+    assert scalar.rows == [["transition_location", "0.35", "[0.3, 0.4]", "",
+                            "transition location"]]
+    over_k = tables["alpha_cr over K"]
+    assert over_k.columns == ["K", "alpha_cr", "alpha_cr_lower", "alpha_cr_upper", "wall [s]"]
+    assert over_k.rows == [["0.0001", "0.1", "0.05", "0.2", "3"], ["0.001", "-", "-", "-", "4"]]
+    assert "alpha_cr: critical activity" in over_k.note
+
+
+def test_hover_texts_give_each_seed_and_skip_points_not_run(tmp_path):
+    phase = xr.Dataset(
+        {"status": (("eps", "seed"), [[1, 2], [0, 0]]),
+         "run_id": (("eps", "seed"), [["a", "b"], ["c", "d"]]),
+         "sigma2_S": (("eps", "seed"), [[1e-3, np.nan], [np.nan, np.nan]])},
+        coords={"eps": [0.1, 0.2], "seed": [3, 7]})
+    cols = point_columns(phase, tmp_path, ["eps"])  # no run files: hover only
+    assert cols["eps"] == ["0.1"]  # eps = 0.2 has no run
+    assert cols["seeds_sigma2_S"] == ["3: 0.001, 7: failed"]
+    assert cols["counts"] == ["1 ok, 1 failed of 2 seeds"]
+    assert cols["shown"] == [pytest.approx(1e-3)]
+    assert cols["snapshot"] == [""]
+    assert cols["run_id"] == ["a"]
+
+
+def _phase(shape: dict[str, list], seeds: int = 1) -> xr.Dataset:
+    dims = [*shape, "seed"]
+    size = [len(v) for v in shape.values()] + [seeds]
+    n = int(np.prod(size))
+    return xr.Dataset(
+        {"status": (dims, np.ones(size, dtype=int)),
+         "run_id": (dims, np.array([f"r{i}" for i in range(n)]).reshape(size)),
+         "sigma2_S": (dims, np.linspace(1e-4, 1e-2, n).reshape(size))},
+        coords={**shape, "seed": list(range(seeds))})
+
+
+def _plots(layout) -> list:
+    from bokeh.models import Plot
+
+    return [m for m in layout.select({"type": Plot}) if m.name == "phase_diagram"]
+
+
+def test_one_two_and_more_dims_give_a_line_a_scatter_and_facets(tmp_path):
+    from sweep.report.phase_plot import MAX_FACETS, phase_layout
+
+    layout, embedded, notes = phase_layout(_phase({"alpha_minus_B": [0.1, 0.3, 0.5]}),
+                                           tmp_path)
+    (plot,) = _plots(layout)
+    assert plot.yaxis[0].axis_label == "sigma2_S (seed mean)"
+    assert embedded == 0  # no run files here
+    assert notes == ["0 of 3 points show a run when clicked (at most 200; a run that failed "
+                     "at once may leave nothing to show)"]
+    # 2-D with a text axis: its values become tick labels at 0, 1
+    layout, _, _ = phase_layout(
+        _phase({"alpha_minus_B": [0.1, 0.3], "mechanics": ["linear", "finite"]}), tmp_path)
+    (plot,) = _plots(layout)
+    assert plot.yaxis[0].major_label_overrides == {0: "linear", 1: "finite"}
+    source = layout.select_one({"name": "points"})
+    assert sorted(zip(source.data["x"], source.data["y"], strict=True)) == [
+        (0.1, 0.0), (0.1, 1.0), (0.3, 0.0), (0.3, 1.0)]
+    # 4-D: the first two dims, one facet per combination of the others, at most MAX_FACETS
+    layout, _, notes = phase_layout(
+        _phase({"alpha_minus_B": [0.1, 0.3], "K": [1e-4, 1e-3], "eps": [0.0, 0.1, 0.2],
+                "chi": [1.0, 2.0, 3.0, 4.0]}), tmp_path)
+    plots = _plots(layout)
+    assert len(plots) == MAX_FACETS < 12
+    shown = {p.title.text.split(" at ")[1].split(";")[0] for p in plots}
+    assert shown == {f"eps={e}, chi={c}" for e in ("0", "0.1") for c in (1, 2, 3, 4)} | {
+        "eps=0.2, chi=1"}  # in the grid's order, chi varying fastest
+    assert notes[-1] == f"12 combinations of eps, chi: the first {MAX_FACETS} are shown"

@@ -80,7 +80,7 @@ def a1(folder: Path, name: str, chi: str, seeds: int, initial: int = 2) -> Path:
 # --------------------------------------------------------------------------- the section
 BASE = """\
 name: r
-numerics: {resolution: 64}
+numerics: {resolution: 128}
 sweep:
   axes:
     eps: [0.0, 0.2, 0.4]
@@ -159,6 +159,7 @@ def test_refine_mistakes_are_collected_with_the_rest_of_the_file():
 # --------------------------------------------------------------------------- the pure plan
 LINE_CAMPAIGN = """\
 name: p
+parameters: {noise_modes: 16}
 numerics: {resolution: 64, t_final: 2}
 sweep:
   axes:
@@ -338,7 +339,7 @@ def test_the_fig2_refine_variant_validates_at_full_and_reduced_size():
         result = invoke("validate", FIG2_ADAPTIVE, *extra)
         assert result.exit_code == 0, result.output
         assert "round 0 (the grid): 5 points x 2 seed(s) = 10 runs" in flat(result.output)
-    c = load_campaign(FIG2_ADAPTIVE, Overrides(settings={"resolution": 64}))
+    c = load_campaign(FIG2_ADAPTIVE, Overrides(settings={"mechanics": "linear"}))
     assert c.refine is not None
     assert c.refine.criterion == "jump"
     # its refined values 0.4, 0.45 (halving 0.3-0.5) are the full Fig. 2 grid's runs

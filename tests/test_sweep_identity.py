@@ -129,9 +129,9 @@ def test_the_band_texture_keeps_the_ids_it_had_before_initial_existed():
     # canonical text; the golden hashes above are of dicts without it
     assert hash_canonical(dict(P, initial="band"), N, 0) == GOLDEN[0]
     # the constants that were the defaults before `initial` existed (band 16, zeta = 1,
-    # s = 10): the id this point had then
+    # kappa = 10): the id this point had then
     old = Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5, "noise_modes": 16,
-                                "zeta": 1.0, "s": 10.0})
+                                "zeta": 1.0, "kappa": 10.0})
     assert run_id_for(old, Numerics(t_final=150, save_every=1), 7) == "702b95bdf3bae1f3"
 
 

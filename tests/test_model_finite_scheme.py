@@ -46,8 +46,9 @@ def test_integrated_displacement_agrees_with_a_tight_reference():
 @pytest.mark.parametrize(("n", "t_final"), [(64, 100.0), (128, 60.0)])
 @pytest.mark.parametrize("amb", [0.6, 1.0])
 def test_integrated_displacement_accuracy_contract(n, t_final, amb):
-    """The contract of docs/model.md section 4 at 64^2 and 128^2, alpha - B = 0.6 and 1."""
-    _contract(n, t_final, amb)
+    """The contract of docs/model.md section 4 at 64^2 and 128^2, alpha - B = 0.6 and 1 (the
+    band-16 texture, which both grids hold)."""
+    _contract(n, t_final, amb, noise_modes=16)
 
 
 def test_saved_states_are_in_force_balance():

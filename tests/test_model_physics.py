@@ -50,15 +50,16 @@ def test_fig2_high_activity_forms_a_pattern_finite_strain_at_128():
 
 @pytest.mark.slow
 def test_resolution_study_sigma2_converged_at_default_resolution():
-    """sigma2_S(t = 50) at N = 64, 128, 256 from the same physical initial field: the
-    128 -> 256 change is small (< 5%) and smaller than the 64 -> 128 change."""
+    """sigma2_S(t = 50) at N = 96, 128, 256 from the same physical initial field (the band-32
+    texture needs N > 64): the 128 -> 256 change is small (< 5%) and smaller than the
+    96 -> 128 change."""
     values = {}
-    for n in (64, 128, 256):
+    for n in (96, 128, 256):
         ds = run(FIG2.replace(alpha_minus_B=1.0),
                  Numerics(resolution=n, t_final=50, save_every=50, mechanics="linear"), 0)
         assert ds.attrs["status"] == "ok"
         values[n] = float(ds["sigma2_S_final"])
-    d1 = abs(values[128] - values[64])
+    d1 = abs(values[128] - values[96])
     d2 = abs(values[256] - values[128])
     assert d2 < 0.05 * values[256], values
     assert d2 < d1 or d1 < 0.01 * values[256], values

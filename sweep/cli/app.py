@@ -100,6 +100,11 @@ app = _App(
 
 # --------------------------------------------------------------------------- shared options
 CampaignArg = Annotated[Path, typer.Argument(help="The campaign YAML file.", show_default=False)]
+#: a campaign given by its file or by the name of its results folder (export, report)
+CampaignRefArg = Annotated[str, typer.Argument(
+    metavar="CAMPAIGN", show_default=False,
+    help="The campaign YAML file, or the campaign's name (its results folder, read with "
+    "the campaign copy the last run left there).")]
 ResultsOpt = Annotated[Path, typer.Option(
     "--results", envvar="NEMATIC_RESULTS",
     help="Folder holding `results/NAME/` for every campaign.")]

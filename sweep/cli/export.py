@@ -9,14 +9,20 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from .app import EXIT_BAD_INPUT, QuietOpt, ResultsOpt, VerboseOpt, err_console, error, setup_logging
+from .app import (
+    EXIT_BAD_INPUT,
+    CampaignRefArg,
+    QuietOpt,
+    ResultsOpt,
+    VerboseOpt,
+    err_console,
+    error,
+    setup_logging,
+)
 
 
 def export(
-    campaign: Annotated[str, typer.Argument(
-        metavar="CAMPAIGN", show_default=False,
-        help="The campaign YAML file, or the campaign's name (its results folder, read with "
-        "the campaign copy the last run left there).")],
+    campaign: CampaignRefArg,
     results: ResultsOpt = Path("results"),
     fmt: Annotated[str | None, typer.Option(
         "--format", metavar="csv|parquet", help="The table's format (default: from the "

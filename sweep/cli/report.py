@@ -9,14 +9,11 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from .app import QuietOpt, ResultsOpt, VerboseOpt, err_console, setup_logging
+from .app import CampaignRefArg, QuietOpt, ResultsOpt, VerboseOpt, err_console, setup_logging
 
 
 def report(
-    campaign: Annotated[str, typer.Argument(
-        metavar="CAMPAIGN", show_default=False,
-        help="The campaign YAML file, or the campaign's name (its results folder, read with "
-        "the campaign copy the last run left there).")],
+    campaign: CampaignRefArg,
     results: ResultsOpt = Path("results"),
     output: Annotated[Path | None, typer.Option(
         "--output", "-o", help="Where to write it (default: results/NAME/report.html).")] = None,

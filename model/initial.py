@@ -24,6 +24,11 @@ physical field, with correlation length ~ L / n_c.
 distributed director angle and the same :math:`q_1, q_2` formula holds. Its correlation
 length is the grid spacing: it is a different physical field at every resolution (a finer
 grid is a finer texture), and the Frank term erases most of it within t ~ 1 / (K k_max^2).
+With ``texture_resolution`` = N_0 (> 0) the white field is drawn on the N_0 x N_0 grid and
+carried to the run's N x N grid by spectral interpolation (:func:`spectral_interpolate`): the
+trigonometric polynomial through the N_0^2 cell-centre values, evaluated at the finer grid's
+cell centres. A run at 2 N_0 then starts from the same physical field as one at N_0, as a
+resolution study needs.
 """
 
 from __future__ import annotations
@@ -71,10 +76,36 @@ def per_node_field(seed: int, resolution: int) -> Array:
     return (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)) / np.sqrt(2.0)
 
 
+def spectral_interpolate(field: Array, resolution: int) -> Array:
+    r"""The trigonometric interpolant of ``field`` (values at the cell centres
+    :math:`(i + 1/2)/N_0` of an N_0 x N_0 periodic grid, N_0 even) evaluated at the cell
+    centres of the N x N grid, N >= N_0. The Nyquist modes :math:`\pm N_0/2` share the
+    coarse grid's Nyquist coefficient equally (the interpolant then passes through every
+    coarse value, and a real field stays real)."""
+    n0 = field.shape[0]
+    if field.shape != (n0, n0) or n0 % 2 or resolution < n0:
+        raise ValueError(f"cannot interpolate a {field.shape} field to {resolution}^2")
+    if resolution == n0:
+        return field.copy()
+    half = n0 // 2
+    ks = np.arange(-half, half + 1)  # the Nyquist wavenumber on both sides
+    raw = np.fft.fft2(field)[np.ix_(ks % n0, ks % n0)] / n0**2
+    weight = np.where(np.abs(ks) == half, 0.5, 1.0)
+    # the coefficient of exp(2 pi i k x) is the DFT value shifted from the coarse cell
+    # centres to x = 0; then evaluated at the fine cell centres (j + 1/2) / N
+    phase = weight * np.exp(1j * np.pi * ks * (1.0 / resolution - 1.0 / n0))
+    Z = np.zeros((resolution, resolution), dtype=complex)
+    np.add.at(Z, (ks[:, None] % resolution, ks[None, :] % resolution),
+              raw * phase[:, None] * phase[None, :])
+    return np.fft.ifft2(Z) * resolution**2
+
+
 def texture_field(params: Parameters, resolution: int, seed: int) -> Array:
     r"""The complex field :math:`\psi` of the texture ``params.initial``."""
     if params.initial == "per_node":
-        return per_node_field(seed, resolution)
+        drawn = params.texture_resolution or resolution
+        psi = per_node_field(seed, drawn)
+        return psi if drawn == resolution else spectral_interpolate(psi, resolution)
     return band_limited_field(seed, params.noise_modes, resolution)
 
 

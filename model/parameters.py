@@ -66,6 +66,10 @@ class Parameters:
             every resolution) or "per_node" (an independent random orientation at every grid
             node, the paper's "initial random orientation": resolution dependent by nature).
         noise_modes: the band of the "band" texture (unused by "per_node").
+        texture_resolution: "per_node" only: the grid the per-node texture is drawn on (0,
+            the default: the run's own grid). A run on a finer grid gets that texture by
+            spectral interpolation, so that it starts from the same physical field (the
+            resolution variant of a verification, sweep/verify).
         noise_amplitude: RMS of an extra Gaussian (q1, q2) perturbation drawn from the same
             random field (needed when S0 = 0, as in Fig. A1).
     """
@@ -86,6 +90,7 @@ class Parameters:
     eps: float = 0.0
     initial: str = "band"
     noise_modes: int = 32
+    texture_resolution: int = 0
     noise_amplitude: float = 0.0
 
     def __post_init__(self) -> None:
@@ -120,6 +125,14 @@ class Parameters:
             raise ParameterError("eps", self.eps, "-0.5 < eps < 0.5 (J_bar = 1 - eps^2 > 0)")
         if not 1 <= self.noise_modes <= 256:
             raise ParameterError("noise_modes", self.noise_modes, "an integer in [1, 256]")
+        if self.texture_resolution != 0 and not (
+                self.texture_resolution >= 16 and self.texture_resolution % 2 == 0):
+            raise ParameterError("texture_resolution", self.texture_resolution,
+                                 "0 (the run's grid) or an even integer >= 16")
+        if self.texture_resolution and self.initial != "per_node":
+            raise ParameterError("texture_resolution", self.texture_resolution,
+                                 "0 unless initial = 'per_node' (the band texture is the same "
+                                 "physical field at every resolution already)")
 
     @property
     def alpha_minus_B(self) -> float:
@@ -324,7 +337,12 @@ class Numerics:
 def check_compatible(params: Parameters, numerics: Numerics) -> None:
     """Constraints that involve both objects: the grid must resolve a band-limited initial
     texture (resolution > 2 noise_modes, so the same physical field exists at this
-    resolution)."""
+    resolution), and a per-node texture drawn on a grid no finer than the run's."""
+    if params.texture_resolution > numerics.resolution:
+        raise ParameterError(
+            "texture_resolution", params.texture_resolution,
+            f"at most the resolution ({numerics.resolution}): a texture is carried to a finer "
+            "grid, not a coarser one")
     if params.initial == "band" and numerics.resolution <= 2 * params.noise_modes:
         raise ParameterError(
             "resolution", numerics.resolution,

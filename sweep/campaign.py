@@ -181,6 +181,50 @@ class RefineSpec:
                           "max_width": self.max_width, "confidence": self.confidence}}
 
 
+#: What a verification compares by default (phase.nc names).
+DEFAULT_VERIFY_OBSERVABLES = ("sigma2_S", "cos2theta", "lambda", "lambda_peak", "t_peak")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One variant of a verification: the settings changed against the campaign's own, as
+    written (a value, or ``"x2"`` / ``"/10"`` for a multiple of the point's own value), and
+    other seeds (``None``: the sampled seeds)."""
+
+    name: str
+    settings: Mapping[str, Any]
+    seeds: tuple[int, ...] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = dict(self.settings)
+        if self.seeds is not None:
+            out["seeds"] = list(self.seeds)
+        return out
+
+
+@dataclass(frozen=True)
+class VerifySpec:
+    """A validated ``verify:`` section (:mod:`sweep.verify.config`). ``points`` is ``None``
+    for the default sample (both sides of each fitted transition and the grid's corners),
+    else the selections given (axis -> value; an axis left out takes every value)."""
+
+    variants: tuple[Variant, ...]
+    points: tuple[Mapping[str, Any], ...] | None = None
+    corners: bool = True
+    seeds: int = 2
+    threshold: float = 0.05
+    patterned_above: float = 1e-6
+    observables: tuple[str, ...] = DEFAULT_VERIFY_OBSERVABLES
+    before: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"variants": [v.to_dict() for v in self.variants],
+                "points": None if self.points is None else [dict(p) for p in self.points],
+                "corners": self.corners, "seeds": self.seeds, "threshold": self.threshold,
+                "patterned_above": self.patterned_above,
+                "observables": list(self.observables), "before": self.before}
+
+
 @dataclass(frozen=True)
 class Campaign:
     """A validated campaign. ``parameters`` / ``numerics`` are the base values as written
@@ -204,6 +248,8 @@ class Campaign:
     overrides: tuple[str, ...] = ()
     #: the ``refine:`` section (an adaptive campaign: sweep/refine), or ``None``
     refine: RefineSpec | None = None
+    #: the ``verify:`` section (convergence and sensitivity checks: sweep/verify), or ``None``
+    verify: VerifySpec | None = None
 
     @property
     def axes(self) -> tuple[Axis, ...]:

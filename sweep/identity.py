@@ -41,12 +41,19 @@ EXECUTION_ONLY = ("backend",)
 #: original value ("band", the only texture before the field existed), so those runs keep their
 #: ids; with "per_node" the band's ``noise_modes`` changes nothing and is left out instead.
 TEXTURE, TEXTURE_ORIGINAL = "initial", "band"
+#: Parameters added later whose default changes nothing: left out of the canonical text at
+#: that default, so earlier runs keep their ids.
+LATER_DEFAULTS = {"texture_resolution": 0}
 
 
 def identity_parameters(parameters: Mapping[str, Any]) -> dict[str, Any]:
     """The parameters as they enter the canonical text: without ``initial`` while it is
-    "band", without the unused ``noise_modes`` while it is "per_node"."""
+    "band", without the unused ``noise_modes`` while it is "per_node", without
+    ``texture_resolution`` while it is 0."""
     out = dict(parameters)
+    for name, default in LATER_DEFAULTS.items():
+        if name in out and out[name] == default:
+            del out[name]
     if out.get(TEXTURE, TEXTURE_ORIGINAL) == TEXTURE_ORIGINAL:
         out.pop(TEXTURE, None)
     else:

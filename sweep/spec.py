@@ -63,11 +63,12 @@ from .sections import (
     read_store,
 )
 from .sweep_section import read_sweep
+from .verify.config import read_verify
 from .yaml_input import read_document
 
 #: The top-level keys, in the order error messages list them.
 TOP_KEYS = ("name", "description", "parameters", "numerics", "sweep", "seeds", "store", "fits",
-            "figures", "execution", "limits", "refine")
+            "figures", "execution", "limits", "refine", "verify")
 
 
 class Section(NamedTuple):
@@ -94,6 +95,7 @@ SECTIONS: tuple[Section, ...] = (
     Section("figures", "figures", read_figures),
     Section("execution", "execution", read_execution),
     Section("refine", "refine", read_refine),
+    Section("verify", "verify", read_verify),
 )
 
 

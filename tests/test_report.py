@@ -1,6 +1,6 @@
 """``nematic report``: the page of a real tiny adaptive campaign with failures lists every
-failure reason, failed run and refinement round, is self-contained, and is rewritten by
-``nematic report`` from the campaign's name; the pieces (fit tables, hover texts) from small
+failure reason, failed run, refinement round and verification verdict, is self-contained,
+and is rewritten by ``nematic report`` from the campaign's name; the pieces (fit tables, hover texts) from small
 data. The page in a real browser: tests/test_report_browser.py."""
 
 from __future__ import annotations
@@ -40,6 +40,10 @@ refine:
   jump: 1.01
   rounds: 1
   min_spacing: 0.05
+verify:
+  seeds: 1
+  variants:
+    - tolerance: /10
 execution: {workers: 2}
 """
 
@@ -85,6 +89,11 @@ def test_run_writes_a_report_listing_every_failure_and_round(adaptive):
                 in html)
     assert "boundary: alpha_minus_B 0.1" in html  # why round 1 ran its points
     assert "8: 6 done, 2 failed, 0 pending" in " ".join(html.split())
+    # the verification: the grid's 4 corners under one variant, the failed ones missing
+    assert '<h2 id="verification">' in html
+    assert "of 4 sampled points converged (2 with runs missing)" in html
+    assert html.count("<td>tolerance /10</td>") == 4
+    assert "<td>missing</td>" in html
 
 
 def test_the_report_is_self_contained(adaptive):

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, driver, export, figures, report, simulate, stability
+from . import campaigns, driver, export, figures, report, simulate, stability, verify
 from .app import app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
@@ -23,6 +23,7 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "run": campaigns.run,
     "status": campaigns.status,
     "aggregate": campaigns.aggregate,
+    "verify": verify.verify,
     "stop": driver.stop,
     "export": export.export,
     "report": report.report,

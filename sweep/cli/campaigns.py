@@ -106,9 +106,14 @@ def run(
         "--prune", help="First remove the orphaned runs: the records and files in the "
         "results folder of runs this campaign does not plan (e.g. values since removed from "
         "an axis); says how many.")] = False,
-    verify: Annotated[bool, typer.Option(
-        "--verify", help="Checksum every finished run's file (by default only files whose "
-        "size or mtime changed are), and redo the corrupt ones.")] = False,
+    check_files: Annotated[bool, typer.Option(
+        "--check-files", help="Checksum every finished run's file (by default only files "
+        "whose size or mtime changed are), and redo the corrupt ones.")] = False,
+    check_files_alias: Annotated[bool, typer.Option(
+        "--verify", hidden=True, help="The former name of --check-files.")] = False,
+    verification: Annotated[bool, typer.Option(
+        "--verification/--no-verification", help="Run the campaign's verify: section "
+        "(as 'nematic verify' does): after the fits, or first with verify.before.")] = True,
     aggregate: Annotated[bool, typer.Option(
         "--aggregate/--no-aggregate", help="Write phase.nc at the end.")] = True,
     figures: Annotated[bool, typer.Option(
@@ -145,6 +150,8 @@ def run(
     err = err_console()
     setup_logging(err, verbose, quiet)
     c = load(err, campaign, set_, seeds, name, scheduler, workers)
+    verify = check_files or check_files_alias
+    verification = verification and c.verify is not None
     try:
         limit = None if max_failures is None else FailureLimit.parse(max_failures)
     except ValueError as e:
@@ -174,6 +181,10 @@ def run(
         try:
             report_changes(say, c, store, expansion if c.refine is None else None,
                            prune=prune, hint="--prune removes them")
+            if verification and c.verify is not None and c.verify.before:
+                from .verify import verify_step
+
+                verify_step(c, store, say, before=True)
             with sigterm_as_interrupt(), progress:
                 try:
                     if c.refine is None:
@@ -231,7 +242,13 @@ def run(
                 say.print(f"phase diagram: {escape(str(store.phase_path))}")
                 if figures:
                     repair_products(c, results, err, phase=False)
-                    for figure in regenerate_figures(c, results):
+                    drawn = regenerate_figures(c, results)
+                    if verification:
+                        from .verify import verify_step
+
+                        if verify_step(c, store, say, before=False):
+                            drawn = regenerate_figures(c, results)  # with the verdicts
+                    for figure in drawn:
                         say.print(f"figure: {escape(str(figure))}")
                     page = regenerate_report(c, results)
                     if page is not None:
@@ -337,10 +354,13 @@ def status(
     if as_json:
         from ..changes import campaign_changes
         from ..refine.rounds import status_dict
+        from .verify import verification_lines
 
         changed = campaign_changes(c, store, expansion)
+        checks = verification_lines(store.root)
         typer.echo(json.dumps({**report.to_dict(), **status_dict(refinement),
-                               "changes": None if changed is None else changed.to_dict()},
+                               "changes": None if changed is None else changed.to_dict(),
+                               "verification": checks[0] if checks else None},
                               default=str))
         return
     pct = 100.0 * report.done / max(report.total, 1)
@@ -384,6 +404,10 @@ def status(
     if report.foreign_runs:
         console.print(f"{report.foreign_runs} run record(s) in the folder belong to other "
                       "grids (kept, not counted)")
+    from .verify import verification_lines
+
+    for line in verification_lines(store.root, detail=verbose):
+        console.print(line, markup=False)
 
 
 def driver_line(running: dict[str, Any] | None, name: str) -> str:

@@ -67,6 +67,29 @@ class Results:
                 self._runs[run_id] = None
         return self._runs[run_id]
 
+    @property
+    def verified(self) -> list[tuple[dict[str, Any], int]]:
+        """The points verify.nc sampled: (swept values, verdict over every variant: 1
+        converged, 0 changed, -2 runs missing); empty without a readable verify.nc."""
+        if not hasattr(self, "_verified"):
+            self._verified: list[tuple[dict[str, Any], int]] = []
+            path = self.root / "verify.nc"
+            if path.exists():
+                try:
+                    with xr.open_dataset(path) as v:
+                        v = v.load()
+                except (OSError, ValueError) as e:
+                    log.warning("cannot read %s: %s", path, e)
+                    return self._verified
+                conv = v["converged"].values
+                axes = [str(c) for c in v.coords if v[c].dims == ("point",)
+                        and c not in ("point", "label", "why")]
+                for p in range(conv.shape[0]):
+                    row = conv[p]
+                    verdict = 0 if (row == 0).any() else -2 if (row == -2).any() else 1
+                    self._verified.append(({a: v[a].values[p].item() for a in axes}, verdict))
+        return self._verified
+
     def fit(self, *names: str) -> xr.Dataset:
         """The fits Dataset, checked to hold every variable in ``names``."""
         missing = [n for n in names if n not in self.fits]
@@ -74,6 +97,43 @@ class Results:
             raise FigureError(f"{self.root / FITS} has no {', '.join(missing)}: "
                               "run `nematic figures` (it writes the fits first)")
         return self.fits
+
+
+#: How a verification verdict is drawn: a square frame around the point (docs/campaigns.md).
+VERDICT_STYLE = {1: ("tab:green", "verified: converged"),
+                 0: ("tab:orange", "verified: changed by a variant"),
+                 -2: ("0.5", "verified: runs missing")}
+
+
+def mark_verdicts(ax: Axes, marks: Sequence[tuple[Sequence[float], int]],
+                  size: float = 150.0) -> list[Any]:
+    """Frame the verified points at their plot positions (2 or 3 coordinates) with a square
+    coloured by verdict, with one legend entry per verdict shown; returns their artists."""
+    drawn = []
+    for verdict, (colour, label) in VERDICT_STYLE.items():
+        pts = [xy for xy, v in marks if v == verdict]
+        if not pts:
+            continue
+        cols = list(zip(*pts, strict=True))
+        plot: Any = ax  # a 2-D or a 3-D Axes
+        drawn.append(plot.scatter(*cols, s=size, marker="s", facecolors="none",
+                                edgecolors=colour, linewidths=1.6, label=label, zorder=5))
+    return drawn
+
+
+def on_slice(coords: Mapping[str, Any], ds: xr.Dataset, names: Sequence[str]) -> bool:
+    """Whether ``coords`` (a verified point's swept values) lie on ``ds``'s slice, whose
+    ``names`` are fixed (scalar coordinates)."""
+    for name in names:
+        if name not in coords or name not in ds.coords or ds[name].size != 1:
+            continue
+        a, b = coords[name], ds[name].values.item()
+        if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+            if not math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-300):
+                return False
+        elif a != b:
+            return False
+    return True
 
 
 def nearest_point(ds: xr.Dataset, where: Mapping[str, Any]) -> xr.Dataset:

@@ -19,7 +19,9 @@ from .common import (
     check_options,
     describe,
     fmt,
+    mark_verdicts,
     ok_run,
+    on_slice,
     runs_along,
     safe_snapshot,
 )
@@ -116,6 +118,13 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
         if math.isfinite(value) and value > 0:
             ax_c.plot([float(snap_point[AMB])], [value], "o", ms=13, mfc="none", mec="red",
                       mew=1.8, zorder=4, label="panel (a)")
+    marks = []
+    for coords, verdict in res.verified:
+        if AMB in coords and on_slice(coords, ds, others):
+            i = int(np.argmin(np.abs(x - float(coords[AMB]))))
+            if np.isfinite(mean[i]) and (mean[i] > 0 or yscale != "log"):
+                marks.append(((float(x[i]), float(mean[i])), verdict))
+    mark_verdicts(ax_c, marks, size=110.0)
     ax_c.set_yscale(yscale)
     if yscale == "linear":
         ax_c.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))

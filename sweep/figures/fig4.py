@@ -21,8 +21,10 @@ from .common import (
     default_select,
     fmt,
     fmt_sci,
+    mark_verdicts,
     nearest_point,
     ok_run,
+    on_slice,
     safe_snapshot,
 )
 
@@ -117,6 +119,14 @@ def fig4(res: Results, options: Mapping[str, Any]) -> Figure:
     else:
         ax.scatter(*plot_vals, s=size, c=colours, edgecolors="k", linewidths=0.4)
         ax.margins(0.1)
+    marks = []
+    for where, verdict in res.verified:
+        if all(a in where for a in axes) and on_slice(where, ds, sorted(
+                set(map(str, ds.coords)) - set(axes))):
+            marks.append(([float(where[a]) * scale if a == act else
+                           math.log10(max(float(where[a]), 1e-300)) if a == "K"
+                           else float(where[a]) for a in axes], verdict))
+    framed = mark_verdicts(ax, marks, size=230.0)
     ax.set_xlabel(labels[axes[0]])
     ax.set_ylabel(labels[axes[1]])
     ax.set_title("(a) colour: " + LABELS["cos2theta"] + r", size: $\sigma^2_S$", loc="left")
@@ -128,9 +138,13 @@ def fig4(res: Results, options: Mapping[str, Any]) -> Figure:
         refs = [vmax * f for f in (1.0, 0.25, 0.02)]
         handles = [ax.scatter([], [], s=float(_sizes(np.array([r]), vmax)[0]), c="0.6",
                               edgecolors="k", linewidths=0.4) for r in refs]
-        ax.legend(handles, [f"{r:.2g}" for r in refs], title=r"marker size: $\sigma^2_S$",
-                  loc="upper center", bbox_to_anchor=(0.5, -0.1 if three_d else -0.09),
-                  ncol=3, fontsize=8, borderpad=0.8, columnspacing=2.5)
+        ax.legend([*handles, *framed], [f"{r:.2g}" for r in refs]
+                  + [h.get_label() for h in framed],
+                  title=r"marker size: $\sigma^2_S$", loc="upper center",
+                  bbox_to_anchor=(0.5, -0.1 if three_d else -0.09), ncol=3,
+                  fontsize=8, borderpad=0.8, columnspacing=2.5)
+    elif framed:
+        ax.legend(loc="upper left", fontsize=7)
 
     # (b) representative snapshots
     targets = list(options.get("snapshots") or FIG4_SNAPSHOTS)[:4]

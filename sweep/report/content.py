@@ -51,6 +51,7 @@ class Content:
     fits: list[Table] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
     refine: dict[str, Any] | None = None
+    verification: dict[str, Any] | None = None
     cost: dict[str, Any] = field(default_factory=dict)
     provenance: list[tuple[str, str]] = field(default_factory=list)
     campaign_yaml: str = ""
@@ -194,6 +195,22 @@ def refine_rounds(plan: Mapping[str, Any] | None) -> dict[str, Any] | None:
             "stop": plan.get("stop") or "", "run_bound": plan.get("run_bound")}
 
 
+def verification(root: Path) -> dict[str, Any] | None:
+    """The verification's summary, verdicts and transitions from ``verify.nc`` (``None``
+    without one; a note when it cannot be read)."""
+    from ..verify.measure import read_verify, summary_line, transition_rows, verdict_rows
+
+    try:
+        ds = read_verify(root)
+    except (OSError, ValueError) as e:
+        return {"summary": f"verify.nc cannot be read: {e}", "rows": [], "transitions": []}
+    if ds is None:
+        return None
+    return {"summary": summary_line(ds), "rows": verdict_rows(ds),
+            "transitions": transition_rows(ds), "seeds": str(ds.attrs.get("seeds", "")),
+            "threshold": float(ds.attrs.get("threshold", math.nan))}
+
+
 def cost(records: Mapping[str, Mapping[str, Any]], run_ids: set[str]) -> dict[str, Any]:
     """CPU time: the sum of the campaign's runs' wall times (one core each), their median,
     and a small histogram of them (a PNG data URI)."""
@@ -255,6 +272,7 @@ def gather(opened: CampaignResults, phase: xr.Dataset, status: StatusReport,
     content.failures = failure_groups(status, phase)
     if opened.campaign.refine is not None:
         content.refine = refine_rounds(read_plan(opened.store))
+    content.verification = verification(root)
     ids = {str(r) for r in np.asarray(phase["run_id"].values).ravel() if r}
     content.cost = cost(records, ids)
     content.provenance, content.campaign_yaml = provenance(phase, root)

@@ -83,6 +83,22 @@ its record, with the traceback: {{ g.record }}</p>
 <td>{{ p.why }}</td><td>{{ p.states | join(", ") }}</td></tr>
 {% endfor %}</table>{% endfor %}{% endif %}
 
+{% if c.verification %}<h2 id="verification">Verification</h2>
+<p class="verify-summary">{{ c.verification.summary }}</p>
+<p class="note">Each sampled point rerun with seeds {{ c.verification.seeds }} under every
+variant; converged: every compared observable changes by less than
+{{ c.verification.threshold }} (relative; absolute for cos2theta) and the pattern class is
+kept (results/NAME/verify.nc).</p>
+<table class="verify"><tr><th>point</th><th>why</th><th>variant</th><th>verdict</th>
+<th>changes</th></tr>
+{% for r in c.verification.rows %}<tr><td>{{ r.point }}</td><td>{{ r.why }}</td>
+<td>{{ r.variant }}</td><td>{{ r.verdict }}</td><td>{{ r.changes }}</td></tr>
+{% endfor %}</table>
+{% if c.verification.transitions %}<table class="verify-transitions"><tr><th>transition</th>
+<th>variant</th><th>recomputed</th></tr>
+{% for r in c.verification.transitions %}<tr><td>{{ r.transition }}</td><td>{{ r.variant }}</td>
+<td>{{ r.where }}</td></tr>{% endfor %}</table>{% endif %}{% endif %}
+
 <h2 id="cost">Cost</h2>
 {% if c.cost.n %}<p>{{ "%.3g" | format(c.cost.cpu_hours) }} CPU-hours: the sum of the wall
 times of {{ c.cost.n }} run(s) ({{ "%.3g" | format(c.cost.total_seconds) }} s; one core each),

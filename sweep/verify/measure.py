@@ -1,0 +1,358 @@
+"""``results/NAME/verify.nc``: what each variant changes at each sampled point, and the
+verdicts.
+
+Per sampled point ``p`` and observable ``X`` (``verify.observables``): ``X_base(p)``, the
+seed mean of the base runs (geometric for sigma2_S, arithmetic otherwise); per variant ``v``:
+``X(p, v)`` the variant's seed mean, ``X_change(p, v)`` the relative change
+``(X - X_base) / |X_base|`` (for <cos 2 theta>, which lies in [-1, 1] and is near 0 without
+applied strain, the absolute change ``X - X_base``) and ``X_verdict(p, v)``:
+
+- 1 converged: ``|change| < verify.threshold``;
+- 0 changed;
+- -1 not compared: a pattern measure (sigma2_S, lambda, the peak values) where neither the
+  base nor the variant is patterned (there is no pattern to measure);
+- -2 missing: a run of the pair missing or failed, or the variant not valid there.
+
+The class: ``patterned_base(p)`` and ``patterned(p, v)`` (1 when the geometric seed mean of
+sigma2_S is above ``verify.patterned_above``). ``converged(p, v)``: 1 when the class is kept
+and no compared observable changed, 0 otherwise, -2 when runs are missing.
+
+Per fitted transition ``t`` the fit is recomputed on the sampled bracket (its two grid
+points) with the base and with each variant's runs: ``transition_location_variant(t, v)``,
+its ``transition_shift(t, v)`` from the base and ``transition_within(t, v)`` (1 when the
+variant's location lies in the fit's own interval, 0 when it does not or the jump is gone).
+The comparison is paired (same seeds unless the variant names others), so it measures the
+numerics, not the seed scatter.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from ..aggregate import OBSERVABLES as PHASE_OBSERVABLES
+from ..analysis.transition import fit_transition
+from ..expand import RunSpec
+from ..files import atomic_to_netcdf
+from ..provenance import code_version, git_commit, library_versions_text
+from ..store import Record, now_iso
+from .config import ABSOLUTE, OBSERVABLES
+from .sample import Sample, point_label
+
+VERIFY = "verify.nc"
+CONVERGED, CHANGED, NOT_COMPARED, MISSING = 1, 0, -1, -2
+VERDICT_ATTRS = {"flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
+                 "flag_meanings": "missing not_compared changed converged"}
+
+
+def _values(runs: Sequence[RunSpec] | None, records: Mapping[str, Record], source: str
+            ) -> tuple[np.ndarray, int]:
+    """The runs' values of ``source`` (NaN where missing) and how many runs are ok."""
+    if not runs:
+        return np.full(0, np.nan), 0
+    out = np.full(len(runs), np.nan)
+    ok = 0
+    for k, r in enumerate(runs):
+        rec = records.get(r.run_id)
+        if rec is None or rec.get("status") != "ok":
+            continue
+        ok += 1
+        value = (rec.get("scalars") or {}).get(source)
+        if value is not None:
+            out[k] = float(value)
+    return out, ok
+
+
+def seed_mean(values: np.ndarray, geometric: bool) -> float:
+    v = values[np.isfinite(values)]
+    if geometric:
+        v = v[v > 0]
+        return float(10 ** np.mean(np.log10(v))) if v.size else math.nan
+    return float(np.mean(v)) if v.size else math.nan
+
+
+def relative_change(base: float, value: float) -> float:
+    if not (math.isfinite(base) and math.isfinite(value)):
+        return math.nan
+    if base == 0:
+        return 0.0 if value == 0 else math.inf
+    return (value - base) / abs(base)
+
+
+def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
+                   variant_records: Mapping[str, Record]) -> xr.Dataset:
+    """The verify.nc Dataset of ``sample`` from the records of the campaign (base runs) and
+    of its verify folder (variant runs)."""
+    spec = sample.spec
+    n_p, n_v = len(sample.points), len(sample.variants)
+    sig_src = PHASE_OBSERVABLES["sigma2_S"][0]
+    base_sig = [_values(runs, base_records, sig_src) for runs in sample.base]
+    base_class = np.array([_class(seed_mean(v, True), ok, spec.patterned_above)
+                           for v, ok in base_sig], dtype=np.int8)
+    var_class = np.full((n_p, n_v), -1, dtype=np.int8)
+    complete = np.zeros((n_p, n_v), dtype=bool)
+    for v in range(n_v):
+        for p in range(n_p):
+            runs = sample.variant_runs[v][p]
+            vals, ok = _values(runs, variant_records, sig_src)
+            var_class[p, v] = _class(seed_mean(vals, True), ok, spec.patterned_above)
+            complete[p, v] = (runs is not None and ok == len(runs)
+                              and base_sig[p][1] == len(sample.base[p]))
+    data: dict[str, xr.Variable] = {}
+    worst = np.ones((n_p, n_v), dtype=bool)
+    for name in spec.observables:
+        source, pattern = OBSERVABLES[name]
+        geometric = name == "sigma2_S"
+        base = np.array([seed_mean(_values(runs, base_records, source)[0], geometric)
+                         for runs in sample.base])
+        value = np.full((n_p, n_v), np.nan)
+        change = np.full((n_p, n_v), np.nan)
+        verdict = np.full((n_p, n_v), MISSING, dtype=np.int8)
+        for v in range(n_v):
+            for p in range(n_p):
+                value[p, v] = seed_mean(
+                    _values(sample.variant_runs[v][p], variant_records, source)[0], geometric)
+                change[p, v] = (value[p, v] - base[p] if name in ABSOLUTE
+                                else relative_change(base[p], value[p, v]))
+                if not complete[p, v]:
+                    continue
+                if pattern and base_class[p] != 1 and var_class[p, v] != 1:
+                    verdict[p, v] = NOT_COMPARED
+                elif not (math.isfinite(base[p]) or math.isfinite(value[p, v])):
+                    verdict[p, v] = NOT_COMPARED  # e.g. no peak in either
+                elif abs(change[p, v]) < spec.threshold:
+                    verdict[p, v] = CONVERGED
+                else:
+                    verdict[p, v] = CHANGED
+        worst &= verdict != CHANGED
+        long = PHASE_OBSERVABLES[name][1]
+        data[f"{name}_base"] = xr.Variable(("point",), base, {
+            "long_name": f"base runs' seed mean of {name}: {long}", "units": "1"})
+        data[name] = xr.Variable(("point", "variant"), value, {
+            "long_name": f"variant runs' seed mean of {name}", "units": "1"})
+        data[f"{name}_change"] = xr.Variable(("point", "variant"), change, {
+            "long_name": f"absolute change of {name}: variant - base" if name in ABSOLUTE
+            else f"relative change of {name}: (variant - base) / |base|", "units": "1"})
+        data[f"{name}_verdict"] = xr.Variable(("point", "variant"), verdict, {
+            "long_name": f"verdict on {name}", **VERDICT_ATTRS})
+    kept = (var_class == base_class[:, None])
+    converged = np.where(~complete, MISSING, np.where(kept & worst, CONVERGED, CHANGED))
+    data["patterned_base"] = xr.Variable(("point",), base_class, {
+        "long_name": "pattern class of the base runs (geometric seed mean of sigma2_S above "
+                     "patterned_above)", "flag_values": np.array([-1, 0, 1], dtype=np.int8),
+        "flag_meanings": "missing relaxed patterned"})
+    data["patterned"] = xr.Variable(("point", "variant"), var_class, {
+        "long_name": "pattern class of the variant runs",
+        "flag_values": np.array([-1, 0, 1], dtype=np.int8),
+        "flag_meanings": "missing relaxed patterned"})
+    data["converged"] = xr.Variable(("point", "variant"), converged.astype(np.int8), {
+        "long_name": "verdict at the point: the class kept and no compared observable "
+                     "changed by more than the threshold", **VERDICT_ATTRS})
+    coords: dict[str, Any] = {
+        "point": xr.Variable(("point",), np.arange(n_p), {"long_name": "sampled point"}),
+        "variant": xr.Variable(("variant",), np.array([v.name for v in sample.variants]),
+                               {"long_name": "variant: the settings changed"}),
+        "label": xr.Variable(("point",), np.array([point_label(p) for p in sample.points]),
+                             {"long_name": "the point's swept values"}),
+        "why": xr.Variable(("point",), np.array(sample.why),
+                           {"long_name": "why the point is sampled"}),
+    }
+    for axis in sample.campaign.axes:
+        coords[axis.name] = xr.Variable(("point",), np.array(
+            [p.coords[axis.name] for p in sample.points]), {"long_name": axis.name})
+    ds = xr.Dataset(data, coords=coords)
+    if sample.transitions:
+        _transitions(ds, sample, base_records, variant_records)
+    ds.attrs.update({
+        "Conventions": "CF-1.11",
+        "title": f"verification of campaign {sample.campaign.name}",
+        "campaign": sample.campaign.name,
+        "source": "active-nematic-solids campaign manager (nematic verify)",
+        "code_version": code_version(), "git_commit": git_commit(),
+        "library_versions": library_versions_text(),
+        "created": now_iso(),
+        "history": f"{now_iso()}: {n_p} points x {n_v} variants compared",
+        "verify_spec": json.dumps(spec.to_dict()),
+        "variant_settings": json.dumps({v.name: v.to_dict() for v in sample.variants}),
+        "seeds": ", ".join(str(s) for s in sample.seeds),
+        "threshold": spec.threshold, "patterned_above": spec.patterned_above,
+        "problems": "; ".join(sample.problems),
+        "summary": summary_line(ds),
+    })
+    return ds
+
+
+def _class(mean_sigma2: float, ok: int, level: float) -> int:
+    if ok == 0 or not math.isfinite(mean_sigma2):
+        return -1
+    return int(mean_sigma2 > level)
+
+
+def _transitions(ds: xr.Dataset, sample: Sample, base_records: Mapping[str, Record],
+                 variant_records: Mapping[str, Record]) -> None:
+    n_t, n_v = len(sample.transitions), len(sample.variants)
+    loc_v = np.full((n_t, n_v), np.nan)
+    loc_b = np.full(n_t, np.nan)
+    for t, tr in enumerate(sample.transitions):
+        source = PHASE_OBSERVABLES.get(tr.observable, (tr.observable, ""))[0]
+        x = [sample.points[tr.below].coords[tr.axis], sample.points[tr.above].coords[tr.axis]]
+
+        def location(runs: Sequence[Sequence[RunSpec] | None],
+                     records: Mapping[str, Record], tr: Any = tr, x: Any = x,
+                     source: str = source) -> float:
+            if any(r is None for r in runs):
+                return math.nan
+            vals = [_values(r, records, source)[0] for r in runs]
+            width = max(v.size for v in vals)
+            table = np.full((2, width), np.nan)
+            for k, v in enumerate(vals):
+                table[k, : v.size] = v
+            fit = fit_transition(x, table, log=tr.log, min_jump=tr.min_jump, mean=tr.mean,
+                                 n_boot=1)
+            return fit.location
+        loc_b[t] = location([sample.base[tr.below], sample.base[tr.above]], base_records)
+        for v in range(n_v):
+            loc_v[t, v] = location([sample.variant_runs[v][tr.below],
+                                    sample.variant_runs[v][tr.above]], variant_records)
+    lower = np.array([tr.lower for tr in sample.transitions])
+    upper = np.array([tr.upper for tr in sample.transitions])
+    within = ((loc_v >= lower[:, None]) & (loc_v <= upper[:, None])).astype(np.int8)
+    ds.coords["transition"] = xr.Variable(("transition",), np.arange(n_t))
+    ds["transition_fit"] = xr.Variable(("transition",), np.array(
+        [f"{tr.prefix} along {tr.axis}" + "".join(f", {k} = {v:g}" for k, v in tr.where.items())
+         for tr in sample.transitions]), {"long_name": "the fitted transition"})
+    ds["transition_location"] = xr.Variable(("transition",), np.array(
+        [tr.location for tr in sample.transitions]), {"long_name": "the fit's location"})
+    ds["transition_lower"] = xr.Variable(("transition",), lower,
+                                         {"long_name": "the fit's interval, lower end"})
+    ds["transition_upper"] = xr.Variable(("transition",), upper,
+                                         {"long_name": "the fit's interval, upper end"})
+    ds["transition_location_base"] = xr.Variable(("transition",), loc_b, {
+        "long_name": "location recomputed on the sampled bracket with the base runs"})
+    ds["transition_location_variant"] = xr.Variable(("transition", "variant"), loc_v, {
+        "long_name": "location recomputed on the sampled bracket with the variant's runs "
+                     "(NaN: no jump between the bracket's points)"})
+    ds["transition_shift"] = xr.Variable(("transition", "variant"), loc_v - loc_b[:, None], {
+        "long_name": "shift of the recomputed location, variant - base", "units": "1"})
+    ds["transition_within"] = xr.Variable(("transition", "variant"), within, {
+        "long_name": "1 when the variant's location lies in the fit's own interval",
+        "flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "outside within"})
+
+
+def _pct(x: float, name: str) -> str:
+    if not math.isfinite(x):
+        return "inf"
+    return f"by {abs(x):.2g}" if name in ABSOLUTE else f"{100 * abs(x):.0f} %"
+
+
+def summary_line(ds: xr.Dataset, worst: int = 2) -> str:
+    """One line: "12 of 14 sampled points converged; K = 1e-06: lambda changes 38 % with
+    resolution x2". A point converged when it converged under every variant."""
+    conv = ds["converged"].values
+    n = conv.shape[0]
+    ok = int((conv == CONVERGED).all(axis=1).sum())
+    missing = int((conv == MISSING).any(axis=1).sum())
+    text = f"{ok} of {n} sampled points converged"
+    if missing:
+        text += f" ({missing} with runs missing)"
+    notes: list[tuple[float, str]] = []
+    variants = [str(v) for v in ds["variant"].values]
+    labels = [str(x) for x in ds["label"].values]
+    for p in range(n):
+        for v in range(len(variants)):
+            if conv[p, v] != CHANGED:
+                continue
+            if ds["patterned"].values[p, v] != ds["patterned_base"].values[p]:
+                notes.append((math.inf, f"{labels[p]}: the pattern class changes with "
+                              f"{variants[v]}"))
+                continue
+            best = (-1.0, "")
+            for name in [str(k)[: -len("_verdict")] for k in ds.data_vars
+                         if str(k).endswith("_verdict")]:
+                if ds[f"{name}_verdict"].values[p, v] == CHANGED:
+                    c = float(ds[f"{name}_change"].values[p, v])
+                    size = abs(c) if math.isfinite(c) else math.inf
+                    if size > best[0]:
+                        best = (size, f"{labels[p]}: {name} changes {_pct(c, name)} with "
+                                f"{variants[v]}")
+            if best[1]:
+                notes.append(best)
+    notes.sort(key=lambda t: -t[0])
+    if notes:
+        text += "; " + "; ".join(t for _, t in notes[:worst])
+        if len(notes) > worst:
+            text += f"; {len(notes) - worst} more"
+    if "transition_within" in ds:
+        w = ds["transition_within"].values
+        text += f"; transitions: {int(w.sum())} of {w.size} stay in their interval"
+    return text
+
+
+def write_verify(root: Path, ds: xr.Dataset) -> Path:
+    path = root / VERIFY
+    text = {name: {"dtype": "S1"} for name in ("variant", "label", "why", "transition_fit")
+            if name in ds.variables}
+    atomic_to_netcdf(ds, path, text)
+    return path
+
+
+#: How a verdict reads in tables.
+VERDICT_TEXT = {CONVERGED: "converged", CHANGED: "CHANGED", NOT_COMPARED: "not compared",
+                MISSING: "missing"}
+
+
+def read_verify(root: Path) -> xr.Dataset | None:
+    """``root/verify.nc`` loaded, or ``None`` when there is none. Raises ``OSError`` /
+    ``ValueError`` when it cannot be read."""
+    path = root / VERIFY
+    if not path.exists():
+        return None
+    with xr.open_dataset(path) as ds:
+        return ds.load()
+
+
+def verdict_rows(ds: xr.Dataset) -> list[dict[str, str]]:
+    """One row per sampled point and variant: the point, why it is sampled, the variant,
+    the verdict (with a class change) and the compared observables' changes."""
+    rows = []
+    names = [str(k)[: -len("_verdict")] for k in ds.data_vars if str(k).endswith("_verdict")]
+    for p in range(ds.sizes["point"]):
+        for v, variant in enumerate(ds["variant"].values):
+            changes = []
+            for n in names:
+                if int(ds[f"{n}_verdict"].values[p, v]) not in (CONVERGED, CHANGED):
+                    continue
+                c = float(ds[f"{n}_change"].values[p, v])
+                absolute = "absolute" in str(ds[f"{n}_change"].attrs.get("long_name"))
+                changes.append(f"{n} {c:+.3f}" if absolute or not abs(c) < 1e6
+                               else f"{n} {100 * c:+.1f} %")
+            verdict = VERDICT_TEXT.get(int(ds["converged"].values[p, v]), "?")
+            if int(ds["patterned"].values[p, v]) != int(ds["patterned_base"].values[p]):
+                verdict += " (pattern class changes)"
+            rows.append({"point": str(ds["label"].values[p]), "why": str(ds["why"].values[p]),
+                         "variant": str(variant), "verdict": verdict,
+                         "changes": ", ".join(changes)})
+    return rows
+
+
+def transition_rows(ds: xr.Dataset) -> list[dict[str, str]]:
+    """One row per fitted transition and variant: where the variant puts it."""
+    if "transition_within" not in ds:
+        return []
+    rows = []
+    for t in range(ds.sizes["transition"]):
+        lo, hi = float(ds["transition_lower"].values[t]), float(ds["transition_upper"].values[t])
+        for v, variant in enumerate(ds["variant"].values):
+            loc = float(ds["transition_location_variant"].values[t, v])
+            where = ("no jump in the bracket" if not math.isfinite(loc) else
+                     f"at {loc:g}, " + ("in" if ds["transition_within"].values[t, v]
+                                        else "outside") + f" the fit's interval [{lo:g}, {hi:g}]")
+            rows.append({"transition": str(ds["transition_fit"].values[t]),
+                         "variant": str(variant), "where": where})
+    return rows

@@ -99,7 +99,7 @@ def _seed_stats(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return mean, std, count.astype(np.int32)
 
 
-def _coord_attrs(name: str) -> dict[str, str]:
+def coord_attrs(name: str) -> dict[str, str]:
     attrs = {"long_name": PARAMETER_LONG_NAMES.get(name, name)}
     if name in PARAMETER_TYPES or NUMERICS_TYPES.get(name) in ("int", "float"):
         attrs["units"] = "1"
@@ -144,7 +144,7 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
     for d in campaign.dims:
         for axis in d.axes:
             coords[axis.name] = xr.Variable((d.name,), np.asarray(axis.values),
-                                            _coord_attrs(axis.name))
+                                            coord_attrs(axis.name))
     coords["seed"] = xr.Variable(("seed",), np.asarray(campaign.seeds, dtype=np.int64), {
         "standard_name": "realization",
         "long_name": "random seed of the initial director field", "units": "1"})

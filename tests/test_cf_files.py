@@ -16,11 +16,13 @@ from sweep_helpers import write_campaign
 
 from model.fourier import HAVE_FFTW
 from sweep.aggregate import write_phase
-from sweep.analysis.fits_file import write_fits
+from sweep.analysis.fits_file import load_fits, write_fits
 from sweep.expand import expand
-from sweep.spec import load_campaign
+from sweep.spec import load_campaign, parse_campaign
 from sweep.store import CampaignStore
 from sweep.task import RunTask, execute_run
+from sweep.verify.measure import verify_dataset, write_verify
+from sweep.verify.sample import plan_sample
 
 LIBRARIES = ("numpy", "py-pde", "numba", "xarray", "dask") + (("fftw",) if HAVE_FFTW else ())
 
@@ -42,7 +44,15 @@ def files(tmp_path_factory):
     fits_path, failures = write_fits(store.root, [("transition", {})])
     assert not failures
     run_file = next(iter(sorted(store.runs_dir.glob("*.nc"))))
-    return SimpleNamespace(run=run_file, phase=store.phase_path, fits=fits_path)
+    # verify.nc of a verification whose variant reproduces the base runs (records reused)
+    checked = parse_campaign(path.read_text() + "fits: [transition]\nverify: {seeds: 2, "
+                             "variants: [{tolerance: /10}]}\n", str(path))
+    sample = plan_sample(checked, expansion, load_fits(store.root))
+    records = store.scan()
+    by_point = {(r.point.index, r.seed): records[r.run_id] for r in sample.base_list()}
+    variant = {r.run_id: by_point[(r.point.index, r.seed)] for r in sample.variant_list()}
+    verify = write_verify(store.root, verify_dataset(sample, records, variant))
+    return SimpleNamespace(run=run_file, phase=store.phase_path, fits=fits_path, verify=verify)
 
 
 def _variables(path: Path) -> dict[str, dict]:
@@ -56,7 +66,7 @@ def _globals(path: Path) -> dict:
         return {k: nc.getncattr(k) for k in nc.ncattrs()}
 
 
-@pytest.mark.parametrize("which", ["run", "phase", "fits"])
+@pytest.mark.parametrize("which", ["run", "phase", "fits", "verify"])
 def test_global_attributes(files, which):
     attrs = _globals(getattr(files, which))
     assert attrs["Conventions"] == "CF-1.11"
@@ -67,7 +77,7 @@ def test_global_attributes(files, which):
         assert versions.get(lib, "").strip(), (lib, versions)
 
 
-@pytest.mark.parametrize("which", ["run", "phase", "fits"])
+@pytest.mark.parametrize("which", ["run", "phase", "fits", "verify"])
 def test_variable_attributes(files, which):
     variables = _variables(getattr(files, which))
     for name, attrs in variables.items():
@@ -133,7 +143,7 @@ def _checker_messages(path: Path, tmp_path: Path) -> list[str]:
             for item in report[key] for m in item["msgs"]]
 
 
-@pytest.mark.parametrize("which", ["run", "phase", "fits"])
+@pytest.mark.parametrize("which", ["run", "phase", "fits", "verify"])
 def test_compliance_checker_cf_1_11_reports_nothing(files, which, tmp_path):
     """No error and no warning of any priority."""
     assert _checker_messages(getattr(files, which), tmp_path) == []
@@ -169,7 +179,7 @@ def _cfchecks(path: Path, tmp_path: Path, version: tuple[int, int]) -> dict[str,
     return out
 
 
-@pytest.mark.parametrize("which", ["run", "phase", "fits"])
+@pytest.mark.parametrize("which", ["run", "phase", "fits", "verify"])
 def test_cfchecks_finds_only_the_newer_cf_version(files, which, tmp_path):
     """cfchecks (CF up to 1.8): on the file as written, the one error is that it does not
     know CF-1.11; on a copy that says CF-1.8, no error and no warning."""

@@ -226,7 +226,7 @@ def test_verdicts_from_known_records():
             var[r.run_id] = _record(1e-9 if a == 0.1 else 1.01e-2, lam=0.202)
         # the seeds variant has no runs yet: missing
     ds = verify_dataset(s, base, var)
-    v = {name: i for i, name in enumerate(ds["variant"].values)}
+    v = {name: i for i, name in enumerate(ds["variant_name"].values)}
     point = {label[i]: i for i in label}
     p01, p05, p09 = point[(0.1, 1e-4)], point[(0.5, 1e-4)], point[(0.9, 1e-4)]
     conv = ds["converged"].values
@@ -265,7 +265,7 @@ def test_run_verifies_and_writes_verify_nc_with_cf_attributes(verified):
     assert "sampled points converged" in text
     ds = xr.open_dataset(results / "v" / "verify.nc")
     assert ds.attrs["Conventions"] == "CF-1.11"
-    assert list(ds["variant"].values) == ["resolution x2", "tolerance /10"]
+    assert list(ds["variant_name"].values) == ["resolution x2", "tolerance /10"]
     assert set(ds["converged"].values.ravel()) <= {CONVERGED, CHANGED}
     # the variants' runs are stored apart, the campaign keeps its 18 runs
     assert len(list((results / "v" / "verify" / "runs").glob("*.nc"))) == 2 * ds.sizes["point"]

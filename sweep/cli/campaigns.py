@@ -79,6 +79,14 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
 
         for line in validation_lines(c):
             console.print(f"  {line}", markup=False)
+    if c.verify is not None:
+        v = c.verify
+        where = ("both sides of each fitted transition" if v.points is None
+                 else f"{len(v.points)} selection(s)") + (" and the corners" if v.corners else "")
+        console.print(f"  verify: {len(v.variants)} variant(s) ("
+                      + "; ".join(x.name for x in v.variants) + f") at {where}, "
+                      f"{v.seeds} seed(s) each" + (", before the grid" if v.before else ""),
+                      markup=False)
 
 
 # --------------------------------------------------------------------------- run

@@ -37,6 +37,7 @@ import numpy as np
 import xarray as xr
 
 from ..aggregate import OBSERVABLES as PHASE_OBSERVABLES
+from ..aggregate import coord_attrs
 from ..analysis.transition import fit_transition
 from ..expand import RunSpec
 from ..files import atomic_to_netcdf
@@ -155,9 +156,12 @@ def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
         "long_name": "verdict at the point: the class kept and no compared observable "
                      "changed by more than the threshold", **VERDICT_ATTRS})
     coords: dict[str, Any] = {
-        "point": xr.Variable(("point",), np.arange(n_p), {"long_name": "sampled point"}),
-        "variant": xr.Variable(("variant",), np.array([v.name for v in sample.variants]),
-                               {"long_name": "variant: the settings changed"}),
+        "point": xr.Variable(("point",), np.arange(n_p), {"long_name": "sampled point",
+                                                          "units": "1"}),
+        "variant": xr.Variable(("variant",), np.arange(n_v), {"long_name": "variant",
+                                                              "units": "1"}),
+        "variant_name": xr.Variable(("variant",), np.array([v.name for v in sample.variants]),
+                                    {"long_name": "variant: the settings changed"}),
         "label": xr.Variable(("point",), np.array([point_label(p) for p in sample.points]),
                              {"long_name": "the point's swept values"}),
         "why": xr.Variable(("point",), np.array(sample.why),
@@ -165,7 +169,7 @@ def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
     }
     for axis in sample.campaign.axes:
         coords[axis.name] = xr.Variable(("point",), np.array(
-            [p.coords[axis.name] for p in sample.points]), {"long_name": axis.name})
+            [p.coords[axis.name] for p in sample.points]), coord_attrs(axis.name))
     ds = xr.Dataset(data, coords=coords)
     if sample.transitions:
         _transitions(ds, sample, base_records, variant_records)
@@ -223,21 +227,24 @@ def _transitions(ds: xr.Dataset, sample: Sample, base_records: Mapping[str, Reco
     lower = np.array([tr.lower for tr in sample.transitions])
     upper = np.array([tr.upper for tr in sample.transitions])
     within = ((loc_v >= lower[:, None]) & (loc_v <= upper[:, None])).astype(np.int8)
-    ds.coords["transition"] = xr.Variable(("transition",), np.arange(n_t))
+    ds.coords["transition"] = xr.Variable(("transition",), np.arange(n_t), {
+        "long_name": "fitted transition sampled", "units": "1"})
     ds["transition_fit"] = xr.Variable(("transition",), np.array(
         [f"{tr.prefix} along {tr.axis}" + "".join(f", {k} = {v:g}" for k, v in tr.where.items())
          for tr in sample.transitions]), {"long_name": "the fitted transition"})
     ds["transition_location"] = xr.Variable(("transition",), np.array(
-        [tr.location for tr in sample.transitions]), {"long_name": "the fit's location"})
-    ds["transition_lower"] = xr.Variable(("transition",), lower,
-                                         {"long_name": "the fit's interval, lower end"})
-    ds["transition_upper"] = xr.Variable(("transition",), upper,
-                                         {"long_name": "the fit's interval, upper end"})
+        [tr.location for tr in sample.transitions]), {"long_name": "the fit's location",
+                                                       "units": "1"})
+    ds["transition_lower"] = xr.Variable(("transition",), lower, {
+        "long_name": "the fit's interval, lower end", "units": "1"})
+    ds["transition_upper"] = xr.Variable(("transition",), upper, {
+        "long_name": "the fit's interval, upper end", "units": "1"})
     ds["transition_location_base"] = xr.Variable(("transition",), loc_b, {
-        "long_name": "location recomputed on the sampled bracket with the base runs"})
+        "long_name": "location recomputed on the sampled bracket with the base runs",
+        "units": "1"})
     ds["transition_location_variant"] = xr.Variable(("transition", "variant"), loc_v, {
         "long_name": "location recomputed on the sampled bracket with the variant's runs "
-                     "(NaN: no jump between the bracket's points)"})
+                     "(NaN: no jump between the bracket's points)", "units": "1"})
     ds["transition_shift"] = xr.Variable(("transition", "variant"), loc_v - loc_b[:, None], {
         "long_name": "shift of the recomputed location, variant - base", "units": "1"})
     ds["transition_within"] = xr.Variable(("transition", "variant"), within, {
@@ -248,7 +255,9 @@ def _transitions(ds: xr.Dataset, sample: Sample, base_records: Mapping[str, Reco
 def _pct(x: float, name: str) -> str:
     if not math.isfinite(x):
         return "inf"
-    return f"by {abs(x):.2g}" if name in ABSOLUTE else f"{100 * abs(x):.0f} %"
+    if name in ABSOLUTE:
+        return f"by {abs(x):.2g}"
+    return f"{100 * abs(x):.0f} %" if abs(x) < 10 else f"by a factor {1 + x:.3g}"
 
 
 def summary_line(ds: xr.Dataset, worst: int = 2) -> str:
@@ -262,7 +271,7 @@ def summary_line(ds: xr.Dataset, worst: int = 2) -> str:
     if missing:
         text += f" ({missing} with runs missing)"
     notes: list[tuple[float, str]] = []
-    variants = [str(v) for v in ds["variant"].values]
+    variants = [str(v) for v in ds["variant_name"].values]
     labels = [str(x) for x in ds["label"].values]
     for p in range(n):
         for v in range(len(variants)):
@@ -296,7 +305,7 @@ def summary_line(ds: xr.Dataset, worst: int = 2) -> str:
 
 def write_verify(root: Path, ds: xr.Dataset) -> Path:
     path = root / VERIFY
-    text = {name: {"dtype": "S1"} for name in ("variant", "label", "why", "transition_fit")
+    text = {name: {"dtype": "S1"} for name in ("variant_name", "label", "why", "transition_fit")
             if name in ds.variables}
     atomic_to_netcdf(ds, path, text)
     return path
@@ -323,15 +332,19 @@ def verdict_rows(ds: xr.Dataset) -> list[dict[str, str]]:
     rows = []
     names = [str(k)[: -len("_verdict")] for k in ds.data_vars if str(k).endswith("_verdict")]
     for p in range(ds.sizes["point"]):
-        for v, variant in enumerate(ds["variant"].values):
+        for v, variant in enumerate(ds["variant_name"].values):
             changes = []
             for n in names:
                 if int(ds[f"{n}_verdict"].values[p, v]) not in (CONVERGED, CHANGED):
                     continue
                 c = float(ds[f"{n}_change"].values[p, v])
                 absolute = "absolute" in str(ds[f"{n}_change"].attrs.get("long_name"))
-                changes.append(f"{n} {c:+.3f}" if absolute or not abs(c) < 1e6
-                               else f"{n} {100 * c:+.1f} %")
+                if absolute:
+                    changes.append(f"{n} {c:+.3f}")
+                elif abs(c) < 10:
+                    changes.append(f"{n} {100 * c:+.1f} %")
+                else:  # orders of magnitude: the factor reads better
+                    changes.append(f"{n} x{1 + c:.3g}")
             verdict = VERDICT_TEXT.get(int(ds["converged"].values[p, v]), "?")
             if int(ds["patterned"].values[p, v]) != int(ds["patterned_base"].values[p]):
                 verdict += " (pattern class changes)"
@@ -348,7 +361,7 @@ def transition_rows(ds: xr.Dataset) -> list[dict[str, str]]:
     rows = []
     for t in range(ds.sizes["transition"]):
         lo, hi = float(ds["transition_lower"].values[t]), float(ds["transition_upper"].values[t])
-        for v, variant in enumerate(ds["variant"].values):
+        for v, variant in enumerate(ds["variant_name"].values):
             loc = float(ds["transition_location_variant"].values[t, v])
             where = ("no jump in the bracket" if not math.isfinite(loc) else
                      f"at {loc:g}, " + ("in" if ds["transition_within"].values[t, v]

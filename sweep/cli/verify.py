@@ -145,7 +145,7 @@ def verification_lines(root: Path, *, detail: bool = False) -> list[str]:
     try:
         ds = read_verify(root)
     except (OSError, ValueError) as e:
-        return [f"verification: {path} cannot be read ({e}); rerun nematic verify"]
+        return [f"verification: {path} cannot be read: {e}"]
     if ds is None:
         return []
 

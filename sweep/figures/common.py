@@ -75,11 +75,14 @@ class Results:
             self._verified: list[tuple[dict[str, Any], int]] = []
             path = self.root / "verify.nc"
             if path.exists():
+                from ..verify.measure import read_verify
+
                 try:
-                    with xr.open_dataset(path) as v:
-                        v = v.load()
+                    v = read_verify(self.root)
                 except (OSError, ValueError) as e:
                     log.warning("cannot read %s: %s", path, e)
+                    return self._verified
+                if v is None:
                     return self._verified
                 conv = v["converged"].values
                 axes = [str(c) for c in v.coords if v[c].dims == ("point",)

@@ -316,6 +316,10 @@ VERDICT_TEXT = {CONVERGED: "converged", CHANGED: "CHANGED", NOT_COMPARED: "not c
                 MISSING: "missing"}
 
 
+#: What every reader of verify.nc relies on.
+REQUIRED = ("converged", "patterned", "patterned_base", "variant_name", "label", "why")
+
+
 def read_verify(root: Path) -> xr.Dataset | None:
     """``root/verify.nc`` loaded, or ``None`` when there is none. Raises ``OSError`` /
     ``ValueError`` when it cannot be read."""
@@ -323,7 +327,12 @@ def read_verify(root: Path) -> xr.Dataset | None:
     if not path.exists():
         return None
     with xr.open_dataset(path) as ds:
-        return ds.load()
+        ds = ds.load()
+    missing = [n for n in REQUIRED if n not in ds.variables]
+    if missing:
+        raise ValueError(f"it has no {', '.join(missing)} (written by another version: "
+                         "rerun nematic verify, which rewrites it from the runs)")
+    return ds
 
 
 def verdict_rows(ds: xr.Dataset) -> list[dict[str, str]]:

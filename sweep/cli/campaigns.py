@@ -20,6 +20,7 @@ from rich.progress import (
 from rich.table import Table
 
 from ..errors import CampaignLocked, ClusterError, StoreError
+from ..startup import paused_gc
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
@@ -143,7 +144,7 @@ def run(
     from ..store import CampaignStore
 
     err = err_console()
-    setup_logging(err, verbose, quiet)
+    setup_logging(err, verbose, quiet, cluster=True)
     c = load(err, campaign, set_, seeds, name, scheduler, workers)
     try:
         limit = None if max_failures is None else FailureLimit.parse(max_failures)
@@ -304,6 +305,7 @@ def storage_message(store: Any, e: OSError) -> str:
 
 
 # --------------------------------------------------------------------------- status
+@paused_gc()  # a short command (10^5 records: millions of objects): sweep.startup says why
 def status(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),

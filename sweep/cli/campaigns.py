@@ -417,6 +417,7 @@ def failure_group_lines(group: dict[str, Any]) -> list[str]:
 
 
 # --------------------------------------------------------------------------- aggregate
+@paused_gc()  # a short command: sweep.startup says why
 def aggregate(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),
@@ -433,11 +434,13 @@ def aggregate(
     """
     from ..aggregate import write_phase
     from ..refine.rounds import expansion_for
+    from ..startup import defer_dask_array
     from ..store import CampaignStore
 
     err = err_console()
     setup_logging(err, verbose, quiet)
     c = load(err, campaign, set_, seeds, name)
+    defer_dask_array()
     store = CampaignStore(results, c.name)
     if not store.runs_dir.is_dir():
         error(err, f"no results for campaign {c.name} in {store.root}; run it first "

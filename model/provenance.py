@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
 
@@ -45,14 +47,14 @@ def library_versions() -> dict[str, str]:
 
 @functools.lru_cache(maxsize=1)
 def _fftw_version() -> str:
-    """The native FFTW library's own version string (``fftw-3.3.5-sse2-avx``), if loaded."""
-    import ctypes
+    """The native FFTW library's own version string (``fftw-3.3.5-sse2-avx``): of the library
+    :mod:`model.compiled.fftw` loaded, or, where that module is not imported, of the one it
+    would load, read with ctypes alone (importing the compiled package imports numba, a
+    quarter of a second that the report and aggregation do not need)."""
+    import sys
 
-    try:
-        from .compiled import fftw
-    except ImportError:
-        return ""
-    lib = getattr(fftw, "_LIB", None)
+    compiled = sys.modules.get("model.compiled.fftw")
+    lib = getattr(compiled, "_LIB", None) if compiled is not None else _fftw_library()
     if lib is None:
         return ""
     try:
@@ -60,6 +62,40 @@ def _fftw_version() -> str:
                                 ).decode(errors="replace")
     except (ValueError, OSError):
         return ""
+
+
+def fftw_candidates() -> Iterator[str]:
+    """Where FFTW's double-precision library may be, in :mod:`model.compiled.fftw`'s order
+    (its ``_candidates``, repeated here without importing pyfftw; a test holds the two
+    equal): inside the pyFFTW wheel first, then the system (looked up only when asked for)."""
+    import ctypes.util
+    import glob
+    import importlib.util
+    import os
+
+    spec = importlib.util.find_spec("pyfftw")
+    if spec is not None and spec.origin:
+        here = os.path.dirname(spec.origin)
+        for pattern in ("../pyfftw.libs/libfftw3-*.so*", ".dylibs/libfftw3.*dylib",
+                        "libfftw3-3.dll", "../pyFFTW.libs/libfftw3-*.so*"):
+            yield from sorted(glob.glob(os.path.join(here, pattern)))
+    system = ctypes.util.find_library("fftw3")
+    if system:
+        yield system
+
+
+def _fftw_library() -> ctypes.CDLL | None:
+    """The first FFTW library of :func:`fftw_candidates` that loads with the transforms the
+    model calls (as :mod:`model.compiled.fftw` chooses it), or None."""
+    for path in fftw_candidates():
+        try:
+            lib = ctypes.CDLL(path)
+            lib.fftw_execute_dft_r2c  # noqa: B018 - the symbols the model needs must exist
+            lib.fftw_execute_dft_c2r  # noqa: B018
+        except (OSError, AttributeError):
+            continue
+        return lib
+    return None
 
 
 def library_versions_text() -> str:

@@ -19,16 +19,18 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 
 from .campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from .expand import Expansion
 from .files import atomic_to_netcdf
 from .provenance import code_version, git_commit, library_versions_text
 from .store import RETRYABLE_REASONS, CampaignStore, Record, now_iso
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 log = logging.getLogger(__name__)
 
@@ -109,6 +111,8 @@ def coord_attrs(name: str) -> dict[str, str]:
 def build_phase(expansion: Expansion, records: Mapping[str, Record],
                 store: CampaignStore | None = None) -> xr.Dataset:
     """The phase-diagram Dataset of a campaign from its run records (see module doc)."""
+    import xarray as xr  # here: the campaign's reader needs OBSERVABLES, not xarray
+
     campaign = expansion.campaign
     dims = [d.name for d in campaign.dims] + ["seed"]
     shape = (*campaign.shape, len(campaign.seeds))

@@ -195,6 +195,8 @@ def _check_products(c: Checker, raw: Any, kind: str) -> tuple[Product, ...]:
     if not isinstance(raw, Sequence) or isinstance(raw, str):
         c.bad(path, raw, "a list of names or {name: {options}}")
         return ()
+    if not raw:  # "figures: []": no registry to import (it brings xarray)
+        return ()
     known = sorted(registry(kind))
     out = []
     for i, item in enumerate(raw):

@@ -94,3 +94,18 @@ def kill_group(proc: subprocess.Popen) -> None:
         os.killpg(proc.pid, signal.SIGKILL)
     with contextlib.suppress(subprocess.TimeoutExpired):
         proc.wait(timeout=10)
+
+
+def cli_modules(*args: object) -> tuple[set[str], str]:
+    """Run ``nematic ARGS`` in a fresh interpreter: the modules it imported, its output."""
+    code = ("import atexit, json, runpy, sys\n"
+            "atexit.register(lambda: print('MODULES', json.dumps(sorted(sys.modules))))\n"
+            f"sys.argv = ['nematic', *{[str(a) for a in args]!r}]\n"
+            "runpy.run_module('sweep', run_name='__main__')\n")
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(root)}, cwd=root,
+                          timeout=300, check=False)
+    output, _, modules = done.stdout.rpartition("MODULES ")
+    assert modules, done.stderr
+    return set(json.loads(modules)), output + done.stderr

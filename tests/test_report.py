@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from sweep_helpers import cli_modules
 from typer.testing import CliRunner
 
 from sweep.cli import app
@@ -104,8 +105,9 @@ def test_the_report_is_self_contained(adaptive):
     markup = re.sub(r"<script[^>]*>.*?</script>", "", html, flags=re.S)  # the page's own tags
     assert not re.search(r"<link[^>]*href=", markup)
     assert not re.search(r"""(src|href)=["']?(https?:|//)""", markup)
-    # the histogram of run times, and one snapshot per grid point that has a run to show
-    assert html.count("data:image/png;base64,") >= 1 + 6
+    # one snapshot per grid point that has a run to show, and the histogram of run times
+    assert html.count("data:image/png;base64,") >= 6
+    assert '<img alt="run time histogram" src="data:image/svg+xml;base64,' in html
     assert "<h2 id=\"refine\">" in html
     assert "(seed mean)" in html
 
@@ -122,6 +124,57 @@ def test_nematic_report_from_the_name_and_to_an_output(adaptive, tmp_path):
     assert result.exit_code == 0, result.output
     assert "round 1:" in out.read_text()
     assert not list(out.parent.glob(".*.tmp"))  # written through a temporary, renamed
+
+
+def test_the_runs_views_are_cached_by_run_file(adaptive, monkeypatch):
+    from sweep.report import run_views as views
+
+    _, results, _ = adaptive
+    cache = results / "rep" / views.CACHE
+    cached = sorted(cache.glob("*.json"), key=lambda p: "data:image" not in p.read_text())
+    assert len(cached) >= 6  # written with the report at the end of the run
+    path = results / "rep" / "runs" / f"{cached[0].stem}.nc"
+    kept = cached[0].read_text()
+    first = views.run_views(path)
+    assert first[0].startswith("data:image/png;base64,")
+
+    def no_drawing(path):
+        raise AssertionError(f"{path} drawn again")
+
+    monkeypatch.setattr(views, "draw_run_views", no_drawing)
+    assert views.run_views(path) == first  # from the cache
+    drawn = []
+
+    def drawing(path):
+        drawn.append(path)
+        return "", [1.0], [2.0]
+
+    monkeypatch.setattr(views, "draw_run_views", drawing)
+    cached[0].write_text("{not json")
+    assert views.run_views(path) == ("", [1.0], [2.0])  # an unreadable cache file: redrawn
+    data = json.loads(cached[0].read_text())
+    data["stamp"][-1] += 1  # another file (an older mtime): redrawn
+    cached[0].write_text(json.dumps(data))
+    views.run_views(path)
+    assert drawn == [path, path]
+    cached[0].write_text(kept)
+
+
+def test_report_and_status_import_only_what_they_need(adaptive, tmp_path):
+    """Once the run's views are cached (the run wrote its report), ``nematic report``
+    imports neither numba, the model's compiled code, dask's arrays and cluster, nor
+    matplotlib; ``status`` reads no netCDF: no xarray, no pandas (benchmarks/report_time.py
+    measures the times)."""
+    path, results, _ = adaptive
+    modules, out = cli_modules("report", "rep", "--results", results,
+                               "--output", tmp_path / "r.html")
+    assert "wrote" in out, out
+    for heavy in ("numba", "model.compiled", "distributed", "dask.array", "matplotlib"):
+        assert heavy not in modules, heavy
+    modules, out = cli_modules("status", path, "--results", results)
+    assert "6 done" in out, out
+    for heavy in ("xarray", "pandas", "numba", "distributed", "matplotlib", "bokeh"):
+        assert heavy not in modules, heavy
 
 
 def test_nematic_report_of_an_unknown_campaign_is_one_error_line(tmp_path):
@@ -167,6 +220,17 @@ def test_hover_texts_give_each_seed_and_skip_points_not_run(tmp_path):
     assert cols["shown"] == [pytest.approx(1e-3)]
     assert cols["snapshot"] == [""]
     assert cols["run_id"] == ["a"]
+
+
+def test_axes_spanning_a_decade_of_positive_values_are_logarithmic():
+    from sweep.report.phase_plot import Axis
+
+    phase = xr.Dataset(coords={"K": [1e-4, 1e-3], "chi": [0.0, 5.0, 10.0],
+                               "amb": [0.1, 0.3, 0.7], "S0": [1.0, 10.0, 100.0]})
+    assert Axis.of(phase, "K").log  # a decade (K logspaced)
+    assert Axis.of(phase, "S0").log
+    assert not Axis.of(phase, "chi").log  # zero
+    assert not Axis.of(phase, "amb").log  # less than a decade
 
 
 def _phase(shape: dict[str, list], seeds: int = 1) -> xr.Dataset:

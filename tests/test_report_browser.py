@@ -2,13 +2,16 @@
 chromedriver: Debian's ``chromium`` and ``chromium-driver``, which .ci/run installs): the
 phase diagram renders its points without a severe console error and without loading
 anything from the network, and clicking a point shows that point's run (its snapshot image
-and sigma2_S(t)). Saves docs/figures/report_screenshot.png (the README shows it).
+and sigma2_S(t)). Saves a screenshot of the page in the test's temporary folder; with
+``NEMATIC_UPDATE_SCREENSHOT=1`` in the environment it replaces docs/figures/report_screenshot.png
+(the README shows it) instead, so a plain test run leaves the checkout unchanged.
 
 Marked ``browser`` (run with ``pytest -m browser``; CI does); skipped, with the reason, where
 Chromium, its driver or selenium is missing."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import time
 from pathlib import Path
@@ -22,6 +25,8 @@ pytestmark = pytest.mark.browser
 
 ROOT = Path(__file__).resolve().parent.parent
 SCREENSHOT = ROOT / "docs" / "figures" / "report_screenshot.png"
+#: ``NEMATIC_UPDATE_SCREENSHOT=1``: the test's screenshot replaces :data:`SCREENSHOT`.
+UPDATE_SCREENSHOT = "NEMATIC_UPDATE_SCREENSHOT"
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMEDRIVER = shutil.which("chromedriver")
 
@@ -130,7 +135,23 @@ def _wait(driver, script: str, ready, timeout: float = 30.0):
     return value
 
 
-def test_the_phase_diagram_renders_and_a_click_shows_the_points_run(browser, report):
+def screenshot_path(tmp_path: Path) -> Path:
+    """docs/figures/report_screenshot.png when asked for (:data:`UPDATE_SCREENSHOT`), else a
+    file in the test's temporary folder."""
+    if os.environ.get(UPDATE_SCREENSHOT) == "1":
+        return SCREENSHOT
+    return tmp_path / SCREENSHOT.name
+
+
+def test_the_screenshot_goes_to_the_docs_only_when_asked(tmp_path, monkeypatch):
+    monkeypatch.delenv(UPDATE_SCREENSHOT, raising=False)
+    assert screenshot_path(tmp_path) == tmp_path / "report_screenshot.png"
+    monkeypatch.setenv(UPDATE_SCREENSHOT, "1")
+    assert screenshot_path(tmp_path) == SCREENSHOT
+
+
+def test_the_phase_diagram_renders_and_a_click_shows_the_points_run(browser, report,
+                                                                    tmp_path):
     from selenium.webdriver.common.actions.action_builder import ActionBuilder
 
     browser.get(report.as_uri())
@@ -159,5 +180,6 @@ def test_the_phase_diagram_renders_and_a_click_shows_the_points_run(browser, rep
     severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert severe == []
     assert browser.execute_script(REQUESTS) == []  # nothing came from the network
-    SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
-    assert browser.save_screenshot(str(SCREENSHOT))
+    target = screenshot_path(tmp_path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    assert browser.save_screenshot(str(target))

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import xarray as xr
 from sweep_helpers import (
+    cli_modules,
     file_stamps,
     group_alive,
     kill_group,
@@ -244,6 +245,28 @@ def test_aggregate_command(copy_of_small):
     assert result.exit_code == 0, result.output
     assert "4 ok, 2 failed, 0 missing of 6 runs" in " ".join(result.output.split())
     assert phase.exists()
+
+
+def test_aggregate_in_a_fresh_process_writes_the_phase_nc_the_run_wrote(copy_of_small):
+    """``nematic aggregate`` as its own process (the collector paused, xarray without
+    dask.array: sweep/startup.py) writes what the driver wrote after the run: the same
+    variables, values, encodings and attributes but the time stamps."""
+    with xr.open_dataset(copy_of_small.phase) as ds:
+        before = ds.load()
+    modules, out = cli_modules("aggregate", copy_of_small.path, "--results",
+                               copy_of_small.results)
+    assert "4 ok, 2 failed, 0 missing of 6 runs" in " ".join(out.split()), out
+    assert "dask.array" not in modules
+    with xr.open_dataset(copy_of_small.phase) as ds:
+        after = ds.load()
+    assert after.equals(before)
+    for name, var in before.variables.items():
+        assert str(after[name].dtype) == str(var.dtype), name
+        assert after[name].attrs.keys() == var.attrs.keys(), name
+        assert after[name].encoding.get("dtype") == var.encoding.get("dtype"), name
+    stamps = {"created", "history"}
+    assert {k: v for k, v in after.attrs.items() if k not in stamps} == \
+        {k: v for k, v in before.attrs.items() if k not in stamps}
 
 
 def test_aggregate_marks_missing_runs(copy_of_small):

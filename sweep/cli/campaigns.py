@@ -20,6 +20,7 @@ from rich.progress import (
 from rich.table import Table
 
 from ..errors import CampaignLocked, ClusterError, StoreError
+from ..startup import paused_gc
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
@@ -156,7 +157,7 @@ def run(
     from ..store import CampaignStore
 
     err = err_console()
-    setup_logging(err, verbose, quiet)
+    setup_logging(err, verbose, quiet, cluster=True)
     c = load(err, campaign, set_, seeds, name, scheduler, workers)
     verify = check_files or check_files_alias
     verification = verification and c.verify is not None
@@ -329,6 +330,7 @@ def storage_message(store: Any, e: OSError) -> str:
 
 
 # --------------------------------------------------------------------------- status
+@paused_gc()  # a short command (10^5 records: millions of objects): sweep.startup says why
 def status(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),
@@ -447,6 +449,7 @@ def failure_group_lines(group: dict[str, Any]) -> list[str]:
 
 
 # --------------------------------------------------------------------------- aggregate
+@paused_gc()  # a short command: sweep.startup says why
 def aggregate(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),
@@ -463,11 +466,13 @@ def aggregate(
     """
     from ..aggregate import write_phase
     from ..refine.rounds import expansion_for
+    from ..startup import defer_dask_array
     from ..store import CampaignStore
 
     err = err_console()
     setup_logging(err, verbose, quiet)
     c = load(err, campaign, set_, seeds, name)
+    defer_dask_array()
     store = CampaignStore(results, c.name)
     if not store.runs_dir.is_dir():
         error(err, f"no results for campaign {c.name} in {store.root}; run it first "

@@ -14,7 +14,6 @@ import typer
 from rich.console import Console
 
 from ..errors import CampaignLocked, FigureError, StoreError
-from ..files import probe_write, storage_cause
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
@@ -58,6 +57,7 @@ def figures(
     when the campaign has no phase.nc yet.
     """
     from ..figures.produce import produce
+    from ..files import probe_write, storage_cause
 
     console = Console(highlight=False, soft_wrap=True, quiet=quiet)
     err = err_console()

@@ -9,9 +9,11 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
+from ..startup import paused_gc
 from .app import CampaignRefArg, QuietOpt, ResultsOpt, VerboseOpt, err_console, setup_logging
 
 
+@paused_gc()  # a short command: sweep.startup says why
 def report(
     campaign: CampaignRefArg,
     results: ResultsOpt = Path("results"),
@@ -28,8 +30,10 @@ def report(
     the provenance. Reads the results folder only (also while the campaign runs).
     """
     from ..report import write_report
+    from ..startup import defer_dask_array
     from ..tables import open_campaign
 
+    defer_dask_array()
     err = err_console()
     setup_logging(err, verbose, quiet)
     opened = open_campaign(campaign, results)

@@ -19,9 +19,7 @@ from model.parameters import Numerics, Parameters, check_compatible, split_setti
 
 from ..campaign import MAX_SEED
 from ..errors import CampaignError, StoreError
-from ..files import atomic_to_netcdf, probe_write, storage_cause
 from ..limits import available_memory, check_run_memory
-from ..yaml_input import parse_assignments
 from .app import EXIT_BAD_INPUT, EXIT_FAILED_RUNS, QuietOpt, VerboseOpt, error, setup_logging
 
 #: the names ``--set`` accepts, from the dataclasses themselves (so the help cannot drift)
@@ -31,6 +29,8 @@ _NUMERICS_NAMES = ", ".join(f.name for f in fields(Numerics))
 
 def output_problem(path: Path) -> str | None:
     """What stops ``path`` from being written (checked before a run, not after it)."""
+    from ..files import probe_write, storage_cause
+
     if path.is_dir():
         return f"--out/--png {path} is a folder; give a file name"
     parent = path.resolve().parent
@@ -45,6 +45,8 @@ def output_problem(path: Path) -> str | None:
 def _keep_elsewhere(ds: Any, out: Path) -> Path | None:
     """Write a result whose ``--out`` failed to the temporary folder; its path or ``None``."""
     import tempfile
+
+    from ..files import atomic_to_netcdf
 
     path = Path(tempfile.gettempdir()) / f"nematic-unsaved-{out.name}"
     try:
@@ -73,6 +75,9 @@ def simulate(
     console = Console(highlight=False, soft_wrap=True)
     err = Console(stderr=True, highlight=False, soft_wrap=True)
     setup_logging(err, verbose, quiet)
+    from ..files import atomic_to_netcdf  # numpy and yaml: not for the help
+    from ..yaml_input import parse_assignments
+
     try:
         settings = parse_assignments(set_ or [])
         pdict, ndict = split_settings(settings)

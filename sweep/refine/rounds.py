@@ -30,7 +30,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..analysis.stability import run_growth
 from ..campaign import Axis, Campaign, Dim
 from ..expand import Expansion, GridPoint, RunSpec, make_point
 from ..files import atomic_write_text, dumps
@@ -80,6 +79,8 @@ class Outcomes:
         if self.source == "growth":
             key = (run_id, rec.get("nc_sha256"))
             if key not in self._growth:
+                from ..analysis.stability import run_growth  # xarray: not for status
+
                 self._growth[key] = run_growth(self.store.nc_path(run_id))
             return self._growth[key]
         value = (rec.get("scalars") or {}).get(self.source)

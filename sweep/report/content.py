@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from html import escape
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -213,26 +214,51 @@ def verification(root: Path) -> dict[str, Any] | None:
 
 def cost(records: Mapping[str, Mapping[str, Any]], run_ids: set[str]) -> dict[str, Any]:
     """CPU time: the sum of the campaign's runs' wall times (one core each), their median,
-    and a small histogram of them (a PNG data URI)."""
+    and a small histogram of them (an SVG data URI)."""
     times = np.array([float(r["wall_time"]) for rid, r in records.items()
                       if rid in run_ids and isinstance(r.get("wall_time"), (int, float))
                       and math.isfinite(r["wall_time"])])
     if not times.size:
         return {"n": 0}
-    from matplotlib.figure import Figure
-
-    from .phase_plot import png_data_uri
-
-    fig = Figure(figsize=(4.0, 2.2), dpi=90)
-    ax = fig.add_axes((0.14, 0.24, 0.82, 0.68))
-    ax.hist(times, bins=min(HISTOGRAM_BINS, max(1, times.size)), color="#1f77b4")
-    ax.set_xlabel("wall time of a run [s]", fontsize=8)
-    ax.set_ylabel("runs", fontsize=8)
-    ax.tick_params(labelsize=7)
     return {"n": int(times.size), "cpu_hours": float(times.sum() / 3600),
             "total_seconds": float(times.sum()), "median": float(np.median(times)),
             "min": float(times.min()), "max": float(times.max()),
-            "histogram": png_data_uri(fig)}
+            "histogram": histogram_svg(times, min(HISTOGRAM_BINS, max(1, times.size)),
+                                       "wall time of a run [s]")}
+
+
+def histogram_svg(values: np.ndarray, bins: int, label: str) -> str:
+    """A small histogram of ``values`` as an SVG data URI: bars, the count axis (0 and the
+    largest count) and the value axis (its two ends and middle) under ``label``. Written
+    out here: matplotlib is not imported for it."""
+    import base64
+
+    counts, edges = np.histogram(values, bins=bins)
+    width, height, left, right, top, bottom = 360, 200, 42, 12, 10, 40
+    plot_w, plot_h = width - left - right, height - top - bottom
+    most = max(int(counts.max()), 1)
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+             'font-family="sans-serif" font-size="10">',
+             f'<rect x="{left}" y="{top}" width="{plot_w}" height="{plot_h}" fill="none" '
+             'stroke="#888"/>']
+    step = plot_w / len(counts)
+    for i, count in enumerate(counts):
+        h = plot_h * int(count) / most
+        parts.append(f'<rect x="{left + i * step + 0.5:.1f}" y="{top + plot_h - h:.1f}" '
+                     f'width="{max(step - 1.0, 0.5):.1f}" height="{h:.1f}" fill="#1f77b4"/>')
+    base = top + plot_h
+    for x, value in ((left, edges[0]), (left + plot_w / 2, (edges[0] + edges[-1]) / 2),
+                     (left + plot_w, edges[-1])):
+        parts.append(f'<text x="{x:.1f}" y="{base + 13}" text-anchor="middle">'
+                     f'{float(value):.3g}</text>')
+    parts += [f'<text x="{left - 4}" y="{base + 3}" text-anchor="end">0</text>',
+              f'<text x="{left - 4}" y="{top + 8}" text-anchor="end">{most}</text>',
+              f'<text x="{left + plot_w / 2:.1f}" y="{height - 6}" text-anchor="middle">'
+              f'{escape(label)}</text>',
+              f'<text x="12" y="{top + plot_h / 2:.1f}" text-anchor="middle" '
+              f'transform="rotate(-90 12 {top + plot_h / 2:.1f})">runs</text>', "</svg>"]
+    data = base64.b64encode("".join(parts).encode("utf-8")).decode("ascii")
+    return f"data:image/svg+xml;base64,{data}"
 
 
 def provenance(phase: xr.Dataset, root: Path) -> tuple[list[tuple[str, str]], str]:

@@ -1,17 +1,17 @@
 """The report's interactive phase diagram (bokeh): one point per grid point that has runs,
 coloured (2-D) or placed (1-D) by the seed mean of sigma2_S. Hovering a point shows its
 parameters and the seed values of the main observables; clicking it shows one of its runs:
-its last snapshot (a small PNG drawn here with :func:`sweep.figures.common.safe_snapshot`,
-embedded as a data URI) and its sigma2_S(t), through a bokeh ``CustomJS`` callback that
-copies the point's columns into the run panel.
+its last snapshot (a small PNG, embedded as a data URI) and its sigma2_S(t) (drawn, and
+cached, by :mod:`.run_views`), through a bokeh ``CustomJS`` callback that copies the point's
+columns into the run panel.
 
 1-D campaigns get a line over the axis; 2-D a scatter over the two axes; more dims the first
-two axes, faceted over the combinations of the others (at most :data:`MAX_FACETS`)."""
+two axes, faceted over the combinations of the others (at most :data:`MAX_FACETS`). An axis
+whose values are all positive and span a decade or more (:data:`LOG_AXIS_RATIO`: K, swept as
+a logspace) is logarithmic."""
 
 from __future__ import annotations
 
-import base64
-import io
 import logging
 import math
 from dataclasses import dataclass, field
@@ -22,7 +22,7 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.phase import sweep_dims
-from ..files import series_time
+from .run_views import run_views
 
 log = logging.getLogger(__name__)
 
@@ -34,8 +34,9 @@ SHOWN = "sigma2_S"
 MAX_POINTS_WITH_RUNS = 200
 #: Facets of a campaign with more than two sweep dims.
 MAX_FACETS = 9
+#: A numeric axis is logarithmic when its values are positive and max / min is at least this.
+LOG_AXIS_RATIO = 10.0
 STATUS_OK, STATUS_FAILED = 1, 2
-SNAPSHOT_INCHES, SNAPSHOT_DPI = 2.6, 100
 HINT = "<p>Click a point of the phase diagram to show one of its runs here.</p>"
 
 #: The one piece of page code: copy the clicked point's run into the run panel.
@@ -79,40 +80,9 @@ class Axis:
                        ticks={i: str(v) for i, v in enumerate(values)})
         v = values.astype(float)
         finite = v[np.isfinite(v)]
-        log = bool(finite.size > 1 and finite.min() > 0 and finite.max() / finite.min() >= 100)
+        log = bool(finite.size > 1 and finite.min() > 0
+                   and finite.max() / finite.min() >= LOG_AXIS_RATIO)
         return cls(dim, v, log=log)
-
-
-def png_data_uri(fig: Any) -> str:
-    """A matplotlib figure as a ``data:image/png;base64`` URI (the page embeds every image)."""
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png")
-    return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
-
-
-def run_views(path: Path) -> tuple[str, list[float], list[float]]:
-    """One run's last snapshot as a PNG data URI ("" without a snapshot) and its sigma2_S(t)
-    (non-positive values left out: the panel's axis is logarithmic)."""
-    from matplotlib.figure import Figure
-
-    from ..figures.common import safe_snapshot
-
-    with xr.open_dataset(path) as ds:
-        names = [n for n in ("q1", "q2", "I1bar", "sigma2_S") if n in ds]
-        run = ds[names].load()
-    t = series_time(run).values.astype(float) if "sigma2_S" in run else np.array([])
-    y = run["sigma2_S"].values.astype(float) if "sigma2_S" in run else np.array([])
-    keep = np.isfinite(t) & np.isfinite(y) & (y > 0)
-    image = ""
-    if run.sizes.get("snapshot_time", 0) and "q1" in run and "q2" in run:
-        fig = Figure(figsize=(SNAPSHOT_INCHES, SNAPSHOT_INCHES), dpi=SNAPSHOT_DPI)
-        ax = fig.add_axes((0.02, 0.02, 0.96, 0.88))
-        with np.errstate(all="ignore"):
-            safe_snapshot(ax, run, -1, colorbar=False, arrows=16)
-        t_snap = float(run["snapshot_time"].values[-1])
-        ax.set_title(f"director (colour: S) over I1bar, t/tau = {t_snap:g}", fontsize=7)
-        image = png_data_uri(fig)
-    return image, t[keep].tolist(), y[keep].tolist()
 
 
 def _seed_text(values: np.ndarray, seeds: np.ndarray, status: np.ndarray) -> str:

@@ -138,21 +138,34 @@ def verify_step(campaign: Any, store: Any, say: Console, *, before: bool) -> boo
 
 def verification_lines(root: Path, *, detail: bool = False) -> list[str]:
     """The verification's summary line (and with ``detail`` one line per point) from
-    ``root/verify.nc``; nothing when there is none, one line when it cannot be read."""
-    from ..verify.measure import VERIFY, read_verify, summary_line
+    ``root/verify.nc``; nothing when there is none, one line when it cannot be read. The
+    summary alone is its ``summary`` attribute, read without xarray (``status`` stays light)."""
+    path = root / "verify.nc"
+    if not path.exists():
+        return []
+    if not detail:
+        import netCDF4
 
-    path = root / VERIFY
+        try:
+            with netCDF4.Dataset(path) as nc:
+                summary = str(nc.getncattr("summary"))
+                missing = [n for n in ("converged", "variant_name") if n not in nc.variables]
+        except (OSError, AttributeError) as e:
+            return [f"verification: {path} cannot be read: {e}"]
+        if missing:
+            return [f"verification: {path} cannot be read: it has no {', '.join(missing)} "
+                    "(written by another version: rerun nematic verify, which rewrites it from "
+                    "the runs)"]
+        return [f"verification ({path}): {summary}"]
+    from ..verify.measure import read_verify, summary_line
+
     try:
         ds = read_verify(root)
     except (OSError, ValueError) as e:
         return [f"verification: {path} cannot be read: {e}"]
     if ds is None:
         return []
-
-    lines = [f"verification ({path}): {summary_line(ds)}"]
-    if not detail:
-        return lines
-    lines.extend(point_lines(ds))
+    lines = [f"verification ({path}): {summary_line(ds)}", *point_lines(ds)]
     if ds.attrs.get("problems"):
         lines.append(f"  not run: {ds.attrs['problems']}")
     return lines

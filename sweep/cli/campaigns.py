@@ -46,6 +46,11 @@ from .progress import ProgressEvents
 # --------------------------------------------------------------------------- validate
 def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
              set_: SetOpt = None, seeds: SeedsOpt = None, name: NameOpt = None,
+             estimate: Annotated[bool, typer.Option(
+                 "--estimate", help="Also estimate the cost: the runs to do, their CPU time "
+                 "and the wall time on the campaign's workers, from the campaign's finished "
+                 "runs in the results folder, else from the cost model (as `nematic run "
+                 "--dry-run`). Reads the folder, writes nothing.")] = False,
              verbose: VerboseOpt = False, quiet: QuietOpt = False) -> None:
     """Check a campaign file without running anything.
 
@@ -79,6 +84,8 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
 
         for line in validation_lines(c):
             console.print(f"  {line}", markup=False)
+    if estimate:
+        print_estimate(console, c, results, indent="  ")
 
 
 # --------------------------------------------------------------------------- run
@@ -117,6 +124,12 @@ def run(
     dashboard: Annotated[bool, typer.Option(
         "--dashboard/--no-dashboard", help="Serve the dask dashboard (local cluster: on "
         "127.0.0.1, a free port) and print its link.")] = True,
+    dry_run: Annotated[bool, typer.Option(
+        "--dry-run", help="Run nothing and write nothing (no results folder, no lock): print "
+        "the runs to do, their estimated CPU time and the wall time on the workers, from "
+        "the campaign's own finished runs (per point, scaled by resolution, length and "
+        "mechanics), else from the calibrated cost model; with the basis and the 10-90 % "
+        "range. Takes --workers, --scheduler and --retry-failed into account.")] = False,
     detach: Annotated[bool, typer.Option(
         "--detach", help="Run the driver in the background, in a session of its own "
         "(closing the terminal or logging out does not end it), its output in "
@@ -150,6 +163,16 @@ def run(
     except ValueError as e:
         error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
+    if dry_run:
+        if detach or prune:
+            error(err, "--dry-run runs and writes nothing: it does not take "
+                  + ("--detach" if detach else "--prune"))
+            raise typer.Exit(EXIT_BAD_INPUT)
+        print_estimate(Console(highlight=False, soft_wrap=True), c, results,
+                       retry_failed=retry_failed, brief=quiet,
+                       header=f"dry run of campaign {c.name} ({results / c.name}): nothing "
+                       "is run or written")
+        return
     if detach:
         from .driver import run_detached
 
@@ -266,6 +289,20 @@ def run(
             raise typer.Exit(EXIT_FAILED_RUNS)
     finally:
         lock.release()
+
+
+def print_estimate(console: Console, campaign: Any, results: Path, *, indent: str = "",
+                   retry_failed: bool = False, brief: bool = False,
+                   header: str | None = None) -> None:
+    """The cost before launch (:mod:`sweep.estimate`): what changed in the campaign file,
+    the runs to do and their CPU and wall time; ``brief``: the totals only."""
+    from ..estimate import estimate, lines
+    from ..store import CampaignStore
+
+    e = estimate(campaign, CampaignStore(results, campaign.name), retry_failed=retry_failed)
+    for line in ([header] if header else []) + ([] if brief else e.changes) + lines(
+            e, brief=brief):
+        console.print(f"{indent}{line}", markup=False)
 
 
 def report_changes(say: Console, campaign: Any, store: Any, expansion: Any = None, *,

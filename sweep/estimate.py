@@ -18,15 +18,19 @@ ratios below), for scaled runs the 10 % and 90 % quantiles of measured / model, 
 model its calibration's :data:`~sweep.cost_model.MODEL_SPREAD`. The wall time on W workers is
 the runs dealt in the campaign's order to the first free worker (as the driver's window
 does), whose makespan lies between the CPU time over W and that plus the longest run, plus
-the driver's own time (:data:`DRIVER_OVERHEAD`). An adaptive campaign is costed for the round
-its results have reached (round 0 without results) plus a bound on the later rounds
-(:func:`sweep.refine.plan.run_bound`).
+the driver's own time (:data:`DRIVER_OVERHEAD`). On a local cluster the cost model's run
+times (a free core each) and part of the driver's time are stretched by the machine's load
+(:func:`slowdown`: W workers beside a load average L on C cores get C / (L + W) of a core
+each); measured run times already carry the load they ran under. An adaptive campaign is
+costed for the round its results have reached (round 0 without results) plus a bound on the
+later rounds (:func:`sweep.refine.plan.run_bound`).
 """
 
 from __future__ import annotations
 
 import heapq
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -41,11 +45,14 @@ from .store import RETRYABLE_REASONS, CampaignStore, Record
 
 #: the quantiles of the spread
 QUANTILES = (0.1, 0.9)
-#: the driver's own wall time around the runs of a local campaign (seconds): the cluster's
-#: start, the kernels' warm-up from the disk cache, phase.nc, fits, figures and report.
-#: Measured with campaigns/quickstart.yaml on the 2-core VM (docs/campaigns.md, *Cost before
-#: launch*): the command's wall time less the runs' makespan
-DRIVER_OVERHEAD = 10.0
+#: the driver's own wall time around the runs of a local campaign (seconds): the command's
+#: start, the cluster's, the kernels' warm-up from the disk cache, the results written (a few
+#: tenths of a second per run), phase.nc, fits, figures and report: a fixed part and a part
+#: stretched by the machine's load like a run (:func:`slowdown`). Measured with
+#: campaigns/quickstart.yaml on the 2-core VM (docs/campaigns.md, *Cost before launch*): the
+#: command's wall time less the runs' makespan, about 13 s on the quiet machine (load
+#: average 0.5), 23-33 s at load average 3-5 and 40-45 s at 11-14
+DRIVER_OVERHEAD = (8.0, 4.7)
 #: points listed one per line (the rest are counted)
 MAX_POINTS = 20
 
@@ -92,7 +99,19 @@ class Estimate:
     wall: tuple[float, float, float]
     local_wall: tuple[float, float, float]
     longest: float
+    #: the driver's own wall time (:data:`DRIVER_OVERHEAD`) on :attr:`workers` and on
+    #: :attr:`local_workers` at the machine's load
     overhead: float
+    local_overhead: float
+    #: this machine's 1-minute load average and cores when the estimate was made, and how
+    #: much longer a run and the driver take here than on a free core (:func:`slowdown`), on
+    #: :attr:`workers` (1 off a local cluster) and on :attr:`local_workers`
+    load: float = 0.0
+    cores: int = 1
+    stretch: float = 1.0
+    local_stretch: float = 1.0
+    #: whether some runs are costed by the cost model alone (stretched by the load)
+    modelled: bool = False
     points: list[Costed] = field(default_factory=list)
     later: LaterRounds | None = None
     round_note: str = ""
@@ -125,6 +144,26 @@ def makespan(times: Sequence[float], workers: int) -> float:
     for t in times:
         heapq.heapreplace(free, free[0] + t)
     return max(free) if times else 0.0
+
+
+def machine_load() -> tuple[float, int]:
+    """This machine's 1-minute load average (0 where the system has none) and its cores."""
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        load = 0.0
+    return load, os.cpu_count() or 1
+
+
+def driver_overhead(stretch: float) -> float:
+    """The driver's own wall time at a machine's :func:`slowdown` (:data:`DRIVER_OVERHEAD`)."""
+    return DRIVER_OVERHEAD[0] + DRIVER_OVERHEAD[1] * stretch
+
+
+def slowdown(workers: int, load: float, cores: int) -> float:
+    """How much longer a run takes than on a free core when ``workers`` runs share ``cores``
+    with ``load`` other runnable processes: 1 while each has a core of its own."""
+    return max(1.0, (load + workers) / max(1, cores))
 
 
 def concurrency(execution: ExecutionSpec) -> tuple[int, str]:
@@ -234,9 +273,10 @@ def measurements(expansion: Expansion, records: Mapping[str, Record]) -> Basis:
     return Basis(measured)
 
 
-def estimate(campaign: Campaign, store: CampaignStore, *,
-             retry_failed: bool = False) -> Estimate:
-    """The estimate of what ``nematic run`` would do now (see the module docstring)."""
+def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = False,
+             load_cores: tuple[float, int] | None = None) -> Estimate:
+    """The estimate of what ``nematic run`` would do now (see the module docstring);
+    ``load_cores``: the machine's load average and cores (default :func:`machine_load`)."""
     from .changes import campaign_changes
 
     records = store.scan(save=False)
@@ -256,9 +296,7 @@ def estimate(campaign: Campaign, store: CampaignStore, *,
     todo, done, failed = classify(expansion, store, records, retry_failed=retry_failed)
     basis = measurements(expansion, records)
     costs: dict[str, Costed] = {}
-    times: list[float] = []
-    lows: list[float] = []
-    highs: list[float] = []
+    runs: list[tuple[float, float, float, bool]] = []  # (seconds, low, high, cost model?)
     per_point: dict[int, tuple[str, float, float, float, str]] = {}
     for i in todo:
         point = expansion.run(i).point
@@ -267,17 +305,20 @@ def estimate(campaign: Campaign, store: CampaignStore, *,
             per_point[id(point)] = (label, *basis.cost(point, label,
                                                        model_seconds(point.numerics)))
         label, est, lo, hi, why = per_point[id(point)]
-        times.append(est)
-        lows.append(lo)
-        highs.append(hi)
+        runs.append((est, lo, hi, why == "cost model"))
         entry = costs.setdefault(label, Costed(label, 0, est, lo, hi, why))
         entry.runs += 1
     workers, where = concurrency(campaign.execution)
     local = local_worker_count(campaign.execution.__class__())
-    overhead = DRIVER_OVERHEAD if todo else 0.0
+    load, cores = machine_load() if load_cores is None else load_cores
+    here = campaign.execution.mode == "local"
+    stretch = slowdown(workers if here else 1, load, cores)
+    local_stretch = slowdown(local, load, cores)
+    modelled = any(r[3] for r in runs)
 
-    def walls(w: int) -> tuple[float, float, float]:
-        return makespan(times, w), makespan(lows, w), makespan(highs, w)
+    def walls(w: int, slow: float) -> tuple[float, float, float]:
+        est, lo, hi = ([r[k] * (slow if r[3] else 1.0) for r in runs] for k in range(3))
+        return makespan(est, w), makespan(lo, w), makespan(hi, w)
 
     n = len(basis.measured)
     if n:
@@ -290,14 +331,23 @@ def estimate(campaign: Campaign, store: CampaignStore, *,
                 "VM: benchmarks/cost_model.json)")
     if campaign.refine is not None and not ref.finished:
         later = later_rounds(campaign, ref.current.number, ref.n_runs,
-                             [*times, *(m[3] for m in basis.measured)], workers)
+                             [*(r[0] for r in runs), *(m[3] for m in basis.measured)],
+                             workers)
     changed = campaign_changes(campaign, store, dense, records)
     return Estimate(campaign=campaign.name, folder=str(store.root), total=len(expansion),
                     done=done, failed=failed, to_do=len(todo), measured=n, basis=text,
                     workers=workers, where=where, local_workers=local,
-                    cpu=(sum(times), sum(lows), sum(highs)), wall=walls(workers),
-                    local_wall=walls(local), longest=max(highs, default=0.0),
-                    overhead=overhead, points=list(costs.values()), later=later,
+                    cpu=(sum(r[0] for r in runs), sum(r[1] for r in runs),
+                         sum(r[2] for r in runs)),
+                    wall=walls(workers, stretch if here else 1.0),
+                    local_wall=walls(local, local_stretch),
+                    longest=max((r[0] * (stretch if r[3] and here else 1.0) for r in runs),
+                                default=0.0),
+                    overhead=driver_overhead(stretch) if todo else 0.0,
+                    local_overhead=driver_overhead(local_stretch) if todo else 0.0,
+                    load=load, cores=cores,
+                    stretch=stretch, local_stretch=local_stretch, modelled=modelled,
+                    points=list(costs.values()), later=later,
                     round_note=round_note,
                     changes=[] if changed is None else changed.lines())
 
@@ -333,13 +383,13 @@ def _hours(seconds: float) -> str:
     return f"{seconds / 3600:.2g} CPU-h"
 
 
-def _wall_line(e: Estimate, workers: int, where: str,
-               runs: tuple[float, float, float]) -> str:
-    total = [r + e.overhead for r in runs]
+def _wall_line(e: Estimate, workers: int, where: str, runs: tuple[float, float, float],
+               overhead: float) -> str:
+    total = [r + overhead for r in runs]
     return (f"wall time: {fmt_seconds(total[0])} on {workers} worker(s) ({where}; 10-90 %: "
             f"{fmt_seconds(total[1])} to {fmt_seconds(total[2])}): "
             f"{fmt_seconds(runs[0])} of runs (the longest {fmt_seconds(e.longest)}) + about "
-            f"{fmt_seconds(e.overhead)} of the driver's own (cluster start, warm-up, "
+            f"{fmt_seconds(overhead)} of the driver's own (cluster start, warm-up, "
             "phase.nc, figures, report)")
 
 
@@ -363,10 +413,17 @@ def lines(e: Estimate, *, brief: bool = False) -> list[str]:
     else:
         out.append(f"CPU time: {fmt_seconds(e.cpu[0])} = {_hours(e.cpu[0])} (10-90 %: "
                    f"{fmt_seconds(e.cpu[1])} to {fmt_seconds(e.cpu[2])}), one core per run")
-        out.append(_wall_line(e, e.workers, e.where, e.wall))
+        out.append(_wall_line(e, e.workers, e.where, e.wall, e.overhead))
+        if e.stretch > 1.0:
+            what = ("the cost model's run times (and part of the driver's time) are stretched "
+                    f"{e.stretch:.2g}x; " if e.modelled else
+                    "part of the driver's time is stretched as much; ")
+            out.append(f"  this machine: load average {e.load:.1f} on {e.cores} core(s), so "
+                       f"each worker gets about {100 / e.stretch:.0f} % of a core: {what}"
+                       "measured run times are taken as they are")
         if e.local_workers != e.workers:
             out.append("  " + _wall_line(e, e.local_workers, "this machine's local cluster",
-                                         e.local_wall))
+                                         e.local_wall, e.local_overhead))
     if e.later is not None:
         out.append(f"later rounds: at most {e.later.rounds} more, at most {e.later.runs} more "
                    f"runs (the run bound), about {_hours(e.later.cpu)} "

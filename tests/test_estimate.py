@@ -14,9 +14,10 @@ from typer.testing import CliRunner
 
 from model.parameters import Numerics
 from sweep import cost_model
+from sweep import estimate as estimate_module
 from sweep.cli import app
 from sweep.cost_model import MODEL_SPREAD, curve_steps, model_seconds, model_steps
-from sweep.estimate import DRIVER_OVERHEAD, estimate, lines, makespan
+from sweep.estimate import driver_overhead, estimate, lines, makespan
 from sweep.expand import expand
 from sweep.files import file_stamp
 from sweep.refine.plan import first_round, run_bound
@@ -25,6 +26,8 @@ from sweep.spec import Overrides, load_campaign, parse_campaign
 from sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parents[1]
+#: a machine with nothing else to do: 2 cores, load average 0
+QUIET = (0.0, 2)
 
 GRID = """\
 name: {name}
@@ -146,12 +149,12 @@ def test_estimate_from_finished_runs_is_exact(tmp_path):
     exp = expand(campaign)
     for i, seconds in ((0, 10.0), (2, 20.0), (4, 30.0)):   # seed 0 of each point
         fake_run(store, exp.run_ids[i], seconds)
-    e = estimate(campaign, store)
+    e = estimate(campaign, store, load_cores=QUIET)
     assert (e.total, e.done, e.failed, e.to_do, e.measured) == (6, 3, 0, 3, 3)
     assert e.cpu[0] == pytest.approx(60.0)
     assert e.wall[0] == pytest.approx(40.0)          # 10 | 20, then 30
     assert e.workers == 2
-    assert e.overhead == DRIVER_OVERHEAD
+    assert e.overhead == driver_overhead(1.0)
     assert [c.seconds for c in e.points] == [10.0, 20.0, 30.0]
     assert all(c.basis == "its 1 finished run" for c in e.points)
     assert e.basis.startswith("from 3 finished runs of this campaign")
@@ -167,7 +170,7 @@ def test_points_with_several_runs_give_the_seed_spread(tmp_path):
     for point, times in enumerate(((8.0, 12.0), (18.0, 22.0), (27.0, 33.0))):
         for seed, seconds in enumerate(times):
             fake_run(store, exp.run_ids[4 * point + seed], seconds)
-    e = estimate(campaign, store)
+    e = estimate(campaign, store, load_cores=QUIET)
     assert e.to_do == 6
     assert e.cpu[0] == pytest.approx(2 * (10.0 + 20.0 + 30.0))
     # within-point ratios 0.8, 1.2, 0.9, 1.1, 0.9, 1.1: 10 % and 90 % quantiles 0.85, 1.15
@@ -189,7 +192,7 @@ def test_unmeasured_points_are_scaled_by_the_cost_model(tmp_path):
         seconds = 2.0 * (k + 1)
         fake_run(store, exp.run_ids[i], seconds)
         ratios.append(seconds / model_seconds(exp.run(i).point.numerics))
-    e = estimate(campaign, store)
+    e = estimate(campaign, store, load_cores=QUIET)
     assert e.to_do == 3
     model64 = model_seconds(Numerics.from_dict({"resolution": 64, "t_final": 10}))
     assert sorted(ratios)[1] * model64 * 3 == pytest.approx(e.cpu[0])
@@ -197,11 +200,35 @@ def test_unmeasured_points_are_scaled_by_the_cost_model(tmp_path):
     assert model64 > model_seconds(Numerics.from_dict({"resolution": 32, "t_final": 10}))
 
 
+def test_a_busy_machine_stretches_the_cost_model_and_the_driver(tmp_path):
+    """Load average 6 on 2 cores: each of 2 workers gets 2 / (6 + 2) of a core."""
+    path = write(tmp_path, GRID.format(name="c", seeds=2))
+    campaign = load_campaign(path)
+    store = CampaignStore(tmp_path / "results", "c")
+    one = model_seconds(expand(campaign).points[0].numerics)
+    e = estimate(campaign, store, load_cores=(6.0, 2))
+    assert e.stretch == 4.0
+    assert e.cpu[0] == pytest.approx(6 * one)           # CPU time: a free core per run
+    assert e.wall[0] == pytest.approx(3 * one * 4.0)
+    assert e.overhead == pytest.approx(driver_overhead(4.0))
+    assert "each worker gets about 25 % of a core" in flat("\n".join(lines(e)))
+    # measured run times are taken as they are; the driver is still stretched
+    exp = expand(campaign)
+    for i, seconds in ((0, 10.0), (2, 20.0), (4, 30.0)):
+        fake_run(store, exp.run_ids[i], seconds)
+    e = estimate(campaign, store, load_cores=(6.0, 2))
+    assert e.wall[0] == pytest.approx(40.0)
+    assert e.overhead == pytest.approx(driver_overhead(4.0))
+    # more workers than cores stretch too
+    assert estimate_module.slowdown(8, 0.0, 2) == 4.0
+    assert estimate_module.slowdown(2, 0.0, 2) == 1.0
+
+
 def test_cost_model_without_runs_and_without_a_folder(tmp_path):
     path = write(tmp_path, GRID.format(name="c", seeds=2))
     campaign = load_campaign(path)
     store = CampaignStore(tmp_path / "results", "c")
-    e = estimate(campaign, store)
+    e = estimate(campaign, store, load_cores=QUIET)
     one = model_seconds(expand(campaign).points[0].numerics)
     assert (e.to_do, e.measured) == (6, 0)
     assert e.cpu == pytest.approx((6 * one, 6 * one * MODEL_SPREAD[0], 6 * one * MODEL_SPREAD[1]))
@@ -217,16 +244,16 @@ def test_failed_runs_are_to_do_only_with_retry_failed(tmp_path):
     exp = expand(campaign)
     fake_run(store, exp.run_ids[0], 5.0)
     fake_run(store, exp.run_ids[1], 1.0, status="failed")
-    e = estimate(campaign, store)
+    e = estimate(campaign, store, load_cores=QUIET)
     assert (e.done, e.failed, e.to_do, e.measured) == (1, 1, 1, 1)
-    assert estimate(campaign, store, retry_failed=True).to_do == 2
+    assert estimate(campaign, store, retry_failed=True, load_cores=QUIET).to_do == 2
     # a run whose file was damaged is redone
     store.nc_path(exp.run_ids[0]).write_bytes(b"truncated")
-    assert estimate(campaign, store).to_do == 2
+    assert estimate(campaign, store, load_cores=QUIET).to_do == 2
     # everything done: nothing to do, and no wall time
     for i in range(3):
         fake_run(store, exp.run_ids[i], 5.0)
-    e = estimate(campaign, store)
+    e = estimate(campaign, store, load_cores=QUIET)
     assert e.to_do == 0
     assert e.cpu[0] == 0.0
     assert e.overhead == 0.0
@@ -236,7 +263,7 @@ def test_failed_runs_are_to_do_only_with_retry_failed(tmp_path):
 def test_adaptive_campaign_round_and_bound(tmp_path):
     campaign = parse_campaign(REFINED)
     store = CampaignStore(tmp_path / "results", "r")
-    e = estimate(campaign, store)   # no results: round 0
+    e = estimate(campaign, store, load_cores=QUIET)   # no results: round 0
     n0 = len(first_round(campaign).runs)
     assert (e.total, e.to_do) == (n0, n0)
     assert e.later is not None
@@ -249,7 +276,7 @@ def test_adaptive_campaign_round_and_bound(tmp_path):
     ref = replay(campaign, store)
     for (_, x, _), rid in ref.run_ids.items():
         fake_run(store, rid, 4.0, scalars={"sigma2_S_final": 1.0 if x > 0.5 else 0.0})
-    e = estimate(campaign, store)
+    e = estimate(campaign, store, load_cores=QUIET)
     ref = replay(campaign, store)
     assert ref.current.number == 1
     assert e.to_do == len(ref.current.runs)
@@ -261,7 +288,12 @@ def test_adaptive_campaign_round_and_bound(tmp_path):
 
 
 # --------------------------------------------------------------------------- the commands
-def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path):
+@pytest.fixture
+def quiet_machine(monkeypatch):
+    monkeypatch.setattr(estimate_module, "machine_load", lambda: QUIET)
+
+
+def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path, quiet_machine):
     path = write(tmp_path, GRID.format(name="c", seeds=2))
     results = tmp_path / "results"
     r = invoke("run", path, "--results", results, "--dry-run")
@@ -290,14 +322,18 @@ def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path):
         in out
     assert "alpha_minus_B=0.1: 1 to do, 10 s each" in out
     assert "CPU time: 1 min 00 s = 0.017 CPU-h" in out
-    assert f"wall time: {30 + DRIVER_OVERHEAD:.0f} s on 3 worker(s)" in out
+    # 3 workers on 2 cores: each gets 2/3 of a core (the driver is stretched, not the runs)
+    assert f"wall time: {30 + driver_overhead(1.5):.0f} s on 3 worker(s)" in out
+    assert "each worker gets about 67 % of a core" in out
+    assert f"wall time: {40 + driver_overhead(1.0):.0f} s on 2 worker(s) (this machine's " \
+        "local cluster" in out
     # -q: the totals only
     r = invoke("run", path, "--results", results, "--dry-run", "-q")
     assert "alpha_minus_B=0.1" not in r.output
     assert "CPU time" in r.output
 
 
-def test_dry_run_of_a_real_campaign_folder_writes_nothing(copy_of_small):
+def test_dry_run_of_a_real_campaign_folder_writes_nothing(copy_of_small, quiet_machine):
     """The small campaign's real records (run times measured by the workers)."""
     before = tree(copy_of_small.results)
     r = invoke("run", copy_of_small.path, "--results", copy_of_small.results, "--dry-run",
@@ -309,7 +345,7 @@ def test_dry_run_of_a_real_campaign_folder_writes_nothing(copy_of_small):
     assert "basis: from 4 finished runs of this campaign" in out
 
 
-def test_validate_estimate(tmp_path):
+def test_validate_estimate(tmp_path, quiet_machine):
     path = write(tmp_path, GRID.format(name="c", seeds=2))
     r = invoke("validate", path, "--results", tmp_path / "results", "--estimate")
     assert r.exit_code == 0, r.output
@@ -346,7 +382,8 @@ def test_quickstart_estimate_without_results(tmp_path):
     """The quickstart (8 runs, 128^2, finite, t = 40) from the cost model alone."""
     campaign = load_campaign(ROOT / "campaigns" / "quickstart.yaml",
                              Overrides(name="estimate-test"))
-    e = estimate(campaign, CampaignStore(tmp_path / "results", campaign.name))
+    e = estimate(campaign, CampaignStore(tmp_path / "results", campaign.name),
+                 load_cores=QUIET)
     assert e.to_do == 8
     assert e.workers == 2
     one = model_seconds(Numerics(resolution=128, t_final=40.0, save_every=1.0))

@@ -50,8 +50,9 @@ QUANTILES = (0.1, 0.9)
 #: tenths of a second per run), phase.nc, fits, figures and report: a fixed part and a part
 #: stretched by the machine's load like a run (:func:`slowdown`). Measured with
 #: campaigns/quickstart.yaml on the 2-core VM (docs/campaigns.md, *Cost before launch*): the
-#: command's wall time less the runs' makespan, about 13 s on the quiet machine (load
-#: average 0.5), 23-33 s at load average 3-5 and 40-45 s at 11-14
+#: command's wall time less the runs' makespan: about 13 s on the quiet machine (the 19.1 s
+#: quickstart of benchmarks/first_run.md, load average 0.5), 23-33 s at load average 3-5
+#: and 40-45 s at 11-14
 DRIVER_OVERHEAD = (8.0, 4.7)
 #: points listed one per line (the rest are counted)
 MAX_POINTS = 20
@@ -112,6 +113,8 @@ class Estimate:
     local_stretch: float = 1.0
     #: whether some runs are costed by the cost model alone (stretched by the load)
     modelled: bool = False
+    #: whether the runs go on this machine (a local cluster)
+    local: bool = True
     points: list[Costed] = field(default_factory=list)
     later: LaterRounds | None = None
     round_note: str = ""
@@ -179,7 +182,7 @@ def concurrency(execution: ExecutionSpec) -> tuple[int, str]:
     local = local_worker_count(execution) * execution.threads_per_worker
     if execution.mode == "scheduler":
         return local, (f"an external scheduler ({execution.scheduler}): its workers are not "
-                       f"known here, {local} assumed (--workers N to assume another count)")
+                       f"known here, this machine's {local} assumed")
     return local, "local cluster"
 
 
@@ -347,6 +350,7 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
                     local_overhead=driver_overhead(local_stretch) if todo else 0.0,
                     load=load, cores=cores,
                     stretch=stretch, local_stretch=local_stretch, modelled=modelled,
+                    local=here,
                     points=list(costs.values()), later=later,
                     round_note=round_note,
                     changes=[] if changed is None else changed.lines())
@@ -414,7 +418,10 @@ def lines(e: Estimate, *, brief: bool = False) -> list[str]:
         out.append(f"CPU time: {fmt_seconds(e.cpu[0])} = {_hours(e.cpu[0])} (10-90 %: "
                    f"{fmt_seconds(e.cpu[1])} to {fmt_seconds(e.cpu[2])}), one core per run")
         out.append(_wall_line(e, e.workers, e.where, e.wall, e.overhead))
-        if e.stretch > 1.0:
+        if e.stretch > 1.0 and not e.local:
+            out.append(f"  this machine: load average {e.load:.1f} on {e.cores} core(s): "
+                       f"part of the driver's time is stretched {e.stretch:.2g}x")
+        elif e.stretch > 1.0:
             what = ("the cost model's run times (and part of the driver's time) are stretched "
                     f"{e.stretch:.2g}x; " if e.modelled else
                     "part of the driver's time is stretched as much; ")

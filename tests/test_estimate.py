@@ -389,3 +389,23 @@ def test_quickstart_estimate_without_results(tmp_path):
     one = model_seconds(Numerics(resolution=128, t_final=40.0, save_every=1.0))
     assert e.cpu[0] == pytest.approx(8 * one)
     assert math.isclose(e.wall[0], 4 * one)
+
+
+def test_workers_of_a_batch_cluster_and_of_a_scheduler(tmp_path):
+    """A dask-jobqueue cluster runs jobs x cores at once (its runs are not stretched by this
+    machine's load); an external scheduler's workers are not known: the local count."""
+    text = GRID.format(name="c", seeds=2).replace(
+        "execution: {workers: 2}",
+        "execution: {cluster: {kind: slurm, jobs: 3, cores: 2, processes: 2, memory: 4GB}}")
+    campaign = parse_campaign(text)
+    e = estimate(campaign, CampaignStore(tmp_path / "results", "c"), load_cores=(6.0, 2))
+    one = model_seconds(expand(campaign).points[0].numerics)
+    assert e.workers == 6
+    assert "slurm cluster: jobs 3 x cores 2" in e.where
+    assert e.wall[0] == pytest.approx(one)               # 6 runs on 6 workers, not stretched
+    assert e.overhead == pytest.approx(driver_overhead(e.stretch))
+    text = GRID.format(name="c", seeds=2).replace(
+        "execution: {workers: 2}", "execution: {scheduler: 'tcp://127.0.0.1:8786'}")
+    e = estimate(parse_campaign(text), CampaignStore(tmp_path / "results", "c"),
+                 load_cores=QUIET)
+    assert "its workers are not known here" in e.where

@@ -126,10 +126,11 @@ def run(
         "127.0.0.1, a free port) and print its link.")] = True,
     dry_run: Annotated[bool, typer.Option(
         "--dry-run", help="Run nothing and write nothing (no results folder, no lock): print "
-        "the runs to do, their estimated CPU time and the wall time on the workers, from "
-        "the campaign's own finished runs (per point, scaled by resolution, length and "
-        "mechanics), else from the calibrated cost model; with the basis and the 10-90 % "
-        "range. Takes --workers, --scheduler and --retry-failed into account.")] = False,
+        "the runs to do, their estimated CPU time and the wall time on the workers at this "
+        "machine's load, from the campaign's own finished runs (per point, scaled by "
+        "resolution, length and mechanics), else from the calibrated cost model; with the "
+        "basis and the 10-90 % range. Takes --workers, --scheduler and --retry-failed into "
+        "account.")] = False,
     detach: Annotated[bool, typer.Option(
         "--detach", help="Run the driver in the background, in a session of its own "
         "(closing the terminal or logging out does not end it), its output in "
@@ -146,7 +147,7 @@ def run(
     orphaned runs are printed first. Exit 0 if every run
     succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 3 when
     stopped by `--max-failures`, 130 when interrupted (rerun to resume). With `--detach`,
-    0 once the driver runs in the background.
+    0 once the driver runs in the background; with `--dry-run`, 0 after printing the cost.
     """
     from ..aggregate import write_phase
     from ..clusters import WORKER_LOSSES

@@ -264,6 +264,7 @@ def test_adaptive_campaign_round_and_bound(tmp_path):
     campaign = parse_campaign(REFINED)
     store = CampaignStore(tmp_path / "results", "r")
     e = estimate(campaign, store, load_cores=QUIET)   # no results: round 0
+    assert not (tmp_path / "results").exists()
     n0 = len(first_round(campaign).runs)
     assert (e.total, e.to_do) == (n0, n0)
     assert e.later is not None

@@ -15,13 +15,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, driver, export, figures, report, simulate, stability, verify
+from . import campaigns, driver, export, figures, report, simulate, stability, status, verify
 from .app import app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
     "validate": campaigns.validate,
     "run": campaigns.run,
-    "status": campaigns.status,
+    "status": status.status,
     "aggregate": campaigns.aggregate,
     "verify": verify.verify,
     "stop": driver.stop,

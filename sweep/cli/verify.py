@@ -110,6 +110,14 @@ def verify(
         raise typer.Exit(EXIT_FAILED_RUNS)
 
 
+def validation_line(v: Any) -> str:
+    """What ``nematic validate`` says about a ``verify:`` section."""
+    where = ("both sides of each fitted transition" if v.points is None
+             else f"{len(v.points)} selection(s)") + (" and the corners" if v.corners else "")
+    return (f"verify: {len(v.variants)} variant(s) (" + "; ".join(x.name for x in v.variants)
+            + f") at {where}, {v.seeds} seed(s) each" + (", before the grid" if v.before else ""))
+
+
 def verify_step(campaign: Any, store: Any, say: Console, *, before: bool) -> bool:
     """``nematic run``'s verification (the caller holds the lock): print its plan and
     summary; ``True`` when verify.nc was written. A cluster or storage problem is printed

@@ -1,0 +1,439 @@
+"""Cost before launch: the runs a campaign has still to do, their CPU time and the wall time
+on its workers (``nematic run --dry-run``, ``nematic validate --estimate``).
+
+It reads the results folder, if there is one, and writes nothing (no lock, no manifest, no
+folder). A run to do is costed, in this order of preference:
+
+- **at a point already run** (the same parameters and numerics, other seeds): the median of
+  that point's measured run times (the records' ``wall_time``);
+- **scaled** from the campaign's other finished runs: the cost model's seconds for the run
+  (:mod:`sweep.cost_model`: resolution, length, saves, mechanics) times the median of
+  measured / model over the finished runs of the same kind and resolution (else of the
+  same kind, else all of them);
+- **the cost model** alone when the campaign has no finished run.
+
+The spread is the 10-90 % range of the run times, summed over the runs to do: at measured
+points the seed-to-seed spread of the points with several runs (else the spread of the
+ratios below), for scaled runs the 10 % and 90 % quantiles of measured / model, for the cost
+model its calibration's :data:`~sweep.cost_model.MODEL_SPREAD`. The wall time on W workers is
+the runs dealt in the campaign's order to the first free worker (as the driver's window
+does), whose makespan lies between the CPU time over W and that plus the longest run, plus
+the driver's own time (:data:`DRIVER_OVERHEAD`). On a local cluster the cost model's run
+times (a free core each) and part of the driver's time are stretched by the machine's load
+(:func:`slowdown`: W workers beside a load average L on C cores get C / (L + W) of a core
+each); measured run times already carry the load they ran under. An adaptive campaign is
+costed for the round its results have reached (round 0 without results) plus a bound on the
+later rounds (:func:`sweep.refine.plan.run_bound`).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .campaign import Campaign, ExecutionSpec
+from .clusters import local_worker_count
+from .cost_model import MODEL_SPREAD, kind, model_seconds
+from .expand import Expansion, GridPoint, expand
+from .store import RETRYABLE_REASONS, CampaignStore, Record
+
+#: the quantiles of the spread
+QUANTILES = (0.1, 0.9)
+#: the driver's own wall time around the runs of a local campaign (seconds): the command's
+#: start, the cluster's, the kernels' warm-up from the disk cache, the results written (a few
+#: tenths of a second per run), phase.nc, fits, figures and report: a fixed part and a part
+#: stretched by the machine's load like a run (:func:`slowdown`). Measured with
+#: campaigns/quickstart.yaml on the 2-core VM (docs/campaigns.md, *Cost before launch*): the
+#: command's wall time less the runs' makespan: about 13 s on the quiet machine (the 19.1 s
+#: quickstart of benchmarks/first_run.md, load average 0.5), 23-33 s at load average 3-5
+#: and 40-45 s at 11-14
+DRIVER_OVERHEAD = (8.0, 4.7)
+#: points listed one per line (the rest are counted)
+MAX_POINTS = 20
+
+
+@dataclass
+class Costed:
+    """The runs to do at one point with their estimated seconds each (and the range)."""
+
+    label: str
+    runs: int
+    seconds: float
+    low: float
+    high: float
+    basis: str
+
+
+@dataclass
+class LaterRounds:
+    """An adaptive campaign's rounds after the current one: a bound."""
+
+    rounds: int
+    runs: int
+    cpu: float
+    wall: float
+
+
+@dataclass
+class Estimate:
+    campaign: str
+    folder: str
+    total: int
+    done: int
+    failed: int
+    to_do: int
+    measured: int
+    basis: str
+    workers: int
+    where: str
+    local_workers: int
+    #: (estimate, low, high) in seconds: the sum of the run times to do, and the makespan of
+    #: the runs (without the driver's :attr:`overhead`) on :attr:`workers` and on
+    #: :attr:`local_workers`
+    cpu: tuple[float, float, float]
+    wall: tuple[float, float, float]
+    local_wall: tuple[float, float, float]
+    longest: float
+    #: the driver's own wall time (:data:`DRIVER_OVERHEAD`) on :attr:`workers` and on
+    #: :attr:`local_workers` at the machine's load
+    overhead: float
+    local_overhead: float
+    #: this machine's 1-minute load average and cores when the estimate was made, and how
+    #: much longer a run and the driver take here than on a free core (:func:`slowdown`), on
+    #: :attr:`workers` (1 off a local cluster) and on :attr:`local_workers`
+    load: float = 0.0
+    cores: int = 1
+    stretch: float = 1.0
+    local_stretch: float = 1.0
+    #: whether some runs are costed by the cost model alone (stretched by the load)
+    modelled: bool = False
+    #: whether the runs go on this machine (a local cluster)
+    local: bool = True
+    points: list[Costed] = field(default_factory=list)
+    later: LaterRounds | None = None
+    round_note: str = ""
+    #: what changed since the results were made (:mod:`sweep.changes`), as lines
+    changes: list[str] = field(default_factory=list)
+
+
+def point_label(point: GridPoint) -> str:
+    return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                     for k, v in point.coords.items())
+
+
+def _seconds(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) and value > 0 else None
+
+
+def run_length(point: GridPoint, record: Mapping[str, Any]) -> float:
+    """The model time a finished run covered: ``t_stopped`` when it stopped early."""
+    scalars = record.get("scalars") or {}
+    if scalars.get("stopped_early") and _seconds(scalars.get("t_stopped")) is not None:
+        return float(scalars["t_stopped"])
+    return point.numerics.t_final
+
+
+def makespan(times: Sequence[float], workers: int) -> float:
+    """The wall time of ``times`` dealt in order to the first free of ``workers``."""
+    free = [0.0] * max(1, min(workers, len(times)))
+    for t in times:
+        heapq.heapreplace(free, free[0] + t)
+    return max(free) if times else 0.0
+
+
+def machine_load() -> tuple[float, int]:
+    """This machine's 1-minute load average (0 where the system has none) and its cores."""
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        load = 0.0
+    return load, os.cpu_count() or 1
+
+
+def driver_overhead(stretch: float) -> float:
+    """The driver's own wall time at a machine's :func:`slowdown` (:data:`DRIVER_OVERHEAD`)."""
+    return DRIVER_OVERHEAD[0] + DRIVER_OVERHEAD[1] * stretch
+
+
+def slowdown(workers: int, load: float, cores: int) -> float:
+    """How much longer a run takes than on a free core when ``workers`` runs share ``cores``
+    with ``load`` other runnable processes: 1 while each has a core of its own."""
+    return max(1.0, (load + workers) / max(1, cores))
+
+
+def concurrency(execution: ExecutionSpec) -> tuple[int, str]:
+    """How many runs go at once, and where that comes from."""
+    if execution.mode == "cluster" and execution.cluster is not None:
+        cl = execution.cluster
+        jobs = cl.adapt[1] if cl.adapt else cl.jobs
+        cores = cl.options.get("cores")
+        per = int(cores) if isinstance(cores, int) and cores > 0 else 1
+        what = "adapt.maximum_jobs" if cl.adapt else "jobs"
+        return jobs * per, (f"{cl.kind} cluster: {what} {jobs} x cores {per}"
+                            + (" (queue waits not included)" if jobs else ""))
+    local = local_worker_count(execution) * execution.threads_per_worker
+    if execution.mode == "scheduler":
+        return local, (f"an external scheduler ({execution.scheduler}): its workers are not "
+                       f"known here, this machine's {local} assumed")
+    return local, "local cluster"
+
+
+class Basis:
+    """The campaign's measured runs and how a run to do is costed from them."""
+
+    def __init__(self, measured: list[tuple[str, tuple[Any, ...], int, float, float]]):
+        #: (point label, kind, resolution, seconds, model seconds) of every measured run
+        self.measured = measured
+        self.by_point: dict[str, list[float]] = {}
+        for label, _, _, seconds, _ in measured:
+            self.by_point.setdefault(label, []).append(seconds)
+        within = [s / float(np.median(v)) for v in self.by_point.values() if len(v) > 1
+                  for s in v]
+        self.seed_spread = _spread(within) if len(within) >= 3 else None
+
+    def ratios(self, kind_: tuple[Any, ...], resolution: int) -> list[float]:
+        for keep in (lambda k, n: k == kind_ and n == resolution, lambda k, n: k == kind_,
+                     lambda k, n: True):
+            r = [s / m for _, k, n, s, m in self.measured if keep(k, n) and m > 0]
+            if r:
+                return r
+        return []
+
+    def cost(self, point: GridPoint, label: str, model: float) -> tuple[float, float, float,
+                                                                           str]:
+        """(seconds, low, high, basis) of one run at ``point``."""
+        if label in self.by_point:
+            times = self.by_point[label]
+            est = float(np.median(times))
+            lo, hi = self.seed_spread or self.ratio_spread(point)
+            n = len(times)
+            return est, est * lo, est * hi, f"its {n} finished run{'s' if n > 1 else ''}"
+        ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
+        if ratios:
+            med = float(np.median(ratios))
+            lo, hi = (_spread(ratios) if len(ratios) >= 3 else MODEL_SPREAD)
+            return model * med, model * med * lo, model * med * hi, "scaled"
+        return model, model * MODEL_SPREAD[0], model * MODEL_SPREAD[1], "cost model"
+
+    def ratio_spread(self, point: GridPoint) -> tuple[float, float]:
+        ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
+        return _spread(ratios) if len(ratios) >= 3 else MODEL_SPREAD
+
+
+def _spread(values: Sequence[float]) -> tuple[float, float]:
+    """The 10 % and 90 % quantiles of ``values`` over their median."""
+    med = float(np.median(values))
+    lo, hi = (float(q) for q in np.quantile(values, QUANTILES))
+    return lo / med, hi / med
+
+
+def classify(expansion: Expansion, store: CampaignStore, records: Mapping[str, Record], *,
+             retry_failed: bool = False) -> tuple[list[int], int, int]:
+    """(positions to do, done, failed and not redone), as ``nematic run`` would plan them
+    (:func:`sweep.plan.plan_runs`) but without touching the folder: a record whose file is
+    not intact is a run to do."""
+    todo: list[int] = []
+    done = failed = 0
+    for i, rid in enumerate(expansion.run_ids):
+        rec = records.get(rid)
+        if rec is None or store.check_run_file(rid, rec) is not None:
+            todo.append(i)
+        elif rec.get("status") == "ok":
+            done += 1
+        elif retry_failed or rec.get("reason") in RETRYABLE_REASONS:
+            todo.append(i)
+        else:
+            failed += 1
+    return todo, done, failed
+
+
+def measurements(expansion: Expansion, records: Mapping[str, Record]) -> Basis:
+    """Every successful run of ``expansion`` with a recorded run time."""
+    measured = []
+    models: dict[tuple[int, float], float] = {}
+    for i, rid in enumerate(expansion.run_ids):
+        rec = records.get(rid)
+        if rec is None or rec.get("status") != "ok":
+            continue
+        seconds = _seconds(rec.get("wall_time"))
+        if seconds is None:
+            continue
+        point = expansion.run(i).point
+        length = run_length(point, rec)
+        key = (id(point), length)
+        if key not in models:
+            models[key] = model_seconds(point.numerics, length)
+        measured.append((point_label(point), kind(point.numerics),
+                         point.numerics.resolution, seconds, models[key]))
+    return Basis(measured)
+
+
+def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = False,
+             load_cores: tuple[float, int] | None = None) -> Estimate:
+    """The estimate of what ``nematic run`` would do now (see the module docstring);
+    ``load_cores``: the machine's load average and cores (default :func:`machine_load`)."""
+    from .changes import campaign_changes
+
+    records = store.scan(save=False)
+    later = None
+    round_note = ""
+    if campaign.refine is None:
+        expansion: Expansion = expand(campaign)
+        dense = expansion
+    else:
+        from .refine.rounds import replay
+
+        ref = replay(campaign, store, records)
+        expansion, dense = ref.run_list(), ref.expansion()
+        round_note = (f"adaptive: round {ref.current.number} "
+                      + ("(the grid)" if ref.current.number == 0 else "")
+                      + (f"; refinement finished ({ref.stop})" if ref.finished else ""))
+    todo, done, failed = classify(expansion, store, records, retry_failed=retry_failed)
+    basis = measurements(expansion, records)
+    costs: dict[str, Costed] = {}
+    runs: list[tuple[float, float, float, bool]] = []  # (seconds, low, high, cost model?)
+    per_point: dict[int, tuple[str, float, float, float, str]] = {}
+    for i in todo:
+        point = expansion.run(i).point
+        if id(point) not in per_point:
+            label = point_label(point)
+            per_point[id(point)] = (label, *basis.cost(point, label,
+                                                       model_seconds(point.numerics)))
+        label, est, lo, hi, why = per_point[id(point)]
+        runs.append((est, lo, hi, why == "cost model"))
+        entry = costs.setdefault(label, Costed(label, 0, est, lo, hi, why))
+        entry.runs += 1
+    workers, where = concurrency(campaign.execution)
+    local = local_worker_count(campaign.execution.__class__())
+    load, cores = machine_load() if load_cores is None else load_cores
+    here = campaign.execution.mode == "local"
+    stretch = slowdown(workers if here else 1, load, cores)
+    local_stretch = slowdown(local, load, cores)
+    modelled = any(r[3] for r in runs)
+
+    def walls(w: int, slow: float) -> tuple[float, float, float]:
+        est, lo, hi = ([r[k] * (slow if r[3] else 1.0) for r in runs] for k in range(3))
+        return makespan(est, w), makespan(lo, w), makespan(hi, w)
+
+    n = len(basis.measured)
+    if n:
+        seconds = [m[3] for m in basis.measured]
+        text = (f"from {n} finished run{'s' if n > 1 else ''} of this campaign (run times "
+                f"{fmt_seconds(min(seconds))} to {fmt_seconds(max(seconds))}, median "
+                f"{fmt_seconds(float(np.median(seconds)))})")
+    else:
+        text = ("cost model, no finished runs (sweep/cost_model.py, calibrated on a 2-core "
+                "VM: benchmarks/cost_model.json)")
+    if campaign.refine is not None and not ref.finished:
+        later = later_rounds(campaign, ref.current.number, ref.n_runs,
+                             [*(r[0] for r in runs), *(m[3] for m in basis.measured)],
+                             workers)
+    changed = campaign_changes(campaign, store, dense, records)
+    return Estimate(campaign=campaign.name, folder=str(store.root), total=len(expansion),
+                    done=done, failed=failed, to_do=len(todo), measured=n, basis=text,
+                    workers=workers, where=where, local_workers=local,
+                    cpu=(sum(r[0] for r in runs), sum(r[1] for r in runs),
+                         sum(r[2] for r in runs)),
+                    wall=walls(workers, stretch if here else 1.0),
+                    local_wall=walls(local, local_stretch),
+                    longest=max((r[0] * (stretch if r[3] and here else 1.0) for r in runs),
+                                default=0.0),
+                    overhead=driver_overhead(stretch) if todo else 0.0,
+                    local_overhead=driver_overhead(local_stretch) if todo else 0.0,
+                    load=load, cores=cores,
+                    stretch=stretch, local_stretch=local_stretch, modelled=modelled,
+                    local=here,
+                    points=list(costs.values()), later=later,
+                    round_note=round_note,
+                    changes=[] if changed is None else changed.lines())
+
+
+def later_rounds(campaign: Campaign, current: int, planned: int, per_run: Sequence[float],
+                 workers: int) -> LaterRounds | None:
+    """A bound on an adaptive campaign's rounds after ``current``: every run
+    :func:`~sweep.refine.plan.run_bound` allows beyond the ``planned`` ones, each at the
+    mean cost of the campaign's runs; each round ends when its longest run does."""
+    from .refine.plan import run_bound
+
+    assert campaign.refine is not None
+    rounds = campaign.refine.rounds - current
+    runs = max(0, run_bound(campaign) - planned)
+    if rounds <= 0 or runs == 0 or not per_run:
+        return None
+    cpu = runs * float(np.mean(per_run))
+    return LaterRounds(rounds, runs, cpu, cpu / workers + rounds * max(per_run))
+
+
+def fmt_seconds(seconds: float) -> str:
+    """12.3 s, 4 min 05 s, 2 h 03 min."""
+    if seconds < 60:
+        return f"{seconds:.2g} s" if seconds < 10 else f"{seconds:.0f} s"
+    if seconds < 3600:
+        m, s = divmod(round(seconds), 60)
+        return f"{m} min {s:02d} s"
+    h, m = divmod(round(seconds / 60), 60)
+    return f"{h} h {m:02d} min"
+
+
+def _hours(seconds: float) -> str:
+    return f"{seconds / 3600:.2g} CPU-h"
+
+
+def _wall_line(e: Estimate, workers: int, where: str, runs: tuple[float, float, float],
+               overhead: float) -> str:
+    total = [r + overhead for r in runs]
+    return (f"wall time: {fmt_seconds(total[0])} on {workers} worker(s) ({where}; 10-90 %: "
+            f"{fmt_seconds(total[1])} to {fmt_seconds(total[2])}): "
+            f"{fmt_seconds(runs[0])} of runs (the longest {fmt_seconds(e.longest)}) + about "
+            f"{fmt_seconds(overhead)} of the driver's own (cluster start, warm-up, "
+            "phase.nc, figures, report)")
+
+
+def lines(e: Estimate, *, brief: bool = False) -> list[str]:
+    """The estimate as plain lines (``nematic run --dry-run``, ``validate --estimate``);
+    ``brief``: without the runs to do point by point."""
+    out = [f"runs: {e.total} planned, {e.done} done, {e.failed} failed (not redone), "
+           f"{e.to_do} to do" + (f"; {e.round_note}" if e.round_note else "")]
+    for c in [] if brief else e.points[:MAX_POINTS]:
+        out.append(f"  {c.label or '(the one point)'}: {c.runs} to do, "
+                   f"{fmt_seconds(c.seconds)} each ({fmt_seconds(c.low)} to "
+                   f"{fmt_seconds(c.high)}; {c.basis})")
+    if len(e.points) > MAX_POINTS and not brief:
+        rest = e.points[MAX_POINTS:]
+        out.append(f"  ... and {len(rest)} more point(s) with {sum(c.runs for c in rest)} "
+                   "run(s) to do")
+    out.append(f"basis: {e.basis}")
+    if e.to_do == 0:
+        out.append("nothing to do" + ("; --retry-failed redoes the failed runs"
+                                      if e.failed else ""))
+    else:
+        out.append(f"CPU time: {fmt_seconds(e.cpu[0])} = {_hours(e.cpu[0])} (10-90 %: "
+                   f"{fmt_seconds(e.cpu[1])} to {fmt_seconds(e.cpu[2])}), one core per run")
+        out.append(_wall_line(e, e.workers, e.where, e.wall, e.overhead))
+        if e.stretch > 1.0 and not e.local:
+            out.append(f"  this machine: load average {e.load:.1f} on {e.cores} core(s): "
+                       f"part of the driver's time is stretched {e.stretch:.2g}x")
+        elif e.stretch > 1.0:
+            what = ("the cost model's run times (and part of the driver's time) are stretched "
+                    f"{e.stretch:.2g}x; " if e.modelled else
+                    "part of the driver's time is stretched as much; ")
+            out.append(f"  this machine: load average {e.load:.1f} on {e.cores} core(s), so "
+                       f"each worker gets about {100 / e.stretch:.0f} % of a core: {what}"
+                       "measured run times are taken as they are")
+        if e.local_workers != e.workers:
+            out.append("  " + _wall_line(e, e.local_workers, "this machine's local cluster",
+                                         e.local_wall, e.local_overhead))
+    if e.later is not None:
+        out.append(f"later rounds: at most {e.later.rounds} more, at most {e.later.runs} more "
+                   f"runs (the run bound), about {_hours(e.later.cpu)} "
+                   f"({fmt_seconds(e.later.cpu)}) and at most {fmt_seconds(e.later.wall)} "
+                   f"wall on {e.workers} worker(s)")
+    return out

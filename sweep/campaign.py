@@ -181,6 +181,34 @@ class RefineSpec:
                           "max_width": self.max_width, "confidence": self.confidence}}
 
 
+@dataclass(frozen=True)
+class PrecisionSpec:
+    """A validated ``precision:`` section (:mod:`sweep.precision`): seeds by precision.
+
+    Every point gets the campaign's first ``initial`` seeds, then the next ``add`` per round
+    until its decision is taken: ``precise`` (the ``confidence`` Student-t interval of the
+    seed mean of ``observable`` is narrower than ``width``, relative to |mean| when
+    ``relative``), ``unanimous`` (at least ``unanimous`` seeds, all of one pattern class:
+    ``sigma2_S`` above ``patterned_above`` or not) or ``cap`` (every seed of the campaign
+    run). ``width`` or ``unanimous`` may be ``None`` (that rule is off)."""
+
+    observable: str
+    source: str
+    width: float | None = None
+    relative: bool = True
+    confidence: float = 0.95
+    unanimous: int | None = None
+    patterned_above: float | None = None
+    initial: int = 4
+    add: int = 4
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"observable": self.observable, "source": self.source, "width": self.width,
+                "relative": self.relative, "confidence": self.confidence,
+                "unanimous": self.unanimous, "patterned_above": self.patterned_above,
+                "initial": self.initial, "add": self.add}
+
+
 #: What a verification compares by default (phase.nc names).
 DEFAULT_VERIFY_OBSERVABLES = ("sigma2_S", "cos2theta", "lambda", "lambda_peak", "t_peak")
 
@@ -248,6 +276,8 @@ class Campaign:
     overrides: tuple[str, ...] = ()
     #: the ``refine:`` section (an adaptive campaign: sweep/refine), or ``None``
     refine: RefineSpec | None = None
+    #: the ``precision:`` section (seeds by precision: sweep/precision), or ``None``
+    precision: PrecisionSpec | None = None
     #: the ``verify:`` section (convergence and sensitivity checks: sweep/verify), or ``None``
     verify: VerifySpec | None = None
 

@@ -120,6 +120,9 @@ def describe_changes(old: Campaign, new: Campaign) -> list[str]:
     if old.refine != new.refine:
         out.append("refine: " + ("added" if old.refine is None else "removed"
                                  if new.refine is None else "changed"))
+    if old.precision != new.precision:
+        out.append("precision: " + ("added" if old.precision is None else "removed"
+                                    if new.precision is None else "changed"))
     others = [name for name in ("store", "fits", "figures", "execution", "limits",
                                 "description") if getattr(old, name) != getattr(new, name)]
     if others:

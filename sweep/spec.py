@@ -49,6 +49,7 @@ from .errors import CampaignError, Problem
 from .execution_section import read_execution
 from .expand import check_points
 from .limits import available_memory, fmt_bytes, parse_size, run_memory_bytes
+from .precision.config import read_precision
 from .refine.config import read_refine
 from .sections import (
     check_product_options,
@@ -68,7 +69,7 @@ from .yaml_input import read_document
 
 #: The top-level keys, in the order error messages list them.
 TOP_KEYS = ("name", "description", "parameters", "numerics", "sweep", "seeds", "store", "fits",
-            "figures", "execution", "limits", "refine", "verify")
+            "figures", "execution", "limits", "refine", "precision", "verify")
 
 
 class Section(NamedTuple):
@@ -95,6 +96,7 @@ SECTIONS: tuple[Section, ...] = (
     Section("figures", "figures", read_figures),
     Section("execution", "execution", read_execution),
     Section("refine", "refine", read_refine),
+    Section("precision", "precision", read_precision),
     Section("verify", "verify", read_verify),
 )
 

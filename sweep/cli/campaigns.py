@@ -84,6 +84,11 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
 
         for line in validation_lines(c):
             console.print(f"  {line}", markup=False)
+    if c.precision is not None:  # seeds by precision: its rule and bound (sweep/precision)
+        from ..precision.rounds import validation_lines as precision_lines
+
+        for line in precision_lines(c):
+            console.print(f"  {line}", markup=False)
     if c.verify is not None:
         from .verify import validation_line
 
@@ -215,11 +220,11 @@ def run(
                 verify_step(c, store, say, before=True)
             with sigterm_as_interrupt(), progress:
                 try:
-                    if c.refine is None:
+                    if c.refine is None and c.precision is None:
                         plan, summary = drive(expansion, store, retry_failed=retry_failed,
                                               verify=verify, events=events,
                                               dashboard=dashboard, limit=limit)
-                    else:  # an adaptive campaign: rounds planned from the results
+                    else:  # adaptive or seeds by precision: rounds planned from the results
                         from ..refine.driver import drive_rounds
 
                         plan, summary, expansion = drive_rounds(

@@ -1,4 +1,5 @@
-"""``nematic run`` of a refined campaign: rounds of runs on one dask cluster.
+"""``nematic run`` of a refined campaign (or one with seeds by precision, whose replay
+:mod:`sweep.precision.rounds` gives): rounds of runs on one dask cluster.
 
 The loop (:func:`drive_rounds`): replay the rounds from the folder
 (:func:`sweep.refine.rounds.replay`), record the plan (``refine.json``) and print a new
@@ -19,11 +20,12 @@ from ..campaign import Campaign
 from ..clusters import open_cluster
 from ..errors import StoreError
 from ..execute import REMOTE_TMP_AGE, RunSummary, dashboard_link, run_campaign
+from ..expand import Expansion
 from ..failures import FailureLimit
 from ..plan import Plan, plan_runs
 from ..store import CampaignStore
 from .report import round_lines
-from .rounds import RefinedExpansion, Refinement, replay, write_plan
+from .rounds import Refinement, replay, write_plan
 
 log = logging.getLogger(__name__)
 
@@ -47,7 +49,7 @@ def _merge(total: RunSummary, part: RunSummary) -> None:
 def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = False,
                  verify: bool = False, events: Any = None, dashboard: bool = False,
                  say: Callable[[str], None] = print, limit: FailureLimit | None = None
-                 ) -> tuple[Plan, RunSummary | None, RefinedExpansion]:
+                 ) -> tuple[Plan, RunSummary | None, Expansion]:
     """Run a refined campaign to its end (or to an interruption) while holding its lock.
 
     Returns the plan of what was on disk when it started (for the failures found there), the
@@ -62,22 +64,21 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
     announced = -1
     stuck_at: tuple[int, int] | None = None
     retry = retry_failed
-    assert campaign.refine is not None
-    say(f"campaign {campaign.name}: adaptive, refining {campaign.refine.axis} in rounds -> "
-        f"{store.root}")
+    replay_fn, record, announce, what, done = _rounds_of(campaign)
+    say(f"campaign {campaign.name}: {what} -> {store.root}")
     with contextlib.ExitStack() as stack:
         force = None
         try:
             while True:
-                ref = replay(campaign, store)
-                _record(store, ref)
+                ref = replay_fn(campaign, store)
+                record(store, ref)
                 if ref.current.number > announced:
                     for number in range(announced + 1, ref.current.number + 1):
-                        for line in round_lines(ref, number):
+                        for line in announce(ref, number):
                             say(line)
                     announced = ref.current.number
                 if ref.finished:
-                    say(f"refinement finished after round {ref.current.number}: {ref.stop}; "
+                    say(f"{done} finished after round {ref.current.number}: {ref.stop}; "
                         f"{ref.n_runs} runs")
                     break
                 runs = ref.run_list()
@@ -119,12 +120,29 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                 stack.close()  # the local workers are gone: clean what they left
                 store.clean_temporaries()
     store.scan()
-    final = replay(campaign, store)
+    final = replay_fn(campaign, store)
     with contextlib.suppress(StoreError):
-        _record(store, final)
+        record(store, final)
     if first is None:
         first = Plan(todo=[], done=[], failed=[], records={})
     return first, total, final.expansion()
+
+
+def _rounds_of(campaign: Campaign) -> tuple[Callable[..., Any], Callable[..., None],
+                                            Callable[[Any, int], list[str]], str, str]:
+    """The replay, the plan writer, a round's lines, what the campaign is and what finishes:
+    an adaptive campaign's rounds, or seeds by precision (:mod:`sweep.precision.rounds`,
+    driven by the same loop: its replay gives an object with the same ``current``,
+    ``finished``, ``stop``, ``n_runs``, ``pending``, ``run_list`` and ``expansion``)."""
+    if campaign.precision is not None:
+        from ..precision import rounds as precision
+
+        return (precision.replay, precision.write_plan,
+                lambda plan, number: plan.round_lines(number),
+                "seeds by precision, in rounds", "seeds by precision")
+    assert campaign.refine is not None
+    what = f"adaptive, refining {campaign.refine.axis} in rounds"
+    return replay, _record, round_lines, what, "refinement"
 
 
 def _record(store: CampaignStore, ref: Refinement) -> None:

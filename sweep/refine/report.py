@@ -78,6 +78,8 @@ def round_lines(ref: Refinement, number: int) -> list[str]:
 
 def status_lines(ref: Refinement) -> list[str]:
     """What ``nematic status`` adds for a refined campaign: one line per round."""
+    if hasattr(ref, "status_lines"):  # seeds by precision (sweep/precision)
+        return list(ref.status_lines())
     out = [spec_line(ref.campaign)]
     for rnd in ref.rounds:
         pending = sum(1 for r in rnd.runs

@@ -23,7 +23,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -31,10 +30,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..campaign import Axis, Campaign, Dim
-from ..expand import Expansion, GridPoint, RunSpec, make_point
+from ..expand import Expansion, GridPoint, make_point
 from ..files import atomic_write_text, dumps
 from ..identity import PointHasher
-from ..store import RETRYABLE_REASONS, CampaignStore, Record
+from ..store import CampaignStore, Record
 from .plan import (
     Line,
     Point,
@@ -45,6 +44,7 @@ from .plan import (
     refined_dim,
     run_bound,
 )
+from .runs import Outcomes, RunList
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -55,39 +55,6 @@ log = logging.getLogger(__name__)
 PLAN_FILE = "refine.json"
 PLAN_VERSION = 1
 RunKey = tuple[Line, float, int]
-
-
-# --------------------------------------------------------------------------- outcomes
-class Outcomes:
-    """The outcome of each run from the results folder: ``None`` while it has not finished
-    (no record, a file that is missing or damaged, a result that was not stored), NaN when
-    it failed or has no value, else the observable."""
-
-    def __init__(self, store: CampaignStore, source: str,
-                 records: Mapping[str, Record] | None = None):
-        self.store = store
-        self.source = source
-        self.records = store.scan() if records is None else records
-        self._growth: dict[tuple[str, Any], float] = {}
-
-    def __call__(self, run_id: str) -> float | None:
-        rec = self.records.get(run_id)
-        if rec is None or not self.store.is_complete(run_id, rec):
-            return None
-        if rec.get("status") != "ok":
-            return None if rec.get("reason") in RETRYABLE_REASONS else math.nan
-        if self.source == "growth":
-            key = (run_id, rec.get("nc_sha256"))
-            if key not in self._growth:
-                from ..analysis.stability import run_growth  # xarray: not for status
-
-                self._growth[key] = run_growth(self.store.nc_path(run_id))
-            return self._growth[key]
-        value = (rec.get("scalars") or {}).get(self.source)
-        try:
-            return math.nan if value is None else float(value)
-        except (TypeError, ValueError):
-            return math.nan
 
 
 class RunNamer:
@@ -264,28 +231,6 @@ def read_plan(store: CampaignStore) -> dict[str, Any] | None:
 
 
 # --------------------------------------------------------------------------- expansions
-class RunList(Expansion):
-    """The planned runs of a refined campaign as an :class:`~sweep.expand.Expansion` (what
-    :func:`sweep.execute.plan_runs` and :func:`~sweep.execute.run_campaign` take)."""
-
-    def __init__(self, campaign: Campaign, runs: list[RunSpec]):  # noqa: D107
-        self.campaign = campaign
-        self.seeds = campaign.seeds
-        self._runs = list(runs)
-        points: dict[int, GridPoint] = {}
-        for r in self._runs:
-            points.setdefault(id(r.point), r.point)
-        self.points = list(points.values())
-        self.run_ids = [r.run_id for r in self._runs]
-        self.position = {rid: i for i, rid in enumerate(self.run_ids)}
-
-    def __len__(self) -> int:
-        return len(self._runs)
-
-    def run(self, i: int) -> RunSpec:
-        return self._runs[i]
-
-
 class RefinedExpansion(Expansion):
     """The grid of a refined campaign (its refined axis the sorted union of the values run)
     with every seed; :attr:`planned` marks the runs of the plan. ``phase.nc`` holds only
@@ -355,15 +300,22 @@ def expansion_for(campaign: Campaign, store: CampaignStore) -> Expansion:
     for a refined campaign the union grid of its rounds replayed from ``store``."""
     from ..expand import expand
 
+    if campaign.precision is not None:  # seeds by precision (sweep/precision)
+        from ..precision.rounds import replay as replay_precision
+
+        return replay_precision(campaign, store).expansion()
     if campaign.refine is None:
         return expand(campaign)
     return replay(campaign, store).expansion()
 
 
-def status_dict(refinement: Refinement | None) -> dict[str, Any]:
-    """The rounds for ``nematic status --json`` (empty for a grid campaign)."""
+def status_dict(refinement: Any) -> dict[str, Any]:
+    """The rounds for ``nematic status --json`` (empty for a grid campaign; a campaign with
+    seeds by precision gives its own)."""
     if refinement is None:
         return {}
+    if hasattr(refinement, "status_dict"):  # seeds by precision (sweep/precision)
+        return dict(refinement.status_dict())
     plan = refinement.to_dict()
     for rnd in plan["rounds"]:
         rnd["pending"] = sum(1 for r in rnd["runs"] if r["state"] == "pending")

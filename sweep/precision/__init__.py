@@ -1,0 +1,16 @@
+"""Seeds by precision: a campaign's ``precision:`` section runs each grid point's seeds in
+order (the campaign's first ``initial``, then ``add`` more per round) until the point is
+decided: its observable's seed mean is precise enough, its pattern class is unanimous, or
+every seed has run (the cap).
+
+- :mod:`sweep.precision.config`: the section's reader and checks (:class:`PrecisionSpec` is
+  in :mod:`sweep.campaign`).
+- :mod:`sweep.precision.decide`: the pure decision of a point from its seeds' values (the
+  Student-t interval of the mean, the unanimity of the class).
+- :mod:`sweep.precision.rounds`: the rounds replayed from the run files (:func:`replay`),
+  the plan file ``precision.json``, the expansion for ``phase.nc`` and ``nematic status``
+  (``seed_count``, ``seed_decision``) and the text ``validate`` and ``status`` print.
+
+``nematic run`` drives the rounds with the adaptive campaigns' loop
+(:func:`sweep.refine.driver.drive_rounds`).
+"""

@@ -1,0 +1,109 @@
+"""The ``precision:`` section of a campaign and its check.
+
+::
+
+    seeds: 50                   # the cap
+    precision:
+      observable: lambda_peak   # a phase.nc observable or a run scalar (as refine: takes)
+      width: 0.1                # precise: the interval of the seed mean is narrower than this
+      relative: true            # width relative to |seed mean| (default) or absolute
+      confidence: 0.95          # of that interval (Student-t)
+      unanimous: 4              # or: at least this many seeds, all of one pattern class
+      patterned_above: 1.0e-6   # the class: sigma2_S above this (needed by unanimous)
+      initial: 4                # seeds every point starts with
+      add: 4                    # seeds added per round to an undecided point
+
+``width`` or ``unanimous`` (or both) must be given. The section cannot be combined with
+``refine:`` (whose ``seeds:`` are sequential already).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from ..campaign import PrecisionSpec
+from ..checker import Checker, suggest
+from ..refine.config import observable_sources
+
+KEYS = ("observable", "width", "relative", "confidence", "unanimous", "patterned_above",
+        "initial", "add")
+
+
+def _number(v: Any) -> bool:
+    return (isinstance(v, (int, float)) and not isinstance(v, bool)
+            and float(v) == float(v) and abs(float(v)) != float("inf"))
+
+
+def _count(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSpec | None:
+    """The reader of the ``precision:`` section (a row of :data:`sweep.spec.SECTIONS`): needs
+    the ``seeds`` and ``refine`` sections read before it. ``None`` when there is none (or it
+    has problems, which are added to ``c``)."""
+    if raw is None:
+        return None
+    path: tuple[str | int, ...] = ("precision",)
+    if not isinstance(raw, dict):
+        c.bad(path, raw, "a mapping with keys " + ", ".join(KEYS))
+        return None
+    sec = c.mapping(path, raw, KEYS)
+    before = len(c.problems)
+    if read.get("refine") is not None:
+        c.add(path, "cannot be combined with refine: (an adaptive campaign adds seeds with "
+              "refine.seeds); remove one of the two sections")
+    n_seeds = len(read.get("seeds") or ())
+
+    observable = sec.get("observable")
+    sources = observable_sources()
+    if not isinstance(observable, str) or observable not in sources:
+        c.bad((*path, "observable"), observable, "one of " + ", ".join(sorted(sources))
+              + (suggest(observable, list(sources)) if isinstance(observable, str) else ""))
+        observable = "sigma2_S"
+
+    width = sec.get("width")
+    if width is not None and (not _number(width) or not width > 0):
+        c.bad((*path, "width"), width, "a number > 0 (the widest acceptable confidence "
+              "interval of the seed mean)")
+    relative = sec.get("relative", True)
+    if not isinstance(relative, bool):
+        c.bad((*path, "relative"), relative, "true (width relative to |seed mean|) or false "
+              "(absolute, in the observable's units)")
+    confidence = sec.get("confidence", 0.95)
+    if not _number(confidence) or not 0 < confidence < 1:
+        c.bad((*path, "confidence"), confidence, "a number in (0, 1)")
+
+    unanimous = sec.get("unanimous")
+    if unanimous is not None and (not _count(unanimous)
+                                  or not 2 <= unanimous <= max(n_seeds, 2)):
+        c.bad((*path, "unanimous"), unanimous, f"an integer from 2 to {n_seeds} (the "
+              "campaign's seeds): the fewest seeds that stop a point when they all share "
+              "the pattern class")
+    patterned = sec.get("patterned_above")
+    if unanimous is not None and patterned is None:
+        c.add((*path, "patterned_above"), "missing; allowed: a number (a run's pattern class "
+              "is sigma2_S above it); needed by unanimous")
+    elif patterned is not None and not _number(patterned):
+        c.bad((*path, "patterned_above"), patterned, "a finite number")
+    if width is None and unanimous is None:
+        c.add(path, "no stopping rule; allowed: width (the interval of the seed mean), "
+              "unanimous (the pattern class), or both")
+
+    initial = sec.get("initial", min(4, n_seeds) or 1)
+    if not _count(initial) or not 1 <= initial <= max(n_seeds, 1):
+        c.bad((*path, "initial"), initial, f"an integer from 1 to {n_seeds} (the campaign's "
+              "seeds)")
+    add = sec.get("add", initial)
+    if not _count(add) or add < 1:
+        c.bad((*path, "add"), add, "an integer >= 1")
+
+    if len(c.problems) > before:
+        return None
+    return PrecisionSpec(
+        observable=observable, source=sources[observable],
+        width=None if width is None else float(width), relative=relative,
+        confidence=float(confidence), unanimous=unanimous,
+        patterned_above=None if patterned is None else float(patterned),
+        initial=int(initial), add=int(add))

@@ -1,0 +1,103 @@
+"""The decision of one point from its seeds' values: pure functions, no file, no clock.
+
+A point's seeds are taken in the campaign's order; after each round the point is:
+
+- ``precise`` when every seed run has a finite value of the observable (a NaN, e.g. a run
+  without a peak or a failed run, counts as not precise), there are at least two, and the
+  Student-t interval of their mean at ``confidence`` (full width ``2 t s / sqrt(n)``, ``t``
+  of ``n - 1`` degrees of freedom) is narrower than ``width`` (times ``|mean|`` when
+  ``relative``; a zero mean is never relatively precise);
+- else ``unanimous`` when at least ``unanimous`` seeds were run and each has the same
+  pattern class (sigma2_S above ``patterned_above``: patterned; a run without sigma2_S has
+  no class and breaks the unanimity);
+- else ``cap`` when every seed of the campaign was run;
+- else ``pending``: the next ``add`` seeds are run in the next round.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+from ..campaign import PrecisionSpec
+
+#: The decisions, in the order of their flag values in phase.nc (``seed_decision``).
+DECISIONS = ("pending", "precise", "unanimous", "cap")
+
+
+@lru_cache(maxsize=256)
+def t_quantile(confidence: float, dof: int) -> float:
+    """The two-sided Student-t quantile of ``confidence`` with ``dof`` degrees of freedom."""
+    from scipy.stats import t
+
+    return float(t.ppf(0.5 + confidence / 2, dof))
+
+
+def interval_width(values: Sequence[float], confidence: float) -> tuple[float, float]:
+    """The seed mean of ``values`` (all finite, at least two) and the full width of its
+    Student-t confidence interval."""
+    n = len(values)
+    mean = math.fsum(values) / n
+    sd = math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (n - 1))
+    return mean, 2 * t_quantile(confidence, n - 1) * sd / math.sqrt(n)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A point's state after a round: ``state`` one of :data:`DECISIONS`, ``n`` seeds run,
+    and why (for the plan file and the messages)."""
+
+    state: str
+    n: int
+    why: str
+    mean: float = math.nan
+    width: float = math.nan
+
+
+def decide(spec: PrecisionSpec, values: Sequence[float], classes: Sequence[float],
+           cap: int) -> Decision:
+    """The decision of a point whose first ``len(values)`` seeds ran: ``values`` are the
+    observable's, ``classes`` the pattern measure's (sigma2_S), both in seed order, NaN
+    where a run has none; ``cap`` is the campaign's seed count."""
+    n = len(values)
+    finite = all(math.isfinite(v) for v in values)
+    mean = width = math.nan
+    if n >= 2 and finite:
+        mean, width = interval_width(values, spec.confidence)
+    if spec.width is not None:
+        if not finite:
+            what = f"{sum(not math.isfinite(v) for v in values)} of {n} seeds without a value"
+        elif n < 2:
+            what = "one seed"
+        else:
+            limit = spec.width * abs(mean) if spec.relative else spec.width
+            if width < limit:
+                return Decision("precise", n, f"interval {width:.3g} < {limit:.3g} "
+                                f"(mean {mean:.4g}, {n} seeds)", mean, width)
+            what = f"interval {width:.3g} >= {limit:.3g} (mean {mean:.4g})"
+    else:
+        what = "no width rule"
+    if spec.unanimous is not None and n >= spec.unanimous:
+        assert spec.patterned_above is not None
+        if all(math.isfinite(c) for c in classes):
+            patterned = {c > spec.patterned_above for c in classes}
+            if len(patterned) == 1:
+                cls = "patterned" if patterned.pop() else "relaxed"
+                return Decision("unanimous", n, f"{n} of {n} seeds {cls}", mean, width)
+    if n >= cap:
+        return Decision("cap", n, f"every seed run ({n}); {what}", mean, width)
+    return Decision("pending", n, what, mean, width)
+
+
+def next_count(spec: PrecisionSpec, decision: Decision, cap: int) -> int:
+    """How many seeds the point has after the next round."""
+    if decision.state != "pending":
+        return decision.n
+    return min(decision.n + spec.add, cap)
+
+
+def rounds_bound(spec: PrecisionSpec, cap: int) -> int:
+    """The most rounds a campaign takes: round 0, then one per ``add`` seeds up to the cap."""
+    return 1 + max(0, math.ceil((cap - min(spec.initial, cap)) / spec.add))

@@ -327,3 +327,21 @@ def test_check_files_keeps_the_former_verify_spelling(verified):
         assert result.exit_code == 0, result.output
         assert "18 done" in " ".join(result.output.split())
     assert "--verify " not in invoke("run", "--help").output
+
+
+def test_an_unreadable_verify_nc_is_one_line_in_status_and_the_report(verified, tmp_path):
+    from sweep.report.content import verification
+
+    path, results, _ = verified
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    (copy / "verify.nc").write_bytes(b"not a netCDF file")
+    found = verification(copy)
+    assert found is not None
+    assert found["summary"].startswith("verify.nc cannot be read")
+    assert found["rows"] == []
+    from sweep.cli.verify import verification_lines
+
+    for detail in (False, True):
+        (line,) = verification_lines(copy, detail=detail)
+        assert "cannot be read" in line

@@ -204,7 +204,8 @@ def verification(root: Path) -> dict[str, Any] | None:
     try:
         ds = read_verify(root)
     except (OSError, ValueError) as e:
-        return {"summary": f"verify.nc cannot be read: {e}", "rows": [], "transitions": []}
+        return {"summary": f"verify.nc cannot be read: {e}", "rows": [], "transitions": [],
+                "seeds": "", "threshold": math.nan}
     if ds is None:
         return None
     return {"summary": summary_line(ds), "rows": verdict_rows(ds),

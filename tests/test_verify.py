@@ -231,7 +231,9 @@ def test_verdicts_from_known_records():
     p01, p05, p09 = point[(0.1, 1e-4)], point[(0.5, 1e-4)], point[(0.9, 1e-4)]
     conv = ds["converged"].values
     assert conv[p01, v["tolerance /10"]] == CONVERGED
-    assert ds["sigma2_S_verdict"].values[p01, v["tolerance /10"]] == NOT_COMPARED  # no pattern
+    # no pattern at 0.1: sigma2_S and lambda (pattern measures) are not compared
+    assert ds["sigma2_S_verdict"].values[p01, v["tolerance /10"]] == NOT_COMPARED
+    assert ds["lambda_verdict"].values[p01, v["tolerance /10"]] == NOT_COMPARED
     assert conv[p05, v["resolution x2"]] == CHANGED  # the class changes
     assert ds["patterned"].values[p05, v["resolution x2"]] == 0
     assert ds["lambda_verdict"].values[p09, v["resolution x2"]] == CHANGED
@@ -244,7 +246,8 @@ def test_verdicts_from_known_records():
     assert ds["transition_within"].values[0, v["resolution x2"]] == 0
     line = summary_line(ds)
     assert line.startswith("0 of 5 sampled points converged (5 with runs missing)")
-    assert "alpha_minus_B = 0.5, K = 0.0001: the pattern class changes with resolution x2" in line
+    assert ("alpha_minus_B = 0.5, K = 0.0001: the patterned fraction changes from 1 to 0 with "
+            "resolution x2") in line
 
 
 # --------------------------------------------------------------------------- real runs

@@ -2,20 +2,23 @@
 verdicts.
 
 Per sampled point ``p`` and observable ``X`` (``verify.observables``): ``X_base(p)``, the
-seed mean of the base runs (geometric for sigma2_S, arithmetic otherwise); per variant ``v``:
+seed mean of the base runs (geometric for sigma2_S, arithmetic otherwise; for a pattern
+measure, sigma2_S, lambda and the peak values, over the runs that patterned only); per
+variant ``v``:
 ``X(p, v)`` the variant's seed mean, ``X_change(p, v)`` the relative change
 ``(X - X_base) / |X_base|`` (for <cos 2 theta>, which lies in [-1, 1] and is near 0 without
 applied strain, the absolute change ``X - X_base``) and ``X_verdict(p, v)``:
 
 - 1 converged: ``|change| < verify.threshold``;
 - 0 changed;
-- -1 not compared: a pattern measure (sigma2_S, lambda, the peak values) where neither the
-  base nor the variant is patterned (there is no pattern to measure);
+- -1 not compared: a pattern measure where the base or the variant has no patterned run (the
+  class says so), or a value neither has (no peak);
 - -2 missing: a run of the pair missing or failed, or the variant not valid there.
 
-The class: ``patterned_base(p)`` and ``patterned(p, v)`` (1 when the geometric seed mean of
-sigma2_S is above ``verify.patterned_above``). ``converged(p, v)``: 1 when the class is kept
-and no compared observable changed, 0 otherwise, -2 when runs are missing.
+The class: ``patterned_base(p)`` and ``patterned(p, v)``, the fraction of the runs whose
+sigma2_S is above ``verify.patterned_above``. ``converged(p, v)``: 1 when that fraction is
+kept (with the same seeds: every seed keeps its class) and no compared observable changed, 0
+otherwise, -2 when runs are missing.
 
 Per fitted transition ``t`` the fit is recomputed on the sampled bracket (its two grid
 points) with the base and with each variant's runs: ``transition_location_variant(t, v)``,
@@ -92,17 +95,19 @@ def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
     of its verify folder (variant runs)."""
     spec = sample.spec
     n_p, n_v = len(sample.points), len(sample.variants)
+    level = spec.patterned_above
     sig_src = PHASE_OBSERVABLES["sigma2_S"][0]
     base_sig = [_values(runs, base_records, sig_src) for runs in sample.base]
-    base_class = np.array([_class(seed_mean(v, True), ok, spec.patterned_above)
-                           for v, ok in base_sig], dtype=np.int8)
-    var_class = np.full((n_p, n_v), -1, dtype=np.int8)
+    base_frac = np.array([_fraction(v, ok, level) for v, ok in base_sig])
+    var_sig: list[list[np.ndarray]] = [[np.full(0, np.nan)] * n_v for _ in range(n_p)]
+    var_frac = np.full((n_p, n_v), np.nan)
     complete = np.zeros((n_p, n_v), dtype=bool)
     for v in range(n_v):
         for p in range(n_p):
             runs = sample.variant_runs[v][p]
             vals, ok = _values(runs, variant_records, sig_src)
-            var_class[p, v] = _class(seed_mean(vals, True), ok, spec.patterned_above)
+            var_sig[p][v] = vals
+            var_frac[p, v] = _fraction(vals, ok, level)
             complete[p, v] = (runs is not None and ok == len(runs)
                               and base_sig[p][1] == len(sample.base[p]))
     data: dict[str, xr.Variable] = {}
@@ -110,51 +115,55 @@ def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
     for name in spec.observables:
         source, pattern = OBSERVABLES[name]
         geometric = name == "sigma2_S"
-        base = np.array([seed_mean(_values(runs, base_records, source)[0], geometric)
-                         for runs in sample.base])
+
+        def mean(vals: np.ndarray, sig: np.ndarray, pattern: bool = pattern,
+                 geometric: bool = geometric) -> float:
+            # a pattern measure is the mean over the patterned runs only: a relaxed run's
+            # sigma2_S (1e-13, at the solver's floor) or lambda (the texture's) is no pattern's
+            return seed_mean(vals[sig > level] if pattern else vals, geometric)
+
+        base = np.array([mean(_values(runs, base_records, source)[0], base_sig[p][0])
+                         for p, runs in enumerate(sample.base)])
         value = np.full((n_p, n_v), np.nan)
         change = np.full((n_p, n_v), np.nan)
         verdict = np.full((n_p, n_v), MISSING, dtype=np.int8)
         for v in range(n_v):
             for p in range(n_p):
-                value[p, v] = seed_mean(
-                    _values(sample.variant_runs[v][p], variant_records, source)[0], geometric)
+                value[p, v] = mean(_values(sample.variant_runs[v][p], variant_records,
+                                           source)[0], var_sig[p][v])
                 change[p, v] = (value[p, v] - base[p] if name in ABSOLUTE
                                 else relative_change(base[p], value[p, v]))
                 if not complete[p, v]:
                     continue
-                if pattern and base_class[p] != 1 and var_class[p, v] != 1:
+                if not (math.isfinite(base[p]) and math.isfinite(value[p, v])):
+                    # no patterned run on a side (the class says it), or no peak in either
                     verdict[p, v] = NOT_COMPARED
-                elif not (math.isfinite(base[p]) or math.isfinite(value[p, v])):
-                    verdict[p, v] = NOT_COMPARED  # e.g. no peak in either
                 elif abs(change[p, v]) < spec.threshold:
                     verdict[p, v] = CONVERGED
                 else:
                     verdict[p, v] = CHANGED
         worst &= verdict != CHANGED
         long = PHASE_OBSERVABLES[name][1]
+        over = " over the patterned runs" if pattern else ""
         data[f"{name}_base"] = xr.Variable(("point",), base, {
-            "long_name": f"base runs' seed mean of {name}: {long}", "units": "1"})
+            "long_name": f"base runs' seed mean{over} of {name}: {long}", "units": "1"})
         data[name] = xr.Variable(("point", "variant"), value, {
-            "long_name": f"variant runs' seed mean of {name}", "units": "1"})
+            "long_name": f"variant runs' seed mean{over} of {name}", "units": "1"})
         data[f"{name}_change"] = xr.Variable(("point", "variant"), change, {
             "long_name": f"absolute change of {name}: variant - base" if name in ABSOLUTE
             else f"relative change of {name}: (variant - base) / |base|", "units": "1"})
         data[f"{name}_verdict"] = xr.Variable(("point", "variant"), verdict, {
             "long_name": f"verdict on {name}", **VERDICT_ATTRS})
-    kept = (var_class == base_class[:, None])
+    kept = var_frac == base_frac[:, None]
     converged = np.where(~complete, MISSING, np.where(kept & worst, CONVERGED, CHANGED))
-    data["patterned_base"] = xr.Variable(("point",), base_class, {
-        "long_name": "pattern class of the base runs (geometric seed mean of sigma2_S above "
-                     "patterned_above)", "flag_values": np.array([-1, 0, 1], dtype=np.int8),
-        "flag_meanings": "missing relaxed patterned"})
-    data["patterned"] = xr.Variable(("point", "variant"), var_class, {
-        "long_name": "pattern class of the variant runs",
-        "flag_values": np.array([-1, 0, 1], dtype=np.int8),
-        "flag_meanings": "missing relaxed patterned"})
+    data["patterned_base"] = xr.Variable(("point",), base_frac, {
+        "long_name": "fraction of the base runs that patterned (sigma2_S above "
+                     "patterned_above)", "units": "1"})
+    data["patterned"] = xr.Variable(("point", "variant"), var_frac, {
+        "long_name": "fraction of the variant runs that patterned", "units": "1"})
     data["converged"] = xr.Variable(("point", "variant"), converged.astype(np.int8), {
-        "long_name": "verdict at the point: the class kept and no compared observable "
-                     "changed by more than the threshold", **VERDICT_ATTRS})
+        "long_name": "verdict at the point: the patterned fraction kept and no compared "
+                     "observable changed by more than the threshold", **VERDICT_ATTRS})
     coords: dict[str, Any] = {
         "point": xr.Variable(("point",), np.arange(n_p), {"long_name": "sampled point",
                                                           "units": "1"}),
@@ -192,10 +201,12 @@ def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
     return ds
 
 
-def _class(mean_sigma2: float, ok: int, level: float) -> int:
-    if ok == 0 or not math.isfinite(mean_sigma2):
-        return -1
-    return int(mean_sigma2 > level)
+def _fraction(sigma2: np.ndarray, ok: int, level: float) -> float:
+    """The fraction of the runs whose sigma2_S is above ``level`` (NaN without runs)."""
+    finite = sigma2[np.isfinite(sigma2)]
+    if ok == 0 or finite.size == 0:
+        return math.nan
+    return float(np.mean(finite > level))
 
 
 def _transitions(ds: xr.Dataset, sample: Sample, base_records: Mapping[str, Record],
@@ -277,9 +288,10 @@ def summary_line(ds: xr.Dataset, worst: int = 2) -> str:
         for v in range(len(variants)):
             if conv[p, v] != CHANGED:
                 continue
-            if ds["patterned"].values[p, v] != ds["patterned_base"].values[p]:
-                notes.append((math.inf, f"{labels[p]}: the pattern class changes with "
-                              f"{variants[v]}"))
+            b, f = float(ds["patterned_base"].values[p]), float(ds["patterned"].values[p, v])
+            if b != f:
+                notes.append((math.inf, f"{labels[p]}: the patterned fraction changes from "
+                              f"{b:.2g} to {f:.2g} with {variants[v]}"))
                 continue
             best = (-1.0, "")
             for name in [str(k)[: -len("_verdict")] for k in ds.data_vars
@@ -355,8 +367,9 @@ def verdict_rows(ds: xr.Dataset) -> list[dict[str, str]]:
                 else:  # orders of magnitude: the factor reads better
                     changes.append(f"{n} x{1 + c:.3g}")
             verdict = VERDICT_TEXT.get(int(ds["converged"].values[p, v]), "?")
-            if int(ds["patterned"].values[p, v]) != int(ds["patterned_base"].values[p]):
-                verdict += " (pattern class changes)"
+            b, f = float(ds["patterned_base"].values[p]), float(ds["patterned"].values[p, v])
+            if b != f and math.isfinite(b) and math.isfinite(f):
+                verdict += f" (patterned fraction {b:.2g} -> {f:.2g})"
             rows.append({"point": str(ds["label"].values[p]), "why": str(ds["why"].values[p]),
                          "variant": str(variant), "verdict": verdict,
                          "changes": ", ".join(changes)})

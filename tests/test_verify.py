@@ -297,16 +297,21 @@ def test_verify_again_runs_nothing_and_status_shows_the_summary(verified):
 
 def test_verify_before_runs_the_corners_into_the_campaign(tmp_path):
     path = tmp_path / "v.yaml"
-    path.write_text(BASE.format(verify="verify:\n  seeds: 1\n  variants:\n"
+    path.write_text(BASE.format(verify="verify:\n  before: true\n  seeds: 1\n  variants:\n"
                                 "    - tolerance: /10\n"))
     results = tmp_path / "results"
-    result = invoke("verify", path, "--before", "--results", results)
-    assert result.exit_code == 0, result.output
-    assert "4 points x 1 seeds" in " ".join(result.output.split())
-    assert len(list((results / "v" / "runs").glob("*.nc"))) == 4  # head start on the grid
-    run = invoke("run", path, "--results", results, "--no-dashboard", "--no-verification",
-                 "--no-figures", "--seeds", "1")
-    assert "4 done" in " ".join(run.output.split()), run.output
+    # verify.before: nematic run verifies the corners first, then runs the grid around them
+    run = invoke("run", path, "--results", results, "--no-dashboard", "--no-figures",
+                 "--seeds", "1")
+    assert run.exit_code == 0, run.output
+    text = " ".join(run.output.split())
+    assert "verify v: 4 points x 1 seeds" in text
+    assert "4 base runs (4 to do)" in text
+    assert text.index("sampled points converged") < text.index("4 done")  # a head start
+    assert len(list((results / "v" / "runs").glob("*.nc"))) == 6
+    again = invoke("verify", path, "--before", "--results", results, "--seeds", "1")
+    assert again.exit_code == 0, again.output
+    assert "variant runs (0 to do)" in again.output
 
 
 def test_verify_without_a_section_or_results_is_one_error_line(tmp_path):

@@ -15,6 +15,7 @@ from .common import (
     LABELS,
     Results,
     check_options,
+    mark_verdicts,
 )
 
 if TYPE_CHECKING:
@@ -69,6 +70,8 @@ def figA1(res: Results, options: Mapping[str, Any]) -> Figure:
     if np.any(unknown):
         ax.scatter(A[unknown], E[unknown], s=25, color="0.6", marker="x", label="no data",
                    zorder=3)
+    mark_verdicts(ax, [((float(w[act]) * scale, float(w[strain])), verdict)
+                       for w, verdict in res.verified if act in w and strain in w], size=90.0)
     fine = f["activity_fine"].values * scale
     th = f["stability_theory_fine"].values
     ax.plot(fine, th, "-", color="tab:orange", lw=2.2,

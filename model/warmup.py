@@ -13,13 +13,14 @@ this, on one worker of each host.
 points in parallel processes (:func:`compile_in_parallel`, ``--jobs``; numba compiles in one
 thread per process): the signatures with which the tiny finite and linear runs call compiled
 code from Python, listed in ``model/compiled/entry_points.txt`` (made by
-``scripts/kernel_entry_points.py``), the longest first. Each process writes the disk cache;
-then :func:`warm_up` runs in the calling process and loads everything from it, compiling only
-what the list missed (reported). numba compiles a kernel's callees with it, in every process
-that needs them, and its cache index (one file per function) is read, changed and rewritten
-without a lock, so two processes that save two signatures of one function at once could give
-both the same data file: the compiling processes hold a file lock around numba's cache reads
-and writes (:func:`lock_cache_files`).
+``scripts/kernel_entry_points.py``), one task per module, each after the modules it imports
+(:func:`entry_groups`). Each process writes the disk cache, and loads from it the callees
+another process has saved already; then :func:`warm_up` runs in the calling process and loads
+everything from it, compiling only what the list missed (reported). numba's cache index (one
+file per function) is read, changed and rewritten without a lock, so two processes that save
+two signatures of one function at once could lose one or give both the same data file: the
+compiling processes hold a file lock around numba's cache reads and writes
+(:func:`lock_cache_files`).
 """
 
 from __future__ import annotations
@@ -271,53 +272,106 @@ def lock_cache_files() -> None:
     cls._nematic_locked = True  # type: ignore[attr-defined]
 
 
-def _compile_task(entry: EntryPoint, verbose: bool) -> dict[str, Any]:
-    """In a compiling process: :func:`compile_entry_point`; returns what it compiled and
-    loaded, or the error (one line, and the traceback if ``verbose``): never raises, so that
-    numba's exceptions need not pickle."""
-    try:
-        before = compile_counts()
-        t0 = time.perf_counter()
-        compile_entry_point(entry)
-        after = compile_counts()
-    except Exception as e:  # noqa: BLE001 - reported by the parent
-        return {"error": one_line(e), "traceback": traceback.format_exc() if verbose else ""}
-    return {"seconds": time.perf_counter() - t0, "pid": os.getpid(),
-            **{k: after[k] - before[k] for k in after}}
+def _compile_group(entries: list[EntryPoint], verbose: bool) -> list[dict[str, Any]]:
+    """In a compiling process: :func:`compile_entry_point` for each of ``entries``, in turn;
+    returns, for each, what it compiled and loaded or its error (one line, and the traceback
+    if ``verbose``). Never raises, so that numba's exceptions need not pickle."""
+    out: list[dict[str, Any]] = []
+    for entry in entries:
+        try:
+            before = compile_counts()
+            t0 = time.perf_counter()
+            compile_entry_point(entry)
+            after = compile_counts()
+        except Exception as e:  # noqa: BLE001 - reported by the parent
+            out.append({"error": one_line(e),
+                        "traceback": traceback.format_exc() if verbose else ""})
+            continue
+        out.append({"seconds": time.perf_counter() - t0, "pid": os.getpid(),
+                    **{k: after[k] - before[k] for k in after}})
+    return out
+
+
+def _imports(module: str) -> set[str]:
+    """The modules of ``module``'s package that its source imports (``from . import x``,
+    ``from .x import y``)."""
+    import ast
+    import importlib.util
+
+    spec = importlib.util.find_spec(module)
+    if spec is None or spec.origin is None:
+        return set()
+    package = module.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(Path(spec.origin).read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            if node.module:
+                out.add(f"{package}.{node.module}")
+            else:
+                out.update(f"{package}.{a.name}" for a in node.names)
+    return out
+
+
+def entry_groups(entries: list[EntryPoint]) -> list[list[EntryPoint]]:
+    """``entries`` as the tasks of :func:`compile_in_parallel`: one per module (its kernels
+    share callees, and the overloads that numba compiles again in every process), each after
+    the modules it imports (directly or not), so that their kernels tend to be in the cache by
+    the time it needs them; otherwise the longest first, as are the entries of a module."""
+    groups: dict[str, list[EntryPoint]] = {}
+    for e in sorted(entries, key=lambda e: -e.seconds):
+        groups.setdefault(e.function.rpartition(".")[0], []).append(e)
+    reach: dict[str, set[str]] = {}
+
+    def below(module: str) -> set[str]:
+        if module not in reach:
+            reach[module] = set()  # a cycle stops here
+            for m in _imports(module):
+                reach[module] |= {m} | below(m)
+        return reach[module]
+
+    cost = {m: sum(e.seconds for e in group) for m, group in groups.items()}
+    left = sorted(groups, key=lambda m: -cost[m])
+    order: list[str] = []
+    while left:
+        ready = [m for m in left if not (below(m) - {m}) & (set(left) - {m})] or left[:1]
+        order.append(ready[0])
+        left.remove(ready[0])
+    return [groups[m] for m in order]
 
 
 def compile_in_parallel(entries: list[EntryPoint], jobs: int,
                         verbose: bool = False) -> dict[str, Any]:
     """Compile ``entries`` (into the disk cache) in ``jobs`` fresh processes (spawned, each
-    with :func:`lock_cache_files`), the longest first. Returns the wall time, the processes
-    used, the signatures they compiled and loaded (a callee compiled by two processes counts
-    twice) and the errors, one line each (``module.function(types): Type: message``, the
-    traceback after it with ``verbose``)."""
-    order = sorted(entries, key=lambda e: -e.seconds)
-    workers = max(1, min(jobs, len(order)))
+    with :func:`lock_cache_files`), a module's entries in one process (:func:`entry_groups`).
+    Returns the wall time, the processes used, the signatures they compiled and loaded (a
+    callee compiled by two processes counts twice) and the errors, one line each
+    (``module.function(types): Type: message``, the traceback after it with ``verbose``)."""
+    groups = entry_groups(entries)
+    workers = max(1, min(jobs, len(groups)))
     t0 = time.perf_counter()
     done: list[dict[str, Any]] = []
     errors: list[str] = []
     lost = 0
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                              initializer=lock_cache_files) as pool:
-        futures = {pool.submit(_compile_task, e, verbose): e for e in order}
+        futures = {pool.submit(_compile_group, group, verbose): group for group in groups}
         for fut in as_completed(futures):
-            entry = futures[fut]
+            group = futures[fut]
             try:
-                result = fut.result()
+                results = fut.result()
             except BrokenProcessPool:
-                lost += 1
+                lost += len(group)
                 continue
             except Exception as e:  # noqa: BLE001 - e.g. a result that did not pickle
-                result = {"error": one_line(e), "traceback": ""}
-            if "error" in result:
-                errors.append(f"{entry.label()}: {result['error']}"
-                              + (f"\n{result['traceback']}" if result["traceback"] else ""))
-            else:
-                done.append(result)
+                results = [{"error": one_line(e), "traceback": ""}] * len(group)
+            for entry, result in zip(group, results, strict=True):
+                if "error" in result:
+                    errors.append(f"{entry.label()}: {result['error']}"
+                                  + (f"\n{result['traceback']}" if result["traceback"] else ""))
+                else:
+                    done.append(result)
     if lost:
-        errors.append(f"a compiling process died ({lost} of {len(order)} entry points not "
+        errors.append(f"a compiling process died ({lost} of {len(entries)} entry points not "
                       f"compiled); python -m model.warmup --jobs 1 compiles them in one "
                       f"process")
     return {"seconds": time.perf_counter() - t0, "processes": len({r["pid"] for r in done}),

@@ -137,6 +137,23 @@ def test_the_listed_entry_points_read_back_as_numba_types():
     assert read_types(type_text(types.Tuple(list(same)))) == same
 
 
+def test_entry_points_are_compiled_by_module_after_the_modules_they_import():
+    from model.warmup import entry_groups, read_entry_points
+
+    entries = read_entry_points()
+    groups = entry_groups(entries)
+    modules = [g[0].function.rpartition(".")[0] for g in groups]
+    assert sorted(e.line() for g in groups for e in g) == sorted(e.line() for e in entries)
+    assert len(set(modules)) == len(modules)  # one task per module
+    assert all(e.function.startswith(m + ".") for m, g in zip(modules, groups, strict=True)
+               for e in g)
+    order = {m.rpartition(".")[2]: i for i, m in enumerate(modules)}
+    for caller, callees in (("finite_krylov", ("fftw", "constitutive", "spectral")),
+                            ("linear_rhs", ("fftw", "rates")),
+                            ("wellposedness", ("constitutive",))):
+        assert all(order[c] < order[caller] for c in callees), modules
+
+
 def _save_many(path: str, worker: int, count: int) -> None:
     from numba.core.caching import IndexDataCacheFile
 

@@ -10,9 +10,10 @@ cache is the clone's own ``model/compiled/__pycache__``), extra arguments from `
 Each repeat runs base then new (new then base in odd repeats), each with an empty cache (its
 ``__pycache__`` removed: "cold") and again right after ("warm", the idempotent second call).
 Reports each run's wall time, CPU time (user + sys of the process and every process it
-waited for: the compiling processes included), the load average before it and the kernel
-signatures compiled (the work, from the command's own report); then medians and the
-base/new ratio of each pair. The machine's speed drifts, so only the pairs compare.
+waited for: the compiling processes included), their ratio (the cores it kept busy on
+average), the load average before it and the kernel signatures compiled (the work, from the
+command's own report); then medians and the base/new ratio of each pair. The machine's speed
+and load drift, so only the pairs compare.
 
 Prints a table and writes benchmarks/compile_time.json.
 """
@@ -69,9 +70,10 @@ def warmup(folder: Path, python: str, extra: list[str]) -> dict[str, Any]:
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode:
         raise RuntimeError(f"python -m model.warmup failed in {folder}:\n{out}")
-    return {"wall_s": round(wall, 2), "cpu_s": round(usage.ru_utime + usage.ru_stime, 2),
-            "load_before": round(load, 2), "compiled": compiled_count(out),
-            "output": out.strip().splitlines()}
+    cpu = usage.ru_utime + usage.ru_stime
+    return {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
+            "cores_used": round(cpu / wall, 2), "load_before": round(load, 2),
+            "compiled": compiled_count(out), "output": out.strip().splitlines()}
 
 
 def main() -> None:
@@ -100,8 +102,9 @@ def main() -> None:
                            **warmup(folders[which], args.python, extra[which])}
                     runs.append(row)
                     print(f"repeat {repeat} {which:4s} {state}: {row['wall_s']:7.1f} s wall "
-                          f"{row['cpu_s']:7.1f} s CPU, {row['compiled']:3d} compiled "
-                          f"(load {row['load_before']:.1f})", flush=True)
+                          f"{row['cpu_s']:7.1f} s CPU ({row['cores_used']:.2f} cores), "
+                          f"{row['compiled']:3d} compiled (load {row['load_before']:.1f})",
+                          flush=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -113,15 +116,15 @@ def main() -> None:
         for which in ("base", "new"):
             summary[f"{which}_{state}"] = {
                 key: statistics.median(pick(which, state, key))
-                for key in ("wall_s", "cpu_s", "compiled")}
+                for key in ("wall_s", "cpu_s", "cores_used", "compiled")}
         summary[f"wall_ratio_base_over_new_{state}"] = [
             round(b / n, 2) for b, n in zip(pick("base", state, "wall_s"),
                                             pick("new", state, "wall_s"), strict=True)]
-    print("median      cold wall   cold CPU   compiled   warm wall")
+    print("median      cold wall   cold CPU   cores   compiled   warm wall")
     for which in ("base", "new"):
         c, w = summary[f"{which}_cold"], summary[f"{which}_warm"]
         print(f"{which:4s} {commits[which][:7]}  {c['wall_s']:7.1f} s  {c['cpu_s']:7.1f} s  "
-              f"{c['compiled']:8.0f}   {w['wall_s']:7.1f} s")
+              f"{c['cores_used']:5.2f}  {c['compiled']:8.0f}   {w['wall_s']:7.1f} s")
     print(f"cold wall base/new per pair: {summary['wall_ratio_base_over_new_cold']}")
     result = {
         "benchmark": "python -m model.warmup on a fresh clone (empty kernel cache), base vs new",

@@ -54,7 +54,7 @@ WARM_T_FINAL = 0.5
 #: The kernels' entry points, compiled in parallel by ``python -m model.warmup``.
 ENTRY_POINTS_FILE = Path(__file__).with_name("compiled") / "entry_points.txt"
 #: At most this many compiling processes unless ``--jobs`` says otherwise (each holds a
-#: numba compiler, a few hundred MB; beyond the longest single kernel more do not help).
+#: numba compiler, a few hundred MB; the tasks are the 8 kernel modules of the list).
 MAX_DEFAULT_JOBS = 8
 
 
@@ -113,7 +113,7 @@ class EntryPoint:
     """One signature with which Python calls a compiled kernel: ``function`` (its module and
     name), ``args`` (its numba argument types as :func:`type_text` writes them; numba's cache
     keys a compiled signature by these types) and ``seconds``, what compiling it took when the
-    list was made (the longest go first)."""
+    list was made (the longest of a module go first)."""
 
     function: str
     args: str

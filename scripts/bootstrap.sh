@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Set up everything on a fresh machine: a virtual environment in .venv with the package
-# (editable) and its test extras, then the model's numba kernels compiled once (cached on
-# disk in model/compiled/__pycache__, so that no run, and no campaign worker, compiles them again).
+# (editable) and its test extras, then the model's numba kernels compiled once, in parallel
+# processes (one per core, at most 8; 'bash scripts/bootstrap.sh --jobs N' to choose), cached
+# on disk in model/compiled/__pycache__, so that no run, and no campaign worker, compiles them
+# again.
 # Idempotent: a second call only checks that it is up to date (the kernels load in seconds).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -11,5 +13,5 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[test]'
-.venv/bin/python -m model.warmup
+.venv/bin/python -m model.warmup "$@"
 echo "ready: .venv/bin/nematic (or 'source .venv/bin/activate' to put nematic on your PATH)"

@@ -186,8 +186,9 @@ def test_the_sample_is_the_transition_bracket_and_the_corners():
     # variant runs: new ids, the variant's numerics, the variant's seeds
     res, tol, seeds = s.variant_runs
     assert all(r.point.numerics.resolution == 64 for runs in res for r in runs or ())
-    assert all(math.isclose(r.point.numerics.tolerance, 1e-4) for runs in tol for r in runs)
-    assert {r.seed for runs in seeds for r in runs} == {7, 8}
+    assert all(math.isclose(r.point.numerics.tolerance, 1e-4) for runs in tol
+               for r in runs or ())
+    assert {r.seed for runs in seeds for r in runs or ()} == {7, 8}
     assert not ids & {r.run_id for r in s.variant_list()}
     before = plan_sample(c, ex, None)  # before the grid has fits: the corners only
     assert {p.coords["alpha_minus_B"] for p in before.points} == {0.1, 0.9}
@@ -222,7 +223,7 @@ def test_verdicts_from_known_records():
         a = label[i][0]
         for r in res[i] or ():  # resolution: lambda moves 20 % at 0.9, 0.5 turns relaxed
             var[r.run_id] = _record(1e-9 if a <= 0.5 else 1e-2, lam=0.24 if a == 0.9 else 0.2)
-        for r in tol[i]:  # tolerance: 1 % changes only
+        for r in tol[i] or ():  # tolerance: 1 % changes only
             var[r.run_id] = _record(1e-9 if a == 0.1 else 1.01e-2, lam=0.202)
         # the seeds variant has no runs yet: missing
     ds = verify_dataset(s, base, var)

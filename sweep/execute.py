@@ -320,7 +320,7 @@ REMOTE_TMP_AGE = 600.0
 
 
 def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
-          verify: bool = False,
+          check_files: bool = False,
           events: DriveEvents | None = None,
           dashboard: bool = False,
           limit: FailureLimit | None = None) -> tuple[Plan, RunSummary | None]:
@@ -333,7 +333,8 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
     store.save_campaign_text(campaign.text, campaign.overrides)
-    plan = plan_runs(expansion, store, retry_failed=retry_failed, verify=verify)
+    plan = plan_runs(expansion, store, retry_failed=retry_failed,
+                      check_files=check_files)
     if events:
         events.planned(plan, expansion)
     summary = None

@@ -41,12 +41,12 @@ class Plan:
 
 
 def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
-              verify: bool = False) -> Plan:
+              check_files: bool = False) -> Plan:
     """Classify every run: done (skipped), failed (skipped unless ``retry_failed``: then
     its failure goes into :attr:`Plan.history`, kept by its next record), to do.
 
     A record whose file is missing, truncated or corrupt (:meth:`CampaignStore.check_run_file`;
-    ``verify`` checksums every file) is discarded and its run redone; a ``.nc`` without a
+    ``check_files`` checksums every file) is discarded and its run redone; a ``.nc`` without a
     record is adopted if it opens, else deleted; a record of a result that could not be
     written (reason ``write_error``) is redone.
     """
@@ -59,7 +59,8 @@ def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool 
             rec = store.adopt(rid)
             if rec is not None:
                 plan.adopted += 1
-        problem = None if rec is None else store.check_run_file(rid, rec, verify=verify)
+        problem = None if rec is None else store.check_run_file(rid, rec,
+                                                                  check_files=check_files)
         if rec is not None and problem is not None:
             log.warning("run %s: %s; it will be redone", rid, problem)
             store.discard(rid)

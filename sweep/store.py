@@ -11,7 +11,7 @@ Every file is written to a temporary name in the same folder and renamed into pl
 (:mod:`sweep.files`), so a file that exists is complete. A run counts as
 *done* when its record exists and, for a run that produced a Dataset, its ``.nc`` is the file
 the worker wrote: the size the record states and, when the file's mtime is not the recorded
-one (or on ``--verify``), the recorded SHA-256 of its content
+one (or on ``--check-files``), the recorded SHA-256 of its content
 (:meth:`CampaignStore.check_run_file`); a ``.nc`` without a record (the worker died between
 the two renames) is adopted if it opens and names the same run, deleted otherwise. The
 manifest is only a cache: a record whose file changed since (other mtime or size) or is
@@ -357,11 +357,11 @@ class CampaignStore:
         return records
 
     def check_run_file(self, run_id: str, record: Mapping[str, Any], *,
-                       verify: bool = False) -> str | None:
+                       check_files: bool = False) -> str | None:
         """Why the run of ``record`` does not count as done (``None`` if it does).
 
         A run that raised has no file: its record is all there is. Otherwise its ``.nc`` must
-        have the recorded size; if its mtime is not the recorded one (or ``verify``), its
+        have the recorded size; if its mtime is not the recorded one (or ``check_files``), its
         content must have the recorded SHA-256 (records written before checksums existed:
         the file must open and hold the run's variables). One ``stat`` per run when nothing
         changed, so ``status`` and the driver's plan stay cheap for 10^5 runs."""
@@ -380,7 +380,7 @@ class CampaignStore:
         if st.st_size != int(nc_bytes):
             return (f"its file has {st.st_size} bytes, not the {int(nc_bytes)} recorded "
                     "(truncated or overwritten)")
-        if not verify and record.get("nc_mtime_ns") == st.st_mtime_ns:
+        if not check_files and record.get("nc_mtime_ns") == st.st_mtime_ns:
             return None
         sha = record.get("nc_sha256")
         if isinstance(sha, str) and sha:
@@ -395,11 +395,11 @@ class CampaignStore:
         return None if problem is None else f"its file: {problem}"
 
     def is_complete(self, run_id: str, record: Mapping[str, Any] | None, *,
-                    verify: bool = False) -> bool:
+                    check_files: bool = False) -> bool:
         """Whether ``record`` stands for a finished run whose file (if any) is intact
         (:meth:`check_run_file`)."""
         return record is not None and self.check_run_file(run_id, record,
-                                                          verify=verify) is None
+                                                          check_files=check_files) is None
 
     def refresh_stamp(self, run_id: str) -> None:
         """After :meth:`check_run_file` accepted a file whose mtime changed (a copy, a

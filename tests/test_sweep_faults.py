@@ -101,7 +101,7 @@ def test_a_corrupt_run_file_is_reported_and_redone(copy):
 
 def test_verify_finds_corruption_that_kept_the_mtime(copy):
     """A file changed in place with its mtime put back looks untouched to the cheap check;
-    `run --verify` (checksums every file) finds it. status and plan agree on both."""
+    `run --check-files` (checksums every file) finds it. status and plan agree on both."""
     rid = copy.ok[0]
     nc = copy.runs / f"{rid}.nc"
     st = nc.stat()
@@ -112,7 +112,7 @@ def test_verify_finds_corruption_that_kept_the_mtime(copy):
     assert status_counts(copy) == (4, 2, 0)
     plan = plan_runs(expansion, store)
     assert (len(plan.done), len(plan.failed), len(plan.todo)) == (4, 2, 0)
-    plan = plan_runs(expansion, store, verify=True)
+    plan = plan_runs(expansion, store, check_files=True)
     assert (len(plan.done), len(plan.failed), len(plan.todo)) == (3, 2, 1)
     assert plan.redone == [(rid, "its file is corrupt (its content is not the one checksummed "
                                  "when it was written)")]

@@ -151,10 +151,10 @@ def test_is_complete_checks_the_file(tmp_path):
     # same size, other bytes: the mtime changed, so the checksum is compared
     path.write_bytes(b"\0" * 4096 + content[4096:])
     assert "corrupt" in str(store.check_run_file("a", rec))
-    # ... even when the mtime is put back, on --verify
+    # ... even when the mtime is put back, on --check-files
     os.utime(path, ns=(rec["nc_mtime_ns"], rec["nc_mtime_ns"]))
     assert store.check_run_file("a", rec) is None
-    assert "corrupt" in str(store.check_run_file("a", rec, verify=True))
+    assert "corrupt" in str(store.check_run_file("a", rec, check_files=True))
     # intact content with a new mtime (a copy): accepted, and the record refreshed
     path.write_bytes(content)
     assert store.check_run_file("a", rec) is None

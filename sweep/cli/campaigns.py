@@ -173,7 +173,7 @@ def run(
     err = err_console()
     setup_logging(err, verbose, quiet, cluster=True)
     c = load(err, campaign, set_, seeds, name, scheduler, workers)
-    verify = check_files or check_files_alias
+    check_files = check_files or check_files_alias
     verification = verification and c.verify is not None
     try:
         limit = None if max_failures is None else FailureLimit.parse(max_failures)
@@ -222,14 +222,14 @@ def run(
                 try:
                     if c.refine is None and c.precision is None:
                         plan, summary = drive(expansion, store, retry_failed=retry_failed,
-                                              verify=verify, events=events,
+                                              check_files=check_files, events=events,
                                               dashboard=dashboard, limit=limit)
                     else:  # adaptive or seeds by precision: rounds planned from the results
                         from ..refine.driver import drive_rounds
 
                         plan, summary, expansion = drive_rounds(
-                            c, store, retry_failed=retry_failed, verify=verify, events=events,
-                            dashboard=dashboard, limit=limit,
+                            c, store, retry_failed=retry_failed, check_files=check_files,
+                            events=events, dashboard=dashboard, limit=limit,
                             say=lambda line: say.print(line, markup=False))
                 finally:
                     events.close()

@@ -47,7 +47,7 @@ def _merge(total: RunSummary, part: RunSummary) -> None:
 
 
 def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = False,
-                 verify: bool = False, events: Any = None, dashboard: bool = False,
+                 check_files: bool = False, events: Any = None, dashboard: bool = False,
                  say: Callable[[str], None] = print, limit: FailureLimit | None = None
                  ) -> tuple[Plan, RunSummary | None, Expansion]:
     """Run a refined campaign to its end (or to an interruption) while holding its lock.
@@ -82,8 +82,9 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                         f"{ref.n_runs} runs")
                     break
                 runs = ref.run_list()
-                plan = plan_runs(runs, store, retry_failed=retry, verify=verify)
-                retry = verify = False
+                plan = plan_runs(runs, store, retry_failed=retry,
+                                  check_files=check_files)
+                retry = check_files = False
                 if first is None:
                     first = plan
                 if not plan.todo:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -54,6 +55,14 @@ def normalise_float(x: float) -> float:
     """Round to :data:`SIGNIFICANT_DIGITS` significant digits: 0.30000000000000004 -> 0.3."""
     y = float(f"{float(x):.{SIGNIFICANT_DIGITS}g}")
     return 0.0 if y == 0 else y
+
+
+def same_value(a: Any, b: Any) -> bool:
+    """Whether two swept values are one: numbers equal to 1e-9 relative (a value read back
+    from a netCDF file or a YAML selection against the grid's), anything else equal."""
+    if isinstance(a, numbers.Real) and isinstance(b, numbers.Real):  # numpy's too
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-300)
+    return bool(a == b)
 
 
 # --------------------------------------------------------------------------- the parsed objects

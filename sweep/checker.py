@@ -92,6 +92,10 @@ def is_number(v: Any) -> bool:
     return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
+def is_finite_number(v: Any) -> bool:
+    return is_number(v) and math.isfinite(float(v))
+
+
 def is_int(v: Any) -> bool:
     return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
 

@@ -102,7 +102,7 @@ def verify(
                   "are kept)")
         raise typer.Exit(EXIT_INTERRUPTED)
     out = Console(highlight=False, soft_wrap=True, quiet=quiet)
-    for line in verification_lines(store.root, detail=True):
+    for line in dataset_lines(outcome.dataset, outcome.path):
         out.print(line, markup=False)
     if outcome.failed:
         err.print(f"[red]{len(outcome.failed)} verification run(s) failed[/]; they count as "
@@ -139,8 +139,8 @@ def verify_step(campaign: Any, store: Any, say: Console, *, before: bool) -> boo
         err.print("[yellow]interrupted[/] during the verification; rerun the same command to "
                   "resume (finished runs are kept)")
         raise typer.Exit(EXIT_INTERRUPTED)
-    for line in verification_lines(store.root):
-        say.print(line, markup=False)
+    if outcome.path is not None:
+        say.print(f"verification ({outcome.path}): {outcome.summary}", markup=False)
     return outcome.path is not None
 
 
@@ -148,7 +148,9 @@ def verification_lines(root: Path, *, detail: bool = False) -> list[str]:
     """The verification's summary line (and with ``detail`` one line per point) from
     ``root/verify.nc``; nothing when there is none, one line when it cannot be read. The
     summary alone is its ``summary`` attribute, read without xarray (``status`` stays light)."""
-    path = root / "verify.nc"
+    from ..verify import REQUIRED, VERIFY, stale
+
+    path = root / VERIFY
     if not path.exists():
         return []
     if not detail:
@@ -157,22 +159,26 @@ def verification_lines(root: Path, *, detail: bool = False) -> list[str]:
         try:
             with netCDF4.Dataset(path) as nc:
                 summary = str(nc.getncattr("summary"))
-                missing = [n for n in ("converged", "variant_name") if n not in nc.variables]
+                missing = [n for n in REQUIRED if n not in nc.variables]
         except (OSError, AttributeError) as e:
             return [f"verification: {path} cannot be read: {e}"]
         if missing:
-            return [f"verification: {path} cannot be read: it has no {', '.join(missing)} "
-                    "(written by another version: rerun nematic verify, which rewrites it from "
-                    "the runs)"]
+            return [f"verification: {path} cannot be read: {stale(missing)}"]
         return [f"verification ({path}): {summary}"]
-    from ..verify.measure import read_verify, summary_line
+    from ..verify.measure import read_verify
 
     try:
         ds = read_verify(root)
     except (OSError, ValueError) as e:
         return [f"verification: {path} cannot be read: {e}"]
-    if ds is None:
-        return []
+    return [] if ds is None else dataset_lines(ds, path)
+
+
+def dataset_lines(ds: Any, path: Path | None) -> list[str]:
+    """The summary line of a verification's Dataset, one line per point and variant, and the
+    variants that could not run."""
+    from ..verify.measure import summary_line
+
     lines = [f"verification ({path}): {summary_line(ds)}", *point_lines(ds)]
     if ds.attrs.get("problems"):
         lines.append(f"  not run: {ds.attrs['problems']}")

@@ -4,6 +4,7 @@ check of a figure's options."""
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Iterator, Mapping, Sequence
@@ -15,7 +16,7 @@ import xarray as xr
 
 from ..analysis.fits_file import FITS, load_fits, load_phase
 from ..analysis.phase import is_swept, select, sweep_dims, with_dim
-from ..campaign import AMB
+from ..campaign import AMB, same_value
 from ..errors import FigureError, FitError
 
 if TYPE_CHECKING:
@@ -67,31 +68,27 @@ class Results:
                 self._runs[run_id] = None
         return self._runs[run_id]
 
-    @property
+    @functools.cached_property
     def verified(self) -> list[tuple[dict[str, Any], int]]:
         """The points verify.nc sampled: (swept values, verdict over every variant: 1
         converged, 0 changed, -2 runs missing); empty without a readable verify.nc."""
-        if not hasattr(self, "_verified"):
-            self._verified: list[tuple[dict[str, Any], int]] = []
-            path = self.root / "verify.nc"
-            if path.exists():
-                from ..verify.measure import read_verify
+        from ..verify.measure import read_verify
 
-                try:
-                    v = read_verify(self.root)
-                except (OSError, ValueError) as e:
-                    log.warning("cannot read %s: %s", path, e)
-                    return self._verified
-                if v is None:
-                    return self._verified
-                conv = v["converged"].values
-                axes = [str(c) for c in v.coords if v[c].dims == ("point",)
-                        and c not in ("point", "label", "why")]
-                for p in range(conv.shape[0]):
-                    row = conv[p]
-                    verdict = 0 if (row == 0).any() else -2 if (row == -2).any() else 1
-                    self._verified.append(({a: v[a].values[p].item() for a in axes}, verdict))
-        return self._verified
+        try:
+            v = read_verify(self.root)
+        except (OSError, ValueError) as e:
+            log.warning("cannot read the verification in %s: %s", self.root, e)
+            return []
+        if v is None:
+            return []
+        conv = v["converged"].values
+        axes = [str(c) for c in v.coords if v[c].dims == ("point",)
+                and c not in ("point", "label", "why")]
+        out = []
+        for p, row in enumerate(conv):
+            verdict = 0 if (row == 0).any() else -2 if (row == -2).any() else 1
+            out.append(({a: v[a].values[p].item() for a in axes}, verdict))
+        return out
 
     def fit(self, *names: str) -> xr.Dataset:
         """The fits Dataset, checked to hold every variable in ``names``."""
@@ -130,11 +127,7 @@ def on_slice(coords: Mapping[str, Any], ds: xr.Dataset, names: Sequence[str]) ->
     for name in names:
         if name not in coords or name not in ds.coords or ds[name].size != 1:
             continue
-        a, b = coords[name], ds[name].values.item()
-        if isinstance(a, (int, float)) and isinstance(b, (int, float)):
-            if not math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-300):
-                return False
-        elif a != b:
+        if not same_value(coords[name], ds[name].values.item()):
             return False
     return True
 

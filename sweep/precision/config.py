@@ -23,20 +23,11 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..campaign import PrecisionSpec
-from ..checker import Checker, suggest
+from ..checker import Checker, is_finite_number, is_int, suggest
 from ..refine.config import observable_sources
 
 KEYS = ("observable", "width", "relative", "confidence", "unanimous", "patterned_above",
         "initial", "add")
-
-
-def _number(v: Any) -> bool:
-    return (isinstance(v, (int, float)) and not isinstance(v, bool)
-            and float(v) == float(v) and abs(float(v)) != float("inf"))
-
-
-def _count(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
 
 
 def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSpec | None:
@@ -64,7 +55,7 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
         observable = "sigma2_S"
 
     width = sec.get("width")
-    if width is not None and (not _number(width) or not width > 0):
+    if width is not None and (not is_finite_number(width) or not width > 0):
         c.bad((*path, "width"), width, "a number > 0 (the widest acceptable confidence "
               "interval of the seed mean)")
     relative = sec.get("relative", True)
@@ -72,11 +63,11 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
         c.bad((*path, "relative"), relative, "true (width relative to |seed mean|) or false "
               "(absolute, in the observable's units)")
     confidence = sec.get("confidence", 0.95)
-    if not _number(confidence) or not 0 < confidence < 1:
+    if not is_finite_number(confidence) or not 0 < confidence < 1:
         c.bad((*path, "confidence"), confidence, "a number in (0, 1)")
 
     unanimous = sec.get("unanimous")
-    if unanimous is not None and (not _count(unanimous)
+    if unanimous is not None and (not is_int(unanimous)
                                   or not 2 <= unanimous <= max(n_seeds, 2)):
         c.bad((*path, "unanimous"), unanimous, f"an integer from 2 to {n_seeds} (the "
               "campaign's seeds): the fewest seeds that stop a point when they all share "
@@ -85,18 +76,18 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     if unanimous is not None and patterned is None:
         c.add((*path, "patterned_above"), "missing; allowed: a number (a run's pattern class "
               "is sigma2_S above it); needed by unanimous")
-    elif patterned is not None and not _number(patterned):
+    elif patterned is not None and not is_finite_number(patterned):
         c.bad((*path, "patterned_above"), patterned, "a finite number")
     if width is None and unanimous is None:
         c.add(path, "no stopping rule; allowed: width (the interval of the seed mean), "
               "unanimous (the pattern class), or both")
 
     initial = sec.get("initial", min(4, n_seeds) or 1)
-    if not _count(initial) or not 1 <= initial <= max(n_seeds, 1):
+    if not is_int(initial) or not 1 <= initial <= max(n_seeds, 1):
         c.bad((*path, "initial"), initial, f"an integer from 1 to {n_seeds} (the campaign's "
               "seeds)")
     add = sec.get("add", initial)
-    if not _count(add) or add < 1:
+    if not is_int(add) or add < 1:
         c.bad((*path, "add"), add, "an integer >= 1")
 
     if len(c.problems) > before:

@@ -45,7 +45,7 @@ from ..campaign import (
     Dim,
     RefineSpec,
 )
-from ..checker import Checker, suggest
+from ..checker import Checker, is_finite_number, is_int, suggest
 
 KEYS = ("axis", "observable", "criterion", "patterned_above", "fraction", "jump", "rounds",
         "min_spacing", "seeds")
@@ -54,15 +54,6 @@ CRITERIA = ("fraction", "jump")
 #: The derived observable read from the run files (the stability fit's criterion).
 GROWTH = "growth"
 MAX_ROUNDS = 50
-
-
-def _number(v: Any) -> bool:
-    return (isinstance(v, (int, float)) and not isinstance(v, bool)
-            and math.isfinite(float(v)))
-
-
-def _count(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
 
 
 def observable_sources() -> dict[str, str]:
@@ -134,7 +125,7 @@ def check_refine(c: Checker, raw: Any, dims: Sequence[Dim],
             c.add((*path, "patterned_above"), "missing; allowed: a number (a run counts as "
                   f"patterned when its {observable} is above it); needed by criterion "
                   "'fraction'")
-        elif not _number(patterned):
+        elif not is_finite_number(patterned):
             c.bad((*path, "patterned_above"), patterned, "a finite number")
     elif patterned is not None:
         c.add((*path, "patterned_above"), "used by criterion 'fraction' only; this section "
@@ -142,31 +133,31 @@ def check_refine(c: Checker, raw: Any, dims: Sequence[Dim],
 
     fraction = sec.get("fraction", list(DEFAULT_FRACTION))
     if (not isinstance(fraction, Sequence) or isinstance(fraction, str) or len(fraction) != 2
-            or not all(_number(f) for f in fraction)
+            or not all(is_finite_number(f) for f in fraction)
             or not 0 <= fraction[0] < fraction[1] <= 1):
         c.bad((*path, "fraction"), fraction, "[low, high] with 0 <= low < high <= 1")
         fraction = list(DEFAULT_FRACTION)
 
     jump = sec.get("jump", DEFAULT_JUMP)
-    if not _number(jump) or not jump > 1:
+    if not is_finite_number(jump) or not jump > 1:
         c.bad((*path, "jump"), jump, "a factor > 1 (the change of the geometric seed mean "
               "that marks a boundary cell)")
         jump = DEFAULT_JUMP
 
     rounds = sec.get("rounds", DEFAULT_ROUNDS)
-    if not _count(rounds) or not 0 <= rounds <= MAX_ROUNDS:
+    if not is_int(rounds) or not 0 <= rounds <= MAX_ROUNDS:
         c.bad((*path, "rounds"), rounds, f"an integer from 0 to {MAX_ROUNDS} (refinement "
               "rounds after the grid's)")
         rounds = DEFAULT_ROUNDS
 
     spacing = sec.get("min_spacing")
     span = (max(values) - min(values)) if len(values) >= 2 and all(
-        _number(v) for v in values) else None
+        is_finite_number(v) for v in values) else None
     if spacing is None:
         c.add((*path, "min_spacing"), "missing; allowed: a number > 0 (a cell is split only "
               "while both halves are at least this wide)")
         spacing = 0.0
-    elif not _number(spacing) or not spacing > 0 or (span is not None and spacing >= span):
+    elif not is_finite_number(spacing) or not spacing > 0 or (span is not None and spacing >= span):
         c.bad((*path, "min_spacing"), spacing, "a number > 0"
               + (f" and below the axis's span ({span:g})" if span is not None else ""))
         spacing = 0.0
@@ -174,23 +165,23 @@ def check_refine(c: Checker, raw: Any, dims: Sequence[Dim],
     n_seeds = len(seeds)
     sd = c.mapping((*path, "seeds"), sec.get("seeds"), SEED_KEYS)
     initial = sd.get("initial", n_seeds)
-    if not _count(initial) or not 1 <= initial <= max(n_seeds, 1):
+    if not is_int(initial) or not 1 <= initial <= max(n_seeds, 1):
         c.bad((*path, "seeds", "initial"), initial, f"an integer from 1 to {n_seeds} (the "
               "campaign's seeds)")
         initial = max(n_seeds, 1)
     add = sd.get("add", initial)
-    if not _count(add) or add < 1:
+    if not is_int(add) or add < 1:
         c.bad((*path, "seeds", "add"), add, "an integer >= 1")
         add = 1
     width = sd.get("max_width", DEFAULT_MAX_WIDTH)
-    if not _number(width) or not width > 0 or (criterion == "fraction" and width > 1):
+    if not is_finite_number(width) or not width > 0 or (criterion == "fraction" and width > 1):
         c.bad((*path, "seeds", "max_width"), width,
               "a number in (0, 1] (the widest acceptable interval on the patterned fraction)"
               if criterion == "fraction" else "a number > 0 (decades: the widest acceptable "
               "interval on the log10 seed mean)")
         width = DEFAULT_MAX_WIDTH
     confidence = sd.get("confidence", DEFAULT_CONFIDENCE)
-    if not _number(confidence) or not 0 < confidence < 1:
+    if not is_finite_number(confidence) or not 0 < confidence < 1:
         c.bad((*path, "seeds", "confidence"), confidence, "a number in (0, 1)")
         confidence = DEFAULT_CONFIDENCE
 

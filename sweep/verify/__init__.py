@@ -9,3 +9,14 @@
 - :mod:`sweep.verify.driver`: running a verification on one dask cluster (``nematic verify``,
   and ``nematic run`` of a campaign with a ``verify:`` section).
 """
+
+#: The verification's file in the campaign's results folder.
+VERIFY = "verify.nc"
+#: What every reader of verify.nc relies on.
+REQUIRED = ("converged", "patterned", "patterned_base", "variant_name", "label", "why")
+
+
+def stale(missing: list[str]) -> str:
+    """Why a verify.nc without the ``missing`` variables cannot be read."""
+    return (f"it has no {', '.join(missing)} (written by another version: rerun nematic "
+            "verify, which rewrites it from the runs)")

@@ -47,6 +47,7 @@ from ..campaign import (
     Variant,
     VerifySpec,
     normalise_float,
+    same_value,
 )
 from ..checker import Checker, coerce, is_int, is_number, suggest
 
@@ -239,7 +240,7 @@ def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
                     if axis not in axes:
                         c.unknown((*p_path, str(axis)), axis, list(axes))
                         continue
-                    match = [v for v in axes[axis] if _same(v, value)]
+                    match = [v for v in axes[axis] if same_value(v, value)]
                     if not match:
                         c.bad((*p_path, axis), value, "a value of the axis: "
                               + ", ".join(f"{v:g}" if is_number(v) else str(v)
@@ -286,8 +287,3 @@ def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
                       observables=tuple(dict.fromkeys(str(o) for o in observables)),
                       before=before_flag)
 
-
-def _same(a: Any, b: Any) -> bool:
-    if is_number(a) and is_number(b):
-        return bool(math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-300))
-    return bool(a == b)

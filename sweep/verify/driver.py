@@ -36,12 +36,13 @@ def verify_store(store: CampaignStore) -> CampaignStore:
 @dataclass
 class VerifyOutcome:
     """What a verification did: its sample, the runs' summaries (``None``: nothing to run),
-    the file written (``None`` when interrupted) and its one-line summary."""
+    the file written and its Dataset (``None`` when interrupted) and its one-line summary."""
 
     sample: Sample
     base: RunSummary | None = None
     variants: RunSummary | None = None
     path: Path | None = None
+    dataset: Any = None
     summary: str = ""
     interrupted: bool = False
 
@@ -115,10 +116,12 @@ def run_verification(campaign: Campaign, store: CampaignStore, *, before: bool =
                     stack.close()
                     store.clean_temporaries()
                     vstore.clean_temporaries()
-    records, vrecords = store.scan(), vstore.scan()
+    ran = bool(plan_b.todo or plan_v.todo)  # else the plans' scans are the records
+    records = store.scan() if ran else plan_b.records
+    vrecords = vstore.scan() if ran else plan_v.records
     if outcome.interrupted:
         return outcome
-    ds = verify_dataset(sample, records, vrecords)
-    outcome.path = write_verify(store.root, ds)
-    outcome.summary = summary_line(ds)
+    outcome.dataset = verify_dataset(sample, records, vrecords)
+    outcome.path = write_verify(store.root, outcome.dataset)
+    outcome.summary = summary_line(outcome.dataset)
     return outcome

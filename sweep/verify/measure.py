@@ -46,10 +46,10 @@ from ..expand import RunSpec
 from ..files import atomic_to_netcdf
 from ..provenance import code_version, git_commit, library_versions_text
 from ..store import Record, now_iso
+from . import REQUIRED, VERIFY, stale
 from .config import ABSOLUTE, OBSERVABLES
 from .sample import Sample, point_label
 
-VERIFY = "verify.nc"
 CONVERGED, CHANGED, NOT_COMPARED, MISSING = 1, 0, -1, -2
 VERDICT_ATTRS = {"flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
                  "flag_meanings": "missing not_compared changed converged"}
@@ -328,10 +328,6 @@ VERDICT_TEXT = {CONVERGED: "converged", CHANGED: "CHANGED", NOT_COMPARED: "not c
                 MISSING: "missing"}
 
 
-#: What every reader of verify.nc relies on.
-REQUIRED = ("converged", "patterned", "patterned_base", "variant_name", "label", "why")
-
-
 def read_verify(root: Path) -> xr.Dataset | None:
     """``root/verify.nc`` loaded, or ``None`` when there is none. Raises ``OSError`` /
     ``ValueError`` when it cannot be read."""
@@ -342,8 +338,7 @@ def read_verify(root: Path) -> xr.Dataset | None:
         ds = ds.load()
     missing = [n for n in REQUIRED if n not in ds.variables]
     if missing:
-        raise ValueError(f"it has no {', '.join(missing)} (written by another version: "
-                         "rerun nematic verify, which rewrites it from the runs)")
+        raise ValueError(stale(missing))
     return ds
 
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from model.errors import ParameterError
 
-from ..campaign import Campaign, Variant, VerifySpec
+from ..campaign import Campaign, Variant, VerifySpec, same_value
 from ..expand import Expansion, GridPoint, RunSpec
 from ..identity import PointHasher
 from .config import resolve
@@ -91,15 +91,9 @@ def point_label(point: GridPoint) -> str:
                      for k, v in point.coords.items())
 
 
-def _close(a: Any, b: Any) -> bool:
-    if isinstance(a, (int, float, np.number)) and isinstance(b, (int, float, np.number)):
-        return bool(math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-300))
-    return bool(a == b)
-
-
 def _matching(expansion: Expansion, where: Mapping[str, Any]) -> list[int]:
     return [i for i, p in enumerate(expansion.points)
-            if all(k not in p.coords or _close(p.coords[k], v) for k, v in where.items())]
+            if all(k not in p.coords or same_value(p.coords[k], v) for k, v in where.items())]
 
 
 def corner_points(expansion: Expansion) -> list[int]:

@@ -275,12 +275,14 @@ def run(
                 say.print(f"phase diagram: {escape(str(store.phase_path))}")
                 if figures:
                     repair_products(c, results, err, phase=False)
-                    drawn = regenerate_figures(c, results)
-                    if verification:
+                    if verification:  # the fits pick its sample; the figures show it
                         from .verify import verify_step
 
-                        if verify_step(c, store, say, before=False):
-                            drawn = regenerate_figures(c, results)  # with the verdicts
+                        regenerate_figures(c, results, draw_figures=False)
+                        verify_step(c, store, say, before=False)
+                        drawn = regenerate_figures(c, results, fits=False)
+                    else:
+                        drawn = regenerate_figures(c, results)
                     for figure in drawn:
                         say.print(f"figure: {escape(str(figure))}")
                     page = regenerate_report(c, results)

@@ -46,12 +46,14 @@ def repair_products(campaign: Campaign, results: Path, console: Console, *,
     return False
 
 
-def regenerate_figures(campaign: Campaign, results: Path) -> list[Path]:
+def regenerate_figures(campaign: Campaign, results: Path, *, fits: bool = True,
+                       draw_figures: bool = True) -> list[Path]:
     """Fits and figures after a run (:func:`sweep.figures.produce.regenerate`, which logs and
-    never raises for a figure it cannot draw)."""
+    never raises for a figure it cannot draw); ``fits`` / ``draw_figures`` false leave either
+    out."""
     from ..figures.produce import regenerate
 
-    return list(regenerate(campaign, results))
+    return list(regenerate(campaign, results, fits=fits, draw_figures=draw_figures))
 
 
 def regenerate_report(campaign: Campaign, results: Path) -> Path | None:

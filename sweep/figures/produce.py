@@ -105,10 +105,10 @@ def plan(campaign: Campaign, phase: xr.Dataset, names: Sequence[str] | None = No
 
 
 def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str] | None = None,
-            fits: bool = True) -> Outcome:
+            fits: bool = True, draw_figures: bool = True) -> Outcome:
     """Write ``fits.nc`` (unless ``fits`` is false) and the figures of ``campaign`` (see
-    :func:`plan`) from ``results_dir/<name>/``. Failures are collected, not raised, except
-    for a missing phase.nc (:class:`FigureError`)."""
+    :func:`plan`; none unless ``draw_figures``) from ``results_dir/<name>/``. Failures are
+    collected, not raised, except for a missing phase.nc (:class:`FigureError`)."""
     root = Path(results_dir) / campaign.name
     try:
         phase = load_phase(root)
@@ -127,7 +127,7 @@ def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str]
         out.failures.update({f"fit {k}": v for k, v in failed.items()})
     if out.fits_path is not None:
         out.notes = fit_notes(load_fits(root))
-    if not figures:  # figures: [] in the campaign
+    if not figures or not draw_figures:  # figures: [] in the campaign, or the fits alone
         return out
     results = Results(root)
     for name, options in figures:
@@ -142,13 +142,15 @@ def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str]
     return out
 
 
-def regenerate(campaign: Campaign, results_dir: str | Path) -> list[Path]:
+def regenerate(campaign: Campaign, results_dir: str | Path, *, fits: bool = True,
+               draw_figures: bool = True) -> list[Path]:
     """Fits and figures of ``campaign`` after a run (the hook of ``nematic run``): writes
-    ``fits.nc`` and ``figures/*.png|pdf`` (none with ``figures: []``); returns the figure
-    paths. Never raises for a figure that cannot be drawn (it is logged, as are the fits'
-    caveats, :func:`sweep.analysis.fits_file.fit_notes`); returns [] when there is no phase.nc."""
+    ``fits.nc`` (unless ``fits`` is false) and ``figures/*.png|pdf`` (none with
+    ``figures: []`` or without ``draw_figures``); returns the figure paths. Never raises for a
+    figure that cannot be drawn (it is logged, as are the fits' caveats,
+    :func:`sweep.analysis.fits_file.fit_notes`); returns [] when there is no phase.nc."""
     try:
-        out = produce(campaign, results_dir)
+        out = produce(campaign, results_dir, fits=fits, draw_figures=draw_figures)
     except FigureError as e:
         log.warning("no figures: %s", e)
         return []

@@ -23,7 +23,9 @@ times (a free core each) and part of the driver's time are stretched by the mach
 (:func:`slowdown`: W workers beside a load average L on C cores get C / (L + W) of a core
 each); measured run times already carry the load they ran under. An adaptive campaign is
 costed for the round its results have reached (round 0 without results) plus a bound on the
-later rounds (:func:`sweep.refine.plan.run_bound`).
+later rounds (:func:`sweep.refine.plan.run_bound`); a campaign with seeds by precision for
+its current round plus the seeds each point is expected to need
+(:mod:`sweep.precision.forecast`), each at its point's cost.
 """
 
 from __future__ import annotations
@@ -72,12 +74,16 @@ class Costed:
 
 @dataclass
 class LaterRounds:
-    """An adaptive campaign's rounds after the current one: a bound."""
+    """The rounds after the current one: for an adaptive campaign a bound; with seeds by
+    precision (``forecast``) the runs each point is expected to need, and the bound as
+    ``at_most`` runs."""
 
     rounds: int
     runs: int
     cpu: float
     wall: float
+    forecast: bool = False
+    at_most: int = 0
 
 
 @dataclass
@@ -285,10 +291,10 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
     records = store.scan(save=False)
     later = None
     round_note = ""
-    if campaign.refine is None:
+    if campaign.refine is None and campaign.precision is None:
         expansion: Expansion = expand(campaign)
         dense = expansion
-    else:
+    elif campaign.refine is not None:
         from .refine.rounds import replay
 
         ref = replay(campaign, store, records)
@@ -296,6 +302,13 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
         round_note = (f"adaptive: round {ref.current.number} "
                       + ("(the grid)" if ref.current.number == 0 else "")
                       + (f"; refinement finished ({ref.stop})" if ref.finished else ""))
+    else:
+        from .precision.rounds import replay as replay_seeds
+
+        seeds = replay_seeds(campaign, store, records)
+        expansion, dense = seeds.run_list(), seeds.expansion()
+        round_note = (f"seeds by precision: round {seeds.current.number}"
+                      + (f"; finished ({seeds.stop})" if seeds.finished else ""))
     todo, done, failed = classify(expansion, store, records, retry_failed=retry_failed)
     basis = measurements(expansion, records)
     costs: dict[str, Costed] = {}
@@ -336,6 +349,8 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
         later = later_rounds(campaign, ref.current.number, ref.n_runs,
                              [*(r[0] for r in runs), *(m[3] for m in basis.measured)],
                              workers)
+    elif campaign.precision is not None and not seeds.finished:
+        later = forecast_rounds(seeds, basis, workers)
     changed = campaign_changes(campaign, store, dense, records)
     return Estimate(campaign=campaign.name, folder=str(store.root), total=len(expansion),
                     done=done, failed=failed, to_do=len(todo), measured=n, basis=text,
@@ -370,6 +385,40 @@ def later_rounds(campaign: Campaign, current: int, planned: int, per_run: Sequen
         return None
     cpu = runs * float(np.mean(per_run))
     return LaterRounds(rounds, runs, cpu, cpu / workers + rounds * max(per_run))
+
+
+def forecast_rounds(plan: Any, basis: Basis, workers: int) -> LaterRounds | None:
+    """The runs a campaign with seeds by precision is expected to add after its current
+    round (:func:`sweep.precision.forecast.expected_seeds` per point, from the seeds it has
+    finished), each at its point's cost; the wall time as :func:`later_rounds` has it."""
+    from .precision.decide import rounds_bound
+    from .precision.forecast import expected_seeds
+
+    cap = plan.cap
+    planned = [0] * len(plan.grid.points)
+    for rnd in plan.rounds:
+        for p, _ in rnd.runs:
+            planned[p] += 1
+    runs = cpu = longest = 0.0
+    for p, point in enumerate(plan.grid.points):
+        idx = [p * cap + j for j in range(planned[p])]
+        done = [i for i in idx if plan.outcomes.get(i) is not None]
+        values = [float(plan.outcomes[i]) for i in done]
+        classes = [math.nan if plan.classes.get(i) is None else float(plan.classes[i])
+                   for i in done]
+        more = expected_seeds(plan.spec, values, classes, cap, planned[p]) - planned[p]
+        if more > 0:
+            label = point_label(point)
+            seconds = basis.cost(point, label, model_seconds(point.numerics))[0]
+            runs += more
+            cpu += more * seconds
+            longest = max(longest, seconds)
+    at_most = plan.run_bound() - plan.n_runs
+    rounds = rounds_bound(plan.spec, cap) - 1 - plan.current.number
+    if at_most <= 0 or rounds <= 0:
+        return None
+    return LaterRounds(rounds, int(runs), cpu, cpu / workers + rounds * longest if runs else 0.0,
+                       forecast=True, at_most=at_most)
 
 
 def fmt_seconds(seconds: float) -> str:
@@ -431,7 +480,14 @@ def lines(e: Estimate, *, brief: bool = False) -> list[str]:
         if e.local_workers != e.workers:
             out.append("  " + _wall_line(e, e.local_workers, "this machine's local cluster",
                                          e.local_wall, e.local_overhead))
-    if e.later is not None:
+    if e.later is not None and e.later.forecast:
+        out.append(f"later rounds: about {e.later.runs} more runs expected (each point's "
+                   "seeds so far projected to its rule), about "
+                   f"{_hours(e.later.cpu)} ({fmt_seconds(e.later.cpu)}) and "
+                   f"{fmt_seconds(e.later.wall)} wall on {e.workers} worker(s); at most "
+                   f"{e.later.at_most} more runs (every point to the cap) in at most "
+                   f"{e.later.rounds} more round(s)")
+    elif e.later is not None:
         out.append(f"later rounds: at most {e.later.rounds} more, at most {e.later.runs} more "
                    f"runs (the run bound), about {_hours(e.later.cpu)} "
                    f"({fmt_seconds(e.later.cpu)}) and at most {fmt_seconds(e.later.wall)} "

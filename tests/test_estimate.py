@@ -288,6 +288,52 @@ def test_adaptive_campaign_round_and_bound(tmp_path):
     assert e.later.cpu == pytest.approx(4.0 * e.later.runs)
 
 
+PRECISE = """\
+name: p
+parameters: {noise_modes: 8}
+numerics: {resolution: 32, t_final: 10}
+sweep:
+  axes:
+    alpha_minus_B: [0.1, 0.2, 0.3]
+seeds: 20
+execution: {workers: 2}
+precision: {observable: sigma2_S, width: 0.1, unanimous: 8, patterned_above: 1.0e-6,
+            initial: 4, add: 4}
+"""
+
+
+def test_seeds_by_precision_current_round_and_forecast(tmp_path):
+    """The current round is costed; the later rounds are the seeds each point is forecast
+    to need (sweep/precision/forecast.py) at the point's measured cost, with the bound."""
+    campaign = parse_campaign(PRECISE)
+    store = CampaignStore(tmp_path / "results", "p")
+    e = estimate(campaign, store, load_cores=QUIET)   # nothing run: round 0, the rest unknown
+    assert (e.total, e.to_do) == (12, 12)
+    assert "seeds by precision: round 0" in lines(e)[0]
+    assert e.later is not None
+    assert e.later.forecast
+    assert e.later.runs == e.later.at_most == 60 - 12
+    # round 0 done: 0.1 relaxed (unanimous at 8), 0.2 precise already, 0.3 mixed (the cap)
+    values = {0.1: [1e-12, 3e-12, 2e-13, 5e-12], 0.2: [1.0, 1.01, 0.99, 1.0],
+              0.3: [1e-12, 1.0, 0.02, 2.0]}
+    grid = expand(campaign)
+    for i, rid in enumerate(grid.run_ids):
+        run = grid.run(i)
+        x, j = run.point.coords["alpha_minus_B"], grid.seeds.index(run.seed)
+        if j < 4:
+            fake_run(store, rid, 2.0 if x < 0.3 else 5.0,
+                     scalars={"sigma2_S_final": values[round(x, 1)][j]})
+    e = estimate(campaign, store, load_cores=QUIET)
+    assert "seeds by precision: round 1" in lines(e)[0]
+    assert e.to_do == 8   # 0.1 and 0.3 get seeds 4-7
+    assert e.cpu[0] == pytest.approx(4 * 2.0 + 4 * 5.0)
+    assert e.later is not None
+    assert e.later.runs == 12   # 0.3 on to 20 seeds; 0.1 stops at 8
+    assert e.later.cpu == pytest.approx(12 * 5.0)
+    assert e.later.at_most == 60 - 20
+    assert "about 12 more runs expected" in flat(" ".join(lines(e)))
+
+
 # --------------------------------------------------------------------------- the commands
 @pytest.fixture
 def quiet_machine(monkeypatch):

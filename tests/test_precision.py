@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 import textwrap
 
 import numpy as np
@@ -19,7 +20,8 @@ from typer.testing import CliRunner
 from sweep.campaign import PrecisionSpec
 from sweep.cli import app
 from sweep.errors import CampaignError
-from sweep.precision.decide import decide, interval_width, rounds_bound
+from sweep.precision.decide import decide, interval_width, rounds_bound, t_quantile
+from sweep.precision.forecast import expected_seeds
 from sweep.precision.rounds import read_plan, replay
 from sweep.spec import load_campaign, parse_campaign
 from sweep.store import CampaignStore
@@ -164,6 +166,47 @@ def test_nan_values_are_not_precise_and_one_seed_is_not_an_interval():
     assert decide(s, [0.2, 0.2, math.nan, 0.2], [], 4).state == "cap"
     assert decide(s, [0.2], [], 50).state == "pending"
     assert decide(s, [0.2, 0.2001], [], 50).state == "precise"
+
+
+def test_the_forecast_projects_the_interval_to_the_seeds_it_needs():
+    """A seed spread that stays what it is: the forecast is the first round count whose
+    interval, t(n - 1) s / sqrt(n), is narrower than the limit, the count the rounds reach
+    when the later seeds have that spread."""
+    s = spec(width=0.1, initial=4, add=4)
+    first = [0.17, 0.23, 0.2, 0.2]  # mean 0.2, sd 0.0245: the 4-seed interval is 0.078 wide
+    sd = statistics.stdev(first)
+    expected = expected_seeds(s, first, [math.nan] * 4, 50, 4)
+    assert expected > 4
+    assert (expected - 4) % 4 == 0
+
+    def width(n: int) -> float:
+        return 2 * t_quantile(0.95, n - 1) * sd / math.sqrt(n)
+
+    assert width(expected) < 0.1 * 0.2 <= width(expected - 4)
+    # seeds drawn with that spread are decided at about that count
+    rng = np.random.default_rng(4)
+    values = first + list(0.2 + sd * rng.standard_normal(46))
+    state, n = sequence(s, values, [math.nan] * 50, 50)
+    assert state == "precise"
+    assert abs(n - expected) <= 8
+    # a decided point needs what it has; planned seeds count even when not finished
+    assert expected_seeds(s, [0.2, 0.2001, 0.2, 0.2], [math.nan] * 4, 50, 4) == 4
+    assert expected_seeds(s, [0.2, 0.2001], [math.nan] * 2, 50, 8) == 8
+    # nothing known, a seed without a value, or too wide for the cap: the cap
+    assert expected_seeds(s, [], [], 50, 4) == 50
+    assert expected_seeds(s, [0.2, math.nan, 0.2, 0.2], [math.nan] * 4, 50, 4) == 50
+    assert expected_seeds(s, [0.01, 1.0, 0.02, 2.0], [math.nan] * 4, 50, 4) == 50
+
+
+def test_the_forecast_of_the_unanimity_rule():
+    s = spec(unanimous=12, patterned_above=1e-6, initial=4, add=4)
+    relaxed = [1e-12] * 4
+    assert expected_seeds(s, [1.0] * 4, relaxed, 50, 4) == 12
+    assert expected_seeds(s, [1.0] * 4, [1e-12, 1e-3, 1e-12, 1e-12], 50, 4) == 50
+    # with a width rule too, the earlier of the two
+    both = spec(width=0.1, unanimous=12, patterned_above=1e-6, initial=4, add=4)
+    assert expected_seeds(both, [0.01, 1.0, 0.02, 2.0], relaxed, 50, 4) == 12
+    assert expected_seeds(both, [0.17, 0.23, 0.2, 0.2], relaxed, 50, 4) <= 12
 
 
 def test_the_rounds_bound():

@@ -54,6 +54,11 @@ def _detached_child() -> None:  # pragma: no cover - runs in the child before ex
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def detached_args(argv: list[str]) -> list[str]:
+    """The command line of the background driver: this one without ``--detach``."""
+    return [a for a in argv if a != "--detach"]
+
+
 def start_detached(args: list[str], log: Path, lock_path: Path, *,
                    wait: float = START_WAIT,
                    clock: Callable[[], float] = time.monotonic) -> Started:

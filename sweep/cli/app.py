@@ -187,10 +187,19 @@ def _parse_seeds(text: str | None) -> int | list[int] | None:
 def load(console: Console, path: Path, settings: list[str] | None, seeds: str | None,
          name: str | None, scheduler: str | None = None,
          workers: int | None = None) -> Campaign:
+    from ..collection import read_collection
     from ..errors import CampaignError
     from ..spec import Overrides, load_campaign
     from ..yaml_input import parse_assignments
 
+    try:
+        if read_collection(path) is not None:
+            error(console, f"{path} is a collection of campaigns (its campaigns: list): this "
+                  "command takes one of its campaign files; validate, run, status and stop "
+                  "take the collection")
+            raise typer.Exit(EXIT_BAD_INPUT)
+    except CampaignError:
+        pass  # its problems are the campaign reader's to report
     try:
         overrides = Overrides(settings=parse_assignments(settings or []),
                               seeds=_parse_seeds(seeds), name=name, scheduler=scheduler,

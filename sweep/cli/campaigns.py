@@ -39,6 +39,7 @@ from .app import (
     setup_logging,
     sigterm_as_interrupt,
 )
+from .collection import collection_or_none, refuse_name, run_collection, validate_collection
 from .products import regenerate_figures, regenerate_report, repair_products
 from .progress import ProgressEvents
 
@@ -59,6 +60,13 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
     """
     console = Console(highlight=False, soft_wrap=True, quiet=quiet)
     setup_logging(err_console(), verbose, quiet)
+    coll = collection_or_none(campaign)
+    if coll is not None:  # a collection of campaigns (sweep.collection): each, then the sum
+        refuse_name(name)
+        validate_collection(coll, validate, dict(
+            results=results, set_=set_, seeds=seeds, estimate=estimate, verbose=verbose,
+            quiet=quiet), console)
+        return
     c = load(err_console(), campaign, set_, seeds, name)
     console.print(f"[green]valid[/]: campaign [bold]{escape(c.name)}[/] ({escape(str(campaign))})")
     for d in c.dims:
@@ -172,6 +180,16 @@ def run(
 
     err = err_console()
     setup_logging(err, verbose, quiet, cluster=True)
+    coll = collection_or_none(campaign)
+    if coll is not None:  # a collection of campaigns (sweep.collection): one after the other
+        refuse_name(name)
+        run_collection(coll, run, dict(
+            results=results, set_=set_, seeds=seeds, scheduler=scheduler, workers=workers,
+            retry_failed=retry_failed, max_failures=max_failures, prune=prune,
+            check_files=check_files, check_files_alias=check_files_alias,
+            verification=verification, aggregate=aggregate, figures=figures,
+            dashboard=dashboard, dry_run=dry_run, detach=detach, verbose=verbose, quiet=quiet))
+        return
     c = load(err, campaign, set_, seeds, name, scheduler, workers)
     check_files = check_files or check_files_alias
     verification = verification and c.verify is not None

@@ -23,17 +23,13 @@ from .app import (
     load,
     setup_logging,
 )
-
-
-def detached_args(argv: list[str]) -> list[str]:
-    """The command line of the background driver: this one without ``--detach``."""
-    return [a for a in argv if a != "--detach"]
+from .collection import collection_or_none, stop_collection
 
 
 def run_detached(c: Campaign, results: Path, campaign: Path, quiet: bool) -> None:
     """``nematic run --detach``: start the driver in the background and say how to follow
     it; exits (0, or the driver's own code if it ended at once)."""
-    from ..detach import DRIVER_LOG, log_tail, start_detached
+    from ..detach import DRIVER_LOG, detached_args, log_tail, start_detached
     from ..store import CampaignStore, read_lock_holder
 
     err = err_console()
@@ -98,6 +94,11 @@ def stop(
     setup_logging(err, verbose, quiet)
     say = Console(highlight=False, soft_wrap=True, quiet=quiet)
     path = Path(campaign)
+    coll = collection_or_none(path) if path.is_file() else None
+    if coll is not None:  # a collection of campaigns: the driver of each member that has one
+        stop_collection(coll, stop, dict(results=results, timeout=timeout, verbose=verbose,
+                                         quiet=quiet))
+        return
     if path.is_file():
         name = load(err, path, None, None, None).name
     elif path.suffix in (".yaml", ".yml") or len(path.parts) > 1:

@@ -26,6 +26,7 @@ from .app import (
     setup_logging,
 )
 from .campaigns import report_changes
+from .collection import collection_or_none, refuse_name, status_collection
 
 
 @paused_gc()  # a short command (10^5 records: millions of objects): sweep.startup says why
@@ -54,6 +55,13 @@ def status(
 
     console = Console(highlight=False, soft_wrap=True)
     setup_logging(err_console(), verbose, quiet)
+    coll = collection_or_none(campaign)
+    if coll is not None:  # a collection of campaigns (sweep.collection): each in turn
+        refuse_name(name)
+        status_collection(coll, status, dict(results=results, set_=set_, seeds=seeds,
+                                             as_json=as_json, workers=workers,
+                                             verbose=verbose, quiet=quiet))
+        return
     c = load(err_console(), campaign, set_, seeds, name)
     store = CampaignStore(results, c.name)
     expansion = expansion_for(c, store)

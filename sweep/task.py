@@ -248,7 +248,9 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
     what each reported. A worker that cannot run it is left to fail in the environment
     check that follows."""
     hosts: dict[str, str] = {}
-    for addr, info in client.scheduler_info().get("workers", {}).items():
+    from .workforce import scheduler_workers
+
+    for addr, info in scheduler_workers(client).items():
         hosts.setdefault(str(info.get("host", addr)), addr)
     kinds = warm_kinds(expansion)
     token = uuid.uuid4().hex[:12]  # a shared scheduler may warm several campaigns at once

@@ -26,6 +26,7 @@ from sweep.workforce import (
     Supervisor,
     Workforce,
     last_worker_error,
+    scheduler_workers,
     window_size,
 )
 
@@ -136,8 +137,15 @@ class FakeClient:
         self.workers[addr] = {"nthreads": nthreads, "name": addr}
         self.answers[addr] = answer
 
-    def scheduler_info(self, n_workers: int = -1) -> dict:
-        return {"workers": dict(self.workers)}
+    @property
+    def scheduler(self) -> FakeClient:
+        return self
+
+    def identity(self, n_workers: int = 0) -> dict:
+        return {"workers": dict(self.workers) if n_workers else {}}
+
+    def sync(self, fn, **kwargs):
+        return fn(**kwargs)
 
     def run(self, fn, workers, on_error):
         return {a: self.answers[a] for a in workers if a in self.workers}
@@ -146,6 +154,21 @@ class FakeClient:
         self.retired += addrs
         for a in addrs:
             self.workers.pop(a, None)
+
+
+def test_the_workers_are_asked_of_the_scheduler_not_of_the_clients_cache():
+    """distributed's client refreshes its scheduler_info() cache without the workers every
+    2 s; that refresh can land between a scheduler_info(n_workers=-1) call's own refresh and
+    its return, and every worker would seem to have left. scheduler_workers asks the
+    scheduler: with the refresh every 5 ms, 3,000 calls all see both workers."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    with dask.config.set({"distributed.client.scheduler-info-interval": "5ms"}), \
+            LocalCluster(n_workers=2, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        seen = [len(scheduler_workers(client)) for _ in range(3000)]
+    assert set(seen) == {2}
 
 
 MINE = {"code_version": "1.0", "git_commit": "abc"}

@@ -27,7 +27,7 @@ with :math:`\omega = \tfrac12 (\partial_1 \dot u_2 - \partial_2 \dot u_1)` of th
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -45,7 +45,12 @@ class MechanicalState:
     ``Ebar_dev`` holds the two independent components ((E11 - E22)/2, E12) of the deviatoric
     part of :math:`\\bar E = \\tfrac12 (J^{-1} C - I)` (small strain: of e), ``Jm1`` is
     :math:`J - 1` as it enters :math:`B'` (small strain: tr e), ``trP`` is
-    :math:`P_{11} + P_{22}` (Eq. 5).
+    :math:`P_{11} + P_{22}` (Eq. 5). Finite strain also carries what the rate problem reuses:
+    ``tangent``, the packed (:func:`model.tensors.pack_symmetric`) tangent
+    :math:`\\mathbb K = \\partial P / \\partial F` of Newton's last step (at the iterate before
+    the solution; None where the guess needed no step, and in the states of
+    :meth:`~Mechanics.state_at`), and ``spin_coupling``, :math:`E = \\partial_Q P : (2 J q)`, once
+    :meth:`~Mechanics.corotational` computed it.
     """
 
     F: Array
@@ -56,7 +61,8 @@ class MechanicalState:
     u_hat: Array
     iterations: int = 0
     residual: float = 0.0
-    extras: dict = field(default_factory=dict)
+    tangent: Array | None = None
+    spin_coupling: Array | None = None
 
 
 def applied_deformation(eps: float) -> Array:

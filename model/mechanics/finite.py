@@ -202,7 +202,7 @@ class FiniteMechanics(Mechanics):
         Ebar_dev, Jm1, trP = self.k.strain_measures_kernel(np.ascontiguousarray(F),
                                                     np.ascontiguousarray(P))
         return MechanicalState(F=F, P=P, Ebar_dev=Ebar_dev, Jm1=Jm1, trP=trP, u_hat=u_hat,
-                               iterations=iterations, residual=residual, extras={"K": K})
+                               iterations=iterations, residual=residual, tangent=K)
 
     def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None,
                  F: Array | None = None) -> MechanicalState:
@@ -242,13 +242,13 @@ class FiniteMechanics(Mechanics):
         by GMRES (Green-preconditioned, warm-started). Returns ``(Qdot components, omega)``.
         """
         g, m = self.grid, self.moduli
-        K = mech.extras.get("K")
+        K = mech.tangent
         if K is None:
             K = self._tangent(mech.F, q1, q2)
-            mech.extras["K"] = K
+            mech.tangent = K
         F = np.ascontiguousarray(mech.F)
         E = self.k.q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, m.B, m.B_prime, m.alpha)
-        mech.extras["E"] = E
+        mech.spin_coupling = E
         dP = self.k.q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
                                        np.ascontiguousarray(R[1]), m.B, m.B_prime, m.alpha)
         b = self.k.div_hat_kernel(g.forward(dP), g.kx, g.ky)
@@ -274,10 +274,10 @@ class FiniteMechanics(Mechanics):
         m = self.moduli
         if mech is None:
             mech = self.solve(q1, q2)
-        K = mech.extras.get("K")
+        K = mech.tangent
         if K is None:
             K = self._tangent(mech.F, q1, q2)
-        E = mech.extras.get("E")
+        E = mech.spin_coupling
         if E is None:
             E = self.k.q_increment_kernel(np.ascontiguousarray(mech.F), q1, q2, -2.0 * q2, 2.0 * q1,
                                    m.B, m.B_prime, m.alpha)

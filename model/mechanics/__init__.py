@@ -15,6 +15,7 @@ module      what it holds
 from __future__ import annotations
 
 from ..fourier import SpectralGrid
+from ..parameters import Numerics, Parameters
 from .base import MechanicalState, Mechanics, applied_deformation
 from .finite import FiniteMechanics
 from .linear import LinearMechanics
@@ -23,7 +24,7 @@ __all__ = ["FiniteMechanics", "LinearMechanics", "MechanicalState", "Mechanics",
            "applied_deformation", "make_mechanics"]
 
 
-def make_mechanics(params, numerics, grid: SpectralGrid) -> Mechanics:
+def make_mechanics(params: Parameters, numerics: Numerics, grid: SpectralGrid) -> Mechanics:
     """The mechanics ``numerics.mechanics`` names, with its tolerances and backend."""
     if numerics.mechanics == "linear":
         return LinearMechanics(params, grid, incompressible=numerics.incompressible,

@@ -27,6 +27,7 @@ with :math:`\omega = \tfrac12 (\partial_1 \dot u_2 - \partial_2 \dot u_1)` of th
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +35,7 @@ import numpy as np
 from .. import constitutive as cl
 from ..backend import kernels
 from ..fourier import SpectralGrid
+from ..parameters import Parameters
 
 Array = np.ndarray
 
@@ -70,7 +72,7 @@ def applied_deformation(eps: float) -> Array:
     return np.array([[1.0 + eps, 0.0], [0.0, 1.0 - eps]])
 
 
-class Mechanics:
+class Mechanics(ABC):
     """The interface the solver and the PDE call; the base of both mechanics.
 
     ``backend`` ("compiled" or "numpy", from ``Numerics.backend``) chooses the compiled
@@ -92,7 +94,7 @@ class Mechanics:
     #: the real-space gradient (2, 2, N, N) of :attr:`udot_hat`
     udot_grad: Array
 
-    def __init__(self, params, grid: SpectralGrid, *, spin_tol: float = 1e-8,
+    def __init__(self, params: Parameters, grid: SpectralGrid, *, spin_tol: float = 1e-8,
                  backend: str = "compiled"):
         self.params = params
         self.grid = grid
@@ -117,12 +119,12 @@ class Mechanics:
         self._inv_k2 = np.where(g.active, 1.0 / np.where(g.active, g.kd2, 1.0), 0.0)
         self._khat = kh
 
-    # --- the interface (the defaults: a mechanics without a warm start) ----------------
+    # --- the interface (abstract, or the defaults of a mechanics without a warm start) -
+    @abstractmethod
     def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
               t: float | None = None, F_guess: Array | None = None) -> MechanicalState:
         """The mechanical state in force balance (Eq. 3) for the order q1, q2 (``u_guess``: a
         start for an iterative solve, ``F_guess`` its deformation gradient if known)."""
-        raise NotImplementedError
 
     def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None,
                  F: Array | None = None) -> MechanicalState:
@@ -135,25 +137,25 @@ class Mechanics:
         :attr:`integrated`)."""
         raise ValueError(f"{type(self).__name__} does not integrate the displacement")
 
+    @abstractmethod
     def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
                      t: float | None = None) -> tuple[Array, Array]:
         """``(Qdot components, omega)``: :math:`\\dot Q = R + 2 \\omega J q` with the spin
         slaved to :math:`\\dot Q` (Eq. 4)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None
                     ) -> tuple[float, int, float]:
         """The well-posedness margin of the rate problem, its flat grid index and the
         wave-vector angle of the minimum (:mod:`model.wellposedness`)."""
-        raise NotImplementedError
 
-    def checkpoint(self) -> None:
+    def checkpoint(self) -> None:  # noqa: B027 (no warm start: nothing to do)
         """Remember the warm start (displacement and its rate) at the start of a step."""
 
-    def restore(self) -> None:
+    def restore(self) -> None:  # noqa: B027 (no warm start: nothing to do)
         """Put the warm start of the last :meth:`checkpoint` back (a rejected step)."""
 
-    def predict(self, dt: float) -> None:
+    def predict(self, dt: float) -> None:  # noqa: B027 (no warm start: nothing to do)
         """Move Newton's warm start ``dt`` ahead along the displacement rate."""
 
     # --- shared helpers ----------------------------------------------------------------

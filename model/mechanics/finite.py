@@ -19,6 +19,7 @@ from .. import wellposedness as wp
 from ..compiled import finite_krylov
 from ..errors import SimulationFailure
 from ..fourier import SpectralGrid
+from ..parameters import Parameters
 from .base import MechanicalState, Mechanics
 
 Array = np.ndarray
@@ -27,9 +28,9 @@ Array = np.ndarray
 class FiniteMechanics(Mechanics):
     """Finite-strain force balance by Newton-Krylov (see the module docstring)."""
 
-    def __init__(self, params, grid: SpectralGrid, *, tol: float = 1e-8, max_newton: int = 30,
-                 cg_rtol: float = 0.1, max_cg: int = 200, spin_tol: float = 1e-8,
-                 backend: str = "compiled", integrated: bool = True):
+    def __init__(self, params: Parameters, grid: SpectralGrid, *, tol: float = 1e-8,
+                 max_newton: int = 30, cg_rtol: float = 0.1, max_cg: int = 200,
+                 spin_tol: float = 1e-8, backend: str = "compiled", integrated: bool = True):
         super().__init__(params, grid, spin_tol=spin_tol, backend=backend)
         self.integrated = integrated
         self.tol = tol

@@ -13,6 +13,7 @@ from .. import tensors as T
 from .. import wellposedness as wp
 from ..errors import SimulationFailure
 from ..fourier import SpectralGrid
+from ..parameters import Parameters
 from .base import MechanicalState, Mechanics
 
 Array = np.ndarray
@@ -33,7 +34,7 @@ class LinearMechanics(Mechanics):
     variants).
     """
 
-    def __init__(self, params, grid: SpectralGrid, *, incompressible: bool = False,
+    def __init__(self, params: Parameters, grid: SpectralGrid, *, incompressible: bool = False,
                  spin_tol: float = 1e-8, backend: str = "compiled"):
         super().__init__(params, grid, spin_tol=spin_tol, backend=backend)
         self.incompressible = incompressible

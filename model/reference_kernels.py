@@ -1,5 +1,6 @@
 r"""The numpy twins of the compiled kernels: the same names and signatures as
-:mod:`model.compiled.kernels`, written as array expressions over the readable references
+:mod:`model.compiled.kernels` (the interface :class:`model.backend.Kernels`, which the type
+checker compares this module with), written as array expressions over the readable references
 (:mod:`model.constitutive`, :mod:`model.wellposedness`, :func:`phi_functions`).
 ``Numerics.backend = "numpy"`` runs these (:func:`model.backend.kernels`); the tests check that
 each pair agrees (``tests/test_model_constitutive.py``).

@@ -1,6 +1,7 @@
 """The shape of the code, read from the source with ``ast``: the imports inside ``sweep/``
 form no cycle, ``model/`` never imports ``sweep``, ``sweep/`` loads no module through
-``importlib``, and no file of ``sweep/`` is longer than :data:`MAX_LINES` lines."""
+``importlib``, and no file of ``model/`` or ``sweep/`` is longer than :data:`MAX_LINES`
+lines."""
 
 from __future__ import annotations
 
@@ -94,10 +95,23 @@ def test_sweep_uses_no_importlib() -> None:
     assert not bad, f"importlib in {bad}: import modules by name, in plain sight"
 
 
-def test_sweep_files_are_short() -> None:
-    long = {str(f.relative_to(ROOT)): n for f in (ROOT / "sweep").rglob("*.py")
+def long_files(package: str, root: Path = ROOT) -> dict[str, int]:
+    """The files of ``package`` longer than :data:`MAX_LINES` lines, with their lengths."""
+    return {str(f.relative_to(root)): n for f in sorted((root / package).rglob("*.py"))
             if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+
+
+@pytest.mark.parametrize("package", ["model", "sweep"])
+def test_files_are_short(package: str) -> None:
+    long = long_files(package)
     assert not long, f"files over {MAX_LINES} lines (split them by concept): {long}"
+
+
+def test_the_length_check_finds_long_files(tmp_path: Path) -> None:
+    (tmp_path / "model" / "compiled").mkdir(parents=True)
+    (tmp_path / "model" / "short.py").write_text("x = 1\n" * MAX_LINES)
+    (tmp_path / "model" / "compiled" / "long.py").write_text("x = 1\n" * (MAX_LINES + 1))
+    assert long_files("model", tmp_path) == {"model/compiled/long.py": MAX_LINES + 1}
 
 
 def test_the_cycle_finder_finds_cycles() -> None:

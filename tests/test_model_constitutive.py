@@ -99,17 +99,29 @@ def test_rotation_invariance_of_energy(rng):
 
 
 def test_every_compiled_kernel_has_a_numpy_twin_with_its_signature():
-    """model.backend swaps the two kernel modules: the same names, the same parameters."""
+    """model.backend swaps the two kernel modules: both export the members of the Kernels
+    interface and nothing else, each with the interface's parameters (the type checker
+    compares the numpy twins' types with it; the numba functions it cannot see)."""
     import inspect
 
     from model import reference_kernels as twin
+    from model.backend import Kernels, kernels
     from model.compiled import kernels as kern
 
-    assert sorted(kern.__all__) == sorted(twin.__all__)
-    for name in kern.__all__:
+    members = sorted(n for n, v in vars(Kernels).items()
+                     if inspect.isfunction(v) and not n.startswith("_"))
+    assert len(members) == 24
+    assert sorted(kern.__all__) == sorted(twin.__all__) == members
+    for name in members:
+        wanted = list(inspect.signature(getattr(Kernels, name)).parameters)[1:]  # not self
         compiled = getattr(kern, name)
         params = inspect.signature(getattr(compiled, "py_func", compiled)).parameters
-        assert list(params) == list(inspect.signature(getattr(twin, name)).parameters), name
+        assert list(params) == wanted, name
+        assert list(inspect.signature(getattr(twin, name)).parameters) == wanted, name
+    assert kernels("compiled") is kern
+    assert kernels("numpy") is twin
+    with pytest.raises(ValueError, match="unknown backend"):
+        kernels("cuda")
 
 
 def test_numba_tangent_kernel_matches_numpy_reference(rng):

@@ -146,3 +146,31 @@ def test_rate_solve_returns_the_gradient_of_its_solution(grid, rng, backend):
         np.testing.assert_allclose(fm.udot_grad, G, rtol=0, atol=1e-12 * scale)
         np.testing.assert_allclose(omega, 0.5 * (G[1, 0] - G[0, 1]), rtol=0,
                                    atol=1e-12 * scale)
+
+
+def test_finite_state_carries_what_the_rate_problem_reuses(grid, rng):
+    """A Newton solve leaves its last step's tangent on the state, the rate solve the spin
+    coupling E; the margin reuses both: the same as the margin of a state without them whose
+    tangent is the one carried (E is recomputed at the same F)."""
+    from dataclasses import replace
+
+    from model import tensors as T
+    from model.constitutive import Moduli, tangent
+
+    p = Parameters(alpha=1.8, eps=0.03, B_prime=0.1)
+    q1, q2 = 0.3 * _band_limited(grid, rng, 1.0)
+    fm = FiniteMechanics(p, grid)
+    mech = fm.solve(q1, q2)
+    assert mech.iterations >= 1
+    assert mech.tangent is not None
+    assert mech.spin_coupling is None
+    assert mech.tangent.shape == (10, N, N)  # packed
+    fresh = T.pack_symmetric(tangent(mech.F, T.nematic(q1, q2), Moduli.from_params(p)))
+    assert not np.allclose(mech.tangent, fresh, rtol=0, atol=1e-12)  # the iterate before
+    np.testing.assert_allclose(mech.tangent, fresh, rtol=0, atol=1e-3)
+    fm.corotational(mech, q1, q2, _band_limited(grid, np.random.default_rng(5), 1.0))
+    assert mech.spin_coupling is not None
+    assert mech.spin_coupling.shape == (2, 2, N, N)
+    assert fm.rate_margin(q1, q2, mech) == fm.rate_margin(
+        q1, q2, replace(mech, spin_coupling=None))
+    assert fm.solve(q1, q2).tangent is None  # converged guess: no Newton step

@@ -150,12 +150,24 @@ class LimitsSpec:
     run_memory: int | None = None
 
 
+#: The run scalar of sigma2_S, the pattern class's measure (``patterned_above``).
+PATTERN_SOURCE = "sigma2_S_final"
 #: Defaults of the ``refine:`` section (an adaptive campaign, :mod:`sweep.refine`).
 DEFAULT_ROUNDS = 4
 DEFAULT_FRACTION = (0.1, 0.9)
 DEFAULT_JUMP = 10.0
 DEFAULT_MAX_WIDTH = 0.6
 DEFAULT_CONFIDENCE = 0.9
+
+
+@dataclass(frozen=True)
+class Threshold:
+    """One part of a run's class: whether ``observable`` (read from the run scalar
+    ``source``) is above ``above``."""
+
+    observable: str
+    source: str
+    above: float
 
 
 @dataclass(frozen=True)
@@ -197,9 +209,10 @@ class PrecisionSpec:
     Every point gets the campaign's first ``initial`` seeds, then the next ``add`` per round
     until its decision is taken: ``precise`` (the ``confidence`` Student-t interval of the
     seed mean of ``observable`` is narrower than ``width``, relative to |mean| when
-    ``relative``), ``unanimous`` (at least ``unanimous`` seeds, all of one pattern class:
-    ``sigma2_S`` above ``patterned_above`` or not) or ``cap`` (every seed of the campaign
-    run). ``width`` or ``unanimous`` may be ``None`` (that rule is off)."""
+    ``relative``), ``unanimous`` (at least ``unanimous`` seeds, all of one class: ``sigma2_S``
+    above ``patterned_above`` or not, or the tuple of ``classes``' thresholds each run is
+    above) or ``cap`` (every seed of the campaign run). ``width`` or ``unanimous`` may be
+    ``None`` (that rule is off)."""
 
     observable: str
     source: str
@@ -210,11 +223,23 @@ class PrecisionSpec:
     patterned_above: float | None = None
     initial: int = 4
     add: int = 4
+    #: the class from several observables (``classes:``), instead of ``patterned_above``
+    classes: tuple[Threshold, ...] = ()
+
+    @property
+    def thresholds(self) -> tuple[Threshold, ...]:
+        """What a run's class is made of (none without the unanimity rule)."""
+        if self.classes:
+            return self.classes
+        if self.patterned_above is None:
+            return ()
+        return (Threshold("sigma2_S", PATTERN_SOURCE, self.patterned_above),)
 
     def to_dict(self) -> dict[str, Any]:
         return {"observable": self.observable, "source": self.source, "width": self.width,
                 "relative": self.relative, "confidence": self.confidence,
                 "unanimous": self.unanimous, "patterned_above": self.patterned_above,
+                "classes": {t.observable: t.above for t in self.classes},
                 "initial": self.initial, "add": self.add}
 
 

@@ -10,6 +10,8 @@
       confidence: 0.95          # of that interval (Student-t)
       unanimous: 4              # or: at least this many seeds, all of one pattern class
       patterned_above: 1.0e-6   # the class: sigma2_S above this (needed by unanimous)
+      # classes: {sigma2_S: 1.0e-6, cos2theta: 0.5}   # or: the class from several
+                                #   observables (which of these thresholds a run is above)
       initial: 4                # seeds every point starts with
       add: 4                    # seeds added per round to an undecided point
 
@@ -24,10 +26,10 @@ from typing import Any
 
 from ..campaign import PrecisionSpec
 from ..checker import Checker, is_finite_number, is_int, suggest
-from ..refine.config import observable_sources
+from ..refine.config import observable_sources, read_classes
 
 KEYS = ("observable", "width", "relative", "confidence", "unanimous", "patterned_above",
-        "initial", "add")
+        "classes", "initial", "add")
 
 
 def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSpec | None:
@@ -73,9 +75,14 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
               "campaign's seeds): the fewest seeds that stop a point when they all share "
               "the pattern class")
     patterned = sec.get("patterned_above")
-    if unanimous is not None and patterned is None:
+    classes = read_classes(c, (*path, "classes"), sec["classes"]) if "classes" in sec else ()
+    if patterned is not None and "classes" in sec:
+        c.add((*path, "patterned_above"), "not with classes: (each observable of classes has "
+              "its threshold); remove one of the two")
+    elif unanimous is not None and patterned is None and "classes" not in sec:
         c.add((*path, "patterned_above"), "missing; allowed: a number (a run's pattern class "
-              "is sigma2_S above it); needed by unanimous")
+              "is sigma2_S above it; or classes: for several observables); needed by "
+              "unanimous")
     elif patterned is not None and not is_finite_number(patterned):
         c.bad((*path, "patterned_above"), patterned, "a finite number")
     if width is None and unanimous is None:
@@ -97,4 +104,4 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
         width=None if width is None else float(width), relative=relative,
         confidence=float(confidence), unanimous=unanimous,
         patterned_above=None if patterned is None else float(patterned),
-        initial=int(initial), add=int(add))
+        initial=int(initial), add=int(add), classes=classes or ())

@@ -44,8 +44,9 @@ from ..campaign import (
     DEFAULT_ROUNDS,
     Dim,
     RefineSpec,
+    Threshold,
 )
-from ..checker import Checker, is_finite_number, is_int, suggest
+from ..checker import Checker, KeyPath, is_finite_number, is_int, suggest
 
 KEYS = ("axis", "observable", "criterion", "patterned_above", "fraction", "jump", "rounds",
         "min_spacing", "seeds")
@@ -65,6 +66,32 @@ def observable_sources() -> dict[str, str]:
     out.update({src: src for src in list(out.values())})
     out[GROWTH] = GROWTH
     return out
+
+
+def read_classes(c: Checker, path: KeyPath, raw: Any) -> tuple[Threshold, ...] | None:
+    """A ``classes:`` mapping (observable -> threshold) as thresholds, in the order written;
+    ``None`` (problems added to ``c``) when it is not one."""
+    sources = observable_sources()
+    if not isinstance(raw, Mapping) or not raw:
+        c.bad(path, raw, "a mapping observable -> threshold (a run's class is which "
+              "thresholds it is above), e.g. {sigma2_S: 1.0e-6, cos2theta: 0.5}")
+        return None
+    out: list[Threshold] = []
+    ok = True
+    for name, above in raw.items():
+        if not isinstance(name, str) or name not in sources:
+            c.bad((*path, str(name)), name, "an observable: one of " + ", ".join(sorted(sources))
+                  + (suggest(name, list(sources)) if isinstance(name, str) else ""))
+            ok = False
+        elif not is_finite_number(above):
+            c.bad((*path, name), above, "a finite number (the run is above it or not)")
+            ok = False
+        else:
+            out.append(Threshold(name, sources[name], float(above)))
+    if ok and len({t.source for t in out}) < len(out):
+        c.bad(path, dict(raw), "each observable once (a name and its run scalar are one)")
+        ok = False
+    return tuple(out) if ok else None
 
 
 def read_refine(c: Checker, raw: Any, read: Mapping[str, Any]) -> RefineSpec | None:

@@ -89,13 +89,19 @@ def test_precision_mistakes_are_reported_with_file_line_and_key_path(section, wo
         assert w in found[0], (w, found[0])
 
 
-def test_precision_and_refine_are_exclusive():
+def test_precision_combines_with_refine_whose_seeds_it_decides():
     text = BASE + textwrap.dedent("""\
         refine: {axis: alpha_minus_B, patterned_above: 0.0, min_spacing: 0.01}
-        precision: {observable: sigma2_S, width: 0.1}
+        precision: {observable: sigma2_S, width: 0.1, initial: 3, add: 2}
         """)
-    found = problems(text)
-    assert any("precision" in p and "cannot be combined with refine" in p for p in found), found
+    c = parse_campaign(text, "c.yaml")
+    assert c.refine is not None
+    assert c.precision is not None
+    assert (c.refine.initial, c.refine.add) == (3, 2)
+    found = problems(text.replace("min_spacing: 0.01}", "min_spacing: 0.01, seeds: {add: 1}}"))
+    assert len(found) == 1, found
+    assert "refine.seeds" in found[0]
+    assert "not with a precision: section" in found[0]
 
 
 def test_the_class_from_several_observables():

@@ -15,8 +15,8 @@
       initial: 4                # seeds every point starts with
       add: 4                    # seeds added per round to an undecided point
 
-``width`` or ``unanimous`` (or both) must be given. The section cannot be combined with
-``refine:`` (whose ``seeds:`` are sequential already).
+``width`` or ``unanimous`` (or both) must be given. With a ``refine:`` section the same rules
+decide the seeds of every point, grid and refined (:mod:`sweep.refine.seeds`).
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ KEYS = ("observable", "width", "relative", "confidence", "unanimous", "patterned
 
 def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSpec | None:
     """The reader of the ``precision:`` section (a row of :data:`sweep.spec.SECTIONS`): needs
-    the ``seeds`` and ``refine`` sections read before it. ``None`` when there is none (or it
-    has problems, which are added to ``c``)."""
+    the ``seeds`` section read before it. ``None`` when there is none (or it has problems,
+    which are added to ``c``)."""
     if raw is None:
         return None
     path: tuple[str | int, ...] = ("precision",)
@@ -44,9 +44,6 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
         return None
     sec = c.mapping(path, raw, KEYS)
     before = len(c.problems)
-    if read.get("refine") is not None:
-        c.add(path, "cannot be combined with refine: (an adaptive campaign adds seeds with "
-              "refine.seeds); remove one of the two sections")
     n_seeds = len(read.get("seeds") or ())
 
     observable = sec.get("observable")

@@ -565,3 +565,31 @@ def test_a_real_campaign_refined_over_two_axes_with_seeds_by_precision(tmp_path)
     assert "decisions: 0 precise, " in status.output
     js = json.loads(invoke("status", path, "--results", results, "--json").output)
     assert js["refine"]["finished"]
+
+
+# --------------------------------------------------------------------------- the campaign file
+FIG4_ADAPTIVE = ROOT / "campaigns" / "fig4_adaptive.yaml"
+
+
+def test_the_fig4_adaptive_campaign_validates_and_shares_fig4s_runs():
+    from sweep.expand import expand
+    from sweep.refine.rounds import RunNamer
+    from sweep.spec import load_campaign
+
+    result = invoke("validate", FIG4_ADAPTIVE)
+    assert result.exit_code == 0, result.output
+    text = flat(result.output)
+    assert "refine chi, K, eps: a run's class is which of sigma2_S > 1e-06, cos2theta > 0.5 " \
+        "hold" in text
+    assert "round 0 (the grid): 27 points x 4 seed(s) = 108 runs" in text
+    c = load_campaign(FIG4_ADAPTIVE)
+    assert c.refine is not None
+    assert c.precision is not None
+    assert c.precision.thresholds == c.refine.thresholds  # one class (a YAML alias)
+    # the first halving of each axis gives campaigns/fig4.yaml's values: the same runs
+    full = expand(load_campaign(ROOT / "campaigns" / "fig4.yaml"))
+    namer = RunNamer(c)
+    for chi, k, eps in ((2.5, 1e-5, 0.025), (0.0, 1e-3, 0.0), (10.0, 1e-6, 0.1)):
+        for seed in (0, 3):
+            run = full.run(full.position[namer.run_id((), (chi, k, eps), seed)])
+            assert run.coords == {"chi": chi, "K": k, "eps": eps, "seed": seed}

@@ -593,3 +593,24 @@ def test_the_fig4_adaptive_campaign_validates_and_shares_fig4s_runs():
         for seed in (0, 3):
             run = full.run(full.position[namer.run_id((), (chi, k, eps), seed)])
             assert run.coords == {"chi": chi, "K": k, "eps": eps, "seed": seed}
+
+
+def test_runs_a_refinement_over_several_axes_can_plan_are_not_orphaned(tmp_path):
+    from sweep.changes import run_counts
+    from sweep.refine.rounds import RunNamer, expansion_for
+
+    c = parse_campaign(PRECISE, "p.yaml")
+    store = CampaignStore(tmp_path / "results", "precise")
+    store.runs_dir.mkdir(parents=True)
+    namer = RunNamer(c)
+    inside = namer.run_id((), (5.5, 0.35), 7)   # refined along both axes, a later seed
+    outside = namer.run_id((), (5.5, 0.45), 1)  # beyond eps's grid
+    for rid, chi, eps, seed in ((inside, 5.5, 0.35, 7), (outside, 5.5, 0.45, 1)):
+        store.write_record({"run_id": rid, "status": "failed", "reason": "nan",
+                            "nc_bytes": None, "seed": seed, "scalars": {},
+                            "coords": {"chi": chi, "eps": eps}})
+    expansion = expansion_for(c, store)
+    assert inside not in expansion.position
+    counts = run_counts(c, expansion, store, store.scan())
+    assert counts.orphaned == [outside]
+    assert counts.new == 6 * 4  # round 0: 2 chi x 3 eps x the first 4 seeds

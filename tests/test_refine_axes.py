@@ -25,6 +25,7 @@ from sweep.cli import app
 from sweep.errors import CampaignError
 from sweep.files import file_stamp
 from sweep.refine.plan import first_round, next_round, points_of, run_bound, values_at
+from sweep.refine.report import validation_lines
 from sweep.refine.rounds import read_plan, replay
 from sweep.refine.seeds import decision
 from sweep.spec import parse_campaign
@@ -317,6 +318,14 @@ def test_the_class_from_two_observables():
     assert by_x[0.3] == ("uncertain: 2/2 sigma2_S > 1e-06, 1/2 cos2theta > 0.5, interval "
                          "0.76 wider than 0.6", [2, 3])
     assert by_x[0.25][0].startswith("boundary: eps 0.2 (")
+    # one observable in classes: is observable + patterned_above
+    one = parse_campaign(LINE.replace("{sigma2_S: 1.0e-6, cos2theta: 0.5}", "{cos2theta: 0.5}"),
+                         "l.yaml")
+    assert "refine eps: patterned when cos2theta > 0.5; a point is mixed" in flat(
+        "\n".join(validation_lines(one)))
+    assert next_round(one, 1, outcomes) == next_round(parse_campaign(LINE.replace(
+        "classes: {sigma2_S: 1.0e-6, cos2theta: 0.5}",
+        "observable: cos2theta\n  patterned_above: 0.5"), "l.yaml"), 1, outcomes)
     # a run without one of the two values is not classified
     outcomes[((), 0.1)] = {0: row(1e-2, math.nan), 1: row(math.nan, 0.9)}
     assert {r.x for r in next_round(c, 1, outcomes).runs if r.why.startswith("bound")} == {

@@ -38,9 +38,9 @@ def spec_line(campaign: Campaign) -> str:
     assert spec is not None
     thresholds = spec.thresholds
     if spec.criterion == "fraction" and len(thresholds) == 1:
-        rule = (f"patterned when {spec.observable} > {spec.patterned_above:g}; a point is mixed "
-                f"when its patterned fraction lies in ({spec.fraction[0]:g}, "
-                f"{spec.fraction[1]:g})")
+        one = thresholds[0]
+        rule = (f"patterned when {one.observable} > {one.above:g}; a point is mixed when its "
+                f"patterned fraction lies in ({spec.fraction[0]:g}, {spec.fraction[1]:g})")
     elif spec.criterion == "fraction":
         rule = ("a run's class is which of " + ", ".join(f"{t.observable} > {t.above:g}"
                                                          for t in thresholds)

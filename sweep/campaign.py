@@ -150,6 +150,8 @@ class LimitsSpec:
     run_memory: int | None = None
 
 
+#: The run scalar of sigma2_S, the pattern class's measure (``patterned_above``).
+PATTERN_SOURCE = "sigma2_S_final"
 #: Defaults of the ``refine:`` section (an adaptive campaign, :mod:`sweep.refine`).
 DEFAULT_ROUNDS = 4
 DEFAULT_FRACTION = (0.1, 0.9)
@@ -159,33 +161,93 @@ DEFAULT_CONFIDENCE = 0.9
 
 
 @dataclass(frozen=True)
+class RefinedAxis:
+    """One refined axis of a ``refine:`` section: a cell is split only while both halves are
+    at least ``min_spacing`` wide; on a ``log`` axis the midpoint is geometric and the
+    spacing is in decades."""
+
+    name: str
+    min_spacing: float
+    log: bool = False
+
+
+@dataclass(frozen=True)
+class Threshold:
+    """One part of a run's class: whether ``observable`` (read from the run scalar
+    ``source``) is above ``above``."""
+
+    observable: str
+    source: str
+    above: float
+
+
+@dataclass(frozen=True)
 class RefineSpec:
     """A validated ``refine:`` section (:mod:`sweep.refine.config`).
 
-    ``source`` is the run scalar the observable is read from (``sigma2_S_final`` for
-    ``sigma2_S``), or ``growth``. ``initial`` / ``add`` are seed counts: a point gets the
-    campaign's first ``initial`` seeds, then ``add`` more per round while it is uncertain, up
-    to all of the campaign's seeds."""
+    ``axes`` are the refined axes in the campaign's order of dims. ``source`` is the run
+    scalar ``observable`` is read from (``sigma2_S_final`` for ``sigma2_S``), or ``growth``;
+    with ``classes`` (several observables) they are the first class's. ``initial`` / ``add``
+    are seed counts: a point gets the campaign's first ``initial`` seeds, then ``add`` more
+    per round while it is uncertain, up to all of the campaign's seeds (with a
+    ``precision:`` section its rules decide the seeds instead)."""
 
-    axis: str
+    axes: tuple[RefinedAxis, ...]
     observable: str
     source: str
     criterion: str = "fraction"
     patterned_above: float | None = None
+    #: criterion fraction over several observables (``classes:``); empty: ``observable``
+    #: above ``patterned_above``
+    classes: tuple[Threshold, ...] = ()
     fraction: tuple[float, float] = DEFAULT_FRACTION
     jump: float = DEFAULT_JUMP
     rounds: int = DEFAULT_ROUNDS
-    min_spacing: float = 0.0
     initial: int = 1
     add: int = 1
     max_width: float = DEFAULT_MAX_WIDTH
     confidence: float = DEFAULT_CONFIDENCE
 
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(a.name for a in self.axes)
+
+    @property
+    def axis(self) -> str:
+        """The refined axis of a section that refines one (``ValueError`` for several)."""
+        return self._one().name
+
+    @property
+    def min_spacing(self) -> float:
+        """The smallest spacing of a section that refines one axis."""
+        return self._one().min_spacing
+
+    def _one(self) -> RefinedAxis:
+        if len(self.axes) != 1:
+            raise ValueError(f"refine: {', '.join(self.names)} are refined, not one axis")
+        return self.axes[0]
+
+    @property
+    def thresholds(self) -> tuple[Threshold, ...]:
+        """What a run's class is made of (criterion fraction; none for jump)."""
+        if self.criterion != "fraction":
+            return ()
+        if self.classes:
+            return self.classes
+        assert self.patterned_above is not None
+        return (Threshold(self.observable, self.source, self.patterned_above),)
+
     def to_dict(self) -> dict[str, Any]:
-        return {"axis": self.axis, "observable": self.observable, "source": self.source,
+        spacing: float | dict[str, float] = (
+            self.axes[0].min_spacing if len(self.axes) == 1
+            else {a.name: a.min_spacing for a in self.axes})
+        return {"axis": self.axes[0].name if len(self.axes) == 1 else None,
+                "axes": list(self.names), "log": [a.name for a in self.axes if a.log],
+                "observable": self.observable, "source": self.source,
                 "criterion": self.criterion, "patterned_above": self.patterned_above,
+                "classes": {t.observable: t.above for t in self.classes},
                 "fraction": list(self.fraction), "jump": self.jump, "rounds": self.rounds,
-                "min_spacing": self.min_spacing,
+                "min_spacing": spacing,
                 "seeds": {"initial": self.initial, "add": self.add,
                           "max_width": self.max_width, "confidence": self.confidence}}
 
@@ -197,9 +259,10 @@ class PrecisionSpec:
     Every point gets the campaign's first ``initial`` seeds, then the next ``add`` per round
     until its decision is taken: ``precise`` (the ``confidence`` Student-t interval of the
     seed mean of ``observable`` is narrower than ``width``, relative to |mean| when
-    ``relative``), ``unanimous`` (at least ``unanimous`` seeds, all of one pattern class:
-    ``sigma2_S`` above ``patterned_above`` or not) or ``cap`` (every seed of the campaign
-    run). ``width`` or ``unanimous`` may be ``None`` (that rule is off)."""
+    ``relative``), ``unanimous`` (at least ``unanimous`` seeds, all of one class: ``sigma2_S``
+    above ``patterned_above`` or not, or the tuple of ``classes``' thresholds each run is
+    above) or ``cap`` (every seed of the campaign run). ``width`` or ``unanimous`` may be
+    ``None`` (that rule is off)."""
 
     observable: str
     source: str
@@ -210,11 +273,23 @@ class PrecisionSpec:
     patterned_above: float | None = None
     initial: int = 4
     add: int = 4
+    #: the class from several observables (``classes:``), instead of ``patterned_above``
+    classes: tuple[Threshold, ...] = ()
+
+    @property
+    def thresholds(self) -> tuple[Threshold, ...]:
+        """What a run's class is made of (none without the unanimity rule)."""
+        if self.classes:
+            return self.classes
+        if self.patterned_above is None:
+            return ()
+        return (Threshold("sigma2_S", PATTERN_SOURCE, self.patterned_above),)
 
     def to_dict(self) -> dict[str, Any]:
         return {"observable": self.observable, "source": self.source, "width": self.width,
                 "relative": self.relative, "confidence": self.confidence,
                 "unanimous": self.unanimous, "patterned_above": self.patterned_above,
+                "classes": {t.observable: t.above for t in self.classes},
                 "initial": self.initial, "add": self.add}
 
 

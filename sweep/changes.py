@@ -6,7 +6,7 @@ plan them). ``nematic run --prune`` removes the orphaned runs (:func:`prune`).
 
 An adaptive campaign (``refine:``) plans its runs round by round: a run in the folder is not
 orphaned when the current campaign could plan it in some round, that is when it is a run of
-the campaign's grid with its refined axis at any value between the axis's first and last
+the campaign's grid with each refined axis at any value between the axis's first and last
 grid values (same run id: the other swept values on the grid, the base parameters and
 numerics, one of the seeds), whether the replayed rounds have planned it yet or not.
 """
@@ -132,22 +132,23 @@ def describe_changes(old: Campaign, new: Campaign) -> list[str]:
 
 def _reachable(campaign: Campaign, run_id: str, record: Mapping[str, Any] | None) -> bool:
     """Whether an adaptive campaign could plan ``run_id`` (module doc) from its record."""
-    from .refine.plan import refined_dim
+    from .refine.plan import point_at, refined_dims
     from .refine.rounds import RunNamer
 
     coords = (record or {}).get("coords")
     seed = (record or {}).get("seed")
-    assert campaign.refine is not None
     if not isinstance(coords, Mapping) or seed not in campaign.seeds:
         return False
-    k = refined_dim(campaign)
-    grid = campaign.dims[k].axes[0].values
-    x = coords.get(campaign.refine.axis)
-    if not isinstance(x, (int, float)) or not min(grid) <= x <= max(grid):
-        return False
+    ks = refined_dims(campaign)
+    refined: list[float] = []
     line = []
     for i, d in enumerate(campaign.dims):
-        if i == k:
+        if i in ks:
+            grid = d.axes[0].values
+            x = coords.get(d.name)
+            if not isinstance(x, (int, float)) or not min(grid) <= x <= max(grid):
+                return False
+            refined.append(float(x))
             continue
         matches = [j for j in range(len(d))
                    if all(coords.get(a.name) == a.values[j] for a in d.axes)]
@@ -155,7 +156,7 @@ def _reachable(campaign: Campaign, run_id: str, record: Mapping[str, Any] | None
             return False
         line.append(matches[0])
     try:
-        return RunNamer(campaign).run_id(tuple(line), float(x), int(seed)) == run_id
+        return RunNamer(campaign).run_id(tuple(line), point_at(refined), int(seed)) == run_id
     except (ValueError, TypeError, ArithmeticError):
         return False
 

@@ -373,13 +373,19 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
 
 def later_rounds(campaign: Campaign, current: int, planned: int, per_run: Sequence[float],
                  workers: int) -> LaterRounds | None:
-    """A bound on an adaptive campaign's rounds after ``current``: every run
-    :func:`~sweep.refine.plan.run_bound` allows beyond the ``planned`` ones, each at the
-    mean cost of the campaign's runs; each round ends when its longest run does."""
+    """A bound on an adaptive campaign's rounds after ``current`` (with seeds by precision,
+    the rounds that only add seeds too): every run :func:`~sweep.refine.plan.run_bound`
+    allows beyond the ``planned`` ones, each at the mean cost of the campaign's runs; each
+    round ends when its longest run does."""
     from .refine.plan import run_bound
 
     assert campaign.refine is not None
-    rounds = campaign.refine.rounds - current
+    last = campaign.refine.rounds
+    if campaign.precision is not None:  # rounds that only add seeds follow
+        from .precision.decide import rounds_bound
+
+        last += rounds_bound(campaign.precision, len(campaign.seeds)) - 1
+    rounds = last - current
     runs = max(0, run_bound(campaign) - planned)
     if rounds <= 0 or runs == 0 or not per_run:
         return None

@@ -23,6 +23,7 @@ The schema (documented for users in ``docs/campaigns.md``)::
       scheduler: tcp://host:8786    # or an existing dask scheduler
       cluster: {kind: slurm, jobs: 10, cores: 8, memory: 16GB, walltime: "02:00:00"}
     refine: {axis: alpha_minus_B, observable: sigma2_S, rounds: 3}   # adaptive (sweep.refine)
+    precision: {observable: lambda_peak, width: 0.1}   # seeds by precision (sweep.precision)
 
 Every mistake is collected as a :class:`~sweep.errors.Problem` naming the file and line, the
 key path, the value and what is allowed (with the closest valid name for unknown keys), and
@@ -82,7 +83,8 @@ class Section(NamedTuple):
 
 
 #: The sections in the order they are read: ``limits`` bounds the grid sections, ``store``
-#: adds to the base ``numerics``, ``sweep`` needs both base sections.
+#: adds to the base ``numerics``, ``sweep`` needs both base sections, ``refine`` takes its
+#: seeds from ``precision`` when both are given.
 SECTIONS: tuple[Section, ...] = (
     Section("limits", "limits", read_limits),
     Section("name", "name", read_name),
@@ -95,8 +97,8 @@ SECTIONS: tuple[Section, ...] = (
     Section("fits", "fits", read_fits),
     Section("figures", "figures", read_figures),
     Section("execution", "execution", read_execution),
-    Section("refine", "refine", read_refine),
     Section("precision", "precision", read_precision),
+    Section("refine", "refine", read_refine),
     Section("verify", "verify", read_verify),
 )
 

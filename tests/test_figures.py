@@ -165,6 +165,39 @@ def test_fig4_in_2d_when_one_axis_is_fixed(phase4):
     assert_figure(paths, "fig4", phase4.root)
 
 
+def test_fig4_of_a_refined_union_grid_shows_the_points_run(phase4, tmp_path):
+    """A refined campaign's phase.nc (each refined axis the union of the values run,
+    seed_count 0 where a point was not run): panel (a) holds only the points run, panel (c)
+    and the anisotropy fit skip the lines with one strain."""
+    from sweep.analysis.anisotropy import anisotropy
+    from sweep.figures.common import Results
+    from sweep.figures.fig4 import fig4
+
+    root = tmp_path / "refined"
+    shutil.copytree(phase4.root, root)
+    phase = xr.load_dataset(root / "phase.nc")
+    fill = {name: 0 if var.dtype.kind in "iu" else "" if var.dtype.kind in "OUS" else np.nan
+            for name, var in phase.data_vars.items()}
+    union = phase.reindex(chi=[0.0, 2.5, 5.0], fill_value=fill)
+    at = {"K": 1.0e-4, "eps": 0.0}
+    for name, var in phase.data_vars.items():  # chi = 2.5 run at one (K, eps) only
+        if "chi" in var.dims:
+            union[name].loc[{"chi": 2.5, **{k: v for k, v in at.items() if k in var.dims}}] = \
+                var.sel(chi=0.0).sel({k: v for k, v in at.items() if k in var.dims})
+    union["seed_count"] = (union["status"] != 0).sum("seed")
+    assert int(union["seed_count"].sum()) == 9
+    union.to_netcdf(root / "phase.nc")
+
+    figure = fig4(Results(root), {"select": {"K": 1e-4}})
+    assert np.asarray(figure.axes[0].collections[0].get_offsets()).shape[0] == 5  # of 6
+    figure.clear()
+    fit = anisotropy(union, {"n_boot": 20})
+    slope = fit["anisotropy_slope"].sel(chi=2.5).values
+    assert np.isnan(slope).all()
+    assert np.isfinite(fit["anisotropy_slope"].sel(chi=[0.0, 5.0]).values).all()
+    assert_figure(draw("fig4", root, {}), "fig4", root)
+
+
 def test_fig4_forced_on_an_alpha_minus_b_by_k_grid(sizes):
     """The caption's snapshots name chi; on a grid of alpha - B and K the unnamed axis is
     taken at its first value (this raised a TypeError before)."""

@@ -91,13 +91,49 @@ def test_precision_mistakes_are_reported_with_file_line_and_key_path(section, wo
         assert w in found[0], (w, found[0])
 
 
-def test_precision_and_refine_are_exclusive():
+def test_precision_combines_with_refine_whose_seeds_it_decides():
     text = BASE + textwrap.dedent("""\
         refine: {axis: alpha_minus_B, patterned_above: 0.0, min_spacing: 0.01}
-        precision: {observable: sigma2_S, width: 0.1}
+        precision: {observable: sigma2_S, width: 0.1, initial: 3, add: 2}
         """)
-    found = problems(text)
-    assert any("precision" in p and "cannot be combined with refine" in p for p in found), found
+    c = parse_campaign(text, "c.yaml")
+    assert c.refine is not None
+    assert c.precision is not None
+    assert (c.refine.initial, c.refine.add) == (3, 2)
+    found = problems(text.replace("min_spacing: 0.01}", "min_spacing: 0.01, seeds: {add: 1}}"))
+    assert len(found) == 1, found
+    assert "refine.seeds" in found[0]
+    assert "not with a precision: section" in found[0]
+
+
+def test_the_class_from_several_observables():
+    c = parse_campaign(BASE + textwrap.dedent("""\
+        precision: {observable: sigma2_S, unanimous: 4,
+                    classes: {sigma2_S: 1.0e-6, cos2theta: 0.5}}
+        """), "c.yaml")
+    assert c.precision is not None
+    assert [(t.observable, t.source, t.above) for t in c.precision.thresholds] == [
+        ("sigma2_S", "sigma2_S_final", 1e-6), ("cos2theta", "cos2theta_final", 0.5)]
+    s = c.precision
+    aligned = [(1e-3, 0.9)] * 4
+    assert decide(s, [1.0, 2.0, 3.0, 9.0], aligned, 8).state == "unanimous"
+    assert "cos2theta > 0.5" in decide(s, [1.0] * 4, aligned, 8).why
+    # the same pattern class, but one seed not aligned: not unanimous
+    assert decide(s, [1.0, 2.0, 3.0, 9.0], [*aligned[:3], (1e-3, 0.1)], 8).state == "pending"
+    assert decide(s, [1.0] * 4, [*aligned[:3], (1e-3, math.nan)], 8).state == "pending"
+    for section, words in [
+            ("{observable: sigma2_S, unanimous: 4, classes: {cos2thta: 0.5}}",
+             ["precision.classes.cos2thta", "did you mean 'cos2theta'"]),
+            ("{observable: sigma2_S, unanimous: 4, classes: {cos2theta: high}}",
+             ["precision.classes.cos2theta", "a finite number"]),
+            ("{observable: sigma2_S, unanimous: 4, patterned_above: 0, classes: {mean_S: 0}}",
+             ["precision.patterned_above", "not with classes"]),
+            ("{observable: sigma2_S, unanimous: 4, classes: []}", ["precision.classes",
+                                                                    "a mapping"])]:
+        found = problems(BASE + f"precision: {section}\n")
+        assert len(found) == 1, found
+        for w in words:
+            assert w in found[0], (w, found[0])
 
 
 # --------------------------------------------------------------------------- the decision

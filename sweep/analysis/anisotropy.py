@@ -46,6 +46,8 @@ def anisotropy(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
         slope[k], icept[k] = fit_line(xs.ravel(), flat[k].ravel())
         if np.isfinite(flat[k]).sum(-1).max(initial=0) < 2:
             continue  # one seed: nothing to resample, the interval is unknown (NaN), not zero
+        if np.isfinite(flat[k]).any(-1).sum() < 2:
+            continue  # one strain with values (a refined campaign's line): no slope
         boot = bootstrap_seed_means(flat[k], n_boot, rng)
         sb = np.array([fit_line(x, boot[b])[0] for b in range(n_boot)])
         lo[k], hi[k] = percentiles(sb, conf)

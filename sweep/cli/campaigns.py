@@ -92,7 +92,7 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
 
         for line in validation_lines(c):
             console.print(f"  {line}", markup=False)
-    if c.precision is not None:  # seeds by precision: its rule and bound (sweep/precision)
+    if c.precision is not None and c.refine is None:  # seeds by precision on the grid
         from ..precision.rounds import validation_lines as precision_lines
 
         for line in precision_lines(c):

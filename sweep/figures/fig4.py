@@ -95,6 +95,10 @@ def fig4(res: Results, options: Mapping[str, Any]) -> Figure:
             plot_vals.append(v)
     cos = ds["cos2theta_mean"].transpose(*dims).values.ravel()
     sig = ref.values.ravel()
+    if "seed_count" in ds:  # a refined campaign's union grid: only the points run
+        ran = (ds["seed_count"].transpose(*dims).values.ravel() > 0)
+        plot_vals = [v[ran] for v in plot_vals]
+        cos, sig = cos[ran], sig[ran]
     vmax = float(np.nanmax(np.where(np.isfinite(sig), sig, np.nan))) if np.any(
         np.isfinite(sig)) else 0.0
     lim = float(np.nanmax(np.abs(cos))) if np.any(np.isfinite(cos)) else 1.0
@@ -212,6 +216,9 @@ def _anisotropy_panel(ax: Axes, res: Results, ds: xr.Dataset, axes: Sequence[str
         point = ds.isel(sel)
         m = mean.isel(sel).transpose("eps").values
         s = sem.isel(sel).transpose("eps").values
+        has = np.isfinite(m)  # a refined campaign's line may hold a single strain run
+        if has.sum() < 2:
+            continue
         label = ", ".join(
             f"{LABELS['activity'] if a == act else LABELS.get(a, a)}="
             f"{fmt_sci(float(point[a]) * (scale if a == act else 1.0))}" for a in shown
@@ -220,8 +227,9 @@ def _anisotropy_panel(ax: Axes, res: Results, ds: xr.Dataset, axes: Sequence[str
             sv = slope.sel({d: float(point[d]) for d in slope.dims}, method="nearest")
             if sv.ndim == 0:
                 label += f"; slope {fmt(float(sv))}"
-        ax.errorbar(eps, m, yerr=np.where(np.isfinite(s), s, 0.0), fmt="o-", ms=3.5, lw=1,
-                    capsize=2, color=cmap(0.85 * n / max(len(combos) - 1, 1)), label=label)
+        ax.errorbar(eps[has], m[has], yerr=np.where(np.isfinite(s), s, 0.0)[has], fmt="o-",
+                    ms=3.5, lw=1, capsize=2, color=cmap(0.85 * n / max(len(combos) - 1, 1)),
+                    label=label)
     ax.axhline(0.0, color="0.6", lw=0.7)
     ax.set_xlabel(r"$\epsilon$")
     ax.set_ylabel(LABELS["cos2theta"])

@@ -12,5 +12,7 @@ every seed has run (the cap).
   (``seed_count``, ``seed_decision``) and the text ``validate`` and ``status`` print.
 
 ``nematic run`` drives the rounds with the adaptive campaigns' loop
-(:func:`sweep.refine.driver.drive_rounds`).
+(:func:`sweep.refine.driver.drive_rounds`). With a ``refine:`` section the same decisions
+are taken at every point of the adaptive campaign, grid and refined
+(:mod:`sweep.refine.seeds`), in the rounds :mod:`sweep.refine.rounds` replays.
 """

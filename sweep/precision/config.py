@@ -10,11 +10,13 @@
       confidence: 0.95          # of that interval (Student-t)
       unanimous: 4              # or: at least this many seeds, all of one pattern class
       patterned_above: 1.0e-6   # the class: sigma2_S above this (needed by unanimous)
+      # classes: {sigma2_S: 1.0e-6, cos2theta: 0.5}   # or: the class from several
+                                #   observables (which of these thresholds a run is above)
       initial: 4                # seeds every point starts with
       add: 4                    # seeds added per round to an undecided point
 
-``width`` or ``unanimous`` (or both) must be given. The section cannot be combined with
-``refine:`` (whose ``seeds:`` are sequential already).
+``width`` or ``unanimous`` (or both) must be given. With a ``refine:`` section the same rules
+decide the seeds of every point, grid and refined (:mod:`sweep.refine.seeds`).
 """
 
 from __future__ import annotations
@@ -24,16 +26,16 @@ from typing import Any
 
 from ..campaign import PrecisionSpec
 from ..checker import Checker, is_finite_number, is_int, suggest
-from ..refine.config import observable_sources
+from ..refine.config import observable_sources, read_classes
 
 KEYS = ("observable", "width", "relative", "confidence", "unanimous", "patterned_above",
-        "initial", "add")
+        "classes", "initial", "add")
 
 
 def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSpec | None:
     """The reader of the ``precision:`` section (a row of :data:`sweep.spec.SECTIONS`): needs
-    the ``seeds`` and ``refine`` sections read before it. ``None`` when there is none (or it
-    has problems, which are added to ``c``)."""
+    the ``seeds`` section read before it. ``None`` when there is none (or it has problems,
+    which are added to ``c``)."""
     if raw is None:
         return None
     path: tuple[str | int, ...] = ("precision",)
@@ -42,9 +44,6 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
         return None
     sec = c.mapping(path, raw, KEYS)
     before = len(c.problems)
-    if read.get("refine") is not None:
-        c.add(path, "cannot be combined with refine: (an adaptive campaign adds seeds with "
-              "refine.seeds); remove one of the two sections")
     n_seeds = len(read.get("seeds") or ())
 
     observable = sec.get("observable")
@@ -73,9 +72,14 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
               "campaign's seeds): the fewest seeds that stop a point when they all share "
               "the pattern class")
     patterned = sec.get("patterned_above")
-    if unanimous is not None and patterned is None:
+    classes = read_classes(c, (*path, "classes"), sec["classes"]) if "classes" in sec else ()
+    if patterned is not None and "classes" in sec:
+        c.add((*path, "patterned_above"), "not with classes: (each observable of classes has "
+              "its threshold); remove one of the two")
+    elif unanimous is not None and patterned is None and "classes" not in sec:
         c.add((*path, "patterned_above"), "missing; allowed: a number (a run's pattern class "
-              "is sigma2_S above it); needed by unanimous")
+              "is sigma2_S above it; or classes: for several observables); needed by "
+              "unanimous")
     elif patterned is not None and not is_finite_number(patterned):
         c.bad((*path, "patterned_above"), patterned, "a finite number")
     if width is None and unanimous is None:
@@ -97,4 +101,4 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
         width=None if width is None else float(width), relative=relative,
         confidence=float(confidence), unanimous=unanimous,
         patterned_above=None if patterned is None else float(patterned),
-        initial=int(initial), add=int(add))
+        initial=int(initial), add=int(add), classes=classes or ())

@@ -8,8 +8,9 @@ A point's seeds are taken in the campaign's order; after each round the point is
   of ``n - 1`` degrees of freedom) is narrower than ``width`` (times ``|mean|`` when
   ``relative``; a zero mean is never relatively precise);
 - else ``unanimous`` when at least ``unanimous`` seeds were run and each has the same
-  pattern class (sigma2_S above ``patterned_above``: patterned; a run without sigma2_S has
-  no class and breaks the unanimity);
+  class: sigma2_S above ``patterned_above`` (patterned) or not, or with ``classes:`` the
+  tuple of the thresholds a run is above; a run without a value of one of these observables
+  has no class and breaks the unanimity;
 - else ``cap`` when every seed of the campaign was run;
 - else ``pending``: the next ``add`` seeds are run in the next round.
 """
@@ -17,7 +18,8 @@ A point's seeds are taken in the campaign's order; after each round the point is
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections import Counter
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -56,11 +58,12 @@ class Decision:
     width: float = math.nan
 
 
-def decide(spec: PrecisionSpec, values: Sequence[float], classes: Sequence[float],
-           cap: int) -> Decision:
+def decide(spec: PrecisionSpec, values: Sequence[float],
+           classes: Sequence[float | tuple[float, ...]], cap: int) -> Decision:
     """The decision of a point whose first ``len(values)`` seeds ran: ``values`` are the
-    observable's, ``classes`` the pattern measure's (sigma2_S), both in seed order, NaN
-    where a run has none; ``cap`` is the campaign's seed count."""
+    observable's, ``classes`` the class's observables (sigma2_S; a tuple in the order of
+    ``classes:`` for several), both in seed order, NaN where a run has none; ``cap`` is the
+    campaign's seed count."""
     n = len(values)
     finite = all(math.isfinite(v) for v in values)
     mean = width = math.nan
@@ -80,15 +83,31 @@ def decide(spec: PrecisionSpec, values: Sequence[float], classes: Sequence[float
     else:
         what = "no width rule"
     if spec.unanimous is not None and n >= spec.unanimous:
-        assert spec.patterned_above is not None
-        if all(math.isfinite(c) for c in classes):
-            patterned = {c > spec.patterned_above for c in classes}
-            if len(patterned) == 1:
-                cls = "patterned" if patterned.pop() else "relaxed"
-                return Decision("unanimous", n, f"{n} of {n} seeds {cls}", mean, width)
+        thresholds = spec.thresholds
+        rows = [c if isinstance(c, tuple) else (c,) for c in classes]
+        if all(len(r) == len(thresholds) and all(math.isfinite(x) for x in r) for r in rows):
+            found = {tuple(x > t.above for x, t in zip(r, thresholds, strict=True))
+                     for r in rows}
+            if len(found) == 1:
+                return Decision("unanimous", n, f"{n} of {n} seeds "
+                                + class_name(spec, found.pop()), mean, width)
     if n >= cap:
         return Decision("cap", n, f"every seed run ({n}); {what}", mean, width)
     return Decision("pending", n, what, mean, width)
+
+
+def class_name(spec: PrecisionSpec, above: tuple[bool, ...]) -> str:
+    """A class in words: patterned or relaxed (sigma2_S), else which thresholds."""
+    if not spec.classes:
+        return "patterned" if above[0] else "relaxed"
+    return ", ".join(f"{t.observable} {'>' if a else '<='} {t.above:g}"
+                     for t, a in zip(spec.classes, above, strict=True))
+
+
+def counts_text(states: Iterable[str]) -> str:
+    """How many points have each decision: ``2 precise, 1 unanimous, 0 cap, 0 pending``."""
+    n = Counter(states)
+    return ", ".join(f"{n[k]} {k}" for k in DECISIONS[1:] + DECISIONS[:1])
 
 
 def next_count(spec: PrecisionSpec, decision: Decision, cap: int) -> int:

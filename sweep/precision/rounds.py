@@ -26,15 +26,13 @@ from ..expand import Expansion, expand
 from ..files import atomic_write_text, dumps
 from ..refine.runs import Outcomes, RunList
 from ..store import CampaignStore, Record
-from .decide import DECISIONS, Decision, decide, next_count, rounds_bound
+from .decide import DECISIONS, Decision, counts_text, decide, next_count, rounds_bound
 
 if TYPE_CHECKING:
     import xarray as xr
 
 PLAN_FILE = "precision.json"
 PLAN_VERSION = 1
-#: The run scalar the pattern class is read from.
-CLASS_SOURCE = "sigma2_S_final"
 #: Points listed per round in the driver's messages (the plan file has them all).
 MAX_LINES = 12
 
@@ -59,9 +57,9 @@ class SeedPlan:
     campaign: Campaign
     grid: Expansion
     rounds: list[SeedRound]
-    #: run index (in :attr:`grid`) -> its outcome and class value (None: not finished)
+    #: run index (in :attr:`grid`) -> its outcome and class values (None: not finished)
     outcomes: dict[int, float | None]
-    classes: dict[int, float | None]
+    classes: dict[int, tuple[float, ...] | None]
     #: each point's latest decision ("pending" while its seeds run)
     decisions: list[Decision]
     finished: bool = False
@@ -101,8 +99,7 @@ class SeedPlan:
         return Counter(d.state for d in self.decisions)
 
     def counts_text(self) -> str:
-        n = self.counts()
-        return ", ".join(f"{n[k]} {k}" for k in DECISIONS[1:] + DECISIONS[:1])
+        return counts_text(d.state for d in self.decisions)
 
     def run_bound(self) -> int:
         return self.campaign.n_runs
@@ -185,7 +182,10 @@ def spec_line(campaign: Campaign) -> str:
                      f"narrower than {s.width:g}" + (" x |mean|" if s.relative else ""))
     if s.unanimous is not None:
         rules.append(f"{s.unanimous}+ seeds of one pattern class (sigma2_S above "
-                     f"{s.patterned_above:g} or not)")
+                     f"{s.patterned_above:g} or not)" if not s.classes else
+                     f"{s.unanimous}+ seeds of one class (which of "
+                     + ", ".join(f"{t.observable} > {t.above:g}" for t in s.classes)
+                     + " hold)")
     return ("seeds by precision: a point stops at " + " or ".join(rules)
             + f"; {s.initial} seed(s) first, +{s.add} per round, up to {len(campaign.seeds)}")
 
@@ -213,7 +213,7 @@ def replay(campaign: Campaign, store: CampaignStore,
     grid = expand(campaign)
     cap = len(campaign.seeds)
     value = Outcomes(store, spec.source, records)
-    klass = Outcomes(store, CLASS_SOURCE, value.records)
+    sources = [t.source for t in spec.thresholds] if spec.unanimous is not None else []
     n_points = len(grid.points)
     count = [min(spec.initial, cap)] * n_points
     first = SeedRound(0, tuple((p, j) for p in range(n_points) for j in range(count[0])),
@@ -227,7 +227,8 @@ def replay(campaign: Campaign, store: CampaignStore,
             i = p * cap + j
             rid = grid.run_ids[i]
             plan.outcomes[i] = value(rid)
-            plan.classes[i] = klass(rid) if spec.unanimous is not None else np.nan
+            row = value.row(rid, sources)
+            plan.classes[i] = None if row is None else tuple(row[k] for k in sources)
             missing = missing or plan.outcomes[i] is None or plan.classes[i] is None
         for p in rnd.points:
             if missing:
@@ -235,7 +236,7 @@ def replay(campaign: Campaign, store: CampaignStore,
                 continue
             idx = range(p * cap, p * cap + count[p])
             plan.decisions[p] = decide(spec, [_f(plan.outcomes[i]) for i in idx],
-                                       [_f(plan.classes[i]) for i in idx], cap)
+                                       [plan.classes[i] or () for i in idx], cap)
         if missing:
             return plan
         runs: list[tuple[int, int]] = []

@@ -1,10 +1,13 @@
-"""Adaptive campaigns: a campaign's ``refine:`` section refines one sweep axis where the
-outcome changes and adds seeds where it is uncertain, in rounds planned from the run
-records on disk.
+"""Adaptive campaigns: a campaign's ``refine:`` section refines one or several sweep axes
+where the outcome changes and adds seeds where it is uncertain (by its own ``seeds:`` or by
+the ``precision:`` section's rules), in rounds planned from the run records on disk.
 
 - :mod:`sweep.refine.config`: the ``refine:`` section (:class:`RefineSpec`) and its check.
 - :mod:`sweep.refine.plan`: the pure planning (the first round; the next round from the
   outcomes of the runs so far; the upper bound on the run count).
+- :mod:`sweep.refine.stats`: what the seeds of one point say (its class, mixed or not; the
+  geometric seed mean), boundary cells and uncertain points.
+- :mod:`sweep.refine.seeds`: the seeds each point gets next and why.
 - :mod:`sweep.refine.rounds`: the outcomes read from the results folder, the replay of the
   rounds from them (:func:`replay`), the plan file ``refine.json`` and the expansions the
   rest of :mod:`sweep` runs, counts and aggregates.

@@ -1,5 +1,6 @@
-"""``nematic run`` of a refined campaign (or one with seeds by precision, whose replay
-:mod:`sweep.precision.rounds` gives): rounds of runs on one dask cluster.
+"""``nematic run`` of a refined campaign (with seeds by precision or not), or of one with seeds
+by precision on its grid (whose replay :mod:`sweep.precision.rounds` gives): rounds of runs
+on one dask cluster.
 
 The loop (:func:`drive_rounds`): replay the rounds from the folder
 (:func:`sweep.refine.rounds.replay`), record the plan (``refine.json``) and print a new
@@ -132,17 +133,18 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
 def _rounds_of(campaign: Campaign) -> tuple[Callable[..., Any], Callable[..., None],
                                             Callable[[Any, int], list[str]], str, str]:
     """The replay, the plan writer, a round's lines, what the campaign is and what finishes:
-    an adaptive campaign's rounds, or seeds by precision (:mod:`sweep.precision.rounds`,
-    driven by the same loop: its replay gives an object with the same ``current``,
-    ``finished``, ``stop``, ``n_runs``, ``pending``, ``run_list`` and ``expansion``)."""
-    if campaign.precision is not None:
+    an adaptive campaign's rounds (with seeds by precision or not), or seeds by precision on
+    the grid (:mod:`sweep.precision.rounds`, driven by the same loop: its replay gives an
+    object with the same ``current``, ``finished``, ``stop``, ``n_runs``, ``pending``,
+    ``run_list`` and ``expansion``)."""
+    if campaign.refine is None:
         from ..precision import rounds as precision
 
         return (precision.replay, precision.write_plan,
                 lambda plan, number: plan.round_lines(number),
                 "seeds by precision, in rounds", "seeds by precision")
-    assert campaign.refine is not None
-    what = f"adaptive, refining {campaign.refine.axis} in rounds"
+    what = (f"adaptive, refining {', '.join(campaign.refine.names)} in rounds"
+            + (", seeds by precision" if campaign.precision is not None else ""))
     return replay, _record, round_lines, what, "refinement"
 
 

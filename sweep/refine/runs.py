@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from ..campaign import Campaign
@@ -16,7 +16,8 @@ from ..store import RETRYABLE_REASONS, CampaignStore, Record
 class Outcomes:
     """The outcome of each run from the results folder: ``None`` while it has not finished
     (no record, a file that is missing or damaged, a result that was not stored), NaN when
-    it failed or has no value, else the observable."""
+    it failed or has no value, else the observable (``source``; :meth:`row` reads several
+    run scalars at once)."""
 
     def __init__(self, store: CampaignStore, source: str,
                  records: Mapping[str, Record] | None = None):
@@ -26,19 +27,29 @@ class Outcomes:
         self._growth: dict[tuple[str, Any], float] = {}
 
     def __call__(self, run_id: str) -> float | None:
+        row = self.row(run_id, (self.source,))
+        return None if row is None else row[self.source]
+
+    def row(self, run_id: str, sources: Sequence[str]) -> dict[str, float] | None:
+        """The run's value of each of ``sources`` (``None`` while it has not finished)."""
         rec = self.records.get(run_id)
         if rec is None or not self.store.is_complete(run_id, rec):
             return None
         if rec.get("status") != "ok":
-            return None if rec.get("reason") in RETRYABLE_REASONS else math.nan
-        if self.source == "growth":
+            if rec.get("reason") in RETRYABLE_REASONS:
+                return None
+            return dict.fromkeys(sources, math.nan)
+        return {source: self._value(run_id, rec, source) for source in sources}
+
+    def _value(self, run_id: str, rec: Record, source: str) -> float:
+        if source == "growth":
             key = (run_id, rec.get("nc_sha256"))
             if key not in self._growth:
                 from ..analysis.stability import run_growth  # xarray: not for status
 
                 self._growth[key] = run_growth(self.store.nc_path(run_id))
             return self._growth[key]
-        value = (rec.get("scalars") or {}).get(self.source)
+        value = (rec.get("scalars") or {}).get(source)
         try:
             return math.nan if value is None else float(value)
         except (TypeError, ValueError):

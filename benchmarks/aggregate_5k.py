@@ -4,7 +4,7 @@ memory? (a benchmark, not a test)
 Builds a synthetic results folder shaped like campaigns/fig4.yaml with 50 seeds: 4 chi x 5 K
 x 5 eps x 50 seeds = 5,000 finished runs (2 % failed), in the real formats. One run is real:
 the campaign's first run, simulated and written by the worker's own code
-(:func:`sweep.task.execute_run`: 128^2, finite strain, t/tau = 100, the campaign's snapshot
+(:func:`sweep.run.task.execute_run`: 128^2, finite strain, t/tau = 100, the campaign's snapshot
 fields in float32). Every other run file is a copy of it with its own identity (run_id,
 seed, parameters, status) and its own scalars and sigma2_S(t), patched in place with
 netCDF4, and its record is the real run's record with those values and the file's own size,
@@ -69,7 +69,7 @@ FAILED_FRACTION = 0.02
 
 def real_run(campaign: Any, expansion: Any, store: Any) -> dict[str, Any]:
     """The campaign's first run, simulated and stored by the worker's code."""
-    from sweep.task import RunTask, execute_run
+    from sweep.run.task import RunTask, execute_run
 
     task = RunTask.from_spec(expansion.run(0), store, campaign.name, campaign.store)
     record = execute_run(task)

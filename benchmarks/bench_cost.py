@@ -1,5 +1,5 @@
 """Calibration of the cost model of ``nematic run --dry-run`` / ``nematic validate --estimate``
-(``sweep/estimate.py``): runs a set of model runs one after the other in this process (warm:
+(``sweep/cost/estimate.py``): runs a set of model runs one after the other in this process (warm:
 the kernels compiled first), fits the model's constants and writes them with every row to
 ``benchmarks/cost_model.json``. Not a test: the numbers depend on the machine and its load.
 

@@ -21,12 +21,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from sweep.execute import dask_client, run_campaign
 from sweep.expand import expand
-from sweep.plan import plan_runs
+from sweep.run.driver import dask_client, run_campaign
+from sweep.run.todo import plan_runs
 from sweep.spec import Overrides, load_campaign
+from sweep.spec.yaml_input import parse_assignments
 from sweep.store import CampaignStore
-from sweep.yaml_input import parse_assignments
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sweep.estimate import estimate
+from sweep.cost.estimate import estimate
 from sweep.spec import Overrides, load_campaign
 from sweep.store import CampaignStore
 

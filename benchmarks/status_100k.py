@@ -26,8 +26,8 @@ import numpy as np
 
 from sweep.expand import expand
 from sweep.files import dumps
+from sweep.outputs.status import campaign_status
 from sweep.spec import load_campaign
-from sweep.status import campaign_status
 from sweep.store import CampaignStore
 
 CAMPAIGN = """\

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import tensors as T
+from model import tensors as T
 
 Array = np.ndarray
 

@@ -35,8 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import ParameterError
-from .parameters import Parameters
+from model.errors import ParameterError
+from model.parameters import Parameters
 
 Array = np.ndarray
 

@@ -66,12 +66,12 @@ from collections.abc import Callable
 import numpy as np
 from pde.solvers.base import SolverBase
 
-from .backend import kernels
-from .errors import IllPosed, SimulationFailure
-from .mechanics import MechanicalState, Mechanics
-from .pde import ActiveNematicPDE
-from .reference_kernels import phi_functions
-from .split import make_split
+from model.backend import kernels
+from model.errors import IllPosed, SimulationFailure
+from model.mechanics import MechanicalState, Mechanics
+from model.pde import ActiveNematicPDE
+from model.reference_kernels import phi_functions
+from model.split import make_split
 
 log = logging.getLogger(__name__)
 Array = np.ndarray

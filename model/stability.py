@@ -49,8 +49,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq
 
-from .errors import ParameterError
-from .parameters import Parameters
+from model.errors import ParameterError
+from model.parameters import Parameters
 
 TWO_PI = 2.0 * math.pi
 

@@ -6,7 +6,7 @@ The kernels are compiled on first use and cached on disk (``cache=True``: ``*.nb
 the compiled code) pays the compilation. Without a warm-up, every worker of a campaign's first
 run compiles the same kernels at the same time. :func:`warm_up` runs a tiny simulation (16^2,
 to t = 0.5) of each kind a campaign uses, in one process; afterwards every other process loads
-the compiled code from the cache. A campaign's warm-up (:func:`sweep.task.warm_worker`) is
+the compiled code from the cache. A campaign's warm-up (:func:`sweep.run.task.warm_worker`) is
 this, on one worker of each host.
 
 ``python -m model.warmup`` (run by ``scripts/bootstrap.sh``) first compiles the kernels' entry
@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .parameters import Numerics, Parameters
+from model.parameters import Numerics, Parameters
 
 #: Modules holding the compiled kernels.
 KERNEL_MODULES = ("model.compiled.arith", "model.compiled.constitutive",
@@ -93,7 +93,7 @@ def warm_up(kinds: Iterable[tuple[Parameters, Numerics]] | None = None) -> dict[
     defaults with finite and with linear mechanics) so that every kernel they use is
     compiled (or loaded from the cache). Returns the wall time and :func:`compile_counts`.
     Never raises for a failed tiny run (the real run reports its own failure)."""
-    from .simulate import run
+    from model.simulate import run
 
     if kinds is None:
         kinds = [(Parameters(), Numerics(mechanics=m)) for m in ("finite", "linear")]
@@ -386,7 +386,7 @@ def _ready_stamp(entry_points: Path) -> dict[str, str]:
 
     import numba
 
-    from .compiled import source_digest
+    from model.compiled import source_digest
 
     try:
         listed = hashlib.sha256(entry_points.read_bytes()).hexdigest()[:16]
@@ -402,7 +402,7 @@ def _ready_file() -> Path:
     to start). If it is wrong (cache files deleted), :func:`warm_up` compiles what is missing."""
     import numba
 
-    from . import compiled  # noqa: F401 - points numba's cache at the compiled sources' folder
+    from model import compiled  # noqa: F401 - points numba's cache at the compiled sources' folder
 
     return Path(numba.config.CACHE_DIR) / "nematic-ready.json"  # type: ignore[attr-defined]
 
@@ -426,7 +426,7 @@ def main(argv: list[str] | None = None) -> int:
     print("compiling the model's numba kernels (cached on disk; once, then a few seconds) ...",
           flush=True)
     if not os.environ.get("NUMBA_CACHE_DIR"):  # the hashed folders are ours to tidy
-        from .compiled import prune_stale_caches
+        from model.compiled import prune_stale_caches
 
         for path in prune_stale_caches():
             print(f"removed the kernel cache of an earlier version: {path}", flush=True)

@@ -46,7 +46,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import tensors
+from model import tensors
 
 Array = np.ndarray
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -140,6 +141,15 @@ class ExecutionSpec:
         return "cluster" if self.cluster else "local"
 
 
+def local_worker_count(execution: ExecutionSpec) -> int:
+    """The workers of a local cluster: the campaign's ``execution.workers``, else one per
+    ``threads_per_worker`` cores of this machine."""
+    if execution.workers:
+        return execution.workers
+    n = os.cpu_count() or 1
+    return max(1, n // max(1, execution.threads_per_worker))
+
+
 @dataclass(frozen=True)
 class LimitsSpec:
     """Ceilings checked before the grid is built: ``max_runs`` (runs = product of the axis
@@ -183,7 +193,7 @@ class Threshold:
 
 @dataclass(frozen=True)
 class RefineSpec:
-    """A validated ``refine:`` section (:mod:`sweep.refine.config`).
+    """A validated ``refine:`` section (:mod:`sweep.spec.refine`).
 
     ``axes`` are the refined axes in the campaign's order of dims. ``source`` is the run
     scalar ``observable`` is read from (``sigma2_S_final`` for ``sigma2_S``), or ``growth``;
@@ -316,7 +326,7 @@ class Variant:
 
 @dataclass(frozen=True)
 class VerifySpec:
-    """A validated ``verify:`` section (:mod:`sweep.verify.config`). ``points`` is ``None``
+    """A validated ``verify:`` section (:mod:`sweep.spec.verify`). ``points`` is ``None``
     for the default sample (both sides of each fitted transition and the grid's corners),
     else the selections given (axis -> value; an axis left out takes every value)."""
 
@@ -380,3 +390,32 @@ class Campaign:
     @property
     def n_runs(self) -> int:
         return self.n_points * len(self.seeds)
+
+
+#: phase.nc variable -> (scalar in the run file, long_name). Units are all "1": the model is
+#: dimensionless (lengths in units of the domain size L, times in units of tau).
+OBSERVABLES: dict[str, tuple[str, str]] = {
+    "sigma2_S": ("sigma2_S_final", "variance of the nematic order parameter S over the "
+                 "domain at t_final"),
+    "mean_S": ("mean_S_final", "domain mean of the nematic order parameter S at t_final"),
+    "cos2theta": ("cos2theta_final", "domain mean of cos(2 theta) (director anisotropy) at "
+                  "t_final"),
+    "lambda": ("lambda_final", "pattern size lambda (radial spectrum peak) at t_final "
+               "(units of L)"),
+    "lambda_peak": ("lambda_peak", "pattern size lambda at the first peak of sigma2_S(t), "
+                    "growth-peak rule (units of L)"),
+    "t_peak": ("t_peak", "time of the first peak of sigma2_S(t), growth-peak rule (units of "
+               "tau)"),
+    "lambda_peak_literal": ("lambda_peak_literal", "pattern size lambda at the first local "
+                            "maximum of sigma2_S(t), the paper's literal rule (units of L)"),
+    "t_peak_literal": ("t_peak_literal", "time of the first local maximum of sigma2_S(t), the "
+                       "paper's literal rule (units of tau)"),
+    "lambda_mean": ("lambda_mean_final", "pattern size 2 pi / mean |k| at t_final (units of "
+                    "L)"),
+    "lambda_mean_peak": ("lambda_mean_peak", "pattern size 2 pi / mean |k| at the first peak "
+                         "of sigma2_S(t), growth-peak rule (units of L)"),
+    "rate_margin_min": ("rate_margin_min", "smallest well-posedness margin of the rate "
+                        "problem over the run (1 passive, 0 ill posed)"),
+}
+#: Scalars of the run files that are not observables (they differ between identical runs).
+NOT_OBSERVABLES = {"wall_time"}

@@ -13,11 +13,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, check_compatible
 
-from .campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES, Campaign
-from .checker import Checker
+from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign
 from .identity import PointHasher
 
 log = logging.getLogger(__name__)
@@ -76,38 +74,6 @@ def make_point(campaign: Campaign, index: tuple[int, ...], coords: dict[str, Any
     point = GridPoint(index, coords, Parameters.from_dict(params), Numerics.from_dict(numerics))
     check_compatible(point.parameters, point.numerics)
     return point
-
-
-def check_points(campaign: Campaign, checker: Checker) -> None:
-    """Build the model's objects at every grid point; report each distinct
-    :class:`~model.errors.ParameterError` at the key path that caused it."""
-    axis_names = {a.name for a in campaign.axes}
-    seen: set[tuple[str, str]] = set()
-    for index, coords in iter_points(campaign):
-        try:
-            make_point(campaign, index, coords)
-        except ParameterError as e:
-            name = e.name
-            if name == "alpha" and AMB in axis_names:
-                name = AMB
-            if name in axis_names:
-                path: tuple[str | int, ...] = ("sweep", "axes", name)
-                at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
-                msg = f"got {e.value!r}; allowed: {e.allowed} (at the grid point {at})"
-            elif name in campaign.numerics:
-                path, msg = ("numerics", name), f"got {e.value!r}; allowed: {e.allowed}"
-            elif name in campaign.parameters:
-                path, msg = ("parameters", name), f"got {e.value!r}; allowed: {e.allowed}"
-            else:
-                path, msg = (name,), f"got {e.value!r}; allowed: {e.allowed}"
-            key = (repr(path), e.allowed)
-            if key in seen:
-                continue
-            seen.add(key)
-            checker.add(path, msg)
-            if len(seen) >= MAX_POINT_PROBLEMS:
-                checker.add((), "further grid problems not shown")
-                return
 
 
 class Expansion:

@@ -1,7 +1,8 @@
 """The shape of the code, read from the source with ``ast``: the imports inside ``sweep/``
-form no cycle, ``model/`` never imports ``sweep``, ``sweep/`` loads no module through
-``importlib``, and no file of ``model/`` or ``sweep/`` is longer than :data:`MAX_LINES`
-lines."""
+form no cycle and cross its groups (spec, run, outputs, cost, refine, ...) only as
+:data:`MAY_IMPORT` allows, ``model/`` never imports ``sweep``, ``sweep/`` loads no module
+through ``importlib``, and no file of ``model/`` or ``sweep/`` is longer than
+:data:`MAX_LINES` lines."""
 
 from __future__ import annotations
 
@@ -81,6 +82,75 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
 def test_sweep_imports_form_no_cycle() -> None:
     cycle = find_cycle(project_graph("sweep"))
     assert cycle is None, "import cycle in sweep/: " + " -> ".join(cycle or [])
+
+
+#: The groups of sweep/ (docs/architecture.md): a module's group is its subpackage, or "base"
+#: for the modules at the top of sweep/. What each group may import of sweep besides itself
+#: and the base ("*": anything); the base imports only itself.
+MAY_IMPORT: dict[str, set[str]] = {
+    "base": set(),
+    "spec": {"analysis.registry", "figures.registry"},  # the names of fits and figures
+    "run": set(),
+    "outputs": {"spec", "refine", "precision"},
+    "cost": {"outputs", "refine", "precision"},
+    "analysis": set(),
+    "figures": {"analysis", "verify"},
+    "refine": {"spec", "run", "outputs", "precision", "analysis"},
+    "precision": {"spec", "run", "outputs", "refine", "analysis"},
+    "verify": {"spec", "run", "outputs", "refine", "precision", "analysis"},
+    "report": {"spec", "outputs", "refine", "precision", "verify", "analysis", "figures"},
+    "cli": {"*"},
+}
+#: Where the base may reach out: ``python -m sweep`` is the command line, and
+#: ``sweep.open_campaign`` is imported on first use from sweep.outputs.tables.
+BASE_EXCEPTIONS = {("sweep.__main__", "cli"), ("sweep", "outputs.tables")}
+
+
+def group_of(module: str) -> str:
+    parts = module.split(".")
+    if len(parts) >= 2 and (ROOT / "sweep" / parts[1]).is_dir():
+        return parts[1]
+    return "base"
+
+
+def boundary_violations(graph: dict[str, set[str]]) -> list[str]:
+    """Every import of ``graph`` (sweep's) that crosses a group boundary not in
+    :data:`MAY_IMPORT`."""
+    bad = []
+    for module, targets in sorted(graph.items()):
+        mine = group_of(module)
+        allowed = MAY_IMPORT[mine]
+        for target in sorted(targets):
+            theirs = group_of(target)
+            if theirs in (mine, "base") or "*" in allowed:
+                continue
+            rest = target.split(".", 1)[1]
+            if theirs in allowed or any(rest == a or rest.startswith(a + ".") for a in allowed):
+                continue
+            if mine == "base" and any(module == m and rest.startswith(a)
+                                      for m, a in BASE_EXCEPTIONS):
+                continue
+            bad.append(f"{module} ({mine}) imports {target} ({theirs})")
+    return bad
+
+
+def test_sweep_groups_import_only_what_they_may() -> None:
+    """spec (reading a campaign file) never imports run, outputs or the command line; run
+    (the driver, the worker task, the cluster) imports only the base; nothing but the command
+    line (and ``python -m sweep``) imports the command line."""
+    graph = project_graph("sweep")
+    assert set(MAY_IMPORT) >= {group_of(m) for m in graph}, "a group without its row"
+    bad = boundary_violations(graph)
+    assert not bad, "imports across sweep/'s groups (docs/architecture.md):\n" + "\n".join(bad)
+
+
+def test_the_boundary_check_finds_a_crossing() -> None:
+    graph = {"sweep.spec.sections": {"sweep.run.driver", "sweep.campaign",
+                                     "sweep.analysis.registry"},
+             "sweep.run.driver": {"sweep.outputs.status"}, "sweep.cli.app": {"sweep.run.task"}}
+    assert boundary_violations(graph) == [
+        "sweep.run.driver (run) imports sweep.outputs.status (outputs)",
+        "sweep.spec.sections (spec) imports sweep.run.driver (run)"]
 
 
 def test_model_never_imports_sweep() -> None:

@@ -15,12 +15,12 @@ import pytest
 from sweep_helpers import write_campaign
 
 from model.fourier import HAVE_FFTW
-from sweep.aggregate import write_phase
 from sweep.analysis.fits_file import load_fits, write_fits
 from sweep.expand import expand
+from sweep.outputs.aggregate import write_phase
+from sweep.run.task import RunTask, execute_run
 from sweep.spec import load_campaign, parse_campaign
 from sweep.store import CampaignStore
-from sweep.task import RunTask, execute_run
 from sweep.verify.measure import verify_dataset, write_verify
 from sweep.verify.sample import plan_sample
 

@@ -174,7 +174,7 @@ def test_py_pde_tracker_time_warning_is_not_printed(caplog):
 
 def test_local_dashboard_on_loopback_or_off():
     from sweep.campaign import ExecutionSpec
-    from sweep.execute import dashboard_link, dask_client
+    from sweep.run.driver import dashboard_link, dask_client
 
     with dask_client(ExecutionSpec(workers=1), dashboard=True) as client:
         link = dashboard_link(client)
@@ -190,7 +190,7 @@ def test_dashboard_link_of_an_external_scheduler():
     from distributed import LocalCluster
 
     from sweep.campaign import ExecutionSpec
-    from sweep.execute import dashboard_link, dask_client
+    from sweep.run.driver import dashboard_link, dask_client
 
     for served in (True, False):
         with LocalCluster(n_workers=0, processes=False, dashboard_address="127.0.0.1:0",

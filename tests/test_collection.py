@@ -1,4 +1,4 @@
-"""A collection of campaigns (sweep/collection.py, sweep/cli/collection.py): the file's checks
+"""A collection of campaigns (sweep/spec/collection.py, sweep/cli/collection.py): the file's checks
 with file, line and key path; every member's problems in one pass; the cost of the whole
 before anything runs (`--dry-run` writes nothing); a real collection of two small campaigns
 run in order, with its summary and index page, resumed with nothing to do; a refused member
@@ -19,8 +19,8 @@ from typer.testing import CliRunner
 
 from sweep.cli import app
 from sweep.cli.collection import run_collection
-from sweep.collection import read_collection
 from sweep.errors import CampaignError
+from sweep.spec.collection import read_collection
 from sweep.store import CampaignStore, read_lock_holder
 
 ROOT = Path(__file__).resolve().parents[1]

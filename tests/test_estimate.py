@@ -1,4 +1,4 @@
-"""Cost before launch (sweep/estimate.py, sweep/cost_model.py): `nematic run --dry-run` and
+"""Cost before launch (sweep/cost/estimate.py, sweep/cost/model.py): `nematic run --dry-run` and
 `nematic validate --estimate` from a campaign's finished runs (records made up with known run
 times: exact CPU and wall times), from the cost model without runs, scaled by resolution; an
 adaptive campaign's round and bound; nothing written; the command-line text and errors."""
@@ -13,11 +13,11 @@ import pytest
 from typer.testing import CliRunner
 
 from model.parameters import Numerics
-from sweep import cost_model
-from sweep import estimate as estimate_module
 from sweep.cli import app
-from sweep.cost_model import MODEL_SPREAD, curve_steps, model_seconds, model_steps
-from sweep.estimate import driver_overhead, estimate, lines, makespan
+from sweep.cost import estimate as estimate_module
+from sweep.cost import model as cost_model
+from sweep.cost.estimate import driver_overhead, estimate, lines, makespan
+from sweep.cost.model import MODEL_SPREAD, curve_steps, model_seconds, model_steps
 from sweep.expand import expand
 from sweep.files import file_stamp
 from sweep.refine.plan import first_round, run_bound
@@ -92,7 +92,7 @@ def tree(folder: Path) -> dict[str, tuple[int, int]]:
 
 # --------------------------------------------------------------------------- the cost model
 def test_cost_model_constants_are_the_benchmarks_fit():
-    """The constants in sweep/cost_model.py are benchmarks/cost_model.json's fit (3 digits)."""
+    """The constants in sweep/cost/model.py are benchmarks/cost_model.json's fit (3 digits)."""
     fit = json.loads((ROOT / "benchmarks" / "cost_model.json").read_text())["fit"]
     for mech, const in cost_model.COSTS.items():
         for name in ("step", "save", "setup"):

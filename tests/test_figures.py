@@ -13,7 +13,6 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from sweep.aggregate import write_phase
 from sweep.analysis.fits_file import FITS, fit_notes
 from sweep.cli import app
 from sweep.cli.products import regenerate_figures
@@ -21,9 +20,10 @@ from sweep.errors import FigureError
 from sweep.expand import expand
 from sweep.figures.produce import draw, plan, produce, regenerate
 from sweep.figures.registry import option_problems
+from sweep.outputs.aggregate import write_phase
+from sweep.run.task import RunTask, execute_run
 from sweep.spec import load_campaign, parse_campaign
 from sweep.store import CampaignStore
-from sweep.task import RunTask, execute_run
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -114,7 +114,7 @@ def assert_figure(paths: list[Path], name: str, root: Path) -> None:
 
 
 def test_registry_names_match_the_campaign_schema():
-    from sweep.sections import registry
+    from sweep.spec.sections import registry
 
     assert sorted(registry("figures")) == ["fig2", "fig3", "fig3_growth", "fig4", "figA1"]
     assert set(registry("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy",

@@ -605,7 +605,7 @@ def test_the_fig4_adaptive_campaign_validates_and_shares_fig4s_runs():
 
 
 def test_runs_a_refinement_over_several_axes_can_plan_are_not_orphaned(tmp_path):
-    from sweep.changes import run_counts
+    from sweep.outputs.changes import run_counts
     from sweep.refine.rounds import RunNamer, expansion_for
 
     c = parse_campaign(PRECISE, "p.yaml")

@@ -304,7 +304,7 @@ def test_a_job_cancelled_mid_run_has_its_run_redone_not_failed(slurm, tmp_path):
 
 def test_workers_retire_before_a_walltime_shorter_than_the_campaign(slurm, tmp_path):
     """A 30-second walltime (SLURM enforces it as one minute): the workers retire after
-    about 21 s (sweep/lifetime.py), before SLURM would kill them; their jobs are replaced
+    about 21 s (sweep/run/lifetime.py), before SLURM would kill them; their jobs are replaced
     and a campaign several times longer completes with every run ok. (So short a walltime
     that the campaign outlasts several worker lifetimes however fast the machine is.)"""
     path = slurm_campaign(tmp_path, "short-walltime", values="{linspace: [0.1, 0.5, 40]}",
@@ -369,7 +369,7 @@ def test_the_driver_as_a_batch_job_and_nematic_stop(slurm, tmp_path, monkeypatch
     assert job in queue(), (tmp_path / f"driver-{job}.log").read_text()
     status = CliRunner().invoke(app, ["status", str(campaign), "--results", str(results)])
     assert f"SLURM job {job}" in status.output, status.output
-    monkeypatch.setattr("sweep.detach.socket.gethostname", lambda: "login-node")
+    monkeypatch.setattr("sweep.run.detach.socket.gethostname", lambda: "login-node")
     stop = CliRunner().invoke(app, ["stop", "fig2-slurm", "--results", str(results)])
     text = " ".join(stop.output.split())
     assert stop.exit_code == 0, text

@@ -10,8 +10,8 @@ import json
 from sweep_helpers import records
 from typer.testing import CliRunner
 
-from sweep.changes import describe_changes, run_counts
 from sweep.cli import app
+from sweep.outputs.changes import describe_changes, run_counts
 from sweep.refine.rounds import RunNamer, expansion_for
 from sweep.spec import parse_campaign
 from sweep.store import CampaignStore

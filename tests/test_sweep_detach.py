@@ -14,7 +14,7 @@ from sweep_helpers import group_alive, records, run_ids, wait_for, write_campaig
 from typer.testing import CliRunner
 
 from sweep.cli import app
-from sweep.detach import detached_args
+from sweep.run.detach import detached_args
 from sweep.store import read_lock_holder
 
 

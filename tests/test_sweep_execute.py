@@ -28,8 +28,8 @@ from sweep_helpers import (
 from typer.testing import CliRunner
 
 from sweep.cli import app
+from sweep.run.task import RunTask, execute_run
 from sweep.store import CampaignLock, read_lock_holder
-from sweep.task import RunTask, execute_run
 
 
 def invoke(*args: object):
@@ -476,7 +476,7 @@ def test_workers_reuse_freed_heap_memory_despite_the_nannys_trim_setting():
     code = """
 import resource, sys
 import numpy as np
-from sweep.task import restore_heap_reuse
+from sweep.run.task import restore_heap_reuse
 
 def faults():
     before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from sweep.cli import app
 from sweep.cli.app import EXIT_TOO_MANY_FAILURES
-from sweep.failures import FailureLimit, previous_failures
+from sweep.run.failures import FailureLimit, previous_failures
 
 
 def invoke(*args: object):

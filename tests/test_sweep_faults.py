@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 
 from sweep.cli import app
 from sweep.expand import expand
-from sweep.plan import plan_runs
+from sweep.run.todo import plan_runs
 from sweep.spec import load_campaign
 from sweep.store import CampaignStore
 
@@ -281,8 +281,8 @@ def test_a_result_that_cannot_be_written_is_kept_and_moved_in(tmp_path, monkeypa
     is a regular file here) gives a record with status 'unsaved' and no record file; the
     result is in the spool, and the next plan moves it in and adopts it."""
     import model.simulate
-    from sweep.plan import import_spool
-    from sweep.task import RunTask, execute_run, spool_dir
+    from sweep.run.task import RunTask, execute_run, spool_dir
+    from sweep.run.todo import import_spool
 
     def fake_run(params, numerics, seed):  # the storage is under test, not the model
         return xr.Dataset({"sigma2_S": ("t", [0.0, 0.1]), "sigma2_S_final": ((), 0.1)},

@@ -1,11 +1,11 @@
-"""Batch workers retire before their walltime (sweep/lifetime.py): the walltime formats, the
+"""Batch workers retire before their walltime (sweep/run/lifetime.py): the walltime formats, the
 rule, the job script the driver submits, and runs lost with their worker staying pending."""
 
 from __future__ import annotations
 
 import pytest
 
-from sweep.lifetime import lifetime_rule, walltime_seconds, worker_lifetime
+from sweep.run.lifetime import lifetime_rule, walltime_seconds, worker_lifetime
 
 
 @pytest.mark.parametrize(("text", "seconds"), [
@@ -48,7 +48,7 @@ def test_worker_arguments_from_the_walltime():
 
 def test_the_job_script_retires_its_worker_before_the_walltime(tmp_path):
     from sweep.campaign import ClusterSpec, ExecutionSpec
-    from sweep.execute import make_cluster
+    from sweep.run.driver import make_cluster
 
     spec = ClusterSpec(kind="slurm", jobs=1, options={
         "cores": 1, "processes": 1, "memory": "1GB", "walltime": "00:02:00"})
@@ -58,7 +58,7 @@ def test_the_job_script_retires_its_worker_before_the_walltime(tmp_path):
         assert "--lifetime 84s --lifetime-stagger 6s" in script, script
         assert "#SBATCH -t 00:02:00" in script, script
         # runs lost with their worker go back to the scheduler a bounded number of times
-        from sweep.clusters import WORKER_LOSSES
+        from sweep.run.clusters import WORKER_LOSSES
 
         assert cluster.scheduler.allowed_failures == WORKER_LOSSES
     finally:

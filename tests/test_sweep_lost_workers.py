@@ -1,5 +1,5 @@
 """A run whose worker is lost more often than the scheduler retries it (dask's KilledWorker,
-after ``sweep.clusters.WORKER_LOSSES`` losses) stays pending: no record, not a failure."""
+after ``sweep.run.clusters.WORKER_LOSSES`` losses) stays pending: no record, not a failure."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ from types import SimpleNamespace
 
 from sweep_helpers import write_campaign
 
-import sweep.execute as execute
+import sweep.run.driver as execute
 from sweep.expand import expand
-from sweep.plan import plan_runs
+from sweep.outputs.status import campaign_status
+from sweep.run.todo import plan_runs
 from sweep.spec import load_campaign
-from sweep.status import campaign_status
 from sweep.store import CampaignStore
 
 

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from sweep.cli import app
 from sweep.errors import CampaignError
 from sweep.spec import Overrides, load_campaign, parse_campaign
-from sweep.yaml_input import parse_assignments
+from sweep.spec.yaml_input import parse_assignments
 
 GOOD = """
 name: good
@@ -133,7 +133,7 @@ def test_parse_assignments():
 
 
 def test_jobqueue_cluster_section_builds_a_job_script():
-    from sweep.execute import make_cluster
+    from sweep.run.driver import make_cluster
 
     c = parse_campaign("""
         name: slurm-test

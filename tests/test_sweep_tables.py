@@ -15,12 +15,12 @@ from sweep_helpers import records
 from typer.testing import CliRunner
 
 import sweep
-from sweep.aggregate import build_phase
 from sweep.cli import app
 from sweep.errors import ExportError, StoreError
 from sweep.expand import expand
+from sweep.outputs.aggregate import build_phase
+from sweep.outputs.tables import open_campaign, parquet_engine, runs_table, write_table
 from sweep.spec import parse_campaign
-from sweep.tables import open_campaign, parquet_engine, runs_table, write_table
 
 
 def invoke(*args: object):

@@ -19,12 +19,12 @@ import pytest
 from sweep_helpers import kill_group, records, run_ids, start_driver, wait_for, write_campaign
 
 from sweep.campaign import ClusterSpec, ExecutionSpec
-from sweep.clusters import jobqueue_options, make_jobqueue, open_cluster
 from sweep.errors import ClusterError
-from sweep.workforce import (
+from sweep.run.clusters import jobqueue_options, make_jobqueue, open_cluster
+from sweep.run.workers import (
     MIN_INFLIGHT,
+    ClusterLink,
     Supervisor,
-    Workforce,
     last_worker_error,
     scheduler_workers,
     window_size,
@@ -175,7 +175,7 @@ MINE = {"code_version": "1.0", "git_commit": "abc"}
 
 
 def supervisor(client: FakeClient, now: list[float], **execution) -> Supervisor:
-    return Supervisor(Workforce(client, "the test cluster"),  # type: ignore[arg-type]
+    return Supervisor(ClusterLink(client, "the test cluster"),  # type: ignore[arg-type]
                       ExecutionSpec(**execution), clock=lambda: now[0], mine=dict(MINE))
 
 
@@ -258,8 +258,8 @@ def test_the_last_worker_error_of_the_job_logs(tmp_path):
 def test_the_local_scheduler_takes_only_clients_with_the_campaign_credentials():
     from distributed import Client, Security
 
-    with open_cluster(ExecutionSpec(workers=1)) as force:
-        client = force.client
+    with open_cluster(ExecutionSpec(workers=1)) as link:
+        client = link.client
         assert client is not None
         assert client.scheduler is not None
         address = client.scheduler.address
@@ -286,8 +286,8 @@ def test_tls_can_be_turned_off_only_with_a_reason(tmp_path):
     c = parse_campaign(base + "execution: {workers: 1, security: {tls: false, reason: "
                        "'a private network'}}\n")
     assert (c.execution.tls, c.execution.insecure_reason) == (False, "a private network")
-    with open_cluster(c.execution) as force:
-        client = force.client
+    with open_cluster(c.execution) as link:
+        client = link.client
         assert client is not None
         assert client.scheduler is not None
         assert str(client.scheduler.address).startswith("tcp://127.0.0.1:")

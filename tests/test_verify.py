@@ -26,7 +26,7 @@ from sweep.errors import CampaignError
 from sweep.expand import expand
 from sweep.identity import PointHasher
 from sweep.spec import parse_campaign
-from sweep.verify.config import resolve
+from sweep.spec.verify import resolve
 from sweep.verify.measure import (
     CHANGED,
     CONVERGED,

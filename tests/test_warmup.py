@@ -15,12 +15,12 @@ import pytest
 from sweep_helpers import write_campaign
 
 from model.parameters import Numerics, Parameters
-from sweep.execute import RunSummary, dask_client, run_campaign
 from sweep.expand import expand
-from sweep.plan import plan_runs
+from sweep.run.driver import RunSummary, dask_client, run_campaign
+from sweep.run.task import warm_kinds
+from sweep.run.todo import plan_runs
 from sweep.spec import load_campaign
 from sweep.store import CampaignStore
-from sweep.task import warm_kinds
 
 
 def test_warm_kinds_one_per_kind_of_run(tmp_path):

@@ -4,7 +4,7 @@ two modules)."""
 
 from __future__ import annotations
 
-from .constitutive import (
+from model.compiled.constitutive import (
     apply_tangent_kernel,
     apply_tangent_spin_kernel,
     first_piola_kernel,
@@ -12,15 +12,21 @@ from .constitutive import (
     strain_measures_kernel,
     tangent_kernel,
 )
-from .etd import activity_exponential, activity_krogstad, etd_combination, rk4_update, rk_stage
-from .rates import (
+from model.compiled.etd import (
+    activity_exponential,
+    activity_krogstad,
+    etd_combination,
+    rk4_update,
+    rk_stage,
+)
+from model.compiled.rates import (
     activity_rate,
     bulk_terms,
     corotational_rate,
     jaumann_products,
     molecular_field_kernel,
 )
-from .spectral import (
+from model.compiled.spectral import (
     balance_residual_kernel,
     div_hat_kernel,
     grad_hat_kernel,
@@ -29,7 +35,7 @@ from .spectral import (
     neg_div_hat_kernel,
     symbol_combination,
 )
-from .wellposedness import finite_margin_kernel
+from model.compiled.wellposedness import finite_margin_kernel
 
 __all__ = [
     "activity_exponential", "activity_krogstad", "activity_rate", "apply_tangent_kernel",

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .arith import rmul
+from model.compiled.arith import rmul
 
 
 @njit(cache=True)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .constitutive import PACKED
+from model.compiled.constitutive import PACKED
 
 
 @njit(cache=True)

@@ -176,7 +176,7 @@ def setup_logging(console: Console, verbose: bool, quiet: bool = False,
 
 
 def _parse_seeds(text: str | None) -> int | list[int] | None:
-    from ..yaml_input import parse_value
+    from ..spec.yaml_input import parse_value
 
     if text is None:
         return None
@@ -187,10 +187,10 @@ def _parse_seeds(text: str | None) -> int | list[int] | None:
 def load(console: Console, path: Path, settings: list[str] | None, seeds: str | None,
          name: str | None, scheduler: str | None = None,
          workers: int | None = None) -> Campaign:
-    from ..collection import read_collection
     from ..errors import CampaignError
     from ..spec import Overrides, load_campaign
-    from ..yaml_input import parse_assignments
+    from ..spec.collection import read_collection
+    from ..spec.yaml_input import parse_assignments
 
     try:
         if read_collection(path) is not None:

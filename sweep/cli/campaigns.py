@@ -61,7 +61,7 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
     console = Console(highlight=False, soft_wrap=True, quiet=quiet)
     setup_logging(err_console(), verbose, quiet)
     coll = collection_or_none(campaign)
-    if coll is not None:  # a collection of campaigns (sweep.collection): each, then the sum
+    if coll is not None:  # a collection of campaigns (sweep.spec.collection): each, then the sum
         refuse_name(name)
         validate_collection(coll, validate, dict(
             results=results, set_=set_, seeds=seeds, estimate=estimate, verbose=verbose,
@@ -171,17 +171,17 @@ def run(
     stopped by `--max-failures`, 130 when interrupted (rerun to resume). With `--detach`,
     0 once the driver runs in the background; with `--dry-run`, 0 after printing the cost.
     """
-    from ..aggregate import write_phase
-    from ..clusters import WORKER_LOSSES
-    from ..execute import describe_failure, drive
     from ..expand import expand
-    from ..failures import FailureLimit
+    from ..outputs.aggregate import write_phase
+    from ..run.clusters import WORKER_LOSSES
+    from ..run.driver import describe_failure, drive
+    from ..run.failures import FailureLimit
     from ..store import CampaignStore
 
     err = err_console()
     setup_logging(err, verbose, quiet, cluster=True)
     coll = collection_or_none(campaign)
-    if coll is not None:  # a collection of campaigns (sweep.collection): one after the other
+    if coll is not None:  # a collection of campaigns (sweep.spec.collection): one after the other
         refuse_name(name)
         run_collection(coll, run, dict(
             results=results, set_=set_, seeds=seeds, scheduler=scheduler, workers=workers,
@@ -341,9 +341,9 @@ def run(
 def print_estimate(console: Console, campaign: Any, results: Path, *, indent: str = "",
                    retry_failed: bool = False, brief: bool = False,
                    header: str | None = None) -> None:
-    """The cost before launch (:mod:`sweep.estimate`): what changed in the campaign file,
+    """The cost before launch (:mod:`sweep.cost.estimate`): what changed in the campaign file,
     the runs to do and their CPU and wall time; ``brief``: the totals only."""
-    from ..estimate import estimate, lines
+    from ..cost.estimate import estimate, lines
     from ..store import CampaignStore
 
     e = estimate(campaign, CampaignStore(results, campaign.name), retry_failed=retry_failed)
@@ -354,11 +354,11 @@ def print_estimate(console: Console, campaign: Any, results: Path, *, indent: st
 
 def report_changes(say: Console, campaign: Any, store: Any, expansion: Any = None, *,
                    prune: bool = False, hint: str = "") -> dict[str, Any] | None:
-    """Print what changed since the results were made (:mod:`sweep.changes`) and, with
+    """Print what changed since the results were made (:mod:`sweep.outputs.changes`) and, with
     ``prune``, remove the orphaned runs (the caller holds the lock); return the changes for
     ``--json``."""
-    from ..changes import campaign_changes, run_counts
-    from ..changes import prune as prune_runs
+    from ..outputs.changes import campaign_changes, run_counts
+    from ..outputs.changes import prune as prune_runs
 
     changed = campaign_changes(campaign, store, expansion)
     if changed is not None:
@@ -403,7 +403,7 @@ def aggregate(
     Missing and failed runs are NaN. Refuses while a driver is running the campaign (the
     driver aggregates when it ends).
     """
-    from ..aggregate import write_phase
+    from ..outputs.aggregate import write_phase
     from ..refine.rounds import expansion_for
     from ..startup import defer_dask_array
     from ..store import CampaignStore

@@ -1,4 +1,4 @@
-"""A collection of campaigns (:mod:`sweep.collection`, e.g. ``campaigns/paper.yaml``) in the
+"""A collection of campaigns (:mod:`sweep.spec.collection`, e.g. ``campaigns/paper.yaml``) in the
 commands that take one: ``validate``, ``run`` (``--dry-run``, ``--detach``), ``status`` and
 ``stop``. Each member runs as ``nematic run MEMBER`` would, in the collection's order, with
 the same options; the collection adds the cost of the whole before anything runs, a summary
@@ -21,8 +21,8 @@ import typer
 from rich.console import Console
 
 from ..campaign import Campaign
-from ..collection import Collection, duplicate_names, read_collection
 from ..errors import CampaignError
+from ..spec.collection import Collection, duplicate_names, read_collection
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
@@ -98,7 +98,7 @@ def estimate_lines(coll: Collection, campaigns: list[Campaign], results: Path, *
     """The cost of the whole collection: one line per member (runs to do, CPU and wall time
     of its current round, the later rounds' forecast or bound) and the total, the members
     one after the other."""
-    from ..estimate import estimate, fmt_seconds
+    from ..cost.estimate import estimate, fmt_seconds
     from ..store import CampaignStore
 
     rows = []
@@ -254,7 +254,7 @@ def run_detached(coll: Collection, campaigns: list[Campaign], results: Path, qui
                  ) -> None:
     """``nematic run COLLECTION --detach``: the collection's driver in the background, its
     output in ``results/NAME/driver.log``; exits."""
-    from ..detach import DRIVER_LOG, detached_args, log_tail, start_detached
+    from ..run.detach import DRIVER_LOG, detached_args, log_tail, start_detached
     from ..store import CampaignStore, read_lock_holder
 
     err = err_console()

@@ -1,5 +1,5 @@
 """A driver in the background: ``nematic run --detach`` (:func:`run_detached`) and
-``nematic stop`` (:mod:`sweep.detach`)."""
+``nematic stop`` (:mod:`sweep.run.detach`)."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ from .collection import collection_or_none, stop_collection
 def run_detached(c: Campaign, results: Path, campaign: Path, quiet: bool) -> None:
     """``nematic run --detach``: start the driver in the background and say how to follow
     it; exits (0, or the driver's own code if it ended at once)."""
-    from ..detach import DRIVER_LOG, detached_args, log_tail, start_detached
+    from ..run.detach import DRIVER_LOG, detached_args, log_tail, start_detached
     from ..store import CampaignStore, read_lock_holder
 
     err = err_console()
@@ -86,8 +86,8 @@ def stop(
     stopped, 1 if no driver was running, 2 if it cannot be signalled from here, or has not
     exited within `--timeout` seconds.
     """
-    from ..detach import DRIVER_LOG, log_tail, stop_driver
     from ..errors import ClusterError
+    from ..run.detach import DRIVER_LOG, log_tail, stop_driver
     from ..store import CampaignStore
 
     err = err_console()

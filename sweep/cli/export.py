@@ -1,5 +1,5 @@
 """``nematic export``: a campaign's runs as one tidy table (CSV or Parquet), for pandas, R
-or a spreadsheet (:mod:`sweep.tables`)."""
+or a spreadsheet (:mod:`sweep.outputs.tables`)."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def export(
     and every per-run scalar (the variables of phase.nc over seed), written atomically.
     Reads the run records only, so it also works while the campaign runs.
     """
-    from ..tables import FORMATS, open_campaign, parquet_engine, write_table
+    from ..outputs.tables import FORMATS, open_campaign, parquet_engine, write_table
 
     err = err_console()
     setup_logging(err, verbose, quiet)

@@ -17,9 +17,9 @@ def repair_products(campaign: Campaign, results: Path, console: Console, *,
     records (taking the campaign's lock) and an unreadable ``fits.nc`` removed (the fits
     recompute it), each with a message. Returns whether ``fits.nc`` was removed. Raises
     :class:`CampaignLocked` if a driver holds the campaign while phase.nc must be rebuilt."""
-    from ..aggregate import write_phase
     from ..analysis.fits_file import FITS
     from ..files import netcdf_problem
+    from ..outputs.aggregate import write_phase
     from ..refine.rounds import expansion_for
     from ..store import CampaignStore
 
@@ -63,8 +63,8 @@ def regenerate_report(campaign: Campaign, results: Path) -> Path | None:
 
     from model.errors import NematicError
 
+    from ..outputs.tables import CampaignResults
     from ..report import write_report
-    from ..tables import CampaignResults
 
     try:
         return write_report(CampaignResults(campaign, results))

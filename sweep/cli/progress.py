@@ -137,7 +137,7 @@ class ProgressEvents:
                                soft_wrap=True)
 
     def finished_run(self, run: Any, record: dict[str, Any]) -> None:
-        from ..execute import describe_failure
+        from ..run.driver import describe_failure
 
         if record.get("status") == "ok":
             self.ok += 1

@@ -29,9 +29,9 @@ def report(
     snapshot and sigma2_S(t)); the failures by reason; the refinement rounds; the cost and
     the provenance. Reads the results folder only (also while the campaign runs).
     """
+    from ..outputs.tables import open_campaign
     from ..report import write_report
     from ..startup import defer_dask_array
-    from ..tables import open_campaign
 
     defer_dask_array()
     err = err_console()

@@ -76,7 +76,7 @@ def simulate(
     err = Console(stderr=True, highlight=False, soft_wrap=True)
     setup_logging(err, verbose, quiet)
     from ..files import atomic_to_netcdf  # numpy and yaml: not for the help
-    from ..yaml_input import parse_assignments
+    from ..spec.yaml_input import parse_assignments
 
     try:
         settings = parse_assignments(set_ or [])

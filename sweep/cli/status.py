@@ -49,14 +49,14 @@ def status(
     from the one its results were made with. Only the run records are read (no netCDF), so
     it answers in seconds for 10^5 runs, also while the campaign runs.
     """
+    from ..outputs.status import campaign_status
     from ..refine.rounds import expansion_for
-    from ..status import campaign_status
     from ..store import CampaignStore
 
     console = Console(highlight=False, soft_wrap=True)
     setup_logging(err_console(), verbose, quiet)
     coll = collection_or_none(campaign)
-    if coll is not None:  # a collection of campaigns (sweep.collection): each in turn
+    if coll is not None:  # a collection of campaigns (sweep.spec.collection): each in turn
         refuse_name(name)
         status_collection(coll, status, dict(results=results, set_=set_, seeds=seeds,
                                              as_json=as_json, workers=workers,
@@ -68,7 +68,7 @@ def status(
     report = campaign_status(expansion, store, workers=workers)
     refinement = getattr(expansion, "refinement", None)  # an adaptive campaign's rounds
     if as_json:
-        from ..changes import campaign_changes
+        from ..outputs.changes import campaign_changes
         from ..refine.rounds import status_dict
         from .verify import verification_lines
 

@@ -3,7 +3,7 @@ order (the campaign's first ``initial``, then ``add`` more per round) until the 
 decided: its observable's seed mean is precise enough, its pattern class is unanimous, or
 every seed has run (the cap).
 
-- :mod:`sweep.precision.config`: the section's reader and checks (:class:`PrecisionSpec` is
+- :mod:`sweep.spec.precision`: the section's reader and checks (:class:`PrecisionSpec` is
   in :mod:`sweep.campaign`).
 - :mod:`sweep.precision.decide`: the pure decision of a point from its seeds' values (the
   Student-t interval of the mean, the unanimity of the class).

@@ -292,14 +292,14 @@ class PrecisionExpansion(Expansion):
 
 def precision_phase(expansion: PrecisionExpansion, records: Mapping[str, Record],
                     store: CampaignStore | None = None) -> xr.Dataset:
-    """phase.nc with seeds by precision: :func:`sweep.aggregate.build_phase` from the
+    """phase.nc with seeds by precision: :func:`sweep.outputs.aggregate.build_phase` from the
     planned runs' records (NaN for the seeds not run), with ``seed_count`` (seeds run at
     each point, ok or failed) and ``seed_decision`` (a CF flag variable: pending, precise,
     unanimous, cap) over the sweep dims, and the rule and the state as ``precision_*``
     attributes."""
     import xarray as xr
 
-    from ..aggregate import STATUS_MISSING, build_phase
+    from ..outputs.aggregate import STATUS_MISSING, build_phase
 
     plan = expansion.refinement
     planned = {rid for rid, keep in zip(expansion.run_ids, expansion.planned, strict=True)

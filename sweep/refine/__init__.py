@@ -2,7 +2,7 @@
 where the outcome changes and adds seeds where it is uncertain (by its own ``seeds:`` or by
 the ``precision:`` section's rules), in rounds planned from the run records on disk.
 
-- :mod:`sweep.refine.config`: the ``refine:`` section (:class:`RefineSpec`) and its check.
+- :mod:`sweep.spec.refine`: the ``refine:`` section (:class:`RefineSpec`) and its check.
 - :mod:`sweep.refine.plan`: the pure planning (the first round; the next round from the
   outcomes of the runs so far; the upper bound on the run count).
 - :mod:`sweep.refine.stats`: what the seeds of one point say (its class, mixed or not; the

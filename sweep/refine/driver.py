@@ -5,7 +5,7 @@ on one dask cluster.
 The loop (:func:`drive_rounds`): replay the rounds from the folder
 (:func:`sweep.refine.rounds.replay`), record the plan (``refine.json``) and print a new
 round's plan; stop when the replay says the campaign is finished; else run the planned runs
-that are not done (:func:`sweep.execute.plan_runs` and :func:`~sweep.execute.run_campaign`,
+that are not done (:func:`sweep.run.driver.plan_runs` and :func:`~sweep.run.driver.run_campaign`,
 as for a grid) and go round again. Every decision is taken by the replay from the files, so
 an interrupted or killed driver resumes to the same plan.
 """
@@ -18,12 +18,12 @@ from collections.abc import Callable
 from typing import Any
 
 from ..campaign import Campaign
-from ..clusters import open_cluster
 from ..errors import StoreError
-from ..execute import REMOTE_TMP_AGE, RunSummary, dashboard_link, run_campaign
 from ..expand import Expansion
-from ..failures import FailureLimit
-from ..plan import Plan, plan_runs
+from ..run.clusters import open_cluster
+from ..run.driver import REMOTE_TMP_AGE, RunSummary, dashboard_link, run_campaign
+from ..run.failures import FailureLimit
+from ..run.todo import Plan, plan_runs
 from ..store import CampaignStore
 from .report import round_lines
 from .rounds import Refinement, replay, write_plan
@@ -68,7 +68,7 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
     replay_fn, record, announce, what, done = _rounds_of(campaign)
     say(f"campaign {campaign.name}: {what} -> {store.root}")
     with contextlib.ExitStack() as stack:
-        force = None
+        link = None
         try:
             while True:
                 ref = replay_fn(campaign, store)
@@ -100,12 +100,12 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                     stuck_at = where
                     continue
                 stuck_at = None
-                if force is None:
-                    force = stack.enter_context(open_cluster(
+                if link is None:
+                    link = stack.enter_context(open_cluster(
                         campaign.execution, dashboard=dashboard, campaign_dir=store.root))
                     if dashboard and events is not None and hasattr(events, "dashboard"):
-                        events.dashboard(dashboard_link(force.client))
-                summary = run_campaign(runs, store, force, plan, events, limit=limit)
+                        events.dashboard(dashboard_link(link.client))
+                summary = run_campaign(runs, store, link, plan, events, limit=limit)
                 if total is None:
                     total = RunSummary(total=0, skipped=summary.skipped,
                                        failed_before=summary.failed_before)
@@ -118,7 +118,7 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                 total = RunSummary(total=0, skipped=0)
             total.interrupted = True
         finally:
-            if local and force is not None:
+            if local and link is not None:
                 stack.close()  # the local workers are gone: clean what they left
                 store.clean_temporaries()
     store.scan()

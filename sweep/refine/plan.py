@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..campaign import Campaign, RefinedAxis, RefineSpec, normalise_float
+from ..spec.refine import points_bound
 from .seeds import initial_count, more_seeds
 from .stats import Outcome, PointStats, is_boundary, point_stats, wilson
 
@@ -202,20 +203,6 @@ def run_bound(campaign: Campaign) -> int:
     per_axis = [points_bound(campaign.dims[k].axes[0].values, axis, spec.rounds)
                 for k, axis in zip(refined_dims(campaign), spec.axes, strict=True)]
     return len(lines(campaign)) * math.prod(per_axis) * len(campaign.seeds)
-
-
-def points_bound(values: Sequence[float], axis: RefinedAxis, rounds: int) -> int:
-    """The most values one refined axis can have: its grid values and every midpoint the
-    rounds can add down to the smallest spacing."""
-    xs = sorted(float(v) for v in values)
-    total = len(xs)
-    for a, b in zip(xs, xs[1:], strict=False):
-        width = math.log10(b / a) if axis.log else b - a
-        depth = 0
-        while depth < rounds and width / 2 ** (depth + 1) >= axis.min_spacing * (1 - 1e-9):
-            depth += 1
-        total += 2 ** depth - 1
-    return total
 
 
 def _spec(campaign: Campaign) -> RefineSpec:

@@ -14,7 +14,7 @@ of a campaign whose refined axes hold it, so a refined value equal to a value of
 campaign's grid is the same run (the same file).
 
 The expansions the rest of :mod:`sweep` works on: :class:`RunList` (the planned runs, for
-:func:`sweep.execute.run_campaign`) and :class:`RefinedExpansion` (the grid whose refined
+:func:`sweep.run.driver.run_campaign`) and :class:`RefinedExpansion` (the grid whose refined
 axes are the sorted union of every value run, with a mask of the planned runs, for
 ``phase.nc`` and ``nematic status``).
 """
@@ -289,13 +289,13 @@ class RefinedExpansion(Expansion):
     def build_phase(self, records: Mapping[str, Record], store: CampaignStore | None = None
                     ) -> xr.Dataset:
         """phase.nc's dataset (:func:`refined_phase`), which
-        :func:`sweep.aggregate.write_phase` asks the expansion for."""
+        :func:`sweep.outputs.aggregate.write_phase` asks the expansion for."""
         return refined_phase(self, records, store)
 
 
 def refined_phase(expansion: RefinedExpansion, records: Mapping[str, Record],
                   store: CampaignStore | None = None) -> xr.Dataset:
-    """phase.nc of a refined campaign: :func:`sweep.aggregate.build_phase` on the union grid
+    """phase.nc of a refined campaign: :func:`sweep.outputs.aggregate.build_phase` on the union grid
     from the planned runs' records, with ``seed_count`` (seeds run at each point, ok or
     failed; 0 where the point was not run) and ``refine_round`` (the round that first ran
     the point; -1 where it was not run) over the sweep dims, and the plan's summary as
@@ -304,7 +304,7 @@ def refined_phase(expansion: RefinedExpansion, records: Mapping[str, Record],
     attributes."""
     import xarray as xr
 
-    from ..aggregate import STATUS_MISSING, build_phase
+    from ..outputs.aggregate import STATUS_MISSING, build_phase
 
     ref = expansion.refinement
     planned = {rid for rid, keep in zip(expansion.run_ids, expansion.planned, strict=True)

@@ -58,7 +58,7 @@ class Outcomes:
 
 class RunList(Expansion):
     """The planned runs of a refined campaign as an :class:`~sweep.expand.Expansion` (what
-    :func:`sweep.execute.plan_runs` and :func:`~sweep.execute.run_campaign` take)."""
+    :func:`sweep.run.driver.plan_runs` and :func:`~sweep.run.driver.run_campaign` take)."""
 
     def __init__(self, campaign: Campaign, runs: list[RunSpec]):  # noqa: D107
         self.campaign = campaign

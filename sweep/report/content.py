@@ -17,10 +17,10 @@ import xarray as xr
 
 from ..analysis.fits_file import FITS
 from ..figures.common import FIGURES
-from ..status import StatusReport
+from ..outputs.status import StatusReport
 
 if TYPE_CHECKING:
-    from ..tables import CampaignResults
+    from ..outputs.tables import CampaignResults
 
 #: Failed runs listed under each reason (the count is always complete).
 MAX_FAILED_LISTED = 50
@@ -156,7 +156,7 @@ def failure_groups(status: StatusReport, phase: xr.Dataset) -> list[dict[str, An
     """The failures by reason, most frequent first: the count, the first run (status's
     failure group: where its record and traceback are) and the failed runs, each with its
     swept values and seed."""
-    from ..tables import runs_table
+    from ..outputs.tables import runs_table
 
     table = runs_table(phase)
     failed = table[table["status"] == "failed"]

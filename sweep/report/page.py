@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 from ..files import atomic_write_text
 
 if TYPE_CHECKING:
-    from ..tables import CampaignResults
+    from ..outputs.tables import CampaignResults
 
 REPORT = "report.html"
 
@@ -125,8 +125,8 @@ def build_report(opened: CampaignResults) -> str:
     from bokeh.embed.bundle import bundle_for_objs_and_resources
     from bokeh.resources import INLINE
 
-    from ..aggregate import phase_dataset
-    from ..status import campaign_status
+    from ..outputs.aggregate import phase_dataset
+    from ..outputs.status import campaign_status
     from .content import gather
     from .phase_plot import phase_layout
 

@@ -1,7 +1,7 @@
 """Verification: a campaign's convergence and sensitivity checks (its ``verify:`` section).
 
-- :mod:`sweep.verify.config`: the ``verify:`` section (:class:`~sweep.campaign.VerifySpec`),
-  its check, and a variant's settings at a point (:func:`~sweep.verify.config.resolve`).
+- :mod:`sweep.spec.verify`: the ``verify:`` section (:class:`~sweep.campaign.VerifySpec`),
+  its check, and a variant's settings at a point (:func:`~sweep.spec.verify.resolve`).
 - :mod:`sweep.verify.sample`: the sampled points (both sides of each fitted transition, the
   grid's corners, or the points listed), their base runs and the variants' runs.
 - :mod:`sweep.verify.measure`: ``verify.nc`` (values, relative changes, verdicts, the

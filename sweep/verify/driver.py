@@ -1,7 +1,7 @@
 """Running a verification: the sample's base runs (into the campaign's folder) and the
 variants' runs (into ``results/NAME/verify/``) on one dask cluster, then ``verify.nc``.
 
-Both are ordinary runs (:func:`sweep.plan.plan_runs`, :func:`sweep.execute.run_campaign`):
+Both are ordinary runs (:func:`sweep.run.todo.plan_runs`, :func:`sweep.run.driver.run_campaign`):
 resumable, checked, recorded; the caller holds the campaign's lock.
 """
 
@@ -15,10 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from ..campaign import Campaign
-from ..clusters import open_cluster
-from ..execute import REMOTE_TMP_AGE, RunSummary, run_campaign
-from ..plan import plan_runs
 from ..refine.rounds import RunList
+from ..run.clusters import open_cluster
+from ..run.driver import REMOTE_TMP_AGE, RunSummary, run_campaign
+from ..run.todo import plan_runs
 from ..store import CampaignStore
 from .measure import summary_line, verify_dataset, write_verify
 from .sample import Sample, plan_sample
@@ -97,14 +97,14 @@ def run_verification(campaign: Campaign, store: CampaignStore, *, before: bool =
     if plan_b.todo or plan_v.todo:
         with contextlib.ExitStack() as stack:
             try:
-                force = stack.enter_context(open_cluster(
+                link = stack.enter_context(open_cluster(
                     campaign.execution, dashboard=dashboard, campaign_dir=store.root))
                 for runs, where, plan, attr in ((base, store, plan_b, "base"),
                                                 (variants, vstore, plan_v, "variants")):
                     if not plan.todo:
                         continue
                     where.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
-                    summary = run_campaign(runs, where, force, plan, events)
+                    summary = run_campaign(runs, where, link, plan, events)
                     setattr(outcome, attr, summary)
                     if summary.interrupted or summary.storage_error or summary.lost:
                         outcome.interrupted = True

@@ -39,15 +39,15 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from ..aggregate import OBSERVABLES as PHASE_OBSERVABLES
-from ..aggregate import coord_attrs
 from ..analysis.transition import fit_transition
+from ..campaign import OBSERVABLES as PHASE_OBSERVABLES
 from ..expand import RunSpec
 from ..files import atomic_to_netcdf
+from ..outputs.aggregate import coord_attrs
 from ..provenance import code_version, git_commit, library_versions_text
+from ..spec.verify import ABSOLUTE, OBSERVABLES
 from ..store import Record, now_iso
 from . import REQUIRED, VERIFY, stale
-from .config import ABSOLUTE, OBSERVABLES
 from .sample import Sample, point_label
 
 CONVERGED, CHANGED, NOT_COMPARED, MISSING = 1, 0, -1, -2

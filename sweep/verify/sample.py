@@ -9,7 +9,7 @@ corners and the selections only.
 At each sampled point the campaign's first ``verify.seeds`` seeds are its **base runs**:
 ordinary runs of the campaign (the same run ids as in its grid, stored in its folder, so a
 verification before the grid is a head start on it). Each variant reruns the point with its
-settings (:func:`sweep.verify.config.resolve`) and the same seeds (or its own): **variant
+settings (:func:`sweep.spec.verify.resolve`) and the same seeds (or its own): **variant
 runs**, stored apart in ``results/NAME/verify/`` under their own run ids.
 """
 
@@ -28,7 +28,7 @@ from model.errors import ParameterError
 from ..campaign import Campaign, Variant, VerifySpec, same_value
 from ..expand import Expansion, GridPoint, RunSpec
 from ..identity import PointHasher
-from .config import resolve
+from ..spec.verify import resolve
 
 log = logging.getLogger(__name__)
 

@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from .campaign import AMB, AXIS_TYPES, NUMERICS_TYPES, Axis, Dim
+from ..campaign import AMB, AXIS_TYPES, NUMERICS_TYPES, Axis, Dim
+from ..errors import Problem
 from .checker import Checker, KeyPath, coerce, is_int, is_number, suggest
-from .errors import Problem
 
 SWEEP_KEYS = ("axes", "zip")
 RANGE_KINDS = ("linspace", "logspace", "geomspace")

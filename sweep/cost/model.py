@@ -1,5 +1,5 @@
 """The calibrated cost of one model run: its CPU seconds from its numerics alone (resolution,
-mechanics, t_final, save interval, scheme, tolerance), for :mod:`sweep.estimate` when a
+mechanics, t_final, save interval, scheme, tolerance), for :mod:`sweep.cost.estimate` when a
 campaign has no finished runs of its own, and to carry measured run times over to runs of
 other numerics.
 

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .errors import ClusterError
-from .store import DRIVER_LOG_ENV, now_iso, read_lock_holder
+from ..errors import ClusterError
+from ..store import DRIVER_LOG_ENV, now_iso, read_lock_holder
 
 #: The detached driver's output, in the campaign's results folder.
 DRIVER_LOG = "driver.log"

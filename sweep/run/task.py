@@ -25,12 +25,12 @@ from typing import TYPE_CHECKING, Any
 
 from model.parameters import Numerics, Parameters
 
-from .campaign import StoreSpec
-from .errors import StorageError, StoreError
-from .expand import Expansion, RunSpec
-from .files import atomic_to_netcdf, file_stamp
-from .identity import SCHEMA_VERSION
-from .store import CampaignStore, Record, now_iso, record_from_dataset
+from ..campaign import StoreSpec
+from ..errors import StorageError, StoreError
+from ..expand import Expansion, RunSpec
+from ..files import atomic_to_netcdf, file_stamp
+from ..identity import SCHEMA_VERSION
+from ..store import CampaignStore, Record, now_iso, record_from_dataset
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -248,7 +248,7 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
     what each reported. A worker that cannot run it is left to fail in the environment
     check that follows."""
     hosts: dict[str, str] = {}
-    from .workforce import scheduler_workers
+    from .workers import scheduler_workers
 
     for addr, info in scheduler_workers(client).items():
         hosts.setdefault(str(info.get("host", addr)), addr)

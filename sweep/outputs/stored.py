@@ -8,10 +8,10 @@ from __future__ import annotations
 import ast
 from typing import Any
 
-from .campaign import Campaign
-from .errors import StoreError
-from .spec import Overrides, parse_campaign
-from .store import OVERRIDE_PREFIX, CampaignStore
+from ..campaign import Campaign
+from ..errors import StoreError
+from ..spec import Overrides, parse_campaign
+from ..store import OVERRIDE_PREFIX, CampaignStore
 
 
 def stored_overrides(text: str) -> Overrides:

@@ -11,15 +11,15 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-from .campaign import (
+from ..campaign import (
     CLUSTER_KINDS,
     DEFAULT_GIVE_UP,
     DEFAULT_WORKER_WAIT,
     ClusterSpec,
     ExecutionSpec,
 )
+from ..limits import max_local_workers
 from .checker import Checker, KeyPath, is_int, is_number, suggest
-from .limits import max_local_workers
 
 EXECUTION_KEYS = ("workers", "threads_per_worker", "memory_limit", "scheduler", "cluster",
                   "wait_for_workers", "give_up_after", "security")

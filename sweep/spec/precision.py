@@ -25,8 +25,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..campaign import PrecisionSpec
-from ..checker import Checker, is_finite_number, is_int, suggest
-from ..refine.config import observable_sources, read_classes
+from .checker import Checker, is_finite_number, is_int, suggest
+from .refine import observable_sources, read_classes
 
 KEYS = ("observable", "width", "relative", "confidence", "unanimous", "patterned_above",
         "classes", "initial", "add")

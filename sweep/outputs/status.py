@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from .clusters import local_worker_count
-from .expand import Expansion
-from .store import RETRYABLE_REASONS, CampaignStore, read_lock_holder
+from ..campaign import local_worker_count
+from ..expand import Expansion
+from ..store import RETRYABLE_REASONS, CampaignStore, read_lock_holder
 
 DONE, FAILED, PENDING = "done", "failed", "pending"
 MAX_EXAMPLES = 10

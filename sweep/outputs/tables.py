@@ -1,6 +1,6 @@
 """A campaign's results where users analyse them (a notebook, pandas, a spreadsheet):
 :func:`open_campaign` gives the phase diagram as an xarray Dataset with a ``seed`` dimension
-(the one ``phase.nc`` holds, built from the run records as :mod:`sweep.aggregate` builds it)
+(the one ``phase.nc`` holds, built from the run records as :mod:`sweep.outputs.aggregate` builds it)
 and the runs as a tidy pandas table, one row per finished run; :func:`write_table` writes
 that table as CSV or Parquet, atomically (``nematic export``).
 
@@ -12,19 +12,19 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..campaign import Campaign
+from ..errors import ExportError, StoreError
+from ..files import atomic_path
+from ..spec import load_campaign
+from ..store import CampaignStore
 from .aggregate import STATUS_FAILED, STATUS_MISSING, phase_dataset
-from .campaign import Campaign
-from .errors import ExportError, StoreError
-from .files import atomic_path
-from .spec import load_campaign
-from .store import CampaignStore
 from .stored import stored_campaign
 
 if TYPE_CHECKING:
     import pandas as pd
     import xarray as xr
 
-    from .expand import Expansion
+    from ..expand import Expansion
 
 FORMATS = ("csv", "parquet")
 #: the per-run variables of the phase diagram that locate a run rather than measure it
@@ -49,7 +49,7 @@ class CampaignResults:
 
     def expansion(self) -> Expansion:
         """The runs the phase diagram spans (an adaptive campaign's rounds replayed)."""
-        from .refine.rounds import expansion_for
+        from ..refine.rounds import expansion_for
 
         return expansion_for(self.campaign, self.store)
 

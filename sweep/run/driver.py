@@ -1,12 +1,12 @@
 """The driver that fans a campaign's runs out over dask.
 
 The driver (:func:`run_campaign`) plans from what is on disk
-(:func:`sweep.plan.plan_runs`), submits the remaining runs (the worker task
-:func:`sweep.task.execute_run`) through a bounded window, reports each result as it arrives
+(:func:`sweep.run.todo.plan_runs`), submits the remaining runs (the worker task
+:func:`sweep.run.task.execute_run`) through a bounded window, reports each result as it arrives
 and can be interrupted at any point: everything it needs to resume is on disk, nothing is
 kept in dask.
 
-Clusters (:mod:`sweep.workforce`): an embedded ``LocalCluster`` (default), an existing
+Clusters (:mod:`sweep.run.workers`): an embedded ``LocalCluster`` (default), an existing
 scheduler (``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster
 (``execution.cluster``), watched while the runs go (workers checked as they join, lost batch
 jobs replaced, a bounded give-up). The results folder must be visible at the same path from
@@ -27,18 +27,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from .campaign import ExecutionSpec
-from .clusters import WORKER_LOSSES, jobqueue_options, make_jobqueue, open_cluster
-from .errors import ClusterError
-from .expand import Expansion, RunSpec
-from .failures import FailureLimit
-from .plan import Plan, plan_runs
-from .store import (
+from ..campaign import ExecutionSpec
+from ..errors import ClusterError
+from ..expand import Expansion, RunSpec
+from ..store import (
     CampaignStore,
     Record,
 )
+from .clusters import WORKER_LOSSES, jobqueue_options, make_jobqueue, open_cluster
+from .failures import FailureLimit
 from .task import UNSAVED, RunTask, execute_run, failure_record, warm_workers
-from .workforce import CHECK_EVERY, Supervisor, Workforce
+from .todo import Plan, plan_runs
+from .workers import CHECK_EVERY, ClusterLink, Supervisor
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -58,10 +58,10 @@ MANIFEST_EVERY = 300.0
 def dask_client(execution: ExecutionSpec, *, timeout: float = 30.0,
                 dashboard: bool = False, campaign_dir: Path | None = None) -> Iterator[Client]:
     """A dask ``Client`` for the campaign's execution section (closed on exit); see
-    :func:`sweep.clusters.open_cluster`."""
+    :func:`sweep.run.clusters.open_cluster`."""
     with open_cluster(execution, timeout=timeout, dashboard=dashboard,
-                      campaign_dir=campaign_dir) as force:
-        yield force.client
+                      campaign_dir=campaign_dir) as link:
+        yield link.client
 
 
 def make_cluster(execution: ExecutionSpec, campaign_dir: Path | None = None) -> Any:
@@ -140,13 +140,13 @@ def _lost_task_record(task: RunTask, exc: BaseException) -> Record:
 
 def _worker_lost(exc: BaseException) -> bool:
     """Whether ``exc`` says the run's worker was lost under it more often than dask retries
-    (:data:`~sweep.clusters.WORKER_LOSSES`): not a failure of the run."""
+    (:data:`~sweep.run.clusters.WORKER_LOSSES`): not a failure of the run."""
     from distributed import KilledWorker
 
     return isinstance(exc, KilledWorker)
 
 
-def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Workforce,
+def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | ClusterLink,
                  plan: Plan, events: RunEvents | None = None, *,
                  clock: Callable[[], float] = time.monotonic,
                  limit: FailureLimit | None = None) -> RunSummary:
@@ -157,18 +157,18 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
     (they stay pending: a record is written whole or not at all) and ``stopped`` says why.
 
     Waits (bounded) for the first worker, checks every worker that joins and sizes the
-    submission window from the accepted workers (:class:`~sweep.workforce.Supervisor`).
+    submission window from the accepted workers (:class:`~sweep.run.workers.Supervisor`).
     Raises :class:`ClusterError` when the workers cannot run the model or none is left for
     ``execution.give_up_after`` seconds (the runs in flight stay pending)."""
     from distributed import as_completed
 
     campaign = expansion.campaign
-    force = client if isinstance(client, Workforce) else Workforce(client, "the dask cluster")
-    client = force.client
+    link = client if isinstance(client, ClusterLink) else ClusterLink(client, "the dask cluster")
+    client = link.client
     t0 = clock()
     summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
                          failed_before=len(plan.failed))
-    watch = Supervisor(force, campaign.execution, clock=clock)
+    watch = Supervisor(link, campaign.execution, clock=clock)
     watch.wait_for_first()
     if events and hasattr(events, "warming"):
         events.warming()
@@ -236,7 +236,7 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Wo
             if client.status != "running":  # the futures are gone with the connection
                 if queue or tasks:
                     log.warning("the connection to %s is lost (client %s): the %d run(s) "
-                                "left stay pending", force.where, client.status,
+                                "left stay pending", link.where, client.status,
                                 len(queue) + len(tasks) + 1)
                 queue.clear()  # nothing more can be submitted
             return True
@@ -341,10 +341,10 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
     if plan.todo:
         try:
             with open_cluster(campaign.execution, dashboard=dashboard,
-                              campaign_dir=store.root) as force:
+                              campaign_dir=store.root) as link:
                 if dashboard and events and hasattr(events, "dashboard"):
-                    events.dashboard(dashboard_link(force.client))
-                summary = run_campaign(expansion, store, force, plan, events, limit=limit)
+                    events.dashboard(dashboard_link(link.client))
+                summary = run_campaign(expansion, store, link, plan, events, limit=limit)
         except KeyboardInterrupt:  # while the cluster was starting or closing
             summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
                                  failed_before=len(plan.failed), interrupted=True)

@@ -1,5 +1,5 @@
 """Readers of the campaign's top-level sections (but ``sweep:`` and ``execution:``, which have
-modules of their own): each takes the :class:`~sweep.checker.Checker`, the section's raw
+modules of their own): each takes the :class:`~sweep.spec.checker.Checker`, the section's raw
 value and the sections read before it, reports every problem and returns what the
 :class:`~sweep.campaign.Campaign` keeps. Also the check of the fits' and figures' options
 against their registries and the campaign's axes."""
@@ -10,7 +10,7 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from .campaign import (
+from ..campaign import (
     AMB,
     DEFAULT_SEEDS,
     MAX_SEED,
@@ -21,8 +21,8 @@ from .campaign import (
     Product,
     StoreSpec,
 )
+from ..limits import DEFAULT_MAX_RUNS, parse_size
 from .checker import Checker, KeyPath, is_int, suggest
-from .limits import DEFAULT_MAX_RUNS, parse_size
 
 LIMITS_KEYS = ("max_runs", "run_memory")
 STORE_KEYS = ("snapshot_times", "snapshot_fields", "snapshot_dtype")
@@ -258,20 +258,20 @@ def registry(kind: str) -> Mapping[str, Any]:
     """The registered fits (``kind`` = "fits") or figures, by name. Imported when a campaign
     names some: they bring xarray, which ``nematic --help`` and ``simulate`` do without."""
     if kind == "fits":
-        from .analysis.registry import REGISTRY as FITS
+        from ..analysis.registry import REGISTRY as FITS
 
         return FITS
-    from .figures.registry import REGISTRY as FIGURES
+    from ..figures.registry import REGISTRY as FIGURES
 
     return FIGURES
 
 
 def _registry_problems(kind: str, product: Product) -> list[str]:
     if kind == "figures":
-        from .figures.registry import option_problems as figure_problems
+        from ..figures.registry import option_problems as figure_problems
 
         return figure_problems(product.name, product.options)
-    from .analysis.registry import option_problems as fit_problems
+    from ..analysis.registry import option_problems as fit_problems
 
     return [] if product.name not in registry("fits") else fit_problems(product.name,
                                                                         product.options)

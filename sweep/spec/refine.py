@@ -34,7 +34,7 @@ positive, its midpoints are geometric (sqrt(a b), so halving 1e-6 to 1e-4 gives 
 its ``min_spacing`` is in decades. With a ``precision:`` section the seeds of every point,
 grid and refined, are decided by its rules, so ``seeds:`` is refused here.
 
-The checks add their problems to the campaign's checker (:class:`sweep.checker.Checker`), so
+The checks add their problems to the campaign's checker (:class:`sweep.spec.checker.Checker`), so
 a mistake here is reported with the file, line, key path, value and what is allowed, in the
 same pass as every other problem of the file.
 """
@@ -52,13 +52,14 @@ from ..campaign import (
     DEFAULT_JUMP,
     DEFAULT_MAX_WIDTH,
     DEFAULT_ROUNDS,
+    OBSERVABLES,
     Dim,
     PrecisionSpec,
     RefinedAxis,
     RefineSpec,
     Threshold,
 )
-from ..checker import Checker, KeyPath, is_finite_number, is_int, suggest
+from .checker import Checker, KeyPath, is_finite_number, is_int, suggest
 
 KEYS = ("axis", "axes", "log", "observable", "classes", "criterion", "patterned_above",
         "fraction", "jump", "rounds", "min_spacing", "seeds")
@@ -72,8 +73,6 @@ MAX_ROUNDS = 50
 def observable_sources() -> dict[str, str]:
     """Observable name -> the run scalar it is read from (phase.nc names and the scalars
     themselves), plus ``growth``."""
-    from ..aggregate import OBSERVABLES
-
     out = {name: src for name, (src, _) in OBSERVABLES.items()}
     out.update({src: src for src in list(out.values())})
     out[GROWTH] = GROWTH
@@ -317,8 +316,6 @@ def check_refine(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
         rounds=int(rounds), initial=initial, add=add, max_width=width,
         confidence=confidence)
     # the union grid phase.nc holds (and the most runs) is bounded like a grid
-    from .plan import points_bound
-
     lines = math.prod(len(d) for d in dims if d.name not in axes)
     bound = lines * math.prod(points_bound(axes[a.name], a, spec.rounds) for a in spec.axes) \
         * len(seeds)
@@ -362,3 +359,17 @@ def _seeds(c: Checker, path: KeyPath, sec: Mapping[str, Any], n_seeds: int, crit
         c.bad((*path, "seeds", "confidence"), confidence, "a number in (0, 1)")
         confidence = DEFAULT_CONFIDENCE
     return int(initial), int(add), float(width), float(confidence)
+
+
+def points_bound(values: Sequence[float], axis: RefinedAxis, rounds: int) -> int:
+    """The most values one refined axis can have: its grid values and every midpoint the
+    rounds can add down to the smallest spacing."""
+    xs = sorted(float(v) for v in values)
+    total = len(xs)
+    for a, b in zip(xs, xs[1:], strict=False):
+        width = math.log10(b / a) if axis.log else b - a
+        depth = 0
+        while depth < rounds and width / 2 ** (depth + 1) >= axis.min_spacing * (1 - 1e-9):
+            depth += 1
+        total += 2 ** depth - 1
+    return total

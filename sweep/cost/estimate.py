@@ -7,7 +7,7 @@ folder). A run to do is costed, in this order of preference:
 - **at a point already run** (the same parameters and numerics, other seeds): the median of
   that point's measured run times (the records' ``wall_time``);
 - **scaled** from the campaign's other finished runs: the cost model's seconds for the run
-  (:mod:`sweep.cost_model`: resolution, length, saves, mechanics) times the median of
+  (:mod:`sweep.cost.model`: resolution, length, saves, mechanics) times the median of
   measured / model over the finished runs of the same kind and resolution (else of the
   same kind, else all of them);
 - **the cost model** alone when the campaign has no finished run.
@@ -15,7 +15,7 @@ folder). A run to do is costed, in this order of preference:
 The spread is the 10-90 % range of the run times, summed over the runs to do: at measured
 points the seed-to-seed spread of the points with several runs (else the spread of the
 ratios below), for scaled runs the 10 % and 90 % quantiles of measured / model, for the cost
-model its calibration's :data:`~sweep.cost_model.MODEL_SPREAD`. The wall time on W workers is
+model its calibration's :data:`~sweep.cost.model.MODEL_SPREAD`. The wall time on W workers is
 the runs dealt in the campaign's order to the first free worker (as the driver's window
 does), whose makespan lies between the CPU time over W and that plus the longest run, plus
 the driver's own time (:data:`DRIVER_OVERHEAD`). On a local cluster the cost model's run
@@ -39,11 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from .campaign import Campaign, ExecutionSpec
-from .clusters import local_worker_count
-from .cost_model import MODEL_SPREAD, kind, model_seconds
-from .expand import Expansion, GridPoint, expand
-from .store import RETRYABLE_REASONS, CampaignStore, Record
+from ..campaign import Campaign, ExecutionSpec, local_worker_count
+from ..expand import Expansion, GridPoint, expand
+from ..store import RETRYABLE_REASONS, CampaignStore, Record
+from .model import MODEL_SPREAD, kind, model_seconds
 
 #: the quantiles of the spread
 QUANTILES = (0.1, 0.9)
@@ -124,7 +123,7 @@ class Estimate:
     points: list[Costed] = field(default_factory=list)
     later: LaterRounds | None = None
     round_note: str = ""
-    #: what changed since the results were made (:mod:`sweep.changes`), as lines
+    #: what changed since the results were made (:mod:`sweep.outputs.changes`), as lines
     changes: list[str] = field(default_factory=list)
 
 
@@ -244,7 +243,7 @@ def _spread(values: Sequence[float]) -> tuple[float, float]:
 def classify(expansion: Expansion, store: CampaignStore, records: Mapping[str, Record], *,
              retry_failed: bool = False) -> tuple[list[int], int, int]:
     """(positions to do, done, failed and not redone), as ``nematic run`` would plan them
-    (:func:`sweep.plan.plan_runs`) but without touching the folder: a record whose file is
+    (:func:`sweep.run.todo.plan_runs`) but without touching the folder: a record whose file is
     not intact is a run to do."""
     todo: list[int] = []
     done = failed = 0
@@ -286,7 +285,7 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
              load_cores: tuple[float, int] | None = None) -> Estimate:
     """The estimate of what ``nematic run`` would do now (see the module docstring);
     ``load_cores``: the machine's load average and cores (default :func:`machine_load`)."""
-    from .changes import campaign_changes
+    from ..outputs.changes import campaign_changes
 
     records = store.scan(save=False)
     later = None
@@ -295,7 +294,7 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
         expansion: Expansion = expand(campaign)
         dense = expansion
     elif campaign.refine is not None:
-        from .refine.rounds import replay
+        from ..refine.rounds import replay
 
         ref = replay(campaign, store, records)
         expansion, dense = ref.run_list(), ref.expansion()
@@ -303,7 +302,7 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
                       + ("(the grid)" if ref.current.number == 0 else "")
                       + (f"; refinement finished ({ref.stop})" if ref.finished else ""))
     else:
-        from .precision.rounds import replay as replay_seeds
+        from ..precision.rounds import replay as replay_seeds
 
         seeds = replay_seeds(campaign, store, records)
         expansion, dense = seeds.run_list(), seeds.expansion()
@@ -343,7 +342,7 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
                 f"{fmt_seconds(min(seconds))} to {fmt_seconds(max(seconds))}, median "
                 f"{fmt_seconds(float(np.median(seconds)))})")
     else:
-        text = ("cost model, no finished runs (sweep/cost_model.py, calibrated on a 2-core "
+        text = ("cost model, no finished runs (sweep/cost/model.py, calibrated on a 2-core "
                 "VM: benchmarks/cost_model.json)")
     if campaign.refine is not None and not ref.finished:
         later = later_rounds(campaign, ref.current.number, ref.n_runs,
@@ -377,12 +376,12 @@ def later_rounds(campaign: Campaign, current: int, planned: int, per_run: Sequen
     the rounds that only add seeds too): every run :func:`~sweep.refine.plan.run_bound`
     allows beyond the ``planned`` ones, each at the mean cost of the campaign's runs; each
     round ends when its longest run does."""
-    from .refine.plan import run_bound
+    from ..refine.plan import run_bound
 
     assert campaign.refine is not None
     last = campaign.refine.rounds
     if campaign.precision is not None:  # rounds that only add seeds follow
-        from .precision.decide import rounds_bound
+        from ..precision.decide import rounds_bound
 
         last += rounds_bound(campaign.precision, len(campaign.seeds)) - 1
     rounds = last - current
@@ -397,8 +396,8 @@ def forecast_rounds(plan: Any, basis: Basis, workers: int) -> LaterRounds | None
     """The runs a campaign with seeds by precision is expected to add after its current
     round (:func:`sweep.precision.forecast.expected_seeds` per point, from the seeds it has
     finished), each at its point's cost; the wall time as :func:`later_rounds` has it."""
-    from .precision.decide import rounds_bound
-    from .precision.forecast import expected_seeds
+    from ..precision.decide import rounds_bound
+    from ..precision.forecast import expected_seeds
 
     cap = plan.cap
     planned = [0] * len(plan.grid.points)

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from .campaign import normalise_float
-from .errors import CampaignError, Problem
-from .limits import DEFAULT_MAX_RUNS
+from ..campaign import normalise_float
+from ..errors import CampaignError, Problem
+from ..limits import DEFAULT_MAX_RUNS
 
 #: A key path inside the YAML document: ``("sweep", "axes", "chi", 2)``.
 KeyPath = tuple[str | int, ...]

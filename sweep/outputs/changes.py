@@ -1,5 +1,5 @@
 """A campaign file that changed since its results were made: what changed, compared with the
-copy the last ``nematic run`` left in the results folder (:mod:`sweep.stored`), and what it
+copy the last ``nematic run`` left in the results folder (:mod:`sweep.outputs.stored`), and what it
 means for the runs: how many of the current plan are new (no record yet) or kept (a record
 from before), and which runs in the folder are *orphaned* (the current campaign does not
 plan them). ``nematic run --prune`` removes the orphaned runs (:func:`prune`).
@@ -17,13 +17,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from .campaign import Campaign
-from .errors import CampaignError
-from .store import OVERRIDE_PREFIX, CampaignStore, Record, campaign_copy_text
+from ..campaign import Campaign
+from ..errors import CampaignError
+from ..store import OVERRIDE_PREFIX, CampaignStore, Record, campaign_copy_text
 from .stored import stored_campaign, stored_text
 
 if TYPE_CHECKING:
-    from .expand import Expansion
+    from ..expand import Expansion
 
 #: At most this many values of an axis are named in a change line.
 MAX_VALUES = 6
@@ -132,8 +132,8 @@ def describe_changes(old: Campaign, new: Campaign) -> list[str]:
 
 def _reachable(campaign: Campaign, run_id: str, record: Mapping[str, Any] | None) -> bool:
     """Whether an adaptive campaign could plan ``run_id`` (module doc) from its record."""
-    from .refine.plan import point_at, refined_dims
-    from .refine.rounds import RunNamer
+    from ..refine.plan import point_at, refined_dims
+    from ..refine.rounds import RunNamer
 
     coords = (record or {}).get("coords")
     seed = (record or {}).get("seed")
@@ -202,7 +202,7 @@ def campaign_changes(campaign: Campaign, store: CampaignStore,
         changes = [f"(the copy is not a valid campaign for this code, so what changed is not "
                    f"listed: {first})"]
     if expansion is None:
-        from .refine.rounds import expansion_for
+        from ..refine.rounds import expansion_for
 
         expansion = expansion_for(campaign, store)
     if records is None:

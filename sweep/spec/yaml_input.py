@@ -9,8 +9,8 @@ from typing import Any
 
 import yaml
 
+from ..errors import CampaignError, Problem
 from .checker import KeyPath
-from .errors import CampaignError, Problem
 
 #: Largest campaign file read (bytes), and most YAML nodes after aliases are expanded: a
 #: file of anchors that refer to anchors (a "billion laughs") is refused before it is built.

@@ -4,7 +4,7 @@ a dask-jobqueue cluster. A scheduler the driver starts itself uses TLS with temp
 credentials made for this campaign (``distributed.Security.temporary()``; a batch job reads
 the worker's copy from files that only the campaign's owner can read, in ``<campaign>/tls``),
 unless ``execution.security`` opts out with a stated reason, and serves its dashboard on
-127.0.0.1 only. The cluster is then watched by :class:`~sweep.workforce.Supervisor`.
+127.0.0.1 only. The cluster is then watched by :class:`~sweep.run.workers.Supervisor`.
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from .campaign import CLUSTER_KINDS, ClusterSpec, ExecutionSpec
-from .errors import ClusterError
+from ..campaign import CLUSTER_KINDS, ClusterSpec, ExecutionSpec, local_worker_count
+from ..errors import ClusterError
 from .lifetime import worker_lifetime
-from .workforce import JOB_LOGS, TLS_DIR, JobWatch, Workforce
+from .workers import JOB_LOGS, TLS_DIR, ClusterLink, JobWatch
 
 log = logging.getLogger(__name__)
 
@@ -28,15 +28,8 @@ log = logging.getLogger(__name__)
 #: or past its walltime, a crash) is run again by the scheduler the driver starts, at most
 #: this many times (dask's ``allowed-failures``); then it stays pending (no record: not a
 #: failure of the run) and the driver says so. A worker that retires (its lifetime,
-#: :mod:`sweep.lifetime`) hands its runs back without counting.
+#: :mod:`sweep.run.lifetime`) hands its runs back without counting.
 WORKER_LOSSES = 3
-
-
-def local_worker_count(execution: ExecutionSpec) -> int:
-    if execution.workers:
-        return execution.workers
-    n = os.cpu_count() or 1
-    return max(1, n // max(1, execution.threads_per_worker))
 
 
 def _security(execution: ExecutionSpec) -> Any:
@@ -106,7 +99,7 @@ def make_jobqueue(spec: ClusterSpec, options: dict[str, Any]) -> Any:
 
 @contextlib.contextmanager
 def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: bool = False,
-                 campaign_dir: Path | None = None) -> Iterator[Workforce]:
+                 campaign_dir: Path | None = None) -> Iterator[ClusterLink]:
     """The campaign's cluster (closed on exit): an external scheduler, a dask-jobqueue
     cluster (jobs submitted here; logs and TLS credentials in ``campaign_dir``) or a local
     cluster (its dashboard on 127.0.0.1, a free port, if ``dashboard``)."""
@@ -120,7 +113,7 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
             raise ClusterError(f"cannot reach the dask scheduler at {execution.scheduler}: "
                                f"{e}") from None
         try:
-            yield Workforce(client, f"the dask scheduler at {execution.scheduler}")
+            yield ClusterLink(client, f"the dask scheduler at {execution.scheduler}")
         finally:
             if client.status != "running":  # the scheduler is gone: its reconnection
                 # attempts, cancelled by close(), are no news (nor are their tracebacks)
@@ -141,7 +134,7 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
             else:
                 cluster.scale(jobs=spec.jobs)
             with Client(cluster) as client:
-                yield Workforce(client, f"the dask-jobqueue {cls_name}",
+                yield ClusterLink(client, f"the dask-jobqueue {cls_name}",
                                 JobWatch(cluster, spec, logs))
         return
     n = local_worker_count(execution)
@@ -162,7 +155,7 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
                                                  "allowed_failures": WORKER_LOSSES},
                                silence_logs=logging.ERROR, **kwargs)
     with cluster, Client(cluster) as client:
-        yield Workforce(client, "the local dask cluster")
+        yield ClusterLink(client, "the local dask cluster")
 
 
 @contextlib.contextmanager

@@ -9,10 +9,10 @@ import logging
 from dataclasses import dataclass, field
 from typing import Any
 
-from .expand import Expansion
+from ..expand import Expansion
+from ..files import atomic_path
+from ..store import RETRYABLE_REASONS, CampaignStore, Record
 from .failures import previous_failures
-from .files import atomic_path
-from .store import RETRYABLE_REASONS, CampaignStore, Record
 from .task import spool_dir
 
 log = logging.getLogger(__name__)
@@ -32,7 +32,7 @@ class Plan:
     #: runs whose record or file was unusable (missing, truncated, corrupt): (run_id, why)
     redone: list[tuple[str, str]] = field(default_factory=list)
     #: failed runs redone (``--retry-failed``): position -> the failures their new record
-    #: keeps as ``previous_failures`` (:func:`sweep.failures.previous_failures`)
+    #: keeps as ``previous_failures`` (:func:`sweep.run.failures.previous_failures`)
     history: dict[int, list[dict[str, Any]]] = field(default_factory=dict)
 
     @property

@@ -22,7 +22,7 @@ A resolution variant of a campaign with the per-node texture also fixes the grid
 texture is drawn on (``texture_resolution``: the point's own resolution), so that it starts
 from the same physical field (model/initial.py); the band texture is that already.
 
-The checks add their problems to the campaign's checker (:class:`sweep.checker.Checker`), so
+The checks add their problems to the campaign's checker (:class:`sweep.spec.checker.Checker`), so
 a mistake here is reported with the file, line, key path and what is allowed, in the same
 pass as every other problem of the file.
 """
@@ -49,7 +49,7 @@ from ..campaign import (
     normalise_float,
     same_value,
 )
-from ..checker import Checker, coerce, is_int, is_number, suggest
+from .checker import Checker, coerce, is_int, is_number, suggest
 
 KEYS = ("variants", "points", "corners", "seeds", "threshold", "patterned_above",
         "observables", "before")

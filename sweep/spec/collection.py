@@ -22,8 +22,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..errors import CampaignError, Problem
 from .checker import Checker
-from .errors import CampaignError, Problem
 from .yaml_input import read_document
 
 KEYS = ("name", "description", "campaigns")

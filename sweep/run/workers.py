@@ -1,5 +1,5 @@
 """The driver's workers: watching the campaign's dask cluster while it runs (the cluster is
-started by :mod:`sweep.clusters`).
+started by :mod:`sweep.run.clusters`).
 
 :class:`Supervisor` is what the driver asks, every couple of seconds, while runs are in
 flight: it checks each worker that joins (it imports the model, its code version is the
@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .campaign import ClusterSpec, ExecutionSpec
-from .errors import ClusterError
+from ..campaign import ClusterSpec, ExecutionSpec
+from ..errors import ClusterError
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -87,7 +87,7 @@ def worker_environment() -> dict[str, Any]:
     """Run on every worker that joins: proves the model imports there; returns its versions."""
     import model.simulate  # noqa: F401 - the import is the check
 
-    from .provenance import environment
+    from ..provenance import environment
 
     return environment()
 
@@ -222,8 +222,9 @@ class JobWatch:
 
 # --------------------------------------------------------------------------- supervisor
 @dataclass
-class Workforce:
-    """A running cluster as the driver sees it."""
+class ClusterLink:
+    """The driver's link to a running cluster: its client, where it is (for messages) and,
+    for a dask-jobqueue cluster, its batch jobs."""
 
     client: Client
     #: "the dask scheduler at tcp://..." / "the dask-jobqueue SLURMCluster" / ...
@@ -235,7 +236,7 @@ class Workforce:
 class Supervisor:
     """Watches the workers while a campaign runs (see the module's docstring)."""
 
-    force: Workforce
+    link: ClusterLink
     execution: ExecutionSpec
     clock: Callable[[], float] = time.monotonic
     mine: dict[str, Any] = field(default_factory=dict)
@@ -247,20 +248,20 @@ class Supervisor:
 
     def __post_init__(self) -> None:
         if not self.mine:
-            from .provenance import code_version, git_commit
+            from ..provenance import code_version, git_commit
 
             self.mine = {"code_version": code_version(), "git_commit": git_commit()}
 
     @property
     def client(self) -> Client:
-        return self.force.client
+        return self.link.client
 
     @property
     def threads(self) -> int:
         return sum(self.accepted.values())
 
     def _logs(self) -> str:
-        return f"; {self.force.jobs.describe_logs()}" if self.force.jobs else ""
+        return f"; {self.link.jobs.describe_logs()}" if self.link.jobs else ""
 
     def check(self, *, running: bool = True) -> None:
         """Look at the workers and jobs now; raise :class:`ClusterError` to give up."""
@@ -268,13 +269,13 @@ class Supervisor:
         self.last_check = now
         status = getattr(self.client, "status", "running")
         if status not in ("running", "newly-created"):
-            self._no_workers(now, f"the connection to {self.force.where} is lost (client "
+            self._no_workers(now, f"the connection to {self.link.where} is lost (client "
                              f"{status})")
             return
         try:
             info = scheduler_workers(self.client)
         except Exception as e:  # noqa: BLE001 - the scheduler went away: judged by time
-            self._no_workers(now, f"{self.force.where} does not answer ({type(e).__name__}: "
+            self._no_workers(now, f"{self.link.where} does not answer ({type(e).__name__}: "
                              f"{e})")
             return
         for addr in list(self.accepted):
@@ -284,27 +285,27 @@ class Supervisor:
         new = [a for a in info if a not in self.accepted and a not in self.refused]
         if new:
             self._check_workers(new, info)
-        if self.force.jobs is not None:
-            self.force.jobs.check({str(w.get("name", "")) for w in info.values()})
+        if self.link.jobs is not None:
+            self.link.jobs.check({str(w.get("name", "")) for w in info.values()})
         self.window = window_size(self.threads)
         if self.accepted:
             self.no_worker_since = None
             return
         if self.refused and not self.accepted:
             reasons = sorted(set(self.refused.values()))
-            raise ClusterError(f"refusing the workers of {self.force.where}: "
+            raise ClusterError(f"refusing the workers of {self.link.where}: "
                                f"{len(self.refused)} worker(s) joined and none can run this "
                                f"campaign: {reasons[0]}" + self._logs())
-        jobs = self.force.jobs
+        jobs = self.link.jobs
         if jobs is not None and jobs.failed_starts >= 2 * max(1, jobs.target):
-            raise ClusterError(f"every batch job of {self.force.where} ends before its dask "
+            raise ClusterError(f"every batch job of {self.link.where} ends before its dask "
                                f"worker joins ({jobs.failed_starts} in a row, the last job "
                                f"{jobs.last_ended}){self._logs()}. Fix the workers' "
                                "environment (execution.cluster: python or "
                                "job_script_prologue) and rerun the same command: finished "
                                "runs are kept")
         if running:
-            self._no_workers(now, f"no worker is left in {self.force.where}")
+            self._no_workers(now, f"no worker is left in {self.link.where}")
 
     def _no_workers(self, now: float, why: str) -> None:
         if self.no_worker_since is None:
@@ -354,7 +355,7 @@ class Supervisor:
             if last is None and now - t0 >= 1.0 or last is not None \
                     and now - last >= WAIT_REPORT_EVERY:
                 log.warning("waiting for a dask worker to join %s (%.0f s so far%s)",
-                            self.force.where, now - t0,
+                            self.link.where, now - t0,
                             f", giving up after {limit:g} s" if limit else "")
                 last = now
             if limit and now - t0 >= limit:
@@ -363,7 +364,7 @@ class Supervisor:
                             "--nthreads 1` from this package's environment")
                 else:
                     hint = "check the batch system's queue"
-                raise ClusterError(f"no dask worker joined {self.force.where} within "
+                raise ClusterError(f"no dask worker joined {self.link.where} within "
                                    f"{limit:g} s (execution.wait_for_workers){self._logs()}; "
                                    f"{hint}, or raise the wait (0 waits for ever)")
             time.sleep(0.5 if now - t0 < 5 else 1.0)

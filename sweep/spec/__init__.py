@@ -44,14 +44,15 @@ from typing import Any, NamedTuple
 
 from model.parameters import Numerics
 
-from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign
+from ..campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign
+from ..errors import CampaignError, Problem
+from ..limits import available_memory, fmt_bytes, parse_size, run_memory_bytes
+from .axes import read_sweep
 from .checker import Checker, KeyPath, is_int, suggest
-from .errors import CampaignError, Problem
-from .execution_section import read_execution
-from .expand import check_points
-from .limits import available_memory, fmt_bytes, parse_size, run_memory_bytes
-from .precision.config import read_precision
-from .refine.config import read_refine
+from .execution import read_execution
+from .points import check_points
+from .precision import read_precision
+from .refine import read_refine
 from .sections import (
     check_product_options,
     read_description,
@@ -64,8 +65,7 @@ from .sections import (
     read_seeds,
     read_store,
 )
-from .sweep_section import read_sweep
-from .verify.config import read_verify
+from .verify import read_verify
 from .yaml_input import read_document
 
 #: The top-level keys, in the order error messages list them.

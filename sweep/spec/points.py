@@ -1,0 +1,43 @@
+"""The model's check of every grid point of a campaign: each point's parameters and numerics
+built as :func:`sweep.expand.make_point` builds them, each distinct
+:class:`~model.errors.ParameterError` reported at the key path that caused it."""
+
+from __future__ import annotations
+
+from model.errors import ParameterError
+
+from ..campaign import AMB, Campaign
+from ..expand import MAX_POINT_PROBLEMS, iter_points, make_point
+from .checker import Checker
+
+
+def check_points(campaign: Campaign, checker: Checker) -> None:
+    """Build the model's objects at every grid point; report each distinct
+    :class:`~model.errors.ParameterError` at the key path that caused it."""
+    axis_names = {a.name for a in campaign.axes}
+    seen: set[tuple[str, str]] = set()
+    for index, coords in iter_points(campaign):
+        try:
+            make_point(campaign, index, coords)
+        except ParameterError as e:
+            name = e.name
+            if name == "alpha" and AMB in axis_names:
+                name = AMB
+            if name in axis_names:
+                path: tuple[str | int, ...] = ("sweep", "axes", name)
+                at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
+                msg = f"got {e.value!r}; allowed: {e.allowed} (at the grid point {at})"
+            elif name in campaign.numerics:
+                path, msg = ("numerics", name), f"got {e.value!r}; allowed: {e.allowed}"
+            elif name in campaign.parameters:
+                path, msg = ("parameters", name), f"got {e.value!r}; allowed: {e.allowed}"
+            else:
+                path, msg = (name,), f"got {e.value!r}; allowed: {e.allowed}"
+            key = (repr(path), e.allowed)
+            if key in seen:
+                continue
+            seen.add(key)
+            checker.add(path, msg)
+            if len(seen) >= MAX_POINT_PROBLEMS:
+                checker.add((), "further grid problems not shown")
+                return

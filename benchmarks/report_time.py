@@ -34,7 +34,7 @@ from collections import Counter
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-#: Libraries whose import the report's fast path avoids (checked in tests/test_report.py).
+#: Libraries whose import the report's fast path avoids (checked in tests/sweep/test_report.py).
 HEAVY = ("numba", "distributed", "dask.array", "matplotlib", "model.compiled", "scipy")
 
 

@@ -6,7 +6,7 @@ r"""The kernels a run executes: ``Numerics.backend`` "compiled" (numba,
 mechanics, the PDE, the split right-hand side and the solver call (through ``self.k`` or
 ``mechanics.k``), with its signature. Both modules satisfy it: :func:`kernels` returns either
 as a :class:`Kernels`, so the type checker compares the numpy twins' signatures with it (the
-numba dispatchers are untyped to it; ``tests/test_model_constitutive.py`` checks that the
+numba dispatchers are untyped to it; ``tests/model/test_constitutive.py`` checks that the
 compiled functions take the same parameters). The FFTs and Krylov solves follow the same
 choice (:mod:`model.fourier`, :class:`model.mechanics.Mechanics`).
 """

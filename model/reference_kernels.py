@@ -3,7 +3,7 @@ r"""The numpy twins of the compiled kernels: the same names and signatures as
 checker compares this module with), written as array expressions over the readable references
 (:mod:`model.constitutive`, :mod:`model.wellposedness`, :func:`phi_functions`).
 ``Numerics.backend = "numpy"`` runs these (:func:`model.backend.kernels`); the tests check that
-each pair agrees (``tests/test_model_constitutive.py``).
+each pair agrees (``tests/model/test_constitutive.py``).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ an empty numba cache (a temporary ``NUMBA_CACHE_DIR``, removed afterwards) and l
 signature with which Python called a compiled function (numba's "numba:compile" events that
 no other compilation encloses) with its compile time, the longest first. Run it after a change
 to the kernels' signatures or to the code that calls them (``python -m model.warmup`` says so
-when the list misses something; tests/test_warmup.py checks it).
+when the list misses something; tests/model/test_warmup.py checks it).
 """
 
 from __future__ import annotations

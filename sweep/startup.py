@@ -22,7 +22,7 @@ that goes on to make dask arrays gets them recognised as usual.
 
 It changes nothing where ``dask.array`` is already imported, where xarray has already asked,
 or where xarray's internals are not the ones this was written for (then xarray imports
-``dask.array`` as before: slower, never wrong). ``tests/test_startup.py`` checks that a dask
+``dask.array`` as before: slower, never wrong). ``tests/sweep/test_startup.py`` checks that a dask
 array made after it is still recognised.
 """
 

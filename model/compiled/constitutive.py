@@ -2,7 +2,7 @@
 
 numpy twin: :mod:`model.constitutive` (the readable formulas of Eqs. 1-2), through the
 signature-compatible wrappers of :mod:`model.reference_kernels`; tested to agree in
-``tests/test_model_constitutive.py``.
+``tests/model/test_constitutive.py``.
 """
 
 from __future__ import annotations

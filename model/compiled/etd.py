@@ -2,7 +2,7 @@
 activity's local Jacobian and the stage combinations.
 
 numpy twin: :mod:`model.reference_kernels` (its ``phi_functions``); tested to agree in
-``tests/test_model_constitutive.py``.
+``tests/model/test_constitutive.py``.
 """
 
 from __future__ import annotations

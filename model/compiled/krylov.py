@@ -3,7 +3,7 @@ weighted inner products and the fused Arnoldi step, shared by
 :func:`model.compiled.linear_rhs.spin_gmres` and :mod:`model.compiled.finite_krylov`.
 
 numpy twin: :mod:`model.krylov` (the same algorithms on arrays with a caller-supplied inner
-product); tested to agree in ``tests/test_model_krylov.py``.
+product); tested to agree in ``tests/model/test_krylov.py``.
 """
 
 from __future__ import annotations

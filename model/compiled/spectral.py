@@ -3,7 +3,7 @@ the isotropic reference medium, the linear mechanics' response and spin symbols.
 
 numpy twin: :mod:`model.reference_kernels` (from :meth:`model.fourier.SpectralGrid.grad_hat`,
 ``div_hat`` and :class:`model.mechanics.LinearMechanics`' references); tested to agree in
-``tests/test_model_constitutive.py``.
+``tests/model/test_constitutive.py``.
 """
 
 from __future__ import annotations

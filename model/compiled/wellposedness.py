@@ -3,7 +3,7 @@ the rate problem's symbol over points and sampled directions.
 
 numpy twin: :func:`model.reference_kernels.finite_margin_kernel` (every point sampled, from
 :func:`model.wellposedness.finite_symbol_det`); tested to agree in
-``tests/test_model_wellposedness.py``.
+``tests/model/test_wellposedness.py``.
 """
 
 from __future__ import annotations

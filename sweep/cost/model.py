@@ -18,7 +18,7 @@ norm, incompressible linear mechanics, finite strain with ``displacement: equili
 multiply the cost by their measured factor.
 
 The constants are measured on this project's 2-core VM by ``benchmarks/bench_cost.py``
-(the fit and every row in ``benchmarks/cost_model.json``; ``tests/test_estimate.py`` checks
+(the fit and every row in ``benchmarks/cost_model.json``; ``tests/sweep/test_estimate.py`` checks
 that they are the file's). The activity decides the step count (1 to 4 steps per tau), so a
 run's cost is known to within :data:`MODEL_SPREAD` only: the 10 % and 90 % quantiles of
 measured / model over the calibration's activity runs.

@@ -69,7 +69,7 @@ def scheduler_workers(client: Client) -> dict[str, dict[str, Any]]:
     cache that call returns asks for no workers, and can overwrite the answer before it is
     returned, so that every worker seems to have left (22 of 3,000 calls with the refresh at
     5 ms, distributed 2026.8; at the default 2 s, the "worker left" warnings of a busy
-    machine, tests/test_sweep_workers.py)."""
+    machine, tests/sweep/test_workers.py)."""
     scheduler = client.scheduler
     if scheduler is None:  # a closed client: no worker it can reach
         return {}

@@ -19,7 +19,7 @@ from model.parameters import Numerics, Parameters
 from sweep.cli.stability import stability
 
 TWO_PI = 2.0 * math.pi
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 # Fig. A1 caption: S0 = 0, A0 = 1, gamma/tau = 1, alpha - B = 1, B = 0.5, K = 1e-4; the rest
 # are the constants campaigns/figA1.yaml pins and docs/stability.md §7 quotes (zeta = 1, C = 3,

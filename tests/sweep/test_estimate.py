@@ -25,7 +25,7 @@ from sweep.refine.rounds import replay
 from sweep.spec import Overrides, load_campaign, parse_campaign
 from sweep.store import CampaignStore
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: a machine with nothing else to do: 2 cores, load average 0
 QUIET = (0.0, 2)
 

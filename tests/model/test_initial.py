@@ -70,7 +70,7 @@ def test_per_node_amplitude_noise_has_the_requested_rms():
 
 
 def test_per_node_is_a_different_field_at_every_resolution():
-    # (the band texture is one field at every resolution: test_model_dynamics)
+    # (the band texture is one field at every resolution: tests/model/test_dynamics.py)
     pn = Parameters(initial="per_node")
     coarse, fine = initial_fields(pn, 32, 2)[0], initial_fields(pn, 64, 2)[0]
     assert coarse.shape == (32, 32)

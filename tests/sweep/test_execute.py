@@ -37,7 +37,7 @@ def invoke(*args: object):
 
 
 # `small` (the campaign run once) and `copy_of_small` are in conftest.py: shared with
-# test_sweep_faults.py.
+# tests/sweep/test_faults.py.
 
 
 def test_failed_runs_are_recorded_and_exit_1(small):

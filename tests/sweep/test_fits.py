@@ -1,6 +1,6 @@
 """Fits recover known values from synthetic phase diagrams with noise, within their stated
 intervals (sweep/analysis/). Synthetic data are fine here: these test the estimators; the
-figures are tested on real runs in tests/test_figures.py."""
+figures are tested on real runs in tests/sweep/test_figures.py."""
 
 from __future__ import annotations
 

@@ -192,7 +192,7 @@ def _in_fresh_process(tmp_path: Path, *args: str) -> Any:
     """``python *args`` with the numba cache in ``tmp_path`` (empty at first)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
     return subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True,
-                          timeout=1200, cwd=Path(__file__).resolve().parent.parent)
+                          timeout=1200, cwd=Path(__file__).resolve().parents[2])
 
 
 def _warmup(tmp_path: Path, *args: str) -> Any:

@@ -31,7 +31,7 @@ from sweep.refine.rounds import read_plan, replay
 from sweep.spec import Overrides, load_campaign, parse_campaign
 from sweep.store import CampaignStore
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FIGA1_ADAPTIVE = ROOT / "campaigns" / "figA1_adaptive.yaml"
 FIG2_ADAPTIVE = ROOT / "campaigns" / "fig2_adaptive.yaml"
 

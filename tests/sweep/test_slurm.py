@@ -27,7 +27,7 @@ from sweep_helpers import kill_group, records, run_ids, start_driver, wait_for, 
 
 pytestmark = pytest.mark.slurm
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "scripts" / "slurm_local.sh"
 
 

@@ -31,7 +31,7 @@ from sweep.refine.seeds import decision
 from sweep.spec import parse_campaign
 from sweep.store import CampaignStore
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def invoke(*args: object):
@@ -495,7 +495,7 @@ def test_the_replay_from_the_run_files_resumes_to_the_same_decisions(tmp_path):
 
 
 # --------------------------------------------------------------------------- a real campaign
-#: The Fig. A1 setting (tests/test_refine.py) refined over chi and eps, seeds by precision
+#: The Fig. A1 setting (tests/sweep/test_refine.py) refined over chi and eps, seeds by precision
 #: on the growth class: stable / unstable (growth above 0) unanimous over 2 seeds, or all 3.
 REAL = """\
 name: {name}

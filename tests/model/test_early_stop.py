@@ -39,7 +39,7 @@ def test_early_stop_is_off_by_default_and_keeps_the_run_ids():
     assert n.steady_tol == 0.0
     assert run_id_for(PARAMS, n, 0) == run_id_for(PARAMS, Numerics(steady_window=7.0), 0)
     assert run_id_for(PARAMS, n, 0) != run_id_for(PARAMS, Numerics(steady_tol=0.01), 0)
-    # the golden ids of tests/test_sweep_identity.py are those of runs made before early stop
+    # the golden ids of tests/sweep/test_identity.py are those of runs made before early stop
     # existed; this one is the default parameters and numerics, seed 0
     from sweep.identity import canonical_json
 

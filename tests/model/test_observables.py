@@ -20,7 +20,7 @@ from model.parameters import Numerics, Parameters
 from model.simulate import run
 from model.stability import max_growth_rate
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 @pytest.mark.parametrize(("mode", "n"), [((3, 4), 64), ((0, 7), 64), ((6, 8), 128), ((1, 1), 32)])

@@ -1,7 +1,7 @@
 """``nematic report``: the page of a real tiny adaptive campaign with failures lists every
 failure reason, failed run, refinement round and verification verdict, is self-contained,
 and is rewritten by ``nematic report`` from the campaign's name; the pieces (fit tables,
-hover texts) from small data. The page in a real browser: tests/test_report_browser.py."""
+hover texts) from small data. The page in a real browser: tests/sweep/test_report_browser.py."""
 
 from __future__ import annotations
 

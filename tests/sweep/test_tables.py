@@ -156,7 +156,7 @@ def test_the_readme_notebook_snippet_runs(small):
     import matplotlib
 
     matplotlib.use("Agg")
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     (snippet,) = re.findall(r"```py\n(.*?)```", readme, flags=re.S)
     opening = 'sweep.open_campaign("quickstart")'
     assert opening in snippet

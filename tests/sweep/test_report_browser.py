@@ -23,7 +23,7 @@ from sweep.cli import app
 
 pytestmark = pytest.mark.browser
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SCREENSHOT = ROOT / "docs" / "figures" / "report_screenshot.png"
 #: ``NEMATIC_UPDATE_SCREENSHOT=1``: the test's screenshot replaces :data:`SCREENSHOT`.
 UPDATE_SCREENSHOT = "NEMATIC_UPDATE_SCREENSHOT"

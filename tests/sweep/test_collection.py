@@ -23,7 +23,7 @@ from sweep.errors import CampaignError
 from sweep.spec.collection import read_collection
 from sweep.store import CampaignStore, read_lock_holder
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 SMALL = """\
 name: {name}

@@ -2,7 +2,7 @@
 "integrated"``, docs/model.md section 4): the accuracy contract against a tightly converged
 run of the scheme that solves force balance at every stage, force balance at the saved
 times, and the displacement's share of the error estimate. (Its order of accuracy:
-``test_model_dynamics.test_time_step_convergence_order``; the passive energy:
+``tests/model/test_dynamics.py::test_time_step_convergence_order``; the passive energy:
 ``test_passive_free_energy_never_increases``, both with the default, integrated scheme.)"""
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ benchmarks/report_time.py, not here): ``nematic --help`` imports none of the num
 libraries, xarray recognises dask arrays made after :func:`defer_dask_array` without
 importing ``dask.array`` before, the FFTW version is read without numba, and the garbage
 collector is paused and restored. Each check runs in a fresh interpreter, where nothing is
-imported yet. What ``nematic report`` and ``status`` import: tests/test_report.py."""
+imported yet. What ``nematic report`` and ``status`` import: tests/sweep/test_report.py."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from sweep_helpers import cli_modules
 
 from sweep.startup import FRESH_PROCESS, paused_gc
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def python(code: str) -> str:

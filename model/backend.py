@@ -52,14 +52,14 @@ class Kernels(Protocol):
     def grad_hat_kernel(self, v: Array, kx: Array, ky: Array) -> Array:
         """:math:`i k_j \\hat v_i`."""
 
-    def div_hat_kernel(self, T: Array, kx: Array, ky: Array) -> Array:  # noqa: N803
+    def div_hat_kernel(self, T: Array, kx: Array, ky: Array) -> Array:
         """:math:`i k_j \\hat T_{ij}`."""
 
     def balance_residual_kernel(self, P: Array, P_hat: Array, khx: Array, khy: Array,
                                 weights: Array) -> float:
         """The force-balance residual (:meth:`model.mechanics.Mechanics.residual`)."""
 
-    def neg_div_hat_kernel(self, T: Array, kx: Array, ky: Array) -> Array:  # noqa: N803
+    def neg_div_hat_kernel(self, T: Array, kx: Array, ky: Array) -> Array:
         """:math:`-i k_j \\hat T_{ij}`."""
 
     def green_kernel(self, b: Array, khx: Array, khy: Array, inv_k2: Array, a: float

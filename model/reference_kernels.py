@@ -82,7 +82,7 @@ def grad_hat_kernel(v: Array, kx: Array, ky: Array) -> Array:
     return 1j * np.stack([np.stack([kx * v[i], ky * v[i]]) for i in range(2)])
 
 
-def div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:  # noqa: N803 (the tensor T)
+def div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:
     r""":math:`i k_j \hat T_{ij}`."""
     return 1j * (kx * T[:, 0] + ky * T[:, 1])
 
@@ -96,7 +96,7 @@ def balance_residual_kernel(P: Array, P_hat: Array, khx: Array, khy: Array, weig
     return norm / max(1.0, float(np.sqrt(np.mean(np.sum(P**2, axis=(0, 1))))))
 
 
-def neg_div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:  # noqa: N803
+def neg_div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:
     r""":math:`-i k_j \hat T_{ij}`."""
     return -div_hat_kernel(T, kx, ky)
 

@@ -70,6 +70,6 @@ def regenerate_report(campaign: Campaign, results: Path) -> Path | None:
         return write_report(CampaignResults(campaign, results))
     except NematicError as e:
         logging.getLogger(__name__).warning("report not written: %s", e)
-    except Exception:  # noqa: BLE001 - a bug here must not fail the campaign's runs
+    except Exception:  # a bug here must not fail the campaign's runs
         logging.getLogger(__name__).warning("report not written", exc_info=True)
     return None

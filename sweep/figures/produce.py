@@ -121,7 +121,7 @@ def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str]
             out.fits_path, failed = write_fits(root, fit_requests)
         except NematicError as e:
             failed = {"fits": str(e)}
-        except Exception as e:  # noqa: BLE001 - nor may the fits
+        except Exception as e:  # nor may the fits
             failed = {"fits": f"{type(e).__name__}: {e}"}
             log.warning("fits not written", exc_info=True)
         out.failures.update({f"fit {k}": v for k, v in failed.items()})
@@ -136,7 +136,7 @@ def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str]
         except NematicError as e:
             out.failures[name] = str(e)
             log.warning("figure %s not drawn: %s", name, e)
-        except Exception as e:  # noqa: BLE001 - a figure must never sink the run it follows
+        except Exception as e:  # a figure must never sink the run it follows
             out.failures[name] = f"{type(e).__name__}: {e}"
             log.warning("figure %s not drawn", name, exc_info=True)
     return out

@@ -277,7 +277,7 @@ class PrecisionExpansion(Expansion):
     ``phase.nc`` holds only the planned runs (NaN elsewhere) and ``nematic status`` counts
     only them; :attr:`refinement` is the plan (``status`` prints its lines)."""
 
-    def __init__(self, plan: SeedPlan):  # noqa: D107 (the grid is built once, by replay)
+    def __init__(self, plan: SeedPlan):  # the grid is built once, by replay
         grid = plan.grid
         self.campaign, self.seeds, self.points = grid.campaign, grid.seeds, grid.points
         self.run_ids, self.position = grid.run_ids, grid.position

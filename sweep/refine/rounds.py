@@ -279,7 +279,7 @@ class RefinedExpansion(Expansion):
     with every seed; :attr:`planned` marks the runs of the plan. ``phase.nc`` holds only
     the planned runs (NaN elsewhere) and ``nematic status`` counts only them."""
 
-    def __init__(self, refinement: Refinement):  # noqa: D107
+    def __init__(self, refinement: Refinement):
         super().__init__(refinement.union_campaign())
         self.refinement = refinement
         planned = set(refinement.run_ids.values())

@@ -60,7 +60,7 @@ class RunList(Expansion):
     """The planned runs of a refined campaign as an :class:`~sweep.expand.Expansion` (what
     :func:`sweep.run.driver.plan_runs` and :func:`~sweep.run.driver.run_campaign` take)."""
 
-    def __init__(self, campaign: Campaign, runs: list[RunSpec]):  # noqa: D107
+    def __init__(self, campaign: Campaign, runs: list[RunSpec]):
         self.campaign = campaign
         self.seeds = campaign.seeds
         self._runs = list(runs)

@@ -88,7 +88,7 @@ def dashboard_link(client: Client, timeout: float = 5.0) -> str | None:
 
     try:
         link = str(client.dashboard_link)
-        with urllib.request.urlopen(link, timeout=timeout) as response:  # noqa: S310 - http
+        with urllib.request.urlopen(link, timeout=timeout) as response:  # an http link
             return link if response.status == 200 else None
     except (OSError, ValueError, urllib.error.URLError):
         return None

@@ -218,7 +218,7 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     structural = list(c.problems)
     try:
         check_points(campaign, c)
-    except Exception:  # noqa: BLE001 - a structure too broken to build points
+    except Exception:  # a structure too broken to build points
         if not structural:
             raise
         c.problems[:] = structural

@@ -32,7 +32,7 @@ _Loader.add_implicit_resolver(
 def parse_value(text: str) -> Any:
     """A command-line value read as YAML (``0.3`` -> float, ``[1, 2]`` -> list, ``abc`` -> str)."""
     try:
-        return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader is a SafeLoader
+        return yaml.load(text, Loader=_Loader)  # _Loader is a SafeLoader
     except yaml.YAMLError:
         return text
 

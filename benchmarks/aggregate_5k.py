@@ -77,8 +77,9 @@ def real_run(campaign: Any, expansion: Any, store: Any) -> dict[str, Any]:
     return record
 
 
-def synthetic_values(rng: np.random.Generator, coords: dict[str, float],
-                     t: np.ndarray) -> tuple[dict[str, float], np.ndarray]:
+def synthetic_values(
+    rng: np.random.Generator, coords: dict[str, float], t: np.ndarray
+) -> tuple[dict[str, float], np.ndarray]:
     """Plausible scalars of a run at ``coords`` and its sigma2_S(t) (not physics: values
     that vary over the grid and the seeds, so phase.nc and the fits have work to do)."""
     chi, eps = coords["chi"], coords["eps"]
@@ -86,10 +87,16 @@ def synthetic_values(rng: np.random.Generator, coords: dict[str, float],
     series = final * np.exp(0.05 * (t - t[-1])) * (1 + 0.05 * rng.standard_normal(t.size))
     cos2 = float(np.tanh(40 * eps) + 0.05 * rng.standard_normal())
     lam = float(0.05 + 0.02 * rng.random())
-    return {"sigma2_S_final": float(final), "cos2theta_final": cos2, "lambda_final": lam,
-            "lambda_peak": lam * 0.9, "lambda_mean_final": lam * 0.8, "t_peak": 20.0,
-            "mean_S_final": float(0.1 + 0.01 * rng.random()),
-            "wall_time": float(rng.uniform(20, 40))}, np.abs(series)
+    return {
+        "sigma2_S_final": float(final),
+        "cos2theta_final": cos2,
+        "lambda_final": lam,
+        "lambda_peak": lam * 0.9,
+        "lambda_mean_final": lam * 0.8,
+        "t_peak": 20.0,
+        "mean_S_final": float(0.1 + 0.01 * rng.random()),
+        "wall_time": float(rng.uniform(20, 40)),
+    }, np.abs(series)
 
 
 def build(folder: Path, seeds: int) -> tuple[Path, int, dict[str, float]]:
@@ -125,33 +132,44 @@ def build(folder: Path, seeds: int) -> tuple[Path, int, dict[str, float]]:
         target = store.nc_path(rid)
         shutil.copyfile(source, target)
         with netCDF4.Dataset(target, "a") as nc:
-            nc.setncatts({"run_id": rid, "seed": run.seed, "status":
-                          "failed" if failed else "ok",
-                          "reason": "ellipticity_lost" if failed else "",
-                          **{f"param_{k}": v for k, v in coords.items()}})
+            nc.setncatts(
+                {
+                    "run_id": rid,
+                    "seed": run.seed,
+                    "status": "failed" if failed else "ok",
+                    "reason": "ellipticity_lost" if failed else "",
+                    **{f"param_{k}": v for k, v in coords.items()},
+                }
+            )
             nc["sigma2_S"][:] = series
             for name, value in scalars.items():
                 if name in nc.variables:
                     nc[name].assignValue(value)
         record = dict(template)
-        record.update(run_id=rid, seed=run.seed, scalars=scalars,
-                      wall_time=scalars["wall_time"], coords=coords,
-                      parameters=run.point.parameters.to_dict(),
-                      status="failed" if failed else "ok",
-                      reason="ellipticity_lost" if failed else "",
-                      t_failed=50.0 if failed else None, **file_stamp(target))
+        record.update(
+            run_id=rid,
+            seed=run.seed,
+            scalars=scalars,
+            wall_time=scalars["wall_time"],
+            coords=coords,
+            parameters=run.point.parameters.to_dict(),
+            status="failed" if failed else "ok",
+            reason="ellipticity_lost" if failed else "",
+            t_failed=50.0 if failed else None,
+            **file_stamp(target),
+        )
         # the worker's format (store.write_record), without its fsync per file
         (store.runs_dir / f"{rid}.json").write_text(dumps(record))
-    return path, len(expansion), {"real_run_s": t_real,
-                                  "copies_s": time.perf_counter() - t0}
+    return path, len(expansion), {"real_run_s": t_real, "copies_s": time.perf_counter() - t0}
 
 
 def timed(label: str, argv: list[str]) -> dict[str, Any]:
     """One fresh process: wall, CPU (user + system) and peak RSS, as the OS accounts them."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     t = time.perf_counter()
-    proc = subprocess.Popen(argv, env=env, cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(
+        argv, env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+    )
     assert proc.stdout is not None
     out = proc.stdout.read()  # to its end, then reaped here: os.wait4 gives its own usage
     proc.stdout.close()
@@ -161,9 +179,13 @@ def timed(label: str, argv: list[str]) -> dict[str, Any]:
     text = out.decode(errors="replace").strip()
     if proc.returncode not in (0, 1):
         raise SystemExit(f"{label}: {' '.join(argv)} exited {proc.returncode}:\n{text}")
-    row = {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime,
-           "peak_mib": usage.ru_maxrss / 1024, "exit": proc.returncode,
-           "output": text.splitlines()[:2]}
+    row = {
+        "wall_s": wall,
+        "cpu_s": usage.ru_utime + usage.ru_stime,
+        "peak_mib": usage.ru_maxrss / 1024,
+        "exit": proc.returncode,
+        "output": text.splitlines()[:2],
+    }
     print(f"{label:<34}{wall:>8.2f}{row['cpu_s']:>8.2f}{row['peak_mib']:>10.0f}", flush=True)
     return row
 
@@ -186,9 +208,11 @@ def main() -> None:
             # built by a child process: the real run's memory (the model, numba) would
             # otherwise count in every timed process's peak (Linux carries a process's peak
             # RSS across fork and exec)
-            subprocess.run([sys.executable, __file__, "--build", str(folder), "--seeds",
-                            str(args.seeds)], check=True, env={**os.environ,
-                                                               "PYTHONPATH": str(ROOT)})
+            subprocess.run(
+                [sys.executable, __file__, "--build", str(folder), "--seeds", str(args.seeds)],
+                check=True,
+                env={**os.environ, "PYTHONPATH": str(ROOT)},
+            )
         path = folder / "fig4big.yaml"
         n, build_times = json.loads(built.read_text())
         results = folder / "results"
@@ -198,38 +222,57 @@ def main() -> None:
         shutil.rmtree(root / "report_cache", ignore_errors=True)
         shutil.rmtree(root / "figures", ignore_errors=True)
         disk = sum(p.stat().st_size for p in (root / "runs").iterdir())
-        print(f"{n:,} runs built (the real run {build_times['real_run_s']:.0f} s, the copies "
-              f"{build_times['copies_s']:.0f} s), {disk / 2**30:.2f} GiB; load average "
-              f"{os.getloadavg()[0]:.1f}; peak memory floor (this process) "
-              f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+        print(
+            f"{n:,} runs built (the real run {build_times['real_run_s']:.0f} s, the copies "
+            f"{build_times['copies_s']:.0f} s), {disk / 2**30:.2f} GiB; load average "
+            f"{os.getloadavg()[0]:.1f}; peak memory floor (this process) "
+            f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB"
+        )
         print(f"{'step (a fresh process each)':<34}{'wall s':>8}{'cpu s':>8}{'peak MiB':>10}")
         py = [sys.executable, "-m", "sweep"]
         common = [str(path), "--results", str(results)]
-        fits = ("from pathlib import Path; from sweep.analysis.fits_file import write_fits; "
-                f"write_fits(Path({str(root)!r}), [('anisotropy', {{}})])")
+        fits = (
+            "from pathlib import Path; from sweep.analysis.fits_file import write_fits; "
+            f"write_fits(Path({str(root)!r}), [('anisotropy', {{}})])"
+        )
         rows = {
-            "status, cold (no manifest)": timed("status, cold (no manifest)",
-                                                [*py, "status", *common]),
+            "status, cold (no manifest)": timed(
+                "status, cold (no manifest)", [*py, "status", *common]
+            ),
             "status, warm": timed("status, warm", [*py, "status", *common]),
-            "aggregate, 1,000 runs": timed("aggregate, 1,000 runs (--seeds 10)",
-                                           [*py, "aggregate", *common, "--seeds",
-                                            str(max(1, args.seeds // 5))]),
-            "aggregate, all runs": timed(f"aggregate, {n:,} runs",
-                                         [*py, "aggregate", *common]),
+            "aggregate, 1,000 runs": timed(
+                "aggregate, 1,000 runs (--seeds 10)",
+                [*py, "aggregate", *common, "--seeds", str(max(1, args.seeds // 5))],
+            ),
+            "aggregate, all runs": timed(f"aggregate, {n:,} runs", [*py, "aggregate", *common]),
             "fits only": timed("fits only (fits.nc: anisotropy)", [sys.executable, "-c", fits]),
             "figures (fits + fig4)": timed("figures (fits + fig4)", [*py, "figures", *common]),
-            "report, cold": timed("report, cold (run views drawn)",
-                                  [*py, "report", "fig4big", "--results", str(results)]),
-            "report, warm": timed("report, warm (run views cached)",
-                                  [*py, "report", "fig4big", "--results", str(results)]),
+            "report, cold": timed(
+                "report, cold (run views drawn)",
+                [*py, "report", "fig4big", "--results", str(results)],
+            ),
+            "report, warm": timed(
+                "report, warm (run views cached)",
+                [*py, "report", "fig4big", "--results", str(results)],
+            ),
         }
         out = Path(__file__).with_suffix(".json")
-        out.write_text(json.dumps({
-            "runs": n, "seeds": args.seeds, **build_times,
-            "peak_floor_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-            "run_files_gib": disk / 2**30, "cpus": os.cpu_count(),
-            "load_average_after": round(os.getloadavg()[0], 2), "results": rows},
-            indent=2) + "\n")
+        out.write_text(
+            json.dumps(
+                {
+                    "runs": n,
+                    "seeds": args.seeds,
+                    **build_times,
+                    "peak_floor_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                    "run_files_gib": disk / 2**30,
+                    "cpus": os.cpu_count(),
+                    "load_average_after": round(os.getloadavg()[0], 2),
+                    "results": rows,
+                },
+                indent=2,
+            )
+            + "\n"
+        )
         print(f"wrote {out}")
     finally:
         if args.keep is None:

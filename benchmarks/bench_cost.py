@@ -39,13 +39,20 @@ ACTIVITIES = (0.1, 0.3, 0.5, 0.7, 1.0)
 
 #: numerics other than the defaults, each run against the default at alpha - B = 0.5, t = 100
 VARIANTS: dict[str, list[tuple[str, dict[str, Any]]]] = {
-    "linear": [("default", {}), ("tolerance=1e-4", {"tolerance": 1e-4}),
-               ("scheme=etdrk2", {"scheme": "etdrk2"}), ("error_norm=rms", {"error_norm": "rms"}),
-               ("incompressible", {"incompressible": True}),
-               ("fixed dt=0.2", {"adaptive": False, "dt": 0.2})],
-    "finite": [("default", {}), ("tolerance=1e-4", {"tolerance": 1e-4}),
-               ("scheme=etdrk2", {"scheme": "etdrk2"}),
-               ("displacement=equilibrium", {"displacement": "equilibrium"})],
+    "linear": [
+        ("default", {}),
+        ("tolerance=1e-4", {"tolerance": 1e-4}),
+        ("scheme=etdrk2", {"scheme": "etdrk2"}),
+        ("error_norm=rms", {"error_norm": "rms"}),
+        ("incompressible", {"incompressible": True}),
+        ("fixed dt=0.2", {"adaptive": False, "dt": 0.2}),
+    ],
+    "finite": [
+        ("default", {}),
+        ("tolerance=1e-4", {"tolerance": 1e-4}),
+        ("scheme=etdrk2", {"scheme": "etdrk2"}),
+        ("displacement=equilibrium", {"displacement": "equilibrium"}),
+    ],
 }
 
 
@@ -63,20 +70,49 @@ def configs() -> list[dict[str, Any]]:
     for mech in ("linear", "finite"):
         for n in (32, 64, 128, 256):  # per-step and per-save cost against the resolution
             for save in (1.0, 10.0):
-                out.append({"kind": "size", "mechanics": mech,
-                            "parameters": {"alpha_minus_B": 0.5, "noise_modes": 8},
-                            "numerics": {"resolution": n, "t_final": 20.0, "save_every": save,
-                                         "mechanics": mech}})
+                out.append(
+                    {
+                        "kind": "size",
+                        "mechanics": mech,
+                        "parameters": {"alpha_minus_B": 0.5, "noise_modes": 8},
+                        "numerics": {
+                            "resolution": n,
+                            "t_final": 20.0,
+                            "save_every": save,
+                            "mechanics": mech,
+                        },
+                    }
+                )
         for amb in ACTIVITIES:  # the step count against the activity (the spread)
-            out.append({"kind": "activity", "mechanics": mech,
-                        "parameters": {"alpha_minus_B": amb},
-                        "numerics": {"resolution": 128, "t_final": 300.0, "save_every": 1.0,
-                                     "mechanics": mech}})
+            out.append(
+                {
+                    "kind": "activity",
+                    "mechanics": mech,
+                    "parameters": {"alpha_minus_B": amb},
+                    "numerics": {
+                        "resolution": 128,
+                        "t_final": 300.0,
+                        "save_every": 1.0,
+                        "mechanics": mech,
+                    },
+                }
+            )
         for name, extra in VARIANTS[mech]:  # other numerics against the default (amb 0.5)
-            out.append({"kind": "variant", "variant": name, "mechanics": mech,
-                        "parameters": {"alpha_minus_B": 0.5},
-                        "numerics": {"resolution": 128, "t_final": 100.0, "save_every": 1.0,
-                                     "mechanics": mech, **extra}})
+            out.append(
+                {
+                    "kind": "variant",
+                    "variant": name,
+                    "mechanics": mech,
+                    "parameters": {"alpha_minus_B": 0.5},
+                    "numerics": {
+                        "resolution": 128,
+                        "t_final": 100.0,
+                        "save_every": 1.0,
+                        "mechanics": mech,
+                        **extra,
+                    },
+                }
+            )
     return out
 
 
@@ -96,10 +132,17 @@ def measure(cfg: dict[str, Any], repeats: int) -> dict[str, Any]:
         wall.append(float(ds["wall_time"]))
     t = ds["t"].values
     steps = ds["steps"].values
-    return {**cfg, "status": ds.attrs["status"], "cpu_s": min(cpu), "wall_s": min(wall),
-            "steps": int(steps[-1]), "saves": len(t),
-            "steps_at": {str(int(x)): int(steps[np.argmin(abs(t - x))])
-                         for x in CURVE_TIMES if x <= t[-1]}}
+    return {
+        **cfg,
+        "status": ds.attrs["status"],
+        "cpu_s": min(cpu),
+        "wall_s": min(wall),
+        "steps": int(steps[-1]),
+        "saves": len(t),
+        "steps_at": {
+            str(int(x)): int(steps[np.argmin(abs(t - x))]) for x in CURVE_TIMES if x <= t[-1]
+        },
+    }
 
 
 def nnls_relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -112,29 +155,48 @@ def nnls_relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def model_seconds(const: dict[str, Any], n: int, steps: float, saves: int) -> float:
     x = scale(n)
-    return (steps * (const["step"][0] + const["step"][1] * x)
-            + saves * (const["save"][0] + const["save"][1] * x)
-            + const["setup"][0] + const["setup"][1] * x)
+    return (
+        steps * (const["step"][0] + const["step"][1] * x)
+        + saves * (const["save"][0] + const["save"][1] * x)
+        + const["setup"][0]
+        + const["setup"][1] * x
+    )
 
 
 def fit(rows: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for mech in ("linear", "finite"):
-        mine = [r for r in rows if r["mechanics"] == mech and r["status"] == "ok"
-                and r["kind"] != "variant"]
-        a = np.array([[r["steps"], r["steps"] * scale(r["numerics"]["resolution"]),
-                       r["saves"], r["saves"] * scale(r["numerics"]["resolution"]),
-                       1.0, scale(r["numerics"]["resolution"])] for r in mine])
+        mine = [
+            r
+            for r in rows
+            if r["mechanics"] == mech and r["status"] == "ok" and r["kind"] != "variant"
+        ]
+        a = np.array(
+            [
+                [
+                    r["steps"],
+                    r["steps"] * scale(r["numerics"]["resolution"]),
+                    r["saves"],
+                    r["saves"] * scale(r["numerics"]["resolution"]),
+                    1.0,
+                    scale(r["numerics"]["resolution"]),
+                ]
+                for r in mine
+            ]
+        )
         b = np.array([r["cpu_s"] for r in mine])
         x = nnls_relative(a, b)
-        const: dict[str, Any] = {"step": [float(x[0]), float(x[1])],
-                                 "save": [float(x[2]), float(x[3])],
-                                 "setup": [float(x[4]), float(x[5])],
-                                 "fit_residual_max": float(np.max(np.abs(a @ x / b - 1)))}
+        const: dict[str, Any] = {
+            "step": [float(x[0]), float(x[1])],
+            "save": [float(x[2]), float(x[3])],
+            "setup": [float(x[4]), float(x[5])],
+            "fit_residual_max": float(np.max(np.abs(a @ x / b - 1))),
+        }
         # the median over the activities of the accepted steps by time t
         act = [r for r in mine if r["kind"] == "activity"]
-        const["steps_curve"] = [[float(t), float(np.median([r["steps_at"][str(t)] for r in act]))]
-                                for t in CURVE_TIMES]
+        const["steps_curve"] = [
+            [float(t), float(np.median([r["steps_at"][str(t)] for r in act]))] for t in CURVE_TIMES
+        ]
         ratios = []
         for r in act:
             steps = const["steps_curve"][-1][1]
@@ -142,13 +204,17 @@ def fit(rows: list[dict[str, Any]]) -> dict[str, Any]:
             ratios.append(r["cpu_s"] / model)
         const["activity_ratios"] = ratios
         # each variant's run time and steps against the default's
-        var = {r["variant"]: r for r in rows if r["mechanics"] == mech
-               and r["kind"] == "variant" and r["status"] == "ok"}
+        var = {
+            r["variant"]: r
+            for r in rows
+            if r["mechanics"] == mech and r["kind"] == "variant" and r["status"] == "ok"
+        }
         base = var.pop("default", None)
         if base is not None:
-            const["variants"] = {k: {"time": v["cpu_s"] / base["cpu_s"],
-                                     "steps": v["steps"] / base["steps"]}
-                                 for k, v in var.items()}
+            const["variants"] = {
+                k: {"time": v["cpu_s"] / base["cpu_s"], "steps": v["steps"] / base["steps"]}
+                for k, v in var.items()
+            }
         out[mech] = const
     ratios = [q for m in ("linear", "finite") for q in out[m]["activity_ratios"]]
     out["spread"] = [float(np.quantile(ratios, 0.1)), float(np.quantile(ratios, 0.9))]
@@ -158,8 +224,12 @@ def fit(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(HERE / "cost_model.json"))
-    ap.add_argument("--repeats", type=int, default=2,
-                    help="runs of each size and variant row (the least CPU time is kept)")
+    ap.add_argument(
+        "--repeats",
+        type=int,
+        default=2,
+        help="runs of each size and variant row (the least CPU time is kept)",
+    )
     args = ap.parse_args()
     from model.warmup import warm_up
 
@@ -169,14 +239,23 @@ def main() -> None:
         r = measure(cfg, 1 if cfg["kind"] == "activity" else args.repeats)
         rows.append(r)
         num = r["numerics"]
-        print(f"{r['kind']:8s} {r['mechanics']:6s} N={num['resolution']:<4d} "
-              f"t={num['t_final']:<5g} save={num['save_every']:<4g} "
-              f"amb={r['parameters']['alpha_minus_B']:<4g} {r.get('variant', ''):24s} "
-              f"{r['cpu_s']:7.2f} s CPU "
-              f"{r['steps']:5d} steps {r['status']}", flush=True)
-    result = {"python": platform.python_version(), "machine": platform.machine(),
-              "cores": os.cpu_count(), "load_average": os.getloadavg(),
-              "time": time.strftime("%Y-%m-%dT%H:%M:%S"), "fit": fit(rows), "rows": rows}
+        print(
+            f"{r['kind']:8s} {r['mechanics']:6s} N={num['resolution']:<4d} "
+            f"t={num['t_final']:<5g} save={num['save_every']:<4g} "
+            f"amb={r['parameters']['alpha_minus_B']:<4g} {r.get('variant', ''):24s} "
+            f"{r['cpu_s']:7.2f} s CPU "
+            f"{r['steps']:5d} steps {r['status']}",
+            flush=True,
+        )
+    result = {
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "cores": os.cpu_count(),
+        "load_average": os.getloadavg(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "fit": fit(rows),
+        "rows": rows,
+    }
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
     print(json.dumps(result["fit"], indent=1))
     print(f"wrote {args.out}")

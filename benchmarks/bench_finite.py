@@ -64,9 +64,15 @@ print("RESULT " + json.dumps(out))
 def start(cfg: dict) -> subprocess.Popen:
     env = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     import os
-    return subprocess.Popen([sys.executable, "-c", CHILD, json.dumps(cfg)], cwd=HERE.parent,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, **env})
+
+    return subprocess.Popen(
+        [sys.executable, "-c", CHILD, json.dumps(cfg)],
+        cwd=HERE.parent,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, **env},
+    )
 
 
 def result(proc: subprocess.Popen, cfg: dict) -> dict:
@@ -87,18 +93,29 @@ def main() -> None:
     ap.add_argument("--sizes", default="128")
     ap.add_argument("--amb", default="1.0,0.6", help="alpha - B values")
     ap.add_argument("--t-final", type=float, default=300.0)
-    ap.add_argument("--schemes", default="integrated,equilibrium",
-                    help="finite-strain displacement schemes")
-    ap.add_argument("--repeat", type=int, default=1,
-                    help="side-by-side pairs per configuration (the median ratio is reported)")
-    ap.add_argument("--linear-runs", type=int, default=3,
-                    help="linear runs in a row beside each finite run (about the CPU ratio)")
+    ap.add_argument(
+        "--schemes", default="integrated,equilibrium", help="finite-strain displacement schemes"
+    )
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        help="side-by-side pairs per configuration (the median ratio is reported)",
+    )
+    ap.add_argument(
+        "--linear-runs",
+        type=int,
+        default=3,
+        help="linear runs in a row beside each finite run (about the CPU ratio)",
+    )
     ap.add_argument("--out", default=str(HERE / "bench_finite.json"))
     args = ap.parse_args()
     rows = []
-    print(f"{'N':>4s} {'a-B':>4s} {'run':12s} {'cpu s':>7s} {'steps':>6s} {'FFT/step':>8s} "
-          f"{'rate':>6s} {'N-CG':>6s} {'N-res':>6s} {'saves':>6s} {'rest':>6s} "
-          f"{'x linear':>8s} {'sigma2_S':>9s}")
+    print(
+        f"{'N':>4s} {'a-B':>4s} {'run':12s} {'cpu s':>7s} {'steps':>6s} {'FFT/step':>8s} "
+        f"{'rate':>6s} {'N-CG':>6s} {'N-res':>6s} {'saves':>6s} {'rest':>6s} "
+        f"{'x linear':>8s} {'sigma2_S':>9s}"
+    )
     for n in (int(s) for s in args.sizes.split(",")):
         for amb in (float(s) for s in args.amb.split(",")):
             base = {"N": n, "amb": amb, "t_final": args.t_final}
@@ -107,8 +124,13 @@ def main() -> None:
                 for _ in range(args.repeat):
                     fin, lin = side_by_side(
                         {**base, "mechanics": "finite", "displacement": disp},
-                        {**base, "mechanics": "linear", "displacement": "",
-                         "runs": args.linear_runs})
+                        {
+                            **base,
+                            "mechanics": "linear",
+                            "displacement": "",
+                            "runs": args.linear_runs,
+                        },
+                    )
                     fin["ratio_cpu"] = fin["cpu_s"] / lin["cpu_s"]
                     ratios.append(fin["ratio_cpu"])
                     for r, label in ((fin, disp), (lin, "linear")):
@@ -116,18 +138,28 @@ def main() -> None:
                         parts = {k: v / steps for k, v in r["parts"].items()}
                         rest = r["ffts"] / steps - sum(parts.values())
                         ratio = f"{r['ratio_cpu']:8.2f}" if "ratio_cpu" in r else f"{'':8s}"
-                        print(f"{n:4d} {amb:4.1f} {label:12s} {r['cpu_s']:7.1f} {r['steps']:6d} "
-                              f"{r['ffts'] / steps:8.1f} {parts.get('rate_solve', 0):6.1f} "
-                              f"{parts.get('newton_cg', 0):6.1f} "
-                              f"{parts.get('force_balance', 0):6.1f} {parts['saves']:6.1f} "
-                              f"{rest:6.1f} {ratio} {r['sigma2_S']:9.5f}", flush=True)
+                        print(
+                            f"{n:4d} {amb:4.1f} {label:12s} {r['cpu_s']:7.1f} {r['steps']:6d} "
+                            f"{r['ffts'] / steps:8.1f} {parts.get('rate_solve', 0):6.1f} "
+                            f"{parts.get('newton_cg', 0):6.1f} "
+                            f"{parts.get('force_balance', 0):6.1f} {parts['saves']:6.1f} "
+                            f"{rest:6.1f} {ratio} {r['sigma2_S']:9.5f}",
+                            flush=True,
+                        )
                         rows.append(r)
                 if args.repeat > 1:
-                    print(f"{n:4d} {amb:4.1f} {disp:12s} median ratio "
-                          f"{statistics.median(ratios):.2f} (range {min(ratios):.2f}-"
-                          f"{max(ratios):.2f}, {len(ratios)} pairs)", flush=True)
-    meta = {"python": platform.python_version(), "machine": platform.machine(),
-            "time": time.strftime("%Y-%m-%dT%H:%M:%S"), "rows": rows}
+                    print(
+                        f"{n:4d} {amb:4.1f} {disp:12s} median ratio "
+                        f"{statistics.median(ratios):.2f} (range {min(ratios):.2f}-"
+                        f"{max(ratios):.2f}, {len(ratios)} pairs)",
+                        flush=True,
+                    )
+    meta = {
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "rows": rows,
+    }
     Path(args.out).write_text(json.dumps(meta, indent=1))
     print(f"wrote {args.out}")
 

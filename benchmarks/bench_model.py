@@ -78,8 +78,12 @@ print("RESULT " + json.dumps(out))
 
 
 def run_config(cfg: dict) -> dict:
-    proc = subprocess.run([sys.executable, "-c", CHILD, json.dumps(cfg)], capture_output=True,
-                          text=True, cwd=HERE.parent)
+    proc = subprocess.run(
+        [sys.executable, "-c", CHILD, json.dumps(cfg)],
+        capture_output=True,
+        text=True,
+        cwd=HERE.parent,
+    )
     for line in proc.stdout.splitlines():
         if line.startswith("RESULT "):
             return {**cfg, **json.loads(line[7:])}
@@ -92,12 +96,24 @@ def main() -> None:
     ap.add_argument("--t-final", type=float, default=300.0)
     ap.add_argument("--sizes", default="64,128,256")
     ap.add_argument("--finite-sizes", default="64,128")
-    ap.add_argument("--pypde", action="store_true",
-                    help="also time py-pde's adaptive explicit solver (slow) at 128^2")
-    ap.add_argument("--pypde-t", type=float, default=20.0,
-                    help="t_final of the py-pde comparison (its explicit solver is slow)")
-    ap.add_argument("--runs", type=int, default=2, choices=(1, 2),
-                    help="runs per configuration in one process (2 shows the warm cost)")
+    ap.add_argument(
+        "--pypde",
+        action="store_true",
+        help="also time py-pde's adaptive explicit solver (slow) at 128^2",
+    )
+    ap.add_argument(
+        "--pypde-t",
+        type=float,
+        default=20.0,
+        help="t_final of the py-pde comparison (its explicit solver is slow)",
+    )
+    ap.add_argument(
+        "--runs",
+        type=int,
+        default=2,
+        choices=(1, 2),
+        help="runs per configuration in one process (2 shows the warm cost)",
+    )
     ap.add_argument("--out", default=str(HERE / "bench_model.json"))
     args = ap.parse_args()
     if args.quick:
@@ -106,16 +122,19 @@ def main() -> None:
         sizes = [int(s) for s in args.sizes.split(",") if s]
         fsizes = [int(s) for s in args.finite_sizes.split(",") if s]
         t_final = args.t_final
-    configs = [{"N": n, "mechanics": "linear", "t_final": t_final, "runs": args.runs}
-               for n in sizes]
-    configs += [{"N": n, "mechanics": "finite", "t_final": t_final, "runs": args.runs}
-                for n in fsizes]
+    configs = [
+        {"N": n, "mechanics": "linear", "t_final": t_final, "runs": args.runs} for n in sizes
+    ]
+    configs += [
+        {"N": n, "mechanics": "finite", "t_final": t_final, "runs": args.runs} for n in fsizes
+    ]
     if args.pypde:
-        configs.append({"N": 128, "mechanics": "linear", "t_final": args.pypde_t,
-                        "pypde": True})
+        configs.append({"N": 128, "mechanics": "linear", "t_final": args.pypde_t, "pypde": True})
     rows = []
-    hdr = (f"{'mech':7s} {'N':>4s} {'t':>5s} {'wall1 s':>8s} {'wall2 s':>8s} {'steps':>6s} "
-           f"{'FFT/step':>8s} {'floor s':>8s} {'wall/floor':>10s} {'RSS MB':>7s} {'sigma2_S':>10s}")
+    hdr = (
+        f"{'mech':7s} {'N':>4s} {'t':>5s} {'wall1 s':>8s} {'wall2 s':>8s} {'steps':>6s} "
+        f"{'FFT/step':>8s} {'floor s':>8s} {'wall/floor':>10s} {'RSS MB':>7s} {'sigma2_S':>10s}"
+    )
     print(hdr)
     for cfg in configs:
         r = run_config(cfg)
@@ -126,23 +145,34 @@ def main() -> None:
         r["fft_floor_s"] = floor
         r["ratio_to_floor"] = s["wall_s"] / floor if floor > 0 else float("nan")
         rows.append(r)
-        print(f"{cfg['mechanics']:7s} {cfg['N']:4d} {cfg['t_final']:5.0f} "
-              f"{r['first']['wall_s']:8.2f} {s['wall_s']:8.2f} {s['steps']:6d} "
-              f"{ffts_per_step:8.1f} {floor:8.2f} {r['ratio_to_floor']:10.1f} "
-              f"{r['peak_rss_mb']:7.0f} {s['sigma2_S']:10.4g}", flush=True)
+        print(
+            f"{cfg['mechanics']:7s} {cfg['N']:4d} {cfg['t_final']:5.0f} "
+            f"{r['first']['wall_s']:8.2f} {s['wall_s']:8.2f} {s['steps']:6d} "
+            f"{ffts_per_step:8.1f} {floor:8.2f} {r['ratio_to_floor']:10.1f} "
+            f"{r['peak_rss_mb']:7.0f} {s['sigma2_S']:10.4g}",
+            flush=True,
+        )
         if "pypde" in r:
             p = r["pypde"]
-            print(f"  py-pde runge-kutta adaptive: {p['wall_s']:.2f} s, sigma2_S = "
-                  f"{p['sigma2_S']:.4g} (ours {s['sigma2_S']:.4g}, "
-                  f"{100 * abs(p['sigma2_S'] / s['sigma2_S'] - 1):.2f}% apart); "
-                  f"speed-up {p['wall_s'] / s['wall_s']:.1f}x")
+            print(
+                f"  py-pde runge-kutta adaptive: {p['wall_s']:.2f} s, sigma2_S = "
+                f"{p['sigma2_S']:.4g} (ours {s['sigma2_S']:.4g}, "
+                f"{100 * abs(p['sigma2_S'] / s['sigma2_S'] - 1):.2f}% apart); "
+                f"speed-up {p['wall_s'] / s['wall_s']:.1f}x"
+            )
     lin = {r["N"]: r for r in rows if r["mechanics"] == "linear" and "pypde" not in r}
     fin = {r["N"]: r for r in rows if r["mechanics"] == "finite"}
     for n in sorted(set(lin) & set(fin)):
-        print(f"finite / linear at {n}^2: "
-              f"{fin[n]['second']['wall_s'] / lin[n]['second']['wall_s']:.1f}x")
-    meta = {"python": platform.python_version(), "machine": platform.machine(),
-            "time": time.strftime("%Y-%m-%dT%H:%M:%S"), "rows": rows}
+        print(
+            f"finite / linear at {n}^2: "
+            f"{fin[n]['second']['wall_s'] / lin[n]['second']['wall_s']:.1f}x"
+        )
+    meta = {
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "rows": rows,
+    }
     Path(args.out).write_text(json.dumps(meta, indent=1))
     print(f"wrote {args.out}")
 

@@ -33,13 +33,15 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("campaign", nargs="?", type=Path,
-                        default=ROOT / "campaigns" / "quickstart.yaml")
+    parser.add_argument(
+        "campaign", nargs="?", type=Path, default=ROOT / "campaigns" / "quickstart.yaml"
+    )
     parser.add_argument("--workers", type=int)
     parser.add_argument("--set", dest="settings", action="append", default=[])
     args = parser.parse_args()
-    campaign = load_campaign(args.campaign, Overrides(settings=parse_assignments(args.settings),
-                                                      workers=args.workers))
+    campaign = load_campaign(
+        args.campaign, Overrides(settings=parse_assignments(args.settings), workers=args.workers)
+    )
     expansion = expand(campaign)
     with tempfile.TemporaryDirectory(prefix="overhead-") as tmp:
         store = CampaignStore(tmp, campaign.name)
@@ -54,10 +56,15 @@ def main() -> None:
         t_closed = time.perf_counter()
     ideal = summary.run_time / max(workers, 1)
     row = {
-        "campaign": campaign.name, "runs": summary.completed, "failed": len(summary.failed),
-        "workers": workers, "cluster_start_s": t_started - t0,
-        "cluster_close_s": t_closed - t_done, "campaign_wall_s": summary.wall_time,
-        "sum_of_run_times_s": summary.run_time, "ideal_wall_s": ideal,
+        "campaign": campaign.name,
+        "runs": summary.completed,
+        "failed": len(summary.failed),
+        "workers": workers,
+        "cluster_start_s": t_started - t0,
+        "cluster_close_s": t_closed - t_done,
+        "campaign_wall_s": summary.wall_time,
+        "sum_of_run_times_s": summary.run_time,
+        "ideal_wall_s": ideal,
         "efficiency": ideal / summary.wall_time if summary.wall_time else float("nan"),
         "overhead_per_run_s": (summary.wall_time - ideal) * workers / max(summary.completed, 1),
         "total_wall_s": t_closed - t0,

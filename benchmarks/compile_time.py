@@ -37,8 +37,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def git(*args: str, cwd: Path = ROOT) -> str:
-    return subprocess.run(["git", *args], cwd=cwd, check=True, capture_output=True,
-                          text=True).stdout.strip()
+    return subprocess.run(
+        ["git", *args], cwd=cwd, check=True, capture_output=True, text=True
+    ).stdout.strip()
 
 
 def clone(commit: str, dst: Path) -> str:
@@ -61,8 +62,14 @@ def warmup(folder: Path, python: str, extra: list[str]) -> dict[str, Any]:
     env["PYTHONPATH"] = str(folder)
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
-    proc = subprocess.Popen([python, "-m", "model.warmup", *extra], cwd=folder, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        [python, "-m", "model.warmup", *extra],
+        cwd=folder,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     assert proc.stdout is not None
     out = proc.stdout.read()
     _, status, usage = os.wait4(proc.pid, 0)
@@ -71,9 +78,14 @@ def warmup(folder: Path, python: str, extra: list[str]) -> dict[str, Any]:
     if proc.returncode:
         raise RuntimeError(f"python -m model.warmup failed in {folder}:\n{out}")
     cpu = usage.ru_utime + usage.ru_stime
-    return {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
-            "cores_used": round(cpu / wall, 2), "load_before": round(load, 2),
-            "compiled": compiled_count(out), "output": out.strip().splitlines()}
+    return {
+        "wall_s": round(wall, 2),
+        "cpu_s": round(cpu, 2),
+        "cores_used": round(cpu / wall, 2),
+        "load_before": round(load, 2),
+        "compiled": compiled_count(out),
+        "output": out.strip().splitlines(),
+    }
 
 
 def main() -> None:
@@ -82,29 +94,41 @@ def main() -> None:
     parser.add_argument("--new", default="HEAD", help="the commit measured (committed code)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--python", default=sys.executable)
-    parser.add_argument("--args", default="", help="extra arguments for the new commit's "
-                                                   "python -m model.warmup, e.g. '--jobs 4'")
+    parser.add_argument(
+        "--args",
+        default="",
+        help="extra arguments for the new commit's python -m model.warmup, e.g. '--jobs 4'",
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "compile_time.json")
     args = parser.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="compile-time-"))
     try:
         folders = {"base": tmp / "base", "new": tmp / "new"}
-        commits = {"base": clone(args.base, folders["base"]),
-                   "new": clone(args.new, folders["new"])}
+        commits = {
+            "base": clone(args.base, folders["base"]),
+            "new": clone(args.new, folders["new"]),
+        }
         extra = {"base": [], "new": args.args.split()}
         runs: list[dict[str, Any]] = []
         for repeat in range(args.repeats):
-            for which in (("base", "new") if repeat % 2 == 0 else ("new", "base")):
-                shutil.rmtree(folders[which] / "model" / "compiled" / "__pycache__",
-                              ignore_errors=True)
+            for which in ("base", "new") if repeat % 2 == 0 else ("new", "base"):
+                shutil.rmtree(
+                    folders[which] / "model" / "compiled" / "__pycache__", ignore_errors=True
+                )
                 for state in ("cold", "warm"):
-                    row = {"repeat": repeat, "commit": which, "cache": state,
-                           **warmup(folders[which], args.python, extra[which])}
+                    row = {
+                        "repeat": repeat,
+                        "commit": which,
+                        "cache": state,
+                        **warmup(folders[which], args.python, extra[which]),
+                    }
                     runs.append(row)
-                    print(f"repeat {repeat} {which:4s} {state}: {row['wall_s']:7.1f} s wall "
-                          f"{row['cpu_s']:7.1f} s CPU ({row['cores_used']:.2f} cores), "
-                          f"{row['compiled']:3d} compiled (load {row['load_before']:.1f})",
-                          flush=True)
+                    print(
+                        f"repeat {repeat} {which:4s} {state}: {row['wall_s']:7.1f} s wall "
+                        f"{row['cpu_s']:7.1f} s CPU ({row['cores_used']:.2f} cores), "
+                        f"{row['compiled']:3d} compiled (load {row['load_before']:.1f})",
+                        flush=True,
+                    )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -116,23 +140,32 @@ def main() -> None:
         for which in ("base", "new"):
             summary[f"{which}_{state}"] = {
                 key: statistics.median(pick(which, state, key))
-                for key in ("wall_s", "cpu_s", "cores_used", "compiled")}
+                for key in ("wall_s", "cpu_s", "cores_used", "compiled")
+            }
         summary[f"wall_ratio_base_over_new_{state}"] = [
-            round(b / n, 2) for b, n in zip(pick("base", state, "wall_s"),
-                                            pick("new", state, "wall_s"), strict=True)]
+            round(b / n, 2)
+            for b, n in zip(
+                pick("base", state, "wall_s"), pick("new", state, "wall_s"), strict=True
+            )
+        ]
     print("median      cold wall   cold CPU   cores   compiled   warm wall")
     for which in ("base", "new"):
         c, w = summary[f"{which}_cold"], summary[f"{which}_warm"]
-        print(f"{which:4s} {commits[which][:7]}  {c['wall_s']:7.1f} s  {c['cpu_s']:7.1f} s  "
-              f"{c['cores_used']:5.2f}  {c['compiled']:8.0f}   {w['wall_s']:7.1f} s")
+        print(
+            f"{which:4s} {commits[which][:7]}  {c['wall_s']:7.1f} s  {c['cpu_s']:7.1f} s  "
+            f"{c['cores_used']:5.2f}  {c['compiled']:8.0f}   {w['wall_s']:7.1f} s"
+        )
     print(f"cold wall base/new per pair: {summary['wall_ratio_base_over_new_cold']}")
     result = {
         "benchmark": "python -m model.warmup on a fresh clone (empty kernel cache), base vs new",
-        "command": " ".join([Path(args.python).name, "benchmarks/compile_time.py",
-                             *sys.argv[1:]]),
-        "commits": commits, "new_args": extra["new"],
-        "cpus": os.cpu_count(), "usable_cpus": len(os.sched_getaffinity(0)),
-        "date": time.strftime("%Y-%m-%d %H:%M"), "runs": runs, "summary": summary,
+        "command": " ".join([Path(args.python).name, "benchmarks/compile_time.py", *sys.argv[1:]]),
+        "commits": commits,
+        "new_args": extra["new"],
+        "cpus": os.cpu_count(),
+        "usable_cpus": len(os.sched_getaffinity(0)),
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "runs": runs,
+        "summary": summary,
     }
     args.out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"written to {args.out}")

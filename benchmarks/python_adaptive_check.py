@@ -39,8 +39,9 @@ def main() -> int:
     for k in range(50):
         order = told[:]
         random.Random(k).shuffle(order)
-        learner = Learner1D(None, bounds=(0.0, 0.4),
-                            loss_per_interval=resolution_loss_function(min_length=0.0625))
+        learner = Learner1D(
+            None, bounds=(0.0, 0.4), loss_per_interval=resolution_loss_function(min_length=0.0625)
+        )
         for x in order:
             learner.tell(x, g(x))
         points, _ = learner.ask(3, tell_pending=False)

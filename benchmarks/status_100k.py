@@ -60,13 +60,21 @@ def build(folder: Path) -> tuple[Path, int]:
         if draw[i] > 0.92:
             continue  # pending
         ok = draw[i] < 0.90
-        record = {"run_id": rid, "status": "ok" if ok else "failed",
-                  "reason": "" if ok else "ellipticity_lost", "detail": "", "t_failed": None,
-                  "traceback": "", "seed": expansion.seeds[i % len(expansion.seeds)],
-                  "wall_time": float(rng.uniform(5, 15)), "nc_bytes": 0,
-                  "scalars": {"sigma2_S_final": float(rng.random())},
-                  "code_version": "0.1.0", "git_commit": "synthetic",
-                  "finished": "2026-01-01T00:00:00+00:00"}
+        record = {
+            "run_id": rid,
+            "status": "ok" if ok else "failed",
+            "reason": "" if ok else "ellipticity_lost",
+            "detail": "",
+            "t_failed": None,
+            "traceback": "",
+            "seed": expansion.seeds[i % len(expansion.seeds)],
+            "wall_time": float(rng.uniform(5, 15)),
+            "nc_bytes": 0,
+            "scalars": {"sigma2_S_final": float(rng.random())},
+            "code_version": "0.1.0",
+            "git_commit": "synthetic",
+            "finished": "2026-01-01T00:00:00+00:00",
+        }
         nc = store.runs_dir / f"{rid}.nc"
         nc.touch()
         record.update(nc_mtime_ns=nc.stat().st_mtime_ns, nc_sha256=EMPTY_SHA256)
@@ -91,12 +99,27 @@ def main() -> None:
             expansion = expand(campaign)
             t_expand = time.perf_counter() - t
             report = campaign_status(expansion, CampaignStore(folder / "results", "big"))
-            rows[label] = {"total_s": time.perf_counter() - t, "expand_s": t_expand,
-                           "done": report.done, "failed": report.failed,
-                           "pending": report.pending}
+            rows[label] = {
+                "total_s": time.perf_counter() - t,
+                "expand_s": t_expand,
+                "done": report.done,
+                "failed": report.failed,
+                "pending": report.pending,
+            }
         t = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "sweep", "status", str(path), "--results",
-                        str(folder / "results")], check=True, capture_output=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "sweep",
+                "status",
+                str(path),
+                "--results",
+                str(folder / "results"),
+            ],
+            check=True,
+            capture_output=True,
+        )
         rows["CLI end to end (warm)"] = {"total_s": time.perf_counter() - t}
         print(f"status of a {n:,}-run campaign (synthetic folder built in {t_build:.0f} s)")
         print(f"{'case':<24}{'seconds':>10}{'expand+hash':>14}")

@@ -27,8 +27,9 @@ class Kernels(Protocol):
     """The kernel set of a backend (the numpy twins' docstrings hold the formulas)."""
 
     # --- finite-strain stress (paper Eqs. 1-2) -------------------------------------------
-    def tangent_kernel(self, F: Array, q1: Array, q2: Array, kappa: float, B: float,
-                       Bp: float, alpha: float) -> Array:
+    def tangent_kernel(
+        self, F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float, alpha: float
+    ) -> Array:
         """The tangent :math:`\\partial P / \\partial F`, packed (10 components)."""
 
     def apply_tangent_kernel(self, K: Array, dF: Array) -> Array:
@@ -37,12 +38,22 @@ class Kernels(Protocol):
     def apply_tangent_spin_kernel(self, K: Array, G: Array, E: Array) -> Array:
         """:math:`\\mathbb K : G + E\\, \\omega(G)` (the displacement-rate operator)."""
 
-    def first_piola_kernel(self, F: Array, q1: Array, q2: Array, kappa: float, B: float,
-                           Bp: float, alpha: float) -> Array:
+    def first_piola_kernel(
+        self, F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float, alpha: float
+    ) -> Array:
         """The first Piola stress P (the derivative of Eq. 1)."""
 
-    def q_increment_kernel(self, F: Array, q1: Array, q2: Array, d1: Array, d2: Array,
-                           B: float, Bp: float, alpha: float) -> Array:
+    def q_increment_kernel(
+        self,
+        F: Array,
+        q1: Array,
+        q2: Array,
+        d1: Array,
+        d2: Array,
+        B: float,
+        Bp: float,
+        alpha: float,
+    ) -> Array:
         """:math:`\\partial_Q P : dQ`, dQ of components (d1, d2)."""
 
     def strain_measures_kernel(self, F: Array, P: Array) -> tuple[Array, Array, Array]:
@@ -55,71 +66,99 @@ class Kernels(Protocol):
     def div_hat_kernel(self, T: Array, kx: Array, ky: Array) -> Array:
         """:math:`i k_j \\hat T_{ij}`."""
 
-    def balance_residual_kernel(self, P: Array, P_hat: Array, khx: Array, khy: Array,
-                                weights: Array) -> float:
+    def balance_residual_kernel(
+        self, P: Array, P_hat: Array, khx: Array, khy: Array, weights: Array
+    ) -> float:
         """The force-balance residual (:meth:`model.mechanics.Mechanics.residual`)."""
 
     def neg_div_hat_kernel(self, T: Array, kx: Array, ky: Array) -> Array:
         """:math:`-i k_j \\hat T_{ij}`."""
 
-    def green_kernel(self, b: Array, khx: Array, khy: Array, inv_k2: Array, a: float
-                     ) -> Array:
+    def green_kernel(self, b: Array, khx: Array, khy: Array, inv_k2: Array, a: float) -> Array:
         """:math:`(I - a \\hat k \\hat k)\\, \\hat b / k^2`."""
 
-    def symbol_combination(self, x: Array, m1: Array, m2: Array, a: Array, b: Array
-                           ) -> Array:
+    def symbol_combination(self, x: Array, m1: Array, m2: Array, a: Array, b: Array) -> Array:
         """:math:`x - (m_1 a + m_2 b)`."""
 
-    def linear_response(self, q1h: Array, q2h: Array, isoh: Array, kx: Array, ky: Array,
-                        khx: Array, khy: Array, inv_k2: Array, amb: float, a: float,
-                        kappa: float, incompressible: bool, mean_dev: float
-                        ) -> tuple[Array, Array, Array]:
+    def linear_response(
+        self,
+        q1h: Array,
+        q2h: Array,
+        isoh: Array,
+        kx: Array,
+        ky: Array,
+        khx: Array,
+        khy: Array,
+        inv_k2: Array,
+        amb: float,
+        a: float,
+        kappa: float,
+        incompressible: bool,
+        mean_dev: float,
+    ) -> tuple[Array, Array, Array]:
         """The small-strain spectra (dev e, tr e, tr sigma) of the eigenstress."""
 
     # --- rates of Eqs. (4)-(5) -------------------------------------------------------------
-    def bulk_terms(self, q1: Array, q2: Array, A: Array, tr_e: Array, C: float,
-                   two_Bp: float) -> Array:
+    def bulk_terms(
+        self, q1: Array, q2: Array, A: Array, tr_e: Array, C: float, two_Bp: float
+    ) -> Array:
         """The bulk part of the molecular field H of Eq. (4)."""
 
-    def molecular_field_kernel(self, q1: Array, q2: Array, A: Array, Jm1: Array,
-                               Ebar_dev: Array, lap: Array, A0: float, C: float,
-                               two_Bp: float, B: float, K: float) -> Array:
+    def molecular_field_kernel(
+        self,
+        q1: Array,
+        q2: Array,
+        A: Array,
+        Jm1: Array,
+        Ebar_dev: Array,
+        lap: Array,
+        A0: float,
+        C: float,
+        two_Bp: float,
+        B: float,
+        K: float,
+    ) -> Array:
         """The molecular field H of Eq. (4)."""
 
-    def activity_rate(self, A: Array, trP: Array, zeta: float, chi: float, s: float,
-                      tau: float) -> Array:
+    def activity_rate(
+        self, A: Array, trP: Array, zeta: float, chi: float, s: float, tau: float
+    ) -> Array:
         """:math:`\\dot A` of Eq. (5)."""
 
-    def corotational_rate(self, R: Array, grad_v: Array, q1: Array, q2: Array
-                          ) -> tuple[Array, Array]:
+    def corotational_rate(
+        self, R: Array, grad_v: Array, q1: Array, q2: Array
+    ) -> tuple[Array, Array]:
         """``(R + 2 omega J q, omega)`` from the gradient of the velocity (Eq. 4)."""
 
     def jaumann_products(self, omega: Array, q1: Array, q2: Array) -> Array:
         """:math:`2 \\omega J q`."""
 
     # --- the exponential integrators' pointwise pieces ----------------------------------------
-    def activity_exponential(self, A: Array, h: float, zeta: float, s: float, tau: float
-                             ) -> tuple[Array, Array, Array]:
+    def activity_exponential(
+        self, A: Array, h: float, zeta: float, s: float, tau: float
+    ) -> tuple[Array, Array, Array]:
         """``(L_A, phi1(h L_A), phi2(h L_A))`` of the activity's linear part."""
 
-    def activity_krogstad(self, A: Array, h: float, zeta: float, s: float, tau: float
-                          ) -> tuple[Array, Array]:
+    def activity_krogstad(
+        self, A: Array, h: float, zeta: float, s: float, tau: float
+    ) -> tuple[Array, Array]:
         """``(L_A, W)``, Krogstad's ten pointwise weights."""
 
-    def etd_combination(self, E: Array, x: Array, h: float, coef: tuple[Array, ...],
-                        terms: tuple[Array, ...]) -> Array:
+    def etd_combination(
+        self, E: Array, x: Array, h: float, coef: tuple[Array, ...], terms: tuple[Array, ...]
+    ) -> Array:
         """:math:`E x + h \\sum_k c_k N_k`."""
 
     def rk_stage(self, x0: Array, c: float, v: Array) -> Array:
         """:math:`x_0 + c\\, v`."""
 
-    def rk4_update(self, x0: Array, c: float, v0: Array, v1: Array, v2: Array, v3: Array
-                   ) -> Array:
+    def rk4_update(self, x0: Array, c: float, v0: Array, v1: Array, v2: Array, v3: Array) -> Array:
         """:math:`x_0 + c\\, (v_0 + 2 v_1 + 2 v_2 + v_3)`."""
 
     # --- well-posedness ------------------------------------------------------------------
-    def finite_margin_kernel(self, K: Array, E: Array, cos_t: Array, sin_t: Array,
-                             scale: float) -> tuple[float, int, int]:
+    def finite_margin_kernel(
+        self, K: Array, E: Array, cos_t: Array, sin_t: Array, scale: float
+    ) -> tuple[float, int, int]:
         """The sampled minimum of the rate problem's symbol determinant / ``scale``, its flat
         point index and angle index (:func:`model.wellposedness.finite_margin_samples`)."""
 

@@ -59,8 +59,12 @@ def energy_density(F: Array, Q: Array, m: Moduli) -> Array:
     """The F-dependent part W(F, Q) of paper Eq. (1) (no active term: it is not an energy)."""
     C, J, I1, _ = _kinematics(F)
     q = T.ddot(Q, Q)
-    return (0.5 * (I1 / J - 2.0) + 0.5 * m.kappa * (J - 1.0) ** 2
-            - 0.5 * m.B * T.ddot(C, Q) / J - m.B_prime * (J - 1.0) * q)
+    return (
+        0.5 * (I1 / J - 2.0)
+        + 0.5 * m.kappa * (J - 1.0) ** 2
+        - 0.5 * m.B * T.ddot(C, Q) / J
+        - m.B_prime * (J - 1.0) * q
+    )
 
 
 def second_piola(F: Array, Q: Array, m: Moduli) -> Array:
@@ -69,8 +73,13 @@ def second_piola(F: Array, Q: Array, m: Moduli) -> Array:
     eye = T.identity(J.shape)
     q = T.ddot(Q, Q)
     CQ = T.ddot(C, Q)
-    return ((eye - 0.5 * I1 * Ci) / J + m.kappa * (J - 1.0) * J * Ci
-            - m.B * (Q - 0.5 * CQ * Ci) / J - m.B_prime * q * J * Ci + m.alpha * Q)
+    return (
+        (eye - 0.5 * I1 * Ci) / J
+        + m.kappa * (J - 1.0) * J * Ci
+        - m.B * (Q - 0.5 * CQ * Ci) / J
+        - m.B_prime * q * J * Ci
+        + m.alpha * Q
+    )
 
 
 def first_piola(F: Array, Q: Array, m: Moduli) -> Array:
@@ -132,8 +141,11 @@ def first_piola_q_increment(F: Array, Q: Array, dQ: Array, m: Moduli) -> Array:
         + \alpha\, dQ\Big]
     """
     C, J, _, Ci = _kinematics(F)
-    dS = (-m.B * (dQ - 0.5 * T.ddot(C, dQ) * Ci) / J
-          - 2.0 * m.B_prime * T.ddot(Q, dQ) * J * Ci + m.alpha * dQ)
+    dS = (
+        -m.B * (dQ - 0.5 * T.ddot(C, dQ) * Ci) / J
+        - 2.0 * m.B_prime * T.ddot(Q, dQ) * J * Ci
+        + m.alpha * dQ
+    )
     return T.matmul(F, dS)
 
 
@@ -146,8 +158,12 @@ def small_strain_stress(grad_u: Array, Q: Array, m: Moduli) -> Array:
     e = 0.5 * (grad_u + T.transpose(grad_u))
     tr = T.trace(e)
     eye = T.identity(tr.shape)
-    return (2.0 * (e - 0.5 * tr * eye) + m.kappa * tr * eye + (m.alpha - m.B) * Q
-            - m.B_prime * T.ddot(Q, Q) * eye)
+    return (
+        2.0 * (e - 0.5 * tr * eye)
+        + m.kappa * tr * eye
+        + (m.alpha - m.B) * Q
+        - m.B_prime * T.ddot(Q, Q) * eye
+    )
 
 
 def small_strain_energy_density(grad_u: Array, Q: Array, m: Moduli) -> Array:
@@ -156,5 +172,9 @@ def small_strain_energy_density(grad_u: Array, Q: Array, m: Moduli) -> Array:
     e = 0.5 * (grad_u + T.transpose(grad_u))
     tr = T.trace(e)
     dev = e - 0.5 * tr * T.identity(tr.shape)
-    return (T.ddot(dev, dev) + 0.5 * m.kappa * tr**2 - m.B * T.ddot(e, Q)
-            - m.B_prime * tr * T.ddot(Q, Q))
+    return (
+        T.ddot(dev, dev)
+        + 0.5 * m.kappa * tr**2
+        - m.B * T.ddot(e, Q)
+        - m.B_prime * tr * T.ddot(Q, Q)
+    )

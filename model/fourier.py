@@ -40,8 +40,9 @@ class FFT:
         if backend == "auto":
             backend = "fftw" if HAVE_FFTW else "scipy"
         if backend == "fftw" and not HAVE_FFTW:
-            raise ImportError("the FFTW library (shipped with pyfftw) cannot be loaded; "
-                              "use backend='scipy'")
+            raise ImportError(
+                "the FFTW library (shipped with pyfftw) cannot be loaded; use backend='scipy'"
+            )
         if backend not in ("fftw", "scipy"):
             raise ValueError(f"unknown FFT backend {backend!r} (fftw, scipy)")
         self.backend = backend
@@ -145,8 +146,10 @@ class SpectralGrid:
         """Real-space inner product sum_x a b, computed from half spectra (Parseval): weight 2
         on every column of the half spectrum but the first and the last (Nyquist)."""
         full = np.vdot(a_hat, b_hat).real
-        edges = (np.vdot(a_hat[..., 0], b_hat[..., 0]).real
-                 + np.vdot(a_hat[..., -1], b_hat[..., -1]).real)
+        edges = (
+            np.vdot(a_hat[..., 0], b_hat[..., 0]).real
+            + np.vdot(a_hat[..., -1], b_hat[..., -1]).real
+        )
         return float(2.0 * full - edges) / self.n**2
 
     def rms_hat(self, a_hat: Array) -> float:

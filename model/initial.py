@@ -56,9 +56,12 @@ def band_limited_modes(seed: int, modes: int) -> tuple[Array, Array, Array]:
 def band_limited_field(seed: int, modes: int, resolution: int) -> Array:
     """The complex field :math:`\\psi` above, sampled at cell centres ``(i + 1/2) / N``."""
     if resolution <= 2 * modes:
-        raise ParameterError("resolution", resolution,
-                             f"> 2 * noise_modes = {2 * modes} (the initial field has modes "
-                             f"up to {modes}; lower noise_modes or raise the resolution)")
+        raise ParameterError(
+            "resolution",
+            resolution,
+            f"> 2 * noise_modes = {2 * modes} (the initial field has modes "
+            f"up to {modes}; lower noise_modes or raise the resolution)",
+        )
     n, m, c = band_limited_modes(seed, modes)
     # shift to cell centres so that every resolution samples the same function
     c = c * np.exp(1j * np.pi * (n + m) / resolution)
@@ -95,8 +98,11 @@ def spectral_interpolate(field: Array, resolution: int) -> Array:
     # centres to x = 0; then evaluated at the fine cell centres (j + 1/2) / N
     phase = weight * np.exp(1j * np.pi * ks * (1.0 / resolution - 1.0 / n0))
     Z = np.zeros((resolution, resolution), dtype=complex)
-    np.add.at(Z, (ks[:, None] % resolution, ks[None, :] % resolution),
-              raw * phase[:, None] * phase[None, :])
+    np.add.at(
+        Z,
+        (ks[:, None] % resolution, ks[None, :] % resolution),
+        raw * phase[:, None] * phase[None, :],
+    )
     return np.fft.ifft2(Z) * resolution**2
 
 

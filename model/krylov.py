@@ -17,8 +17,9 @@ Op = Callable[[Array], Array]
 Inner = Callable[[Array, Array], float]
 
 
-def pcg(A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxiter: int
-        ) -> tuple[Array, int, str]:
+def pcg(
+    A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxiter: int
+) -> tuple[Array, int, str]:
     """Preconditioned conjugate gradients for symmetric positive definite ``A``.
 
     Stops when the preconditioned residual norm ``sqrt(r.M r)`` falls below ``rtol`` times
@@ -50,33 +51,50 @@ def pcg(A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxiter
     return x, maxiter, "maxiter"
 
 
-def gmres(A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxiter: int,
-          restart: int = 30) -> tuple[Array, int, str]:
+def gmres(
+    A: Op, b: Array, x0: Array, M: Op, inner: Inner, *, rtol: float, maxiter: int, restart: int = 30
+) -> tuple[Array, int, str]:
     """Right-preconditioned restarted GMRES: solve ``A x = b`` as ``A M y = b, x = M y``.
 
     Stops when ``||b - A x|| <= rtol ||b||``. Returns ``(x, iterations, status)``.
     """
-    x, it, status, _ = _gmres(lambda v: (A(v), None), b, x0, M, inner, rtol=rtol,
-                              maxiter=maxiter, restart=restart)
+    x, it, status, _ = _gmres(
+        lambda v: (A(v), None), b, x0, M, inner, rtol=rtol, maxiter=maxiter, restart=restart
+    )
     return x, it, status
 
 
-def gmres_aux(op: Callable[[Array], tuple[Array, Array]], b: Array, x0: Array, M: Op,
-              inner: Inner, *, rtol: float, maxiter: int, restart: int = 30
-              ) -> tuple[Array, int, str, Array]:
+def gmres_aux(
+    op: Callable[[Array], tuple[Array, Array]],
+    b: Array,
+    x0: Array,
+    M: Op,
+    inner: Inner,
+    *,
+    rtol: float,
+    maxiter: int,
+    restart: int = 30,
+) -> tuple[Array, int, str, Array]:
     """GMRES for an operator that returns ``(A v, L v)``, L another linear map: also returns
     ``L x`` for the solution, taken from the final true-residual evaluation (so a quantity the
     operator computes anyway need not be recomputed)."""
-    x, it, status, Lx = _gmres(op, b, x0, M, inner, rtol=rtol, maxiter=maxiter,
-                               restart=restart)
+    x, it, status, Lx = _gmres(op, b, x0, M, inner, rtol=rtol, maxiter=maxiter, restart=restart)
     if Lx is None:  # a zero start that needed no iteration (b = 0): L x = L 0
         Lx = op(x)[1]
     return x, it, status, Lx
 
 
-def _gmres(op: Callable[[Array], tuple[Array, Array | None]], b: Array, x0: Array, M: Op,
-           inner: Inner, *, rtol: float, maxiter: int, restart: int
-           ) -> tuple[Array, int, str, Array | None]:
+def _gmres(
+    op: Callable[[Array], tuple[Array, Array | None]],
+    b: Array,
+    x0: Array,
+    M: Op,
+    inner: Inner,
+    *,
+    rtol: float,
+    maxiter: int,
+    restart: int,
+) -> tuple[Array, int, str, Array | None]:
     """Restarted GMRES; the auxiliary output ``L x`` is accumulated from the ``L z`` of the
     basis (L is linear), so a cycle that converges needs no extra operator application: the
     stopping test uses the Givens-rotated residual estimate, the true residual is recomputed

@@ -86,8 +86,16 @@ def pattern_size_mean(S: Array, grid: SpectralGrid) -> float:
     return 2 * np.pi / kbar
 
 
-def free_energy(q1: Array, q2: Array, A: Array, F: Array, params: Parameters,
-                grid: SpectralGrid, *, linear: bool) -> float:
+def free_energy(
+    q1: Array,
+    q2: Array,
+    A: Array,
+    F: Array,
+    params: Parameters,
+    grid: SpectralGrid,
+    *,
+    linear: bool,
+) -> float:
     """:math:`\\int \\Psi\\, dX` of paper Eq. (1) over the unit square."""
     p = params
     QQ = 2.0 * (q1**2 + q2**2)
@@ -103,9 +111,17 @@ def free_energy(q1: Array, q2: Array, A: Array, F: Array, params: Parameters,
     return float(np.mean(psi))
 
 
-def snapshot_observables(q1: Array, q2: Array, A: Array, F: Array, residual: float,
-                         params: Parameters, grid: SpectralGrid, *, linear: bool
-                         ) -> dict[str, float]:
+def snapshot_observables(
+    q1: Array,
+    q2: Array,
+    A: Array,
+    F: Array,
+    residual: float,
+    params: Parameters,
+    grid: SpectralGrid,
+    *,
+    linear: bool,
+) -> dict[str, float]:
     S = order_parameter(q1, q2)
     J = T.det(F)
     C = T.matmul(T.transpose(F), F)
@@ -134,14 +150,23 @@ def first_peak(values: Array, *, significance: float = 0.5) -> int:
     finite = np.where(np.isfinite(v), v, -np.inf)
     top = float(finite.max())
     for i in range(1, len(v) - 1):
-        if finite[i] > finite[i - 1] and finite[i] >= finite[i + 1] \
-                and finite[i] >= significance * top:
+        if (
+            finite[i] > finite[i - 1]
+            and finite[i] >= finite[i + 1]
+            and finite[i] >= significance * top
+        ):
             return i
     return int(np.argmax(finite))
 
 
-def growth_peak(values: Array, times: Array | None = None, *, rate_fraction: float = 0.1,
-                min_prominence: float = 0.1, level: float = 0.25) -> int:
+def growth_peak(
+    values: Array,
+    times: Array | None = None,
+    *,
+    rate_fraction: float = 0.1,
+    min_prominence: float = 0.1,
+    level: float = 0.25,
+) -> int:
     r"""Fig. 3's "first peak" read robustly, at the **end of the main growth phase**.
 
     The main growth phase is the rise that carries the series to its maximum: it starts at

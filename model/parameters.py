@@ -126,13 +126,20 @@ class Parameters:
         if not 1 <= self.noise_modes <= 256:
             raise ParameterError("noise_modes", self.noise_modes, "an integer in [1, 256]")
         if self.texture_resolution != 0 and not (
-                self.texture_resolution >= 16 and self.texture_resolution % 2 == 0):
-            raise ParameterError("texture_resolution", self.texture_resolution,
-                                 "0 (the run's grid) or an even integer >= 16")
+            self.texture_resolution >= 16 and self.texture_resolution % 2 == 0
+        ):
+            raise ParameterError(
+                "texture_resolution",
+                self.texture_resolution,
+                "0 (the run's grid) or an even integer >= 16",
+            )
         if self.texture_resolution and self.initial != "per_node":
-            raise ParameterError("texture_resolution", self.texture_resolution,
-                                 "0 unless initial = 'per_node' (the band texture is the same "
-                                 "physical field at every resolution already)")
+            raise ParameterError(
+                "texture_resolution",
+                self.texture_resolution,
+                "0 unless initial = 'per_node' (the band texture is the same "
+                "physical field at every resolution already)",
+            )
 
     @property
     def alpha_minus_B(self) -> float:
@@ -155,7 +162,8 @@ class Parameters:
         for key in values:
             if key not in valid:
                 raise ParameterError(
-                    key, values[key],
+                    key,
+                    values[key],
                     f"{_suggest(key, valid + ['alpha_minus_B'])}known parameters: "
                     + ", ".join(valid + ["alpha_minus_B"]),
                 )
@@ -250,19 +258,28 @@ class Numerics:
         n = number("resolution", integer=True)
         if n < 16 or n % 2:
             raise ParameterError("resolution", n, "an even integer >= 16")
-        for name in ("t_final", "dt", "tolerance", "dt_max", "save_every", "newton_tol",
-                     "spin_tol"):
+        for name in (
+            "t_final",
+            "dt",
+            "tolerance",
+            "dt_max",
+            "save_every",
+            "newton_tol",
+            "spin_tol",
+        ):
             if number(name) <= 0:
                 raise ParameterError(name, getattr(self, name), "a number > 0")
         if number("steady_tol") < 0:
-            raise ParameterError("steady_tol", self.steady_tol, "a number >= 0 (0: no early "
-                                 "stop)")
+            raise ParameterError("steady_tol", self.steady_tol, "a number >= 0 (0: no early stop)")
         if number("steady_window") <= 0:
             raise ParameterError("steady_window", self.steady_window, "a number > 0")
         if self.steady_tol > 0 and not self.save_every <= self.steady_window < self.t_final:
             raise ParameterError(
-                "steady_window", self.steady_window, f"at least save_every "
-                f"({self.save_every}) and below t_final ({self.t_final}) when steady_tol > 0")
+                "steady_window",
+                self.steady_window,
+                f"at least save_every "
+                f"({self.save_every}) and below t_final ({self.t_final}) when steady_tol > 0",
+            )
         if number("max_newton", integer=True) < 1:
             raise ParameterError("max_newton", self.max_newton, "an integer >= 1")
         if self.error_norm not in ERROR_NORMS:
@@ -280,8 +297,10 @@ class Numerics:
                 raise ParameterError(name, getattr(self, name), "true or false")
         if self.incompressible and self.mechanics != "linear":
             raise ParameterError(
-                "incompressible", True, "true only with mechanics = 'linear' (finite strain "
-                "is compressible with bulk modulus kappa)"
+                "incompressible",
+                True,
+                "true only with mechanics = 'linear' (finite strain "
+                "is compressible with bulk modulus kappa)",
             )
         snaps = self.snapshot_times
         if isinstance(snaps, (int, float)):
@@ -289,26 +308,33 @@ class Numerics:
         try:
             snaps = tuple(sorted(float(t) for t in snaps))
         except (TypeError, ValueError):
-            raise ParameterError("snapshot_times", self.snapshot_times,
-                                 "a list of times") from None
+            raise ParameterError("snapshot_times", self.snapshot_times, "a list of times") from None
         if any(not 0 <= t <= self.t_final for t in snaps):
-            raise ParameterError("snapshot_times", list(snaps),
-                                 f"times between 0 and t_final = {self.t_final}")
+            raise ParameterError(
+                "snapshot_times", list(snaps), f"times between 0 and t_final = {self.t_final}"
+            )
         if len(snaps) > MAX_SAVES:
-            raise ParameterError("snapshot_times", f"{len(snaps)} times",
-                                 f"at most {MAX_SAVES} snapshot times")
+            raise ParameterError(
+                "snapshot_times", f"{len(snaps)} times", f"at most {MAX_SAVES} snapshot times"
+            )
         object.__setattr__(self, "snapshot_times", snaps)
         # Bounds on the work and the memory of one run, checked before anything is allocated.
         if self.t_final / self.save_every > MAX_SAVES:
             raise ParameterError(
-                "t_final", self.t_final, f"at most {MAX_SAVES} saved times: t_final / "
-                f"save_every <= {MAX_SAVES} (save_every = {self.save_every}; raise it)")
+                "t_final",
+                self.t_final,
+                f"at most {MAX_SAVES} saved times: t_final / "
+                f"save_every <= {MAX_SAVES} (save_every = {self.save_every}; raise it)",
+            )
         step = self.dt_max if self.adaptive else self.dt
         if self.t_final / step > MAX_STEPS:
             raise ParameterError(
-                "t_final", self.t_final, f"at most {MAX_STEPS:.0e} time steps of the largest "
+                "t_final",
+                self.t_final,
+                f"at most {MAX_STEPS:.0e} time steps of the largest "
                 f"step allowed: t_final / {'dt_max' if self.adaptive else 'dt'} <= "
-                f"{MAX_STEPS:.0e} ({'dt_max' if self.adaptive else 'dt'} = {step})")
+                f"{MAX_STEPS:.0e} ({'dt_max' if self.adaptive else 'dt'} = {step})",
+            )
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -325,7 +351,8 @@ class Numerics:
         for key in values:
             if key not in valid:
                 raise ParameterError(
-                    key, values[key],
+                    key,
+                    values[key],
                     f"{_suggest(key, valid)}known numerics: " + ", ".join(valid),
                 )
         return cls(**dict(values))
@@ -340,15 +367,19 @@ def check_compatible(params: Parameters, numerics: Numerics) -> None:
     resolution), and a per-node texture drawn on a grid no finer than the run's."""
     if params.texture_resolution > numerics.resolution:
         raise ParameterError(
-            "texture_resolution", params.texture_resolution,
+            "texture_resolution",
+            params.texture_resolution,
             f"at most the resolution ({numerics.resolution}): a texture is carried to a finer "
-            "grid, not a coarser one")
+            "grid, not a coarser one",
+        )
     if params.initial == "band" and numerics.resolution <= 2 * params.noise_modes:
         raise ParameterError(
-            "resolution", numerics.resolution,
+            "resolution",
+            numerics.resolution,
             f"an even integer > 2 * noise_modes = {2 * params.noise_modes} (the initial field "
             f"has Fourier modes up to {params.noise_modes}; raise the resolution or lower "
-            "noise_modes)")
+            "noise_modes)",
+        )
 
 
 def split_settings(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -367,8 +398,9 @@ def split_settings(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str,
             numerics[key] = value
         else:
             valid = sorted(pnames | nnames)
-            raise ParameterError(key, value, f"{_suggest(key, valid)}known names: "
-                                 + ", ".join(valid))
+            raise ParameterError(
+                key, value, f"{_suggest(key, valid)}known names: " + ", ".join(valid)
+            )
     return params, numerics
 
 

@@ -44,8 +44,9 @@ def make_grid(resolution: int) -> CartesianGrid:
 
 def make_state(q1: Array, q2: Array, A: Array) -> FieldCollection:
     grid = make_grid(q1.shape[0])
-    return FieldCollection([ScalarField(grid, np.array(d, dtype=float)) for d in (q1, q2, A)],
-                           labels=list(LABELS))
+    return FieldCollection(
+        [ScalarField(grid, np.array(d, dtype=float)) for d in (q1, q2, A)], labels=list(LABELS)
+    )
 
 
 class ActiveNematicPDE(PDEBase):
@@ -64,8 +65,9 @@ class ActiveNematicPDE(PDEBase):
 
     def _build(self, numerics: Numerics) -> None:
         self.numerics = numerics
-        self.spectral = SpectralGrid(numerics.resolution,
-                                     fft_backend="scipy" if numerics.backend == "numpy" else "auto")
+        self.spectral = SpectralGrid(
+            numerics.resolution, fft_backend="scipy" if numerics.backend == "numpy" else "auto"
+        )
         self.mechanics = make_mechanics(self.params, numerics, self.spectral)
 
     def use_grid_of(self, state: FieldCollection) -> None:
@@ -82,7 +84,8 @@ class ActiveNematicPDE(PDEBase):
             raise ValueError(
                 f"the state is on a {n}x{n} grid but the PDE's numerics have resolution "
                 f"{self.numerics.resolution}: pass Numerics(resolution={n}) or a state of "
-                f"that size")
+                f"that size"
+            )
         self._build(self.numerics.replace(resolution=n))
 
     def solve(self, state, *args, **kwargs):  # type: ignore[override]
@@ -91,19 +94,22 @@ class ActiveNematicPDE(PDEBase):
         return super().solve(state, *args, **kwargs)
 
     # --- pieces of the right-hand side (readable reference) ----------------------------
-    def molecular_field(self, q1: Array, q2: Array, A: Array, mech: MechanicalState,
-                        q_hat: Array | None = None) -> Array:
+    def molecular_field(
+        self, q1: Array, q2: Array, A: Array, mech: MechanicalState, q_hat: Array | None = None
+    ) -> Array:
         """:math:`H` (components H11, H12), the negative variational derivative of Eq. (1)
         (the backend's ``molecular_field_kernel``); ``q_hat``, the spectra of q1, q2 if known,
         saves two transforms."""
         p = self.params
         g = self.spectral
         lap = g.inverse(-g.k2 * (g.forward(np.stack([q1, q2])) if q_hat is None else q_hat))
-        return self.mechanics.k.molecular_field_kernel(q1, q2, A, mech.Jm1, mech.Ebar_dev, lap,
-                                                       p.A0, p.C, 2.0 * p.B_prime, p.B, p.K)
+        return self.mechanics.k.molecular_field_kernel(
+            q1, q2, A, mech.Jm1, mech.Ebar_dev, lap, p.A0, p.C, 2.0 * p.B_prime, p.B, p.K
+        )
 
-    def corotational_rates(self, q1: Array, q2: Array, H: Array, mech: MechanicalState,
-                           t: float | None = None) -> tuple[Array, Array]:
+    def corotational_rates(
+        self, q1: Array, q2: Array, H: Array, mech: MechanicalState, t: float | None = None
+    ) -> tuple[Array, Array]:
         r"""``(Qdot components, omega)``: :math:`\dot Q = H/\gamma + W Q - Q W` with the spin
         slaved to :math:`\dot Q` through the displacement rate (see :mod:`model.mechanics`)."""
         return self.mechanics.corotational(mech, q1, q2, H / self.params.gamma, t)
@@ -114,9 +120,16 @@ class ActiveNematicPDE(PDEBase):
         p = self.params
         return self.mechanics.k.activity_rate(A, mech.trP, p.zeta, p.chi, p.s, p.tau)
 
-    def rates(self, q1: Array, q2: Array, A: Array, t: float | None = None,
-              u_hat: Array | None = None, q_hat: Array | None = None, F: Array | None = None
-              ) -> tuple[Array, MechanicalState, Array]:
+    def rates(
+        self,
+        q1: Array,
+        q2: Array,
+        A: Array,
+        t: float | None = None,
+        u_hat: Array | None = None,
+        q_hat: Array | None = None,
+        F: Array | None = None,
+    ) -> tuple[Array, MechanicalState, Array]:
         """Return ``(d/dt [q1, q2, A], mechanical state, omega)``: with the displacement in
         force balance (Eq. 3, solved), or at the given displacement spectrum ``u_hat``
         (finite mechanics only; the integrated-displacement stages of the solver) with its

@@ -15,11 +15,20 @@ def git_commit() -> str:
     uncommitted changes), or ``"unknown"`` outside a git checkout."""
     here = Path(__file__).resolve().parent
     try:
-        head = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True,
-                              text=True, timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(here), "status", "--porcelain",
-                                "--untracked-files=no"], capture_output=True, text=True,
-                               timeout=10, check=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "-C", str(here), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return head + ("+dirty" if dirty else "")
@@ -32,9 +41,16 @@ def library_versions() -> dict[str, str]:
     import importlib.metadata as md
 
     out: dict[str, str] = {}
-    for label, dist in (("numpy", "numpy"), ("scipy", "scipy"), ("py-pde", "py-pde"),
-                        ("numba", "numba"), ("pyfftw", "pyFFTW"), ("xarray", "xarray"),
-                        ("netCDF4", "netCDF4"), ("dask", "dask")):
+    for label, dist in (
+        ("numpy", "numpy"),
+        ("scipy", "scipy"),
+        ("py-pde", "py-pde"),
+        ("numba", "numba"),
+        ("pyfftw", "pyFFTW"),
+        ("xarray", "xarray"),
+        ("netCDF4", "netCDF4"),
+        ("dask", "dask"),
+    ):
         try:
             out[label] = md.version(dist)
         except md.PackageNotFoundError:
@@ -58,8 +74,9 @@ def _fftw_version() -> str:
     if lib is None:
         return ""
     try:
-        return ctypes.string_at(ctypes.addressof(ctypes.c_char.in_dll(lib, "fftw_version"))
-                                ).decode(errors="replace")
+        return ctypes.string_at(ctypes.addressof(ctypes.c_char.in_dll(lib, "fftw_version"))).decode(
+            errors="replace"
+        )
     except (ValueError, OSError):
         return ""
 
@@ -76,8 +93,12 @@ def fftw_candidates() -> Iterator[str]:
     spec = importlib.util.find_spec("pyfftw")
     if spec is not None and spec.origin:
         here = os.path.dirname(spec.origin)
-        for pattern in ("../pyfftw.libs/libfftw3-*.so*", ".dylibs/libfftw3.*dylib",
-                        "libfftw3-3.dll", "../pyFFTW.libs/libfftw3-*.so*"):
+        for pattern in (
+            "../pyfftw.libs/libfftw3-*.so*",
+            ".dylibs/libfftw3.*dylib",
+            "libfftw3-3.dll",
+            "../pyFFTW.libs/libfftw3-*.so*",
+        ):
             yield from sorted(glob.glob(os.path.join(here, pattern)))
     system = ctypes.util.find_library("fftw3")
     if system:

@@ -19,12 +19,30 @@ from model.wellposedness import finite_margin_samples
 Array = np.ndarray
 
 __all__ = [
-    "activity_exponential", "activity_krogstad", "activity_rate", "apply_tangent_kernel",
-    "apply_tangent_spin_kernel", "balance_residual_kernel", "bulk_terms", "corotational_rate",
-    "div_hat_kernel", "etd_combination", "finite_margin_kernel", "first_piola_kernel",
-    "grad_hat_kernel", "green_kernel", "jaumann_products", "linear_response",
-    "molecular_field_kernel", "neg_div_hat_kernel", "q_increment_kernel", "rk4_update",
-    "rk_stage", "strain_measures_kernel", "symbol_combination", "tangent_kernel",
+    "activity_exponential",
+    "activity_krogstad",
+    "activity_rate",
+    "apply_tangent_kernel",
+    "apply_tangent_spin_kernel",
+    "balance_residual_kernel",
+    "bulk_terms",
+    "corotational_rate",
+    "div_hat_kernel",
+    "etd_combination",
+    "finite_margin_kernel",
+    "first_piola_kernel",
+    "grad_hat_kernel",
+    "green_kernel",
+    "jaumann_products",
+    "linear_response",
+    "molecular_field_kernel",
+    "neg_div_hat_kernel",
+    "q_increment_kernel",
+    "rk4_update",
+    "rk_stage",
+    "strain_measures_kernel",
+    "symbol_combination",
+    "tangent_kernel",
 ]
 
 
@@ -34,11 +52,14 @@ def _moduli(kappa: float, B: float, Bp: float, alpha: float) -> cl.Moduli:
 
 # --- finite-strain stress (twins of model.compiled.constitutive) ---------------------------
 
-def tangent_kernel(F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float,
-                   alpha: float) -> Array:
+
+def tangent_kernel(
+    F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float, alpha: float
+) -> Array:
     """:func:`model.constitutive.tangent`, packed (:func:`model.tensors.pack_symmetric`)."""
-    return tensors.pack_symmetric(cl.tangent(F, tensors.nematic(q1, q2),
-                                             _moduli(kappa, B, Bp, alpha)))
+    return tensors.pack_symmetric(
+        cl.tangent(F, tensors.nematic(q1, q2), _moduli(kappa, B, Bp, alpha))
+    )
 
 
 def apply_tangent_kernel(K: Array, dF: Array) -> Array:
@@ -52,17 +73,20 @@ def apply_tangent_spin_kernel(K: Array, G: Array, E: Array) -> Array:
     return cl.apply_tangent(tensors.unpack_symmetric(K), G) + E * (0.5 * (G[1, 0] - G[0, 1]))
 
 
-def first_piola_kernel(F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float,
-                       alpha: float) -> Array:
+def first_piola_kernel(
+    F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float, alpha: float
+) -> Array:
     """:func:`model.constitutive.first_piola`."""
     return cl.first_piola(F, tensors.nematic(q1, q2), _moduli(kappa, B, Bp, alpha))
 
 
-def q_increment_kernel(F: Array, q1: Array, q2: Array, d1: Array, d2: Array, B: float,
-                       Bp: float, alpha: float) -> Array:
+def q_increment_kernel(
+    F: Array, q1: Array, q2: Array, d1: Array, d2: Array, B: float, Bp: float, alpha: float
+) -> Array:
     """:func:`model.constitutive.first_piola_q_increment` (kappa does not enter)."""
-    return cl.first_piola_q_increment(F, tensors.nematic(q1, q2), tensors.nematic(d1, d2),
-                                      _moduli(0.0, B, Bp, alpha))
+    return cl.first_piola_q_increment(
+        F, tensors.nematic(q1, q2), tensors.nematic(d1, d2), _moduli(0.0, B, Bp, alpha)
+    )
 
 
 def strain_measures_kernel(F: Array, P: Array) -> tuple[Array, Array, Array]:
@@ -74,8 +98,8 @@ def strain_measures_kernel(F: Array, P: Array) -> tuple[Array, Array, Array]:
     return Ebar_dev, J - 1.0, tensors.trace(P)
 
 
-
 # --- spectral operators (twins of model.compiled.spectral) ---------------------------------
+
 
 def grad_hat_kernel(v: Array, kx: Array, ky: Array) -> Array:
     r""":math:`\widehat{\partial_j v_i} = i k_j \hat v_i`."""
@@ -87,8 +111,9 @@ def div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:
     return 1j * (kx * T[:, 0] + ky * T[:, 1])
 
 
-def balance_residual_kernel(P: Array, P_hat: Array, khx: Array, khy: Array, weights: Array
-                            ) -> float:
+def balance_residual_kernel(
+    P: Array, P_hat: Array, khx: Array, khy: Array, weights: Array
+) -> float:
     r""":math:`\lVert \hat k_J \hat P_{iJ} \rVert / \max(1, \mathrm{RMS}\, P)`."""
     n = P.shape[2]
     r = khx * P_hat[:, 0] + khy * P_hat[:, 1]
@@ -112,9 +137,21 @@ def symbol_combination(x: Array, m1: Array, m2: Array, a: Array, b: Array) -> Ar
     return x - (m1 * a + m2 * b)
 
 
-def linear_response(q1h: Array, q2h: Array, isoh: Array, kx: Array, ky: Array, khx: Array,
-                    khy: Array, inv_k2: Array, amb: float, a: float, kappa: float,
-                    incompressible: bool, mean_dev: float) -> tuple[Array, Array, Array]:
+def linear_response(
+    q1h: Array,
+    q2h: Array,
+    isoh: Array,
+    kx: Array,
+    ky: Array,
+    khx: Array,
+    khy: Array,
+    inv_k2: Array,
+    amb: float,
+    a: float,
+    kappa: float,
+    incompressible: bool,
+    mean_dev: float,
+) -> tuple[Array, Array, Array]:
     r"""The small-strain solution's spectra ``dev e`` (2 components), ``tr e``, ``tr sigma``
     for the eigenstress :math:`\tau = (\alpha - B) Q + \mathrm{iso}\, I` (docs/model.md,
     section 3): :math:`\hat b = i \hat\tau k`, :math:`\hat u = (I - a \hat k \hat k) \hat b /
@@ -138,23 +175,33 @@ def linear_response(q1h: Array, q2h: Array, isoh: Array, kx: Array, ky: Array, k
 
 # --- rates of Eqs. (4)-(5) (twins of model.compiled.rates) ----------------------------------
 
+
 def bulk_terms(q1: Array, q2: Array, A: Array, tr_e: Array, C: float, two_Bp: float) -> Array:
     r"""``[-b q1, -b q2]``, :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e`."""
     bulk = A + C * 2.0 * (q1 * q1 + q2 * q2) - two_Bp * tr_e
     return np.stack([-bulk * q1, -bulk * q2])
 
 
-def molecular_field_kernel(q1: Array, q2: Array, A: Array, Jm1: Array, Ebar_dev: Array,
-                           lap: Array, A0: float, C: float, two_Bp: float, B: float, K: float
-                           ) -> Array:
+def molecular_field_kernel(
+    q1: Array,
+    q2: Array,
+    A: Array,
+    Jm1: Array,
+    Ebar_dev: Array,
+    lap: Array,
+    A0: float,
+    C: float,
+    two_Bp: float,
+    B: float,
+    K: float,
+) -> Array:
     r"""H of Eq. (4): :math:`-(A + A_0 + C\, Q:Q - 2 B' (J - 1)) q + B\, \mathrm{dev}\, \bar E
     + K \nabla^2 q`."""
     bulk = A + A0 + C * 2.0 * (q1**2 + q2**2) - two_Bp * Jm1
     return np.stack([-bulk * q1, -bulk * q2]) + B * Ebar_dev + K * lap
 
 
-def activity_rate(A: Array, trP: Array, zeta: float, chi: float, s: float, tau: float
-                  ) -> Array:
+def activity_rate(A: Array, trP: Array, zeta: float, chi: float, s: float, tau: float) -> Array:
     r"""Paper Eq. (5): :math:`(-\zeta A - \chi\, \mathrm{tr} P - s A^3)/\tau`."""
     return (-zeta * A - chi * trP - s * A * A * A) / tau
 
@@ -172,6 +219,7 @@ def jaumann_products(omega: Array, q1: Array, q2: Array) -> Array:
 
 
 # --- the exponential integrators' pointwise pieces (twins of model.compiled.etd) -----------
+
 
 def phi_functions(z: Array, kmax: int = 2) -> tuple[Array, ...]:
     """:math:`e^z, \\varphi_1(z), \\ldots, \\varphi_{k_{max}}(z)` (real ``z``),
@@ -195,28 +243,41 @@ def phi_functions(z: Array, kmax: int = 2) -> tuple[Array, ...]:
     return tuple(out)
 
 
-def activity_exponential(A: Array, h: float, zeta: float, s: float, tau: float
-                         ) -> tuple[Array, Array, Array]:
+def activity_exponential(
+    A: Array, h: float, zeta: float, s: float, tau: float
+) -> tuple[Array, Array, Array]:
     r"""``(L_A, phi1(h L_A), phi2(h L_A))``, :math:`L_A = -(\zeta + 3 s A^2)/\tau`."""
     L = -(zeta + 3.0 * s * A * A) / tau
     _, p1, p2 = phi_functions(L * h, 2)
     return L, p1, p2
 
 
-def activity_krogstad(A: Array, h: float, zeta: float, s: float, tau: float
-                      ) -> tuple[Array, Array]:
+def activity_krogstad(A: Array, h: float, zeta: float, s: float, tau: float) -> tuple[Array, Array]:
     """``(L_A, W)`` with Krogstad's ten pointwise weights (order as
     :func:`model.compiled.etd.activity_krogstad`)."""
     L = -(zeta + 3.0 * s * A * A) / tau
     E, f1, f2, f3 = phi_functions(L * h, 3)
     E2, g1, g2 = phi_functions(0.5 * L * h, 2)
-    W = np.stack([E, E2, 0.5 * g1, 0.5 * g1 - g2, g2, f1 - 2.0 * f2, 2.0 * f2,
-                  f1 - 3.0 * f2 + 4.0 * f3, 2.0 * f2 - 4.0 * f3, 4.0 * f3 - f2])
+    W = np.stack(
+        [
+            E,
+            E2,
+            0.5 * g1,
+            0.5 * g1 - g2,
+            g2,
+            f1 - 2.0 * f2,
+            2.0 * f2,
+            f1 - 3.0 * f2 + 4.0 * f3,
+            2.0 * f2 - 4.0 * f3,
+            4.0 * f3 - f2,
+        ]
+    )
     return L, W
 
 
-def etd_combination(E: Array, x: Array, h: float, coef: tuple[Array, ...],
-                    terms: tuple[Array, ...]) -> Array:
+def etd_combination(
+    E: Array, x: Array, h: float, coef: tuple[Array, ...], terms: tuple[Array, ...]
+) -> Array:
     r""":math:`E x + h \sum_k c_k N_k`."""
     return E * x + h * sum(c * t for c, t in zip(coef, terms, strict=True))
 

@@ -62,20 +62,41 @@ logging.getLogger("pde.solvers.controller").addFilter(_TrackerTimeIsExpected())
 #: Layout of the Dataset (and run file): 2 names the time-series dimension ``t`` (1 called it
 #: ``time``, which CF reserves for calendar time; readers take either).
 SCHEMA_VERSION = 2
-SERIES = ("mean_S", "sigma2_S", "cos2theta", "lambda", "lambda_mean", "mean_I1bar", "min_J",
-          "mean_A", "free_energy", "residual", "rate_margin")
+SERIES = (
+    "mean_S",
+    "sigma2_S",
+    "cos2theta",
+    "lambda",
+    "lambda_mean",
+    "mean_I1bar",
+    "min_J",
+    "mean_A",
+    "free_energy",
+    "residual",
+    "rate_margin",
+)
 #: CF units: the model is dimensionless (lengths in units of the domain size L, times in units
 #: of tau, energies in units of G L^2), so every quantity has units "1" (UDUNITS: a pure
 #: number) and its long_name says the scale; only the wall time is in seconds.
-UNITS = {"mean_S": "1", "sigma2_S": "1", "cos2theta": "1", "lambda": "1", "lambda_mean": "1",
-         "mean_I1bar": "1", "min_J": "1", "mean_A": "1", "free_energy": "1", "residual": "1",
-         "rate_margin": "1"}
+UNITS = {
+    "mean_S": "1",
+    "sigma2_S": "1",
+    "cos2theta": "1",
+    "lambda": "1",
+    "lambda_mean": "1",
+    "mean_I1bar": "1",
+    "min_J": "1",
+    "mean_A": "1",
+    "free_energy": "1",
+    "residual": "1",
+    "rate_margin": "1",
+}
 LONG_NAMES = {
     "mean_S": "area mean of the nematic order parameter S",
     "sigma2_S": "variance of S over the unit domain (paper sigma_S^2)",
     "cos2theta": "anisotropy <cos 2 theta> = <q1 / S>",
     "lambda": "pattern size L / n, n the E^2-weighted mean shell of the radial spectrum of "
-              "S - <S>, in units of L",
+    "S - <S>, in units of L",
     "lambda_mean": "pattern size 2 pi / (spectrum-weighted mean |k| of S - <S>), in units of L",
     "mean_I1bar": "area mean of I1bar = tr C / J",
     "min_J": "minimum of J = det F",
@@ -83,7 +104,7 @@ LONG_NAMES = {
     "free_energy": "total free energy, paper Eq. (1), in units of G L^2",
     "residual": "force-balance residual |Div P|_{H^-1} / max(1, |P|)",
     "rate_margin": "well-posedness margin of the rate problem, min det of its symbol / "
-                   "(kappa + 1): 1 passive, 0 ill posed",
+    "(kappa + 1): 1 passive, 0 ill posed",
 }
 #: long_name and units of the per-run scalars
 SCALARS = {
@@ -92,23 +113,41 @@ SCALARS = {
     "cos2theta_final": ("cos2theta at t_final", "1"),
     "lambda_final": ("pattern size lambda at t_final, in units of L", "1"),
     "lambda_mean_final": ("pattern size lambda_mean at t_final, in units of L", "1"),
-    "t_peak": ("time of the first peak of sigma2_S(t) (growth-peak rule: the end of the "
-               "growth phase), in units of tau", "1"),
-    "lambda_peak": ("pattern size lambda at the first peak of sigma2_S(t) (growth-peak "
-                    "rule), in units of L", "1"),
-    "lambda_mean_peak": ("pattern size lambda_mean at the first peak of sigma2_S(t) "
-                         "(growth-peak rule), in units of L", "1"),
-    "t_peak_literal": ("time of the first local maximum of sigma2_S(t) (the paper's literal "
-                       "rule), in units of tau", "1"),
-    "lambda_peak_literal": ("pattern size lambda at the first local maximum of sigma2_S(t) "
-                            "(the paper's literal rule), in units of L", "1"),
-    "rate_margin_min": ("smallest well-posedness margin of the rate problem over the run",
-                        "1"),
-    "stopped_early": ("1 if the run ended before t_final because sigma2_S and mean_S were "
-                      "steady (numerics steady_tol, steady_window), else 0; the *_final "
-                      "values are then those at t_stopped", "1"),
-    "t_stopped": ("time the run ended early (steady observables); NaN if it ran to t_final, "
-                  "in units of tau", "1"),
+    "t_peak": (
+        "time of the first peak of sigma2_S(t) (growth-peak rule: the end of the "
+        "growth phase), in units of tau",
+        "1",
+    ),
+    "lambda_peak": (
+        "pattern size lambda at the first peak of sigma2_S(t) (growth-peak rule), in units of L",
+        "1",
+    ),
+    "lambda_mean_peak": (
+        "pattern size lambda_mean at the first peak of sigma2_S(t) "
+        "(growth-peak rule), in units of L",
+        "1",
+    ),
+    "t_peak_literal": (
+        "time of the first local maximum of sigma2_S(t) (the paper's literal "
+        "rule), in units of tau",
+        "1",
+    ),
+    "lambda_peak_literal": (
+        "pattern size lambda at the first local maximum of sigma2_S(t) "
+        "(the paper's literal rule), in units of L",
+        "1",
+    ),
+    "rate_margin_min": ("smallest well-posedness margin of the rate problem over the run", "1"),
+    "stopped_early": (
+        "1 if the run ended before t_final because sigma2_S and mean_S were "
+        "steady (numerics steady_tol, steady_window), else 0; the *_final "
+        "values are then those at t_stopped",
+        "1",
+    ),
+    "t_stopped": (
+        "time the run ended early (steady observables); NaN if it ran to t_final, in units of tau",
+        "1",
+    ),
     "wall_time": ("wall-clock time of the run", "s"),
 }
 #: Observables whose steadiness ends a run early (numerics steady_tol > 0).
@@ -132,8 +171,7 @@ def steady(rows: list[dict[str, float]], numerics: Numerics) -> bool:
     then = before[-1]
     for name in STEADY:
         a, b = then[name], now[name]
-        if not (math.isfinite(a) and math.isfinite(b)) or abs(b - a) > tol * max(abs(a),
-                                                                                abs(b)):
+        if not (math.isfinite(a) and math.isfinite(b)) or abs(b - a) > tol * max(abs(a), abs(b)):
             return False
     return True
 
@@ -153,8 +191,13 @@ def save_times(numerics: Numerics) -> np.ndarray:
     return np.unique(np.round(times, 12))
 
 
-def run(params: Parameters, numerics: Numerics, seed: int, *,
-        progress: Callable[[float], None] | None = None) -> xr.Dataset:
+def run(
+    params: Parameters,
+    numerics: Numerics,
+    seed: int,
+    *,
+    progress: Callable[[float], None] | None = None,
+) -> xr.Dataset:
     """Simulate paper Eqs. (1)-(5) from the seeded initial condition; see module docstring."""
     check_compatible(params, numerics)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -167,8 +210,7 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
     state = make_state(q1, q2, A)
     solver = SCHEMES[numerics.scheme](eq)
     times = save_times(numerics)
-    snap_set = {float(t) for t in np.round(list(numerics.snapshot_times) + [numerics.t_final],
-                                           12)}
+    snap_set = {float(t) for t in np.round(list(numerics.snapshot_times) + [numerics.t_final], 12)}
     rows: list[dict[str, float]] = []
     snaps: list[tuple[float, np.ndarray]] = []
     stopped = [math.nan]  # the time the run ended early
@@ -178,8 +220,7 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
         parts, count = dict(eq.mechanics.fft_parts), grid.fft.count
         mech = eq.mechanics.solve(d[0], d[1], t=t)
         residual = mech.residual if not linear else eq.mechanics.residual(mech.P)
-        obs = snapshot_observables(d[0], d[1], d[2], mech.F, residual, params, grid,
-                                   linear=linear)
+        obs = snapshot_observables(d[0], d[1], d[2], mech.F, residual, params, grid, linear=linear)
         obs["rate_margin"] = eq.mechanics.rate_margin(d[0], d[1], mech)[0]
         obs["time"] = float(t)
         obs["steps"] = float(solver.stats["steps"])
@@ -208,36 +249,77 @@ def run(params: Parameters, numerics: Numerics, seed: int, *,
         status, reason, detail = "failed", exc.reason, exc.detail
         t_failed = float(exc.t) if exc.t is not None else float("nan")
         log.info("run failed: %s", exc)
-    if status == "ok" and rows and not all(np.isfinite(rows[-1][k]) for k in
-                                           ("mean_S", "sigma2_S", "min_J")):
+    if (
+        status == "ok"
+        and rows
+        and not all(np.isfinite(rows[-1][k]) for k in ("mean_S", "sigma2_S", "min_J"))
+    ):
         status, reason, detail = "failed", "nan", "non-finite observables at the end"
     wall = time.perf_counter() - wall0
-    return _to_dataset(rows, snaps, grid.x, params, numerics, seed, solver,
-                       status=status, reason=reason, detail=detail, t_failed=t_failed,
-                       wall=wall, t_stopped=stopped[0])
+    return _to_dataset(
+        rows,
+        snaps,
+        grid.x,
+        params,
+        numerics,
+        seed,
+        solver,
+        status=status,
+        reason=reason,
+        detail=detail,
+        t_failed=t_failed,
+        wall=wall,
+        t_stopped=stopped[0],
+    )
 
 
-def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: int,
-                solver: ETDSolver, *, status: str, reason: str, detail: str,
-                t_failed: float, wall: float, t_stopped: float = math.nan) -> xr.Dataset:
+def _to_dataset(
+    rows,
+    snaps,
+    x,
+    params: Parameters,
+    numerics: Numerics,
+    seed: int,
+    solver: ETDSolver,
+    *,
+    status: str,
+    reason: str,
+    detail: str,
+    t_failed: float,
+    wall: float,
+    t_stopped: float = math.nan,
+) -> xr.Dataset:
     t = np.array([r["time"] for r in rows], dtype=float)
     data_vars: dict[str, Any] = {}
     for name in (*SERIES, "steps"):
-        data_vars[name] = ("t", np.array([r[name] for r in rows], dtype=float),
-                           {"long_name": LONG_NAMES.get(name, "accepted time steps"),
-                            "units": UNITS.get(name, "1")})
+        data_vars[name] = (
+            "t",
+            np.array([r[name] for r in rows], dtype=float),
+            {
+                "long_name": LONG_NAMES.get(name, "accepted time steps"),
+                "units": UNITS.get(name, "1"),
+            },
+        )
     fields = ("q1", "q2", "A", "u1", "u2", "I1bar")
     n = len(x)
     snap_t = np.array([s[0] for s in snaps], dtype=float)
-    stack = (np.stack([s[1] for s in snaps], axis=1) if snaps
-             else np.zeros((len(fields), 0, n, n)))
+    stack = np.stack([s[1] for s in snaps], axis=1) if snaps else np.zeros((len(fields), 0, n, n))
     for i, name in enumerate(fields):
-        data_vars[name] = (("snapshot_time", "x", "y"), stack[i],
-                           {"long_name": {"q1": "Q11 = S cos 2 theta",
-                                          "q2": "Q12 = S sin 2 theta", "A": "activity A",
-                                          "u1": "periodic displacement fluctuation u~_1",
-                                          "u2": "periodic displacement fluctuation u~_2",
-                                          "I1bar": "I1bar = tr C / J"}[name], "units": "1"})
+        data_vars[name] = (
+            ("snapshot_time", "x", "y"),
+            stack[i],
+            {
+                "long_name": {
+                    "q1": "Q11 = S cos 2 theta",
+                    "q2": "Q12 = S sin 2 theta",
+                    "A": "activity A",
+                    "u1": "periodic displacement fluctuation u~_1",
+                    "u2": "periodic displacement fluctuation u~_2",
+                    "I1bar": "I1bar = tr C / J",
+                }[name],
+                "units": "1",
+            },
+        )
     sig = data_vars["sigma2_S"][1]
     lam = data_vars["lambda"][1]
     ok_final = status == "ok" and len(t) > 0
@@ -255,8 +337,9 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     ip = peaks.get("")
     scalars["lambda_mean_peak"] = float(lam_mean[ip]) if ip is not None else float("nan")
     rates = data_vars["rate_margin"][1]
-    margin = min(solver.margin_min, float(np.nanmin(rates)) if np.any(np.isfinite(rates))
-                 else np.inf)
+    margin = min(
+        solver.margin_min, float(np.nanmin(rates)) if np.any(np.isfinite(rates)) else np.inf
+    )
     scalars["rate_margin_min"] = margin if np.isfinite(margin) else float("nan")
     scalars["stopped_early"] = float(math.isfinite(t_stopped))
     scalars["t_stopped"] = t_stopped
@@ -271,8 +354,13 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
         "source": f"active-nematic-solids {__version__} model.simulate.run",
         "history": f"{created}: simulated by model.simulate.run (seed {int(seed)})",
         "library_versions": library_versions_text(),
-        "status": status, "reason": reason, "detail": detail, "t_failed": t_failed,
-        "seed": int(seed), "code_version": __version__, "git_commit": git_commit(),
+        "status": status,
+        "reason": reason,
+        "detail": detail,
+        "t_failed": t_failed,
+        "seed": int(seed),
+        "code_version": __version__,
+        "git_commit": git_commit(),
         "schema_version": SCHEMA_VERSION,
         "parameters_json": json.dumps(params.to_dict(), sort_keys=True),
         "numerics_json": json.dumps(numerics.to_dict(), sort_keys=True),
@@ -289,11 +377,14 @@ def _to_dataset(rows, snaps, x, params: Parameters, numerics: Numerics, seed: in
     attrs.update({f"num_{k}": _attr(v) for k, v in numerics.to_dict().items()})
     # the dimensionless time is "t", not "time": CF (and its checkers) take a coordinate named
     # time for a calendar time ("<unit> since <epoch>")
-    coords = {"t": ("t", t, {"units": "1", "long_name": "time t, in units of tau"}),
-              "snapshot_time": ("snapshot_time", snap_t, {
-                  "units": "1", "long_name": "time of the snapshot, in units of tau"}),
-              "x": ("x", x, {"units": "1",
-                             "long_name": "reference coordinate X1, in units of L"}),
-              "y": ("y", x, {"units": "1",
-                             "long_name": "reference coordinate X2, in units of L"})}
+    coords = {
+        "t": ("t", t, {"units": "1", "long_name": "time t, in units of tau"}),
+        "snapshot_time": (
+            "snapshot_time",
+            snap_t,
+            {"units": "1", "long_name": "time of the snapshot, in units of tau"},
+        ),
+        "x": ("x", x, {"units": "1", "long_name": "reference coordinate X1, in units of L"}),
+        "y": ("y", x, {"units": "1", "long_name": "reference coordinate X2, in units of L"}),
+    }
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)

@@ -89,9 +89,15 @@ class ETDSolver(SolverBase):
     #: converge) is retried with h / 4 while h > this; below it the failure is the run's.
     retry_floor = 1e-3
 
-    def __init__(self, pde: ActiveNematicPDE, *, backend: str = "numpy",
-                 adaptive: bool | None = None, tolerance: float | None = None,
-                 dt_max: float | None = None):
+    def __init__(
+        self,
+        pde: ActiveNematicPDE,
+        *,
+        backend: str = "numpy",
+        adaptive: bool | None = None,
+        tolerance: float | None = None,
+        dt_max: float | None = None,
+    ):
         super().__init__(pde, backend=backend)
         self.pde: ActiveNematicPDE = pde
         num = pde.numerics
@@ -115,8 +121,14 @@ class ETDSolver(SolverBase):
         #: the integrated displacement spectrum at the end of the last step and its
         #: deformation gradient (projected onto force balance when the step is accepted)
         self._pending_disp: tuple[Array, Array] | None = None
-        self.stats = {"steps": 0, "rejected": 0, "stage_failures": 0, "rhs": 0, "newton": 0,
-                      "projections": 0}
+        self.stats = {
+            "steps": 0,
+            "rejected": 0,
+            "stage_failures": 0,
+            "rhs": 0,
+            "newton": 0,
+            "projections": 0,
+        }
         #: the mechanical state of the last force-balance right-hand side (its tangent and E
         #: serve the well-posedness check of the step's start)
         self._last_mech: MechanicalState | None = None
@@ -125,8 +137,9 @@ class ETDSolver(SolverBase):
         self._checked_at = float("nan")
 
     # --- the split right-hand side -----------------------------------------------------
-    def split(self, u: Array, q_hat: Array, t: float, disp: Array | None = None,
-              F: Array | None = None) -> tuple[Array, Array]:
+    def split(
+        self, u: Array, q_hat: Array, t: float, disp: Array | None = None, F: Array | None = None
+    ) -> tuple[Array, Array]:
         """Return ``(N_q hat, Adot)`` for the state ``u = [q1, q2, A]`` with ``q_hat`` the
         spectra of q1, q2 (:mod:`model.split`). Where the mechanics integrates the
         displacement: at the displacement spectrum ``disp`` with deformation gradient ``F`` (its
@@ -185,7 +198,9 @@ class ETDSolver(SolverBase):
             raise IllPosed(
                 f"well-posedness margin {margin:.3g} <= 0 at x = {(ix + 0.5) / n:.3f}, "
                 f"y = {(iy + 0.5) / n:.3f} (S = {S:.3f}, (alpha - B) S = {amb * S:.3f}, "
-                f"wave vector at {np.degrees(phi):.0f} deg)", t)
+                f"wave vector at {np.degrees(phi):.0f} deg)",
+                t,
+            )
         return margin
 
     def _integrated_mechanics(self) -> Mechanics | None:
@@ -206,9 +221,17 @@ class ETDSolver(SolverBase):
         if self._checkpointed:
             self.pde.mechanics.restore()
 
-    def _finish(self, u: Array, q_hat: Array, new_q_hat: Array, new_A: Array, err_q: Array,
-                err_A: Array, new_disp: tuple[Array, Array] | None = None,
-                err_grad: Array | None = None) -> tuple[Array, float]:
+    def _finish(
+        self,
+        u: Array,
+        q_hat: Array,
+        new_q_hat: Array,
+        new_A: Array,
+        err_q: Array,
+        err_A: Array,
+        new_disp: tuple[Array, Array] | None = None,
+        err_grad: Array | None = None,
+    ) -> tuple[Array, float]:
         """The new state, its spectra remembered for the next step, and the error estimate
         of ``err_q`` (spectra) and ``err_A`` (real space): the largest pointwise error
         (``error_norm = "max"``, two inverse transforms) or the RMS over the grid, maximum
@@ -222,12 +245,15 @@ class ETDSolver(SolverBase):
         if self.error_norm == "max":
             err = max(float(np.abs(g.inverse(err_q)).max()), float(np.abs(err_A).max()))
         else:
-            err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]),
-                      float(np.sqrt(np.mean(err_A**2))))
+            err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]), float(np.sqrt(np.mean(err_A**2))))
         self._pending_disp = new_disp
         if err_grad is not None:
-            err = max(err, float(np.abs(err_grad).max()) if self.error_norm == "max"
-                      else float(np.sqrt(np.mean(err_grad**2, axis=(2, 3))).max()))
+            err = max(
+                err,
+                float(np.abs(err_grad).max())
+                if self.error_norm == "max"
+                else float(np.sqrt(np.mean(err_grad**2, axis=(2, 3))).max()),
+            )
         return new, err
 
     def _project(self, new: Array, t: float) -> None:
@@ -249,8 +275,11 @@ class ETDSolver(SolverBase):
         # failure that persists at small steps is the run's, and so is an ill-posed accepted
         # state (a shorter step cannot change it)
         self._restore()
-        if (not self.adaptive or isinstance(exc, IllPosed)
-                or h_try <= self.retry_floor * self.dt_max):
+        if (
+            not self.adaptive
+            or isinstance(exc, IllPosed)
+            or h_try <= self.retry_floor * self.dt_max
+        ):
             raise exc
         log.debug("step %g at t = %g failed (%s): retrying with h / 4", h_try, t, exc)
         self.stats["rejected"] += 1
@@ -286,8 +315,15 @@ class ETDSolver(SolverBase):
                     h = self._retry(exc, h_try, t)
                     continue
                 if self.adaptive:
-                    fac = 2.0 if err == 0 else float(np.clip(
-                        0.9 * (self.tolerance / err) ** (1.0 / self.error_order), 0.2, 2.0))
+                    fac = (
+                        2.0
+                        if err == 0
+                        else float(
+                            np.clip(
+                                0.9 * (self.tolerance / err) ** (1.0 / self.error_order), 0.2, 2.0
+                            )
+                        )
+                    )
                     if err > self.tolerance:
                         self.stats["rejected"] += 1
                         self._restore()
@@ -298,7 +334,9 @@ class ETDSolver(SolverBase):
                         if h < self.dt_min:
                             raise SimulationFailure(
                                 "step_size_collapsed",
-                                f"adaptive time step fell below {self.dt_min:g}", t)
+                                f"adaptive time step fell below {self.dt_min:g}",
+                                t,
+                            )
                         continue
                 try:
                     self._project(new, t + h_try)
@@ -364,8 +402,16 @@ class ETDRK2Solver(ETDSolver):
             return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A)
         corr_d = 0.5 * h * (fin.udot_hat - V0)
         corr_G = 0.5 * h * (fin.udot_grad - G0)
-        return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A,
-                            (da + corr_d, Fa + corr_G), corr_G)
+        return self._finish(
+            u,
+            q_hat,
+            aq_hat + corr_q,
+            aA + corr_A,
+            corr_q,
+            corr_A,
+            (da + corr_d, Fa + corr_G),
+            corr_G,
+        )
 
 
 class ETDRK4Solver(ETDSolver):
@@ -389,8 +435,7 @@ class ETDRK4Solver(ETDSolver):
         E, E2, wq = self._krogstad_weights(h)
         LA, W = self.k.activity_krogstad(A, h, p.zeta, p.s, p.tau)  # pointwise L_A: no cache
         EA, EA2 = W[0], W[1]
-        wA = {"a": (W[2],), "b": (W[3], W[4]), "c": (W[5], W[6]),
-              "new": (W[7], W[8], W[8], W[9])}
+        wA = {"a": (W[2],), "b": (W[3], W[4]), "c": (W[5], W[6]), "new": (W[7], W[8], W[8], W[9])}
         comb = self.k.etd_combination
 
         def combo_q(Eq: Array, x: Array, w: tuple[Array, ...], N: tuple[Array, ...]) -> Array:
@@ -401,8 +446,9 @@ class ETDRK4Solver(ETDSolver):
 
         fin = self._integrated_mechanics()
 
-        def rhs(q_s: Array, A_s: Array, t_s: float, d_s: Array | None, F_s: Array | None
-                ) -> tuple[Array, Array]:
+        def rhs(
+            q_s: Array, A_s: Array, t_s: float, d_s: Array | None, F_s: Array | None
+        ) -> tuple[Array, Array]:
             """Stage (q spectra, A[, displacement spectrum and its deformation gradient]) ->
             (N_q hat, N_A) with N_A = Adot - L_A A (the displacement rate is then the
             mechanics' udot_hat, its gradient udot_grad)."""
@@ -435,16 +481,26 @@ class ETDRK4Solver(ETDSolver):
         else:  # Newton's start: the displacement extrapolated with its rate
             self.pde.mechanics.predict(0.5 * h)
         # stage a (t + h/2): ETD1 half step
-        Nq_a, NA_a = rhs(combo_q(E2, q_hat, wq["a"], (Nq_u,)),
-                         combo_A(EA2, A, wA["a"], (NA_u,)), t + 0.5 * h, d_a, F_a)
+        Nq_a, NA_a = rhs(
+            combo_q(E2, q_hat, wq["a"], (Nq_u,)),
+            combo_A(EA2, A, wA["a"], (NA_u,)),
+            t + 0.5 * h,
+            d_a,
+            F_a,
+        )
         if fin is not None and d0 is not None and F0 is not None:
             V.append(fin.udot_hat)
             G.append(fin.udot_grad)
             d_b = rk(d0, 0.5 * h, V[1])
             F_b = rk(F0, 0.5 * h, G[1])
         # stage b (t + h/2): Krogstad's correction with phi_2, a + h phi_2(h/2) (N_a - N_u)
-        Nq_b, NA_b = rhs(combo_q(E2, q_hat, wq["b"], (Nq_u, Nq_a)),
-                         combo_A(EA2, A, wA["b"], (NA_u, NA_a)), t + 0.5 * h, d_b, F_b)
+        Nq_b, NA_b = rhs(
+            combo_q(E2, q_hat, wq["b"], (Nq_u, Nq_a)),
+            combo_A(EA2, A, wA["b"], (NA_u, NA_a)),
+            t + 0.5 * h,
+            d_b,
+            F_b,
+        )
         if fin is not None and d0 is not None and F0 is not None:
             V.append(fin.udot_hat)
             G.append(fin.udot_grad)
@@ -453,8 +509,13 @@ class ETDRK4Solver(ETDSolver):
         else:
             self.pde.mechanics.predict(0.5 * h)
         # stage c (t + h)
-        Nq_c, NA_c = rhs(combo_q(E, q_hat, wq["c"], (Nq_u, Nq_b)),
-                         combo_A(EA, A, wA["c"], (NA_u, NA_b)), t + h, d_c, F_c)
+        Nq_c, NA_c = rhs(
+            combo_q(E, q_hat, wq["c"], (Nq_u, Nq_b)),
+            combo_A(EA, A, wA["c"], (NA_u, NA_b)),
+            t + h,
+            d_c,
+            F_c,
+        )
         # the fourth-order combination
         new_q_hat = combo_q(E, q_hat, wq["new"], (Nq_u, Nq_a, Nq_b, Nq_c))
         new_A = combo_A(EA, A, wA["new"], (NA_u, NA_a, NA_b, NA_c))
@@ -468,19 +529,25 @@ class ETDRK4Solver(ETDSolver):
         G.append(fin.udot_grad)
         new_d = self.k.rk4_update(d0, h / 6.0, *V)  # d0 + h/6 (V0 + 2 V1 + 2 V2 + V3)
         new_F = self.k.rk4_update(F0, h / 6.0, *G)
-        return self._finish(u, q_hat, new_q_hat, new_A, err_q, err_A, (new_d, new_F),
-                            (h / 3.0) * (G[2] - G[1]))
+        return self._finish(
+            u, q_hat, new_q_hat, new_A, err_q, err_A, (new_d, new_F), (h / 3.0) * (G[2] - G[1])
+        )
 
     @staticmethod
-    def _weights_from(f1: Array, f2: Array, f3: Array, g1: Array, g2: Array
-                      ) -> dict[str, tuple[Array, ...]]:
+    def _weights_from(
+        f1: Array, f2: Array, f3: Array, g1: Array, g2: Array
+    ) -> dict[str, tuple[Array, ...]]:
         """The stage and update weights of Krogstad's scheme from phi_k(hL) (f) and
         phi_k(hL/2) (g): a = e^{Lh/2} u + h [g1/2] N_u, b = e^{Lh/2} u + h [g1/2 - g2, g2]
         (N_u, N_a), c = e^{Lh} u + h [f1 - 2 f2, 2 f2] (N_u, N_b), u_{n+1} = e^{Lh} u +
         h [w_u, w_ab, w_ab, w_c] (N_u, N_a, N_b, N_c) (module docstring)."""
         w_ab = 2.0 * f2 - 4.0 * f3
-        return {"a": (0.5 * g1,), "b": (0.5 * g1 - g2, g2), "c": (f1 - 2.0 * f2, 2.0 * f2),
-                "new": (f1 - 3.0 * f2 + 4.0 * f3, w_ab, w_ab, 4.0 * f3 - f2)}
+        return {
+            "a": (0.5 * g1,),
+            "b": (0.5 * g1 - g2, g2),
+            "c": (f1 - 2.0 * f2, 2.0 * f2),
+            "new": (f1 - 3.0 * f2 + 4.0 * f3, w_ab, w_ab, 4.0 * f3 - f2),
+        }
 
     def _krogstad_weights(self, h: float) -> tuple[Array, Array, dict[str, tuple[Array, ...]]]:
         """``(e^{L_q h}, e^{L_q h/2}, weights)`` for the q spectra, cached per step size."""

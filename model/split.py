@@ -37,8 +37,9 @@ class ForceBalanceSplit:
         self.pde = pde
         self.Lq = Lq
 
-    def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None,
-                 F: Array | None = None) -> tuple[Array, Array, MechanicalState | None]:
+    def __call__(
+        self, u: Array, q_hat: Array, t: float, disp: Array | None = None, F: Array | None = None
+    ) -> tuple[Array, Array, MechanicalState | None]:
         """``(N_q hat, Adot, mechanical state)`` at the displacement spectrum ``disp`` if
         given (the integrated scheme; ``F`` its deformation gradient if known), else in
         force balance."""
@@ -64,12 +65,28 @@ class SpectralSplit:
             p = pde.params
             assert g.fft.plans is not None
             self._rhs_data = linear_rhs.LinearRHS(
-                Lq, *mech.spin_symbols, mech.response_symbols(), self._weights, *g.fft.plans,
-                p.eps * g.n**2, p.B, p.B_prime, p.C, p.gamma, p.zeta, p.chi, p.s, p.tau,
-                mech.spin_tol, mech.spin_maxiter, *linear_rhs.workspace(g.n))
+                Lq,
+                *mech.spin_symbols,
+                mech.response_symbols(),
+                self._weights,
+                *g.fft.plans,
+                p.eps * g.n**2,
+                p.B,
+                p.B_prime,
+                p.C,
+                p.gamma,
+                p.zeta,
+                p.chi,
+                p.s,
+                p.tau,
+                mech.spin_tol,
+                mech.spin_maxiter,
+                *linear_rhs.workspace(g.n),
+            )
 
-    def __call__(self, u: Array, q_hat: Array, t: float, disp: Array | None = None,
-                 F: Array | None = None) -> tuple[Array, Array, MechanicalState | None]:
+    def __call__(
+        self, u: Array, q_hat: Array, t: float, disp: Array | None = None, F: Array | None = None
+    ) -> tuple[Array, Array, MechanicalState | None]:
         """``(N_q hat, Adot, None)``; by :func:`model.compiled.linear_rhs.linear_split` where the
         mechanics is compiled, else by :meth:`reference`."""
         if disp is not None:
@@ -78,7 +95,8 @@ class SpectralSplit:
             return (*self.reference(u, q_hat, t), None)
         mech, g = self.mech, self.pde.spectral
         Nq, Adot, omega_hat, its, ok, nfft = linear_rhs.linear_split(
-            u[0], u[1], u[2], np.ascontiguousarray(q_hat), mech.zero_hat, self._rhs_data)
+            u[0], u[1], u[2], np.ascontiguousarray(q_hat), mech.zero_hat, self._rhs_data
+        )
         g.fft.count += nfft
         mech.accept_spin(omega_hat, its, ok, t)
         return Nq, Adot, None

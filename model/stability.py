@@ -113,8 +113,10 @@ def _activity_root(r: float, zeta: float, s: float) -> float:
             if r == 0.0:
                 return 0.0
             raise ParameterError(
-                "zeta", zeta, "zeta > 0 or s > 0 when chi * B_prime != 0 (else the activity "
-                "equation has no homogeneous steady state)"
+                "zeta",
+                zeta,
+                "zeta > 0 or s > 0 when chi * B_prime != 0 (else the activity "
+                "equation has no homogeneous steady state)",
             )
         return r / zeta
     # Cardano for the depressed cubic A^3 + p A - r/s = 0 with p = zeta/s >= 0 (one real root)
@@ -171,8 +173,10 @@ def base_state(params: Parameters, eps: float | None = None) -> BaseState:
     change = np.nonzero((values[:-1] < 0.0) & (values[1:] >= 0.0))[0]
     if change.size == 0:
         raise ParameterError(
-            "eps", e, "a strain with a homogeneous steady state (none found for |q1| < 1e6: "
-            "check that A0 > 0 or C > 0)"
+            "eps",
+            e,
+            "a strain with a homogeneous steady state (none found for |q1| < 1e6: "
+            "check that A0 > 0 or C > 0)",
         )
     lo, hi = float(grid[change[0]]), float(grid[change[0] + 1])
     q = hi if values[change[0] + 1] == 0.0 else brentq(residual, lo, hi, xtol=1e-16, rtol=1e-15)
@@ -266,8 +270,9 @@ def linear_operator(
     g = A_b + params.A0 + 2.0 * C * q * q
     shape = k.shape[:-1]
     L = np.zeros((*shape, 3, 3))
-    L[..., 0, 0] = (-(g + 4.0 * C * q * q + params.K * k2) + 2.0 * Bp * q * tre_1
-                    + B * dev11_1) / params.gamma
+    L[..., 0, 0] = (
+        -(g + 4.0 * C * q * q + params.K * k2) + 2.0 * Bp * q * tre_1 + B * dev11_1
+    ) / params.gamma
     L[..., 0, 1] = (2.0 * Bp * q * tre_2 + B * dev11_2) / params.gamma
     L[..., 0, 2] = -q / params.gamma
     L[..., 1, 0] = B * dev12_1 / params.gamma
@@ -368,8 +373,13 @@ def _threshold_residual(params: Parameters, q: float, k2: float, beta: float) ->
     \hat{\mathbf y}` (``docs/stability.md``, "Threshold"); negative means unstable."""
     a, Bp = params.alpha - params.B, params.B_prime
     A_b = _base_activity(params, q)
-    D = (A_b + params.A0 + 6.0 * params.C * q * q + params.K * k2
-         + (1.0 - beta) * (a + 4.0 * Bp * q) * (0.5 * params.B - 2.0 * Bp * q))
+    D = (
+        A_b
+        + params.A0
+        + 6.0 * params.C * q * q
+        + params.K * k2
+        + (1.0 - beta) * (a + 4.0 * Bp * q) * (0.5 * params.B - 2.0 * Bp * q)
+    )
     zeta_eff = params.zeta + 3.0 * params.s * A_b * A_b
     return D * zeta_eff - 2.0 * params.chi * q * (beta * a - 4.0 * (1.0 - beta) * Bp * q)
 
@@ -425,8 +435,13 @@ def critical_eps_closed_form(
     if idx.size == 0:
         return math.inf
     i = int(idx[0])
-    q = brentq(lambda x: _threshold_residual(params, x, k2, beta), grid[i], grid[i + 1],
-               xtol=1e-16, rtol=1e-15)
+    q = brentq(
+        lambda x: _threshold_residual(params, x, k2, beta),
+        grid[i],
+        grid[i + 1],
+        xtol=1e-16,
+        rtol=1e-15,
+    )
     return _eps_of_q(params, float(q))
 
 

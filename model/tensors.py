@@ -25,10 +25,16 @@ def transpose(T: Array) -> Array:
 
 def matmul(A: Array, B: Array) -> Array:
     """``(A B)_ij = A_ik B_kj`` (explicit 2 x 2 products: much faster than einsum here)."""
-    return np.stack([np.stack([A[0, 0] * B[0, 0] + A[0, 1] * B[1, 0],
-                               A[0, 0] * B[0, 1] + A[0, 1] * B[1, 1]]),
-                     np.stack([A[1, 0] * B[0, 0] + A[1, 1] * B[1, 0],
-                               A[1, 0] * B[0, 1] + A[1, 1] * B[1, 1]])])
+    return np.stack(
+        [
+            np.stack(
+                [A[0, 0] * B[0, 0] + A[0, 1] * B[1, 0], A[0, 0] * B[0, 1] + A[0, 1] * B[1, 1]]
+            ),
+            np.stack(
+                [A[1, 0] * B[0, 0] + A[1, 1] * B[1, 0], A[1, 0] * B[0, 1] + A[1, 1] * B[1, 1]]
+            ),
+        ]
+    )
 
 
 def ddot(A: Array, B: Array) -> Array:

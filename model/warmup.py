@@ -44,11 +44,18 @@ from typing import Any
 from model.parameters import Numerics, Parameters
 
 #: Modules holding the compiled kernels.
-KERNEL_MODULES = ("model.compiled.arith", "model.compiled.constitutive",
-                  "model.compiled.spectral", "model.compiled.etd", "model.compiled.rates",
-                  "model.compiled.wellposedness", "model.compiled.krylov",
-                  "model.compiled.linear_rhs", "model.compiled.finite_krylov",
-                  "model.compiled.fftw")
+KERNEL_MODULES = (
+    "model.compiled.arith",
+    "model.compiled.constitutive",
+    "model.compiled.spectral",
+    "model.compiled.etd",
+    "model.compiled.rates",
+    "model.compiled.wellposedness",
+    "model.compiled.krylov",
+    "model.compiled.linear_rhs",
+    "model.compiled.finite_krylov",
+    "model.compiled.fftw",
+)
 WARM_RESOLUTION = 16
 WARM_T_FINAL = 0.5
 #: The kernels' entry points, compiled in parallel by ``python -m model.warmup``.
@@ -83,9 +90,13 @@ def compile_counts() -> dict[str, int]:
 
 def warm_numerics(numerics: Numerics) -> Numerics:
     """The tiny numerics that take the same code paths as ``numerics``."""
-    return numerics.replace(resolution=WARM_RESOLUTION, t_final=WARM_T_FINAL,
-                            save_every=WARM_T_FINAL, snapshot_times=(), dt=min(numerics.dt,
-                                                                               0.05))
+    return numerics.replace(
+        resolution=WARM_RESOLUTION,
+        t_final=WARM_T_FINAL,
+        save_every=WARM_T_FINAL,
+        snapshot_times=(),
+        dt=min(numerics.dt, 0.05),
+    )
 
 
 def warm_up(kinds: Iterable[tuple[Parameters, Numerics]] | None = None) -> dict[str, Any]:
@@ -148,8 +159,9 @@ def _type_namespace() -> dict[str, Any]:
 
     def named(cls: str, *items: Any) -> Any:
         module, _, name = cls.rpartition(".")
-        return types.BaseTuple.from_types(list(items), getattr(importlib.import_module(module),
-                                                                name))
+        return types.BaseTuple.from_types(
+            list(items), getattr(importlib.import_module(module), name)
+        )
 
     return {**vars(types), "tup": tup, "named": named}
 
@@ -202,8 +214,9 @@ def read_entry_points(path: Path = ENTRY_POINTS_FILE) -> list[EntryPoint]:
             continue
         fields = text.split("\t")
         if len(fields) != 3:
-            raise ValueError(f"{path}:{number}: expected seconds, function and types "
-                             f"separated by tabs")
+            raise ValueError(
+                f"{path}:{number}: expected seconds, function and types separated by tabs"
+            )
         out.append(EntryPoint(fields[1], fields[2], float(fields[0])))
     return out
 
@@ -284,11 +297,17 @@ def _compile_group(entries: list[EntryPoint], verbose: bool) -> list[dict[str, A
             compile_entry_point(entry)
             after = compile_counts()
         except Exception as e:  # noqa: BLE001 - reported by the parent
-            out.append({"error": one_line(e),
-                        "traceback": traceback.format_exc() if verbose else ""})
+            out.append(
+                {"error": one_line(e), "traceback": traceback.format_exc() if verbose else ""}
+            )
             continue
-        out.append({"seconds": time.perf_counter() - t0, "pid": os.getpid(),
-                    **{k: after[k] - before[k] for k in after}})
+        out.append(
+            {
+                "seconds": time.perf_counter() - t0,
+                "pid": os.getpid(),
+                **{k: after[k] - before[k] for k in after},
+            }
+        )
     return out
 
 
@@ -339,8 +358,9 @@ def entry_groups(entries: list[EntryPoint]) -> list[list[EntryPoint]]:
     return [groups[m] for m in order]
 
 
-def compile_in_parallel(entries: list[EntryPoint], jobs: int,
-                        verbose: bool = False) -> dict[str, Any]:
+def compile_in_parallel(
+    entries: list[EntryPoint], jobs: int, verbose: bool = False
+) -> dict[str, Any]:
     """Compile ``entries`` (into the disk cache) in ``jobs`` fresh processes (spawned, each
     with :func:`lock_cache_files`), a module's entries in one process (:func:`entry_groups`).
     Returns the wall time, the processes used, the signatures they compiled and loaded (a
@@ -352,8 +372,11 @@ def compile_in_parallel(entries: list[EntryPoint], jobs: int,
     done: list[dict[str, Any]] = []
     errors: list[str] = []
     lost = 0
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                             initializer=lock_cache_files) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=lock_cache_files,
+    ) as pool:
         futures = {pool.submit(_compile_group, group, verbose): group for group in groups}
         for fut in as_completed(futures):
             group = futures[fut]
@@ -366,17 +389,25 @@ def compile_in_parallel(entries: list[EntryPoint], jobs: int,
                 results = [{"error": one_line(e), "traceback": ""}] * len(group)
             for entry, result in zip(group, results, strict=True):
                 if "error" in result:
-                    errors.append(f"{entry.label()}: {result['error']}"
-                                  + (f"\n{result['traceback']}" if result["traceback"] else ""))
+                    errors.append(
+                        f"{entry.label()}: {result['error']}"
+                        + (f"\n{result['traceback']}" if result["traceback"] else "")
+                    )
                 else:
                     done.append(result)
     if lost:
-        errors.append(f"a compiling process died ({lost} of {len(entries)} entry points not "
-                      f"compiled); python -m model.warmup --jobs 1 compiles them in one "
-                      f"process")
-    return {"seconds": time.perf_counter() - t0, "processes": len({r["pid"] for r in done}),
-            "compiled": sum(r["compiled"] for r in done),
-            "loaded": sum(r["loaded"] for r in done), "errors": errors}
+        errors.append(
+            f"a compiling process died ({lost} of {len(entries)} entry points not "
+            f"compiled); python -m model.warmup --jobs 1 compiles them in one "
+            f"process"
+        )
+    return {
+        "seconds": time.perf_counter() - t0,
+        "processes": len({r["pid"] for r in done}),
+        "compiled": sum(r["compiled"] for r in done),
+        "loaded": sum(r["loaded"] for r in done),
+        "errors": errors,
+    }
 
 
 def _ready_stamp(entry_points: Path) -> dict[str, str]:
@@ -392,8 +423,12 @@ def _ready_stamp(entry_points: Path) -> dict[str, str]:
         listed = hashlib.sha256(entry_points.read_bytes()).hexdigest()[:16]
     except OSError:
         listed = ""
-    return {"sources": source_digest(), "numba": numba.__version__, "python": sys.version,
-            "entry_points": listed}
+    return {
+        "sources": source_digest(),
+        "numba": numba.__version__,
+        "python": sys.version,
+        "entry_points": listed,
+    }
 
 
 def _ready_file() -> Path:
@@ -411,20 +446,33 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m model.warmup",
         description="Compile the model's numba kernels into the disk cache (a few seconds "
-                    "when they are there already).")
-    parser.add_argument("-j", "--jobs", type=int, default=None,
-                        help=f"compiling processes (default: the usable cores, at most "
-                             f"{MAX_DEFAULT_JOBS}; 1: compile in this process only)")
-    parser.add_argument("--entry-points", type=Path, default=ENTRY_POINTS_FILE,
-                        help="the kernel signatures to compile in parallel (default: %(default)s)")
-    parser.add_argument("-v", "--verbose", action="store_true",
-                        help="the full traceback of a failed compilation")
+        "when they are there already).",
+    )
+    parser.add_argument(
+        "-j",
+        "--jobs",
+        type=int,
+        default=None,
+        help=f"compiling processes (default: the usable cores, at most "
+        f"{MAX_DEFAULT_JOBS}; 1: compile in this process only)",
+    )
+    parser.add_argument(
+        "--entry-points",
+        type=Path,
+        default=ENTRY_POINTS_FILE,
+        help="the kernel signatures to compile in parallel (default: %(default)s)",
+    )
+    parser.add_argument(
+        "-v", "--verbose", action="store_true", help="the full traceback of a failed compilation"
+    )
     args = parser.parse_args(argv)
     jobs = args.jobs if args.jobs is not None else default_jobs()
     if jobs < 1:
         parser.error("--jobs must be at least 1")
-    print("compiling the model's numba kernels (cached on disk; once, then a few seconds) ...",
-          flush=True)
+    print(
+        "compiling the model's numba kernels (cached on disk; once, then a few seconds) ...",
+        flush=True,
+    )
     if not os.environ.get("NUMBA_CACHE_DIR"):  # the hashed folders are ours to tidy
         from model.compiled import prune_stale_caches
 
@@ -442,8 +490,12 @@ def main(argv: list[str] | None = None) -> int:
             for entry in entries:
                 entry.arg_types()
         except Exception as exc:  # noqa: BLE001 - then compile in this process (--jobs 1)
-            print(f"warning: cannot read the kernels' entry points ({one_line(exc)}): "
-                  f"compiling in this process only", file=sys.stderr, flush=True)
+            print(
+                f"warning: cannot read the kernels' entry points ({one_line(exc)}): "
+                f"compiling in this process only",
+                file=sys.stderr,
+                flush=True,
+            )
             entries = []
     if entries:
         par = compile_in_parallel(entries, jobs, verbose=args.verbose)
@@ -451,16 +503,25 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: compiling {line}", file=sys.stderr)
         if par["errors"]:
             return 1
-        print(f"{len(entries)} entry points ready in {par['seconds']:.0f} s in "
-              f"{par['processes']} processes ({par['compiled']} signatures compiled, "
-              f"{par['loaded']} loaded from the cache)", flush=True)
+        print(
+            f"{len(entries)} entry points ready in {par['seconds']:.0f} s in "
+            f"{par['processes']} processes ({par['compiled']} signatures compiled, "
+            f"{par['loaded']} loaded from the cache)",
+            flush=True,
+        )
     info = warm_up()
-    print(f"kernels ready in {info['seconds']:.0f} s ({info['compiled']} compiled, "
-          f"{info['loaded']} loaded from the cache)", flush=True)
+    print(
+        f"kernels ready in {info['seconds']:.0f} s ({info['compiled']} compiled, "
+        f"{info['loaded']} loaded from the cache)",
+        flush=True,
+    )
     if entries and info["compiled"]:
-        print(f"note: {info['compiled']} kernel signatures were compiled here, not in "
-              f"parallel: {args.entry_points} misses them (scripts/kernel_entry_points.py "
-              f"remakes it)", flush=True)
+        print(
+            f"note: {info['compiled']} kernel signatures were compiled here, not in "
+            f"parallel: {args.entry_points} misses them (scripts/kernel_entry_points.py "
+            f"remakes it)",
+            flush=True,
+        )
     for e in info["errors"]:
         print(f"warning: warm-up run failed: {e}", file=sys.stderr)
     if not info["errors"]:

@@ -72,8 +72,9 @@ def finite_symbol_det(K: Array, E: Array, phi: float) -> Array:
     return M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
 
 
-def finite_margin_samples(K: Array, E: Array, cos_t: Array, sin_t: Array, scale: float
-                          ) -> tuple[float, int, int]:
+def finite_margin_samples(
+    K: Array, E: Array, cos_t: Array, sin_t: Array, scale: float
+) -> tuple[float, int, int]:
     """(min over points and the sampled directions of det M / scale, flat index, angle
     index), the first in (x, y, angle) order among equal minima: every point sampled (numpy
     twin of :func:`model.compiled.wellposedness.finite_margin_kernel`, which skips the points
@@ -85,22 +86,39 @@ def finite_margin_samples(K: Array, E: Array, cos_t: Array, sin_t: Array, scale:
     return float(D.flat[flat]), point, ia
 
 
-def finite_margin(K: Array, E: Array, kappa: float, n_angles: int = N_ANGLES,
-                  samples: Callable[..., tuple[float, int, int]] = finite_margin_samples
-                  ) -> tuple[float, int, float]:
+def finite_margin(
+    K: Array,
+    E: Array,
+    kappa: float,
+    n_angles: int = N_ANGLES,
+    samples: Callable[..., tuple[float, int, int]] = finite_margin_samples,
+) -> tuple[float, int, float]:
     """The finite-strain margin :math:`\\min_x \\min_\\phi \\det M / (\\kappa + 1)` (module
     docstring) with the flat grid index and the direction angle of its minimum, sampled by
     ``samples`` (:func:`finite_margin_samples` or its compiled twin). The sampled minimum is
     refined at its point by a parabola in phi through three samples."""
     angles = np.arange(n_angles) * (np.pi / n_angles)
-    m, idx, ia = samples(np.ascontiguousarray(K), np.ascontiguousarray(E), np.cos(angles),
-                         np.sin(angles), kappa + 1.0)
+    m, idx, ia = samples(
+        np.ascontiguousarray(K),
+        np.ascontiguousarray(E),
+        np.cos(angles),
+        np.sin(angles),
+        kappa + 1.0,
+    )
     _nx, ny = E.shape[2], E.shape[3]
     x, y = divmod(int(idx), ny)
     dphi = np.pi / n_angles
     phis = angles[ia] + dphi * np.array([-1.0, 0.0, 1.0])
-    d = np.array([float(finite_symbol_det(K[..., x:x + 1, y:y + 1], E[..., x:x + 1, y:y + 1],
-                                          p)[0, 0]) for p in phis]) / (kappa + 1.0)
+    d = np.array(
+        [
+            float(
+                finite_symbol_det(K[..., x : x + 1, y : y + 1], E[..., x : x + 1, y : y + 1], p)[
+                    0, 0
+                ]
+            )
+            for p in phis
+        ]
+    ) / (kappa + 1.0)
     curv = d[0] - 2.0 * d[1] + d[2]
     phi = float(angles[ia])
     if curv > 0:
@@ -135,5 +153,12 @@ def limit_S(alpha_minus_B: float, *, linear: bool) -> float:
     return (1.0 if linear else 0.5) / alpha_minus_B
 
 
-__all__ = ["N_ANGLES", "finite_margin", "finite_symbol", "finite_symbol_det", "limit_S",
-           "linear_margin", "uniform_margin"]
+__all__ = [
+    "N_ANGLES",
+    "finite_margin",
+    "finite_symbol",
+    "finite_symbol_det",
+    "limit_S",
+    "linear_margin",
+    "uniform_margin",
+]

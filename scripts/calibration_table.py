@@ -74,37 +74,62 @@ def summarise(folder: Path) -> dict[str, Any]:
     # bound is that lowest value (alpha_cr > 0 is then not shown, rising can be)
     lowest = float(phase["alpha_minus_B"].min())
     majority_low = most.sel(alpha_minus_B=lowest)
-    alpha_cr = {k: float(_sel(loc, K=k)) if bool(_sel(majority, K=k)) else math.nan
-                for k in ks}
+    alpha_cr = {k: float(_sel(loc, K=k)) if bool(_sel(majority, K=k)) else math.nan for k in ks}
     alpha_cr_below = {k: lowest for k in ks if bool(_sel(majority_low, K=k))}
     jump = alpha_cr.get(FIG2_K, math.nan)
-    interval = (float(_sel(fits["transition_lower"], K=FIG2_K)),
-                float(_sel(fits["transition_upper"], K=FIG2_K))) if FIG2_K in alpha_cr \
+    interval = (
+        (
+            float(_sel(fits["transition_lower"], K=FIG2_K)),
+            float(_sel(fits["transition_upper"], K=FIG2_K)),
+        )
+        if FIG2_K in alpha_cr
         else (math.nan, math.nan)
+    )
     lam = {}
     for k in FIG3_K:
         lo, e_lo, n_lo, d_lo = lambda_at(phase, k, LOW)
         hi, e_hi, n_hi, d_hi = lambda_at(phase, k, HIGH)
         ratio = lo / hi if hi > 0 else math.nan
-        lam[k] = {"low": lo, "high": hi, "ratio": ratio,
-                  "ratio_se": ratio * math.hypot(e_lo, e_hi),
-                  "patterned_low": n_lo, "patterned_high": n_hi, "runs_low": d_lo,
-                  "runs_high": d_hi}
-    bounds = [alpha_cr[k] if math.isfinite(alpha_cr[k]) else alpha_cr_below.get(k, math.nan)
-              for k in sorted(alpha_cr)]
+        lam[k] = {
+            "low": lo,
+            "high": hi,
+            "ratio": ratio,
+            "ratio_se": ratio * math.hypot(e_lo, e_hi),
+            "patterned_low": n_lo,
+            "patterned_high": n_hi,
+            "runs_low": d_lo,
+            "runs_high": d_hi,
+        }
+    bounds = [
+        alpha_cr[k] if math.isfinite(alpha_cr[k]) else alpha_cr_below.get(k, math.nan)
+        for k in sorted(alpha_cr)
+    ]
     rising = all(math.isfinite(a) and a > 0 for a in bounds) and all(
-        b > a for a, b in zip(bounds, bounds[1:], strict=False))
+        b > a for a, b in zip(bounds, bounds[1:], strict=False)
+    )
     ok_jump = JUMP_RANGE[0] <= jump <= JUMP_RANGE[1]
     ok_ratio = all(lam[k]["ratio"] >= RATIO_MIN for k in FIG3_K)
-    overrides = json.loads(phase.attrs.get("overrides_json", "{}")) \
-        if "overrides_json" in phase.attrs else {}
-    return {"setting": folder.name.removeprefix("calib-"), "folder": str(folder),
-            "jump": jump, "jump_interval": interval, "alpha_cr": alpha_cr,
-            "alpha_cr_below": alpha_cr_below, "lambda": lam,
-            "ok_jump": ok_jump, "ok_ratio": ok_ratio, "ok_alpha_cr": rising,
-            "ok_all": ok_jump and ok_ratio and rising,
-            "runs_ok": int(phase.attrs.get("n_ok", -1)),
-            "runs_failed": int(phase.attrs.get("n_failed", -1)), "overrides": overrides}
+    overrides = (
+        json.loads(phase.attrs.get("overrides_json", "{}"))
+        if "overrides_json" in phase.attrs
+        else {}
+    )
+    return {
+        "setting": folder.name.removeprefix("calib-"),
+        "folder": str(folder),
+        "jump": jump,
+        "jump_interval": interval,
+        "alpha_cr": alpha_cr,
+        "alpha_cr_below": alpha_cr_below,
+        "lambda": lam,
+        "ok_jump": ok_jump,
+        "ok_ratio": ok_ratio,
+        "ok_alpha_cr": rising,
+        "ok_all": ok_jump and ok_ratio and rising,
+        "runs_ok": int(phase.attrs.get("n_ok", -1)),
+        "runs_failed": int(phase.attrs.get("n_failed", -1)),
+        "overrides": overrides,
+    }
 
 
 def _f(x: float, digits: int = 3) -> str:
@@ -116,30 +141,37 @@ def _mark(ok: bool) -> str:
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
-    head = ("| setting | jump at K = 5e-5 [interval] | alpha_cr(K) from the jump, K = "
-            "1e-5 / 3e-5 / 5e-5 / 1e-4 | lambda_peak 0.6 / 1.0 (ratio ± its standard error; "
-            "patterned seeds) at "
-            "K = 1e-5 | at 3e-5 | at 1e-4 | jump in [0.3, 0.5] | ratio >= 1.2 | alpha_cr "
-            "rising | runs |")
+    head = (
+        "| setting | jump at K = 5e-5 [interval] | alpha_cr(K) from the jump, K = "
+        "1e-5 / 3e-5 / 5e-5 / 1e-4 | lambda_peak 0.6 / 1.0 (ratio ± its standard error; "
+        "patterned seeds) at "
+        "K = 1e-5 | at 3e-5 | at 1e-4 | jump in [0.3, 0.5] | ratio >= 1.2 | alpha_cr "
+        "rising | runs |"
+    )
     lines = [head, "|" + "---|" * 10]
     for r in rows:
         acr = " / ".join(
-            f"< {_f(r['alpha_cr_below'][k])}" if k in r["alpha_cr_below"]
-            and not math.isfinite(r["alpha_cr"].get(k, math.nan))
-            else _f(r["alpha_cr"].get(k, math.nan)) for k in (1e-5, 3e-5, 5e-5, 1e-4))
+            f"< {_f(r['alpha_cr_below'][k])}"
+            if k in r["alpha_cr_below"] and not math.isfinite(r["alpha_cr"].get(k, math.nan))
+            else _f(r["alpha_cr"].get(k, math.nan))
+            for k in (1e-5, 3e-5, 5e-5, 1e-4)
+        )
         cells = []
         for k in FIG3_K:
             q = r["lambda"][k]
-            cells.append(f"{_f(q['low'])} / {_f(q['high'])} ({_f(q['ratio'])} "
-                         f"± {_f(q['ratio_se'], 1)}; "
-                         f"{q['patterned_low']}/{q['runs_low']}, "
-                         f"{q['patterned_high']}/{q['runs_high']})")
+            cells.append(
+                f"{_f(q['low'])} / {_f(q['high'])} ({_f(q['ratio'])} "
+                f"± {_f(q['ratio_se'], 1)}; "
+                f"{q['patterned_low']}/{q['runs_low']}, "
+                f"{q['patterned_high']}/{q['runs_high']})"
+            )
         lo, hi = r["jump_interval"]
         lines.append(
             f"| {r['setting']} | {_f(r['jump'])} [{_f(lo)}, {_f(hi)}] | {acr} | "
             + " | ".join(cells)
             + f" | {_mark(r['ok_jump'])} | {_mark(r['ok_ratio'])} | "
-              f"{_mark(r['ok_alpha_cr'])} | {r['runs_ok']} ok, {r['runs_failed']} failed |")
+            f"{_mark(r['ok_alpha_cr'])} | {r['runs_ok']} ok, {r['runs_failed']} failed |"
+        )
     return "\n".join(lines)
 
 
@@ -167,31 +199,57 @@ def tradeoff_figure(rows: list[dict[str, Any]], path: Path, chosen: str | None =
         x = r["jump"] if math.isfinite(r["jump"]) else 1.05
         y = r["lambda"][FIG3_K[0]]["ratio"]
         r3 = r["lambda"][FIG3_K[1]]["ratio"]
-        legend.append(f"{number:2d}  {r['setting']}  ({_f(r3, 2)})"
-                      + ("  <- defaults" if r["setting"] == chosen else ""))
+        legend.append(
+            f"{number:2d}  {r['setting']}  ({_f(r3, 2)})"
+            + ("  <- defaults" if r["setting"] == chosen else "")
+        )
         if not math.isfinite(y):
             continue
         for axes, size in ((ax, 7), (zoom, 6)):
-            axes.plot([x], [y], "o", ms=size, mec="k",
-                      mfc="k" if r["ok_alpha_cr"] else "white")
+            axes.plot([x], [y], "o", ms=size, mec="k", mfc="k" if r["ok_alpha_cr"] else "white")
             if r["setting"] == chosen:
-                axes.plot([x], [y], "o", ms=2 * size, mfc="none", mec="tab:red", mew=2,
-                          label="the model's defaults" if axes is ax else None)
+                axes.plot(
+                    [x],
+                    [y],
+                    "o",
+                    ms=2 * size,
+                    mfc="none",
+                    mec="tab:red",
+                    mew=2,
+                    label="the model's defaults" if axes is ax else None,
+                )
         ax.annotate(str(number), (x, y), xytext=(5, 3), textcoords="offset points", fontsize=7)
         # in the inset: numbers beside the markers, alternating sides where they crowd
-        zoom.annotate(str(number), (x, y), xytext=(6 if number % 2 else -13, -3),
-                      textcoords="offset points", fontsize=7, clip_on=True)
+        zoom.annotate(
+            str(number),
+            (x, y),
+            xytext=(6 if number % 2 else -13, -3),
+            textcoords="offset points",
+            fontsize=7,
+            clip_on=True,
+        )
     ax.set_xlim(0.2, 1.1)
     ax.set_ylim(0.8, max(2.3, ax.get_ylim()[1]))
     ax.set_xlabel("Fig. 2: jump of sigma2_S(300) at K = 5e-5 (alpha - B; 1.05: none below 1)")
     ax.set_ylabel("Fig. 3: lambda_peak(0.6) / lambda_peak(1.0) at K = 1e-5")
     if chosen is not None:
         ax.legend(loc="lower right", fontsize=8)
-    ax.set_title("calibration trade-off: green bands are the targets;\nfilled: alpha_cr rises "
-                 "with K", fontsize=9, loc="left")
+    ax.set_title(
+        "calibration trade-off: green bands are the targets;\nfilled: alpha_cr rises with K",
+        fontsize=9,
+        loc="left",
+    )
     key.axis("off")
-    key.text(0.0, 1.0, "setting (ratio at K = 3e-5)\n\n" + "\n".join(legend),
-             va="top", ha="left", family="monospace", fontsize=7, transform=key.transAxes)
+    key.text(
+        0.0,
+        1.0,
+        "setting (ratio at K = 3e-5)\n\n" + "\n".join(legend),
+        va="top",
+        ha="left",
+        family="monospace",
+        fontsize=7,
+        transform=key.transAxes,
+    )
     fig.savefig(path, dpi=110)
 
 

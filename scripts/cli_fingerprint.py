@@ -31,16 +31,49 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ["validate", "run", "status", "aggregate", "verify", "stop", "export", "report",
-            "simulate", "stability", "figures"]
-VALIDATED = ["quickstart", "fig2", "fig2_precision", "fig3", "fig4", "figA1",
-             "figA1_adaptive", "fig2_adaptive", "paper"]
-SMALL = ["--set", "resolution=32", "--set", "noise_modes=8", "--set", "t_final=5", "--seeds", "1",
-         "--name", "fp"]
+COMMANDS = [
+    "validate",
+    "run",
+    "status",
+    "aggregate",
+    "verify",
+    "stop",
+    "export",
+    "report",
+    "simulate",
+    "stability",
+    "figures",
+]
+VALIDATED = [
+    "quickstart",
+    "fig2",
+    "fig2_precision",
+    "fig3",
+    "fig4",
+    "figA1",
+    "figA1_adaptive",
+    "fig2_adaptive",
+    "paper",
+]
+SMALL = [
+    "--set",
+    "resolution=32",
+    "--set",
+    "noise_modes=8",
+    "--set",
+    "t_final=5",
+    "--seeds",
+    "1",
+    "--name",
+    "fp",
+]
 #: attributes and columns that record when, where, how long, or which code
-VOLATILE = re.compile(r"time|date|created|host|pid|commit|code_hash|code_version|history|"
-                      r"elapsed|started|finished|duration|stamp|mtime|path|log|worker|"
-                      r"saved_to|wall|cpu|load", re.IGNORECASE)
+VOLATILE = re.compile(
+    r"time|date|created|host|pid|commit|code_hash|code_version|history|"
+    r"elapsed|started|finished|duration|stamp|mtime|path|log|worker|"
+    r"saved_to|wall|cpu|load",
+    re.IGNORECASE,
+)
 MASKS = [
     (re.compile(r"\d+(\.\d+)?(e[-+]?\d+)? ?(s|ms|min|h|CPU-h)\b"), "<T>"),
     (re.compile(r"\b\d+:\d\d(:\d\d)?\b"), "<T>"),
@@ -57,8 +90,11 @@ MASKS = [
 def mask(text: str, tmp: str) -> str:
     """``text`` without what varies between two runs of the same code; the progress lines,
     printed every few seconds, are dropped."""
-    text = "\n".join(line for line in text.replace(tmp, "<TMP>").splitlines()
-                     if not line.startswith("progress: "))
+    text = "\n".join(
+        line
+        for line in text.replace(tmp, "<TMP>").splitlines()
+        if not line.startswith("progress: ")
+    )
     for pattern, repl in MASKS:
         text = pattern.sub(repl, text)
     return "\n".join(line.rstrip() for line in text.splitlines())
@@ -66,13 +102,23 @@ def mask(text: str, tmp: str) -> str:
 
 def nematic(args: list[str], tmp: str) -> dict[str, Any]:
     env = dict(os.environ, COLUMNS="120", NO_COLOR="1", TERM="dumb")
-    proc = subprocess.run([sys.executable, "-m", "sweep", *args], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(
+        [sys.executable, "-m", "sweep", *args],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     stdout: Any = mask(proc.stdout, tmp)
     if "--json" in args:
         stdout = status_json(proc.stdout.replace(tmp, "<TMP>"))
-    return {"args": " ".join(a.replace(tmp, "<TMP>") for a in args), "exit": proc.returncode,
-            "stdout": stdout, "stderr": mask(proc.stderr, tmp)}
+    return {
+        "args": " ".join(a.replace(tmp, "<TMP>") for a in args),
+        "exit": proc.returncode,
+        "stdout": stdout,
+        "stderr": mask(proc.stderr, tmp),
+    }
 
 
 def digest(data: bytes) -> str:
@@ -95,10 +141,17 @@ def netcdf(path: Path) -> dict[str, Any]:
                 out["vars"][name] = {"dims": list(var.dims)}
                 continue
             values = np.asarray(var.values)
-            data = (values.astype(str).tobytes() if values.dtype.kind in "OUS"
-                    else np.ascontiguousarray(values).tobytes())
-            out["vars"][name] = {"dims": list(var.dims), "dtype": str(values.dtype),
-                                 "sha": digest(data), "attrs": attrs(dict(var.attrs))}
+            data = (
+                values.astype(str).tobytes()
+                if values.dtype.kind in "OUS"
+                else np.ascontiguousarray(values).tobytes()
+            )
+            out["vars"][name] = {
+                "dims": list(var.dims),
+                "dtype": str(values.dtype),
+                "sha": digest(data),
+                "attrs": attrs(dict(var.attrs)),
+            }
     return out
 
 
@@ -129,20 +182,35 @@ def main() -> None:
             out["validate"][name] = nematic(["validate", f"campaigns/{name}.yaml"], tmp)
         results = Path(tmp) / "results"
         q = ["campaigns/quickstart.yaml", *SMALL, "--results", str(results)]
-        steps = [["validate", *q], ["run", *q, "--dry-run"],
-                 ["run", *q, "--no-dashboard"], ["status", *q], ["status", *q, "--json"],
-                 ["aggregate", *q], ["run", *q, "--no-dashboard"],
-                 ["export", "fp", "--results", str(results), "--format", "csv", "-o",
-                  str(Path(tmp) / "fp.csv")],
-                 ["report", "fp", "--results", str(results)],
-                 ["status", "campaigns/quickstart.yaml", "--results", str(results)],
-                 ["aggregate", "campaigns/missing.yaml"], ["run", "campaigns/paper.yaml",
-                                                          "--name", "x"]]
+        steps = [
+            ["validate", *q],
+            ["run", *q, "--dry-run"],
+            ["run", *q, "--no-dashboard"],
+            ["status", *q],
+            ["status", *q, "--json"],
+            ["aggregate", *q],
+            ["run", *q, "--no-dashboard"],
+            [
+                "export",
+                "fp",
+                "--results",
+                str(results),
+                "--format",
+                "csv",
+                "-o",
+                str(Path(tmp) / "fp.csv"),
+            ],
+            ["report", "fp", "--results", str(results)],
+            ["status", "campaigns/quickstart.yaml", "--results", str(results)],
+            ["aggregate", "campaigns/missing.yaml"],
+            ["run", "campaigns/paper.yaml", "--name", "x"],
+        ]
         for step in steps:
             out["campaign"].append(nematic(step, tmp))
         folder = results / "fp"
-        out["files"]["names"] = sorted(str(p.relative_to(folder)) for p in folder.rglob("*")
-                                       if "report_cache" not in p.parts)
+        out["files"]["names"] = sorted(
+            str(p.relative_to(folder)) for p in folder.rglob("*") if "report_cache" not in p.parts
+        )
         for p in sorted(folder.rglob("*.nc")):
             out["files"][str(p.relative_to(folder))] = netcdf(p)
         out["files"]["campaign.yaml"] = digest((folder / "campaign.yaml").read_bytes())
@@ -150,13 +218,18 @@ def main() -> None:
 
         with open(Path(tmp) / "fp.csv", newline="") as f:
             rows = list(csv.DictReader(f))
-        out["files"]["fp.csv"] = digest(json.dumps(
-            [{k: v for k, v in r.items() if not VOLATILE.search(k)} for r in rows],
-            sort_keys=True).encode())
+        out["files"]["fp.csv"] = digest(
+            json.dumps(
+                [{k: v for k, v in r.items() if not VOLATILE.search(k)} for r in rows],
+                sort_keys=True,
+            ).encode()
+        )
     args.out.write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")
-    print(f"wrote {args.out}: {len(out['help'])} help texts, {len(out['validate'])} "
-          f"validations, {len(out['campaign'])} campaign steps, "
-          f"{len(out['files']) - 1} files hashed")
+    print(
+        f"wrote {args.out}: {len(out['help'])} help texts, {len(out['validate'])} "
+        f"validations, {len(out['campaign'])} campaign steps, "
+        f"{len(out['files']) - 1} files hashed"
+    )
 
 
 if __name__ == "__main__":

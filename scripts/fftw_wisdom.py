@@ -37,8 +37,10 @@ def main(argv: list[str]) -> int:
     with os.fdopen(fd, "w") as fh:
         fh.write(wisdom)
     os.replace(tmp, target)
-    print(f"FFTW_PATIENT wisdom for N = {sizes} written to {target} "
-          f"({len(wisdom)} bytes, {time.perf_counter() - t0:.1f} s)")
+    print(
+        f"FFTW_PATIENT wisdom for N = {sizes} written to {target} "
+        f"({len(wisdom)} bytes, {time.perf_counter() - t0:.1f} s)"
+    )
     return 0
 
 

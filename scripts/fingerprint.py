@@ -49,26 +49,49 @@ BASE = Parameters(noise_modes=6, K=1e-3, S0=0.2, zeta=1.0, kappa=10.0)
 RUNS: dict[str, tuple[Parameters, Numerics, int]] = {
     "finite_compiled": (
         BASE.replace(alpha_minus_B=1.0),
-        Numerics(resolution=32, t_final=8.0, save_every=2.0, mechanics="finite"), 1),
+        Numerics(resolution=32, t_final=8.0, save_every=2.0, mechanics="finite"),
+        1,
+    ),
     "finite_numpy": (
         BASE.replace(alpha_minus_B=1.0),
-        Numerics(resolution=32, t_final=8.0, save_every=2.0, mechanics="finite",
-                 backend="numpy"), 1),
+        Numerics(resolution=32, t_final=8.0, save_every=2.0, mechanics="finite", backend="numpy"),
+        1,
+    ),
     "finite_equilibrium": (
         BASE.replace(alpha_minus_B=1.2, eps=0.03, B_prime=0.1, chi=5.0),
-        Numerics(resolution=32, t_final=4.0, save_every=1.0, mechanics="finite",
-                 displacement="equilibrium", scheme="etdrk2", snapshot_times=(2.0,)), 2),
+        Numerics(
+            resolution=32,
+            t_final=4.0,
+            save_every=1.0,
+            mechanics="finite",
+            displacement="equilibrium",
+            scheme="etdrk2",
+            snapshot_times=(2.0,),
+        ),
+        2,
+    ),
     "linear_compiled": (
         BASE.replace(alpha_minus_B=1.5, eps=0.02, initial="per_node"),
-        Numerics(resolution=64, t_final=8.0, save_every=2.0, mechanics="linear"), 3),
+        Numerics(resolution=64, t_final=8.0, save_every=2.0, mechanics="linear"),
+        3,
+    ),
     "linear_numpy": (
         BASE.replace(alpha_minus_B=1.5, B_prime=0.1),
-        Numerics(resolution=32, t_final=8.0, save_every=2.0, mechanics="linear",
-                 incompressible=True, backend="numpy"), 4),
+        Numerics(
+            resolution=32,
+            t_final=8.0,
+            save_every=2.0,
+            mechanics="linear",
+            incompressible=True,
+            backend="numpy",
+        ),
+        4,
+    ),
     "linear_texture": (
         BASE.replace(alpha_minus_B=1.3, eps=0.01, initial="per_node", texture_resolution=32),
-        Numerics(resolution=64, t_final=6.0, save_every=1.5, mechanics="linear",
-                 scheme="etdrk2"), 5),
+        Numerics(resolution=64, t_final=6.0, save_every=1.5, mechanics="linear", scheme="etdrk2"),
+        5,
+    ),
 }
 
 #: attributes that differ between identical runs
@@ -97,9 +120,12 @@ def fingerprint(ds: xr.Dataset) -> dict[str, Any]:
             scalars[name] = repr(values.item())
         else:
             arrays[name] = array_hash(values)
-    attrs = {k: repr(v) for k, v in sorted(ds.attrs.items())
-             if k not in VOLATILE_ATTRS and (k.startswith(("solver_", "fft_", "status",
-                                                            "reason", "detail", "t_failed")))}
+    attrs = {
+        k: repr(v)
+        for k, v in sorted(ds.attrs.items())
+        if k not in VOLATILE_ATTRS
+        and (k.startswith(("solver_", "fft_", "status", "reason", "detail", "t_failed")))
+    }
     return {"attrs": attrs, "scalars": scalars, "arrays": arrays}
 
 

@@ -53,21 +53,26 @@ def main() -> int:
             if started:  # a callee, compiled with its caller
                 continue
             func = ev.data["dispatcher"].py_func
-            key = (f"{func.__module__}.{func.__qualname__}",
-                   f"tup({', '.join(type_text(t) for t in ev.data['args'])})")
+            key = (
+                f"{func.__module__}.{func.__qualname__}",
+                f"tup({', '.join(type_text(t) for t in ev.data['args'])})",
+            )
             seconds[key] = seconds.get(key, 0.0) + stamp - begin
             types[key] = tuple(ev.data["args"])
-        entries = sorted((EntryPoint(f, a, s) for (f, a), s in seconds.items()),
-                         key=lambda e: -e.seconds)
+        entries = sorted(
+            (EntryPoint(f, a, s) for (f, a), s in seconds.items()), key=lambda e: -e.seconds
+        )
         for e in entries:  # each line reads back as what numba compiled
             if e.arg_types() != types[e.function, e.args] or e.dispatcher() is None:
                 raise AssertionError(f"{e.line()} does not read back")
         tmp = Path(ENTRY_POINTS_FILE).with_suffix(".tmp")
         tmp.write_text(HEADER + "".join(e.line() + "\n" for e in entries))
         os.replace(tmp, ENTRY_POINTS_FILE)
-        print(f"{len(entries)} entry points ({sum(e.seconds for e in entries):.0f} s of "
-              f"compilation, {time.perf_counter() - t0:.0f} s in all) written to "
-              f"{ENTRY_POINTS_FILE}")
+        print(
+            f"{len(entries)} entry points ({sum(e.seconds for e in entries):.0f} s of "
+            f"compilation, {time.perf_counter() - t0:.0f} s in all) written to "
+            f"{ENTRY_POINTS_FILE}"
+        )
         return 0
     finally:
         shutil.rmtree(cache, ignore_errors=True)

@@ -33,8 +33,13 @@ DEFAULT_WORKER_WAIT = 600.0
 DEFAULT_GIVE_UP = 120.0
 #: ``execution.cluster.kind`` -> the dask-jobqueue class.
 CLUSTER_KINDS = {
-    "slurm": "SLURMCluster", "pbs": "PBSCluster", "sge": "SGECluster", "lsf": "LSFCluster",
-    "oar": "OARCluster", "moab": "MoabCluster", "htcondor": "HTCondorCluster",
+    "slurm": "SLURMCluster",
+    "pbs": "PBSCluster",
+    "sge": "SGECluster",
+    "lsf": "LSFCluster",
+    "oar": "OARCluster",
+    "moab": "MoabCluster",
+    "htcondor": "HTCondorCluster",
 }
 
 
@@ -46,10 +51,13 @@ def _field_types(cls: type) -> dict[str, str]:
 PARAMETER_TYPES: dict[str, str] = {**_field_types(Parameters), AMB: "float"}
 NUMERICS_TYPES: dict[str, str] = _field_types(Numerics)
 #: Numerics fields that may be swept (scalars only).
-SWEEPABLE_NUMERICS = tuple(n for n, t in NUMERICS_TYPES.items()
-                           if t in ("int", "float", "bool", "str"))
-AXIS_TYPES: dict[str, str] = {**PARAMETER_TYPES,
-                              **{n: NUMERICS_TYPES[n] for n in SWEEPABLE_NUMERICS}}
+SWEEPABLE_NUMERICS = tuple(
+    n for n, t in NUMERICS_TYPES.items() if t in ("int", "float", "bool", "str")
+)
+AXIS_TYPES: dict[str, str] = {
+    **PARAMETER_TYPES,
+    **{n: NUMERICS_TYPES[n] for n in SWEEPABLE_NUMERICS},
+}
 
 
 def normalise_float(x: float) -> float:
@@ -135,7 +143,7 @@ class ExecutionSpec:
 
     @property
     def mode(self) -> str:
-        """"local", "scheduler" or "cluster"."""
+        """ "local", "scheduler" or "cluster"."""
         if self.scheduler:
             return "scheduler"
         return "cluster" if self.cluster else "local"
@@ -249,17 +257,30 @@ class RefineSpec:
 
     def to_dict(self) -> dict[str, Any]:
         spacing: float | dict[str, float] = (
-            self.axes[0].min_spacing if len(self.axes) == 1
-            else {a.name: a.min_spacing for a in self.axes})
-        return {"axis": self.axes[0].name if len(self.axes) == 1 else None,
-                "axes": list(self.names), "log": [a.name for a in self.axes if a.log],
-                "observable": self.observable, "source": self.source,
-                "criterion": self.criterion, "patterned_above": self.patterned_above,
-                "classes": {t.observable: t.above for t in self.classes},
-                "fraction": list(self.fraction), "jump": self.jump, "rounds": self.rounds,
-                "min_spacing": spacing,
-                "seeds": {"initial": self.initial, "add": self.add,
-                          "max_width": self.max_width, "confidence": self.confidence}}
+            self.axes[0].min_spacing
+            if len(self.axes) == 1
+            else {a.name: a.min_spacing for a in self.axes}
+        )
+        return {
+            "axis": self.axes[0].name if len(self.axes) == 1 else None,
+            "axes": list(self.names),
+            "log": [a.name for a in self.axes if a.log],
+            "observable": self.observable,
+            "source": self.source,
+            "criterion": self.criterion,
+            "patterned_above": self.patterned_above,
+            "classes": {t.observable: t.above for t in self.classes},
+            "fraction": list(self.fraction),
+            "jump": self.jump,
+            "rounds": self.rounds,
+            "min_spacing": spacing,
+            "seeds": {
+                "initial": self.initial,
+                "add": self.add,
+                "max_width": self.max_width,
+                "confidence": self.confidence,
+            },
+        }
 
 
 @dataclass(frozen=True)
@@ -296,11 +317,18 @@ class PrecisionSpec:
         return (Threshold("sigma2_S", PATTERN_SOURCE, self.patterned_above),)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"observable": self.observable, "source": self.source, "width": self.width,
-                "relative": self.relative, "confidence": self.confidence,
-                "unanimous": self.unanimous, "patterned_above": self.patterned_above,
-                "classes": {t.observable: t.above for t in self.classes},
-                "initial": self.initial, "add": self.add}
+        return {
+            "observable": self.observable,
+            "source": self.source,
+            "width": self.width,
+            "relative": self.relative,
+            "confidence": self.confidence,
+            "unanimous": self.unanimous,
+            "patterned_above": self.patterned_above,
+            "classes": {t.observable: t.above for t in self.classes},
+            "initial": self.initial,
+            "add": self.add,
+        }
 
 
 #: What a verification compares by default (phase.nc names).
@@ -340,11 +368,16 @@ class VerifySpec:
     before: bool = False
 
     def to_dict(self) -> dict[str, Any]:
-        return {"variants": [v.to_dict() for v in self.variants],
-                "points": None if self.points is None else [dict(p) for p in self.points],
-                "corners": self.corners, "seeds": self.seeds, "threshold": self.threshold,
-                "patterned_above": self.patterned_above,
-                "observables": list(self.observables), "before": self.before}
+        return {
+            "variants": [v.to_dict() for v in self.variants],
+            "points": None if self.points is None else [dict(p) for p in self.points],
+            "corners": self.corners,
+            "seeds": self.seeds,
+            "threshold": self.threshold,
+            "patterned_above": self.patterned_above,
+            "observables": list(self.observables),
+            "before": self.before,
+        }
 
 
 @dataclass(frozen=True)
@@ -395,27 +428,43 @@ class Campaign:
 #: phase.nc variable -> (scalar in the run file, long_name). Units are all "1": the model is
 #: dimensionless (lengths in units of the domain size L, times in units of tau).
 OBSERVABLES: dict[str, tuple[str, str]] = {
-    "sigma2_S": ("sigma2_S_final", "variance of the nematic order parameter S over the "
-                 "domain at t_final"),
+    "sigma2_S": (
+        "sigma2_S_final",
+        "variance of the nematic order parameter S over the domain at t_final",
+    ),
     "mean_S": ("mean_S_final", "domain mean of the nematic order parameter S at t_final"),
-    "cos2theta": ("cos2theta_final", "domain mean of cos(2 theta) (director anisotropy) at "
-                  "t_final"),
-    "lambda": ("lambda_final", "pattern size lambda (radial spectrum peak) at t_final "
-               "(units of L)"),
-    "lambda_peak": ("lambda_peak", "pattern size lambda at the first peak of sigma2_S(t), "
-                    "growth-peak rule (units of L)"),
-    "t_peak": ("t_peak", "time of the first peak of sigma2_S(t), growth-peak rule (units of "
-               "tau)"),
-    "lambda_peak_literal": ("lambda_peak_literal", "pattern size lambda at the first local "
-                            "maximum of sigma2_S(t), the paper's literal rule (units of L)"),
-    "t_peak_literal": ("t_peak_literal", "time of the first local maximum of sigma2_S(t), the "
-                       "paper's literal rule (units of tau)"),
-    "lambda_mean": ("lambda_mean_final", "pattern size 2 pi / mean |k| at t_final (units of "
-                    "L)"),
-    "lambda_mean_peak": ("lambda_mean_peak", "pattern size 2 pi / mean |k| at the first peak "
-                         "of sigma2_S(t), growth-peak rule (units of L)"),
-    "rate_margin_min": ("rate_margin_min", "smallest well-posedness margin of the rate "
-                        "problem over the run (1 passive, 0 ill posed)"),
+    "cos2theta": (
+        "cos2theta_final",
+        "domain mean of cos(2 theta) (director anisotropy) at t_final",
+    ),
+    "lambda": (
+        "lambda_final",
+        "pattern size lambda (radial spectrum peak) at t_final (units of L)",
+    ),
+    "lambda_peak": (
+        "lambda_peak",
+        "pattern size lambda at the first peak of sigma2_S(t), growth-peak rule (units of L)",
+    ),
+    "t_peak": ("t_peak", "time of the first peak of sigma2_S(t), growth-peak rule (units of tau)"),
+    "lambda_peak_literal": (
+        "lambda_peak_literal",
+        "pattern size lambda at the first local "
+        "maximum of sigma2_S(t), the paper's literal rule (units of L)",
+    ),
+    "t_peak_literal": (
+        "t_peak_literal",
+        "time of the first local maximum of sigma2_S(t), the paper's literal rule (units of tau)",
+    ),
+    "lambda_mean": ("lambda_mean_final", "pattern size 2 pi / mean |k| at t_final (units of L)"),
+    "lambda_mean_peak": (
+        "lambda_mean_peak",
+        "pattern size 2 pi / mean |k| at the first peak "
+        "of sigma2_S(t), growth-peak rule (units of L)",
+    ),
+    "rate_margin_min": (
+        "rate_margin_min",
+        "smallest well-posedness margin of the rate problem over the run (1 passive, 0 ill posed)",
+    ),
 }
 #: Scalars of the run files that are not observables (they differ between identical runs).
 NOT_OBSERVABLES = {"wall_time"}

@@ -47,8 +47,7 @@ class RunSpec:
         return {**self.point.coords, "seed": self.seed}
 
 
-def _settings(campaign: Campaign, values: dict[str, Any]) -> tuple[dict[str, Any],
-                                                                      dict[str, Any]]:
+def _settings(campaign: Campaign, values: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     params = dict(campaign.parameters)
     numerics = dict(campaign.numerics)
     for name, value in values.items():

@@ -183,15 +183,15 @@ def netcdf_attr(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         if not value:
             return ""
-        if all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool)
-               for v in value):
+        if all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in value):
             return np.asarray(value)
         return dumps(list(value))
     return value
 
 
-def atomic_to_netcdf(ds: xr.Dataset, path: Path,
-                     encoding: Mapping[str, Mapping[str, Any]] | None = None) -> int:
+def atomic_to_netcdf(
+    ds: xr.Dataset, path: Path, encoding: Mapping[str, Mapping[str, Any]] | None = None
+) -> int:
     """Write ``ds`` to ``path`` atomically; return the file's size in bytes."""
     ds = ds.copy(deep=False)
     ds.attrs = {k: netcdf_attr(v) for k, v in ds.attrs.items()}
@@ -224,8 +224,7 @@ def file_stamp(path: Path) -> dict[str, Any]:
     """What a run's record says about its file, to recognise it later: size, mtime and
     SHA-256 (``nc_bytes``, ``nc_mtime_ns``, ``nc_sha256``)."""
     st = path.stat()
-    return {"nc_bytes": st.st_size, "nc_mtime_ns": st.st_mtime_ns,
-            "nc_sha256": file_sha256(path)}
+    return {"nc_bytes": st.st_size, "nc_mtime_ns": st.st_mtime_ns, "nc_sha256": file_sha256(path)}
 
 
 def netcdf_problem(path: Path, variables: Iterable[str] = ()) -> str | None:

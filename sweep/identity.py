@@ -98,27 +98,28 @@ def _dumps(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
 
 
-def canonical_json(parameters: Mapping[str, Any], numerics: Mapping[str, Any],
-                   seed: int) -> str:
+def canonical_json(parameters: Mapping[str, Any], numerics: Mapping[str, Any], seed: int) -> str:
     """The canonical text that is hashed. The mappings are taken as given: pass complete
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`."""
-    return _dumps({
-        "numerics": canonical_value(identity_numerics(numerics)),
-        "parameters": canonical_value(identity_parameters(parameters)),
-        "schema": SCHEMA_VERSION,
-        "seed": canonical_value(int(seed)),
-    })
+    return _dumps(
+        {
+            "numerics": canonical_value(identity_numerics(numerics)),
+            "parameters": canonical_value(identity_parameters(parameters)),
+            "schema": SCHEMA_VERSION,
+            "seed": canonical_value(int(seed)),
+        }
+    )
 
 
-def hash_canonical(parameters: Mapping[str, Any], numerics: Mapping[str, Any],
-                   seed: int) -> str:
+def hash_canonical(parameters: Mapping[str, Any], numerics: Mapping[str, Any], seed: int) -> str:
     """run_id of complete parameter / numerics dicts (no defaults filled in)."""
     text = canonical_json(parameters, numerics, seed)
     return hashlib.sha256(text.encode("ascii")).hexdigest()[:ID_LENGTH]
 
 
-def run_id_for(parameters: Parameters | Mapping[str, Any],
-               numerics: Numerics | Mapping[str, Any], seed: int) -> str:
+def run_id_for(
+    parameters: Parameters | Mapping[str, Any], numerics: Numerics | Mapping[str, Any], seed: int
+) -> str:
     """run_id of one run; mappings go through the model's objects first (defaults filled in,
     ``alpha_minus_B`` resolved, values validated)."""
     p = parameters if isinstance(parameters, Parameters) else Parameters.from_dict(parameters)
@@ -134,11 +135,13 @@ class PointHasher:
     """
 
     def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
-        head = _dumps({
-            "numerics": canonical_value(identity_numerics(numerics)),
-            "parameters": canonical_value(identity_parameters(parameters)),
-            "schema": SCHEMA_VERSION,
-        })
+        head = _dumps(
+            {
+                "numerics": canonical_value(identity_numerics(numerics)),
+                "parameters": canonical_value(identity_parameters(parameters)),
+                "schema": SCHEMA_VERSION,
+            }
+        )
         self._prefix = hashlib.sha256((head[:-1] + ',"seed":').encode("ascii"))
 
     def __call__(self, seed: int) -> str:

@@ -85,10 +85,12 @@ def check_run_memory(numerics: Any, limit: int | None, what: str) -> None:
     need = run_memory_bytes(numerics.resolution, numerics.mechanics)
     if need > limit:
         raise ParameterError(
-            "resolution", numerics.resolution,
+            "resolution",
+            numerics.resolution,
             f"a resolution whose run fits in {what} ({fmt_bytes(limit)}): resolution "
             f"{numerics.resolution} ({numerics.mechanics} mechanics) needs about "
-            f"{fmt_bytes(need)}")
+            f"{fmt_bytes(need)}",
+        )
 
 
 def max_local_workers() -> int:

@@ -11,8 +11,7 @@ from model.provenance import git_commit, library_versions, library_versions_text
 
 log = logging.getLogger(__name__)
 
-__all__ = ["code_version", "environment", "git_commit", "library_versions",
-           "library_versions_text"]
+__all__ = ["code_version", "environment", "git_commit", "library_versions", "library_versions_text"]
 
 
 def code_version() -> str:
@@ -25,7 +24,13 @@ def environment() -> dict[str, Any]:
     import numpy
     import xarray
 
-    return {"code_version": code_version(), "git_commit": git_commit(),
-            "python": platform.python_version(), "numpy": numpy.__version__,
-            "xarray": xarray.__version__, "dask": dask.__version__,
-            **library_versions(), "host": platform.node()}
+    return {
+        "code_version": code_version(),
+        "git_commit": git_commit(),
+        "python": platform.python_version(),
+        "numpy": numpy.__version__,
+        "xarray": xarray.__version__,
+        "dask": dask.__version__,
+        **library_versions(),
+        "host": platform.node(),
+    }

@@ -59,9 +59,21 @@ LOCK = ".lock"
 CAMPAIGN_COPY = "campaign.yaml"
 MANIFEST_VERSION = 4
 #: Record keys kept in the manifest (the sidecar also has traceback, parameters, numerics).
-MANIFEST_KEYS = ("status", "reason", "detail", "t_failed", "seed", "wall_time", "nc_bytes",
-                 "nc_sha256", "nc_mtime_ns", "scalars", "code_version", "git_commit",
-                 "finished")
+MANIFEST_KEYS = (
+    "status",
+    "reason",
+    "detail",
+    "t_failed",
+    "seed",
+    "wall_time",
+    "nc_bytes",
+    "nc_sha256",
+    "nc_mtime_ns",
+    "scalars",
+    "code_version",
+    "git_commit",
+    "finished",
+)
 #: Variables every run file holds (checked when a file without a checksum is verified; the
 #: time axis is ``t``, or ``time`` in files of schema 1: see :func:`series_time`).
 RUN_FILE_VARIABLES = ("sigma2_S",)
@@ -99,8 +111,9 @@ def scalars_of(ds: xr.Dataset) -> dict[str, float]:
     return out
 
 
-def record_from_dataset(ds: xr.Dataset, run_id: str, nc_bytes: int | None,
-                        stamp: Mapping[str, Any] | None = None) -> Record:
+def record_from_dataset(
+    ds: xr.Dataset, run_id: str, nc_bytes: int | None, stamp: Mapping[str, Any] | None = None
+) -> Record:
     """The record of a run from its Dataset (the worker, or adoption of an unindexed file);
     ``stamp`` (:func:`file_stamp`) identifies the file written."""
     a = ds.attrs
@@ -160,8 +173,9 @@ class CampaignLock:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as e:
-            raise StorageError(f"cannot create the lock file {self.path}: "
-                               f"{storage_cause(self.path, e)}") from None
+            raise StorageError(
+                f"cannot create the lock file {self.path}: {storage_cause(self.path, e)}"
+            ) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as e:
@@ -175,8 +189,12 @@ class CampaignLock:
                 f"{holder.get('started', '?')}: {holder.get('command', '')}). Wait for it to "
                 "finish or stop it (Ctrl-C); 'nematic status' shows its progress."
             ) from None
-        info = {"pid": os.getpid(), "host": socket.gethostname(), "started": now_iso(),
-                "command": command}
+        info = {
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "started": now_iso(),
+            "command": command,
+        }
         for key, var in (("slurm_job", "SLURM_JOB_ID"), ("log", DRIVER_LOG_ENV)):
             if os.environ.get(var):  # a driver in a batch job; a detached driver's log
                 info[key] = os.environ[var]
@@ -257,12 +275,14 @@ class CampaignStore:
         try:
             self.runs_dir.mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise StorageError(f"cannot create {self.runs_dir}: "
-                               f"{storage_cause(self.runs_dir, e)}") from None
+            raise StorageError(
+                f"cannot create {self.runs_dir}: {storage_cause(self.runs_dir, e)}"
+            ) from None
         problem = probe_write(self.runs_dir)
         if problem is not None:
-            raise StorageError(f"cannot write in {self.runs_dir}: "
-                               f"{storage_cause(self.runs_dir / 'x', problem)}")
+            raise StorageError(
+                f"cannot write in {self.runs_dir}: {storage_cause(self.runs_dir / 'x', problem)}"
+            )
 
     # records
     def write_record(self, record: Mapping[str, Any]) -> None:
@@ -292,8 +312,9 @@ class CampaignStore:
             for rid, row in zip(data["run_id"], rows, strict=True):
                 rec = dict(zip(keys, row, strict=True))
                 scalar_row = next(values) if values is not None else ()
-                rec["scalars"] = {k: v for k, v in zip(names, scalar_row, strict=True)
-                                  if v is not None}
+                rec["scalars"] = {
+                    k: v for k, v in zip(names, scalar_row, strict=True) if v is not None
+                }
                 records[rid] = rec
         except (KeyError, TypeError, ValueError, StopIteration):
             return {}
@@ -307,8 +328,9 @@ class CampaignStore:
             if key != "scalars":
                 data[key] = [records[r].get(key) for r in ids]
         names = sorted({k for r in ids for k in (records[r].get("scalars") or {})})
-        data["scalars"] = {k: [(records[r].get("scalars") or {}).get(k) for r in ids]
-                           for k in names}
+        data["scalars"] = {
+            k: [(records[r].get("scalars") or {}).get(k) for r in ids] for k in names
+        }
         try:
             atomic_write_text(self.manifest_path, dumps(data))
         except (OSError, StoreError) as e:
@@ -356,8 +378,9 @@ class CampaignStore:
             self.save_manifest(records)
         return records
 
-    def check_run_file(self, run_id: str, record: Mapping[str, Any], *,
-                       check_files: bool = False) -> str | None:
+    def check_run_file(
+        self, run_id: str, record: Mapping[str, Any], *, check_files: bool = False
+    ) -> str | None:
         """Why the run of ``record`` does not count as done (``None`` if it does).
 
         A run that raised has no file: its record is all there is. Otherwise its ``.nc`` must
@@ -378,28 +401,35 @@ class CampaignStore:
         except OSError:
             return "its file is missing"
         if st.st_size != int(nc_bytes):
-            return (f"its file has {st.st_size} bytes, not the {int(nc_bytes)} recorded "
-                    "(truncated or overwritten)")
+            return (
+                f"its file has {st.st_size} bytes, not the {int(nc_bytes)} recorded "
+                "(truncated or overwritten)"
+            )
         if not check_files and record.get("nc_mtime_ns") == st.st_mtime_ns:
             return None
         sha = record.get("nc_sha256")
         if isinstance(sha, str) and sha:
             try:
                 if file_sha256(path) != sha:
-                    return ("its file is corrupt (its content is not the one checksummed "
-                            "when it was written)")
+                    return (
+                        "its file is corrupt (its content is not the one checksummed "
+                        "when it was written)"
+                    )
             except OSError as e:
                 return f"its file cannot be read ({e.strerror or e})"
             return None
         problem = netcdf_problem(path, RUN_FILE_VARIABLES)
         return None if problem is None else f"its file: {problem}"
 
-    def is_complete(self, run_id: str, record: Mapping[str, Any] | None, *,
-                    check_files: bool = False) -> bool:
+    def is_complete(
+        self, run_id: str, record: Mapping[str, Any] | None, *, check_files: bool = False
+    ) -> bool:
         """Whether ``record`` stands for a finished run whose file (if any) is intact
         (:meth:`check_run_file`)."""
-        return record is not None and self.check_run_file(run_id, record,
-                                                          check_files=check_files) is None
+        return (
+            record is not None
+            and self.check_run_file(run_id, record, check_files=check_files) is None
+        )
 
     def refresh_stamp(self, run_id: str) -> None:
         """After :meth:`check_run_file` accepted a file whose mtime changed (a copy, a
@@ -423,8 +453,10 @@ class CampaignStore:
         import xarray as xr
 
         try:
-            with dask.config.set(scheduler="synchronous"), \
-                    xr.open_dataset(path, engine="netcdf4") as ds:
+            with (
+                dask.config.set(scheduler="synchronous"),
+                xr.open_dataset(path, engine="netcdf4") as ds,
+            ):
                 ds.load()
                 if str(ds.attrs.get("run_id", "")) != run_id:
                     raise ValueError(f"it names run {ds.attrs.get('run_id')!r}")

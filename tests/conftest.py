@@ -43,8 +43,13 @@ def small(tmp_path_factory):
     folder = tmp_path_factory.mktemp("small")
     path = write_campaign(folder)
     result = CliRunner().invoke(app, ["run", str(path), "--results", str(folder / "results")])
-    return SimpleNamespace(path=path, results=folder / "results", result=result,
-                           runs=folder / "results" / "small" / "runs", ids=run_ids(path))
+    return SimpleNamespace(
+        path=path,
+        results=folder / "results",
+        result=result,
+        runs=folder / "results" / "small" / "runs",
+        ids=run_ids(path),
+    )
 
 
 @pytest.fixture
@@ -52,6 +57,10 @@ def copy_of_small(small, tmp_path):
     """A private copy of the small campaign's results (for tests that change them)."""
     shutil.copytree(small.results, tmp_path / "results", symlinks=True)
     path = shutil.copy(small.path, tmp_path / "small.yaml")
-    return SimpleNamespace(path=Path(path), results=tmp_path / "results",
-                           runs=tmp_path / "results" / "small" / "runs", ids=small.ids,
-                           phase=tmp_path / "results" / "small" / "phase.nc")
+    return SimpleNamespace(
+        path=Path(path),
+        results=tmp_path / "results",
+        runs=tmp_path / "results" / "small" / "runs",
+        ids=small.ids,
+        phase=tmp_path / "results" / "small" / "phase.nc",
+    )

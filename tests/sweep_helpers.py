@@ -29,12 +29,19 @@ execution: {{workers: {workers}}}
 """
 
 
-def write_campaign(folder: Path, name: str = "small", values: str = "[0.1, 0.2, 20.0]",
-                   seeds: int = 2, t_final: float = 2.0, workers: int = 2) -> Path:
+def write_campaign(
+    folder: Path,
+    name: str = "small",
+    values: str = "[0.1, 0.2, 20.0]",
+    seeds: int = 2,
+    t_final: float = 2.0,
+    workers: int = 2,
+) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.yaml"
-    path.write_text(SMALL.format(name=name, values=values, seeds=seeds, t_final=t_final,
-                                 workers=workers))
+    path.write_text(
+        SMALL.format(name=name, values=values, seeds=seeds, t_final=t_final, workers=workers)
+    )
     return path
 
 
@@ -62,9 +69,14 @@ def start_driver(args: list[str], log: Path) -> subprocess.Popen:
     disposition is inherited, so the driver would never see the Ctrl-C."""
     env = dict(os.environ, PYTHONUNBUFFERED="1", COLUMNS="200")
     with open(log, "wb") as out:
-        return subprocess.Popen([sys.executable, "-m", "sweep", *args], stdout=out,
-                                stderr=subprocess.STDOUT, env=env, start_new_session=True,
-                                preexec_fn=_default_sigint)
+        return subprocess.Popen(
+            [sys.executable, "-m", "sweep", *args],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
+            preexec_fn=_default_sigint,
+        )
 
 
 def _default_sigint() -> None:
@@ -98,14 +110,22 @@ def kill_group(proc: subprocess.Popen) -> None:
 
 def cli_modules(*args: object) -> tuple[set[str], str]:
     """Run ``nematic ARGS`` in a fresh interpreter: the modules it imported, its output."""
-    code = ("import atexit, json, runpy, sys\n"
-            "atexit.register(lambda: print('MODULES', json.dumps(sorted(sys.modules))))\n"
-            f"sys.argv = ['nematic', *{[str(a) for a in args]!r}]\n"
-            "runpy.run_module('sweep', run_name='__main__')\n")
+    code = (
+        "import atexit, json, runpy, sys\n"
+        "atexit.register(lambda: print('MODULES', json.dumps(sorted(sys.modules))))\n"
+        f"sys.argv = ['nematic', *{[str(a) for a in args]!r}]\n"
+        "runpy.run_module('sweep', run_name='__main__')\n"
+    )
     root = Path(__file__).resolve().parents[1]
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(root)}, cwd=root,
-                          timeout=300, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+        cwd=root,
+        timeout=300,
+        check=False,
+    )
     output, _, modules = done.stdout.rpartition("MODULES ")
     assert modules, done.stderr
     return set(json.loads(modules)), output + done.stderr

@@ -48,8 +48,10 @@ def project_graph(package: str) -> dict[str, set[str]]:
     """Module -> the modules of ``package`` it imports."""
     files = sorted((ROOT / package).rglob("*.py"))
     names = {module_name(f) for f in files}
-    return {module_name(f): {m for m in imported_modules(f) if m in names} - {module_name(f)}
-            for f in files}
+    return {
+        module_name(f): {m for m in imported_modules(f) if m in names} - {module_name(f)}
+        for f in files
+    }
 
 
 def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
@@ -62,7 +64,7 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
         stack.append(node)
         for nxt in sorted(graph.get(node, ())):
             if state.get(nxt) == 1:
-                return [*stack[stack.index(nxt):], nxt]
+                return [*stack[stack.index(nxt) :], nxt]
             if nxt not in state:
                 found = visit(nxt)
                 if found:
@@ -127,8 +129,9 @@ def boundary_violations(graph: dict[str, set[str]]) -> list[str]:
             rest = target.split(".", 1)[1]
             if theirs in allowed or any(rest == a or rest.startswith(a + ".") for a in allowed):
                 continue
-            if mine == "base" and any(module == m and rest.startswith(a)
-                                      for m, a in BASE_EXCEPTIONS):
+            if mine == "base" and any(
+                module == m and rest.startswith(a) for m, a in BASE_EXCEPTIONS
+            ):
                 continue
             bad.append(f"{module} ({mine}) imports {target} ({theirs})")
     return bad
@@ -145,30 +148,43 @@ def test_sweep_groups_import_only_what_they_may() -> None:
 
 
 def test_the_boundary_check_finds_a_crossing() -> None:
-    graph = {"sweep.spec.sections": {"sweep.run.driver", "sweep.campaign",
-                                     "sweep.analysis.registry"},
-             "sweep.run.driver": {"sweep.outputs.status"}, "sweep.cli.app": {"sweep.run.task"}}
+    graph = {
+        "sweep.spec.sections": {"sweep.run.driver", "sweep.campaign", "sweep.analysis.registry"},
+        "sweep.run.driver": {"sweep.outputs.status"},
+        "sweep.cli.app": {"sweep.run.task"},
+    }
     assert boundary_violations(graph) == [
         "sweep.run.driver (run) imports sweep.outputs.status (outputs)",
-        "sweep.spec.sections (spec) imports sweep.run.driver (run)"]
+        "sweep.spec.sections (spec) imports sweep.run.driver (run)",
+    ]
 
 
 def test_model_never_imports_sweep() -> None:
-    bad = {f"{module_name(f)} imports {m}" for f in (ROOT / "model").rglob("*.py")
-           for m in imported_modules(f) if m == "sweep" or m.startswith("sweep.")}
+    bad = {
+        f"{module_name(f)} imports {m}"
+        for f in (ROOT / "model").rglob("*.py")
+        for m in imported_modules(f)
+        if m == "sweep" or m.startswith("sweep.")
+    }
     assert not bad, sorted(bad)
 
 
 def test_sweep_uses_no_importlib() -> None:
-    bad = [module_name(f) for f in (ROOT / "sweep").rglob("*.py")
-           if any(m == "importlib" or m.startswith("importlib.") for m in imported_modules(f))]
+    bad = [
+        module_name(f)
+        for f in (ROOT / "sweep").rglob("*.py")
+        if any(m == "importlib" or m.startswith("importlib.") for m in imported_modules(f))
+    ]
     assert not bad, f"importlib in {bad}: import modules by name, in plain sight"
 
 
 def long_files(package: str, root: Path = ROOT) -> dict[str, int]:
     """The files of ``package`` longer than :data:`MAX_LINES` lines, with their lengths."""
-    return {str(f.relative_to(root)): n for f in sorted((root / package).rglob("*.py"))
-            if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    return {
+        str(f.relative_to(root)): n
+        for f in sorted((root / package).rglob("*.py"))
+        if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_LINES
+    }
 
 
 @pytest.mark.parametrize("package", ["model", "sweep"])
@@ -189,11 +205,14 @@ def test_the_cycle_finder_finds_cycles() -> None:
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
 
 
-@pytest.mark.parametrize(("source", "expected"), [
-    ("from .spec import AMB\n", {"sweep.spec", "sweep.spec.AMB"}),
-    ("from . import fits\n", {"sweep", "sweep.fits"}),
-    ("import importlib\n", {"importlib"}),
-])
+@pytest.mark.parametrize(
+    ("source", "expected"),
+    [
+        ("from .spec import AMB\n", {"sweep.spec", "sweep.spec.AMB"}),
+        ("from . import fits\n", {"sweep", "sweep.fits"}),
+        ("import importlib\n", {"importlib"}),
+    ],
+)
 def test_imports_are_resolved(tmp_path: Path, source: str, expected: set[str]) -> None:
     (tmp_path / "sweep").mkdir()
     path = tmp_path / "sweep" / "expand.py"

@@ -7,12 +7,15 @@ import numpy as np
 import pytest
 
 
-@pytest.mark.parametrize("operation", [
-    lambda: np.array([1.0]) / np.array([0.0]),  # divide
-    lambda: np.array([0.0]) / np.array([0.0]),  # invalid
-    lambda: np.exp(np.array([1000.0])),  # overflow
-    lambda: np.sqrt(np.array([-1.0])),  # invalid
-])
+@pytest.mark.parametrize(
+    "operation",
+    [
+        lambda: np.array([1.0]) / np.array([0.0]),  # divide
+        lambda: np.array([0.0]) / np.array([0.0]),  # invalid
+        lambda: np.exp(np.array([1000.0])),  # overflow
+        lambda: np.sqrt(np.array([-1.0])),  # invalid
+    ],
+)
 def test_floating_point_errors_raise_in_every_test(operation):
     with pytest.raises(FloatingPointError):
         operation()

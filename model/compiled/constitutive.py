@@ -19,8 +19,16 @@ def _point_kinematics(F, x, y):  # pragma: no cover - compiled
     f01 = F[0, 1, x, y]
     f10 = F[1, 0, x, y]
     f11 = F[1, 1, x, y]
-    return (f00, f01, f10, f11, f00 * f11 - f01 * f10, f00 * f00 + f10 * f10,
-            f00 * f01 + f10 * f11, f01 * f01 + f11 * f11)
+    return (
+        f00,
+        f01,
+        f10,
+        f11,
+        f00 * f11 - f01 * f10,
+        f00 * f00 + f10 * f10,
+        f00 * f01 + f10 * f11,
+        f01 * f01 + f11 * f11,
+    )
 
 
 #: the packed tangent: K as the symmetric 4 x 4 matrix K[2 i + J, 2 k + L], its upper
@@ -66,9 +74,13 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
     buf = np.empty((10, _BLOCK))
     for p0 in range(0, n, _BLOCK):
         m = min(_BLOCK, n - p0)
-        F0, F1, F2, F3 = (Ff[0, p0:p0 + m], Ff[1, p0:p0 + m], Ff[2, p0:p0 + m],
-                          Ff[3, p0:p0 + m])
-        qa_b, qb_b = qa[p0:p0 + m], qb[p0:p0 + m]
+        F0, F1, F2, F3 = (
+            Ff[0, p0 : p0 + m],
+            Ff[1, p0 : p0 + m],
+            Ff[2, p0 : p0 + m],
+            Ff[3, p0 : p0 + m],
+        )
+        qa_b, qb_b = qa[p0 : p0 + m], qb[p0 : p0 + m]
         # scalars only (no tuples indexed in the loop) and 1-D views: the loop vectorises
         # (2.5x faster than with tuples of H, W and Sigma, bitwise the same)
         for o in range(m):
@@ -110,7 +122,7 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
             buf[8, o] = eta * h2 * h3 - w2 * h3 - h2 * w3 - beta * h3 * h2 + s01
             buf[9, o] = eta * h3 * h3 - w3 * h3 - h3 * w3 - beta * h3 * h3 + s11
         for c in range(10):
-            row, src = Kf[c, p0:p0 + m], buf[c]
+            row, src = Kf[c, p0 : p0 + m], buf[c]
             for o in range(m):
                 row[o] = src[o]
     return K
@@ -183,11 +195,11 @@ def _stress_point(a, b, c, d, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # p
         CQ = (C00 - C11) * q1 + 2.0 * C01 * q2
         qq = 2.0 * (q1 * q1 + q2 * q2)
         iso = kappa * (J - 1.0) * J - Bp * qq * J  # coefficient of C^-1
-        S00 = (1.0 - 0.5 * I1 * Ci00) / J + iso * Ci00 - B * (q1 - 0.5 * CQ * Ci00) / J \
-            + alpha * q1
+        S00 = (1.0 - 0.5 * I1 * Ci00) / J + iso * Ci00 - B * (q1 - 0.5 * CQ * Ci00) / J + alpha * q1
         S01 = (-0.5 * I1 * Ci01) / J + iso * Ci01 - B * (q2 - 0.5 * CQ * Ci01) / J + alpha * q2
-        S11 = (1.0 - 0.5 * I1 * Ci11) / J + iso * Ci11 - B * (-q1 - 0.5 * CQ * Ci11) / J \
-            - alpha * q1
+        S11 = (
+            (1.0 - 0.5 * I1 * Ci11) / J + iso * Ci11 - B * (-q1 - 0.5 * CQ * Ci11) / J - alpha * q1
+        )
     else:
         CdQ = (C00 - C11) * d1 + 2.0 * C01 * d2
         QdQ = 2.0 * (q1 * d1 + q2 * d2)
@@ -211,8 +223,8 @@ def _stress_field(F, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # pragma: no
         p0, p1, p2, p3 = P[0, 0, x], P[0, 1, x], P[1, 0, x], P[1, 1, x]
         for y in range(ny):
             p0[y], p1[y], p2[y], p3[y] = _stress_point(
-                f0[y], f1[y], f2[y], f3[y], qa[y], qb[y], da[y], db[y], kappa, B, Bp, alpha,
-                active)
+                f0[y], f1[y], f2[y], f3[y], qa[y], qb[y], da[y], db[y], kappa, B, Bp, alpha, active
+            )
     return P
 
 

@@ -52,8 +52,13 @@ FFTW_WISDOM_ONLY = 1 << 21
 #: the shipped wisdom (FFTW_PATIENT plans for the common sizes; scripts/fftw_wisdom.py);
 #: the environment variable NEMATIC_FFTW_WISDOM names another file ("" for none)
 _WISDOM_ENV = os.environ.get("NEMATIC_FFTW_WISDOM")
-WISDOM_FILE: Path | None = (Path(__file__).with_name("fftw_wisdom.txt") if _WISDOM_ENV is None
-                            else Path(_WISDOM_ENV) if _WISDOM_ENV else None)
+WISDOM_FILE: Path | None = (
+    Path(__file__).with_name("fftw_wisdom.txt")
+    if _WISDOM_ENV is None
+    else Path(_WISDOM_ENV)
+    if _WISDOM_ENV
+    else None
+)
 _ALIGN = 64  # bytes: at least FFTW's SIMD alignment on every platform it supports
 
 
@@ -65,8 +70,12 @@ def _candidates() -> list[str]:
         import pyfftw
 
         here = os.path.dirname(pyfftw.__file__)
-        for pattern in ("../pyfftw.libs/libfftw3-*.so*", ".dylibs/libfftw3.*dylib",
-                        "libfftw3-3.dll", "../pyFFTW.libs/libfftw3-*.so*"):
+        for pattern in (
+            "../pyfftw.libs/libfftw3-*.so*",
+            ".dylibs/libfftw3.*dylib",
+            "libfftw3-3.dll",
+            "../pyFFTW.libs/libfftw3-*.so*",
+        ):
             out += sorted(glob.glob(os.path.join(here, pattern)))
     except ImportError:  # pragma: no cover - pyfftw is a dependency
         pass
@@ -92,8 +101,13 @@ def _load() -> ctypes.CDLL | None:
         for name in ("fftw_plan_dft_r2c_2d", "fftw_plan_dft_c2r_2d"):
             fn = getattr(lib, name)
             fn.restype = ctypes.c_void_p
-            fn.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p,
-                           ctypes.c_uint]
+            fn.argtypes = [
+                ctypes.c_int,
+                ctypes.c_int,
+                ctypes.c_void_p,
+                ctypes.c_void_p,
+                ctypes.c_uint,
+            ]
         lib.fftw_alignment_of.restype = ctypes.c_int
         lib.fftw_alignment_of.argtypes = [ctypes.c_void_p]
         lib.fftw_import_wisdom_from_string.restype = ctypes.c_int
@@ -129,7 +143,7 @@ def aligned_empty(shape: tuple[int, ...], dtype) -> np.ndarray:
     size = int(np.prod(shape)) * dtype.itemsize
     raw = np.empty(size + _ALIGN, dtype=np.uint8)
     offset = (-raw.ctypes.data) % _ALIGN
-    return raw[offset:offset + size].view(dtype).reshape(shape)
+    return raw[offset : offset + size].view(dtype).reshape(shape)
 
 
 def _plan_pair(lib: ctypes.CDLL, n: int, flags: int) -> tuple[int, int]:
@@ -189,16 +203,20 @@ def patient_wisdom(sizes: list[int]) -> str:
 # FFTW's execute functions as external symbols: resolved by name when a compiled function is
 # linked (so compiling needs the library loaded: AVAILABLE), not when this module is imported
 _r2c = types.ExternalFunction(
-    "fftw_execute_dft_r2c", types.void(types.uintp, types.uintp, types.uintp))
+    "fftw_execute_dft_r2c", types.void(types.uintp, types.uintp, types.uintp)
+)
 _c2r = types.ExternalFunction(
-    "fftw_execute_dft_c2r", types.void(types.uintp, types.uintp, types.uintp))
+    "fftw_execute_dft_c2r", types.void(types.uintp, types.uintp, types.uintp)
+)
 _alignment_of = types.ExternalFunction("fftw_alignment_of", types.intc(types.uintp))
+
 
 @njit(cache=True)
 def _aligned_real(n):  # pragma: no cover - compiled
     raw = np.empty(n * n + 8)
     off = ((-raw.ctypes.data) % 64) // 8
-    return raw[off:off + n * n].reshape((n, n))
+    return raw[off : off + n * n].reshape((n, n))
+
 
 @njit(cache=True)
 def aligned_half(n):  # pragma: no cover - compiled
@@ -206,11 +224,13 @@ def aligned_half(n):  # pragma: no cover - compiled
     m = n // 2 + 1
     raw = np.empty(n * m + 4, dtype=np.complex128)
     off = ((-raw.ctypes.data) % 64) // 16
-    return raw[off:off + n * m].reshape((n, m))
+    return raw[off : off + n * m].reshape((n, m))
+
 
 @njit(cache=True)
 def _usable(a):  # pragma: no cover - compiled
     return a.flags.c_contiguous and _alignment_of(a.ctypes.data) == 0
+
 
 @njit(cache=True)
 def rfft2(plan, src, dst):  # pragma: no cover - compiled
@@ -225,11 +245,13 @@ def rfft2(plan, src, dst):  # pragma: no cover - compiled
     _r2c(plan, a.ctypes.data, b.ctypes.data)
     dst[:, :] = b
 
+
 @njit(cache=True)
 def irfft2(plan, src, dst):  # pragma: no cover - compiled
     """``dst[...] = irfft2(src)`` for one (N, N // 2 + 1) half spectrum (divides by N^2);
     ``src`` is left intact (FFTW's c2r destroys its input: it works on a copy)."""
     irfft2_via(plan, src, dst, aligned_half(dst.shape[0]))
+
 
 @njit(cache=True)
 def irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
@@ -243,6 +265,7 @@ def irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
         for y in range(n):
             dst[x, y] *= scale
 
+
 @njit(cache=True)
 def unscaled_irfft2_into(plan, src, dst, scratch):  # pragma: no cover - compiled
     """:func:`unscaled_irfft2_via` into any ``dst``: directly where it is aligned for the
@@ -251,6 +274,7 @@ def unscaled_irfft2_into(plan, src, dst, scratch):  # pragma: no cover - compile
         a = _aligned_real(dst.shape[0])
         unscaled_irfft2_via(plan, src, a, scratch)
         dst[:, :] = a
+
 
 @njit(cache=True)
 def unscaled_irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
@@ -266,11 +290,13 @@ def unscaled_irfft2_via(plan, src, dst, scratch):  # pragma: no cover - compiled
     _c2r(plan, b.ctypes.data, dst.ctypes.data)
     return True
 
+
 @njit(cache=True)
 def rfft2_many(plan, src, dst):  # pragma: no cover - compiled
     """:func:`rfft2` over the leading axis of ``(k, N, N)`` -> ``(k, N, N//2 + 1)``."""
     for j in range(src.shape[0]):
         rfft2(plan, src[j], dst[j])
+
 
 @njit(cache=True)
 def irfft2_many(plan, src, dst):  # pragma: no cover - compiled

@@ -94,22 +94,27 @@ def _apply_tangent(op, x, out, aux):  # pragma: no cover - compiled
     if getattr(op, "instance_class", None) is not TangentOperator:  # the named tuple type
         return None
     if isinstance(aux, types.Array) and aux.ndim == 4:
+
         def impl(op, x, out, aux):  # the auxiliary output: the real-space gradient of x
-            _operator(x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, aux,
-                      op.P, out)
+            _operator(
+                x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, aux, op.P, out
+            )
+
         return impl
 
     def impl_plain(op, x, out, aux):  # no auxiliary output
-        _operator(x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, op.G, op.P,
-                  out)
+        _operator(x, op.K, op.E, op.spin, op.kx, op.ky, op.pf, op.pi, op.work_hat, op.G, op.P, out)
+
     return impl_plain
 
 
 @overload(precondition)
 def _precondition_tangent(op, v, out):  # pragma: no cover - compiled
     if getattr(op, "instance_class", None) is TangentOperator:  # the named tuple type
+
         def impl(op, v, out):
             green_into(v, op.khx, op.khy, op.inv_k2, op.a, out)
+
         return impl
     return None
 
@@ -119,9 +124,22 @@ def _tangent_operator(K, E, spin, kx, ky, khx, khy, inv_k2, a, pf, pi):  # pragm
     """The :class:`TangentOperator` of the packed tangent ``K`` (10, N, N), with its work
     arrays (a half spectrum, the gradient and the stress)."""
     n = K.shape[1]
-    return TangentOperator(K, E, spin, kx, ky, khx, khy, inv_k2, a, pf, pi,
-                           np.empty(kx.shape, dtype=np.complex128), np.empty((2, 2, n, n)),
-                           np.empty((2, 2, n, n)))
+    return TangentOperator(
+        K,
+        E,
+        spin,
+        kx,
+        ky,
+        khx,
+        khy,
+        inv_k2,
+        a,
+        pf,
+        pi,
+        np.empty(kx.shape, dtype=np.complex128),
+        np.empty((2, 2, n, n)),
+        np.empty((2, 2, n, n)),
+    )
 
 
 @njit(cache=True)
@@ -135,8 +153,9 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
 
 
 @njit(cache=True)
-def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V, Z, LZ
-          ):  # pragma: no cover
+def gmres(
+    K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V, Z, LZ
+):  # pragma: no cover
     """The displacement rate by :func:`model.compiled.krylov.gmres`, right-preconditioned by
     the Green operator; returns ``(x, grad x, iterations, converged, operator applications)``
     with ``grad x`` the real-space gradient (2, 2, N, N) of the solution, accumulated from the
@@ -150,6 +169,8 @@ def gmres(K, E, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V,
 def workspace(n: int, restart: int = 30) -> tuple[Array, Array, Array]:
     """The ``(V, Z, LZ)`` work arrays of :func:`gmres` for an N x N grid."""
     shape = (2, n, n // 2 + 1)
-    return (np.empty((restart + 1,) + shape, dtype=np.complex128),
-            np.empty((restart,) + shape, dtype=np.complex128),
-            np.empty((restart, 2, 2, n, n)))
+    return (
+        np.empty((restart + 1,) + shape, dtype=np.complex128),
+        np.empty((restart,) + shape, dtype=np.complex128),
+        np.empty((restart, 2, 2, n, n)),
+    )

@@ -187,6 +187,7 @@ def scaled(dst, x, alpha):  # pragma: no cover - compiled
 
 # --- the one compiled GMRES and PCG -------------------------------------------------------
 
+
 def apply_operator(op, x, out, aux):  # pragma: no cover - compiled through its overloads
     """``out = A x`` (and ``aux = L x``, the operator's auxiliary linear output, where it has
     one) for the operator ``op``, a named tuple of its data: implemented for each operator

@@ -40,8 +40,7 @@ Array = np.ndarray
 
 
 @njit(cache=True)
-def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, out, jout
-                   ):  # pragma: no cover
+def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, out, jout):  # pragma: no cover
     """``out = (I - M) x`` and ``jout`` = the spectra of :math:`2 \\omega J q` for
     :math:`\\hat\\omega = x` (3 transforms); ``omega``, ``prod`` are real work arrays,
     ``scratch`` a half spectrum for the inverse transform."""
@@ -80,9 +79,12 @@ class SpinOperator(NamedTuple):
 @overload(apply_operator)
 def _apply_spin(op, x, out, aux):  # pragma: no cover - compiled
     if getattr(op, "instance_class", None) is SpinOperator:  # the named tuple type
+
         def impl(op, x, out, aux):
-            _spin_operator(x, op.q1, op.q2, op.m1, op.m2, op.pf, op.pi, op.omega, op.prod,
-                           op.scratch, out, aux)
+            _spin_operator(
+                x, op.q1, op.q2, op.m1, op.m2, op.pf, op.pi, op.omega, op.prod, op.scratch, out, aux
+            )
+
         return impl
     return None
 
@@ -90,8 +92,10 @@ def _apply_spin(op, x, out, aux):  # pragma: no cover - compiled
 @overload(precondition)
 def _precondition_spin(op, v, out):  # pragma: no cover - compiled
     if getattr(op, "instance_class", None) is SpinOperator:  # the named tuple type
+
         def impl(op, v, out):  # unpreconditioned: out is v (the basis is its own)
             pass
+
         return impl
     return None
 
@@ -104,16 +108,19 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
     Krylov basis ``V`` (restart + 1 spectra) and its Jaumann rates ``LZ`` (restart pairs) are
     caller-owned work arrays."""
     n = q1.shape[0]
-    op = SpinOperator(q1, q2, m1, m2, pf, pi, np.empty((n, n)), np.empty((2, n, n)),
-                      fx.aligned_half(n))
+    op = SpinOperator(
+        q1, q2, m1, m2, pf, pi, np.empty((n, n)), np.empty((2, n, n)), fx.aligned_half(n)
+    )
     return gmres(op, b, x0, w, rtol, maxiter, V, V, LZ)
 
 
 def workspace(n: int, restart: int = 30) -> tuple[Array, Array]:
     """The ``(V, LZ)`` work arrays of :func:`spin_gmres` for an N x N grid."""
     shape = (n, n // 2 + 1)
-    return (np.empty((restart + 1,) + shape, dtype=np.complex128),
-            np.empty((restart, 2) + shape, dtype=np.complex128))
+    return (
+        np.empty((restart + 1,) + shape, dtype=np.complex128),
+        np.empty((restart, 2) + shape, dtype=np.complex128),
+    )
 
 
 class LinearRHS(NamedTuple):
@@ -155,8 +162,28 @@ def linear_split(q1, q2, A, q_hat, omega_hat, rhs_data):  # pragma: no cover
     :meth:`model.mechanics.LinearMechanics.response_symbols`) is applied point by point where
     it is used, so that no response spectra are stored (the passes over memory, not the
     arithmetic, are what this costs); with B' = 0 the Q:Q column and tr e are skipped."""
-    (Lq, m1, m2, S, w, pf, pi, mean_dev, B, Bp, C, gamma, zeta, chi, s, tau, spin_tol, maxiter,
-     V, LZ) = rhs_data
+    (
+        Lq,
+        m1,
+        m2,
+        S,
+        w,
+        pf,
+        pi,
+        mean_dev,
+        B,
+        Bp,
+        C,
+        gamma,
+        zeta,
+        chi,
+        s,
+        tau,
+        spin_tol,
+        maxiter,
+        V,
+        LZ,
+    ) = rhs_data
     n = q1.shape[0]
     shape = q_hat.shape[1:]
     nx, ny = shape
@@ -178,18 +205,21 @@ def linear_split(q1, q2, A, q_hat, omega_hat, rhs_data):  # pragma: no cover
                 b = q_hat[1, i, j]
                 c = rmul(-Bp, iso[i, j])
                 iso[i, j] = c
-                tr_e_hat[i, j] = (rmul(S[2, 0, i, j], a) + rmul(S[2, 1, i, j], b)
-                                  + rmul(S[2, 2, i, j], c))
-                tr_s_hat[i, j] = (rmul(S[3, 0, i, j], a) + rmul(S[3, 1, i, j], b)
-                                  + rmul(S[3, 2, i, j], c))
+                tr_e_hat[i, j] = (
+                    rmul(S[2, 0, i, j], a) + rmul(S[2, 1, i, j], b) + rmul(S[2, 2, i, j], c)
+                )
+                tr_s_hat[i, j] = (
+                    rmul(S[3, 0, i, j], a) + rmul(S[3, 1, i, j], b) + rmul(S[3, 2, i, j], c)
+                )
         fx.irfft2_via(pi, tr_e_hat, tr_e, tr_e_hat)
         nfft += 1
     else:
         iso = np.empty((1, 1), dtype=np.complex128)  # not read
         for i in range(nx):
             for j in range(ny):
-                tr_s_hat[i, j] = (rmul(S[3, 0, i, j], q_hat[0, i, j])
-                                  + rmul(S[3, 1, i, j], q_hat[1, i, j]))
+                tr_s_hat[i, j] = rmul(S[3, 0, i, j], q_hat[0, i, j]) + rmul(
+                    S[3, 1, i, j], q_hat[1, i, j]
+                )
     tr_s = np.empty((n, n))
     fx.irfft2_via(pi, tr_s_hat, tr_s, tr_s_hat)
     nfft += 1
@@ -217,8 +247,9 @@ def linear_split(q1, q2, A, q_hat, omega_hat, rhs_data):  # pragma: no cover
             R[0, i, j] = r0
             R[1, i, j] = r1
             rhs[i, j] = rmul(m1[i, j], r0) + rmul(m2[i, j], r1)
-    omega_hat, j_hat, its, ok, nop = spin_gmres(rhs, omega_hat, q1, q2, m1, m2, w, pf, pi,
-                                                spin_tol, maxiter, V, LZ)
+    omega_hat, j_hat, its, ok, nop = spin_gmres(
+        rhs, omega_hat, q1, q2, m1, m2, w, pf, pi, spin_tol, maxiter, V, LZ
+    )
     nfft += 3 * nop
     for c in range(2):
         for i in range(nx):

@@ -32,8 +32,9 @@ def bulk_terms(q1, q2, A, tr_e, C, two_Bp):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def molecular_field_kernel(q1, q2, A, Jm1, Ebar_dev, lap, A0, C, two_Bp, B, K
-                           ):  # pragma: no cover - compiled
+def molecular_field_kernel(
+    q1, q2, A, Jm1, Ebar_dev, lap, A0, C, two_Bp, B, K
+):  # pragma: no cover - compiled
     r"""The molecular field H (components H11, H12) of Eq. (4):
     :math:`-(A + A_0 + C\, Q:Q - 2 B' (J - 1)) q + B\, \mathrm{dev}\, \bar E + K \nabla^2 q`
     (``lap`` the Laplacians of q1, q2, ``Ebar_dev`` the two components of dev E-bar)."""

@@ -38,8 +38,9 @@ def neg_div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
     for i in range(2):
         for x in range(nx):
             for y in range(ny):
-                out[i, x, y] = imul(-1.0, rmul(kx[x, y], T[i, 0, x, y])
-                                    + rmul(ky[x, y], T[i, 1, x, y]))
+                out[i, x, y] = imul(
+                    -1.0, rmul(kx[x, y], T[i, 0, x, y]) + rmul(ky[x, y], T[i, 1, x, y])
+                )
     return out
 
 
@@ -51,8 +52,9 @@ def div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
     for i in range(2):
         for x in range(nx):
             for y in range(ny):
-                out[i, x, y] = imul(1.0, rmul(kx[x, y], T[i, 0, x, y])
-                                    + rmul(ky[x, y], T[i, 1, x, y]))
+                out[i, x, y] = imul(
+                    1.0, rmul(kx[x, y], T[i, 0, x, y]) + rmul(ky[x, y], T[i, 1, x, y])
+                )
     return out
 
 
@@ -114,8 +116,9 @@ def symbol_combination(x, m1, m2, a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def linear_response(q1h, q2h, isoh, kx, ky, khx, khy, inv_k2, amb, a, kappa,
-                    incompressible, mean_dev):  # pragma: no cover - compiled
+def linear_response(
+    q1h, q2h, isoh, kx, ky, khx, khy, inv_k2, amb, a, kappa, incompressible, mean_dev
+):  # pragma: no cover - compiled
     r"""Fused :meth:`model.mechanics.LinearMechanics.spectral_response`: from the spectra of
     q1, q2 (and of the isotropic eigenstress ``isoh`` = -B' Q:Q hat, zeros if B' = 0) return
     the spectra ``dev e`` (2 components), ``tr e`` and ``tr sigma`` of the small-strain

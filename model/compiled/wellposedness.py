@@ -36,8 +36,9 @@ def finite_margin_kernel(K, E, cos_t, sin_t, scale):  # pragma: no cover - compi
             for i in range(2):
                 for k in range(2):
                     ent[i, k, 0] = K[PACKED[2 * i, 2 * k], x, y]
-                    ent[i, k, 1] = (K[PACKED[2 * i, 2 * k + 1], x, y]
-                                    + K[PACKED[2 * i + 1, 2 * k], x, y])
+                    ent[i, k, 1] = (
+                        K[PACKED[2 * i, 2 * k + 1], x, y] + K[PACKED[2 * i + 1, 2 * k], x, y]
+                    )
                     ent[i, k, 2] = K[PACKED[2 * i + 1, 2 * k + 1], x, y]
                 e0 = 0.5 * E[i, 0, x, y]
                 e1 = 0.5 * E[i, 1, x, y]
@@ -68,8 +69,9 @@ def finite_margin_kernel(K, E, cos_t, sin_t, scale):  # pragma: no cover - compi
                 size += (abs(a1) + abs(b1) + abs(c1)) * (abs(a2) + abs(b2) + abs(c2))
             # sqrt, not hypot (3x slower): the values are O(1), and the 1e-12 size margin covers
             # the ulp it may be off
-            bound = (d0 - np.sqrt(d2c * d2c + d2s * d2s) - np.sqrt(d4c * d4c + d4s * d4s)
-                     - 1e-12 * size)
+            bound = (
+                d0 - np.sqrt(d2c * d2c + d2s * d2s) - np.sqrt(d4c * d4c + d4s * d4s) - 1e-12 * size
+            )
             if bound / scale >= best:
                 continue
             for a in range(na):

@@ -20,15 +20,32 @@ from model.mechanics.finite import FiniteMechanics
 from model.mechanics.linear import LinearMechanics
 from model.parameters import Numerics, Parameters
 
-__all__ = ["FiniteMechanics", "LinearMechanics", "MechanicalState", "Mechanics",
-           "applied_deformation", "make_mechanics"]
+__all__ = [
+    "FiniteMechanics",
+    "LinearMechanics",
+    "MechanicalState",
+    "Mechanics",
+    "applied_deformation",
+    "make_mechanics",
+]
 
 
 def make_mechanics(params: Parameters, numerics: Numerics, grid: SpectralGrid) -> Mechanics:
     """The mechanics ``numerics.mechanics`` names, with its tolerances and backend."""
     if numerics.mechanics == "linear":
-        return LinearMechanics(params, grid, incompressible=numerics.incompressible,
-                               spin_tol=numerics.spin_tol, backend=numerics.backend)
-    return FiniteMechanics(params, grid, tol=numerics.newton_tol, max_newton=numerics.max_newton,
-                           spin_tol=numerics.spin_tol, backend=numerics.backend,
-                           integrated=numerics.displacement == "integrated")
+        return LinearMechanics(
+            params,
+            grid,
+            incompressible=numerics.incompressible,
+            spin_tol=numerics.spin_tol,
+            backend=numerics.backend,
+        )
+    return FiniteMechanics(
+        params,
+        grid,
+        tol=numerics.newton_tol,
+        max_newton=numerics.max_newton,
+        spin_tol=numerics.spin_tol,
+        backend=numerics.backend,
+        integrated=numerics.displacement == "integrated",
+    )

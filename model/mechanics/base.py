@@ -94,8 +94,14 @@ class Mechanics(ABC):
     #: the real-space gradient (2, 2, N, N) of :attr:`udot_hat`
     udot_grad: Array
 
-    def __init__(self, params: Parameters, grid: SpectralGrid, *, spin_tol: float = 1e-8,
-                 backend: str = "compiled"):
+    def __init__(
+        self,
+        params: Parameters,
+        grid: SpectralGrid,
+        *,
+        spin_tol: float = 1e-8,
+        backend: str = "compiled",
+    ):
         self.params = params
         self.grid = grid
         self.spin_tol = spin_tol
@@ -121,13 +127,21 @@ class Mechanics(ABC):
 
     # --- the interface (abstract, or the defaults of a mechanics without a warm start) -
     @abstractmethod
-    def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
-              t: float | None = None, F_guess: Array | None = None) -> MechanicalState:
+    def solve(
+        self,
+        q1: Array,
+        q2: Array,
+        *,
+        u_guess: Array | None = None,
+        t: float | None = None,
+        F_guess: Array | None = None,
+    ) -> MechanicalState:
         """The mechanical state in force balance (Eq. 3) for the order q1, q2 (``u_guess``: a
         start for an iterative solve, ``F_guess`` its deformation gradient if known)."""
 
-    def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None,
-                 F: Array | None = None) -> MechanicalState:
+    def state_at(
+        self, u_hat: Array, q1: Array, q2: Array, t: float | None = None, F: Array | None = None
+    ) -> MechanicalState:
         """The mechanical state at a given displacement, whose deformation gradient is ``F``
         if given (only where :attr:`integrated`)."""
         raise ValueError(f"{type(self).__name__} does not integrate the displacement")
@@ -138,14 +152,16 @@ class Mechanics(ABC):
         raise ValueError(f"{type(self).__name__} does not integrate the displacement")
 
     @abstractmethod
-    def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
-                     t: float | None = None) -> tuple[Array, Array]:
+    def corotational(
+        self, mech: MechanicalState, q1: Array, q2: Array, R: Array, t: float | None = None
+    ) -> tuple[Array, Array]:
         """``(Qdot components, omega)``: :math:`\\dot Q = R + 2 \\omega J q` with the spin
         slaved to :math:`\\dot Q` (Eq. 4)."""
 
     @abstractmethod
-    def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None
-                    ) -> tuple[float, int, float]:
+    def rate_margin(
+        self, q1: Array, q2: Array, mech: MechanicalState | None = None
+    ) -> tuple[float, int, float]:
         """The well-posedness margin of the rate problem, its flat grid index and the
         wave-vector angle of the minimum (:mod:`model.wellposedness`)."""
 
@@ -167,5 +183,8 @@ class Mechanics(ABC):
         """:math:`\\lVert \\hat k_J \\hat P_{iJ} \\rVert / \\max(1, \\mathrm{RMS}\\, P)`."""
         if P_hat is None:
             P_hat = self.grid.forward(P)
-        return float(self.k.balance_residual_kernel(P, P_hat, self._khat[0], self._khat[1],
-                                                    self.grid.weights))
+        return float(
+            self.k.balance_residual_kernel(
+                P, P_hat, self._khat[0], self._khat[1], self.grid.weights
+            )
+        )

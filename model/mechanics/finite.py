@@ -28,9 +28,19 @@ Array = np.ndarray
 class FiniteMechanics(Mechanics):
     """Finite-strain force balance by Newton-Krylov (see the module docstring)."""
 
-    def __init__(self, params: Parameters, grid: SpectralGrid, *, tol: float = 1e-8,
-                 max_newton: int = 30, cg_rtol: float = 0.1, max_cg: int = 200,
-                 spin_tol: float = 1e-8, backend: str = "compiled", integrated: bool = True):
+    def __init__(
+        self,
+        params: Parameters,
+        grid: SpectralGrid,
+        *,
+        tol: float = 1e-8,
+        max_newton: int = 30,
+        cg_rtol: float = 0.1,
+        max_cg: int = 200,
+        spin_tol: float = 1e-8,
+        backend: str = "compiled",
+        integrated: bool = True,
+    ):
         super().__init__(params, grid, spin_tol=spin_tol, backend=backend)
         self.integrated = integrated
         self.tol = tol
@@ -64,8 +74,15 @@ class FiniteMechanics(Mechanics):
     def _tangent(self, F: Array, q1: Array, q2: Array) -> Array:
         """The tangent dP/dF (the backend's ``tangent_kernel``)."""
         m = self.moduli
-        return self.k.tangent_kernel(np.ascontiguousarray(F), np.ascontiguousarray(q1),
-                              np.ascontiguousarray(q2), m.kappa, m.B, m.B_prime, m.alpha)
+        return self.k.tangent_kernel(
+            np.ascontiguousarray(F),
+            np.ascontiguousarray(q1),
+            np.ascontiguousarray(q2),
+            m.kappa,
+            m.B,
+            m.B_prime,
+            m.alpha,
+        )
 
     def deformation(self, u_hat: Array) -> Array:
         """:math:`F = \\bar F + \\nabla u` from the spectrum ``u_hat`` (four transforms)."""
@@ -93,13 +110,31 @@ class FiniteMechanics(Mechanics):
         if self.compiled:
             assert g.fft.plans is not None
             x, it, code, nop = finite_krylov.pcg(
-                K, b_hat, x0, g.kx, g.ky, self._khat[0], self._khat[1], self._inv_k2, self._a,
-                self._weights, *g.fft.plans, rtol, self.max_cg)
+                K,
+                b_hat,
+                x0,
+                g.kx,
+                g.ky,
+                self._khat[0],
+                self._khat[1],
+                self._inv_k2,
+                self._a,
+                self._weights,
+                *g.fft.plans,
+                rtol,
+                self.max_cg,
+            )
             g.fft.count += 8 * nop
             return x, it, code == 0
-        x, it, status = krylov.pcg(self._operator(K), b_hat, x0,
-                                   lambda r: self._green(r, self._a), g.inner, rtol=rtol,
-                                   maxiter=self.max_cg)
+        x, it, status = krylov.pcg(
+            self._operator(K),
+            b_hat,
+            x0,
+            lambda r: self._green(r, self._a),
+            g.inner,
+            rtol=rtol,
+            maxiter=self.max_cg,
+        )
         return x, it, status == "ok"
 
     def _udot_gmres(self, K: Array, E: Array, b: Array) -> tuple[Array, Array, int, bool]:
@@ -113,25 +148,46 @@ class FiniteMechanics(Mechanics):
             if self._workspace is None:
                 self._workspace = finite_krylov.workspace(g.n)
             x, grad, it, ok, nop = finite_krylov.gmres(
-                K, E, b, self.udot_hat, g.kx, g.ky, self._khat[0], self._khat[1],
-                self._inv_k2, self._a, self._weights, *g.fft.plans, self.spin_tol,
-                self.max_cg, *self._workspace)
+                K,
+                E,
+                b,
+                self.udot_hat,
+                g.kx,
+                g.ky,
+                self._khat[0],
+                self._khat[1],
+                self._inv_k2,
+                self._a,
+                self._weights,
+                *g.fft.plans,
+                self.spin_tol,
+                self.max_cg,
+                *self._workspace,
+            )
             g.fft.count += 8 * nop
             return x, grad, it, ok
 
         def A(v_hat: Array) -> tuple[Array, Array]:
             k = self.k
             G = g.inverse(k.grad_hat_kernel(v_hat, g.kx, g.ky))
-            return k.neg_div_hat_kernel(g.forward(k.apply_tangent_spin_kernel(K, G, E)), g.kx,
-                                        g.ky), G
+            return k.neg_div_hat_kernel(
+                g.forward(k.apply_tangent_spin_kernel(K, G, E)), g.kx, g.ky
+            ), G
 
-        x, it, status, grad = krylov.gmres_aux(A, b, self.udot_hat,
-                                               lambda r: self._green(r, self._a), g.inner,
-                                               rtol=self.spin_tol, maxiter=self.max_cg)
+        x, it, status, grad = krylov.gmres_aux(
+            A,
+            b,
+            self.udot_hat,
+            lambda r: self._green(r, self._a),
+            g.inner,
+            rtol=self.spin_tol,
+            maxiter=self.max_cg,
+        )
         return x, grad, it, status == "ok"
 
-    def _evaluate(self, u_hat: Array, q1: Array, q2: Array, F: Array | None = None
-                  ) -> tuple[Array, Array, Array, float]:
+    def _evaluate(
+        self, u_hat: Array, q1: Array, q2: Array, F: Array | None = None
+    ) -> tuple[Array, Array, Array, float]:
         """``(F, P, P_hat, residual)`` at ``u_hat`` (deformation ``F`` if known); an infinite
         residual where J <= 0."""
         count = self.grid.fft.count
@@ -147,8 +203,15 @@ class FiniteMechanics(Mechanics):
         self.fft_parts["force_balance"] += self.grid.fft.count - count
         return F, P, P_hat, self.residual(P, P_hat)
 
-    def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
-              t: float | None = None, F_guess: Array | None = None) -> MechanicalState:
+    def solve(
+        self,
+        q1: Array,
+        q2: Array,
+        *,
+        u_guess: Array | None = None,
+        t: float | None = None,
+        F_guess: Array | None = None,
+    ) -> MechanicalState:
         u_hat = self.u_hat if u_guess is None else u_guess
         F, P, P_hat, res = self._evaluate(u_hat, q1, q2, F_guess)
         if not np.isfinite(res):  # the guess is unusable: restart from the homogeneous state
@@ -163,7 +226,9 @@ class FiniteMechanics(Mechanics):
                 raise SimulationFailure(
                     "newton_diverged",
                     f"force balance not converged after {it} Newton iterations "
-                    f"(residual {res:.3g} > {self.tol:g})", t)
+                    f"(residual {res:.3g} > {self.tol:g})",
+                    t,
+                )
             it += 1
             K = self._tangent(F, q1, q2)
             b = self.grid.div_hat(P_hat)
@@ -178,7 +243,9 @@ class FiniteMechanics(Mechanics):
             if not ok and ncg < self.max_cg:
                 raise SimulationFailure(
                     "ellipticity_lost",
-                    "the tangent stiffness is not positive definite (loss of ellipticity)", t)
+                    "the tangent stiffness is not positive definite (loss of ellipticity)",
+                    t,
+                )
             step = 1.0
             for _ in range(12):
                 trial = u_hat + step * du
@@ -189,24 +256,43 @@ class FiniteMechanics(Mechanics):
             else:
                 reason = "J<=0" if not np.isfinite(res_t) else "newton_diverged"
                 raise SimulationFailure(
-                    reason, f"line search failed at Newton iteration {it} "
-                    f"(residual {res:.3g})", t)
+                    reason, f"line search failed at Newton iteration {it} (residual {res:.3g})", t
+                )
             u_hat, F, P, P_hat, res = trial, F_t, P_t, P_hat_t, res_t
         self.u_hat = u_hat
         self._solution = (u_hat, q1.copy(), q2.copy(), F, P)
         return self._state(F, P, u_hat, iterations=it, residual=res, K=K)
 
-    def _state(self, F: Array, P: Array, u_hat: Array, *, iterations: int = 0,
-               residual: float = float("nan"), K: Array | None = None) -> MechanicalState:
+    def _state(
+        self,
+        F: Array,
+        P: Array,
+        u_hat: Array,
+        *,
+        iterations: int = 0,
+        residual: float = float("nan"),
+        K: Array | None = None,
+    ) -> MechanicalState:
         """The :class:`MechanicalState` of the deformation ``F`` with stress ``P`` (its
         strain measures by the backend's ``strain_measures_kernel``)."""
-        Ebar_dev, Jm1, trP = self.k.strain_measures_kernel(np.ascontiguousarray(F),
-                                                    np.ascontiguousarray(P))
-        return MechanicalState(F=F, P=P, Ebar_dev=Ebar_dev, Jm1=Jm1, trP=trP, u_hat=u_hat,
-                               iterations=iterations, residual=residual, tangent=K)
+        Ebar_dev, Jm1, trP = self.k.strain_measures_kernel(
+            np.ascontiguousarray(F), np.ascontiguousarray(P)
+        )
+        return MechanicalState(
+            F=F,
+            P=P,
+            Ebar_dev=Ebar_dev,
+            Jm1=Jm1,
+            trP=trP,
+            u_hat=u_hat,
+            iterations=iterations,
+            residual=residual,
+            tangent=K,
+        )
 
-    def state_at(self, u_hat: Array, q1: Array, q2: Array, t: float | None = None,
-                 F: Array | None = None) -> MechanicalState:
+    def state_at(
+        self, u_hat: Array, q1: Array, q2: Array, t: float | None = None, F: Array | None = None
+    ) -> MechanicalState:
         """The mechanical state at the displacement ``u_hat`` as given, without solving the
         force balance (the stages of the integrated-displacement scheme, where u is part of
         the integrated state: docs/model.md, section 4), with the deformation gradient ``F``
@@ -214,8 +300,12 @@ class FiniteMechanics(Mechanics):
         ``J<=0`` where the deformation folds. The deformation and stress of the last solve
         are reused when ``u_hat`` is its solution for the same q."""
         sol = self._solution
-        if (sol is not None and u_hat is sol[0] and np.array_equal(q1, sol[1])
-                and np.array_equal(q2, sol[2])):
+        if (
+            sol is not None
+            and u_hat is sol[0]
+            and np.array_equal(q1, sol[1])
+            and np.array_equal(q2, sol[2])
+        ):
             return self._state(sol[3], sol[4], u_hat)
         if F is None:
             F = self.deformation(u_hat)
@@ -231,8 +321,9 @@ class FiniteMechanics(Mechanics):
         sol = self._solution
         return sol[3] if sol is not None and u_hat is sol[0] else self.deformation(u_hat)
 
-    def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
-                     t: float | None = None) -> tuple[Array, Array]:
+    def corotational(
+        self, mech: MechanicalState, q1: Array, q2: Array, R: Array, t: float | None = None
+    ) -> tuple[Array, Array]:
         r"""Solve for :math:`\dot u` and :math:`\dot Q = R + 2\omega J q` together:
 
         .. math::
@@ -250,8 +341,16 @@ class FiniteMechanics(Mechanics):
         F = np.ascontiguousarray(mech.F)
         E = self.k.q_increment_kernel(F, q1, q2, -2.0 * q2, 2.0 * q1, m.B, m.B_prime, m.alpha)
         mech.spin_coupling = E
-        dP = self.k.q_increment_kernel(F, q1, q2, np.ascontiguousarray(R[0]),
-                                       np.ascontiguousarray(R[1]), m.B, m.B_prime, m.alpha)
+        dP = self.k.q_increment_kernel(
+            F,
+            q1,
+            q2,
+            np.ascontiguousarray(R[0]),
+            np.ascontiguousarray(R[1]),
+            m.B,
+            m.B_prime,
+            m.alpha,
+        )
         b = self.k.div_hat_kernel(g.forward(dP), g.kx, g.ky)
 
         count = g.fft.count
@@ -260,14 +359,18 @@ class FiniteMechanics(Mechanics):
         self.spin_iterations += it
         if not ok:
             raise SimulationFailure(
-                "spin_diverged", "the displacement-rate (Jaumann spin) solve did not converge "
-                f"in {it} iterations: loss of ellipticity", t)
+                "spin_diverged",
+                "the displacement-rate (Jaumann spin) solve did not converge "
+                f"in {it} iterations: loss of ellipticity",
+                t,
+            )
         self.udot_hat = udot
         self.udot_grad = grad
         return self.k.corotational_rate(R, grad, q1, q2)
 
-    def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None
-                    ) -> tuple[float, int, float]:
+    def rate_margin(
+        self, q1: Array, q2: Array, mech: MechanicalState | None = None
+    ) -> tuple[float, int, float]:
         """Well-posedness margin of the rate problem at the deformation of ``mech`` (solved
         here if not given), its flat grid index and the wave-vector angle of the minimum
         (:func:`model.wellposedness.finite_margin`; reuses the tangent and E of
@@ -280,6 +383,7 @@ class FiniteMechanics(Mechanics):
             K = self._tangent(mech.F, q1, q2)
         E = mech.spin_coupling
         if E is None:
-            E = self.k.q_increment_kernel(np.ascontiguousarray(mech.F), q1, q2, -2.0 * q2, 2.0 * q1,
-                                   m.B, m.B_prime, m.alpha)
+            E = self.k.q_increment_kernel(
+                np.ascontiguousarray(mech.F), q1, q2, -2.0 * q2, 2.0 * q1, m.B, m.B_prime, m.alpha
+            )
         return wp.finite_margin(K, E, m.kappa, samples=self.k.finite_margin_kernel)

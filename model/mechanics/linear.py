@@ -34,8 +34,15 @@ class LinearMechanics(Mechanics):
     variants).
     """
 
-    def __init__(self, params: Parameters, grid: SpectralGrid, *, incompressible: bool = False,
-                 spin_tol: float = 1e-8, backend: str = "compiled"):
+    def __init__(
+        self,
+        params: Parameters,
+        grid: SpectralGrid,
+        *,
+        incompressible: bool = False,
+        spin_tol: float = 1e-8,
+        backend: str = "compiled",
+    ):
         super().__init__(params, grid, spin_tol=spin_tol, backend=backend)
         self.incompressible = incompressible
         k = params.kappa
@@ -57,8 +64,15 @@ class LinearMechanics(Mechanics):
             tau = tau - m.B_prime * T.ddot(Q, Q) * T.identity(q1.shape)
         return tau
 
-    def solve(self, q1: Array, q2: Array, *, u_guess: Array | None = None,
-              t: float | None = None, F_guess: Array | None = None) -> MechanicalState:
+    def solve(
+        self,
+        q1: Array,
+        q2: Array,
+        *,
+        u_guess: Array | None = None,
+        t: float | None = None,
+        F_guess: Array | None = None,
+    ) -> MechanicalState:
         """The small-strain state: one exact Fourier solve (no guess is needed)."""
         g = self.grid
         tau = self._eigenstress(q1, q2)
@@ -77,11 +91,16 @@ class LinearMechanics(Mechanics):
         else:
             sigma = 2.0 * (e - 0.5 * tr_e * eye) + self.params.kappa * tr_e * eye + tau
         Ebar_dev = np.stack([0.5 * (e[0, 0] - e[1, 1]), e[0, 1]])
-        return MechanicalState(F=T.identity(tr_e.shape) + grad_u, P=sigma, Ebar_dev=Ebar_dev,
-                               Jm1=tr_e, trP=T.trace(sigma), u_hat=u_hat)
+        return MechanicalState(
+            F=T.identity(tr_e.shape) + grad_u,
+            P=sigma,
+            Ebar_dev=Ebar_dev,
+            Jm1=tr_e,
+            trP=T.trace(sigma),
+            u_hat=u_hat,
+        )
 
-    def spectral_response(self, q_hat: Array, QQ_hat: Array | None
-                          ) -> tuple[Array, Array, Array]:
+    def spectral_response(self, q_hat: Array, QQ_hat: Array | None) -> tuple[Array, Array, Array]:
         """Fast path of :meth:`solve` for the time stepper, all from the spectra of q1, q2
         (and of Q:Q when B' != 0): returns ``(dev e hat (2 comps), tr e hat, tr sigma hat)``.
 
@@ -90,10 +109,21 @@ class LinearMechanics(Mechanics):
         """
         g, m = self.grid, self.moduli
         iso = -m.B_prime * QQ_hat if QQ_hat is not None else self.zero_hat
-        return self.k.linear_response(q_hat[0], q_hat[1], iso, g.kx, g.ky, self._khat[0],
-                               self._khat[1], self._inv_k2, m.alpha - m.B, self._a,
-                               self.params.kappa, self.incompressible,
-                               self.params.eps * g.n**2)
+        return self.k.linear_response(
+            q_hat[0],
+            q_hat[1],
+            iso,
+            g.kx,
+            g.ky,
+            self._khat[0],
+            self._khat[1],
+            self._inv_k2,
+            m.alpha - m.B,
+            self._a,
+            self.params.kappa,
+            self.incompressible,
+            self.params.eps * g.n**2,
+        )
 
     def response_symbols(self) -> Array:
         """The real symbols ``S[r, c]`` of :meth:`spectral_response` (outputs r: dev e (2
@@ -105,10 +135,21 @@ class LinearMechanics(Mechanics):
         one, zero = np.ones(g.k2.shape, dtype=complex), self.zero_hat
         cols = []
         for q1h, q2h, iso in ((one, zero, zero), (zero, one, zero), (zero, zero, one)):
-            dev, tr_e, tr_s = self.k.linear_response(q1h, q2h, iso, g.kx, g.ky, self._khat[0],
-                                              self._khat[1], self._inv_k2, m.alpha - m.B,
-                                              self._a, self.params.kappa, self.incompressible,
-                                              0.0)
+            dev, tr_e, tr_s = self.k.linear_response(
+                q1h,
+                q2h,
+                iso,
+                g.kx,
+                g.ky,
+                self._khat[0],
+                self._khat[1],
+                self._inv_k2,
+                m.alpha - m.B,
+                self._a,
+                self.params.kappa,
+                self.incompressible,
+                0.0,
+            )
             cols.append(np.stack([dev[0], dev[1], tr_e, tr_s]))
         S = np.stack(cols, axis=1)
         assert np.all(S.imag == 0.0)
@@ -121,8 +162,7 @@ class LinearMechanics(Mechanics):
         m1, m2 = self.spin_symbols
         return m1 * qdot1_hat + m2 * qdot2_hat
 
-    def corotational_hat(self, q1: Array, q2: Array, R_hat: Array, t: float | None = None
-                         ) -> Array:
+    def corotational_hat(self, q1: Array, q2: Array, R_hat: Array, t: float | None = None) -> Array:
         r"""Solve :math:`\omega = \Omega[R + 2 \omega J q]` (Jq = (-q2, q1)) by GMRES on
         :math:`\hat\omega`, started from zero; return the spectra of the Qdot components (the
         spin's spectrum is kept in ``omega_hat``).
@@ -145,13 +185,20 @@ class LinearMechanics(Mechanics):
         # follows the stage-specific part of Qdot): 4534 iterations + 1256 residuals against
         # 4940 iterations for a linear 128^2 run to t = 300 (-11 % transforms, measured)
         omega_hat, it, status, j_hat = krylov.gmres_aux(
-            operator, b, self.zero_hat, lambda r: r, g.inner, rtol=self.spin_tol,
-            maxiter=self.spin_maxiter)
+            operator,
+            b,
+            self.zero_hat,
+            lambda r: r,
+            g.inner,
+            rtol=self.spin_tol,
+            maxiter=self.spin_maxiter,
+        )
         self.accept_spin(omega_hat, it, status == "ok", t)
         return R_hat + j_hat
 
-    def rate_margin(self, q1: Array, q2: Array, mech: MechanicalState | None = None
-                    ) -> tuple[float, int, float]:
+    def rate_margin(
+        self, q1: Array, q2: Array, mech: MechanicalState | None = None
+    ) -> tuple[float, int, float]:
         r"""Well-posedness margin of the rate problem (:mod:`model.wellposedness`):
         :math:`1 - (\alpha - B) \max S`, its flat grid index, and the wave-vector angle of
         the minimum (perpendicular to the director there)."""
@@ -159,20 +206,25 @@ class LinearMechanics(Mechanics):
         theta = 0.5 * float(np.arctan2(q2.flat[idx], q1.flat[idx]))
         return m, idx, (theta + 0.5 * np.pi) % np.pi
 
-    def accept_spin(self, omega_hat: Array, iterations: int, converged: bool,
-                    t: float | None) -> None:
+    def accept_spin(
+        self, omega_hat: Array, iterations: int, converged: bool, t: float | None
+    ) -> None:
         """Book a spin solve (here or in :func:`model.compiled.linear_rhs.linear_split`): count its
         iterations, fail the run if it did not converge, keep the spin (``omega_hat``, which
         :meth:`corotational` returns)."""
         self.spin_iterations += iterations
         if not converged:
             raise SimulationFailure(
-                "spin_diverged", "the Jaumann spin solve did not converge in "
-                f"{iterations} iterations ((alpha - B) S too large: loss of well-posedness)", t)
+                "spin_diverged",
+                "the Jaumann spin solve did not converge in "
+                f"{iterations} iterations ((alpha - B) S too large: loss of well-posedness)",
+                t,
+            )
         self.omega_hat = omega_hat
 
-    def corotational(self, mech: MechanicalState, q1: Array, q2: Array, R: Array,
-                     t: float | None = None) -> tuple[Array, Array]:
+    def corotational(
+        self, mech: MechanicalState, q1: Array, q2: Array, R: Array, t: float | None = None
+    ) -> tuple[Array, Array]:
         qdot_hat = self.corotational_hat(q1, q2, self.grid.forward(R), t)
         assert self.omega_hat is not None
         return self.grid.inverse(qdot_hat), self.grid.inverse(self.omega_hat)

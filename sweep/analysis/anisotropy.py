@@ -18,8 +18,9 @@ from .statistics import bootstrap_seed_means, finite_mean, finite_std, fit_line,
 ANISOTROPY_OPTIONS = ("axis", "observable")
 
 
-def anisotropy(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
-               ) -> xr.Dataset:
+def anisotropy(
+    phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
+) -> xr.Dataset:
     """The ``anisotropy`` fit (docs/campaigns.md, "Fits"). Options: ``axis`` (default ``eps``),
     ``observable`` (default ``cos2theta``)."""
     check_options("anisotropy", options, ANISOTROPY_OPTIONS)
@@ -57,21 +58,31 @@ def anisotropy(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
         sem = finite_std(flat) / np.sqrt(np.where(count > 0, count, np.nan))
     res = xr.Dataset(coords={**coord_copy(ds, others), axis: ds[axis].variable})
     per = [*others, axis]
-    res["anisotropy_mean"] = variable(per, mean.reshape(*oshape, x.size),
-                                      f"seed mean of {observable}")
-    res["anisotropy_sem"] = variable(per, sem.reshape(*oshape, x.size),
-                                     f"standard error of the seed mean of {observable}")
-    attrs: dict[str, Any] = {"fit_axis": axis, "fit_observable": observable, "fit_n_boot": n_boot,
-                             "fit_confidence": conf}
-    res["anisotropy_slope"] = variable(others, slope.reshape(oshape),
-                                       f"least-squares slope d<{observable}>/d{axis} over all runs",
-                                       **attrs)
-    res["anisotropy_slope_lower"] = variable(others, lo.reshape(oshape), "slope seed-bootstrap "
-                                             "interval, lower end")
-    res["anisotropy_slope_upper"] = variable(others, hi.reshape(oshape), "slope seed-bootstrap "
-                                             "interval, upper end")
-    res["anisotropy_intercept"] = variable(others, icept.reshape(oshape),
-                                           f"least-squares intercept of {observable} at {axis} = 0")
+    res["anisotropy_mean"] = variable(
+        per, mean.reshape(*oshape, x.size), f"seed mean of {observable}"
+    )
+    res["anisotropy_sem"] = variable(
+        per, sem.reshape(*oshape, x.size), f"standard error of the seed mean of {observable}"
+    )
+    attrs: dict[str, Any] = {
+        "fit_axis": axis,
+        "fit_observable": observable,
+        "fit_n_boot": n_boot,
+        "fit_confidence": conf,
+    }
+    res["anisotropy_slope"] = variable(
+        others,
+        slope.reshape(oshape),
+        f"least-squares slope d<{observable}>/d{axis} over all runs",
+        **attrs,
+    )
+    res["anisotropy_slope_lower"] = variable(
+        others, lo.reshape(oshape), "slope seed-bootstrap interval, lower end"
+    )
+    res["anisotropy_slope_upper"] = variable(
+        others, hi.reshape(oshape), "slope seed-bootstrap interval, upper end"
+    )
+    res["anisotropy_intercept"] = variable(
+        others, icept.reshape(oshape), f"least-squares intercept of {observable} at {axis} = 0"
+    )
     return res
-
-

@@ -25,9 +25,13 @@ log = logging.getLogger(__name__)
 FITS = "fits.nc"
 
 
-def compute_fits(phase: xr.Dataset, requests: Iterable[tuple[str, Mapping[str, Any]]],
-                 root: Path | None = None, *, strict: bool = True
-                 ) -> tuple[xr.Dataset, dict[str, str]]:
+def compute_fits(
+    phase: xr.Dataset,
+    requests: Iterable[tuple[str, Mapping[str, Any]]],
+    root: Path | None = None,
+    *,
+    strict: bool = True,
+) -> tuple[xr.Dataset, dict[str, str]]:
     """Run the requested fits on ``phase``; return the merged Dataset and the failures
     (``{name: message}``; with ``strict`` the first failure raises)."""
     parts: list[xr.Dataset] = []
@@ -52,22 +56,27 @@ def compute_fits(phase: xr.Dataset, requests: Iterable[tuple[str, Mapping[str, A
             var.attrs.setdefault("fit", name)
         parts.append(part)
         done.append(f"{name}: {json.dumps(options, sort_keys=True, default=str)}")
-    merged = xr.merge(parts, compat="no_conflicts", join="outer",
-                      combine_attrs="override") if parts else xr.Dataset()
-    merged.attrs.update({
-        "Conventions": "CF-1.11",
-        "title": f"fits of campaign {phase.attrs.get('campaign', '')}",
-        "history": f"{now_iso()}: fitted from phase.nc by sweep.analysis",
-        "library_versions": library_versions_text(),
-        "campaign": str(phase.attrs.get("campaign", "")),
-        "source": "active-nematic-solids fits (sweep.analysis) of phase.nc",
-        "phase_created": str(phase.attrs.get("created", "")),
-        "code_version": code_version(),
-        "git_commit": git_commit(),
-        "created": now_iso(),
-        "fits": "; ".join(done),
-        "failed_fits": "; ".join(f"{k}: {v}" for k, v in failures.items()),
-    })
+    merged = (
+        xr.merge(parts, compat="no_conflicts", join="outer", combine_attrs="override")
+        if parts
+        else xr.Dataset()
+    )
+    merged.attrs.update(
+        {
+            "Conventions": "CF-1.11",
+            "title": f"fits of campaign {phase.attrs.get('campaign', '')}",
+            "history": f"{now_iso()}: fitted from phase.nc by sweep.analysis",
+            "library_versions": library_versions_text(),
+            "campaign": str(phase.attrs.get("campaign", "")),
+            "source": "active-nematic-solids fits (sweep.analysis) of phase.nc",
+            "phase_created": str(phase.attrs.get("created", "")),
+            "code_version": code_version(),
+            "git_commit": git_commit(),
+            "created": now_iso(),
+            "fits": "; ".join(done),
+            "failed_fits": "; ".join(f"{k}: {v}" for k, v in failures.items()),
+        }
+    )
     return merged, failures
 
 
@@ -83,18 +92,21 @@ def fit_notes(ds: xr.Dataset) -> list[str]:
     n = int(attrs.get("fit_n_unpeaked", 0))
     check = str(attrs.get("fit_peak_check", ""))
     if n:
-        notes.append(f"alpha_cr/scaling: {n} of {int(attrs.get('fit_n_patterned', n))} "
-                     "patterned run(s) left out: the first peak of sigma2_S was not reached "
-                     f"by t_final ({check}; per point: alpha_cr_unpeaked_count in {FITS})")
+        notes.append(
+            f"alpha_cr/scaling: {n} of {int(attrs.get('fit_n_patterned', n))} "
+            "patterned run(s) left out: the first peak of sigma2_S was not reached "
+            f"by t_final ({check}; per point: alpha_cr_unpeaked_count in {FITS})"
+        )
     elif check.startswith("not done"):
-        notes.append(f"alpha_cr/scaling: runs without a peak of sigma2_S not looked for "
-                     f"({check})")
+        notes.append(f"alpha_cr/scaling: runs without a peak of sigma2_S not looked for ({check})")
     if "alpha_cr_at_bound" in ds:
         at = np.asarray(ds["alpha_cr_at_bound"].values).astype(bool)
         if at.any():
             K = ", ".join(f"{float(k):g}" for k in ds["K"].values[at])
-            notes.append(f"alpha_cr at its bound {attrs.get('fit_alpha_cr_min', 0)} for K = "
-                         f"{K} (the unbounded fit would put it lower)")
+            notes.append(
+                f"alpha_cr at its bound {attrs.get('fit_alpha_cr_min', 0)} for K = "
+                f"{K} (the unbounded fit would put it lower)"
+            )
     return notes
 
 
@@ -102,14 +114,17 @@ def load_phase(root: Path) -> xr.Dataset:
     """``root/phase.nc`` loaded into memory (the file is closed)."""
     path = Path(root) / PHASE
     if not path.is_file():
-        raise FitError(f"no phase diagram at {path}: run the campaign (nematic run) or "
-                       "aggregate it (nematic aggregate) first")
+        raise FitError(
+            f"no phase diagram at {path}: run the campaign (nematic run) or "
+            "aggregate it (nematic aggregate) first"
+        )
     with xr.open_dataset(path) as ds:
         return ds.load()
 
 
-def write_fits(root: Path, requests: Iterable[tuple[str, Mapping[str, Any]]], *,
-               strict: bool = False) -> tuple[Path, dict[str, str]]:
+def write_fits(
+    root: Path, requests: Iterable[tuple[str, Mapping[str, Any]]], *, strict: bool = False
+) -> tuple[Path, dict[str, str]]:
     """Compute the requested fits from ``root/phase.nc`` and write ``root/fits.nc``
     atomically; return its path and the failures."""
     root = Path(root)

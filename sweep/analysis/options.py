@@ -22,8 +22,11 @@ def invalid_options(name: str, options: Mapping[str, Any], allowed: Iterable[str
     """What is wrong with the ``options`` of fit ``name``, whose own options are ``allowed``
     (besides :data:`COMMON_OPTIONS`): one message per problem, empty if none."""
     valid = sorted({*allowed, *COMMON_OPTIONS})
-    out = [f"unknown option {key!r}; allowed: {', '.join(valid)}" for key in options
-           if key not in valid]
+    out = [
+        f"unknown option {key!r}; allowed: {', '.join(valid)}"
+        for key in options
+        if key not in valid
+    ]
     n_boot = options.get("n_boot", 1000)
     if not isinstance(n_boot, int) or isinstance(n_boot, bool) or n_boot < 1:
         out.append(f"n_boot = {n_boot!r}; expected an integer >= 1")
@@ -34,10 +37,13 @@ def invalid_options(name: str, options: Mapping[str, Any], allowed: Iterable[str
     if sel is not None and not isinstance(sel, Mapping):
         out.append(f"select = {sel!r}; expected a mapping {{sweep axis: value}}")
     bound = options.get("alpha_cr_min")
-    if bound is not None and (isinstance(bound, bool) or not isinstance(bound, (int, float))
-                              or not math.isfinite(bound)):
-        out.append(f"alpha_cr_min = {bound!r}; expected a number (the lower bound of alpha_cr) "
-                   "or null (no bound)")
+    if bound is not None and (
+        isinstance(bound, bool) or not isinstance(bound, (int, float)) or not math.isfinite(bound)
+    ):
+        out.append(
+            f"alpha_cr_min = {bound!r}; expected a number (the lower bound of alpha_cr) "
+            "or null (no bound)"
+        )
     require = options.get("require_peak")
     if require is not None and not isinstance(require, bool):
         out.append(f"require_peak = {require!r}; expected true or false")
@@ -52,5 +58,3 @@ def check_options(name: str, options: Mapping[str, Any], allowed: Iterable[str])
     problems = invalid_options(name, options, allowed)
     if problems:
         raise FitError(f"fit {name!r}: " + "; ".join(problems))
-
-

@@ -16,8 +16,11 @@ from ..errors import FitError
 
 def sweep_dims(phase: xr.Dataset) -> list[str]:
     """The sweep dims of a phase Dataset (every dim of ``status`` but ``seed``)."""
-    ref = "status" if "status" in phase else next(
-        (n for n, v in phase.data_vars.items() if "seed" in v.dims), None)
+    ref = (
+        "status"
+        if "status" in phase
+        else next((n for n, v in phase.data_vars.items() if "seed" in v.dims), None)
+    )
     if ref is None:
         raise FitError("not a phase diagram: no variable over the seed dim")
     return [str(d) for d in phase[ref].dims if d != "seed"]
@@ -55,18 +58,28 @@ def with_dim(phase: xr.Dataset, name: str) -> xr.Dataset:
             if is_swept(phase, swept):
                 fixed = fixed_parameter(phase, other)
                 if fixed is None:
-                    raise FitError("alpha_minus_B: both alpha and B are swept on different "
-                                   "dims; sweep alpha_minus_B instead")
+                    raise FitError(
+                        "alpha_minus_B: both alpha and B are swept on different "
+                        "dims; sweep alpha_minus_B instead"
+                    )
                 sign = 1.0 if swept == "alpha" else -1.0
                 amb = sign * (phase[swept] - fixed)
-                ds = phase.assign_coords({AMB: (phase[swept].dims, amb.values,
-                                                {"long_name": "contractility alpha - B",
-                                                 "units": "1"})})
+                ds = phase.assign_coords(
+                    {
+                        AMB: (
+                            phase[swept].dims,
+                            amb.values,
+                            {"long_name": "contractility alpha - B", "units": "1"},
+                        )
+                    }
+                )
                 return with_dim(ds, AMB)
     value = fixed_parameter(phase, name)
     if value is None:
-        raise FitError(f"{name!r} is neither swept nor a fixed parameter of this campaign "
-                       f"(sweep dims: {', '.join(sweep_dims(phase)) or 'none'})")
+        raise FitError(
+            f"{name!r} is neither swept nor a fixed parameter of this campaign "
+            f"(sweep dims: {', '.join(sweep_dims(phase)) or 'none'})"
+        )
     return phase.expand_dims({name: [value]})
 
 
@@ -74,8 +87,10 @@ def select(phase: xr.Dataset, choice: Mapping[str, Any] | None) -> xr.Dataset:
     """``phase`` at the sweep values ``choice`` (nearest grid value; the dim is dropped)."""
     for name, value in (choice or {}).items():
         if name not in phase.coords:
-            raise FitError(f"select: {name!r} is not a coordinate of the phase diagram "
-                           f"(coordinates: {', '.join(map(str, phase.coords))})")
+            raise FitError(
+                f"select: {name!r} is not a coordinate of the phase diagram "
+                f"(coordinates: {', '.join(map(str, phase.coords))})"
+            )
         ds = with_dim(phase, name)
         phase = ds.sel({name: value}, method="nearest")
     return phase
@@ -105,9 +120,9 @@ def coord_copy(ds: xr.Dataset, dims: Sequence[str]) -> dict[str, xr.Variable]:
     return out
 
 
-def variable(dims: Sequence[str], data: Any, long_name: str, units: str = "1",
-             **attrs: Any) -> xr.Variable:
-    return xr.Variable(tuple(dims), np.asarray(data), {"long_name": long_name, "units": units,
-                                                       **attrs})
-
-
+def variable(
+    dims: Sequence[str], data: Any, long_name: str, units: str = "1", **attrs: Any
+) -> xr.Variable:
+    return xr.Variable(
+        tuple(dims), np.asarray(data), {"long_name": long_name, "units": units, **attrs}
+    )

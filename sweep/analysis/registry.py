@@ -31,17 +31,31 @@ class FitSpec:
 
 
 REGISTRY: dict[str, FitSpec] = {
-    "transition": FitSpec(transition, "location of the jump of the seed-mean sigma2_S along "
-                          "an axis, interval from the grid and the seeds", TRANSITION_OPTIONS),
-    "alpha_cr": FitSpec(alpha_cr, "critical activity alpha_cr(K) from the pattern sizes",
-                        SIZE_OPTIONS),
-    "scaling": FitSpec(scaling, "exponent of lambda vs K / (alpha - B - alpha_cr) with a seed "
-                       "bootstrap interval (includes alpha_cr)", SIZE_OPTIONS,
-                       includes=("alpha_cr",)),
-    "anisotropy": FitSpec(anisotropy, "trend of <cos 2 theta> with the applied strain eps",
-                          ANISOTROPY_OPTIONS),
-    "stability": FitSpec(stability, "stable/unstable runs in the (activity, eps) plane and "
-                         "the linear-stability boundary (Fig. A1)", STABILITY_OPTIONS),
+    "transition": FitSpec(
+        transition,
+        "location of the jump of the seed-mean sigma2_S along "
+        "an axis, interval from the grid and the seeds",
+        TRANSITION_OPTIONS,
+    ),
+    "alpha_cr": FitSpec(
+        alpha_cr, "critical activity alpha_cr(K) from the pattern sizes", SIZE_OPTIONS
+    ),
+    "scaling": FitSpec(
+        scaling,
+        "exponent of lambda vs K / (alpha - B - alpha_cr) with a seed "
+        "bootstrap interval (includes alpha_cr)",
+        SIZE_OPTIONS,
+        includes=("alpha_cr",),
+    ),
+    "anisotropy": FitSpec(
+        anisotropy, "trend of <cos 2 theta> with the applied strain eps", ANISOTROPY_OPTIONS
+    ),
+    "stability": FitSpec(
+        stability,
+        "stable/unstable runs in the (activity, eps) plane and "
+        "the linear-stability boundary (Fig. A1)",
+        STABILITY_OPTIONS,
+    ),
 }
 
 
@@ -67,5 +81,3 @@ def resolve(requests: Iterable[tuple[str, Mapping[str, Any]]]) -> list[tuple[str
             if name in out and inc in out:
                 out[name] = {**out.pop(inc), **out[name]}
     return list(out.items())
-
-

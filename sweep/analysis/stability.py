@@ -25,8 +25,14 @@ from .statistics import Array
 
 log = logging.getLogger(__name__)
 
-STABILITY_OPTIONS = ("activity", "strain", "unstable_reasons", "fraction", "n_fine",
-                     "incompressible")
+STABILITY_OPTIONS = (
+    "activity",
+    "strain",
+    "unstable_reasons",
+    "fraction",
+    "n_fine",
+    "incompressible",
+)
 
 
 def run_growth(path: Path) -> float:
@@ -55,8 +61,10 @@ def stability_parameters(phase: xr.Dataset, coords: Mapping[str, float]) -> Any:
     from model.parameters import Parameters
 
     # each attribute back to its field's type (netCDF stores ints and strings as they are)
-    kinds = {f.name: {"int": int, "str": str}.get(str(f.type), float)
-             for f in dataclasses.fields(Parameters)}
+    kinds = {
+        f.name: {"int": int, "str": str}.get(str(f.type), float)
+        for f in dataclasses.fields(Parameters)
+    }
     values: dict[str, Any] = {}
     for key, value in phase.attrs.items():
         name = key.removeprefix("param_")
@@ -71,8 +79,9 @@ def stability_parameters(phase: xr.Dataset, coords: Mapping[str, float]) -> Any:
     return Parameters.from_dict(values)
 
 
-def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
-              ) -> xr.Dataset:
+def stability(
+    phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
+) -> xr.Dataset:
     """The ``stability`` fit (docs/campaigns.md, "Fits"). Options: ``activity`` (axis,
     default ``chi`` if swept else ``alpha_minus_B``), ``strain`` (default ``eps``),
     ``unstable_reasons`` (default [spin_diverged]), ``fraction`` (majority threshold,
@@ -90,8 +99,10 @@ def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None =
     ds = with_dim(with_dim(ds, act), strain)
     extra = other_dims(ds, [act, strain])
     if extra:
-        raise FitError(f"stability: the phase diagram also varies {', '.join(extra)}; pick one "
-                       f"value with the option select: {{{extra[0]}: VALUE}}")
+        raise FitError(
+            f"stability: the phase diagram also varies {', '.join(extra)}; pick one "
+            f"value with the option select: {{{extra[0]}: VALUE}}"
+        )
     reasons = set(options.get("unstable_reasons", ["spin_diverged"]))
     frac_needed = float(options.get("fraction", 0.5))
     dims = [act, strain, "seed"]
@@ -129,8 +140,7 @@ def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None =
             below = np.nonzero(np.isfinite(f[:j]))[0]
             eps_lo[i] = e[order][below[-1]] if below.size else e[order][j]
             eps_sim[i] = 0.5 * (eps_lo[i] + eps_hi[i])
-    incompressible = bool(options.get("incompressible",
-                                      int(ds.attrs.get("num_incompressible", 0))))
+    incompressible = bool(options.get("incompressible", int(ds.attrs.get("num_incompressible", 0))))
     n_fine = int(options.get("n_fine", 400))
     lo_a, hi_a = float(np.min(a)), float(np.max(a))
     fine = np.linspace(lo_a, hi_a, n_fine) if hi_a > lo_a else np.array([lo_a])
@@ -145,46 +155,79 @@ def stability(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None =
                 continue
             ours[k] = critical_eps_closed_form(p, incompressible=incompressible)
             paper[k] = paper_eq6(p)
-        return np.where(np.isfinite(ours), ours, np.nan), np.where(np.isfinite(paper),
-                                                                   paper, np.nan)
+        return np.where(np.isfinite(ours), ours, np.nan), np.where(
+            np.isfinite(paper), paper, np.nan
+        )
 
     th, th_paper = theory(a)
     fth, fth_paper = theory(fine)
     amb = fixed_parameter(ds, AMB)
-    scale = (amb if act == "chi" and amb is not None else
-             (fixed_parameter(ds, "chi") or 1.0) if act == AMB else 1.0)
-    res = xr.Dataset(coords={act: ds[act].variable, strain: ds[strain].variable,
-                             "seed": ds["seed"].variable,
-                             "activity_fine": ("activity_fine", fine, {
-                                 "long_name": f"{act} on a fine grid (theory curve)",
-                                 "units": "1"})})
+    scale = (
+        amb
+        if act == "chi" and amb is not None
+        else (fixed_parameter(ds, "chi") or 1.0)
+        if act == AMB
+        else 1.0
+    )
+    res = xr.Dataset(
+        coords={
+            act: ds[act].variable,
+            strain: ds[strain].variable,
+            "seed": ds["seed"].variable,
+            "activity_fine": (
+                "activity_fine",
+                fine,
+                {"long_name": f"{act} on a fine grid (theory curve)", "units": "1"},
+            ),
+        }
+    )
     attrs: dict[str, Any] = {
         "fit_criterion": "sigma2_S(t_final) > sigma2_S(t_final / 2), or failed with "
         "reason in " + (", ".join(sorted(reasons)) or "(none)"),
-             "fit_activity": act, "fit_strain": strain, "fit_activity_scale": float(scale),
-             "fit_incompressible": int(incompressible),
-             "fit_mechanics": str(ds.attrs.get("num_mechanics", ""))}
-    res["stability_growth"] = variable(dims, growth, "log10 sigma2_S(t_final) / "
-                                       "sigma2_S(t_final / 2) (decades)", "1")
-    res["stability_unstable"] = variable(dims, unstable, "1 unstable, 0 stable, -1 unknown "
-                                         "(missing, or failed for another reason)", **attrs)
-    res["stability_fraction_unstable"] = variable([act, strain], frac, "fraction of classified "
-                                                  "seeds that are unstable")
-    res["stability_eps_c_sim"] = variable([act], eps_sim, "simulated critical strain: midpoint "
-                                          "between the last stable and the first unstable strain",
-                                          fit_fraction=frac_needed)
-    res["stability_eps_c_sim_lower"] = variable([act], eps_lo, "simulated critical strain, grid "
-                                                "interval lower end")
-    res["stability_eps_c_sim_upper"] = variable([act], eps_hi, "simulated critical strain, grid "
-                                                "interval upper end")
-    res["stability_eps_c_theory"] = variable([act], th, "critical strain of the linear stability "
-                                             "analysis (docs/stability.md Eq. S10); NaN: none")
-    res["stability_eps_c_paper"] = variable([act], th_paper, "critical strain of paper Eq. (6) "
-                                            "as printed")
-    res["stability_theory_fine"] = variable(["activity_fine"], fth, "critical strain of the linear "
-                                            "stability analysis on the fine activity axis")
-    res["stability_paper_fine"] = variable(["activity_fine"], fth_paper, "paper Eq. (6) as printed "
-                                           "on the fine activity axis")
+        "fit_activity": act,
+        "fit_strain": strain,
+        "fit_activity_scale": float(scale),
+        "fit_incompressible": int(incompressible),
+        "fit_mechanics": str(ds.attrs.get("num_mechanics", "")),
+    }
+    res["stability_growth"] = variable(
+        dims, growth, "log10 sigma2_S(t_final) / sigma2_S(t_final / 2) (decades)", "1"
+    )
+    res["stability_unstable"] = variable(
+        dims,
+        unstable,
+        "1 unstable, 0 stable, -1 unknown (missing, or failed for another reason)",
+        **attrs,
+    )
+    res["stability_fraction_unstable"] = variable(
+        [act, strain], frac, "fraction of classified seeds that are unstable"
+    )
+    res["stability_eps_c_sim"] = variable(
+        [act],
+        eps_sim,
+        "simulated critical strain: midpoint between the last stable and the first unstable strain",
+        fit_fraction=frac_needed,
+    )
+    res["stability_eps_c_sim_lower"] = variable(
+        [act], eps_lo, "simulated critical strain, grid interval lower end"
+    )
+    res["stability_eps_c_sim_upper"] = variable(
+        [act], eps_hi, "simulated critical strain, grid interval upper end"
+    )
+    res["stability_eps_c_theory"] = variable(
+        [act],
+        th,
+        "critical strain of the linear stability analysis (docs/stability.md Eq. S10); NaN: none",
+    )
+    res["stability_eps_c_paper"] = variable(
+        [act], th_paper, "critical strain of paper Eq. (6) as printed"
+    )
+    res["stability_theory_fine"] = variable(
+        ["activity_fine"],
+        fth,
+        "critical strain of the linear stability analysis on the fine activity axis",
+    )
+    res["stability_paper_fine"] = variable(
+        ["activity_fine"], fth_paper, "paper Eq. (6) as printed on the fine activity axis"
+    )
     return res
-
-

@@ -47,8 +47,9 @@ def percentiles(samples: Array, confidence: float) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def bootstrap_seed_means(values: ArrayLike, n_boot: int, rng: np.random.Generator,
-                         batch: int = 64) -> Array:
+def bootstrap_seed_means(
+    values: ArrayLike, n_boot: int, rng: np.random.Generator, batch: int = 64
+) -> Array:
     """Bootstrap replicates of the seed mean at every point.
 
     ``values`` has the seeds on its last axis (NaN = missing run). For every replicate and
@@ -68,8 +69,9 @@ def bootstrap_seed_means(values: ArrayLike, n_boot: int, rng: np.random.Generato
         picked = np.take_along_axis(np.broadcast_to(flat, (b, *flat.shape)), idx, axis=-1)
         picked = np.where(cols < count[:, None], picked, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            out[start:start + b] = np.where(count > 0, picked.sum(-1) / np.maximum(count, 1),
-                                            np.nan)
+            out[start : start + b] = np.where(
+                count > 0, picked.sum(-1) / np.maximum(count, 1), np.nan
+            )
     return out.reshape(n_boot, *shape)
 
 
@@ -92,4 +94,3 @@ def fit_power_law(x: ArrayLike, y: ArrayLike) -> tuple[float, float]:
     ok = np.isfinite(xa) & np.isfinite(ya) & (xa > 0) & (ya > 0)
     beta, b = fit_line(np.log10(xa[ok]), np.log10(ya[ok]))
     return beta, (10.0**b if math.isfinite(b) else math.nan)
-

@@ -49,9 +49,17 @@ def largest_step(x: Array, y: Array) -> tuple[int, int, float]:
     return int(idx[k]), int(idx[k + 1]), float(steps[k])
 
 
-def fit_transition(x: ArrayLike, values: ArrayLike, *, log: bool = True, min_jump: float = 1.0,
-                   mean: str = "geometric", n_boot: int = 1000, confidence: float = 0.95,
-                   rng: np.random.Generator | None = None) -> TransitionFit:
+def fit_transition(
+    x: ArrayLike,
+    values: ArrayLike,
+    *,
+    log: bool = True,
+    min_jump: float = 1.0,
+    mean: str = "geometric",
+    n_boot: int = 1000,
+    confidence: float = 0.95,
+    rng: np.random.Generator | None = None,
+) -> TransitionFit:
     r"""Locate the jump of the seed mean of ``values`` (shape ``(len(x), n_seeds)``, NaN for
     missing runs) along ``x``; see docs/campaigns.md, "Fits". With ``log`` the step is measured in
     decades, else in the observable's units; a step below ``min_jump`` is not a transition
@@ -64,8 +72,7 @@ def fit_transition(x: ArrayLike, values: ArrayLike, *, log: bool = True, min_jum
     xa = np.asarray(x, dtype=float)
     v = np.asarray(values, dtype=float)
     if v.ndim != 2 or v.shape[0] != xa.size:
-        raise FitError(f"values must have shape (len(x), n_seeds) = ({xa.size}, n); "
-                       f"got {v.shape}")
+        raise FitError(f"values must have shape (len(x), n_seeds) = ({xa.size}, n); got {v.shape}")
     order = np.argsort(xa)
     xa, v = xa[order], v[order]
 
@@ -104,14 +111,24 @@ def fit_transition(x: ArrayLike, values: ArrayLike, *, log: bool = True, min_jum
     _, bhi = percentiles(highs, confidence)
     lower = float(np.nanmin([xa[i], blo]))
     upper = float(np.nanmax([xa[j], bhi]))
-    return TransitionFit(location=float(location), lower=lower, upper=upper,
-                         grid_lower=float(xa[i]), grid_upper=float(xa[j]),
-                         seed_lower=seed_lower, seed_upper=seed_upper, jump=step,
-                         level=float(level), direction=direction, fraction_high=frac)
+    return TransitionFit(
+        location=float(location),
+        lower=lower,
+        upper=upper,
+        grid_lower=float(xa[i]),
+        grid_upper=float(xa[j]),
+        seed_lower=seed_lower,
+        seed_upper=seed_upper,
+        jump=step,
+        level=float(level),
+        direction=direction,
+        fraction_high=frac,
+    )
 
 
-def transition(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
-               ) -> xr.Dataset:
+def transition(
+    phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
+) -> xr.Dataset:
     """The ``transition`` fit (docs/campaigns.md, "Fits"). Options: ``axis``, ``observable``
     (default ``sigma2_S``), ``log`` (default true), ``min_jump`` (decades, default 1),
     ``prefix`` (variable prefix, default ``transition``), and the common options."""
@@ -132,15 +149,32 @@ def transition(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
     rng = bootstrap_rng(options)
     oshape = tuple(ds.sizes[d] for d in others)
     flat = data.values.reshape(-1, x.size, data.sizes["seed"])
-    names = ("location", "lower", "upper", "grid_lower", "grid_upper", "seed_lower",
-             "seed_upper", "jump", "level", "direction")
+    names = (
+        "location",
+        "lower",
+        "upper",
+        "grid_lower",
+        "grid_upper",
+        "seed_lower",
+        "seed_upper",
+        "jump",
+        "level",
+        "direction",
+    )
     out = {n: np.full(flat.shape[0], np.nan) for n in names}
     frac = np.full((flat.shape[0], x.size), np.nan)
     order = np.argsort(x)
     for k in range(flat.shape[0]):
-        f = fit_transition(x, flat[k], log=log_scale, min_jump=min_jump, mean=mean_kind,
-                           n_boot=int(options.get("n_boot", 1000)),
-                           confidence=float(options.get("confidence", 0.95)), rng=rng)
+        f = fit_transition(
+            x,
+            flat[k],
+            log=log_scale,
+            min_jump=min_jump,
+            mean=mean_kind,
+            n_boot=int(options.get("n_boot", 1000)),
+            confidence=float(options.get("confidence", 0.95)),
+            rng=rng,
+        )
         for n in names:
             out[n][k] = getattr(f, n)
         frac[k, order] = f.fraction_high
@@ -148,7 +182,7 @@ def transition(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
     what = f"seed mean of {observable} along {axis}"
     long = {
         "location": f"transition location: midpoint of the grid bracket of the largest step "
-                    f"of the {what}",
+        f"of the {what}",
         "lower": "transition interval, lower end (grid bracket and seed bootstrap combined)",
         "upper": "transition interval, upper end (grid bracket and seed bootstrap combined)",
         "grid_lower": "grid value below the largest step",
@@ -156,7 +190,7 @@ def transition(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
         "seed_lower": "seed-bootstrap percentile interval of the location, lower end",
         "seed_upper": "seed-bootstrap percentile interval of the location, upper end",
         "jump": f"signed size of the largest step of the {what}"
-                + (" (decades: in log10 of the observable)" if log_scale else ""),
+        + (" (decades: in log10 of the observable)" if log_scale else ""),
         "level": "mid level of the step (log10 of the observable when log)",
         "direction": "+1 if the observable rises across the transition, -1 if it falls",
     }
@@ -165,15 +199,20 @@ def transition(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None 
     for n in names:
         result[f"{pre}_{n}"] = variable(others, out[n].reshape(oshape), long[n], unit)
     result[f"{pre}_fraction_high"] = variable(
-        [*others, axis], frac.reshape(*oshape, x.size),
-        "fraction of seeds beyond the step's mid level")
+        [*others, axis],
+        frac.reshape(*oshape, x.size),
+        "fraction of seeds beyond the step's mid level",
+    )
     result = result.assign_coords({axis: ds[axis].variable})
-    attrs = {"axis": axis, "observable": observable, "log": int(log_scale),
-             "min_jump": min_jump, "mean": mean_kind,
-             "method": "largest step of the seed mean; bracket midpoint",
-             "n_seeds": int(ds.sizes["seed"])}
+    attrs = {
+        "axis": axis,
+        "observable": observable,
+        "log": int(log_scale),
+        "min_jump": min_jump,
+        "mean": mean_kind,
+        "method": "largest step of the seed mean; bracket midpoint",
+        "n_seeds": int(ds.sizes["seed"]),
+    }
     for n in names:
         result[f"{pre}_{n}"].attrs.update({f"fit_{k}": v for k, v in attrs.items()})
     return result
-
-

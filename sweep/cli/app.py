@@ -37,19 +37,29 @@ def guarded(command: Callable[..., Any]) -> Callable[..., Any]:
     input, files that cannot be read or written and similar errors exit 2 (the file and
     cause named), anything else exits 1 as an internal error. ``--debug`` (or a command's
     ``--verbose``) lets the exception through, with its traceback."""
+
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return command(*args, **kwargs)
-        except (typer.Exit, click.exceptions.ClickException, click.exceptions.Abort,
-                KeyboardInterrupt, SystemExit):
+        except (
+            typer.Exit,
+            click.exceptions.ClickException,
+            click.exceptions.Abort,
+            KeyboardInterrupt,
+            SystemExit,
+        ):
             raise
         except Exception as e:
             if DEBUG["on"] or kwargs.get("verbose"):
                 raise
             code, text = _describe_error(e)
-            err_console().print(f"[bold red]error:[/] {escape(text)} (--debug shows the "
-                                "traceback)", soft_wrap=True, highlight=False, markup=True)
+            err_console().print(
+                f"[bold red]error:[/] {escape(text)} (--debug shows the traceback)",
+                soft_wrap=True,
+                highlight=False,
+                markup=True,
+            )
             raise typer.Exit(code) from None
 
     return wrapper
@@ -63,8 +73,9 @@ def _describe_error(e: Exception) -> tuple[int, str]:
     if isinstance(e, NematicError):
         return EXIT_BAD_INPUT, str(e)
     if isinstance(e, MemoryError):
-        return EXIT_BAD_INPUT, ("not enough memory (lower the resolution, or give the process "
-                                "more memory)")
+        return EXIT_BAD_INPUT, (
+            "not enough memory (lower the resolution, or give the process more memory)"
+        )
     if isinstance(e, OSError):
         where = str(e.filename) if e.filename else ""
         cause = storage_cause(Path(where), e) if where else (e.strerror or str(e))
@@ -82,8 +93,9 @@ class _App(typer.Typer):
         FRESH_PROCESS["on"] = True
         return super().__call__(*args, **kwargs)
 
-    def command(self, *args: Any, **kwargs: Any  # type: ignore[override]
-                ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    def command(  # type: ignore[override]
+        self, *args: Any, **kwargs: Any
+    ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
         register = super().command(*args, **kwargs)
 
         def decorator(f: Callable[..., Any]) -> Callable[..., Any]:
@@ -106,31 +118,52 @@ app = _App(
 # --------------------------------------------------------------------------- shared options
 CampaignArg = Annotated[Path, typer.Argument(help="The campaign YAML file.", show_default=False)]
 #: a campaign given by its file or by the name of its results folder (export, report)
-CampaignRefArg = Annotated[str, typer.Argument(
-    metavar="CAMPAIGN", show_default=False,
-    help="The campaign YAML file, or the campaign's name (its results folder, read with "
-    "the campaign copy the last run left there).")]
-ResultsOpt = Annotated[Path, typer.Option(
-    "--results", envvar="NEMATIC_RESULTS",
-    help="Folder holding `results/NAME/` for every campaign.")]
-SetOpt = Annotated[list[str] | None, typer.Option(
-    "--set", metavar="NAME=VALUE",
-    help="Override a base parameter or numerics value (repeatable), e.g. --set mechanics=linear.")]
-SeedsOpt = Annotated[str | None, typer.Option(
-    "--seeds", help="Override the seeds: a count (5) or a list (0,1,2).")]
-NameOpt = Annotated[str | None, typer.Option(
-    "--name", help="Override the campaign name (and so its results folder).")]
-VerboseOpt = Annotated[bool, typer.Option(
-    "--verbose", "-v", help="Also log details (INFO messages, library warnings).")]
-QuietOpt = Annotated[bool, typer.Option(
-    "--quiet", "-q", help="Only results and errors: no progress, no warnings.")]
+CampaignRefArg = Annotated[
+    str,
+    typer.Argument(
+        metavar="CAMPAIGN",
+        show_default=False,
+        help="The campaign YAML file, or the campaign's name (its results folder, read with "
+        "the campaign copy the last run left there).",
+    ),
+]
+ResultsOpt = Annotated[
+    Path,
+    typer.Option(
+        "--results",
+        envvar="NEMATIC_RESULTS",
+        help="Folder holding `results/NAME/` for every campaign.",
+    ),
+]
+SetOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--set",
+        metavar="NAME=VALUE",
+        help="Override a base parameter or numerics value (repeatable), e.g. "
+        "--set mechanics=linear.",
+    ),
+]
+SeedsOpt = Annotated[
+    str | None, typer.Option("--seeds", help="Override the seeds: a count (5) or a list (0,1,2).")
+]
+NameOpt = Annotated[
+    str | None,
+    typer.Option("--name", help="Override the campaign name (and so its results folder)."),
+]
+VerboseOpt = Annotated[
+    bool,
+    typer.Option("--verbose", "-v", help="Also log details (INFO messages, library warnings)."),
+]
+QuietOpt = Annotated[
+    bool, typer.Option("--quiet", "-q", help="Only results and errors: no progress, no warnings.")
+]
 
 
 def error(console: Console, message: object) -> None:
     """One error line, ``error: MESSAGE``, the same for every command. The message is
     printed literally (no rich markup: ``[start, stop, num]`` stays as it is)."""
-    console.print(f"[bold red]error:[/] {escape(str(message))}", highlight=False,
-                  soft_wrap=True)
+    console.print(f"[bold red]error:[/] {escape(str(message))}", highlight=False, soft_wrap=True)
 
 
 def _version_callback(value: bool) -> None:
@@ -142,19 +175,33 @@ def _version_callback(value: bool) -> None:
 
 
 @app.callback()
-def _main(version: Annotated[bool, typer.Option(
-        "--version", callback=_version_callback, is_eager=True,
-        help="Print the version and exit.")] = False,
-          debug: Annotated[bool, typer.Option(
-        "--debug", envvar="NEMATIC_DEBUG",
-        help="Show the Python traceback of an error (by default one line says what went "
-        "wrong).")] = False) -> None:
+def _main(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            callback=_version_callback,
+            is_eager=True,
+            help="Print the version and exit.",
+        ),
+    ] = False,
+    debug: Annotated[
+        bool,
+        typer.Option(
+            "--debug",
+            envvar="NEMATIC_DEBUG",
+            help="Show the Python traceback of an error (by default one line says what went "
+            "wrong).",
+        ),
+    ] = False,
+) -> None:
     """Active nematic solids: run the model, sweep it, aggregate phase diagrams."""
     DEBUG["on"] = debug
 
 
-def setup_logging(console: Console, verbose: bool, quiet: bool = False,
-                  cluster: bool = False) -> None:
+def setup_logging(
+    console: Console, verbose: bool, quiet: bool = False, cluster: bool = False
+) -> None:
     """Log to ``console`` (INFO with ``verbose``, ERROR with ``quiet``, else WARNING), with
     the chatty libraries' loggers at ERROR. ``cluster``: the command starts a dask cluster;
     distributed configures its loggers when it is imported, so it is imported first (the
@@ -184,9 +231,15 @@ def _parse_seeds(text: str | None) -> int | list[int] | None:
     return value  # validated with the rest of the campaign
 
 
-def load(console: Console, path: Path, settings: list[str] | None, seeds: str | None,
-         name: str | None, scheduler: str | None = None,
-         workers: int | None = None) -> Campaign:
+def load(
+    console: Console,
+    path: Path,
+    settings: list[str] | None,
+    seeds: str | None,
+    name: str | None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+) -> Campaign:
     from ..errors import CampaignError
     from ..spec import Overrides, load_campaign
     from ..spec.collection import read_collection
@@ -194,16 +247,23 @@ def load(console: Console, path: Path, settings: list[str] | None, seeds: str | 
 
     try:
         if read_collection(path) is not None:
-            error(console, f"{path} is a collection of campaigns (its campaigns: list): this "
-                  "command takes one of its campaign files; validate, run, status and stop "
-                  "take the collection")
+            error(
+                console,
+                f"{path} is a collection of campaigns (its campaigns: list): this "
+                "command takes one of its campaign files; validate, run, status and stop "
+                "take the collection",
+            )
             raise typer.Exit(EXIT_BAD_INPUT)
     except CampaignError:
         pass  # its problems are the campaign reader's to report
     try:
-        overrides = Overrides(settings=parse_assignments(settings or []),
-                              seeds=_parse_seeds(seeds), name=name, scheduler=scheduler,
-                              workers=workers)
+        overrides = Overrides(
+            settings=parse_assignments(settings or []),
+            seeds=_parse_seeds(seeds),
+            name=name,
+            scheduler=scheduler,
+            workers=workers,
+        )
         return load_campaign(path, overrides)
     except CampaignError as e:
         error(console, e)
@@ -226,6 +286,7 @@ def fmt_time(seconds: float | None) -> str:
 @contextlib.contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
     """SIGTERM (a batch system ending the driver's job) stops as cleanly as Ctrl-C."""
+
     def handler(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt
 
@@ -238,5 +299,3 @@ def sigterm_as_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
-
-

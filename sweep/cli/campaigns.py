@@ -45,14 +45,25 @@ from .progress import ProgressEvents
 
 
 # --------------------------------------------------------------------------- validate
-def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
-             set_: SetOpt = None, seeds: SeedsOpt = None, name: NameOpt = None,
-             estimate: Annotated[bool, typer.Option(
-                 "--estimate", help="Also estimate the cost: the runs to do, their CPU time "
-                 "and the wall time on the campaign's workers, from the campaign's finished "
-                 "runs in the results folder, else from the cost model (as `nematic run "
-                 "--dry-run`). Reads the folder, writes nothing.")] = False,
-             verbose: VerboseOpt = False, quiet: QuietOpt = False) -> None:
+def validate(
+    campaign: CampaignArg,
+    results: ResultsOpt = Path("results"),
+    set_: SetOpt = None,
+    seeds: SeedsOpt = None,
+    name: NameOpt = None,
+    estimate: Annotated[
+        bool,
+        typer.Option(
+            "--estimate",
+            help="Also estimate the cost: the runs to do, their CPU time "
+            "and the wall time on the campaign's workers, from the campaign's finished "
+            "runs in the results folder, else from the cost model (as `nematic run "
+            "--dry-run`). Reads the folder, writes nothing.",
+        ),
+    ] = False,
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
+) -> None:
     """Check a campaign file without running anything.
 
     Exit 0 if it is valid (a summary of the grid is printed), 2 with every problem listed
@@ -63,9 +74,19 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
     coll = collection_or_none(campaign)
     if coll is not None:  # a collection of campaigns (sweep.spec.collection): each, then the sum
         refuse_name(name)
-        validate_collection(coll, validate, dict(
-            results=results, set_=set_, seeds=seeds, estimate=estimate, verbose=verbose,
-            quiet=quiet), console)
+        validate_collection(
+            coll,
+            validate,
+            dict(
+                results=results,
+                set_=set_,
+                seeds=seeds,
+                estimate=estimate,
+                verbose=verbose,
+                quiet=quiet,
+            ),
+            console,
+        )
         return
     c = load(err_console(), campaign, set_, seeds, name)
     console.print(f"[green]valid[/]: campaign [bold]{escape(c.name)}[/] ({escape(str(campaign))})")
@@ -74,19 +95,26 @@ def validate(campaign: CampaignArg, results: ResultsOpt = Path("results"),
             vals = ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in a.values[:8])
             more = ", ..." if len(a.values) > 8 else ""
             zipped = f" (zipped with {d.name})" if a.name != d.name else ""
-            console.print(f"  axis {a.name}{zipped}: {len(a.values)} values "
-                          f"{escape(f'[{vals}{more}]')}")
+            console.print(
+                f"  axis {a.name}{zipped}: {len(a.values)} values {escape(f'[{vals}{more}]')}"
+            )
     console.print(f"  seeds: {len(c.seeds)}; grid points: {c.n_points}; runs: {c.n_runs}")
     ex = c.execution
-    where = {"local": f"local dask cluster ({ex.workers or 'one per core'} worker(s))",
-             "scheduler": f"dask scheduler {ex.scheduler}",
-             "cluster": f"dask-jobqueue {ex.cluster.kind if ex.cluster else ''}"}[ex.mode]
+    where = {
+        "local": f"local dask cluster ({ex.workers or 'one per core'} worker(s))",
+        "scheduler": f"dask scheduler {ex.scheduler}",
+        "cluster": f"dask-jobqueue {ex.cluster.kind if ex.cluster else ''}",
+    }[ex.mode]
     console.print(f"  execution: {where}; results: {results / c.name}")
     if c.fits or c.figures is not None:
-        shown = ("every one that applies" if c.figures is None
-                 else ", ".join(p.name for p in c.figures) or "none")
-        console.print("  fits: " + (", ".join(p.name for p in c.fits) or "none")
-                      + "; figures: " + shown)
+        shown = (
+            "every one that applies"
+            if c.figures is None
+            else ", ".join(p.name for p in c.figures) or "none"
+        )
+        console.print(
+            "  fits: " + (", ".join(p.name for p in c.fits) or "none") + "; figures: " + shown
+        )
     if c.refine is not None:  # an adaptive campaign: its first round and a bound (sweep/refine)
         from ..refine.report import validation_lines
 
@@ -112,52 +140,107 @@ def run(
     set_: SetOpt = None,
     seeds: SeedsOpt = None,
     name: NameOpt = None,
-    scheduler: Annotated[str | None, typer.Option(
-        "--scheduler", help="Use the dask scheduler at this address (tcp://HOST:PORT) instead "
-        "of the campaign's execution section.")] = None,
-    workers: Annotated[int | None, typer.Option(
-        "--workers", help="Local worker processes (default: the campaign's, else one per "
-        "core).")] = None,
-    retry_failed: Annotated[bool, typer.Option(
-        "--retry-failed", help="Also redo runs that failed before (their new record keeps "
-        "the earlier failures under previous_failures).")] = False,
-    max_failures: Annotated[str | None, typer.Option(
-        "--max-failures", metavar="N",
-        help="Stop the campaign (exit 3) once more runs failed in this session than N: a "
-        "count (0 stops at the first failure) or a fraction of the runs to do (0.1). Runs "
-        "not finished stay pending.")] = None,
-    prune: Annotated[bool, typer.Option(
-        "--prune", help="First remove the orphaned runs: the records and files in the "
-        "results folder of runs this campaign does not plan (e.g. values since removed from "
-        "an axis); says how many.")] = False,
-    check_files: Annotated[bool, typer.Option(
-        "--check-files", help="Checksum every finished run's file (by default only files "
-        "whose size or mtime changed are), and redo the corrupt ones.")] = False,
-    check_files_alias: Annotated[bool, typer.Option(
-        "--verify", hidden=True, help="The former name of --check-files.")] = False,
-    verification: Annotated[bool, typer.Option(
-        "--verification/--no-verification", help="Run the campaign's verify: section "
-        "(as 'nematic verify' does): after the fits, or first with verify.before.")] = True,
-    aggregate: Annotated[bool, typer.Option(
-        "--aggregate/--no-aggregate", help="Write phase.nc at the end.")] = True,
-    figures: Annotated[bool, typer.Option(
-        "--figures/--no-figures", help="After phase.nc, write fits.nc and the figures "
-        "(as 'nematic figures' does), then report.html (as 'nematic report' does).")] = True,
-    dashboard: Annotated[bool, typer.Option(
-        "--dashboard/--no-dashboard", help="Serve the dask dashboard (local cluster: on "
-        "127.0.0.1, a free port) and print its link.")] = True,
-    dry_run: Annotated[bool, typer.Option(
-        "--dry-run", help="Run nothing and write nothing (no results folder, no lock): print "
-        "the runs to do, their estimated CPU time and the wall time on the workers at this "
-        "machine's load, from the campaign's own finished runs (per point, scaled by "
-        "resolution, length and mechanics), else from the calibrated cost model; with the "
-        "basis and the 10-90 % range. Takes --workers, --scheduler and --retry-failed into "
-        "account.")] = False,
-    detach: Annotated[bool, typer.Option(
-        "--detach", help="Run the driver in the background, in a session of its own "
-        "(closing the terminal or logging out does not end it), its output in "
-        "results/NAME/driver.log; prints how to follow it (`tail -f`, `nematic status`) and "
-        "stop it (`nematic stop NAME`).")] = False,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Use the dask scheduler at this address (tcp://HOST:PORT) instead "
+            "of the campaign's execution section.",
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            "--workers", help="Local worker processes (default: the campaign's, else one per core)."
+        ),
+    ] = None,
+    retry_failed: Annotated[
+        bool,
+        typer.Option(
+            "--retry-failed",
+            help="Also redo runs that failed before (their new record keeps "
+            "the earlier failures under previous_failures).",
+        ),
+    ] = False,
+    max_failures: Annotated[
+        str | None,
+        typer.Option(
+            "--max-failures",
+            metavar="N",
+            help="Stop the campaign (exit 3) once more runs failed in this session than N: a "
+            "count (0 stops at the first failure) or a fraction of the runs to do (0.1). Runs "
+            "not finished stay pending.",
+        ),
+    ] = None,
+    prune: Annotated[
+        bool,
+        typer.Option(
+            "--prune",
+            help="First remove the orphaned runs: the records and files in the "
+            "results folder of runs this campaign does not plan (e.g. values since removed from "
+            "an axis); says how many.",
+        ),
+    ] = False,
+    check_files: Annotated[
+        bool,
+        typer.Option(
+            "--check-files",
+            help="Checksum every finished run's file (by default only files "
+            "whose size or mtime changed are), and redo the corrupt ones.",
+        ),
+    ] = False,
+    check_files_alias: Annotated[
+        bool, typer.Option("--verify", hidden=True, help="The former name of --check-files.")
+    ] = False,
+    verification: Annotated[
+        bool,
+        typer.Option(
+            "--verification/--no-verification",
+            help="Run the campaign's verify: section "
+            "(as 'nematic verify' does): after the fits, or first with verify.before.",
+        ),
+    ] = True,
+    aggregate: Annotated[
+        bool, typer.Option("--aggregate/--no-aggregate", help="Write phase.nc at the end.")
+    ] = True,
+    figures: Annotated[
+        bool,
+        typer.Option(
+            "--figures/--no-figures",
+            help="After phase.nc, write fits.nc and the figures "
+            "(as 'nematic figures' does), then report.html (as 'nematic report' does).",
+        ),
+    ] = True,
+    dashboard: Annotated[
+        bool,
+        typer.Option(
+            "--dashboard/--no-dashboard",
+            help="Serve the dask dashboard (local cluster: on "
+            "127.0.0.1, a free port) and print its link.",
+        ),
+    ] = True,
+    dry_run: Annotated[
+        bool,
+        typer.Option(
+            "--dry-run",
+            help="Run nothing and write nothing (no results folder, no lock): print "
+            "the runs to do, their estimated CPU time and the wall time on the workers at this "
+            "machine's load, from the campaign's own finished runs (per point, scaled by "
+            "resolution, length and mechanics), else from the calibrated cost model; with the "
+            "basis and the 10-90 % range. Takes --workers, --scheduler and --retry-failed into "
+            "account.",
+        ),
+    ] = False,
+    detach: Annotated[
+        bool,
+        typer.Option(
+            "--detach",
+            help="Run the driver in the background, in a session of its own "
+            "(closing the terminal or logging out does not end it), its output in "
+            "results/NAME/driver.log; prints how to follow it (`tail -f`, `nematic status`) and "
+            "stop it (`nematic stop NAME`).",
+        ),
+    ] = False,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -183,12 +266,30 @@ def run(
     coll = collection_or_none(campaign)
     if coll is not None:  # a collection of campaigns (sweep.spec.collection): one after the other
         refuse_name(name)
-        run_collection(coll, run, dict(
-            results=results, set_=set_, seeds=seeds, scheduler=scheduler, workers=workers,
-            retry_failed=retry_failed, max_failures=max_failures, prune=prune,
-            check_files=check_files, check_files_alias=check_files_alias,
-            verification=verification, aggregate=aggregate, figures=figures,
-            dashboard=dashboard, dry_run=dry_run, detach=detach, verbose=verbose, quiet=quiet))
+        run_collection(
+            coll,
+            run,
+            dict(
+                results=results,
+                set_=set_,
+                seeds=seeds,
+                scheduler=scheduler,
+                workers=workers,
+                retry_failed=retry_failed,
+                max_failures=max_failures,
+                prune=prune,
+                check_files=check_files,
+                check_files_alias=check_files_alias,
+                verification=verification,
+                aggregate=aggregate,
+                figures=figures,
+                dashboard=dashboard,
+                dry_run=dry_run,
+                detach=detach,
+                verbose=verbose,
+                quiet=quiet,
+            ),
+        )
         return
     c = load(err, campaign, set_, seeds, name, scheduler, workers)
     check_files = check_files or check_files_alias
@@ -200,13 +301,20 @@ def run(
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if dry_run:
         if detach or prune:
-            error(err, "--dry-run runs and writes nothing: it does not take "
-                  + ("--detach" if detach else "--prune"))
+            error(
+                err,
+                "--dry-run runs and writes nothing: it does not take "
+                + ("--detach" if detach else "--prune"),
+            )
             raise typer.Exit(EXIT_BAD_INPUT)
-        print_estimate(Console(highlight=False, soft_wrap=True), c, results,
-                       retry_failed=retry_failed, brief=quiet,
-                       header=f"dry run of campaign {c.name} ({results / c.name}): nothing "
-                       "is run or written")
+        print_estimate(
+            Console(highlight=False, soft_wrap=True),
+            c,
+            results,
+            retry_failed=retry_failed,
+            brief=quiet,
+            header=f"dry run of campaign {c.name} ({results / c.name}): nothing is run or written",
+        )
         return
     if detach:
         from .driver import run_detached
@@ -224,14 +332,26 @@ def run(
     try:
         expansion = expand(c)
         progress = Progress(
-            TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-            TextColumn("{task.fields[counts]}"), TimeElapsedColumn(),
-            TextColumn("ETA {task.fields[eta]}"), console=err, transient=False,
-            disable=quiet or not err.is_terminal)
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[counts]}"),
+            TimeElapsedColumn(),
+            TextColumn("ETA {task.fields[eta]}"),
+            console=err,
+            transient=False,
+            disable=quiet or not err.is_terminal,
+        )
         events = ProgressEvents(say, progress, store)
         try:
-            report_changes(say, c, store, expansion if c.refine is None else None,
-                           prune=prune, hint="--prune removes them")
+            report_changes(
+                say,
+                c,
+                store,
+                expansion if c.refine is None else None,
+                prune=prune,
+                hint="--prune removes them",
+            )
             if verification and c.verify is not None and c.verify.before:
                 from .verify import verify_step
 
@@ -239,16 +359,28 @@ def run(
             with sigterm_as_interrupt(), progress:
                 try:
                     if c.refine is None and c.precision is None:
-                        plan, summary = drive(expansion, store, retry_failed=retry_failed,
-                                              check_files=check_files, events=events,
-                                              dashboard=dashboard, limit=limit)
+                        plan, summary = drive(
+                            expansion,
+                            store,
+                            retry_failed=retry_failed,
+                            check_files=check_files,
+                            events=events,
+                            dashboard=dashboard,
+                            limit=limit,
+                        )
                     else:  # adaptive or seeds by precision: rounds planned from the results
                         from ..refine.driver import drive_rounds
 
                         plan, summary, expansion = drive_rounds(
-                            c, store, retry_failed=retry_failed, check_files=check_files,
-                            events=events, dashboard=dashboard, limit=limit,
-                            say=lambda line: say.print(line, markup=False))
+                            c,
+                            store,
+                            retry_failed=retry_failed,
+                            check_files=check_files,
+                            events=events,
+                            dashboard=dashboard,
+                            limit=limit,
+                            say=lambda line: say.print(line, markup=False),
+                        )
                 finally:
                     events.close()
         except (ClusterError, StoreError) as e:
@@ -261,32 +393,44 @@ def run(
             err.print("[yellow]interrupted[/]; rerun the same command to resume")
             raise typer.Exit(EXIT_INTERRUPTED) from None
         if summary is not None and summary.storage_error is not None:
-            kept = [str(rec.get("saved_to")) for _, rec in summary.unsaved
-                    if rec.get("saved_to")]
-            err.print(f"[bold red]error: results cannot be written[/]: "
-                      f"{escape(summary.storage_error)}. "
-                      f"Stopped after {summary.completed} stored run(s) this session; the "
-                      f"other runs stay pending (not failed). "
-                      + (f"{len(kept)} computed result(s) kept in "
-                         f"{Path(kept[0]).parent} (moved in by the next run). " if kept
-                         else "")
-                      + "Fix the storage and rerun the same command.",
-                      soft_wrap=True, highlight=False)
+            kept = [str(rec.get("saved_to")) for _, rec in summary.unsaved if rec.get("saved_to")]
+            err.print(
+                f"[bold red]error: results cannot be written[/]: "
+                f"{escape(summary.storage_error)}. "
+                f"Stopped after {summary.completed} stored run(s) this session; the "
+                f"other runs stay pending (not failed). "
+                + (
+                    f"{len(kept)} computed result(s) kept in "
+                    f"{Path(kept[0]).parent} (moved in by the next run). "
+                    if kept
+                    else ""
+                )
+                + "Fix the storage and rerun the same command.",
+                soft_wrap=True,
+                highlight=False,
+            )
             raise typer.Exit(EXIT_BAD_INPUT)
         if summary is not None and summary.stopped is not None:
-            error(err, f"stopped: {summary.stopped}. {summary.completed} run(s) finished "
-                  "this session; the runs not finished stay pending and phase.nc was not "
-                  f"rewritten. Details: nematic status {campaign}; rerun (with a higher "
-                  "--max-failures, or after a fix) to go on")
+            error(
+                err,
+                f"stopped: {summary.stopped}. {summary.completed} run(s) finished "
+                "this session; the runs not finished stay pending and phase.nc was not "
+                f"rewritten. Details: nematic status {campaign}; rerun (with a higher "
+                "--max-failures, or after a fix) to go on",
+            )
             raise typer.Exit(EXIT_TOO_MANY_FAILURES)
         if summary is not None and summary.interrupted:
-            err.print(f"[yellow]interrupted[/] after {summary.completed} run(s) "
-                      f"({summary.ok} ok, {len(summary.failed)} failed); rerun the same "
-                      "command to resume")
+            err.print(
+                f"[yellow]interrupted[/] after {summary.completed} run(s) "
+                f"({summary.ok} ok, {len(summary.failed)} failed); rerun the same "
+                "command to resume"
+            )
             raise typer.Exit(EXIT_INTERRUPTED)
         if summary is not None and summary.wall_time > 0:
-            say.print(f"{summary.completed} run(s) in {fmt_time(summary.wall_time)} "
-                      f"(sum of run times {fmt_time(summary.run_time)})")
+            say.print(
+                f"{summary.completed} run(s) in {fmt_time(summary.wall_time)} "
+                f"(sum of run times {fmt_time(summary.run_time)})"
+            )
         if aggregate:
             try:
                 write_phase(expansion, store)
@@ -307,53 +451,75 @@ def run(
                     if page is not None:
                         say.print(f"report: {escape(str(page))}")
             except StoreError as e:
-                error(err, f"{e}; the runs are stored, rerun the same command (or nematic "
-                      "aggregate) once the folder can be written")
+                error(
+                    err,
+                    f"{e}; the runs are stored, rerun the same command (or nematic "
+                    "aggregate) once the folder can be written",
+                )
                 raise typer.Exit(EXIT_BAD_INPUT) from None
         failures = [] if summary is None else summary.failed
         n_failed = len(failures) + len(plan.failed)
         if summary is not None and summary.lost:
-            err.print(f"[yellow]{len(summary.lost)} run(s) were cancelled by dask[/] (the "
-                      "scheduler or cluster went away); rerun the same command to do them")
+            err.print(
+                f"[yellow]{len(summary.lost)} run(s) were cancelled by dask[/] (the "
+                "scheduler or cluster went away); rerun the same command to do them"
+            )
         if summary is not None and summary.worker_lost:
-            err.print(f"[yellow]{len(summary.worker_lost)} run(s) lost their worker more "
-                      f"than {WORKER_LOSSES} times[/] (batch jobs cancelled, preempted or past "
-                      "their walltime, or the run kills its worker: memory?); they stay "
-                      "pending: rerun the same command to do them")
+            err.print(
+                f"[yellow]{len(summary.worker_lost)} run(s) lost their worker more "
+                f"than {WORKER_LOSSES} times[/] (batch jobs cancelled, preempted or past "
+                "their walltime, or the run kills its worker: memory?); they stay "
+                "pending: rerun the same command to do them"
+            )
         if summary is not None and (summary.lost or summary.worker_lost) and not n_failed:
             raise typer.Exit(EXIT_FAILED_RUNS)
         if n_failed:
             err.print(f"[red]{n_failed} run(s) failed[/]:")
             for r, rec in failures[:20]:
-                err.print(f"  {describe_failure(r, rec)}", soft_wrap=True, highlight=False,
-                          markup=False)
+                err.print(
+                    f"  {describe_failure(r, rec)}", soft_wrap=True, highlight=False, markup=False
+                )
             if len(failures) > 20:
                 err.print(f"  ... and {len(failures) - 20} more")
             if plan.failed:
-                err.print(f"  ... and {len(plan.failed)} earlier failure(s); "
-                          "--retry-failed redoes them")
+                err.print(
+                    f"  ... and {len(plan.failed)} earlier failure(s); --retry-failed redoes them"
+                )
             err.print(f"details: nematic status {campaign}")
             raise typer.Exit(EXIT_FAILED_RUNS)
     finally:
         lock.release()
 
 
-def print_estimate(console: Console, campaign: Any, results: Path, *, indent: str = "",
-                   retry_failed: bool = False, brief: bool = False,
-                   header: str | None = None) -> None:
+def print_estimate(
+    console: Console,
+    campaign: Any,
+    results: Path,
+    *,
+    indent: str = "",
+    retry_failed: bool = False,
+    brief: bool = False,
+    header: str | None = None,
+) -> None:
     """The cost before launch (:mod:`sweep.cost.estimate`): what changed in the campaign file,
     the runs to do and their CPU and wall time; ``brief``: the totals only."""
     from ..cost.estimate import estimate, lines
     from ..store import CampaignStore
 
     e = estimate(campaign, CampaignStore(results, campaign.name), retry_failed=retry_failed)
-    for line in ([header] if header else []) + ([] if brief else e.changes) + lines(
-            e, brief=brief):
+    for line in ([header] if header else []) + ([] if brief else e.changes) + lines(e, brief=brief):
         console.print(f"{indent}{line}", markup=False)
 
 
-def report_changes(say: Console, campaign: Any, store: Any, expansion: Any = None, *,
-                   prune: bool = False, hint: str = "") -> dict[str, Any] | None:
+def report_changes(
+    say: Console,
+    campaign: Any,
+    store: Any,
+    expansion: Any = None,
+    *,
+    prune: bool = False,
+    hint: str = "",
+) -> dict[str, Any] | None:
     """Print what changed since the results were made (:mod:`sweep.outputs.changes`) and, with
     ``prune``, remove the orphaned runs (the caller holds the lock); return the changes for
     ``--json``."""
@@ -372,12 +538,16 @@ def report_changes(say: Console, campaign: Any, store: Any, expansion: Any = Non
         else:
             from ..refine.rounds import expansion_for
 
-            orphaned = run_counts(campaign, expansion or expansion_for(campaign, store), store,
-                                  store.scan()).orphaned
+            orphaned = run_counts(
+                campaign, expansion or expansion_for(campaign, store), store, store.scan()
+            ).orphaned
         n = prune_runs(store, orphaned)
-        say.print(f"pruned {n} orphaned run(s) (their records and run files) from "
-                  f"{store.runs_dir}" if n else "nothing to prune: every run in the folder "
-                  "is planned by this campaign", markup=False)
+        say.print(
+            f"pruned {n} orphaned run(s) (their records and run files) from {store.runs_dir}"
+            if n
+            else "nothing to prune: every run in the folder is planned by this campaign",
+            markup=False,
+        )
     return None if changed is None else changed.to_dict()
 
 
@@ -414,8 +584,11 @@ def aggregate(
     defer_dask_array()
     store = CampaignStore(results, c.name)
     if not store.runs_dir.is_dir():
-        error(err, f"no results for campaign {c.name} in {store.root}; run it first "
-              f"(nematic run {campaign})")
+        error(
+            err,
+            f"no results for campaign {c.name} in {store.root}; run it first "
+            f"(nematic run {campaign})",
+        )
         raise typer.Exit(EXIT_BAD_INPUT)
     lock = store.lock()
     try:
@@ -429,4 +602,5 @@ def aggregate(
         raise typer.Exit(EXIT_BAD_INPUT) from None
     Console(highlight=False, soft_wrap=True, quiet=quiet).print(
         f"wrote {store.phase_path}: {ds.attrs['n_ok']} ok, {ds.attrs['n_failed']} failed, "
-        f"{ds.attrs['n_missing']} missing of {ds.attrs['n_runs']} runs")
+        f"{ds.attrs['n_missing']} missing of {ds.attrs['n_runs']} runs"
+    )

@@ -52,13 +52,20 @@ def collection_or_none(path: Path) -> Collection | None:
 
 def refuse_name(name: str | None) -> None:
     if name is not None:
-        error(err_console(), "--name renames one campaign; the campaigns of a collection keep "
-              "their own names")
+        error(
+            err_console(),
+            "--name renames one campaign; the campaigns of a collection keep their own names",
+        )
         raise typer.Exit(EXIT_BAD_INPUT)
 
 
-def load_members(coll: Collection, set_: list[str] | None, seeds: str | None,
-                 scheduler: str | None = None, workers: int | None = None) -> list[Campaign]:
+def load_members(
+    coll: Collection,
+    set_: list[str] | None,
+    seeds: str | None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+) -> list[Campaign]:
     """Every member read and checked; exit 2 after listing the problems of every member
     (and of two members sharing a name)."""
     err = err_console()
@@ -93,8 +100,9 @@ def exit_code(e: BaseException) -> int:
 
 
 # --------------------------------------------------------------------------- cost
-def estimate_lines(coll: Collection, campaigns: list[Campaign], results: Path, *,
-                   retry_failed: bool = False) -> list[str]:
+def estimate_lines(
+    coll: Collection, campaigns: list[Campaign], results: Path, *, retry_failed: bool = False
+) -> list[str]:
     """The cost of the whole collection: one line per member (runs to do, CPU and wall time
     of its current round, the later rounds' forecast or bound) and the total, the members
     one after the other."""
@@ -102,18 +110,29 @@ def estimate_lines(coll: Collection, campaigns: list[Campaign], results: Path, *
     from ..store import CampaignStore
 
     rows = []
-    total = {"todo": 0, "cpu": 0.0, "wall": 0.0, "later": 0, "later_cpu": 0.0,
-             "later_wall": 0.0, "bound": 0}
+    total = {
+        "todo": 0,
+        "cpu": 0.0,
+        "wall": 0.0,
+        "later": 0,
+        "later_cpu": 0.0,
+        "later_wall": 0.0,
+        "bound": 0,
+    }
     for c in campaigns:
         e = estimate(c, CampaignStore(results, c.name), retry_failed=retry_failed)
         wall = e.wall[0] + e.overhead if e.to_do else 0.0
         line = f"  {c.name}: {e.total} planned, {e.done} done, {e.to_do} to do" + (
             f": {e.cpu[0] / 3600:.2g} CPU-h, {fmt_seconds(wall)} wall on {e.workers} worker(s)"
-            if e.to_do else "")
+            if e.to_do
+            else ""
+        )
         if e.later is not None:
             kind = "expected" if e.later.forecast else "at most"
-            line += (f"; later rounds: {kind} {e.later.runs} more runs, "
-                     f"{e.later.cpu / 3600:.2g} CPU-h, {fmt_seconds(e.later.wall)} wall")
+            line += (
+                f"; later rounds: {kind} {e.later.runs} more runs, "
+                f"{e.later.cpu / 3600:.2g} CPU-h, {fmt_seconds(e.later.wall)} wall"
+            )
             total["later"] += e.later.runs
             total["later_cpu"] += e.later.cpu
             total["later_wall"] += e.later.wall
@@ -122,28 +141,38 @@ def estimate_lines(coll: Collection, campaigns: list[Campaign], results: Path, *
         total["todo"] += e.to_do
         total["cpu"] += e.cpu[0]
         total["wall"] += wall
-    out = [f"collection {coll.name} ({coll.source}): {len(campaigns)} campaign(s), run one "
-           "after the other", *rows,
-           f"  total now: {total['todo']} runs, {total['cpu'] / 3600:.2g} CPU-h, "
-           f"{fmt_seconds(total['wall'])} wall"]
+    out = [
+        f"collection {coll.name} ({coll.source}): {len(campaigns)} campaign(s), run one "
+        "after the other",
+        *rows,
+        f"  total now: {total['todo']} runs, {total['cpu'] / 3600:.2g} CPU-h, "
+        f"{fmt_seconds(total['wall'])} wall",
+    ]
     if total["later"] or total["bound"]:
-        out.append(f"  total with the later rounds: about {total['todo'] + total['later']} "
-                   f"runs, {(total['cpu'] + total['later_cpu']) / 3600:.2g} CPU-h, "
-                   f"{fmt_seconds(total['wall'] + total['later_wall'])} wall (the rounds' "
-                   "forecasts and bounds as each campaign's --dry-run gives them)")
-    out.append("  (each campaign's own `nematic run FILE --dry-run` lists its points and the "
-               "basis of its estimate)")
+        out.append(
+            f"  total with the later rounds: about {total['todo'] + total['later']} "
+            f"runs, {(total['cpu'] + total['later_cpu']) / 3600:.2g} CPU-h, "
+            f"{fmt_seconds(total['wall'] + total['later_wall'])} wall (the rounds' "
+            "forecasts and bounds as each campaign's --dry-run gives them)"
+        )
+    out.append(
+        "  (each campaign's own `nematic run FILE --dry-run` lists its points and the "
+        "basis of its estimate)"
+    )
     return out
 
 
 # --------------------------------------------------------------------------- commands
-def validate_collection(coll: Collection, validate: Callable[..., None], options: dict[str, Any],
-                        console: Console) -> None:
+def validate_collection(
+    coll: Collection, validate: Callable[..., None], options: dict[str, Any], console: Console
+) -> None:
     """``nematic validate COLLECTION``: every member as ``validate`` checks it, then the
     collection's cost with ``--estimate``."""
     campaigns = load_members(coll, options["set_"], options["seeds"])
-    console.print(f"[green]valid[/]: collection [bold]{coll.name}[/] ({coll.source}): "
-                  f"{len(campaigns)} campaign(s)")
+    console.print(
+        f"[green]valid[/]: collection [bold]{coll.name}[/] ({coll.source}): "
+        f"{len(campaigns)} campaign(s)"
+    )
     for member in coll.members:
         validate(member, **{**options, "estimate": False})
     if options["estimate"]:
@@ -159,17 +188,19 @@ def run_collection(coll: Collection, run: Callable[..., None], options: dict[str
     results: Path = options["results"]
     quiet = options["quiet"]
     say = Console(highlight=False, soft_wrap=True, quiet=quiet)
-    campaigns = load_members(coll, options["set_"], options["seeds"], options["scheduler"],
-                             options["workers"])
+    campaigns = load_members(
+        coll, options["set_"], options["seeds"], options["scheduler"], options["workers"]
+    )
     if options["dry_run"]:
         if options["detach"] or options["prune"]:
-            error(err_console(), "--dry-run runs and writes nothing: it does not take "
-                  + ("--detach" if options["detach"] else "--prune"))
+            error(
+                err_console(),
+                "--dry-run runs and writes nothing: it does not take "
+                + ("--detach" if options["detach"] else "--prune"),
+            )
             raise typer.Exit(EXIT_BAD_INPUT)
-        say.print(f"dry run of collection {coll.name}: nothing is run or written",
-                  markup=False)
-        for line in estimate_lines(coll, campaigns, results,
-                                   retry_failed=options["retry_failed"]):
+        say.print(f"dry run of collection {coll.name}: nothing is run or written", markup=False)
+        for line in estimate_lines(coll, campaigns, results, retry_failed=options["retry_failed"]):
             say.print(line, markup=False)
         return
     if options["detach"]:
@@ -178,8 +209,7 @@ def run_collection(coll: Collection, run: Callable[..., None], options: dict[str
         say.print(line, markup=False)
     outcome: list[tuple[Campaign, int, float]] = []
     for k, (member, c) in enumerate(zip(coll.members, campaigns, strict=True)):
-        say.print(f"\n== campaign {c.name} ({k + 1} of {len(campaigns)}): {member}",
-                  markup=False)
+        say.print(f"\n== campaign {c.name} ({k + 1} of {len(campaigns)}): {member}", markup=False)
         start = time.monotonic()
         try:
             run(member, **{**options, "name": None, "dry_run": False, "detach": False})
@@ -197,19 +227,32 @@ def run_collection(coll: Collection, run: Callable[..., None], options: dict[str
         raise typer.Exit(code)
 
 
-def summary(say: Console, coll: Collection, campaigns: list[Campaign],
-            outcome: list[tuple[Campaign, int, float]], results: Path) -> None:
+def summary(
+    say: Console,
+    coll: Collection,
+    campaigns: list[Campaign],
+    outcome: list[tuple[Campaign, int, float]],
+    results: Path,
+) -> None:
     """The end of ``run COLLECTION``: each member's outcome and products, and the index."""
-    words = {EXIT_OK: "done", EXIT_FAILED_RUNS: "some runs failed or were lost",
-             EXIT_BAD_INPUT: "refused or stopped (bad input, locked, storage)",
-             EXIT_TOO_MANY_FAILURES: "stopped by --max-failures",
-             EXIT_INTERRUPTED: "interrupted"}
-    say.print(f"\n== collection {coll.name}: {len(outcome)} of {len(campaigns)} campaign(s) "
-              "run", markup=False)
+    words = {
+        EXIT_OK: "done",
+        EXIT_FAILED_RUNS: "some runs failed or were lost",
+        EXIT_BAD_INPUT: "refused or stopped (bad input, locked, storage)",
+        EXIT_TOO_MANY_FAILURES: "stopped by --max-failures",
+        EXIT_INTERRUPTED: "interrupted",
+    }
+    say.print(
+        f"\n== collection {coll.name}: {len(outcome)} of {len(campaigns)} campaign(s) run",
+        markup=False,
+    )
     for c, code, took in outcome:
-        say.print(f"  {c.name}: {words.get(code, f'exit {code}')} in {fmt_time(took)} "
-                  f"({results / c.name})", markup=False)
-    for c in campaigns[len(outcome):]:
+        say.print(
+            f"  {c.name}: {words.get(code, f'exit {code}')} in {fmt_time(took)} "
+            f"({results / c.name})",
+            markup=False,
+        )
+    for c in campaigns[len(outcome) :]:
         say.print(f"  {c.name}: not run (rerun the same command to go on)", markup=False)
     try:
         page = write_index(coll, campaigns, results)
@@ -241,17 +284,22 @@ def write_index(coll: Collection, campaigns: list[Campaign], results: Path) -> P
             parts.append("<p>no report yet</p>")
         for png in sorted((folder / "figures").glob("*.png")):
             src = html.escape(f"{rel}/figures/{png.name}")
-            parts.append(f'<a href="{src}"><img src="{src}" alt="{html.escape(png.stem)}" '
-                         'style="max-width:48%"></a>')
+            parts.append(
+                f'<a href="{src}"><img src="{src}" alt="{html.escape(png.stem)}" '
+                'style="max-width:48%"></a>'
+            )
     page = root / INDEX
-    atomic_write_text(page, "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>"
-                      f"{html.escape(coll.name)}</title></head><body>\n"
-                      + "\n".join(parts) + "\n</body></html>\n")
+    atomic_write_text(
+        page,
+        '<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>'
+        f"{html.escape(coll.name)}</title></head><body>\n"
+        + "\n".join(parts)
+        + "\n</body></html>\n",
+    )
     return page
 
 
-def run_detached(coll: Collection, campaigns: list[Campaign], results: Path, quiet: bool
-                 ) -> None:
+def run_detached(coll: Collection, campaigns: list[Campaign], results: Path, quiet: bool) -> None:
     """``nematic run COLLECTION --detach``: the collection's driver in the background, its
     output in ``results/NAME/driver.log``; exits."""
     from ..run.detach import DRIVER_LOG, detached_args, log_tail, start_detached
@@ -262,32 +310,40 @@ def run_detached(coll: Collection, campaigns: list[Campaign], results: Path, qui
     for c in campaigns:
         holder = read_lock_holder(CampaignStore(results, c.name).lock_path)
         if holder is not None:
-            error(err, f"campaign {c.name} of the collection is in use by another driver "
-                  f"(pid {holder.get('pid', '?')} on {holder.get('host', '?')}); "
-                  f"'nematic stop {coll.source}' stops it")
+            error(
+                err,
+                f"campaign {c.name} of the collection is in use by another driver "
+                f"(pid {holder.get('pid', '?')} on {holder.get('host', '?')}); "
+                f"'nematic stop {coll.source}' stops it",
+            )
             raise typer.Exit(EXIT_BAD_INPUT)
     log = results / coll.name / DRIVER_LOG
     first = CampaignStore(results, campaigns[0].name).lock_path
     started = start_detached(detached_args(sys.argv[1:]), log, first)
     if started.returncode is not None:
         (error if started.returncode else lambda _c, t: say.print(t, markup=False))(
-            err, f"the collection's driver (pid {started.pid}) ended at once with exit code "
-            f"{started.returncode}; the end of {log}:")
+            err,
+            f"the collection's driver (pid {started.pid}) ended at once with exit code "
+            f"{started.returncode}; the end of {log}:",
+        )
         for line in log_tail(log):
             (err if started.returncode else say).print(f"  {line}", markup=False)
         raise typer.Exit(started.returncode)
-    say.print(f"collection {coll.name} running in the background: pid {started.pid}; its "
-              f"output goes to {log}\n"
-              f"  follow it:  tail -f {log}\n"
-              f"  progress:   nematic status {coll.source}\n"
-              f"  stop it:    nematic stop {coll.source}"
-              + (f" --results {results}" if results != Path("results") else ""),
-              markup=False)
+    say.print(
+        f"collection {coll.name} running in the background: pid {started.pid}; its "
+        f"output goes to {log}\n"
+        f"  follow it:  tail -f {log}\n"
+        f"  progress:   nematic status {coll.source}\n"
+        f"  stop it:    nematic stop {coll.source}"
+        + (f" --results {results}" if results != Path("results") else ""),
+        markup=False,
+    )
     raise typer.Exit(EXIT_OK)
 
 
-def status_collection(coll: Collection, status: Callable[..., None], options: dict[str, Any]
-                      ) -> None:
+def status_collection(
+    coll: Collection, status: Callable[..., None], options: dict[str, Any]
+) -> None:
     """``nematic status COLLECTION``: every member's status in turn; with ``--json`` one
     object ``{"collection": NAME, "campaigns": {NAME: status}}``."""
     campaigns = load_members(coll, options["set_"], options["seeds"])
@@ -306,20 +362,23 @@ def status_collection(coll: Collection, status: Callable[..., None], options: di
     print(json.dumps({"collection": coll.name, "campaigns": out}, indent=1))
 
 
-def stop_collection(coll: Collection, stop: Callable[..., None], options: dict[str, Any]
-                    ) -> None:
+def stop_collection(coll: Collection, stop: Callable[..., None], options: dict[str, Any]) -> None:
     """``nematic stop COLLECTION``: stop the driver of each member that has one (the
     collection's driver holds one member's lock at a time; stopping it ends the collection);
     exit 1 if none was running."""
     from ..store import CampaignStore, read_lock_holder
 
     campaigns = load_members(coll, None, None)
-    running = [c for c in campaigns
-               if read_lock_holder(CampaignStore(options["results"], c.name).lock_path)]
+    running = [
+        c
+        for c in campaigns
+        if read_lock_holder(CampaignStore(options["results"], c.name).lock_path)
+    ]
     if not running:
         Console(highlight=False, soft_wrap=True, quiet=options["quiet"]).print(
             f"no driver is running a campaign of collection {coll.name}: nothing to stop",
-            markup=False)
+            markup=False,
+        )
         raise typer.Exit(EXIT_FAILED_RUNS)
     for c in running:
         stop(c.name, **options)

@@ -37,16 +37,21 @@ def run_detached(c: Campaign, results: Path, campaign: Path, quiet: bool) -> Non
     store = CampaignStore(results, c.name)
     holder = read_lock_holder(store.lock_path)
     if holder is not None:
-        error(err, f"campaign folder {store.root} is in use by another driver (pid "
-              f"{holder.get('pid', '?')} on {holder.get('host', '?')}, since "
-              f"{holder.get('started', '?')}); 'nematic status {campaign}' shows it, "
-              f"'nematic stop {c.name}' stops it")
+        error(
+            err,
+            f"campaign folder {store.root} is in use by another driver (pid "
+            f"{holder.get('pid', '?')} on {holder.get('host', '?')}, since "
+            f"{holder.get('started', '?')}); 'nematic status {campaign}' shows it, "
+            f"'nematic stop {c.name}' stops it",
+        )
         raise typer.Exit(EXIT_BAD_INPUT)
     log = store.root / DRIVER_LOG
     started = start_detached(detached_args(sys.argv[1:]), log, store.lock_path)
     if started.returncode is not None:
-        text = (f"the driver (pid {started.pid}) ended at once with exit code "
-                f"{started.returncode}; the end of {log}:")
+        text = (
+            f"the driver (pid {started.pid}) ended at once with exit code "
+            f"{started.returncode}; the end of {log}:"
+        )
         out = err if started.returncode else say
         if started.returncode:
             error(err, text)
@@ -56,24 +61,34 @@ def run_detached(c: Campaign, results: Path, campaign: Path, quiet: bool) -> Non
             out.print(f"  {line}", markup=False)
         raise typer.Exit(started.returncode)
     state = "running" if started.holds_lock else "starting (it has not taken the lock yet)"
-    say.print(f"driver {state} in the background: pid {started.pid}; its output goes to "
-              f"{log}\n"
-              f"  follow it:  tail -f {log}\n"
-              f"  progress:   nematic status {campaign}\n"
-              f"  stop it:    nematic stop {c.name}" + (
-                  f" --results {results}" if results != Path("results") else ""),
-              markup=False)
+    say.print(
+        f"driver {state} in the background: pid {started.pid}; its output goes to "
+        f"{log}\n"
+        f"  follow it:  tail -f {log}\n"
+        f"  progress:   nematic status {campaign}\n"
+        f"  stop it:    nematic stop {c.name}"
+        + (f" --results {results}" if results != Path("results") else ""),
+        markup=False,
+    )
     raise typer.Exit(EXIT_OK)
 
 
 def stop(
-    campaign: Annotated[str, typer.Argument(
-        metavar="CAMPAIGN", show_default=False,
-        help="The campaign YAML file, or the campaign's name (its results folder).")],
+    campaign: Annotated[
+        str,
+        typer.Argument(
+            metavar="CAMPAIGN",
+            show_default=False,
+            help="The campaign YAML file, or the campaign's name (its results folder).",
+        ),
+    ],
     results: ResultsOpt = Path("results"),
-    timeout: Annotated[float, typer.Option(
-        "--timeout", metavar="SECONDS", min=0,
-        help="How long to wait for the driver to exit.")] = 300.0,
+    timeout: Annotated[
+        float,
+        typer.Option(
+            "--timeout", metavar="SECONDS", min=0, help="How long to wait for the driver to exit."
+        ),
+    ] = 300.0,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -96,8 +111,9 @@ def stop(
     path = Path(campaign)
     coll = collection_or_none(path) if path.is_file() else None
     if coll is not None:  # a collection of campaigns: the driver of each member that has one
-        stop_collection(coll, stop, dict(results=results, timeout=timeout, verbose=verbose,
-                                         quiet=quiet))
+        stop_collection(
+            coll, stop, dict(results=results, timeout=timeout, verbose=verbose, quiet=quiet)
+        )
         return
     if path.is_file():
         name = load(err, path, None, None, None).name
@@ -108,8 +124,11 @@ def stop(
         name = campaign
     store = CampaignStore(results, name)
     if not store.root.is_dir():
-        error(err, f"no results of a campaign named {name!r} in {store.results_root}; give "
-              "the campaign file or its name (and --results if its folder is elsewhere)")
+        error(
+            err,
+            f"no results of a campaign named {name!r} in {store.results_root}; give "
+            "the campaign file or its name (and --results if its folder is elsewhere)",
+        )
         raise typer.Exit(EXIT_BAD_INPUT)
     try:
         stopped = stop_driver(store.lock_path, wait=timeout)
@@ -118,19 +137,26 @@ def stop(
         raise typer.Exit(EXIT_BAD_INPUT) from None
     holder = stopped.holder
     if holder is None:
-        say.print(f"no driver is running campaign {name} ({store.root}): nothing to stop",
-                  markup=False)
+        say.print(
+            f"no driver is running campaign {name} ({store.root}): nothing to stop", markup=False
+        )
         raise typer.Exit(EXIT_FAILED_RUNS)
     who = f"pid {holder.get('pid')} on {holder.get('host')}"
     if stopped.took is None:
-        error(err, f"the driver of {name} ({who}) has not exited {timeout:g} s after "
-              f"{stopped.how}; it may still be cancelling runs or closing its cluster: "
-              f"'nematic status' shows whether it runs, 'nematic stop {name} --timeout N' "
-              "waits longer")
+        error(
+            err,
+            f"the driver of {name} ({who}) has not exited {timeout:g} s after "
+            f"{stopped.how}; it may still be cancelling runs or closing its cluster: "
+            f"'nematic status' shows whether it runs, 'nematic stop {name} --timeout N' "
+            "waits longer",
+        )
         raise typer.Exit(EXIT_BAD_INPUT)
-    say.print(f"stopped the driver of {name} ({who}, since {holder.get('started')}) in "
-              f"{stopped.took:.1f} s ({stopped.how}); the runs not finished stay pending: "
-              f"'nematic run' resumes", markup=False)
+    say.print(
+        f"stopped the driver of {name} ({who}, since {holder.get('started')}) in "
+        f"{stopped.took:.1f} s ({stopped.how}); the runs not finished stay pending: "
+        f"'nematic run' resumes",
+        markup=False,
+    )
     log = Path(str(holder.get("log") or store.root / DRIVER_LOG))
     tail = log_tail(log, 1) if holder.get("log") else []
     if tail:

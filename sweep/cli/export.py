@@ -24,12 +24,23 @@ from .app import (
 def export(
     campaign: CampaignRefArg,
     results: ResultsOpt = Path("results"),
-    fmt: Annotated[str | None, typer.Option(
-        "--format", metavar="csv|parquet", help="The table's format (default: from the "
-        "--output suffix, else csv). Parquet needs pyarrow (the parquet extra).")] = None,
-    output: Annotated[Path | None, typer.Option(
-        "--output", "-o", help="Where to write it (default: results/NAME/runs.csv or "
-        "runs.parquet).")] = None,
+    fmt: Annotated[
+        str | None,
+        typer.Option(
+            "--format",
+            metavar="csv|parquet",
+            help="The table's format (default: from the "
+            "--output suffix, else csv). Parquet needs pyarrow (the parquet extra).",
+        ),
+    ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option(
+            "--output",
+            "-o",
+            help="Where to write it (default: results/NAME/runs.csv or runs.parquet).",
+        ),
+    ] = None,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -58,4 +69,6 @@ def export(
     n_ok = int((table["status"] == "ok").sum())
     Console(highlight=False, soft_wrap=True, quiet=quiet).print(
         f"wrote {path}: {len(table)} run(s) ({n_ok} ok, {len(table) - n_ok} failed), "
-        f"{len(table.columns)} columns", markup=False)
+        f"{len(table.columns)} columns",
+        markup=False,
+    )

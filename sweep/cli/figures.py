@@ -38,14 +38,24 @@ def figures(
     set_: SetOpt = None,
     seeds: SeedsOpt = None,
     name: NameOpt = None,
-    only: Annotated[list[str] | None, typer.Option(
-        "--only", metavar="FIGURE",
-        help="Draw only this figure (repeatable): fig2, fig3, fig4, figA1. Default: the "
-             "campaign's 'figures:' list ('figures: []': none), else every figure that "
-             "applies to its grid.")] = None,
-    fits: Annotated[bool, typer.Option(
-        "--fits/--no-fits", help="Recompute fits.nc from phase.nc first (default), or draw "
-        "from the fits.nc on disk.")] = True,
+    only: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--only",
+            metavar="FIGURE",
+            help="Draw only this figure (repeatable): fig2, fig3, fig4, figA1. Default: the "
+            "campaign's 'figures:' list ('figures: []': none), else every figure that "
+            "applies to its grid.",
+        ),
+    ] = None,
+    fits: Annotated[
+        bool,
+        typer.Option(
+            "--fits/--no-fits",
+            help="Recompute fits.nc from phase.nc first (default), or draw "
+            "from the fits.nc on disk.",
+        ),
+    ] = True,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -66,9 +76,12 @@ def figures(
     root = results / c.name
     problem = probe_write(root) if root.is_dir() else None
     if problem is not None:
-        err.print(f"[bold red]error:[/] cannot write the fits and figures in {root}: "
-                  f"{storage_cause(root / 'figures', problem)}", soft_wrap=True,
-                  highlight=False)
+        err.print(
+            f"[bold red]error:[/] cannot write the fits and figures in {root}: "
+            f"{storage_cause(root / 'figures', problem)}",
+            soft_wrap=True,
+            highlight=False,
+        )
         raise typer.Exit(EXIT_BAD_INPUT)
     try:
         if repair_products(c, results, err) and not fits:
@@ -85,8 +98,11 @@ def figures(
     for path in out.paths:
         console.print(f"figure: {path}")
     if not out.figures:
-        why = ("the campaign lists none (figures: [])" if c.figures is not None
-               else "none applies to this grid")
+        why = (
+            "the campaign lists none (figures: [])"
+            if c.figures is not None
+            else "none applies to this grid"
+        )
         console.print(f"no figures: {why}; --only FIGURE draws one", markup=False)
     if out.failures:
         err.print(f"[red]{len(out.failures)} failed[/]:")

@@ -11,8 +11,9 @@ from rich.console import Console
 from ..campaign import Campaign
 
 
-def repair_products(campaign: Campaign, results: Path, console: Console, *,
-                    phase: bool = True) -> bool:
+def repair_products(
+    campaign: Campaign, results: Path, console: Console, *, phase: bool = True
+) -> bool:
     """Before fits and figures are drawn: an unreadable ``phase.nc`` is rebuilt from the run
     records (taking the campaign's lock) and an unreadable ``fits.nc`` removed (the fits
     recompute it), each with a message. Returns whether ``fits.nc`` was removed. Raises
@@ -27,8 +28,11 @@ def repair_products(campaign: Campaign, results: Path, console: Console, *,
     if phase and store.phase_path.exists():
         problem = netcdf_problem(store.phase_path, ("status", "run_id"))
         if problem is not None:
-            console.print(f"[yellow]{store.phase_path}: {problem}[/]; rebuilding it from the "
-                          "run records", soft_wrap=True, highlight=False)
+            console.print(
+                f"[yellow]{store.phase_path}: {problem}[/]; rebuilding it from the run records",
+                soft_wrap=True,
+                highlight=False,
+            )
             lock = store.lock()
             lock.acquire(command=" ".join(sys.argv))
             try:
@@ -39,15 +43,19 @@ def repair_products(campaign: Campaign, results: Path, console: Console, *,
     if fits_path.exists():
         problem = netcdf_problem(fits_path)
         if problem is not None:
-            console.print(f"[yellow]{fits_path}: {problem}[/]; removing it (the fits "
-                          "recompute it)", soft_wrap=True, highlight=False)
+            console.print(
+                f"[yellow]{fits_path}: {problem}[/]; removing it (the fits recompute it)",
+                soft_wrap=True,
+                highlight=False,
+            )
             fits_path.unlink()
             return True
     return False
 
 
-def regenerate_figures(campaign: Campaign, results: Path, *, fits: bool = True,
-                       draw_figures: bool = True) -> list[Path]:
+def regenerate_figures(
+    campaign: Campaign, results: Path, *, fits: bool = True, draw_figures: bool = True
+) -> list[Path]:
     """Fits and figures after a run (:func:`sweep.figures.produce.regenerate`, which logs and
     never raises for a figure it cannot draw); ``fits`` / ``draw_figures`` false leave either
     out."""

@@ -27,8 +27,9 @@ class ProgressEvents:
     LOG_EVERY = 30.0
     LOG_MIN = 5.0
 
-    def __init__(self, console: Console, progress: Progress, store: Any, *,
-                 clock: Any = time.monotonic):
+    def __init__(
+        self, console: Console, progress: Progress, store: Any, *, clock: Any = time.monotonic
+    ):
         self.console, self.progress, self.store = console, progress, store
         self.clock = clock
         self.task: TaskID | None = None
@@ -53,15 +54,21 @@ class ProgressEvents:
             f"campaign [bold]{escape(c.name)}[/]: {len(expansion)} runs ({c.n_points} points "
             f"x {len(c.seeds)} seeds); {len(plan.done)} done, {len(plan.failed)} failed"
             f"{skipped}, {len(plan.todo)} to run -> {escape(str(self.store.root))}",
-            soft_wrap=True)
+            soft_wrap=True,
+        )
         if plan.unspooled:
-            self.console.print(f"moved {plan.unspooled} result(s) that could not be written "
-                               "before into the results folder")
+            self.console.print(
+                f"moved {plan.unspooled} result(s) that could not be written "
+                "before into the results folder"
+            )
         if plan.adopted:
             self.console.print(f"recovered {plan.adopted} unindexed run file(s)")
         if plan.redone:
-            self.console.print(f"[yellow]{len(plan.redone)} run(s) will be redone[/] (their "
-                               "file is missing, truncated or corrupt):", soft_wrap=True)
+            self.console.print(
+                f"[yellow]{len(plan.redone)} run(s) will be redone[/] (their "
+                "file is missing, truncated or corrupt):",
+                soft_wrap=True,
+            )
             for rid, why in plan.redone[:10]:
                 self.console.print(f"  {rid}: {why}", soft_wrap=True, markup=False)
             if len(plan.redone) > 10:
@@ -71,18 +78,26 @@ class ProgressEvents:
         if link:
             self.console.print(f"dask dashboard: {escape(link)}", soft_wrap=True)
         else:
-            self.console.print("dask dashboard: none answers from here (it needs bokeh "
-                               "where the scheduler runs, and its port reachable)",
-                               soft_wrap=True)
+            self.console.print(
+                "dask dashboard: none answers from here (it needs bokeh "
+                "where the scheduler runs, and its port reachable)",
+                soft_wrap=True,
+            )
 
     def warming(self) -> None:
-        self.console.print("preparing the workers: compiled kernels (cached on disk; about a "
-                           "minute once per machine, then seconds) ...", soft_wrap=True)
+        self.console.print(
+            "preparing the workers: compiled kernels (cached on disk; about a "
+            "minute once per machine, then seconds) ...",
+            soft_wrap=True,
+        )
 
     def warmed(self, infos: list[dict[str, Any]], seconds: float) -> None:
         compiled = sum(int(i.get("compiled", 0)) for i in infos)
-        what = (f"{compiled} kernel(s) compiled once, now cached for every worker" if compiled
-                else "loaded from the cache")
+        what = (
+            f"{compiled} kernel(s) compiled once, now cached for every worker"
+            if compiled
+            else "loaded from the cache"
+        )
         self.console.print(f"workers ready in {seconds:.0f} s ({what})", soft_wrap=True)
 
     def started(self, plan: Any, total: int, workers: int) -> None:
@@ -91,11 +106,13 @@ class ProgressEvents:
         self.total = total
         self.workers = max(1, workers)
         self.t0 = self.last_log = self.clock()
-        self.task = self.progress.add_task("runs", total=total, completed=self.skipped,
-                                           counts=self._counts(), eta="unknown")
+        self.task = self.progress.add_task(
+            "runs", total=total, completed=self.skipped, counts=self._counts(), eta="unknown"
+        )
         if not self.terminal:
-            self._heartbeat = threading.Thread(target=self._beat, daemon=True,
-                                               name="nematic-progress")
+            self._heartbeat = threading.Thread(
+                target=self._beat, daemon=True, name="nematic-progress"
+            )
             self._heartbeat.start()
 
     def close(self) -> None:
@@ -126,15 +143,16 @@ class ProgressEvents:
     def progress_line(self) -> str:
         done = self.skipped + self.ok + self.failed
         running = min(self.workers, self.remaining)
-        return (f"progress: {done}/{self.total} runs ({self.ok} ok, {self.failed} failed, "
-                f"{running} running this session), elapsed "
-                f"{fmt_time(self.clock() - self.t0)}, ETA {fmt_time(self.eta())}")
+        return (
+            f"progress: {done}/{self.total} runs ({self.ok} ok, {self.failed} failed, "
+            f"{running} running this session), elapsed "
+            f"{fmt_time(self.clock() - self.t0)}, ETA {fmt_time(self.eta())}"
+        )
 
     def _log_line(self) -> None:
         with self._lock:
             self.last_log = self.clock()
-            self.console.print(self.progress_line(), highlight=False, markup=False,
-                               soft_wrap=True)
+            self.console.print(self.progress_line(), highlight=False, markup=False, soft_wrap=True)
 
     def finished_run(self, run: Any, record: dict[str, Any]) -> None:
         from ..run.driver import describe_failure
@@ -143,14 +161,19 @@ class ProgressEvents:
             self.ok += 1
         else:
             self.failed += 1
-            self.progress.console.print(f"[red]FAILED[/] {escape(describe_failure(run, record))}",
-                                        highlight=False, soft_wrap=True)
+            self.progress.console.print(
+                f"[red]FAILED[/] {escape(describe_failure(run, record))}",
+                highlight=False,
+                soft_wrap=True,
+            )
         wall = record.get("wall_time")
         if isinstance(wall, (int, float)) and math.isfinite(wall):
             self.run_times.append(float(wall))
         if self.task is not None:
-            self.progress.update(self.task, advance=1, counts=self._counts(),
-                                 eta=fmt_time(self.eta()))
-        if not self.terminal and (self.clock() - self.last_log >= self.LOG_MIN
-                                  or not self.remaining):
+            self.progress.update(
+                self.task, advance=1, counts=self._counts(), eta=fmt_time(self.eta())
+            )
+        if not self.terminal and (
+            self.clock() - self.last_log >= self.LOG_MIN or not self.remaining
+        ):
             self._log_line()

@@ -17,8 +17,12 @@ from .app import CampaignRefArg, QuietOpt, ResultsOpt, VerboseOpt, err_console, 
 def report(
     campaign: CampaignRefArg,
     results: ResultsOpt = Path("results"),
-    output: Annotated[Path | None, typer.Option(
-        "--output", "-o", help="Where to write it (default: results/NAME/report.html).")] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option(
+            "--output", "-o", help="Where to write it (default: results/NAME/report.html)."
+        ),
+    ] = None,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -40,7 +44,9 @@ def report(
     if not opened.store.runs_dir.is_dir():
         from ..errors import StoreError
 
-        raise StoreError(f"no results for campaign {opened.campaign.name} in "
-                         f"{opened.store.root}; run it first (nematic run)")
+        raise StoreError(
+            f"no results for campaign {opened.campaign.name} in "
+            f"{opened.store.root}; run it first (nematic run)"
+        )
     path = write_report(opened, output)
     Console(highlight=False, soft_wrap=True, quiet=quiet).print(f"wrote {path}", markup=False)

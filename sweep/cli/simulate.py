@@ -57,16 +57,27 @@ def _keep_elsewhere(ds: Any, out: Path) -> Path | None:
 
 
 def simulate(
-    set_: Annotated[list[str] | None, typer.Option(
-        "--set", metavar="NAME=VALUE",
-        help=f"A model parameter ({_PARAMETER_NAMES}) or numerics field ({_NUMERICS_NAMES}). "
-             "Repeatable.")] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the random initial director field.")] = 0,
-    out: Annotated[Path | None, typer.Option(
-        "--out", help="Write the run (time series, snapshots, attributes) to this netCDF.")
+    set_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            metavar="NAME=VALUE",
+            help=f"A model parameter ({_PARAMETER_NAMES}) or numerics field ({_NUMERICS_NAMES}). "
+            "Repeatable.",
+        ),
     ] = None,
-    png: Annotated[Path | None, typer.Option(
-        "--png", help="Draw the final snapshot (Fig. 2a style) and sigma2_S(t) to this PNG.")
+    seed: Annotated[int, typer.Option(help="Seed of the random initial director field.")] = 0,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", help="Write the run (time series, snapshots, attributes) to this netCDF."
+        ),
+    ] = None,
+    png: Annotated[
+        Path | None,
+        typer.Option(
+            "--png", help="Draw the final snapshot (Fig. 2a style) and sigma2_S(t) to this PNG."
+        ),
     ] = None,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
@@ -98,12 +109,20 @@ def simulate(
 
     from model.simulate import run  # heavy import (py-pde) only when needed
 
-    desc = (f"alpha-B={params.alpha_minus_B:g} {numerics.mechanics} "
-            f"{numerics.resolution}^2 seed {seed}")
+    desc = (
+        f"alpha-B={params.alpha_minus_B:g} {numerics.mechanics} {numerics.resolution}^2 seed {seed}"
+    )
     try:
-        with Progress(TextColumn("{task.description}"), BarColumn(),
-                      TextColumn("t = {task.fields[t]:>7.2f}"), TimeElapsedColumn(),
-                      TimeRemainingColumn(), console=err, disable=quiet, transient=False) as bar:
+        with Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            TextColumn("t = {task.fields[t]:>7.2f}"),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=err,
+            disable=quiet,
+            transient=False,
+        ) as bar:
             task = bar.add_task(desc, total=1.0, t=0.0)
 
             def progress(fraction: float) -> None:
@@ -118,8 +137,15 @@ def simulate(
             atomic_to_netcdf(ds, out)
         except StoreError as exc:
             kept = _keep_elsewhere(ds, out)
-            error(err, f"{exc}; " + (f"the result is kept in {kept}" if kept else
-                                     "it could not be kept elsewhere either"))
+            error(
+                err,
+                f"{exc}; "
+                + (
+                    f"the result is kept in {kept}"
+                    if kept
+                    else "it could not be kept elsewhere either"
+                ),
+            )
             raise typer.Exit(EXIT_BAD_INPUT) from None
     if png is not None and ds.sizes.get("snapshot_time", 0):
         from ..figures.snapshot import snapshot_figure
@@ -129,15 +155,21 @@ def simulate(
         except StoreError as exc:
             error(err, exc)
             raise typer.Exit(EXIT_BAD_INPUT) from None
-    last = {k: float(ds[k].values[-1]) for k in ("sigma2_S", "cos2theta", "lambda")} \
-        if ds.sizes["t"] else {}
+    last = (
+        {k: float(ds[k].values[-1]) for k in ("sigma2_S", "cos2theta", "lambda")}
+        if ds.sizes["t"]
+        else {}
+    )
     summary = ", ".join(f"{k} = {v:.4g}" for k, v in last.items())
     wall = float(ds["wall_time"])
     steps = int(ds.attrs.get("solver_steps", 0))
     if ds.attrs["status"] != "ok":
         t_fail = ds.attrs.get("t_failed", float("nan"))
-        err.print(f"[red]run failed[/red] at t = {t_fail:.4g}: {ds.attrs['reason']}: "
-                  f"{ds.attrs['detail']} (last saved: {summary}; {wall:.1f} s)")
+        err.print(
+            f"[red]run failed[/red] at t = {t_fail:.4g}: {ds.attrs['reason']}: "
+            f"{ds.attrs['detail']} (last saved: {summary}; {wall:.1f} s)"
+        )
         raise typer.Exit(EXIT_FAILED_RUNS)
-    console.print(f"t = {float(ds['t'].values[-1]):g}: {summary}; {steps} steps, "
-                  f"wall time {wall:.2f} s")
+    console.print(
+        f"t = {float(ds['t'].values[-1]):g}: {summary}; {steps} steps, wall time {wall:.2f} s"
+    )

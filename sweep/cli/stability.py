@@ -62,20 +62,27 @@ def _fmt(x: float | None) -> str:
 
 def stability(
     set_: list[str] | None = typer.Option(
-        None, "--set", metavar="NAME=VALUE",
+        None,
+        "--set",
+        metavar="NAME=VALUE",
         help="Model parameter or numerics field (repeatable), e.g. --set chi=10 "
-             "--set alpha_minus_B=1 --set incompressible=true. Only mechanics=linear is "
-             "analysed.",
+        "--set alpha_minus_B=1 --set incompressible=true. Only mechanics=linear is "
+        "analysed.",
     ),
     json_: bool = typer.Option(False, "--json", help="Print one JSON object instead of text."),
     nmax: int = typer.Option(
-        8, "--nmax", min=1, max=64,
+        8,
+        "--nmax",
+        min=1,
+        max=64,
         help="Lattice modes 2 pi (n, m) with |n|, |m| <= NMAX enter the numerical maximum.",
     ),
     verbose: bool = typer.Option(
-        False, "--verbose", "-v", help="Also log details (INFO messages, library warnings)."),
+        False, "--verbose", "-v", help="Also log details (INFO messages, library warnings)."
+    ),
     quiet: bool = typer.Option(
-        False, "--quiet", "-q", help="Only results and errors: no progress, no warnings."),
+        False, "--quiet", "-q", help="Only results and errors: no progress, no warnings."
+    ),
 ) -> None:
     """Critical applied shear eps (closed form and numerical bisection), the critical
     wavevector, and the leading growth rate at the given eps (paper Eq. 6, Fig. A1)."""
@@ -86,8 +93,11 @@ def stability(
         nvals.setdefault("mechanics", "linear")
         numerics = Numerics.from_dict(nvals)
         if numerics.mechanics != "linear":
-            raise ParameterError("mechanics", numerics.mechanics,
-                                 "'linear' (the stability analysis is of the small-strain model)")
+            raise ParameterError(
+                "mechanics",
+                numerics.mechanics,
+                "'linear' (the stability analysis is of the small-strain model)",
+            )
         params = Parameters.from_dict(pvals)
     except (ValueError, TypeError) as exc:
         error(err_console(), exc)
@@ -128,9 +138,13 @@ def stability(
         typer.echo(jsonlib.dumps(result, sort_keys=True))
         return
     medium = "incompressible" if inc else f"compressible (kappa = {params.kappa:g})"
-    crit_k = ("-" if crit.k is None else
-              f"2 pi ({crit.mode[0]}, {crit.mode[1]}) = ({crit.k[0]:.6g}, {crit.k[1]:.6g})"
-              if crit.mode is not None else "-")
+    crit_k = (
+        "-"
+        if crit.k is None
+        else f"2 pi ({crit.mode[0]}, {crit.mode[1]}) = ({crit.k[0]:.6g}, {crit.k[1]:.6g})"
+        if crit.mode is not None
+        else "-"
+    )
     lines = [
         f"linear mechanics, {medium}; chi (alpha - B) = {params.chi * params.alpha_minus_B:g}",
         f"critical eps, closed form : {_fmt(closed)}",

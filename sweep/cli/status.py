@@ -37,9 +37,14 @@ def status(
     seeds: SeedsOpt = None,
     name: NameOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    workers: Annotated[int | None, typer.Option(
-        "--workers", help="Concurrency assumed for the ETA (default: the processes seen "
-        "finishing runs under the running driver, else the local worker count).")] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            "--workers",
+            help="Concurrency assumed for the ETA (default: the processes seen "
+            "finishing runs under the running driver, else the local worker count).",
+        ),
+    ] = None,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -58,9 +63,19 @@ def status(
     coll = collection_or_none(campaign)
     if coll is not None:  # a collection of campaigns (sweep.spec.collection): each in turn
         refuse_name(name)
-        status_collection(coll, status, dict(results=results, set_=set_, seeds=seeds,
-                                             as_json=as_json, workers=workers,
-                                             verbose=verbose, quiet=quiet))
+        status_collection(
+            coll,
+            status,
+            dict(
+                results=results,
+                set_=set_,
+                seeds=seeds,
+                as_json=as_json,
+                workers=workers,
+                verbose=verbose,
+                quiet=quiet,
+            ),
+        )
         return
     c = load(err_console(), campaign, set_, seeds, name)
     store = CampaignStore(results, c.name)
@@ -74,20 +89,28 @@ def status(
 
         changed = campaign_changes(c, store, expansion)
         checks = verification_lines(store.root)
-        typer.echo(json.dumps({**report.to_dict(), **status_dict(refinement),
-                               "changes": None if changed is None else changed.to_dict(),
-                               "verification": checks[0] if checks else None},
-                              default=str))
+        typer.echo(
+            json.dumps(
+                {
+                    **report.to_dict(),
+                    **status_dict(refinement),
+                    "changes": None if changed is None else changed.to_dict(),
+                    "verification": checks[0] if checks else None,
+                },
+                default=str,
+            )
+        )
         return
     pct = 100.0 * report.done / max(report.total, 1)
-    console.print(f"campaign [bold]{report.campaign}[/] ({report.folder}): "
-                  f"[green]{report.done} done[/], [red]{report.failed} failed[/], "
-                  f"{report.pending} pending of {report.total} ({pct:.0f}% done)")
+    console.print(
+        f"campaign [bold]{report.campaign}[/] ({report.folder}): "
+        f"[green]{report.done} done[/], [red]{report.failed} failed[/], "
+        f"{report.pending} pending of {report.total} ({pct:.0f}% done)"
+    )
     if quiet:
         return
     console.print(driver_line(report.running, report.campaign), markup=False)
-    report_changes(console, c, store, expansion,
-                   hint="'nematic run --prune' removes them")
+    report_changes(console, c, store, expansion, hint="'nematic run --prune' removes them")
     if refinement is not None:
         from ..refine.report import status_lines
 
@@ -97,8 +120,10 @@ def status(
         basis = f" ({report.eta_basis})" if report.eta_basis else ""
         console.print(f"ETA: {fmt_time(report.eta_seconds)}{basis}")
     if report.median_run_time is not None and report.mean_run_time is not None:
-        console.print(f"run time: median {report.median_run_time:.3g} s, mean "
-                      f"{report.mean_run_time:.3g} s (successful runs)")
+        console.print(
+            f"run time: median {report.median_run_time:.3g} s, mean "
+            f"{report.mean_run_time:.3g} s (successful runs)"
+        )
     for ax in report.per_axis:
         table = Table(title=f"by {ax.dim}", title_justify="left", show_edge=False)
         for col in (ax.dim, "done", "failed", "pending"):
@@ -107,19 +132,25 @@ def status(
             table.add_row(*map(str, row))
         console.print(table)
     if report.reasons:
-        console.print("[red]failures by reason[/]: "
-                      + ", ".join(f"{k}: {v}" for k, v in report.reasons.items()))
+        console.print(
+            "[red]failures by reason[/]: "
+            + ", ".join(f"{k}: {v}" for k, v in report.reasons.items())
+        )
         for group in report.failure_groups:
             for line in failure_group_lines(group):
                 console.print(line, markup=False)
     if report.unreadable:
-        console.print(f"[yellow]{report.unreadable} run(s) pending because their file is "
-                      "missing, truncated or corrupt[/] (the next 'nematic run' redoes them):")
+        console.print(
+            f"[yellow]{report.unreadable} run(s) pending because their file is "
+            "missing, truncated or corrupt[/] (the next 'nematic run' redoes them):"
+        )
         for ex in report.unreadable_examples:
             console.print(f"  {ex['run_id']}: {ex['problem']}", markup=False)
     if report.foreign_runs:
-        console.print(f"{report.foreign_runs} run record(s) in the folder belong to other "
-                      "grids (kept, not counted)")
+        console.print(
+            f"{report.foreign_runs} run record(s) in the folder belong to other "
+            "grids (kept, not counted)"
+        )
     from .verify import verification_lines
 
     for line in verification_lines(store.root, detail=verbose):
@@ -133,15 +164,18 @@ def driver_line(running: dict[str, Any] | None, name: str) -> str:
         return "driver: none running"
     job = f", SLURM job {running['slurm_job']}" if running.get("slurm_job") else ""
     log = f"; log: {running['log']}" if running.get("log") else ""
-    return (f"driver running: pid {running.get('pid')} on {running.get('host')} since "
-            f"{running.get('started')}{job}{log} (nematic stop {name} stops it)")
+    return (
+        f"driver running: pid {running.get('pid')} on {running.get('host')} since "
+        f"{running.get('started')}{job}{log} (nematic stop {name} stops it)"
+    )
 
 
 def failure_group_lines(group: dict[str, Any]) -> list[str]:
     """``nematic status``'s lines for one failure reason: the count, the first such run
     (swept values and seed, model time and date of the failure, message) and its files."""
-    coords = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
-                       for k, v in group["coords"].items())
+    coords = ", ".join(
+        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in group["coords"].items()
+    )
     t = group.get("t_failed")
     at = f" at t = {t:.4g}" if isinstance(t, (int, float)) else ""
     when = f" on {group['finished']}" if group.get("finished") else ""
@@ -149,6 +183,8 @@ def failure_group_lines(group: dict[str, Any]) -> list[str]:
     files = f"record (with traceback): {group['record']}"
     if group.get("run_file"):
         files += f"; partial run file: {group['run_file']}"
-    return [f"  {group['reason']}: {group['count']} run(s); first: {group['run_id']} "
-            f"({coords}){at}{when}" + (f": {detail[-1]}" if detail else ""),
-            f"    {files}"]
+    return [
+        f"  {group['reason']}: {group['count']} run(s); first: {group['run_id']} "
+        f"({coords}){at}{when}" + (f": {detail[-1]}" if detail else ""),
+        f"    {files}",
+    ]

@@ -34,20 +34,31 @@ from .app import (
 def verify(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),
-    before: Annotated[bool, typer.Option(
-        "--before", help="Verify before the full grid is run: the sample is the grid's "
-        "corners and the points the section lists (no fits yet), run on the campaign's own "
-        "numerics and each variant; a cheap pilot for choosing resolution and tolerance. "
-        "The base runs are the campaign's own and count for the grid.")] = False,
+    before: Annotated[
+        bool,
+        typer.Option(
+            "--before",
+            help="Verify before the full grid is run: the sample is the grid's "
+            "corners and the points the section lists (no fits yet), run on the campaign's own "
+            "numerics and each variant; a cheap pilot for choosing resolution and tolerance. "
+            "The base runs are the campaign's own and count for the grid.",
+        ),
+    ] = False,
     set_: SetOpt = None,
     seeds: SeedsOpt = None,
     name: NameOpt = None,
-    workers: Annotated[int | None, typer.Option(
-        "--workers", help="Local worker processes (default: the campaign's, else one per "
-        "core).")] = None,
-    dashboard: Annotated[bool, typer.Option(
-        "--dashboard/--no-dashboard", help="Serve the dask dashboard and print its "
-        "link.")] = False,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            "--workers", help="Local worker processes (default: the campaign's, else one per core)."
+        ),
+    ] = None,
+    dashboard: Annotated[
+        bool,
+        typer.Option(
+            "--dashboard/--no-dashboard", help="Serve the dask dashboard and print its link."
+        ),
+    ] = False,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -68,15 +79,21 @@ def verify(
     setup_logging(err, verbose, quiet)
     c = load(err, campaign, set_, seeds, name, None, workers)
     if c.verify is None:
-        error(err, f"{campaign}: the campaign has no verify: section; add one (docs/"
-              "campaigns.md, \"Verification\"), e.g.\n  verify:\n    variants:\n"
-              "      - resolution: x2\n      - tolerance: /10")
+        error(
+            err,
+            f"{campaign}: the campaign has no verify: section; add one (docs/"
+            'campaigns.md, "Verification"), e.g.\n  verify:\n    variants:\n'
+            "      - resolution: x2\n      - tolerance: /10",
+        )
         raise typer.Exit(EXIT_BAD_INPUT)
     say = Console(stderr=True, highlight=False, soft_wrap=True, quiet=quiet)
     store = CampaignStore(results, c.name)
     if not before and not store.runs_dir.is_dir():
-        error(err, f"no results for campaign {c.name} in {store.root}: run it first, or "
-              "verify before the grid with --before")
+        error(
+            err,
+            f"no results for campaign {c.name} in {store.root}: run it first, or "
+            "verify before the grid with --before",
+        )
         raise typer.Exit(EXIT_BAD_INPUT)
     lock = store.lock()
     try:
@@ -87,8 +104,13 @@ def verify(
         raise typer.Exit(EXIT_BAD_INPUT) from None
     try:
         with sigterm_as_interrupt():
-            outcome = run_verification(c, store, before=before, dashboard=dashboard,
-                                       say=lambda line: say.print(line, markup=False))
+            outcome = run_verification(
+                c,
+                store,
+                before=before,
+                dashboard=dashboard,
+                say=lambda line: say.print(line, markup=False),
+            )
     except (ClusterError, StoreError) as e:
         error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
@@ -98,24 +120,34 @@ def verify(
     finally:
         lock.release()
     if outcome.interrupted:
-        err.print("[yellow]interrupted[/]; rerun the same command to resume (finished runs "
-                  "are kept)")
+        err.print(
+            "[yellow]interrupted[/]; rerun the same command to resume (finished runs are kept)"
+        )
         raise typer.Exit(EXIT_INTERRUPTED)
     out = Console(highlight=False, soft_wrap=True, quiet=quiet)
     for line in dataset_lines(outcome.dataset, outcome.path):
         out.print(line, markup=False)
     if outcome.failed:
-        err.print(f"[red]{len(outcome.failed)} verification run(s) failed[/]; they count as "
-                  f"missing in {escape(str(outcome.path))}")
+        err.print(
+            f"[red]{len(outcome.failed)} verification run(s) failed[/]; they count as "
+            f"missing in {escape(str(outcome.path))}"
+        )
         raise typer.Exit(EXIT_FAILED_RUNS)
 
 
 def validation_line(v: Any) -> str:
     """What ``nematic validate`` says about a ``verify:`` section."""
-    where = ("both sides of each fitted transition" if v.points is None
-             else f"{len(v.points)} selection(s)") + (" and the corners" if v.corners else "")
-    return (f"verify: {len(v.variants)} variant(s) (" + "; ".join(x.name for x in v.variants)
-            + f") at {where}, {v.seeds} seed(s) each" + (", before the grid" if v.before else ""))
+    where = (
+        "both sides of each fitted transition"
+        if v.points is None
+        else f"{len(v.points)} selection(s)"
+    ) + (" and the corners" if v.corners else "")
+    return (
+        f"verify: {len(v.variants)} variant(s) ("
+        + "; ".join(x.name for x in v.variants)
+        + f") at {where}, {v.seeds} seed(s) each"
+        + (", before the grid" if v.before else "")
+    )
 
 
 def verify_step(campaign: Any, store: Any, say: Console, *, before: bool) -> bool:
@@ -128,16 +160,19 @@ def verify_step(campaign: Any, store: Any, say: Console, *, before: bool) -> boo
     err = err_console()
     try:
         with sigterm_as_interrupt():
-            outcome = run_verification(campaign, store, before=before,
-                                       say=lambda line: say.print(line, markup=False))
+            outcome = run_verification(
+                campaign, store, before=before, say=lambda line: say.print(line, markup=False)
+            )
     except (ClusterError, StoreError) as e:
         error(err, f"verification not done: {e}; rerun, or run 'nematic verify'")
         return False
     except KeyboardInterrupt:
         outcome = None
     if outcome is None or outcome.interrupted:
-        err.print("[yellow]interrupted[/] during the verification; rerun the same command to "
-                  "resume (finished runs are kept)")
+        err.print(
+            "[yellow]interrupted[/] during the verification; rerun the same command to "
+            "resume (finished runs are kept)"
+        )
         raise typer.Exit(EXIT_INTERRUPTED)
     if outcome.path is not None:
         say.print(f"verification ({outcome.path}): {outcome.summary}", markup=False)
@@ -190,8 +225,10 @@ def point_lines(ds: Any) -> list[str]:
     fitted transition and variant."""
     from ..verify.measure import transition_rows, verdict_rows
 
-    out = [f"  {r['point']} [{r['why']}] {r['variant']}: {r['verdict']}"
-           + (f": {r['changes']}" if r["changes"] else "") for r in verdict_rows(ds)]
-    out += [f"  {r['transition']} with {r['variant']}: {r['where']}"
-            for r in transition_rows(ds)]
+    out = [
+        f"  {r['point']} [{r['why']}] {r['variant']}: {r['verdict']}"
+        + (f": {r['changes']}" if r["changes"] else "")
+        for r in verdict_rows(ds)
+    ]
+    out += [f"  {r['transition']} with {r['variant']}: {r['where']}" for r in transition_rows(ds)]
     return out

@@ -128,8 +128,9 @@ class Estimate:
 
 
 def point_label(point: GridPoint) -> str:
-    return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
-                     for k, v in point.coords.items())
+    return ", ".join(
+        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in point.coords.items()
+    )
 
 
 def _seconds(value: Any) -> float | None:
@@ -182,12 +183,16 @@ def concurrency(execution: ExecutionSpec) -> tuple[int, str]:
         cores = cl.options.get("cores")
         per = int(cores) if isinstance(cores, int) and cores > 0 else 1
         what = "adapt.maximum_jobs" if cl.adapt else "jobs"
-        return jobs * per, (f"{cl.kind} cluster: {what} {jobs} x cores {per}"
-                            + (" (queue waits not included)" if jobs else ""))
+        return jobs * per, (
+            f"{cl.kind} cluster: {what} {jobs} x cores {per}"
+            + (" (queue waits not included)" if jobs else "")
+        )
     local = local_worker_count(execution) * execution.threads_per_worker
     if execution.mode == "scheduler":
-        return local, (f"an external scheduler ({execution.scheduler}): its workers are not "
-                       f"known here, this machine's {local} assumed")
+        return local, (
+            f"an external scheduler ({execution.scheduler}): its workers are not "
+            f"known here, this machine's {local} assumed"
+        )
     return local, "local cluster"
 
 
@@ -200,20 +205,21 @@ class Basis:
         self.by_point: dict[str, list[float]] = {}
         for label, _, _, seconds, _ in measured:
             self.by_point.setdefault(label, []).append(seconds)
-        within = [s / float(np.median(v)) for v in self.by_point.values() if len(v) > 1
-                  for s in v]
+        within = [s / float(np.median(v)) for v in self.by_point.values() if len(v) > 1 for s in v]
         self.seed_spread = _spread(within) if len(within) >= 3 else None
 
     def ratios(self, kind_: tuple[Any, ...], resolution: int) -> list[float]:
-        for keep in (lambda k, n: k == kind_ and n == resolution, lambda k, n: k == kind_,
-                     lambda k, n: True):
+        for keep in (
+            lambda k, n: k == kind_ and n == resolution,
+            lambda k, n: k == kind_,
+            lambda k, n: True,
+        ):
             r = [s / m for _, k, n, s, m in self.measured if keep(k, n) and m > 0]
             if r:
                 return r
         return []
 
-    def cost(self, point: GridPoint, label: str, model: float) -> tuple[float, float, float,
-                                                                           str]:
+    def cost(self, point: GridPoint, label: str, model: float) -> tuple[float, float, float, str]:
         """(seconds, low, high, basis) of one run at ``point``."""
         if label in self.by_point:
             times = self.by_point[label]
@@ -224,7 +230,7 @@ class Basis:
         ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
         if ratios:
             med = float(np.median(ratios))
-            lo, hi = (_spread(ratios) if len(ratios) >= 3 else MODEL_SPREAD)
+            lo, hi = _spread(ratios) if len(ratios) >= 3 else MODEL_SPREAD
             return model * med, model * med * lo, model * med * hi, "scaled"
         return model, model * MODEL_SPREAD[0], model * MODEL_SPREAD[1], "cost model"
 
@@ -240,8 +246,13 @@ def _spread(values: Sequence[float]) -> tuple[float, float]:
     return lo / med, hi / med
 
 
-def classify(expansion: Expansion, store: CampaignStore, records: Mapping[str, Record], *,
-             retry_failed: bool = False) -> tuple[list[int], int, int]:
+def classify(
+    expansion: Expansion,
+    store: CampaignStore,
+    records: Mapping[str, Record],
+    *,
+    retry_failed: bool = False,
+) -> tuple[list[int], int, int]:
     """(positions to do, done, failed and not redone), as ``nematic run`` would plan them
     (:func:`sweep.run.todo.plan_runs`) but without touching the folder: a record whose file is
     not intact is a run to do."""
@@ -276,13 +287,25 @@ def measurements(expansion: Expansion, records: Mapping[str, Record]) -> Basis:
         key = (id(point), length)
         if key not in models:
             models[key] = model_seconds(point.numerics, length)
-        measured.append((point_label(point), kind(point.numerics),
-                         point.numerics.resolution, seconds, models[key]))
+        measured.append(
+            (
+                point_label(point),
+                kind(point.numerics),
+                point.numerics.resolution,
+                seconds,
+                models[key],
+            )
+        )
     return Basis(measured)
 
 
-def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = False,
-             load_cores: tuple[float, int] | None = None) -> Estimate:
+def estimate(
+    campaign: Campaign,
+    store: CampaignStore,
+    *,
+    retry_failed: bool = False,
+    load_cores: tuple[float, int] | None = None,
+) -> Estimate:
     """The estimate of what ``nematic run`` would do now (see the module docstring);
     ``load_cores``: the machine's load average and cores (default :func:`machine_load`)."""
     from ..outputs.changes import campaign_changes
@@ -298,16 +321,19 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
 
         ref = replay(campaign, store, records)
         expansion, dense = ref.run_list(), ref.expansion()
-        round_note = (f"adaptive: round {ref.current.number} "
-                      + ("(the grid)" if ref.current.number == 0 else "")
-                      + (f"; refinement finished ({ref.stop})" if ref.finished else ""))
+        round_note = (
+            f"adaptive: round {ref.current.number} "
+            + ("(the grid)" if ref.current.number == 0 else "")
+            + (f"; refinement finished ({ref.stop})" if ref.finished else "")
+        )
     else:
         from ..precision.rounds import replay as replay_seeds
 
         seeds = replay_seeds(campaign, store, records)
         expansion, dense = seeds.run_list(), seeds.expansion()
-        round_note = (f"seeds by precision: round {seeds.current.number}"
-                      + (f"; finished ({seeds.stop})" if seeds.finished else ""))
+        round_note = f"seeds by precision: round {seeds.current.number}" + (
+            f"; finished ({seeds.stop})" if seeds.finished else ""
+        )
     todo, done, failed = classify(expansion, store, records, retry_failed=retry_failed)
     basis = measurements(expansion, records)
     costs: dict[str, Costed] = {}
@@ -317,8 +343,7 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
         point = expansion.run(i).point
         if id(point) not in per_point:
             label = point_label(point)
-            per_point[id(point)] = (label, *basis.cost(point, label,
-                                                       model_seconds(point.numerics)))
+            per_point[id(point)] = (label, *basis.cost(point, label, model_seconds(point.numerics)))
         label, est, lo, hi, why = per_point[id(point)]
         runs.append((est, lo, hi, why == "cost model"))
         entry = costs.setdefault(label, Costed(label, 0, est, lo, hi, why))
@@ -338,40 +363,61 @@ def estimate(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = F
     n = len(basis.measured)
     if n:
         seconds = [m[3] for m in basis.measured]
-        text = (f"from {n} finished run{'s' if n > 1 else ''} of this campaign (run times "
-                f"{fmt_seconds(min(seconds))} to {fmt_seconds(max(seconds))}, median "
-                f"{fmt_seconds(float(np.median(seconds)))})")
+        text = (
+            f"from {n} finished run{'s' if n > 1 else ''} of this campaign (run times "
+            f"{fmt_seconds(min(seconds))} to {fmt_seconds(max(seconds))}, median "
+            f"{fmt_seconds(float(np.median(seconds)))})"
+        )
     else:
-        text = ("cost model, no finished runs (sweep/cost/model.py, calibrated on a 2-core "
-                "VM: benchmarks/cost_model.json)")
+        text = (
+            "cost model, no finished runs (sweep/cost/model.py, calibrated on a 2-core "
+            "VM: benchmarks/cost_model.json)"
+        )
     if campaign.refine is not None and not ref.finished:
-        later = later_rounds(campaign, ref.current.number, ref.n_runs,
-                             [*(r[0] for r in runs), *(m[3] for m in basis.measured)],
-                             workers)
+        later = later_rounds(
+            campaign,
+            ref.current.number,
+            ref.n_runs,
+            [*(r[0] for r in runs), *(m[3] for m in basis.measured)],
+            workers,
+        )
     elif campaign.precision is not None and not seeds.finished:
         later = forecast_rounds(seeds, basis, workers)
     changed = campaign_changes(campaign, store, dense, records)
-    return Estimate(campaign=campaign.name, folder=str(store.root), total=len(expansion),
-                    done=done, failed=failed, to_do=len(todo), measured=n, basis=text,
-                    workers=workers, where=where, local_workers=local,
-                    cpu=(sum(r[0] for r in runs), sum(r[1] for r in runs),
-                         sum(r[2] for r in runs)),
-                    wall=walls(workers, stretch if here else 1.0),
-                    local_wall=walls(local, local_stretch),
-                    longest=max((r[0] * (stretch if r[3] and here else 1.0) for r in runs),
-                                default=0.0),
-                    overhead=driver_overhead(stretch) if todo else 0.0,
-                    local_overhead=driver_overhead(local_stretch) if todo else 0.0,
-                    load=load, cores=cores,
-                    stretch=stretch, local_stretch=local_stretch, modelled=modelled,
-                    local=here,
-                    points=list(costs.values()), later=later,
-                    round_note=round_note,
-                    changes=[] if changed is None else changed.lines())
+    return Estimate(
+        campaign=campaign.name,
+        folder=str(store.root),
+        total=len(expansion),
+        done=done,
+        failed=failed,
+        to_do=len(todo),
+        measured=n,
+        basis=text,
+        workers=workers,
+        where=where,
+        local_workers=local,
+        cpu=(sum(r[0] for r in runs), sum(r[1] for r in runs), sum(r[2] for r in runs)),
+        wall=walls(workers, stretch if here else 1.0),
+        local_wall=walls(local, local_stretch),
+        longest=max((r[0] * (stretch if r[3] and here else 1.0) for r in runs), default=0.0),
+        overhead=driver_overhead(stretch) if todo else 0.0,
+        local_overhead=driver_overhead(local_stretch) if todo else 0.0,
+        load=load,
+        cores=cores,
+        stretch=stretch,
+        local_stretch=local_stretch,
+        modelled=modelled,
+        local=here,
+        points=list(costs.values()),
+        later=later,
+        round_note=round_note,
+        changes=[] if changed is None else changed.lines(),
+    )
 
 
-def later_rounds(campaign: Campaign, current: int, planned: int, per_run: Sequence[float],
-                 workers: int) -> LaterRounds | None:
+def later_rounds(
+    campaign: Campaign, current: int, planned: int, per_run: Sequence[float], workers: int
+) -> LaterRounds | None:
     """A bound on an adaptive campaign's rounds after ``current`` (with seeds by precision,
     the rounds that only add seeds too): every run :func:`~sweep.refine.plan.run_bound`
     allows beyond the ``planned`` ones, each at the mean cost of the campaign's runs; each
@@ -409,8 +455,9 @@ def forecast_rounds(plan: Any, basis: Basis, workers: int) -> LaterRounds | None
         idx = [p * cap + j for j in range(planned[p])]
         done = [i for i in idx if plan.outcomes.get(i) is not None]
         values = [float(plan.outcomes[i]) for i in done]
-        classes = [math.nan if plan.classes.get(i) is None else float(plan.classes[i])
-                   for i in done]
+        classes = [
+            math.nan if plan.classes.get(i) is None else float(plan.classes[i]) for i in done
+        ]
         more = expected_seeds(plan.spec, values, classes, cap, planned[p]) - planned[p]
         if more > 0:
             label = point_label(point)
@@ -422,8 +469,14 @@ def forecast_rounds(plan: Any, basis: Basis, workers: int) -> LaterRounds | None
     rounds = rounds_bound(plan.spec, cap) - 1 - plan.current.number
     if at_most <= 0 or rounds <= 0:
         return None
-    return LaterRounds(rounds, int(runs), cpu, cpu / workers + rounds * longest if runs else 0.0,
-                       forecast=True, at_most=at_most)
+    return LaterRounds(
+        rounds,
+        int(runs),
+        cpu,
+        cpu / workers + rounds * longest if runs else 0.0,
+        forecast=True,
+        at_most=at_most,
+    )
 
 
 def fmt_seconds(seconds: float) -> str:
@@ -441,60 +494,90 @@ def _hours(seconds: float) -> str:
     return f"{seconds / 3600:.2g} CPU-h"
 
 
-def _wall_line(e: Estimate, workers: int, where: str, runs: tuple[float, float, float],
-               overhead: float) -> str:
+def _wall_line(
+    e: Estimate, workers: int, where: str, runs: tuple[float, float, float], overhead: float
+) -> str:
     total = [r + overhead for r in runs]
-    return (f"wall time: {fmt_seconds(total[0])} on {workers} worker(s) ({where}; 10-90 %: "
-            f"{fmt_seconds(total[1])} to {fmt_seconds(total[2])}): "
-            f"{fmt_seconds(runs[0])} of runs (the longest {fmt_seconds(e.longest)}) + about "
-            f"{fmt_seconds(overhead)} of the driver's own (cluster start, warm-up, "
-            "phase.nc, figures, report)")
+    return (
+        f"wall time: {fmt_seconds(total[0])} on {workers} worker(s) ({where}; 10-90 %: "
+        f"{fmt_seconds(total[1])} to {fmt_seconds(total[2])}): "
+        f"{fmt_seconds(runs[0])} of runs (the longest {fmt_seconds(e.longest)}) + about "
+        f"{fmt_seconds(overhead)} of the driver's own (cluster start, warm-up, "
+        "phase.nc, figures, report)"
+    )
 
 
 def lines(e: Estimate, *, brief: bool = False) -> list[str]:
     """The estimate as plain lines (``nematic run --dry-run``, ``validate --estimate``);
     ``brief``: without the runs to do point by point."""
-    out = [f"runs: {e.total} planned, {e.done} done, {e.failed} failed (not redone), "
-           f"{e.to_do} to do" + (f"; {e.round_note}" if e.round_note else "")]
+    out = [
+        f"runs: {e.total} planned, {e.done} done, {e.failed} failed (not redone), "
+        f"{e.to_do} to do" + (f"; {e.round_note}" if e.round_note else "")
+    ]
     for c in [] if brief else e.points[:MAX_POINTS]:
-        out.append(f"  {c.label or '(the one point)'}: {c.runs} to do, "
-                   f"{fmt_seconds(c.seconds)} each ({fmt_seconds(c.low)} to "
-                   f"{fmt_seconds(c.high)}; {c.basis})")
+        out.append(
+            f"  {c.label or '(the one point)'}: {c.runs} to do, "
+            f"{fmt_seconds(c.seconds)} each ({fmt_seconds(c.low)} to "
+            f"{fmt_seconds(c.high)}; {c.basis})"
+        )
     if len(e.points) > MAX_POINTS and not brief:
         rest = e.points[MAX_POINTS:]
-        out.append(f"  ... and {len(rest)} more point(s) with {sum(c.runs for c in rest)} "
-                   "run(s) to do")
+        out.append(
+            f"  ... and {len(rest)} more point(s) with {sum(c.runs for c in rest)} run(s) to do"
+        )
     out.append(f"basis: {e.basis}")
     if e.to_do == 0:
-        out.append("nothing to do" + ("; --retry-failed redoes the failed runs"
-                                      if e.failed else ""))
+        out.append(
+            "nothing to do" + ("; --retry-failed redoes the failed runs" if e.failed else "")
+        )
     else:
-        out.append(f"CPU time: {fmt_seconds(e.cpu[0])} = {_hours(e.cpu[0])} (10-90 %: "
-                   f"{fmt_seconds(e.cpu[1])} to {fmt_seconds(e.cpu[2])}), one core per run")
+        out.append(
+            f"CPU time: {fmt_seconds(e.cpu[0])} = {_hours(e.cpu[0])} (10-90 %: "
+            f"{fmt_seconds(e.cpu[1])} to {fmt_seconds(e.cpu[2])}), one core per run"
+        )
         out.append(_wall_line(e, e.workers, e.where, e.wall, e.overhead))
         if e.stretch > 1.0 and not e.local:
-            out.append(f"  this machine: load average {e.load:.1f} on {e.cores} core(s): "
-                       f"part of the driver's time is stretched {e.stretch:.2g}x")
+            out.append(
+                f"  this machine: load average {e.load:.1f} on {e.cores} core(s): "
+                f"part of the driver's time is stretched {e.stretch:.2g}x"
+            )
         elif e.stretch > 1.0:
-            what = ("the cost model's run times (and part of the driver's time) are stretched "
-                    f"{e.stretch:.2g}x; " if e.modelled else
-                    "part of the driver's time is stretched as much; ")
-            out.append(f"  this machine: load average {e.load:.1f} on {e.cores} core(s), so "
-                       f"each worker gets about {100 / e.stretch:.0f} % of a core: {what}"
-                       "measured run times are taken as they are")
+            what = (
+                "the cost model's run times (and part of the driver's time) are stretched "
+                f"{e.stretch:.2g}x; "
+                if e.modelled
+                else "part of the driver's time is stretched as much; "
+            )
+            out.append(
+                f"  this machine: load average {e.load:.1f} on {e.cores} core(s), so "
+                f"each worker gets about {100 / e.stretch:.0f} % of a core: {what}"
+                "measured run times are taken as they are"
+            )
         if e.local_workers != e.workers:
-            out.append("  " + _wall_line(e, e.local_workers, "this machine's local cluster",
-                                         e.local_wall, e.local_overhead))
+            out.append(
+                "  "
+                + _wall_line(
+                    e,
+                    e.local_workers,
+                    "this machine's local cluster",
+                    e.local_wall,
+                    e.local_overhead,
+                )
+            )
     if e.later is not None and e.later.forecast:
-        out.append(f"later rounds: about {e.later.runs} more runs expected (each point's "
-                   "seeds so far projected to its rule), about "
-                   f"{_hours(e.later.cpu)} ({fmt_seconds(e.later.cpu)}) and "
-                   f"{fmt_seconds(e.later.wall)} wall on {e.workers} worker(s); at most "
-                   f"{e.later.at_most} more runs (every point to the cap) in at most "
-                   f"{e.later.rounds} more round(s)")
+        out.append(
+            f"later rounds: about {e.later.runs} more runs expected (each point's "
+            "seeds so far projected to its rule), about "
+            f"{_hours(e.later.cpu)} ({fmt_seconds(e.later.cpu)}) and "
+            f"{fmt_seconds(e.later.wall)} wall on {e.workers} worker(s); at most "
+            f"{e.later.at_most} more runs (every point to the cap) in at most "
+            f"{e.later.rounds} more round(s)"
+        )
     elif e.later is not None:
-        out.append(f"later rounds: at most {e.later.rounds} more, at most {e.later.runs} more "
-                   f"runs (the run bound), about {_hours(e.later.cpu)} "
-                   f"({fmt_seconds(e.later.cpu)}) and at most {fmt_seconds(e.later.wall)} "
-                   f"wall on {e.workers} worker(s)")
+        out.append(
+            f"later rounds: at most {e.later.rounds} more, at most {e.later.runs} more "
+            f"runs (the run bound), about {_hours(e.later.cpu)} "
+            f"({fmt_seconds(e.later.cpu)}) and at most {fmt_seconds(e.later.wall)} "
+            f"wall on {e.workers} worker(s)"
+        )
     return out

@@ -56,24 +56,50 @@ class MechanicsCost:
 #: ``benchmarks/cost_model.json`` (``fit``), measured 2026-12-03 on the 2-core VM
 COSTS = {
     "linear": MechanicsCost(
-        step=(0.0, 0.00581), save=(0.00176, 0.00334),
+        step=(0.0, 0.00581),
+        save=(0.00176, 0.00334),
         setup=(0.0452, 0.0315),
-        steps_curve=((0, 0), (5, 17), (10, 24), (20, 34), (40, 55), (60, 104),
-                     (100, 186), (150, 286), (200, 386), (250, 445), (300, 498))),
+        steps_curve=(
+            (0, 0),
+            (5, 17),
+            (10, 24),
+            (20, 34),
+            (40, 55),
+            (60, 104),
+            (100, 186),
+            (150, 286),
+            (200, 386),
+            (250, 445),
+            (300, 498),
+        ),
+    ),
     "finite": MechanicsCost(
-        step=(0.00248, 0.019), save=(0.000994, 0.0),
+        step=(0.00248, 0.019),
+        save=(0.000994, 0.0),
         setup=(0.0, 0.0),
-        steps_curve=((0, 0), (5, 24), (10, 31), (20, 41), (40, 61), (60, 98),
-                     (100, 178), (150, 278), (200, 347), (250, 398), (300, 448))),
+        steps_curve=(
+            (0, 0),
+            (5, 24),
+            (10, 31),
+            (20, 41),
+            (40, 61),
+            (60, 98),
+            (100, 178),
+            (150, 278),
+            (200, 347),
+            (250, 398),
+            (300, 448),
+        ),
+    ),
 }
 #: measured factors of the CPU time against the calibrated numerics (``variants`` of the
 #: JSON: the same run, alpha - B = 0.5, t = 100, 128^2, with one numerics value changed)
 VARIANT_FACTORS = {
-    ('linear', 'scheme', 'etdrk2'): 2.13,
-    ('finite', 'scheme', 'etdrk2'): 2.60,
-    ('linear', 'error_norm', 'rms'): 0.71,
-    ('linear', 'incompressible', True): 1.31,
-    ('finite', 'displacement', 'equilibrium'): 1.51,
+    ("linear", "scheme", "etdrk2"): 2.13,
+    ("finite", "scheme", "etdrk2"): 2.60,
+    ("linear", "error_norm", "rms"): 0.71,
+    ("linear", "incompressible", True): 1.31,
+    ("finite", "displacement", "equilibrium"): 1.51,
 }
 #: the 10 % and 90 % quantiles of measured / model over the calibration's activity runs
 MODEL_SPREAD = (0.66, 1.99)
@@ -101,8 +127,9 @@ def model_steps(numerics: Numerics, t_final: float | None = None) -> float:
         return t / numerics.dt
     cost = COSTS[numerics.mechanics]
     order = ORDER.get(numerics.scheme, 4)
-    steps = curve_steps(cost.steps_curve, t) * (
-        numerics.tolerance / REFERENCE_TOLERANCE) ** (-1.0 / order)
+    steps = curve_steps(cost.steps_curve, t) * (numerics.tolerance / REFERENCE_TOLERANCE) ** (
+        -1.0 / order
+    )
     return max(steps, t / numerics.dt_max)
 
 
@@ -123,15 +150,23 @@ def model_seconds(numerics: Numerics, t_final: float | None = None) -> float:
     cost = COSTS[numerics.mechanics]
     x = scale(numerics.resolution)
     saves = math.floor(t / numerics.save_every) + 1
-    seconds = (model_steps(numerics, t) * (cost.step[0] + cost.step[1] * x)
-               + saves * (cost.save[0] + cost.save[1] * x)
-               + cost.setup[0] + cost.setup[1] * x)
+    seconds = (
+        model_steps(numerics, t) * (cost.step[0] + cost.step[1] * x)
+        + saves * (cost.save[0] + cost.save[1] * x)
+        + cost.setup[0]
+        + cost.setup[1] * x
+    )
     return seconds * variant_factor(numerics)
 
 
 def kind(numerics: Numerics) -> tuple[object, ...]:
     """What makes runs cost alike besides resolution and length: mechanics, scheme and the
     numerics with a factor of their own."""
-    return (numerics.mechanics, numerics.scheme, numerics.error_norm, numerics.adaptive,
-            numerics.incompressible if numerics.mechanics == "linear" else None,
-            numerics.displacement if numerics.mechanics == "finite" else None)
+    return (
+        numerics.mechanics,
+        numerics.scheme,
+        numerics.error_norm,
+        numerics.adaptive,
+        numerics.incompressible if numerics.mechanics == "linear" else None,
+        numerics.displacement if numerics.mechanics == "finite" else None,
+    )

@@ -28,13 +28,24 @@ FIGURES = "figures"
 FORMATS = ("png", "pdf")
 PNG_DPI = 160
 LABELS = {
-    AMB: r"$\alpha - B$", "alpha": r"$\alpha$", "B": r"$B$", "K": r"$K$", "chi": r"$\chi$",
-    "eps": r"$\epsilon$", "sigma2_S": r"$\sigma^2_S$", "cos2theta": r"$\langle\cos 2\theta\rangle$",
+    AMB: r"$\alpha - B$",
+    "alpha": r"$\alpha$",
+    "B": r"$B$",
+    "K": r"$K$",
+    "chi": r"$\chi$",
+    "eps": r"$\epsilon$",
+    "sigma2_S": r"$\sigma^2_S$",
+    "cos2theta": r"$\langle\cos 2\theta\rangle$",
     "activity": r"$\chi(\alpha - B)$",
 }
 STYLE = {
-    "font.size": 9, "axes.titlesize": 10, "axes.labelsize": 10, "legend.fontsize": 8,
-    "xtick.labelsize": 8.5, "ytick.labelsize": 8.5, "legend.framealpha": 0.85,
+    "font.size": 9,
+    "axes.titlesize": 10,
+    "axes.labelsize": 10,
+    "legend.fontsize": 8,
+    "xtick.labelsize": 8.5,
+    "ytick.labelsize": 8.5,
+    "legend.framealpha": 0.85,
     "axes.grid": False,
 }
 
@@ -82,8 +93,11 @@ class Results:
         if v is None:
             return []
         conv = v["converged"].values
-        axes = [str(c) for c in v.coords if v[c].dims == ("point",)
-                and c not in ("point", "label", "why")]
+        axes = [
+            str(c)
+            for c in v.coords
+            if v[c].dims == ("point",) and c not in ("point", "label", "why")
+        ]
         out = []
         for p, row in enumerate(conv):
             verdict = 0 if (row == 0).any() else -2 if (row == -2).any() else 1
@@ -94,19 +108,24 @@ class Results:
         """The fits Dataset, checked to hold every variable in ``names``."""
         missing = [n for n in names if n not in self.fits]
         if missing:
-            raise FigureError(f"{self.root / FITS} has no {', '.join(missing)}: "
-                              "run `nematic figures` (it writes the fits first)")
+            raise FigureError(
+                f"{self.root / FITS} has no {', '.join(missing)}: "
+                "run `nematic figures` (it writes the fits first)"
+            )
         return self.fits
 
 
 #: How a verification verdict is drawn: a square frame around the point (docs/campaigns.md).
-VERDICT_STYLE = {1: ("tab:green", "verified: converged"),
-                 0: ("tab:orange", "verified: changed by a variant"),
-                 -2: ("0.5", "verified: runs missing")}
+VERDICT_STYLE = {
+    1: ("tab:green", "verified: converged"),
+    0: ("tab:orange", "verified: changed by a variant"),
+    -2: ("0.5", "verified: runs missing"),
+}
 
 
-def mark_verdicts(ax: Axes, marks: Sequence[tuple[Sequence[float], int]],
-                  size: float = 150.0) -> list[Any]:
+def mark_verdicts(
+    ax: Axes, marks: Sequence[tuple[Sequence[float], int]], size: float = 150.0
+) -> list[Any]:
     """Frame the verified points at their plot positions (2 or 3 coordinates) with a square
     coloured by verdict, with one legend entry per verdict shown; returns their artists."""
     drawn = []
@@ -116,8 +135,18 @@ def mark_verdicts(ax: Axes, marks: Sequence[tuple[Sequence[float], int]],
             continue
         cols = list(zip(*pts, strict=True))
         plot: Any = ax  # a 2-D or a 3-D Axes
-        drawn.append(plot.scatter(*cols, s=size, marker="s", facecolors="none",
-                                edgecolors=colour, linewidths=1.6, label=label, zorder=5))
+        drawn.append(
+            plot.scatter(
+                *cols,
+                s=size,
+                marker="s",
+                facecolors="none",
+                edgecolors=colour,
+                linewidths=1.6,
+                label=label,
+                zorder=5,
+            )
+        )
     return drawn
 
 
@@ -140,8 +169,9 @@ def nearest_point(ds: xr.Dataset, where: Mapping[str, Any]) -> xr.Dataset:
     return ds
 
 
-def ok_run(res: Results, point: xr.Dataset, seed: int | None = None
-            ) -> tuple[xr.Dataset | None, int | None]:
+def ok_run(
+    res: Results, point: xr.Dataset, seed: int | None = None
+) -> tuple[xr.Dataset | None, int | None]:
     """The run file of ``point`` (a phase.nc slice over seeds) for ``seed`` or the first seed
     that succeeded (and has snapshots)."""
     seeds = point["seed"].values
@@ -157,8 +187,9 @@ def ok_run(res: Results, point: xr.Dataset, seed: int | None = None
     return None, None
 
 
-def activity_line(res: Results, figure: str, options: Mapping[str, Any]
-                  ) -> tuple[xr.Dataset, list[str], np.ndarray]:
+def activity_line(
+    res: Results, figure: str, options: Mapping[str, Any]
+) -> tuple[xr.Dataset, list[str], np.ndarray]:
     """phase.nc along alpha - B with every other sweep dim fixed (option ``select``, default
     their first values), the names of those other dims and the alpha - B values."""
     if not is_swept(res.phase, AMB):
@@ -169,8 +200,9 @@ def activity_line(res: Results, figure: str, options: Mapping[str, Any]
     return ds, others, ds[AMB].values.astype(float)
 
 
-def runs_along(res: Results, ds: xr.Dataset, curves: int, seed: int | None
-               ) -> Iterator[tuple[float, int, xr.Dataset, int]]:
+def runs_along(
+    res: Results, ds: xr.Dataset, curves: int, seed: int | None
+) -> Iterator[tuple[float, int, xr.Dataset, int]]:
     """One run per drawn alpha - B of the line ``ds``: at most ``curves`` values spread over
     the line, each ``(position in [0, 1], index, run, seed)``; the run of ``seed``, or of the
     first seed that succeeded at the first drawn point (the same seed is tried everywhere)."""
@@ -211,8 +243,9 @@ def describe(ds: xr.Dataset, names: Sequence[str]) -> str:
     return ", ".join(parts)
 
 
-def default_select(ds: xr.Dataset, keep: Sequence[str], choice: Mapping[str, Any] | None
-                    ) -> xr.Dataset:
+def default_select(
+    ds: xr.Dataset, keep: Sequence[str], choice: Mapping[str, Any] | None
+) -> xr.Dataset:
     """``ds`` with every sweep dim except ``keep`` fixed: ``choice`` or its first value."""
     ds = select(ds, choice)
     for d in sweep_dims(ds):
@@ -221,8 +254,9 @@ def default_select(ds: xr.Dataset, keep: Sequence[str], choice: Mapping[str, Any
     return ds
 
 
-def safe_snapshot(ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool = True,
-                  arrows: int = 24) -> None:
+def safe_snapshot(
+    ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool = True, arrows: int = 24
+) -> None:
     """:func:`sweep.figures.snapshot.draw_snapshot` (without its title), tolerating a run without
     I1bar stored (then a plain background), with compact colour bars: S (quivers) on the
     right, I1bar (background) below."""
@@ -231,8 +265,7 @@ def safe_snapshot(ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool 
     from .snapshot import background_colorbar, draw_snapshot
 
     if run.sizes.get("snapshot_time", 0) == 0 or "q1" not in run or "q2" not in run:
-        ax.text(0.5, 0.5, "no snapshot stored", ha="center", va="center",
-                transform=ax.transAxes)
+        ax.text(0.5, 0.5, "no snapshot stored", ha="center", va="center", transform=ax.transAxes)
         ax.set_xticks([])
         ax.set_yticks([])
         return
@@ -249,23 +282,30 @@ def safe_snapshot(ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool 
     cb.locator = MaxNLocator(5)
     cb.update_ticks()
     if has_i1 and ax.images:
-        background_colorbar(fig, ax.images[0], cax=ax.inset_axes((0.1, -0.09, 0.8, 0.04)),
-                            orientation="horizontal")
+        background_colorbar(
+            fig, ax.images[0], cax=ax.inset_axes((0.1, -0.09, 0.8, 0.04)), orientation="horizontal"
+        )
 
 
 def invalid_options(name: str, options: Mapping[str, Any], allowed: Sequence[str]) -> list[str]:
     """What is wrong with the ``options`` of figure ``name``, whose options are ``allowed``:
     one message per problem, empty if none."""
-    out = [f"unknown option {key!r}; allowed: {', '.join(allowed) or 'none'}"
-           for key in options if key not in allowed]
+    out = [
+        f"unknown option {key!r}; allowed: {', '.join(allowed) or 'none'}"
+        for key in options
+        if key not in allowed
+    ]
     if "yscale" in allowed and options.get("yscale", "linear") not in ("linear", "log"):
         out.append(f"yscale = {options['yscale']!r}; expected 'linear' or 'log'")
     for key in ("select", "snapshot"):
         if options.get(key) is not None and not isinstance(options[key], Mapping):
             out.append(f"{key} = {options[key]!r}; expected a mapping {{sweep axis: value}}")
     snaps = options.get("snapshots")
-    if snaps is not None and (not isinstance(snaps, Sequence) or isinstance(snaps, str)
-                              or not all(isinstance(t, Mapping) for t in snaps)):
+    if snaps is not None and (
+        not isinstance(snaps, Sequence)
+        or isinstance(snaps, str)
+        or not all(isinstance(t, Mapping) for t in snaps)
+    ):
         out.append(f"snapshots = {snaps!r}; expected a list of mappings {{sweep axis: value}}")
     return out
 

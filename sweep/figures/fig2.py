@@ -48,8 +48,11 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
     if snap_amb is None:
         mean = ds["sigma2_S_mean"].values
         if trans is not None and math.isfinite(trans["upper"]):
-            above = [(i, v) for i, v in enumerate(x) if v >= trans["upper"] - 1e-12
-                     and np.isfinite(mean[i])]
+            above = [
+                (i, v)
+                for i, v in enumerate(x)
+                if v >= trans["upper"] - 1e-12 and np.isfinite(mean[i])
+            ]
             snap_amb = above[0][1] if above else None
         if snap_amb is None and np.any(np.isfinite(mean)):
             snap_amb = x[int(np.nanargmax(np.where(np.isfinite(mean), mean, -np.inf)))]
@@ -67,23 +70,37 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
     if snap_run is not None and snap_point is not None:
         index = -1
         if "time" in snap_opt and snap_run.sizes.get("snapshot_time", 0):
-            index = int(np.argmin(np.abs(snap_run["snapshot_time"].values
-                                         - float(snap_opt["time"]))))
+            index = int(
+                np.argmin(np.abs(snap_run["snapshot_time"].values - float(snap_opt["time"])))
+            )
         safe_snapshot(ax_a, snap_run, index)
-        t = (float(snap_run["snapshot_time"].values[index])
-             if snap_run.sizes.get("snapshot_time", 0) else math.nan)
-        ax_a.set_title(rf"(a) $\alpha - B$ = {fmt(float(snap_point[AMB]))}, seed {snap_seed},"
-                       rf" $t/\tau$ = {t:g}", loc="left")
+        t = (
+            float(snap_run["snapshot_time"].values[index])
+            if snap_run.sizes.get("snapshot_time", 0)
+            else math.nan
+        )
+        ax_a.set_title(
+            rf"(a) $\alpha - B$ = {fmt(float(snap_point[AMB]))}, seed {snap_seed},"
+            rf" $t/\tau$ = {t:g}",
+            loc="left",
+        )
     else:
-        ax_a.text(0.5, 0.5, "no successful run to draw", ha="center", va="center",
-                  transform=ax_a.transAxes)
+        ax_a.text(
+            0.5,
+            0.5,
+            "no successful run to draw",
+            ha="center",
+            va="center",
+            transform=ax_a.transAxes,
+        )
         ax_a.set_title("(a)", loc="left")
 
     # (b) sigma2_S(t) for several alpha - B
     cmap = colormaps["viridis"]
     drawn_seed = None
-    for position, i, run, s in runs_along(res, ds, int(options.get("curves", 8)),
-                                          options.get("seed")):
+    for position, i, run, s in runs_along(
+        res, ds, int(options.get("curves", 8)), options.get("seed")
+    ):
         drawn_seed = s if drawn_seed is None else drawn_seed
         colour = cmap(position)
         times, series = series_time(run).values, run["sigma2_S"].values.astype(float)
@@ -107,17 +124,43 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
     err = np.where(np.isfinite(std), std, 0.0)
     # on a log axis a bar that would reach zero or below is cut at a tenth of the mean
     lower = np.minimum(err, 0.9 * mean) if yscale == "log" else err
-    ax_c.errorbar(x[good], mean[good], yerr=[lower[good], err[good]], fmt="o-", color="k",
-                  ms=4.5, lw=1.2, capsize=2.5, label="seed mean ± std", zorder=3)
+    ax_c.errorbar(
+        x[good],
+        mean[good],
+        yerr=[lower[good], err[good]],
+        fmt="o-",
+        color="k",
+        ms=4.5,
+        lw=1.2,
+        capsize=2.5,
+        label="seed mean ± std",
+        zorder=3,
+    )
     if trans is not None and math.isfinite(trans["location"]):
-        ax_c.axvspan(trans["lower"], trans["upper"], color="tab:red", alpha=0.12, lw=0,
-                     label=(f"jump at {fmt(trans['location'])} "
-                            f"[{fmt(trans['lower'])}, {fmt(trans['upper'])}]"))
+        ax_c.axvspan(
+            trans["lower"],
+            trans["upper"],
+            color="tab:red",
+            alpha=0.12,
+            lw=0,
+            label=(
+                f"jump at {fmt(trans['location'])} [{fmt(trans['lower'])}, {fmt(trans['upper'])}]"
+            ),
+        )
     if snap_run is not None and snap_point is not None:
         value = float(snap_run["sigma2_S_final"]) if "sigma2_S_final" in snap_run else math.nan
         if math.isfinite(value) and value > 0:
-            ax_c.plot([float(snap_point[AMB])], [value], "o", ms=13, mfc="none", mec="red",
-                      mew=1.8, zorder=4, label="panel (a)")
+            ax_c.plot(
+                [float(snap_point[AMB])],
+                [value],
+                "o",
+                ms=13,
+                mfc="none",
+                mec="red",
+                mew=1.8,
+                zorder=4,
+                label="panel (a)",
+            )
     marks = []
     for coords, verdict in res.verified:
         if AMB in coords and on_slice(coords, ds, others):
@@ -130,21 +173,25 @@ def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
         ax_c.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
     ax_c.set_xlabel(r"$\alpha - B$")
     t_final = res.phase.attrs.get("num_t_final")
-    ax_c.set_ylabel(rf"$\sigma^2_S$ at $t/\tau$ = {float(t_final):g}" if t_final is not None
-                    else r"$\sigma^2_S(t_{\rm final})$")
+    ax_c.set_ylabel(
+        rf"$\sigma^2_S$ at $t/\tau$ = {float(t_final):g}"
+        if t_final is not None
+        else r"$\sigma^2_S(t_{\rm final})$"
+    )
     # an adaptive campaign runs different numbers of seeds per point (phase.nc's seed_count)
-    counts = (ds["seed_count"].values[ds["seed_count"].values > 0] if "seed_count" in ds
-              else np.array([ds["seed"].size]))
+    counts = (
+        ds["seed_count"].values[ds["seed_count"].values > 0]
+        if "seed_count" in ds
+        else np.array([ds["seed"].size])
+    )
     lo, hi = (int(counts.min()), int(counts.max())) if counts.size else (0, 0)
-    ax_c.set_title(f"(c) {hi} seeds" if lo == hi else f"(c) {lo}-{hi} seeds per point",
-                   loc="left")
+    ax_c.set_title(f"(c) {hi} seeds" if lo == hi else f"(c) {lo}-{hi} seeds per point", loc="left")
     ax_c.legend(loc="lower right" if yscale == "log" else "best")
     fig.suptitle(f"{res.name}: paper Fig. 2" + (f" ({where})" if where else ""), fontsize=10)
     return fig
 
 
-def _transition_row(res: Results, ds: xr.Dataset, others: Sequence[str]
-                    ) -> dict[str, float] | None:
+def _transition_row(res: Results, ds: xr.Dataset, others: Sequence[str]) -> dict[str, float] | None:
     """The fitted transition along alpha - B at the other sweep values of ``ds``."""
     fits = res.fits
     if "transition_location" not in fits:
@@ -162,5 +209,3 @@ def _transition_row(res: Results, ds: xr.Dataset, others: Sequence[str]
             return None
         out[n] = float(v)
     return out
-
-

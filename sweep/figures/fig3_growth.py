@@ -38,8 +38,9 @@ def fig3_growth(res: Results, options: Mapping[str, Any]) -> Figure:
     ax_l, ax_s = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
     cmap = colormaps["plasma"]
     drawn_seed = None
-    for position, i, run, s in runs_along(res, ds, int(options.get("curves", 6)),
-                                          options.get("seed")):
+    for position, i, run, s in runs_along(
+        res, ds, int(options.get("curves", 6)), options.get("seed")
+    ):
         drawn_seed = s if drawn_seed is None else drawn_seed
         colour = cmap(0.85 * position)
         times = series_time(run).values
@@ -49,8 +50,14 @@ def fig3_growth(res: Results, options: Mapping[str, Any]) -> Figure:
         patterned = float(run["sigma2_S_final"]) > 1e-6 if "sigma2_S_final" in run else True
         style = "-" if patterned else ":"
         label = fmt(float(x[i])) + ("" if patterned else " (relaxes)")
-        ax_l.plot(times[ok & np.isfinite(lam)], lam[ok & np.isfinite(lam)], style,
-                  color=colour, lw=1.4, label=label)
+        ax_l.plot(
+            times[ok & np.isfinite(lam)],
+            lam[ok & np.isfinite(lam)],
+            style,
+            color=colour,
+            lw=1.4,
+            label=label,
+        )
         ax_s.plot(times[ok], sig[ok], style, color=colour, lw=1.4, label=label)
         t_peak = float(run["t_peak"]) if "t_peak" in run else math.nan
         if patterned and math.isfinite(t_peak):
@@ -63,8 +70,11 @@ def fig3_growth(res: Results, options: Mapping[str, Any]) -> Figure:
     ax_l.set_yscale("log")
     ax_l.set_xlabel(r"$t/\tau$")
     ax_l.set_ylabel(r"$\lambda$ (units of L)")
-    ax_l.set_title(r"(a) pattern size $\lambda(t)$; dot: growth peak ($\lambda_{\rm peak}$)",
-                   loc="left", fontsize=10)
+    ax_l.set_title(
+        r"(a) pattern size $\lambda(t)$; dot: growth peak ($\lambda_{\rm peak}$)",
+        loc="left",
+        fontsize=10,
+    )
     ax_s.set_yscale("log")
     top = max(float(np.nanmax(line.get_ydata())) for line in ax_s.lines)
     ax_s.set_ylim(bottom=1e-4 * top)  # a relaxing run falls to round-off: cut it off
@@ -74,6 +84,7 @@ def fig3_growth(res: Results, options: Mapping[str, Any]) -> Figure:
     ax_s.set_title(f"(b) seed {drawn_seed}", loc="left", fontsize=10)
     ax_s.legend(title=r"$\alpha - B$", fontsize=8, loc="best")
     where = describe(ds, others)
-    fig.suptitle(f"{res.name}: growth of the pattern" + (f" ({where})" if where else ""),
-                 fontsize=10)
+    fig.suptitle(
+        f"{res.name}: growth of the pattern" + (f" ({where})" if where else ""), fontsize=10
+    )
     return fig

@@ -61,24 +61,52 @@ def figA1(res: Results, options: Mapping[str, Any]) -> Figure:
     # planned (a refined campaign's phase.nc: its axis is the union of every value run) are
     # left blank
     unknown = ~np.isfinite(frac) & _ran(res.phase, act, strain, frac.shape)
-    ax.scatter(A[stable], E[stable], s=30, facecolors="none", edgecolors="tab:blue", lw=1.1,
-               label="stable", zorder=3)
+    ax.scatter(
+        A[stable],
+        E[stable],
+        s=30,
+        facecolors="none",
+        edgecolors="tab:blue",
+        lw=1.1,
+        label="stable",
+        zorder=3,
+    )
     ax.scatter(A[unstable], E[unstable], s=30, color="tab:red", label="unstable", zorder=3)
     if np.any(mixed):
-        ax.scatter(A[mixed], E[mixed], s=30, color="tab:purple", marker="D",
-                   label="seeds disagree", zorder=3)
+        ax.scatter(
+            A[mixed],
+            E[mixed],
+            s=30,
+            color="tab:purple",
+            marker="D",
+            label="seeds disagree",
+            zorder=3,
+        )
     if np.any(unknown):
-        ax.scatter(A[unknown], E[unknown], s=25, color="0.6", marker="x", label="no data",
-                   zorder=3)
-    mark_verdicts(ax, [((float(w[act]) * scale, float(w[strain])), verdict)
-                       for w, verdict in res.verified if act in w and strain in w], size=90.0)
+        ax.scatter(A[unknown], E[unknown], s=25, color="0.6", marker="x", label="no data", zorder=3)
+    mark_verdicts(
+        ax,
+        [
+            ((float(w[act]) * scale, float(w[strain])), verdict)
+            for w, verdict in res.verified
+            if act in w and strain in w
+        ],
+        size=90.0,
+    )
     fine = f["activity_fine"].values * scale
     th = f["stability_theory_fine"].values
-    ax.plot(fine, th, "-", color="tab:orange", lw=2.2,
-            label="linear stability (docs/stability.md S10)")
+    ax.plot(
+        fine, th, "-", color="tab:orange", lw=2.2, label="linear stability (docs/stability.md S10)"
+    )
     if "stability_paper_fine" in f:
-        ax.plot(fine, f["stability_paper_fine"].values, "--", color="0.45", lw=1.2,
-                label="paper Eq. (6) as printed")
+        ax.plot(
+            fine,
+            f["stability_paper_fine"].values,
+            "--",
+            color="0.45",
+            lw=1.2,
+            label="paper Eq. (6) as printed",
+        )
     ax.set_ylim(e.min() - 0.04 * max(np.ptp(e), 1e-3), e.max() + 0.04 * max(np.ptp(e), 1e-3))
     ax.set_xlim(a.min() - 0.03 * max(np.ptp(a), 1e-3), a.max() + 0.03 * max(np.ptp(a), 1e-3))
     ax.set_xlabel(LABELS["activity"])
@@ -86,9 +114,10 @@ def figA1(res: Results, options: Mapping[str, Any]) -> Figure:
     mech = str(attrs.get("fit_mechanics", ""))
     inc = "incompressible" if int(attrs.get("fit_incompressible", 0)) else "compressible"
     n_seeds = int(res.phase.sizes.get("seed", 0))
-    ax.set_title(f"{res.name}: paper Fig. A1 ({mech} mechanics, {inc}; {n_seeds} "
-                 f"seed{'s' if n_seeds != 1 else ''})", fontsize=9)
+    ax.set_title(
+        f"{res.name}: paper Fig. A1 ({mech} mechanics, {inc}; {n_seeds} "
+        f"seed{'s' if n_seeds != 1 else ''})",
+        fontsize=9,
+    )
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=8)
     return fig
-
-

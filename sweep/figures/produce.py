@@ -44,15 +44,22 @@ def save_figure(fig: Figure, folder: Path, name: str) -> list[Path]:
     for fmt in FORMATS:
         path = folder / f"{name}.{fmt}"
         with atomic_path(path) as tmp:
-            fig.savefig(tmp, format=fmt, dpi=PNG_DPI if fmt == "png" else None,
-                        metadata={"Title": f"{name} ({folder.parent.name})"} if fmt == "pdf"
-                        else None)
+            fig.savefig(
+                tmp,
+                format=fmt,
+                dpi=PNG_DPI if fmt == "png" else None,
+                metadata={"Title": f"{name} ({folder.parent.name})"} if fmt == "pdf" else None,
+            )
         paths.append(path)
     return paths
 
 
-def draw(name: str, root: str | Path, options: Mapping[str, Any] | None = None,
-         results: Results | None = None) -> list[Path]:
+def draw(
+    name: str,
+    root: str | Path,
+    options: Mapping[str, Any] | None = None,
+    results: Results | None = None,
+) -> list[Path]:
     """Draw registered figure ``name`` from ``root`` (results/<campaign>) into
     ``root/figures/``; return the written paths. Raises :class:`FigureError`."""
     if name not in REGISTRY:
@@ -79,33 +86,43 @@ class Outcome:
     notes: list[str] = field(default_factory=list)
 
 
-def plan(campaign: Campaign, phase: xr.Dataset, names: Sequence[str] | None = None
-         ) -> tuple[list[tuple[str, dict[str, Any]]], list[tuple[str, dict[str, Any]]]]:
+def plan(
+    campaign: Campaign, phase: xr.Dataset, names: Sequence[str] | None = None
+) -> tuple[list[tuple[str, dict[str, Any]]], list[tuple[str, dict[str, Any]]]]:
     """(fits, figures) to produce: the figures named (``names``), else the campaign's
     ``figures:`` list (``figures: []``: none), else (no ``figures:`` key) every registered
     figure that applies to this grid; the campaign's fits first (their options win), then
     the fits those figures need."""
-    listed = (None if campaign.figures is None
-              else {p.name: dict(p.options) for p in campaign.figures})
+    listed = (
+        None if campaign.figures is None else {p.name: dict(p.options) for p in campaign.figures}
+    )
     if names:
         unknown = [n for n in names if n not in REGISTRY]
         if unknown:
-            raise FigureError(f"unknown figure(s) {', '.join(unknown)}; registered: "
-                              f"{', '.join(sorted(REGISTRY))}")
+            raise FigureError(
+                f"unknown figure(s) {', '.join(unknown)}; registered: {', '.join(sorted(REGISTRY))}"
+            )
         figures = [(n, (listed or {}).get(n, {})) for n in names]
     elif listed is not None:
         figures = list(listed.items())
     else:
         figures = [(n, {}) for n, spec in REGISTRY.items() if spec.applies(phase)]
-    fit_requests: list[tuple[str, dict[str, Any]]] = [(p.name, dict(p.options))
-                                                      for p in campaign.fits]
+    fit_requests: list[tuple[str, dict[str, Any]]] = [
+        (p.name, dict(p.options)) for p in campaign.fits
+    ]
     for n, _ in figures:
         fit_requests.extend(REGISTRY[n].fits(phase))
     return fit_requests, figures
 
 
-def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str] | None = None,
-            fits: bool = True, draw_figures: bool = True) -> Outcome:
+def produce(
+    campaign: Campaign,
+    results_dir: str | Path,
+    *,
+    names: Sequence[str] | None = None,
+    fits: bool = True,
+    draw_figures: bool = True,
+) -> Outcome:
     """Write ``fits.nc`` (unless ``fits`` is false) and the figures of ``campaign`` (see
     :func:`plan`; none unless ``draw_figures``) from ``results_dir/<name>/``. Failures are
     collected, not raised, except for a missing phase.nc (:class:`FigureError`)."""
@@ -142,8 +159,9 @@ def produce(campaign: Campaign, results_dir: str | Path, *, names: Sequence[str]
     return out
 
 
-def regenerate(campaign: Campaign, results_dir: str | Path, *, fits: bool = True,
-               draw_figures: bool = True) -> list[Path]:
+def regenerate(
+    campaign: Campaign, results_dir: str | Path, *, fits: bool = True, draw_figures: bool = True
+) -> list[Path]:
     """Fits and figures of ``campaign`` after a run (the hook of ``nematic run``): writes
     ``fits.nc`` (unless ``fits`` is false) and ``figures/*.png|pdf`` (none with
     ``figures: []`` or without ``draw_figures``); returns the figure paths. Never raises for a

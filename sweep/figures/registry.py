@@ -34,8 +34,11 @@ def _fig4_applies(phase: xr.Dataset) -> bool:
 
 
 def _figA1_applies(phase: xr.Dataset) -> bool:
-    return (is_swept(phase, "eps") and (is_swept(phase, "chi") or is_swept(phase, AMB))
-            and str(phase.attrs.get("num_mechanics", "")) == "linear")
+    return (
+        is_swept(phase, "eps")
+        and (is_swept(phase, "chi") or is_swept(phase, AMB))
+        and str(phase.attrs.get("num_mechanics", "")) == "linear"
+    )
 
 
 @dataclass(frozen=True)
@@ -66,18 +69,41 @@ def _figA1_fits(phase: xr.Dataset) -> list[tuple[str, dict[str, Any]]]:
 
 
 REGISTRY: dict[str, FigureSpec] = {
-    "fig2": FigureSpec(fig2, "snapshot, sigma2_S(t) and sigma2_S(t_final) vs alpha - B",
-                       _fig2_fits, _swept_all(AMB), FIG2_OPTIONS),
-    "fig3": FigureSpec(fig3, "pattern size vs K / (alpha - B - alpha_cr), inset alpha_cr(K)",
-                       _fig3_fits, _swept_all(AMB, "K"), FIG3_OPTIONS),
-    "fig3_growth": FigureSpec(fig3_growth, "lambda(t) and sigma2_S(t) for several alpha - B at "
-                              "one K, the growth peak marked", lambda phase: [],
-                              _swept_all(AMB, "K"), FIG3_GROWTH_OPTIONS),
-    "fig4": FigureSpec(fig4, "phase diagram over chi (alpha - B), K, eps with snapshots",
-                       _fig4_fits, _fig4_applies, FIG4_OPTIONS),
-    "figA1": FigureSpec(figA1, "stable/unstable runs in (chi (alpha - B), eps) and the "
-                        "linear-stability boundary", _figA1_fits, _figA1_applies,
-                        FIGA1_OPTIONS),
+    "fig2": FigureSpec(
+        fig2,
+        "snapshot, sigma2_S(t) and sigma2_S(t_final) vs alpha - B",
+        _fig2_fits,
+        _swept_all(AMB),
+        FIG2_OPTIONS,
+    ),
+    "fig3": FigureSpec(
+        fig3,
+        "pattern size vs K / (alpha - B - alpha_cr), inset alpha_cr(K)",
+        _fig3_fits,
+        _swept_all(AMB, "K"),
+        FIG3_OPTIONS,
+    ),
+    "fig3_growth": FigureSpec(
+        fig3_growth,
+        "lambda(t) and sigma2_S(t) for several alpha - B at one K, the growth peak marked",
+        lambda phase: [],
+        _swept_all(AMB, "K"),
+        FIG3_GROWTH_OPTIONS,
+    ),
+    "fig4": FigureSpec(
+        fig4,
+        "phase diagram over chi (alpha - B), K, eps with snapshots",
+        _fig4_fits,
+        _fig4_applies,
+        FIG4_OPTIONS,
+    ),
+    "figA1": FigureSpec(
+        figA1,
+        "stable/unstable runs in (chi (alpha - B), eps) and the linear-stability boundary",
+        _figA1_fits,
+        _figA1_applies,
+        FIGA1_OPTIONS,
+    ),
 }
 
 

@@ -55,8 +55,7 @@ def background_colorbar(fig: Any, image: Any, **kwargs: Any) -> Any:
     return cb
 
 
-def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32,
-                  colorbar: bool = True):
+def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32, colorbar: bool = True):
     """Draw snapshot ``index`` of ``ds`` on a matplotlib axes; returns the quiver artist.
     The background image (``ax.images[0]``) is :func:`background` of I1bar; its label is the
     colour-bar label (:func:`background_colorbar`)."""
@@ -66,8 +65,14 @@ def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32,
     x = ds["x"].values
     n = len(x)
     values, label = background(i1)
-    bg = ax.imshow(values.T, origin="lower", extent=(0, 1, 0, 1), cmap="Greys",
-                   interpolation="nearest", label=label)
+    bg = ax.imshow(
+        values.T,
+        origin="lower",
+        extent=(0, 1, 0, 1),
+        cmap="Greys",
+        interpolation="nearest",
+        label=label,
+    )
     stride = max(1, n // arrows)
     sl = (slice(stride // 2, None, stride), slice(stride // 2, None, stride))
     S = np.hypot(q1, q2)
@@ -76,9 +81,21 @@ def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32,
     Ss = S[sl]
     smax = max(float(S.max()), 1e-12)
     length = Ss / smax
-    qv = ax.quiver(X[sl], Y[sl], length * np.cos(theta[sl]), length * np.sin(theta[sl]), Ss,
-                   cmap="viridis", pivot="middle", headwidth=0, headlength=0,
-                   headaxislength=0, scale=arrows * 1.1, width=0.004, clim=(0, smax))
+    qv = ax.quiver(
+        X[sl],
+        Y[sl],
+        length * np.cos(theta[sl]),
+        length * np.sin(theta[sl]),
+        Ss,
+        cmap="viridis",
+        pivot="middle",
+        headwidth=0,
+        headlength=0,
+        headaxislength=0,
+        scale=arrows * 1.1,
+        width=0.004,
+        clim=(0, smax),
+    )
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1)
     ax.set_aspect("equal")
@@ -100,19 +117,26 @@ def snapshot_figure(ds: xr.Dataset, path: str | Path, index: int = -1) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10, 4.2),
-                                  gridspec_kw={"width_ratios": [1.35, 1]})
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10, 4.2), gridspec_kw={"width_ratios": [1.35, 1]})
     draw_snapshot(ax, ds, index)
     ax2.plot(series_time(ds).values, ds["sigma2_S"].values, color="C3")
     ax2.set_xlabel("t / tau")
     ax2.set_ylabel(r"$\sigma^2_S$")
     amb = ds.attrs.get("param_alpha_minus_B", float("nan"))
-    ax2.set_title(f"alpha - B = {amb:g}, seed {ds.attrs.get('seed')}, "
-                  f"{ds.attrs.get('num_mechanics')}", fontsize=9)
+    ax2.set_title(
+        f"alpha - B = {amb:g}, seed {ds.attrs.get('seed')}, {ds.attrs.get('num_mechanics')}",
+        fontsize=9,
+    )
     status = ds.attrs.get("status", "ok")
     if status != "ok":
-        ax2.text(0.02, 0.95, f"FAILED: {ds.attrs.get('reason')}", transform=ax2.transAxes,
-                 color="red", va="top")
+        ax2.text(
+            0.02,
+            0.95,
+            f"FAILED: {ds.attrs.get('reason')}",
+            transform=ax2.transAxes,
+            color="red",
+            va="top",
+        )
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=130)

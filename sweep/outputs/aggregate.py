@@ -38,13 +38,21 @@ STATUS_MISSING, STATUS_OK, STATUS_FAILED = 0, 1, 2
 
 
 PARAMETER_LONG_NAMES = {
-    "alpha_minus_B": "contractility alpha - B", "alpha": "active stress magnitude alpha",
-    "B": "nemato-elastic coupling B", "K": "Frank constant K", "chi": "stress-activity "
-    "coupling chi", "eps": "applied pure shear strain eps", "S0": "initial nematic order S0",
-    "A0": "Landau-de Gennes coefficient A0", "C": "quartic Landau-de Gennes coefficient C",
-    "zeta": "activity relaxation rate zeta", "s": "cubic activity saturation s",
-    "gamma": "rotational viscosity gamma", "tau": "activity time scale tau",
-    "kappa": "bulk modulus kappa", "B_prime": "volumetric nemato-elastic coupling B'",
+    "alpha_minus_B": "contractility alpha - B",
+    "alpha": "active stress magnitude alpha",
+    "B": "nemato-elastic coupling B",
+    "K": "Frank constant K",
+    "chi": "stress-activity coupling chi",
+    "eps": "applied pure shear strain eps",
+    "S0": "initial nematic order S0",
+    "A0": "Landau-de Gennes coefficient A0",
+    "C": "quartic Landau-de Gennes coefficient C",
+    "zeta": "activity relaxation rate zeta",
+    "s": "cubic activity saturation s",
+    "gamma": "rotational viscosity gamma",
+    "tau": "activity time scale tau",
+    "kappa": "bulk modulus kappa",
+    "B_prime": "volumetric nemato-elastic coupling B'",
 }
 
 
@@ -81,8 +89,9 @@ def coord_attrs(name: str) -> dict[str, str]:
     return attrs
 
 
-def build_phase(expansion: Expansion, records: Mapping[str, Record],
-                store: CampaignStore | None = None) -> xr.Dataset:
+def build_phase(
+    expansion: Expansion, records: Mapping[str, Record], store: CampaignStore | None = None
+) -> xr.Dataset:
     """The phase-diagram Dataset of a campaign from its run records (see module doc)."""
     import xarray as xr  # here: the campaign's reader needs OBSERVABLES, not xarray
 
@@ -120,40 +129,79 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
     coords: dict[str, Any] = {}
     for d in campaign.dims:
         for axis in d.axes:
-            coords[axis.name] = xr.Variable((d.name,), np.asarray(axis.values),
-                                            coord_attrs(axis.name))
-    coords["seed"] = xr.Variable(("seed",), np.asarray(campaign.seeds, dtype=np.int64), {
-        "standard_name": "realization",
-        "long_name": "random seed of the initial director field", "units": "1"})
+            coords[axis.name] = xr.Variable(
+                (d.name,), np.asarray(axis.values), coord_attrs(axis.name)
+            )
+    coords["seed"] = xr.Variable(
+        ("seed",),
+        np.asarray(campaign.seeds, dtype=np.int64),
+        {
+            "standard_name": "realization",
+            "long_name": "random seed of the initial director field",
+            "units": "1",
+        },
+    )
 
     # the seed statistics (X_mean, X_std) pool the seeds: their cell_methods name this scalar
     # coordinate variable (CF 7.3: "realization: mean")
-    coords["realization"] = xr.Variable((), np.int64(len(campaign.seeds)), {
-        "long_name": "number of seeds pooled by the seed statistics (X_mean, X_std); the "
-                     "seeds are the seed coordinate", "units": "1"})
+    coords["realization"] = xr.Variable(
+        (),
+        np.int64(len(campaign.seeds)),
+        {
+            "long_name": "number of seeds pooled by the seed statistics (X_mean, X_std); the "
+            "seeds are the seed coordinate",
+            "units": "1",
+        },
+    )
     ds = xr.Dataset(coords=coords)
-    ds["status"] = xr.Variable(dims, status.reshape(shape), {
-        "long_name": "run status", "flag_values": np.array([0, 1, 2], dtype=np.int8),
-        "flag_meanings": "missing ok failed"})
-    ds["reason"] = xr.Variable(dims, reason.reshape(shape).astype(str), {
-        "long_name": "why the run failed (empty when it did not)"})
-    ds["run_id"] = xr.Variable(dims, np.asarray(expansion.run_ids, dtype=str).reshape(shape), {
-        "long_name": "run identifier: the run's file is runs/<run_id>.nc"})
+    ds["status"] = xr.Variable(
+        dims,
+        status.reshape(shape),
+        {
+            "long_name": "run status",
+            "flag_values": np.array([0, 1, 2], dtype=np.int8),
+            "flag_meanings": "missing ok failed",
+        },
+    )
+    ds["reason"] = xr.Variable(
+        dims,
+        reason.reshape(shape).astype(str),
+        {"long_name": "why the run failed (empty when it did not)"},
+    )
+    ds["run_id"] = xr.Variable(
+        dims,
+        np.asarray(expansion.run_ids, dtype=str).reshape(shape),
+        {"long_name": "run identifier: the run's file is runs/<run_id>.nc"},
+    )
     for name, (src, long_name) in observables.items():
         values = data[name].reshape(shape)
-        ds[name] = xr.Variable(dims, values, {"long_name": long_name, "units": "1",
-                                              "source_variable": src})
+        ds[name] = xr.Variable(
+            dims, values, {"long_name": long_name, "units": "1", "source_variable": src}
+        )
         mean, std, count = _seed_stats(values)
         sd = dims[:-1]
         # CF cell_methods name the collapsed seed axis by the scalar coordinate "realization"
-        ds[f"{name}_mean"] = xr.Variable(sd, mean, {
-            "long_name": f"seed mean of {name}", "units": "1",
-            "cell_methods": "realization: mean"})
-        ds[f"{name}_std"] = xr.Variable(sd, std, {
-            "long_name": f"seed standard deviation (ddof = 1) of {name}", "units": "1",
-            "cell_methods": "realization: standard_deviation"})
-        ds[f"{name}_count"] = xr.Variable(sd, count, {
-            "long_name": f"number of seeds with a value of {name}", "units": "1"})
+        ds[f"{name}_mean"] = xr.Variable(
+            sd,
+            mean,
+            {
+                "long_name": f"seed mean of {name}",
+                "units": "1",
+                "cell_methods": "realization: mean",
+            },
+        )
+        ds[f"{name}_std"] = xr.Variable(
+            sd,
+            std,
+            {
+                "long_name": f"seed standard deviation (ddof = 1) of {name}",
+                "units": "1",
+                "cell_methods": "realization: standard_deviation",
+            },
+        )
+        ds[f"{name}_count"] = xr.Variable(
+            sd, count, {"long_name": f"number of seeds with a value of {name}", "units": "1"}
+        )
 
     for var in ds.data_vars.values():  # the per-seed values do not pool seeds
         if "seed" in var.dims:
@@ -162,48 +210,59 @@ def build_phase(expansion: Expansion, records: Mapping[str, Record],
     swept = {a.name for a in campaign.axes}
     first = expansion.points[0]
     params = first.parameters.to_dict()
-    fixed_params = {k: v for k, v in params.items() if k not in swept
-                    and not (k == "alpha" and (AMB in swept or "B" in swept))}
+    fixed_params = {
+        k: v
+        for k, v in params.items()
+        if k not in swept and not (k == "alpha" and (AMB in swept or "B" in swept))
+    }
     if AMB not in swept and "alpha" not in swept and "B" not in swept:
         fixed_params[AMB] = first.parameters.alpha_minus_B
     fixed_numerics = {k: v for k, v in first.numerics.to_dict().items() if k not in swept}
     n_ok = int((status == STATUS_OK).sum())
     n_failed = int((status == STATUS_FAILED).sum())
-    ds.attrs.update({
-        "Conventions": "CF-1.11",
-        "title": f"phase diagram of campaign {campaign.name}",
-        "campaign": campaign.name,
-        "description": campaign.description,
-        "source": "active-nematic-solids campaign manager (nematic aggregate)",
-        "code_version": code_version(),
-        "git_commit": git_commit(),
-        "library_versions": library_versions_text(),
-        "run_code_versions": ", ".join(sorted(versions)),
-        "run_git_commits": ", ".join(sorted(commits)),
-        "created": now_iso(),
-        "history": f"{now_iso()}: aggregated {n_ok} ok and {n_failed} failed of {n} runs",
-        "campaign_yaml": campaign.text,
-        "campaign_overrides": "; ".join(campaign.overrides),
-        "sweep_dims": ", ".join(d.name for d in campaign.dims),
-        "zip_groups": "; ".join(", ".join(a.name for a in d.axes)
-                                for d in campaign.dims if len(d.axes) > 1),
-        "n_runs": n, "n_ok": n_ok, "n_failed": n_failed, "n_missing": n - n_ok - n_failed,
-        **{f"param_{k}": v for k, v in fixed_params.items()},
-        **{f"num_{k}": v for k, v in fixed_numerics.items()},
-    })
+    ds.attrs.update(
+        {
+            "Conventions": "CF-1.11",
+            "title": f"phase diagram of campaign {campaign.name}",
+            "campaign": campaign.name,
+            "description": campaign.description,
+            "source": "active-nematic-solids campaign manager (nematic aggregate)",
+            "code_version": code_version(),
+            "git_commit": git_commit(),
+            "library_versions": library_versions_text(),
+            "run_code_versions": ", ".join(sorted(versions)),
+            "run_git_commits": ", ".join(sorted(commits)),
+            "created": now_iso(),
+            "history": f"{now_iso()}: aggregated {n_ok} ok and {n_failed} failed of {n} runs",
+            "campaign_yaml": campaign.text,
+            "campaign_overrides": "; ".join(campaign.overrides),
+            "sweep_dims": ", ".join(d.name for d in campaign.dims),
+            "zip_groups": "; ".join(
+                ", ".join(a.name for a in d.axes) for d in campaign.dims if len(d.axes) > 1
+            ),
+            "n_runs": n,
+            "n_ok": n_ok,
+            "n_failed": n_failed,
+            "n_missing": n - n_ok - n_failed,
+            **{f"param_{k}": v for k, v in fixed_params.items()},
+            **{f"num_{k}": v for k, v in fixed_numerics.items()},
+        }
+    )
     return ds
 
 
-def phase_dataset(expansion: Expansion, store: CampaignStore,
-                  records: Mapping[str, Record]) -> xr.Dataset:
+def phase_dataset(
+    expansion: Expansion, store: CampaignStore, records: Mapping[str, Record]
+) -> xr.Dataset:
     """The phase-diagram Dataset of ``expansion`` (a grid, or an adaptive campaign's union
     grid, whose expansion builds its own: :class:`sweep.refine.rounds.RefinedExpansion`)."""
     own = getattr(expansion, "build_phase", None)
     return own(records, store) if own is not None else build_phase(expansion, records, store)
 
 
-def write_phase(expansion: Expansion, store: CampaignStore,
-                records: Mapping[str, Record] | None = None) -> xr.Dataset:
+def write_phase(
+    expansion: Expansion, store: CampaignStore, records: Mapping[str, Record] | None = None
+) -> xr.Dataset:
     """Build and atomically write ``results/<name>/phase.nc``; return the Dataset."""
     if records is None:
         records = store.scan()
@@ -213,7 +272,11 @@ def write_phase(expansion: Expansion, store: CampaignStore,
     # which older CF checkers (cfchecks, CF <= 1.8) reject
     text = {name: {"dtype": "S1"} for name in ("reason", "run_id")}
     atomic_to_netcdf(ds, store.phase_path, text)
-    log.info("wrote %s (%d ok, %d failed, %d missing)", store.phase_path, ds.attrs["n_ok"],
-             ds.attrs["n_failed"], ds.attrs["n_missing"])
+    log.info(
+        "wrote %s (%d ok, %d failed, %d missing)",
+        store.phase_path,
+        ds.attrs["n_ok"],
+        ds.attrs["n_failed"],
+        ds.attrs["n_missing"],
+    )
     return ds
-

@@ -41,8 +41,10 @@ class RunCounts:
     orphaned: list[str] = field(default_factory=list)
 
     def line(self) -> str:
-        return (f"runs: {self.new} new, {self.kept} kept, {len(self.orphaned)} orphaned "
-                "(in the folder, not planned by this campaign)")
+        return (
+            f"runs: {self.new} new, {self.kept} kept, {len(self.orphaned)} orphaned "
+            "(in the folder, not planned by this campaign)"
+        )
 
 
 @dataclass
@@ -54,12 +56,20 @@ class CampaignChanges:
     counts: RunCounts
 
     def lines(self) -> list[str]:
-        return [f"the campaign differs from the one its results were made with ({self.copy}):",
-                *(f"  {c}" for c in self.changes), f"  {self.counts.line()}"]
+        return [
+            f"the campaign differs from the one its results were made with ({self.copy}):",
+            *(f"  {c}" for c in self.changes),
+            f"  {self.counts.line()}",
+        ]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"copy": self.copy, "changes": self.changes, "new": self.counts.new,
-                "kept": self.counts.kept, "orphaned": len(self.counts.orphaned)}
+        return {
+            "copy": self.copy,
+            "changes": self.changes,
+            "new": self.counts.new,
+            "kept": self.counts.kept,
+            "orphaned": len(self.counts.orphaned),
+        }
 
 
 def _fmt(value: Any) -> str:
@@ -95,36 +105,58 @@ def describe_changes(old: Campaign, new: Campaign) -> list[str]:
             continue
         added = [v for v in values if v not in set(old_axes[name])]
         removed = [v for v in old_axes[name] if v not in set(values)]
-        what = ([f"values added {_values(added)}"] if added else []) + \
-            ([f"values removed {_values(removed)}"] if removed else [])
+        what = ([f"values added {_values(added)}"] if added else []) + (
+            [f"values removed {_values(removed)}"] if removed else []
+        )
         if what:
             out.append(f"axis {name}: " + "; ".join(what))
         elif tuple(values) != tuple(old_axes[name]):
             out.append(f"axis {name}: values reordered")
-    out.extend(f"axis {name} removed (was {_values(values)})"
-               for name, values in old_axes.items() if name not in new_axes)
+    out.extend(
+        f"axis {name} removed (was {_values(values)})"
+        for name, values in old_axes.items()
+        if name not in new_axes
+    )
     groups_old = {tuple(a.name for a in d.axes) for d in old.dims if len(d.axes) > 1}
     groups_new = {tuple(a.name for a in d.axes) for d in new.dims if len(d.axes) > 1}
     if groups_old != groups_new:
-        out.append("zip groups: " + (", ".join(f"[{', '.join(g)}]" for g in sorted(groups_old))
-                                     or "none") + " -> "
-                   + (", ".join(f"[{', '.join(g)}]" for g in sorted(groups_new)) or "none"))
+        out.append(
+            "zip groups: "
+            + (", ".join(f"[{', '.join(g)}]" for g in sorted(groups_old)) or "none")
+            + " -> "
+            + (", ".join(f"[{', '.join(g)}]" for g in sorted(groups_new)) or "none")
+        )
     out += _mapping_changes("parameters", old.parameters, new.parameters)
     out += _mapping_changes("numerics", old.numerics, new.numerics)
     if old.seeds != new.seeds:
         added = [s for s in new.seeds if s not in set(old.seeds)]
         removed = [s for s in old.seeds if s not in set(new.seeds)]
-        out.append(f"seeds: {len(old.seeds)} -> {len(new.seeds)}"
-                   + (f"; added {_values(added)}" if added else "")
-                   + (f"; removed {_values(removed)}" if removed else ""))
+        out.append(
+            f"seeds: {len(old.seeds)} -> {len(new.seeds)}"
+            + (f"; added {_values(added)}" if added else "")
+            + (f"; removed {_values(removed)}" if removed else "")
+        )
     if old.refine != new.refine:
-        out.append("refine: " + ("added" if old.refine is None else "removed"
-                                 if new.refine is None else "changed"))
+        out.append(
+            "refine: "
+            + ("added" if old.refine is None else "removed" if new.refine is None else "changed")
+        )
     if old.precision != new.precision:
-        out.append("precision: " + ("added" if old.precision is None else "removed"
-                                    if new.precision is None else "changed"))
-    others = [name for name in ("store", "fits", "figures", "execution", "limits",
-                                "description") if getattr(old, name) != getattr(new, name)]
+        out.append(
+            "precision: "
+            + (
+                "added"
+                if old.precision is None
+                else "removed"
+                if new.precision is None
+                else "changed"
+            )
+        )
+    others = [
+        name
+        for name in ("store", "fits", "figures", "execution", "limits", "description")
+        if getattr(old, name) != getattr(new, name)
+    ]
     if others:
         out.append("also changed (no effect on the run ids): " + ", ".join(others))
     return out or ["nothing that changes the runs (comments or layout)"]
@@ -150,8 +182,9 @@ def _reachable(campaign: Campaign, run_id: str, record: Mapping[str, Any] | None
                 return False
             refined.append(float(x))
             continue
-        matches = [j for j in range(len(d))
-                   if all(coords.get(a.name) == a.values[j] for a in d.axes)]
+        matches = [
+            j for j in range(len(d)) if all(coords.get(a.name) == a.values[j] for a in d.axes)
+        ]
         if not matches:
             return False
         line.append(matches[0])
@@ -161,37 +194,47 @@ def _reachable(campaign: Campaign, run_id: str, record: Mapping[str, Any] | None
         return False
 
 
-def run_counts(campaign: Campaign, expansion: Expansion, store: CampaignStore,
-               records: Mapping[str, Record]) -> RunCounts:
+def run_counts(
+    campaign: Campaign, expansion: Expansion, store: CampaignStore, records: Mapping[str, Record]
+) -> RunCounts:
     """New and kept runs of the plan, and the orphaned ones of the folder (``records`` is
     :meth:`CampaignStore.scan`, which also lists the run files without a record)."""
     planned = getattr(expansion, "planned", None)
-    ids = expansion.run_ids if planned is None else \
-        [rid for rid, keep in zip(expansion.run_ids, planned, strict=True) if keep]
+    ids = (
+        expansion.run_ids
+        if planned is None
+        else [rid for rid, keep in zip(expansion.run_ids, planned, strict=True) if keep]
+    )
     kept = sum(1 for rid in ids if rid in records)
     orphaned = sorted((set(records) | store.nc_present) - set(expansion.position))
     if campaign.refine is not None:
-        orphaned = [rid for rid in orphaned
-                    if not _reachable(campaign, rid, store.read_record(rid))]
+        orphaned = [
+            rid for rid in orphaned if not _reachable(campaign, rid, store.read_record(rid))
+        ]
     return RunCounts(new=len(ids) - kept, kept=kept, orphaned=orphaned)
 
 
 def _significant(copy_text: str) -> str:
     """A campaign copy without the overrides of :data:`WHERE_OVERRIDES`."""
     where = tuple(OVERRIDE_PREFIX + o for o in WHERE_OVERRIDES)
-    return "".join(line for line in copy_text.splitlines(keepends=True)
-                   if not line.startswith(where))
+    return "".join(
+        line for line in copy_text.splitlines(keepends=True) if not line.startswith(where)
+    )
 
 
-def campaign_changes(campaign: Campaign, store: CampaignStore,
-                     expansion: Expansion | None = None,
-                     records: Mapping[str, Record] | None = None) -> CampaignChanges | None:
+def campaign_changes(
+    campaign: Campaign,
+    store: CampaignStore,
+    expansion: Expansion | None = None,
+    records: Mapping[str, Record] | None = None,
+) -> CampaignChanges | None:
     """What changed since the last run, or ``None`` when the folder has no copy or the same
     campaign (the same text and command-line overrides, but ``--workers`` and
     ``--scheduler``)."""
     text = stored_text(store)
     if text is None or _significant(text) == _significant(
-            campaign_copy_text(campaign.text, campaign.overrides)):
+        campaign_copy_text(campaign.text, campaign.overrides)
+    ):
         return None
     try:
         old = stored_campaign(store, text)
@@ -199,16 +242,19 @@ def campaign_changes(campaign: Campaign, store: CampaignStore,
         changes = describe_changes(old, campaign)
     except CampaignError as e:
         first = e.problems[0] if e.problems else e
-        changes = [f"(the copy is not a valid campaign for this code, so what changed is not "
-                   f"listed: {first})"]
+        changes = [
+            f"(the copy is not a valid campaign for this code, so what changed is not "
+            f"listed: {first})"
+        ]
     if expansion is None:
         from ..refine.rounds import expansion_for
 
         expansion = expansion_for(campaign, store)
     if records is None:
         records = store.scan(save=False)
-    return CampaignChanges(str(store.campaign_copy), changes,
-                           run_counts(campaign, expansion, store, records))
+    return CampaignChanges(
+        str(store.campaign_copy), changes, run_counts(campaign, expansion, store, records)
+    )
 
 
 def prune(store: CampaignStore, run_ids: Sequence[str]) -> int:

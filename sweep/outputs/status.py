@@ -81,15 +81,23 @@ def _group(store: CampaignStore, example: dict[str, Any], count: int) -> dict[st
     """A failure reason's entry of :attr:`StatusReport.failure_groups` (reads one record)."""
     rid = example["run_id"]
     full = store.read_record(rid) or {}
-    return {"reason": example["reason"], "count": count, "run_id": rid,
-            "coords": example["coords"], "parameters": full.get("parameters") or {},
-            "t_failed": example["t_failed"], "finished": example["finished"],
-            "detail": example["detail"], "record": str(store.record_path(rid)),
-            "run_file": str(store.nc_path(rid)) if example["has_file"] else None}
+    return {
+        "reason": example["reason"],
+        "count": count,
+        "run_id": rid,
+        "coords": example["coords"],
+        "parameters": full.get("parameters") or {},
+        "t_failed": example["t_failed"],
+        "finished": example["finished"],
+        "detail": example["detail"],
+        "record": str(store.record_path(rid)),
+        "run_file": str(store.nc_path(rid)) if example["has_file"] else None,
+    }
 
 
-def campaign_status(expansion: Expansion, store: CampaignStore, *,
-                    workers: int | None = None) -> StatusReport:
+def campaign_status(
+    expansion: Expansion, store: CampaignStore, *, workers: int | None = None
+) -> StatusReport:
     """The status of every run of ``expansion`` as recorded in ``store``."""
     campaign = expansion.campaign
     records = store.scan()
@@ -126,13 +134,21 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
             reasons[reason] += 1
             if len(examples) < MAX_EXAMPLES or reason not in first:
                 run = expansion.run(i)
-                example = {"run_id": rid, "coords": run.coords, "reason": reason,
-                           "detail": rec.get("detail") or "", "t_failed": rec.get("t_failed")}
+                example = {
+                    "run_id": rid,
+                    "coords": run.coords,
+                    "reason": reason,
+                    "detail": rec.get("detail") or "",
+                    "t_failed": rec.get("t_failed"),
+                }
                 if len(examples) < MAX_EXAMPLES:
                     examples.append(example)
                 if reason not in first:
-                    first[reason] = {**example, "finished": rec.get("finished"),
-                                     "has_file": rec.get("nc_bytes") is not None}
+                    first[reason] = {
+                        **example,
+                        "finished": rec.get("finished"),
+                        "has_file": rec.get("nc_bytes") is not None,
+                    }
         if rec.get("finished"):
             finished.append((str(rec["finished"]), f"{rec.get('host')}:{rec.get('pid')}"))
     if planned is not None:
@@ -147,19 +163,31 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
         other = tuple(j for j in range(shaped.ndim) if j != k)
         labels = [" / ".join(_label(a.values[i]) for a in d.axes) for i in range(len(d))]
         name = " / ".join(a.name for a in d.axes)
-        per_axis.append(AxisCounts(
-            dim=name, labels=labels,
-            done=[int(x) for x in (shaped == 0).sum(axis=other)],
-            failed=[int(x) for x in (shaped == 1).sum(axis=other)],
-            pending=[int(x) for x in (shaped == 2).sum(axis=other)]))
+        per_axis.append(
+            AxisCounts(
+                dim=name,
+                labels=labels,
+                done=[int(x) for x in (shaped == 0).sum(axis=other)],
+                failed=[int(x) for x in (shaped == 1).sum(axis=other)],
+                pending=[int(x) for x in (shaped == 2).sum(axis=other)],
+            )
+        )
 
-    report = StatusReport(campaign=campaign.name, folder=str(store.root), total=n, done=done,
-                          failed=failed, pending=pending, per_axis=per_axis,
-                          reasons=dict(reasons.most_common()), examples=examples,
-                          failure_groups=[_group(store, first[r], k)
-                                          for r, k in reasons.most_common()],
-                          foreign_runs=len(set(records) - set(expansion.position)),
-                          unreadable=n_unreadable, unreadable_examples=unreadable)
+    report = StatusReport(
+        campaign=campaign.name,
+        folder=str(store.root),
+        total=n,
+        done=done,
+        failed=failed,
+        pending=pending,
+        per_axis=per_axis,
+        reasons=dict(reasons.most_common()),
+        examples=examples,
+        failure_groups=[_group(store, first[r], k) for r, k in reasons.most_common()],
+        foreign_runs=len(set(records) - set(expansion.position)),
+        unreadable=n_unreadable,
+        unreadable_examples=unreadable,
+    )
     report.running = read_lock_holder(store.lock_path)
     if times:
         report.mean_run_time = float(np.mean(times))
@@ -172,13 +200,15 @@ def campaign_status(expansion: Expansion, store: CampaignStore, *,
     if report.running and report.running.get("started") and not workers:
         # the processes that finished runs since the running driver started
         start = _parse_time(report.running["started"])
-        procs = {who for f, who in finished
-                 if start is not None and (t := _parse_time(f)) is not None and t >= start}
+        procs = {
+            who
+            for f, who in finished
+            if start is not None and (t := _parse_time(f)) is not None and t >= start
+        }
         if procs:
             w = len(procs)
             concurrency = f"{w} worker(s) seen since the driver started"
     if report.median_run_time is not None:
         report.eta_seconds = pending * report.median_run_time / w
-        report.eta_basis = (f"median run time {report.median_run_time:.3g} s over "
-                            f"{concurrency}")
+        report.eta_basis = f"median run time {report.median_run_time:.3g} s over {concurrency}"
     return report

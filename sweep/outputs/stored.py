@@ -23,7 +23,7 @@ def stored_overrides(text: str) -> Overrides:
     for line in text.splitlines():
         if not line.startswith(OVERRIDE_PREFIX):
             break
-        option, _, value = line[len(OVERRIDE_PREFIX):].partition(" ")
+        option, _, value = line[len(OVERRIDE_PREFIX) :].partition(" ")
         try:
             if option == "--set":
                 key, _, literal = value.partition("=")
@@ -54,5 +54,6 @@ def stored_campaign(store: CampaignStore, text: str | None = None) -> Campaign |
         text = stored_text(store)
     if text is None:
         return None
-    return parse_campaign(text, str(store.campaign_copy), stored_overrides(text),
-                          default_name=store.root.name)
+    return parse_campaign(
+        text, str(store.campaign_copy), stored_overrides(text), default_name=store.root.name
+    )

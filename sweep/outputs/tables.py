@@ -71,8 +71,11 @@ def runs_table(ds: xr.Dataset) -> pd.DataFrame:
     table = table.reset_index()
     table = table[table["status"] != STATUS_MISSING].reset_index(drop=True)
     table["status"] = ["failed" if s == STATUS_FAILED else "ok" for s in table["status"]]
-    axes = [str(c) for c in ds.coords if str(c) != "seed" and ds[c].dims
-            and set(ds[c].dims) <= set(ds.dims) - {"seed"}]
+    axes = [
+        str(c)
+        for c in ds.coords
+        if str(c) != "seed" and ds[c].dims and set(ds[c].dims) <= set(ds.dims) - {"seed"}
+    ]
     first = [*axes, "seed", *RUN_COLUMNS]
     rest = [c for c in table.columns if c not in first and c not in ds.dims]
     return table[first + rest]
@@ -91,9 +94,11 @@ def open_campaign(campaign: str | Path, results: str | Path = "results") -> Camp
     store = CampaignStore(results, str(campaign))
     found = stored_campaign(store)
     if found is None:
-        raise StoreError(f"no results of a campaign named {campaign!r} in {store.results_root}"
-                         f" ({store.campaign_copy} is missing); give the campaign file, or "
-                         "the folder that holds its results (--results; results= in Python)")
+        raise StoreError(
+            f"no results of a campaign named {campaign!r} in {store.results_root}"
+            f" ({store.campaign_copy} is missing); give the campaign file, or "
+            "the folder that holds its results (--results; results= in Python)"
+        )
     return CampaignResults(found, results)
 
 
@@ -127,5 +132,6 @@ def parquet_engine() -> Any:
         raise ExportError(
             "Parquet needs pyarrow, which is not installed here: install it with pip install "
             "'active-nematic-solids[parquet]' (or pip install pyarrow), or export with "
-            "--format csv") from None
+            "--format csv"
+        ) from None
     return "fastparquet"

@@ -58,8 +58,12 @@ class Decision:
     width: float = math.nan
 
 
-def decide(spec: PrecisionSpec, values: Sequence[float],
-           classes: Sequence[float | tuple[float, ...]], cap: int) -> Decision:
+def decide(
+    spec: PrecisionSpec,
+    values: Sequence[float],
+    classes: Sequence[float | tuple[float, ...]],
+    cap: int,
+) -> Decision:
     """The decision of a point whose first ``len(values)`` seeds ran: ``values`` are the
     observable's, ``classes`` the class's observables (sigma2_S; a tuple in the order of
     ``classes:`` for several), both in seed order, NaN where a run has none; ``cap`` is the
@@ -77,8 +81,13 @@ def decide(spec: PrecisionSpec, values: Sequence[float],
         else:
             limit = spec.width * abs(mean) if spec.relative else spec.width
             if width < limit:
-                return Decision("precise", n, f"interval {width:.3g} < {limit:.3g} "
-                                f"(mean {mean:.4g}, {n} seeds)", mean, width)
+                return Decision(
+                    "precise",
+                    n,
+                    f"interval {width:.3g} < {limit:.3g} (mean {mean:.4g}, {n} seeds)",
+                    mean,
+                    width,
+                )
             what = f"interval {width:.3g} >= {limit:.3g} (mean {mean:.4g})"
     else:
         what = "no width rule"
@@ -86,11 +95,15 @@ def decide(spec: PrecisionSpec, values: Sequence[float],
         thresholds = spec.thresholds
         rows = [c if isinstance(c, tuple) else (c,) for c in classes]
         if all(len(r) == len(thresholds) and all(math.isfinite(x) for x in r) for r in rows):
-            found = {tuple(x > t.above for x, t in zip(r, thresholds, strict=True))
-                     for r in rows}
+            found = {tuple(x > t.above for x, t in zip(r, thresholds, strict=True)) for r in rows}
             if len(found) == 1:
-                return Decision("unanimous", n, f"{n} of {n} seeds "
-                                + class_name(spec, found.pop()), mean, width)
+                return Decision(
+                    "unanimous",
+                    n,
+                    f"{n} of {n} seeds " + class_name(spec, found.pop()),
+                    mean,
+                    width,
+                )
     if n >= cap:
         return Decision("cap", n, f"every seed run ({n}); {what}", mean, width)
     return Decision("pending", n, what, mean, width)
@@ -100,8 +113,10 @@ def class_name(spec: PrecisionSpec, above: tuple[bool, ...]) -> str:
     """A class in words: patterned or relaxed (sigma2_S), else which thresholds."""
     if not spec.classes:
         return "patterned" if above[0] else "relaxed"
-    return ", ".join(f"{t.observable} {'>' if a else '<='} {t.above:g}"
-                     for t, a in zip(spec.classes, above, strict=True))
+    return ", ".join(
+        f"{t.observable} {'>' if a else '<='} {t.above:g}"
+        for t, a in zip(spec.classes, above, strict=True)
+    )
 
 
 def counts_text(states: Iterable[str]) -> str:

@@ -38,8 +38,9 @@ def round_counts(spec: PrecisionSpec, cap: int) -> list[int]:
     return counts
 
 
-def expected_seeds(spec: PrecisionSpec, values: Sequence[float], classes: Sequence[float],
-                   cap: int, planned: int) -> int:
+def expected_seeds(
+    spec: PrecisionSpec, values: Sequence[float], classes: Sequence[float], cap: int, planned: int
+) -> int:
     """The seeds a point is expected to end with: ``values`` and ``classes`` of its finished
     seeds (in order, NaN where a run has none), ``planned`` the seeds its rounds so far give
     it (at least as many as finished)."""
@@ -56,11 +57,21 @@ def expected_seeds(spec: PrecisionSpec, values: Sequence[float], classes: Sequen
         mean, width = interval_width(values, spec.confidence)
         limit = spec.width * abs(mean) if spec.relative else spec.width
         spread = width * math.sqrt(n) / t_quantile(spec.confidence, n - 1)
-        best = next((m for m in counts if m >= 2 and limit > 0
-                     and spread * t_quantile(spec.confidence, m - 1) / math.sqrt(m) < limit),
-                    cap)
-    if (spec.unanimous is not None and spec.patterned_above is not None
-            and all(math.isfinite(c) for c in classes)
-            and len({c > spec.patterned_above for c in classes}) == 1):
+        best = next(
+            (
+                m
+                for m in counts
+                if m >= 2
+                and limit > 0
+                and spread * t_quantile(spec.confidence, m - 1) / math.sqrt(m) < limit
+            ),
+            cap,
+        )
+    if (
+        spec.unanimous is not None
+        and spec.patterned_above is not None
+        and all(math.isfinite(c) for c in classes)
+        and len({c > spec.patterned_above for c in classes}) == 1
+    ):
         best = min(best, next((m for m in counts if m >= spec.unanimous), cap))
     return best

@@ -109,26 +109,54 @@ class SeedPlan:
         rounds with their runs (run_id, seed, state, outcome)."""
         points = []
         for p, d in enumerate(self.decisions):
-            points.append({"coords": self.grid.points[p].coords, "seeds_run": d.n,
-                           "decision": d.state, "why": d.why,
-                           "mean": d.mean, "width": d.width})
+            points.append(
+                {
+                    "coords": self.grid.points[p].coords,
+                    "seeds_run": d.n,
+                    "decision": d.state,
+                    "why": d.why,
+                    "mean": d.mean,
+                    "width": d.width,
+                }
+            )
         rounds = []
         for rnd in self.rounds:
             runs = []
             for p, j in rnd.runs:
                 i = p * self.cap + j
                 value = self.outcomes.get(i)
-                runs.append({"coords": self.grid.points[p].coords, "seed": self.grid.seeds[j],
-                             "run_id": self.grid.run_ids[i], "why": rnd.why.get(p, ""),
-                             "state": "pending" if value is None else "done",
-                             "outcome": value})
-            rounds.append({"round": rnd.number, "n_runs": len(rnd.runs),
-                           "points": len(rnd.points), "runs": runs})
-        return {"version": PLAN_VERSION, "campaign": self.campaign.name,
-                "precision": self.spec.to_dict(), "seeds": list(self.campaign.seeds),
-                "finished": self.finished, "stop": self.stop, "n_runs": self.n_runs,
-                "n_pending": len(self.pending), "run_bound": self.run_bound(),
-                "decisions": dict(self.counts()), "points": points, "rounds": rounds}
+                runs.append(
+                    {
+                        "coords": self.grid.points[p].coords,
+                        "seed": self.grid.seeds[j],
+                        "run_id": self.grid.run_ids[i],
+                        "why": rnd.why.get(p, ""),
+                        "state": "pending" if value is None else "done",
+                        "outcome": value,
+                    }
+                )
+            rounds.append(
+                {
+                    "round": rnd.number,
+                    "n_runs": len(rnd.runs),
+                    "points": len(rnd.points),
+                    "runs": runs,
+                }
+            )
+        return {
+            "version": PLAN_VERSION,
+            "campaign": self.campaign.name,
+            "precision": self.spec.to_dict(),
+            "seeds": list(self.campaign.seeds),
+            "finished": self.finished,
+            "stop": self.stop,
+            "n_runs": self.n_runs,
+            "n_pending": len(self.pending),
+            "run_bound": self.run_bound(),
+            "decisions": dict(self.counts()),
+            "points": points,
+            "rounds": rounds,
+        }
 
     def status_dict(self) -> dict[str, Any]:
         """The plan for ``nematic status --json`` (rounds without their runs)."""
@@ -144,30 +172,40 @@ class SeedPlan:
         out = [spec_line(self.campaign)]
         for rnd in self.rounds:
             pending = sum(1 for p, j in rnd.runs if self.outcomes.get(p * self.cap + j) is None)
-            out.append(f"round {rnd.number}: {len(rnd.runs)} runs at {len(rnd.points)} "
-                       "point(s); " + (f"{pending} pending" if pending else "done"))
-        state = ("finished" if self.finished
-                 else f"round {self.current.number} in progress")
-        out.append(f"decisions: {self.counts_text()}; {state}; {self.n_runs} runs planned so "
-                   f"far, at most {self.run_bound()}")
+            out.append(
+                f"round {rnd.number}: {len(rnd.runs)} runs at {len(rnd.points)} "
+                "point(s); " + (f"{pending} pending" if pending else "done")
+            )
+        state = "finished" if self.finished else f"round {self.current.number} in progress"
+        out.append(
+            f"decisions: {self.counts_text()}; {state}; {self.n_runs} runs planned so "
+            f"far, at most {self.run_bound()}"
+        )
         return out
 
     def round_lines(self, number: int) -> list[str]:
         """A round's plan as the driver prints it."""
         rnd = self.rounds[number]
         if number == 0:
-            return [f"round 0: {len(rnd.points)} points x {self.spec.initial} seed(s), "
-                    f"{len(rnd.runs)} runs"]
-        out = [f"round {number}: {len(rnd.runs)} runs: {len(rnd.points)} undecided point(s) "
-               "get more seeds"]
+            return [
+                f"round 0: {len(rnd.points)} points x {self.spec.initial} seed(s), "
+                f"{len(rnd.runs)} runs"
+            ]
+        out = [
+            f"round {number}: {len(rnd.runs)} runs: {len(rnd.points)} undecided point(s) "
+            "get more seeds"
+        ]
         for k, p in enumerate(rnd.points):
             if k == MAX_LINES:
-                out.append(f"  ... and {len(rnd.points) - MAX_LINES} more ({PLAN_FILE} lists "
-                           "every run)")
+                out.append(
+                    f"  ... and {len(rnd.points) - MAX_LINES} more ({PLAN_FILE} lists every run)"
+                )
                 break
             seeds = [self.grid.seeds[j] for q, j in rnd.runs if q == p]
-            where = ", ".join(f"{a}={v:g}" if isinstance(v, float) else f"{a}={v}"
-                              for a, v in self.grid.points[p].coords.items())
+            where = ", ".join(
+                f"{a}={v:g}" if isinstance(v, float) else f"{a}={v}"
+                for a, v in self.grid.points[p].coords.items()
+            )
             out.append(f"  {where}: seeds {', '.join(map(str, seeds))}: {rnd.why.get(p, '')}")
         return out
 
@@ -178,16 +216,24 @@ def spec_line(campaign: Campaign) -> str:
     assert s is not None
     rules = []
     if s.width is not None:
-        rules.append(f"the {s.confidence:g} interval of the seed mean of {s.observable} "
-                     f"narrower than {s.width:g}" + (" x |mean|" if s.relative else ""))
+        rules.append(
+            f"the {s.confidence:g} interval of the seed mean of {s.observable} "
+            f"narrower than {s.width:g}" + (" x |mean|" if s.relative else "")
+        )
     if s.unanimous is not None:
-        rules.append(f"{s.unanimous}+ seeds of one pattern class (sigma2_S above "
-                     f"{s.patterned_above:g} or not)" if not s.classes else
-                     f"{s.unanimous}+ seeds of one class (which of "
-                     + ", ".join(f"{t.observable} > {t.above:g}" for t in s.classes)
-                     + " hold)")
-    return ("seeds by precision: a point stops at " + " or ".join(rules)
-            + f"; {s.initial} seed(s) first, +{s.add} per round, up to {len(campaign.seeds)}")
+        rules.append(
+            f"{s.unanimous}+ seeds of one pattern class (sigma2_S above "
+            f"{s.patterned_above:g} or not)"
+            if not s.classes
+            else f"{s.unanimous}+ seeds of one class (which of "
+            + ", ".join(f"{t.observable} > {t.above:g}" for t in s.classes)
+            + " hold)"
+        )
+    return (
+        "seeds by precision: a point stops at "
+        + " or ".join(rules)
+        + f"; {s.initial} seed(s) first, +{s.add} per round, up to {len(campaign.seeds)}"
+    )
 
 
 def validation_lines(campaign: Campaign) -> list[str]:
@@ -196,15 +242,18 @@ def validation_lines(campaign: Campaign) -> list[str]:
     assert s is not None
     cap = len(campaign.seeds)
     first = campaign.n_points * min(s.initial, cap)
-    return [spec_line(campaign),
-            f"round 0: {campaign.n_points} points x {min(s.initial, cap)} seed(s) = {first} "
-            "runs; later rounds add seeds to the undecided points",
-            f"runs: at least {first}, at most {campaign.n_runs} (every point to the cap), in "
-            f"at most {rounds_bound(s, cap)} round(s)"]
+    return [
+        spec_line(campaign),
+        f"round 0: {campaign.n_points} points x {min(s.initial, cap)} seed(s) = {first} "
+        "runs; later rounds add seeds to the undecided points",
+        f"runs: at least {first}, at most {campaign.n_runs} (every point to the cap), in "
+        f"at most {rounds_bound(s, cap)} round(s)",
+    ]
 
 
-def replay(campaign: Campaign, store: CampaignStore,
-           records: Mapping[str, Record] | None = None) -> SeedPlan:
+def replay(
+    campaign: Campaign, store: CampaignStore, records: Mapping[str, Record] | None = None
+) -> SeedPlan:
     """The rounds of ``campaign`` from the run records and files in ``store`` (see the
     module docstring): a pure function of the folder's run files."""
     spec = campaign.precision
@@ -216,10 +265,12 @@ def replay(campaign: Campaign, store: CampaignStore,
     sources = [t.source for t in spec.thresholds] if spec.unanimous is not None else []
     n_points = len(grid.points)
     count = [min(spec.initial, cap)] * n_points
-    first = SeedRound(0, tuple((p, j) for p in range(n_points) for j in range(count[0])),
-                      {p: "first seeds" for p in range(n_points)})
-    plan = SeedPlan(campaign, grid, [first], {}, {},
-                    [Decision("pending", 0, "not run")] * n_points)
+    first = SeedRound(
+        0,
+        tuple((p, j) for p in range(n_points) for j in range(count[0])),
+        {p: "first seeds" for p in range(n_points)},
+    )
+    plan = SeedPlan(campaign, grid, [first], {}, {}, [Decision("pending", 0, "not run")] * n_points)
     while True:
         rnd = plan.current
         missing = False
@@ -235,8 +286,9 @@ def replay(campaign: Campaign, store: CampaignStore,
                 plan.decisions[p] = Decision("pending", count[p], "seeds running")
                 continue
             idx = range(p * cap, p * cap + count[p])
-            plan.decisions[p] = decide(spec, [_f(plan.outcomes[i]) for i in idx],
-                                       [plan.classes[i] or () for i in idx], cap)
+            plan.decisions[p] = decide(
+                spec, [_f(plan.outcomes[i]) for i in idx], [plan.classes[i] or () for i in idx], cap
+            )
         if missing:
             return plan
         runs: list[tuple[int, int]] = []
@@ -285,13 +337,15 @@ class PrecisionExpansion(Expansion):
         self.planned = np.zeros(len(grid.run_ids), dtype=bool)
         self.planned[plan.indices()] = True
 
-    def build_phase(self, records: Mapping[str, Record], store: CampaignStore | None = None
-                    ) -> xr.Dataset:
+    def build_phase(
+        self, records: Mapping[str, Record], store: CampaignStore | None = None
+    ) -> xr.Dataset:
         return precision_phase(self, records, store)
 
 
-def precision_phase(expansion: PrecisionExpansion, records: Mapping[str, Record],
-                    store: CampaignStore | None = None) -> xr.Dataset:
+def precision_phase(
+    expansion: PrecisionExpansion, records: Mapping[str, Record], store: CampaignStore | None = None
+) -> xr.Dataset:
     """phase.nc with seeds by precision: :func:`sweep.outputs.aggregate.build_phase` from the
     planned runs' records (NaN for the seeds not run), with ``seed_count`` (seeds run at
     each point, ok or failed) and ``seed_decision`` (a CF flag variable: pending, precise,
@@ -302,24 +356,34 @@ def precision_phase(expansion: PrecisionExpansion, records: Mapping[str, Record]
     from ..outputs.aggregate import STATUS_MISSING, build_phase
 
     plan = expansion.refinement
-    planned = {rid for rid, keep in zip(expansion.run_ids, expansion.planned, strict=True)
-               if keep}
+    planned = {rid for rid, keep in zip(expansion.run_ids, expansion.planned, strict=True) if keep}
     ds = build_phase(expansion, {k: v for k, v in records.items() if k in planned}, store)
     dims = [d.name for d in expansion.campaign.dims]
-    ds["seed_count"] = xr.Variable(dims, (ds["status"] != STATUS_MISSING).sum("seed").values
-                                   .astype(np.int32), {
-        "long_name": "number of seeds run at the point (ok or failed)", "units": "1"})
+    ds["seed_count"] = xr.Variable(
+        dims,
+        (ds["status"] != STATUS_MISSING).sum("seed").values.astype(np.int32),
+        {"long_name": "number of seeds run at the point (ok or failed)", "units": "1"},
+    )
     flags = np.zeros(expansion.campaign.shape, dtype=np.int8)
     for point, d in zip(expansion.points, plan.decisions, strict=True):
         flags[point.index] = DECISIONS.index(d.state)
-    ds["seed_decision"] = xr.Variable(dims, flags, {
-        "long_name": "why the point's seeds stopped (seeds by precision)",
-        "flag_values": np.arange(len(DECISIONS), dtype=np.int8),
-        "flag_meanings": " ".join(DECISIONS)})
-    ds.attrs.update({
-        "precision_spec": json.dumps(plan.spec.to_dict()),
-        "precision_observable": plan.spec.observable, "precision_rounds": len(plan.rounds),
-        "precision_finished": int(plan.finished), "precision_stop": plan.stop,
-        "precision_runs_planned": plan.n_runs,
-    })
+    ds["seed_decision"] = xr.Variable(
+        dims,
+        flags,
+        {
+            "long_name": "why the point's seeds stopped (seeds by precision)",
+            "flag_values": np.arange(len(DECISIONS), dtype=np.int8),
+            "flag_meanings": " ".join(DECISIONS),
+        },
+    )
+    ds.attrs.update(
+        {
+            "precision_spec": json.dumps(plan.spec.to_dict()),
+            "precision_observable": plan.spec.observable,
+            "precision_rounds": len(plan.rounds),
+            "precision_finished": int(plan.finished),
+            "precision_stop": plan.stop,
+            "precision_runs_planned": plan.n_runs,
+        }
+    )
     return ds

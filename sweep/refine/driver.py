@@ -47,10 +47,17 @@ def _merge(total: RunSummary, part: RunSummary) -> None:
     total.run_time += part.run_time
 
 
-def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool = False,
-                 check_files: bool = False, events: Any = None, dashboard: bool = False,
-                 say: Callable[[str], None] = print, limit: FailureLimit | None = None
-                 ) -> tuple[Plan, RunSummary | None, Expansion]:
+def drive_rounds(
+    campaign: Campaign,
+    store: CampaignStore,
+    *,
+    retry_failed: bool = False,
+    check_files: bool = False,
+    events: Any = None,
+    dashboard: bool = False,
+    say: Callable[[str], None] = print,
+    limit: FailureLimit | None = None,
+) -> tuple[Plan, RunSummary | None, Expansion]:
     """Run a refined campaign to its end (or to an interruption) while holding its lock.
 
     Returns the plan of what was on disk when it started (for the failures found there), the
@@ -79,12 +86,13 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                             say(line)
                     announced = ref.current.number
                 if ref.finished:
-                    say(f"{done} finished after round {ref.current.number}: {ref.stop}; "
-                        f"{ref.n_runs} runs")
+                    say(
+                        f"{done} finished after round {ref.current.number}: {ref.stop}; "
+                        f"{ref.n_runs} runs"
+                    )
                     break
                 runs = ref.run_list()
-                plan = plan_runs(runs, store, retry_failed=retry,
-                                  check_files=check_files)
+                plan = plan_runs(runs, store, retry_failed=retry, check_files=check_files)
                 retry = check_files = False
                 if first is None:
                     first = plan
@@ -93,25 +101,36 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
                     # does not move on, the files changed under the driver
                     where = (ref.current.number, len(ref.pending))
                     if where == stuck_at:
-                        raise StoreError(f"round {where[0]} of {campaign.name}: "
-                                         f"{where[1]} run(s) stay unfinished although their "
-                                         "records are on disk; check the folder "
-                                         f"{store.root} (nematic status)")
+                        raise StoreError(
+                            f"round {where[0]} of {campaign.name}: "
+                            f"{where[1]} run(s) stay unfinished although their "
+                            "records are on disk; check the folder "
+                            f"{store.root} (nematic status)"
+                        )
                     stuck_at = where
                     continue
                 stuck_at = None
                 if link is None:
-                    link = stack.enter_context(open_cluster(
-                        campaign.execution, dashboard=dashboard, campaign_dir=store.root))
+                    link = stack.enter_context(
+                        open_cluster(
+                            campaign.execution, dashboard=dashboard, campaign_dir=store.root
+                        )
+                    )
                     if dashboard and events is not None and hasattr(events, "dashboard"):
                         events.dashboard(dashboard_link(link.client))
                 summary = run_campaign(runs, store, link, plan, events, limit=limit)
                 if total is None:
-                    total = RunSummary(total=0, skipped=summary.skipped,
-                                       failed_before=summary.failed_before)
+                    total = RunSummary(
+                        total=0, skipped=summary.skipped, failed_before=summary.failed_before
+                    )
                 _merge(total, summary)
-                if (summary.interrupted or summary.storage_error or summary.lost
-                        or summary.worker_lost or summary.stopped):
+                if (
+                    summary.interrupted
+                    or summary.storage_error
+                    or summary.lost
+                    or summary.worker_lost
+                    or summary.stopped
+                ):
                     break
         except KeyboardInterrupt:  # while the cluster was starting or closing
             if total is None:
@@ -130,8 +149,9 @@ def drive_rounds(campaign: Campaign, store: CampaignStore, *, retry_failed: bool
     return first, total, final.expansion()
 
 
-def _rounds_of(campaign: Campaign) -> tuple[Callable[..., Any], Callable[..., None],
-                                            Callable[[Any, int], list[str]], str, str]:
+def _rounds_of(
+    campaign: Campaign,
+) -> tuple[Callable[..., Any], Callable[..., None], Callable[[Any, int], list[str]], str, str]:
     """The replay, the plan writer, a round's lines, what the campaign is and what finishes:
     an adaptive campaign's rounds (with seeds by precision or not), or seeds by precision on
     the grid (:mod:`sweep.precision.rounds`, driven by the same loop: its replay gives an
@@ -140,15 +160,24 @@ def _rounds_of(campaign: Campaign) -> tuple[Callable[..., Any], Callable[..., No
     if campaign.refine is None:
         from ..precision import rounds as precision
 
-        return (precision.replay, precision.write_plan,
-                lambda plan, number: plan.round_lines(number),
-                "seeds by precision, in rounds", "seeds by precision")
-    what = (f"adaptive, refining {', '.join(campaign.refine.names)} in rounds"
-            + (", seeds by precision" if campaign.precision is not None else ""))
+        return (
+            precision.replay,
+            precision.write_plan,
+            lambda plan, number: plan.round_lines(number),
+            "seeds by precision, in rounds",
+            "seeds by precision",
+        )
+    what = f"adaptive, refining {', '.join(campaign.refine.names)} in rounds" + (
+        ", seeds by precision" if campaign.precision is not None else ""
+    )
     return replay, _record, round_lines, what, "refinement"
 
 
 def _record(store: CampaignStore, ref: Refinement) -> None:
     write_plan(store, ref)
-    log.info("refine: round %d, %d runs planned, %d pending", ref.current.number, ref.n_runs,
-             len(ref.pending))
+    log.info(
+        "refine: round %d, %d runs planned, %d pending",
+        ref.current.number,
+        ref.n_runs,
+        len(ref.pending),
+    )

@@ -38,9 +38,26 @@ from ..spec.refine import points_bound
 from .seeds import initial_count, more_seeds
 from .stats import Outcome, PointStats, is_boundary, point_stats, wilson
 
-__all__ = ["Line", "Outcome", "PlannedRun", "Point", "PointStats", "Round", "first_round",
-           "lines", "merge_index", "midpoint", "next_round", "point_at", "points_bound",
-           "points_of", "refined_dims", "run_bound", "values_at", "wilson"]
+__all__ = [
+    "Line",
+    "Outcome",
+    "PlannedRun",
+    "Point",
+    "PointStats",
+    "Round",
+    "first_round",
+    "lines",
+    "merge_index",
+    "midpoint",
+    "next_round",
+    "point_at",
+    "points_bound",
+    "points_of",
+    "refined_dims",
+    "run_bound",
+    "values_at",
+    "wilson",
+]
 
 Line = tuple[int, ...]
 #: The refined values of a point: a float (one refined axis) or a tuple of floats (several);
@@ -130,9 +147,13 @@ def grid_values(campaign: Campaign) -> list[tuple[float, ...]]:
 
 def first_round(campaign: Campaign) -> Round:
     """Round 0: every grid point with its first seeds."""
-    seeds = campaign.seeds[:initial_count(campaign)]
-    runs = [PlannedRun(line, point_at(vs), s, "grid") for line in lines(campaign)
-            for vs in grid_values(campaign) for s in seeds]
+    seeds = campaign.seeds[: initial_count(campaign)]
+    runs = [
+        PlannedRun(line, point_at(vs), s, "grid")
+        for line in lines(campaign)
+        for vs in grid_values(campaign)
+        for s in seeds
+    ]
     return Round(0, tuple(runs))
 
 
@@ -150,23 +171,32 @@ def _fmt(x: float) -> str:
     return f"{x:.6g}"
 
 
-def next_round(campaign: Campaign, number: int,
-               outcomes: Mapping[Point, Mapping[int, Outcome]], *, split: bool = True
-               ) -> Round:
+def next_round(
+    campaign: Campaign,
+    number: int,
+    outcomes: Mapping[Point, Mapping[int, Outcome]],
+    *,
+    split: bool = True,
+) -> Round:
     """Round ``number`` planned from the outcomes so far: ``outcomes[point][seed]`` for every
     run of the earlier rounds (all finished). ``split=False``: seeds only, no new points. An
     empty round means nothing is left to do."""
     spec = _spec(campaign)
     seeds = campaign.seeds
-    first = seeds[:initial_count(campaign)]
+    first = seeds[: initial_count(campaign)]
     by_line: dict[Line, list[tuple[float, ...]]] = {}
     for line, x in outcomes:
         by_line.setdefault(line, []).append(values_at(x))
     runs: list[PlannedRun] = []
     for line in sorted(by_line):
         pts = sorted(by_line[line])
-        ordered = {v: [outcomes[(line, point_at(v))][s] for s in
-                       sorted(outcomes[(line, point_at(v))], key=seeds.index)] for v in pts}
+        ordered = {
+            v: [
+                outcomes[(line, point_at(v))][s]
+                for s in sorted(outcomes[(line, point_at(v))], key=seeds.index)
+            ]
+            for v in pts
+        }
         stats = {v: point_stats(spec, ordered[v]) for v in pts}
         for v in pts:
             extra, why = more_seeds(campaign, ordered[v], stats[v])
@@ -177,20 +207,22 @@ def next_round(campaign: Campaign, number: int,
         for a, axis in enumerate(spec.axes):
             along: dict[tuple[float, ...], list[tuple[float, ...]]] = {}
             for v in pts:  # sorted: each group is in the order of axis a
-                along.setdefault(v[:a] + v[a + 1:], []).append(v)
+                along.setdefault(v[:a] + v[a + 1 :], []).append(v)
             for key in sorted(along):
                 classified = [v for v in along[key] if stats[v].n > 0]
                 for p, q in zip(classified, classified[1:], strict=False):
                     if not is_boundary(spec, stats[p], stats[q]):
                         continue
                     mid = midpoint(axis, p[a], q[a])
-                    new = (*p[:a], mid, *p[a + 1:]) if mid is not None else None
+                    new = (*p[:a], mid, *p[a + 1 :]) if mid is not None else None
                     if new is None or new in present:
                         continue
                     present.add(new)
-                    why = (f"boundary: {axis.name} {_fmt(p[a])} "
-                           f"({stats[p].label(spec.criterion)}) | {_fmt(q[a])} "
-                           f"({stats[q].label(spec.criterion)})")
+                    why = (
+                        f"boundary: {axis.name} {_fmt(p[a])} "
+                        f"({stats[p].label(spec.criterion)}) | {_fmt(q[a])} "
+                        f"({stats[q].label(spec.criterion)})"
+                    )
                     runs.extend(PlannedRun(line, point_at(new), s, why) for s in first)
     return Round(number, tuple(runs))
 
@@ -200,8 +232,10 @@ def run_bound(campaign: Campaign) -> int:
     spacing (or as far as the rounds go) along every refined axis, and every point of that
     union grid run with every seed."""
     spec = _spec(campaign)
-    per_axis = [points_bound(campaign.dims[k].axes[0].values, axis, spec.rounds)
-                for k, axis in zip(refined_dims(campaign), spec.axes, strict=True)]
+    per_axis = [
+        points_bound(campaign.dims[k].axes[0].values, axis, spec.rounds)
+        for k, axis in zip(refined_dims(campaign), spec.axes, strict=True)
+    ]
     return len(lines(campaign)) * math.prod(per_axis) * len(campaign.seeds)
 
 

@@ -174,28 +174,56 @@ class Refinement:
             for r in rnd.runs:
                 key = (r.line, r.x, r.seed)
                 value = self.outcomes.get(key)
-                runs.append({"coords": self.namer.coords(r.line, r.x), "seed": r.seed,
-                             "run_id": self.run_ids[key], "why": r.why,
-                             "state": "pending" if value is None else "done",
-                             "outcome": value})
-            rounds.append({"round": rnd.number, "n_runs": len(rnd.runs),
-                           "new_points": len(rnd.new_points),
-                           "seeded_points": len(rnd.seeded_points), "runs": runs})
-        out = {"version": PLAN_VERSION, "campaign": self.campaign.name,
-               "refine": self.campaign.refine.to_dict(),
-               "seeds": list(self.campaign.seeds), "finished": self.finished,
-               "stop": self.stop, "n_runs": self.n_runs, "n_pending": len(self.pending),
-               "run_bound": run_bound(self.campaign), "rounds": rounds}
+                runs.append(
+                    {
+                        "coords": self.namer.coords(r.line, r.x),
+                        "seed": r.seed,
+                        "run_id": self.run_ids[key],
+                        "why": r.why,
+                        "state": "pending" if value is None else "done",
+                        "outcome": value,
+                    }
+                )
+            rounds.append(
+                {
+                    "round": rnd.number,
+                    "n_runs": len(rnd.runs),
+                    "new_points": len(rnd.new_points),
+                    "seeded_points": len(rnd.seeded_points),
+                    "runs": runs,
+                }
+            )
+        out = {
+            "version": PLAN_VERSION,
+            "campaign": self.campaign.name,
+            "refine": self.campaign.refine.to_dict(),
+            "seeds": list(self.campaign.seeds),
+            "finished": self.finished,
+            "stop": self.stop,
+            "n_runs": self.n_runs,
+            "n_pending": len(self.pending),
+            "run_bound": run_bound(self.campaign),
+            "rounds": rounds,
+        }
         if self.campaign.precision is not None:
             out["precision"] = self.campaign.precision.to_dict()
-            out["points"] = [{"coords": self.namer.coords(*point), "seeds_run": d.n,
-                              "decision": d.state, "why": d.why, "mean": d.mean,
-                              "width": d.width} for point, d in self.decisions.items()]
+            out["points"] = [
+                {
+                    "coords": self.namer.coords(*point),
+                    "seeds_run": d.n,
+                    "decision": d.state,
+                    "why": d.why,
+                    "mean": d.mean,
+                    "width": d.width,
+                }
+                for point, d in self.decisions.items()
+            ]
         return out
 
 
-def replay(campaign: Campaign, store: CampaignStore,
-           records: Mapping[str, Record] | None = None) -> Refinement:
+def replay(
+    campaign: Campaign, store: CampaignStore, records: Mapping[str, Record] | None = None
+) -> Refinement:
     """The rounds of ``campaign`` from the run records and files in ``store`` (see the
     module docstring). A pure function of the folder's run files."""
     spec = campaign.refine
@@ -228,13 +256,16 @@ def replay(campaign: Campaign, store: CampaignStore,
         if not nxt.runs:
             ref.finished = True
             if campaign.precision is None:
-                ref.stop = ("converged: no boundary cell wider than twice the smallest "
-                            "spacing, no uncertain point with seeds left")
+                ref.stop = (
+                    "converged: no boundary cell wider than twice the smallest "
+                    "spacing, no uncertain point with seeds left"
+                )
             else:
-                ref.stop = (("converged: no boundary cell wider than twice the smallest "
-                             "spacing" if refining else
-                             f"rounds used ({spec.rounds} after the grid)")
-                            + f"; every point's seeds decided ({ref.decisions_text()})")
+                ref.stop = (
+                    "converged: no boundary cell wider than twice the smallest spacing"
+                    if refining
+                    else f"rounds used ({spec.rounds} after the grid)"
+                ) + f"; every point's seeds decided ({ref.decisions_text()})"
             return ref
         ref.rounds.append(nxt)
 
@@ -283,18 +314,21 @@ class RefinedExpansion(Expansion):
         super().__init__(refinement.union_campaign())
         self.refinement = refinement
         planned = set(refinement.run_ids.values())
-        self.planned = np.fromiter((rid in planned for rid in self.run_ids), dtype=bool,
-                                   count=len(self.run_ids))
+        self.planned = np.fromiter(
+            (rid in planned for rid in self.run_ids), dtype=bool, count=len(self.run_ids)
+        )
 
-    def build_phase(self, records: Mapping[str, Record], store: CampaignStore | None = None
-                    ) -> xr.Dataset:
+    def build_phase(
+        self, records: Mapping[str, Record], store: CampaignStore | None = None
+    ) -> xr.Dataset:
         """phase.nc's dataset (:func:`refined_phase`), which
         :func:`sweep.outputs.aggregate.write_phase` asks the expansion for."""
         return refined_phase(self, records, store)
 
 
-def refined_phase(expansion: RefinedExpansion, records: Mapping[str, Record],
-                  store: CampaignStore | None = None) -> xr.Dataset:
+def refined_phase(
+    expansion: RefinedExpansion, records: Mapping[str, Record], store: CampaignStore | None = None
+) -> xr.Dataset:
     """phase.nc of a refined campaign: :func:`sweep.outputs.aggregate.build_phase` on the union grid
     from the planned runs' records, with ``seed_count`` (seeds run at each point, ok or
     failed; 0 where the point was not run) and ``refine_round`` (the round that first ran
@@ -307,50 +341,72 @@ def refined_phase(expansion: RefinedExpansion, records: Mapping[str, Record],
     from ..outputs.aggregate import STATUS_MISSING, build_phase
 
     ref = expansion.refinement
-    planned = {rid for rid, keep in zip(expansion.run_ids, expansion.planned, strict=True)
-               if keep}
+    planned = {rid for rid, keep in zip(expansion.run_ids, expansion.planned, strict=True) if keep}
     ds = build_phase(expansion, {k: v for k, v in records.items() if k in planned}, store)
     sweep_dims = [d.name for d in expansion.campaign.dims]
     ran = ds["status"] != STATUS_MISSING
     count = ran.sum("seed").astype(np.int32)
-    ds["seed_count"] = xr.Variable(sweep_dims, count.values, {
-        "long_name": "number of seeds run at the point (ok or failed); 0: the point was not "
-                     "run", "units": "1"})
+    ds["seed_count"] = xr.Variable(
+        sweep_dims,
+        count.values,
+        {
+            "long_name": "number of seeds run at the point (ok or failed); 0: the point was not "
+            "run",
+            "units": "1",
+        },
+    )
     ks = refined_dims(ref.campaign)
-    cols = [{x: i for i, x in enumerate(expansion.campaign.dims[k].axes[0].values)}
-            for k in ks]
+    cols = [{x: i for i, x in enumerate(expansion.campaign.dims[k].axes[0].values)} for k in ks]
 
     def index(line: tuple[int, ...], x: float | tuple[float, ...]) -> tuple[int, ...]:
-        return merge_index(ks, line, [col[v] for col, v in zip(cols, values_at(x),
-                                                                strict=True)])
+        return merge_index(ks, line, [col[v] for col, v in zip(cols, values_at(x), strict=True)])
 
     rounds = np.full(expansion.campaign.shape, -1, dtype=np.int32)
     for (line, x), number in ref.first_round_of().items():
         rounds[index(line, x)] = number
-    ds["refine_round"] = xr.Variable(sweep_dims, rounds, {
-        "long_name": "refinement round that first ran the point (0: the grid); -1: not run",
-        "units": "1"})
+    ds["refine_round"] = xr.Variable(
+        sweep_dims,
+        rounds,
+        {
+            "long_name": "refinement round that first ran the point (0: the grid); -1: not run",
+            "units": "1",
+        },
+    )
     spec = ref.campaign.refine
     assert spec is not None
-    ds.attrs.update({
-        "refine_axis": ", ".join(spec.names),
-        "refine_observable": ", ".join(t.observable for t in spec.thresholds)
-                             or spec.observable,
-        "refine_criterion": spec.criterion, "refine_rounds": len(ref.rounds),
-        "refine_finished": int(ref.finished), "refine_stop": ref.stop,
-        "refine_runs_planned": ref.n_runs, "refine_spec": json.dumps(spec.to_dict()),
-    })
+    ds.attrs.update(
+        {
+            "refine_axis": ", ".join(spec.names),
+            "refine_observable": ", ".join(t.observable for t in spec.thresholds)
+            or spec.observable,
+            "refine_criterion": spec.criterion,
+            "refine_rounds": len(ref.rounds),
+            "refine_finished": int(ref.finished),
+            "refine_stop": ref.stop,
+            "refine_runs_planned": ref.n_runs,
+            "refine_spec": json.dumps(spec.to_dict()),
+        }
+    )
     precision = ref.campaign.precision
     if precision is not None:
         flags = np.full(expansion.campaign.shape, NOT_RUN, dtype=np.int8)
         for (line, x), d in ref.decisions.items():
             flags[index(line, x)] = DECISIONS.index(d.state)
-        ds["seed_decision"] = xr.Variable(sweep_dims, flags, {
-            "long_name": "why the point's seeds stopped (seeds by precision)",
-            "flag_values": np.arange(NOT_RUN, len(DECISIONS), dtype=np.int8),
-            "flag_meanings": " ".join(("not_run", *DECISIONS))})
-        ds.attrs.update({"precision_spec": json.dumps(precision.to_dict()),
-                         "precision_observable": precision.observable})
+        ds["seed_decision"] = xr.Variable(
+            sweep_dims,
+            flags,
+            {
+                "long_name": "why the point's seeds stopped (seeds by precision)",
+                "flag_values": np.arange(NOT_RUN, len(DECISIONS), dtype=np.int8),
+                "flag_meanings": " ".join(("not_run", *DECISIONS)),
+            },
+        )
+        ds.attrs.update(
+            {
+                "precision_spec": json.dumps(precision.to_dict()),
+                "precision_observable": precision.observable,
+            }
+        )
     return ds
 
 

@@ -19,8 +19,9 @@ class Outcomes:
     it failed or has no value, else the observable (``source``; :meth:`row` reads several
     run scalars at once)."""
 
-    def __init__(self, store: CampaignStore, source: str,
-                 records: Mapping[str, Record] | None = None):
+    def __init__(
+        self, store: CampaignStore, source: str, records: Mapping[str, Record] | None = None
+    ):
         self.store = store
         self.source = source
         self.records = store.scan() if records is None else records

@@ -62,8 +62,9 @@ def decision(campaign: Campaign, values: Sequence[Outcome]) -> Decision:
     return decide(p, obs, classes, len(campaign.seeds))
 
 
-def more_seeds(campaign: Campaign, values: Sequence[Outcome], stats: PointStats
-               ) -> tuple[tuple[int, ...], str]:
+def more_seeds(
+    campaign: Campaign, values: Sequence[Outcome], stats: PointStats
+) -> tuple[tuple[int, ...], str]:
     """The seeds a point whose first ``len(values)`` seeds ran gets next, and why (none:
     ``()``)."""
     seeds = campaign.seeds
@@ -74,11 +75,16 @@ def more_seeds(campaign: Campaign, values: Sequence[Outcome], stats: PointStats
         d = decision(campaign, values)
         if d.state != "pending":
             return (), ""
-        return (seeds[have:have + campaign.precision.add],
-                f"undecided after {have} seeds: {d.why}")
+        return (
+            seeds[have : have + campaign.precision.add],
+            f"undecided after {have} seeds: {d.why}",
+        )
     spec = _spec(campaign)
     if not is_uncertain(spec, stats):
         return (), ""
-    what = (f"interval {stats.width:.2f} wider than {spec.max_width:g}"
-            if math.isfinite(stats.width) else "one seed")
-    return seeds[have:have + spec.add], f"uncertain: {stats.label(spec.criterion)}, {what}"
+    what = (
+        f"interval {stats.width:.2f} wider than {spec.max_width:g}"
+        if math.isfinite(stats.width)
+        else "one seed"
+    )
+    return seeds[have : have + spec.add], f"uncertain: {stats.label(spec.criterion)}, {what}"

@@ -78,8 +78,10 @@ class PointStats:
             return f"log10 mean {self.mean_log:.3g} ({self.n} seeds)"
         if len(self.ks) == 1:
             return f"{self.ks[0]}/{self.n} patterned"
-        return ", ".join(f"{k}/{self.n} {name} > {above:g}"
-                         for k, (name, above) in zip(self.ks, self.names, strict=True))
+        return ", ".join(
+            f"{k}/{self.n} {name} > {above:g}"
+            for k, (name, above) in zip(self.ks, self.names, strict=True)
+        )
 
 
 def point_stats(spec: RefineSpec, values: Sequence[Outcome]) -> PointStats:
@@ -97,8 +99,11 @@ def point_stats(spec: RefineSpec, values: Sequence[Outcome]) -> PointStats:
         classes = tuple(0.0 if k / n <= lo else 1.0 if k / n >= hi else 0.5 for k in ks)
         width = max(b - a for a, b in (wilson(k, n, spec.confidence) for k in ks))
         return PointStats(len(values), n, ks, classes, width=width, names=names)
-    logs = [math.log10(x) for x in (value_of(v, spec.source) for v in values)
-            if math.isfinite(x) and x > 0]
+    logs = [
+        math.log10(x)
+        for x in (value_of(v, spec.source) for v in values)
+        if math.isfinite(x) and x > 0
+    ]
     n = len(logs)
     if n == 0:
         return PointStats(len(values), 0)

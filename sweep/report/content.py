@@ -83,10 +83,18 @@ def summary(opened: CampaignResults, status: StatusReport) -> Content:
         for a in d.axes:
             zipped = f" (zipped with {d.name})" if a.name != d.name else ""
             axes.append((f"{a.name}{zipped}", _values(a.values)))
-    return Content(name=c.name, description=" ".join((c.description or "").split()),
-                   axes=axes, seeds=f"{len(c.seeds)}: {_values(c.seeds)}",
-                   counts={"runs": status.total, "done": status.done,
-                           "failed": status.failed, "pending": status.pending})
+    return Content(
+        name=c.name,
+        description=" ".join((c.description or "").split()),
+        axes=axes,
+        seeds=f"{len(c.seeds)}: {_values(c.seeds)}",
+        counts={
+            "runs": status.total,
+            "done": status.done,
+            "failed": status.failed,
+            "pending": status.pending,
+        },
+    )
 
 
 def figure_images(root: Path) -> list[tuple[str, str]]:
@@ -116,39 +124,70 @@ def fit_tables(fits: xr.Dataset) -> list[Table]:
         groups.setdefault((fit, tuple(str(d) for d in var.dims)), []).append(str(name))
     tables = []
     for (fit, dims), names in groups.items():
-        ends = {n for n in names for s in ("_lower", "_upper")
-                if n.endswith(s) and n[: -len(s)] in names}
+        ends = {
+            n
+            for n in names
+            for s in ("_lower", "_upper")
+            if n.endswith(s) and n[: -len(s)] in names
+        }
         if not dims:
             rows = []
             for n in names:
                 if n in ends:
                     continue
                 lo, hi = f"{n}_lower", f"{n}_upper"
-                interval = (f"[{fmt(fits[lo].values.item())}, {fmt(fits[hi].values.item())}]"
-                            if lo in ends and hi in ends else "")
-                rows.append([n, fmt(fits[n].values.item()), interval,
-                             str(fits[n].attrs.get("units") or ""),
-                             str(fits[n].attrs.get("long_name") or "")])
-            tables.append(Table(title=fit, rows=rows,
-                                columns=["variable", "value", "interval", "units", "meaning"]))
+                interval = (
+                    f"[{fmt(fits[lo].values.item())}, {fmt(fits[hi].values.item())}]"
+                    if lo in ends and hi in ends
+                    else ""
+                )
+                rows.append(
+                    [
+                        n,
+                        fmt(fits[n].values.item()),
+                        interval,
+                        str(fits[n].attrs.get("units") or ""),
+                        str(fits[n].attrs.get("long_name") or ""),
+                    ]
+                )
+            tables.append(
+                Table(
+                    title=fit,
+                    rows=rows,
+                    columns=["variable", "value", "interval", "units", "meaning"],
+                )
+            )
             continue
-        ordered = [m for n in names if n not in ends
-                   for m in (n, f"{n}_lower", f"{n}_upper") if m == n or m in ends]
+        ordered = [
+            m
+            for n in names
+            if n not in ends
+            for m in (n, f"{n}_lower", f"{n}_upper")
+            if m == n or m in ends
+        ]
         headers = [f"{d}{_unit(fits[d])}" if d in fits.coords else d for d in dims]
         headers += [f"{n}{_unit(fits[n])}" for n in ordered]
         rows = []
         size = int(np.prod([fits.sizes[d] for d in dims]))
         for index in list(np.ndindex(*[fits.sizes[d] for d in dims]))[:MAX_FIT_ROWS]:
             at = dict(zip(dims, index, strict=True))
-            row = [fmt(fits[d].values[i]) if d in fits.coords else str(i)
-                   for d, i in at.items()]
+            row = [fmt(fits[d].values[i]) if d in fits.coords else str(i) for d, i in at.items()]
             row += [fmt(fits[n].isel(at).values.item()) for n in ordered]
             rows.append(row)
-        meanings = "; ".join(f"{n}: {fits[n].attrs['long_name']}" for n in ordered
-                             if n not in ends and fits[n].attrs.get("long_name"))
+        meanings = "; ".join(
+            f"{n}: {fits[n].attrs['long_name']}"
+            for n in ordered
+            if n not in ends and fits[n].attrs.get("long_name")
+        )
         cut = f"the first {MAX_FIT_ROWS} of {size} rows. " if size > MAX_FIT_ROWS else ""
-        tables.append(Table(title=f"{fit} over {', '.join(dims)}", columns=headers, rows=rows,
-                            note=cut + meanings))
+        tables.append(
+            Table(
+                title=f"{fit} over {', '.join(dims)}",
+                columns=headers,
+                rows=rows,
+                note=cut + meanings,
+            )
+        )
     return tables
 
 
@@ -160,18 +199,30 @@ def failure_groups(status: StatusReport, phase: xr.Dataset) -> list[dict[str, An
 
     table = runs_table(phase)
     failed = table[table["status"] == "failed"]
-    axes = [c for c in table.columns if c not in ("seed", "run_id", "status", "reason")
-            and c in phase.coords]
+    axes = [
+        c
+        for c in table.columns
+        if c not in ("seed", "run_id", "status", "reason") and c in phase.coords
+    ]
     out = []
     for group in status.failure_groups:
         rows = failed[failed["reason"] == group["reason"]]
-        runs = [(", ".join(f"{a}={fmt(r[a])}" for a in axes), int(r["seed"]), str(r["run_id"]))
-                for _, r in rows.head(MAX_FAILED_LISTED).iterrows()]
+        runs = [
+            (", ".join(f"{a}={fmt(r[a])}" for a in axes), int(r["seed"]), str(r["run_id"]))
+            for _, r in rows.head(MAX_FAILED_LISTED).iterrows()
+        ]
         detail = str(group.get("detail") or "").strip().splitlines()
-        out.append({"reason": group["reason"], "count": group["count"],
-                    "detail": detail[-1] if detail else "", "record": group["record"],
-                    "t_failed": fmt(group.get("t_failed")), "runs": runs,
-                    "more": max(0, len(rows) - MAX_FAILED_LISTED)})
+        out.append(
+            {
+                "reason": group["reason"],
+                "count": group["count"],
+                "detail": detail[-1] if detail else "",
+                "record": group["record"],
+                "t_failed": fmt(group.get("t_failed")),
+                "runs": runs,
+                "more": max(0, len(rows) - MAX_FAILED_LISTED),
+            }
+        )
     return out
 
 
@@ -186,14 +237,24 @@ def refine_rounds(plan: Mapping[str, Any] | None) -> dict[str, Any] | None:
         points: dict[str, dict[str, Any]] = {}
         for r in runs:
             where = ", ".join(f"{k}={fmt(v)}" for k, v in (r.get("coords") or {}).items())
-            entry = points.setdefault(where, {"where": where, "seeds": [], "why": r.get("why"),
-                                              "states": []})
+            entry = points.setdefault(
+                where, {"where": where, "seeds": [], "why": r.get("why"), "states": []}
+            )
             entry["seeds"].append(str(r.get("seed")))
             entry["states"].append(str(r.get("state")))
-        rounds.append({"number": rnd.get("round", len(rounds)), "n_runs": len(runs),
-                       "points": list(points.values())})
-    return {"rounds": rounds, "finished": bool(plan.get("finished")),
-            "stop": plan.get("stop") or "", "run_bound": plan.get("run_bound")}
+        rounds.append(
+            {
+                "number": rnd.get("round", len(rounds)),
+                "n_runs": len(runs),
+                "points": list(points.values()),
+            }
+        )
+    return {
+        "rounds": rounds,
+        "finished": bool(plan.get("finished")),
+        "stop": plan.get("stop") or "",
+        "run_bound": plan.get("run_bound"),
+    }
 
 
 def verification(root: Path) -> dict[str, Any] | None:
@@ -204,28 +265,49 @@ def verification(root: Path) -> dict[str, Any] | None:
     try:
         ds = read_verify(root)
     except (OSError, ValueError) as e:
-        return {"summary": f"verify.nc cannot be read: {e}", "rows": [], "transitions": [],
-                "seeds": "", "threshold": math.nan}
+        return {
+            "summary": f"verify.nc cannot be read: {e}",
+            "rows": [],
+            "transitions": [],
+            "seeds": "",
+            "threshold": math.nan,
+        }
     if ds is None:
         return None
-    return {"summary": summary_line(ds), "rows": verdict_rows(ds),
-            "transitions": transition_rows(ds), "seeds": str(ds.attrs.get("seeds", "")),
-            "threshold": float(ds.attrs.get("threshold", math.nan))}
+    return {
+        "summary": summary_line(ds),
+        "rows": verdict_rows(ds),
+        "transitions": transition_rows(ds),
+        "seeds": str(ds.attrs.get("seeds", "")),
+        "threshold": float(ds.attrs.get("threshold", math.nan)),
+    }
 
 
 def cost(records: Mapping[str, Mapping[str, Any]], run_ids: set[str]) -> dict[str, Any]:
     """CPU time: the sum of the campaign's runs' wall times (one core each), their median,
     and a small histogram of them (an SVG data URI)."""
-    times = np.array([float(r["wall_time"]) for rid, r in records.items()
-                      if rid in run_ids and isinstance(r.get("wall_time"), (int, float))
-                      and math.isfinite(r["wall_time"])])
+    times = np.array(
+        [
+            float(r["wall_time"])
+            for rid, r in records.items()
+            if rid in run_ids
+            and isinstance(r.get("wall_time"), (int, float))
+            and math.isfinite(r["wall_time"])
+        ]
+    )
     if not times.size:
         return {"n": 0}
-    return {"n": int(times.size), "cpu_hours": float(times.sum() / 3600),
-            "total_seconds": float(times.sum()), "median": float(np.median(times)),
-            "min": float(times.min()), "max": float(times.max()),
-            "histogram": histogram_svg(times, min(HISTOGRAM_BINS, max(1, times.size)),
-                                       "wall time of a run [s]")}
+    return {
+        "n": int(times.size),
+        "cpu_hours": float(times.sum() / 3600),
+        "total_seconds": float(times.sum()),
+        "median": float(np.median(times)),
+        "min": float(times.min()),
+        "max": float(times.max()),
+        "histogram": histogram_svg(
+            times, min(HISTOGRAM_BINS, max(1, times.size)), "wall time of a run [s]"
+        ),
+    }
 
 
 def histogram_svg(values: np.ndarray, bins: int, label: str) -> str:
@@ -238,26 +320,37 @@ def histogram_svg(values: np.ndarray, bins: int, label: str) -> str:
     width, height, left, right, top, bottom = 360, 200, 42, 12, 10, 40
     plot_w, plot_h = width - left - right, height - top - bottom
     most = max(int(counts.max()), 1)
-    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-             'font-family="sans-serif" font-size="10">',
-             f'<rect x="{left}" y="{top}" width="{plot_w}" height="{plot_h}" fill="none" '
-             'stroke="#888"/>']
+    parts = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+        'font-family="sans-serif" font-size="10">',
+        f'<rect x="{left}" y="{top}" width="{plot_w}" height="{plot_h}" fill="none" '
+        'stroke="#888"/>',
+    ]
     step = plot_w / len(counts)
     for i, count in enumerate(counts):
         h = plot_h * int(count) / most
-        parts.append(f'<rect x="{left + i * step + 0.5:.1f}" y="{top + plot_h - h:.1f}" '
-                     f'width="{max(step - 1.0, 0.5):.1f}" height="{h:.1f}" fill="#1f77b4"/>')
+        parts.append(
+            f'<rect x="{left + i * step + 0.5:.1f}" y="{top + plot_h - h:.1f}" '
+            f'width="{max(step - 1.0, 0.5):.1f}" height="{h:.1f}" fill="#1f77b4"/>'
+        )
     base = top + plot_h
-    for x, value in ((left, edges[0]), (left + plot_w / 2, (edges[0] + edges[-1]) / 2),
-                     (left + plot_w, edges[-1])):
-        parts.append(f'<text x="{x:.1f}" y="{base + 13}" text-anchor="middle">'
-                     f'{float(value):.3g}</text>')
-    parts += [f'<text x="{left - 4}" y="{base + 3}" text-anchor="end">0</text>',
-              f'<text x="{left - 4}" y="{top + 8}" text-anchor="end">{most}</text>',
-              f'<text x="{left + plot_w / 2:.1f}" y="{height - 6}" text-anchor="middle">'
-              f'{escape(label)}</text>',
-              f'<text x="12" y="{top + plot_h / 2:.1f}" text-anchor="middle" '
-              f'transform="rotate(-90 12 {top + plot_h / 2:.1f})">runs</text>', "</svg>"]
+    for x, value in (
+        (left, edges[0]),
+        (left + plot_w / 2, (edges[0] + edges[-1]) / 2),
+        (left + plot_w, edges[-1]),
+    ):
+        parts.append(
+            f'<text x="{x:.1f}" y="{base + 13}" text-anchor="middle">{float(value):.3g}</text>'
+        )
+    parts += [
+        f'<text x="{left - 4}" y="{base + 3}" text-anchor="end">0</text>',
+        f'<text x="{left - 4}" y="{top + 8}" text-anchor="end">{most}</text>',
+        f'<text x="{left + plot_w / 2:.1f}" y="{height - 6}" text-anchor="middle">'
+        f"{escape(label)}</text>",
+        f'<text x="12" y="{top + plot_h / 2:.1f}" text-anchor="middle" '
+        f'transform="rotate(-90 12 {top + plot_h / 2:.1f})">runs</text>',
+        "</svg>",
+    ]
     data = base64.b64encode("".join(parts).encode("utf-8")).decode("ascii")
     return f"data:image/svg+xml;base64,{data}"
 
@@ -268,25 +361,32 @@ def provenance(phase: xr.Dataset, root: Path) -> tuple[list[tuple[str, str]], st
     from ..provenance import code_version, git_commit, library_versions_text
 
     a = phase.attrs
-    rows = [("runs made by code version(s)", str(a.get("run_code_versions") or "-")),
-            ("runs made at git commit(s)", str(a.get("run_git_commits") or "-")),
-            ("report made by code version", code_version()),
-            ("report made at git commit", str(git_commit() or "-")),
-            ("library versions", library_versions_text())]
-    fixed = [f"{k[len('param_'):]}={fmt(v)}" for k, v in a.items() if k.startswith("param_")]
-    numerics = [f"{k[len('num_'):]}={fmt(v)}" for k, v in a.items() if k.startswith("num_")]
-    rows += [("fixed parameters", ", ".join(fixed) or "-"),
-             ("fixed numerics", ", ".join(numerics) or "-")]
+    rows = [
+        ("runs made by code version(s)", str(a.get("run_code_versions") or "-")),
+        ("runs made at git commit(s)", str(a.get("run_git_commits") or "-")),
+        ("report made by code version", code_version()),
+        ("report made at git commit", str(git_commit() or "-")),
+        ("library versions", library_versions_text()),
+    ]
+    fixed = [f"{k[len('param_') :]}={fmt(v)}" for k, v in a.items() if k.startswith("param_")]
+    numerics = [f"{k[len('num_') :]}={fmt(v)}" for k, v in a.items() if k.startswith("num_")]
+    rows += [
+        ("fixed parameters", ", ".join(fixed) or "-"),
+        ("fixed numerics", ", ".join(numerics) or "-"),
+    ]
     if a.get("campaign_overrides"):
         rows.append(("command-line overrides", str(a["campaign_overrides"])))
     copy = root / "campaign.yaml"
-    text = copy.read_text(encoding="utf-8") if copy.is_file() else \
-        str(a.get("campaign_yaml") or "")
+    text = copy.read_text(encoding="utf-8") if copy.is_file() else str(a.get("campaign_yaml") or "")
     return rows, text
 
 
-def gather(opened: CampaignResults, phase: xr.Dataset, status: StatusReport,
-           records: Mapping[str, Mapping[str, Any]]) -> Content:
+def gather(
+    opened: CampaignResults,
+    phase: xr.Dataset,
+    status: StatusReport,
+    records: Mapping[str, Mapping[str, Any]],
+) -> Content:
     """Every section of the page but the phase diagram."""
     from ..analysis.fits_file import load_fits
     from ..refine.rounds import read_plan

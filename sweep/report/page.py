@@ -146,9 +146,14 @@ def build_report(opened: CampaignResults) -> str:
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
     created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     return env.from_string(TEMPLATE).render(
-        c=content, bokeh_resources=resources,
-        plot_div=div, plot_script=script, plot_notes=notes, created=created,
-        folder=str(store.root))
+        c=content,
+        bokeh_resources=resources,
+        plot_div=div,
+        plot_script=script,
+        plot_notes=notes,
+        created=created,
+        folder=str(store.root),
+    )
 
 
 def write_report(opened: CampaignResults, path: Path | None = None) -> Path:

@@ -76,12 +76,16 @@ class Axis:
     def of(cls, phase: xr.Dataset, dim: str) -> Axis:
         values = np.asarray(phase[dim].values)
         if not _numeric(values):
-            return cls(dim, np.arange(len(values), dtype=float),
-                       ticks={i: str(v) for i, v in enumerate(values)})
+            return cls(
+                dim,
+                np.arange(len(values), dtype=float),
+                ticks={i: str(v) for i, v in enumerate(values)},
+            )
         v = values.astype(float)
         finite = v[np.isfinite(v)]
-        log = bool(finite.size > 1 and finite.min() > 0
-                   and finite.max() / finite.min() >= LOG_AXIS_RATIO)
+        log = bool(
+            finite.size > 1 and finite.min() > 0 and finite.max() / finite.min() >= LOG_AXIS_RATIO
+        )
         return cls(dim, v, log=log)
 
 
@@ -108,12 +112,29 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
     status = per_point("status").astype(int)
     run_ids = per_point("run_id")
     observables = {m: per_point(m).astype(float) for m in MAIN if m in phase}
-    extra = {str(c): str(phase[c].dims[0]) for c in phase.coords
-             if phase[c].ndim == 1 and phase[c].dims[0] in dims and str(c) not in dims}
-    cols: dict[str, list[Any]] = {k: [] for k in (
-        "where", "counts", "shown", "shown_log", "run_id", "run_seed", "run_title",
-        "snapshot", "series_t", "series_y", "facet", *dims,
-        *(f"seeds_{m}" for m in observables))}
+    extra = {
+        str(c): str(phase[c].dims[0])
+        for c in phase.coords
+        if phase[c].ndim == 1 and phase[c].dims[0] in dims and str(c) not in dims
+    }
+    cols: dict[str, list[Any]] = {
+        k: []
+        for k in (
+            "where",
+            "counts",
+            "shown",
+            "shown_log",
+            "run_id",
+            "run_seed",
+            "run_title",
+            "snapshot",
+            "series_t",
+            "series_y",
+            "facet",
+            *dims,
+            *(f"seeds_{m}" for m in observables),
+        )
+    }
     embedded = 0
     for flat, index in enumerate(np.ndindex(*shape)):
         st = status[flat]
@@ -125,11 +146,12 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
         where = ", ".join(f"{k}={_label(v)}" for k, v in coords.items())
         for d in dims:
             cols[d].append(_label(phase[d].values[at[d]]))
-        cols["facet"].append(", ".join(f"{d}={_label(phase[d].values[at[d]])}"
-                                       for d in dims[2:]))
+        cols["facet"].append(", ".join(f"{d}={_label(phase[d].values[at[d]])}" for d in dims[2:]))
         cols["where"].append(where)
-        cols["counts"].append(f"{int((st == STATUS_OK).sum())} ok, "
-                              f"{int((st == STATUS_FAILED).sum())} failed of {len(st)} seeds")
+        cols["counts"].append(
+            f"{int((st == STATUS_OK).sum())} ok, "
+            f"{int((st == STATUS_FAILED).sum())} failed of {len(st)} seeds"
+        )
         for m, values in observables.items():
             cols[f"seeds_{m}"].append(_seed_text(values[flat], seeds, st))
         shown = observables.get(SHOWN)
@@ -137,8 +159,9 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
         mean = float(np.mean(shown[flat][ok])) if shown is not None and ok.any() else math.nan
         cols["shown"].append(mean)
         cols["shown_log"].append(math.log10(mean) if mean > 0 else math.nan)
-        order = [k for k in range(n_seeds) if st[k] == STATUS_OK] + \
-            [k for k in range(n_seeds) if st[k] == STATUS_FAILED]
+        order = [k for k in range(n_seeds) if st[k] == STATUS_OK] + [
+            k for k in range(n_seeds) if st[k] == STATUS_FAILED
+        ]
         chosen: int | None = None
         image = ""
         t: list[float] = []
@@ -158,8 +181,11 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
         state = "ok" if st[k] == STATUS_OK else "failed"
         cols["run_id"].append(str(run_ids[flat][k]))
         cols["run_seed"].append(int(seeds[k]))
-        cols["run_title"].append(f"sigma2_S(t): seed {int(seeds[k])} ({state})"
-                                 if chosen is not None else "run not embedded")
+        cols["run_title"].append(
+            f"sigma2_S(t): seed {int(seeds[k])} ({state})"
+            if chosen is not None
+            else "run not embedded"
+        )
         cols["snapshot"].append(image)
         cols["series_t"].append(t)
         cols["series_y"].append(y)
@@ -170,12 +196,17 @@ def _figure(x: Axis, y: Axis | None, title: str, tools: str) -> Any:
     from bokeh.models import FixedTicker
     from bokeh.plotting import figure
 
-    fig = figure(title=title, width=520 if y is None else 440, height=380, tools=tools,
-                 name="phase_diagram",
-                 x_axis_type="log" if x.log else "linear",
-                 y_axis_type="log" if y is None or y.log else "linear",
-                 x_axis_label=x.name, y_axis_label=f"{SHOWN} (seed mean)" if y is None
-                 else y.name)
+    fig = figure(
+        title=title,
+        width=520 if y is None else 440,
+        height=380,
+        tools=tools,
+        name="phase_diagram",
+        x_axis_type="log" if x.log else "linear",
+        y_axis_type="log" if y is None or y.log else "linear",
+        x_axis_label=x.name,
+        y_axis_label=f"{SHOWN} (seed mean)" if y is None else y.name,
+    )
     for ax, axis in ((fig.xaxis, x), (fig.yaxis, y)):
         if axis is not None and axis.ticks:
             ax.ticker = FixedTicker(ticks=list(axis.ticks))
@@ -214,9 +245,11 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
         return None, 0, ["no run has finished yet"]
     embedded = sum(1 for s, t in zip(cols["snapshot"], cols["series_t"], strict=True) if s or t)
     if embedded < len(cols["where"]):
-        notes.append(f"{embedded} of {len(cols['where'])} points show a run when clicked "
-                     f"(at most {MAX_POINTS_WITH_RUNS}; a run that failed at once may leave "
-                     "nothing to show)")
+        notes.append(
+            f"{embedded} of {len(cols['where'])} points show a run when clicked "
+            f"(at most {MAX_POINTS_WITH_RUNS}; a run that failed at once may leave "
+            "nothing to show)"
+        )
     x_axis = Axis.of(phase, dims[0])
     y_axis = Axis.of(phase, dims[1]) if len(dims) > 1 else None
     cols["x"] = _position(x_axis, cols[dims[0]], phase)
@@ -235,43 +268,75 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
     if y_axis is None:
         fig = _figure(x_axis, None, f"{SHOWN} at t_final over {dims[0]} (click a point)", tools)
         order = np.argsort(cols["x"])
-        fig.line([cols["x"][i] for i in order], [cols["y"][i] for i in order], line_width=2,
-                 color="#1f77b4")
-        renderers = [fig.scatter("x", "y", source=source, size=11, color="#1f77b4",
-                                 name="phase_points")]
+        fig.line(
+            [cols["x"][i] for i in order],
+            [cols["y"][i] for i in order],
+            line_width=2,
+            color="#1f77b4",
+        )
+        renderers = [
+            fig.scatter("x", "y", source=source, size=11, color="#1f77b4", name="phase_points")
+        ]
         plots.append(fig)
     else:
         finite = [v for v in cols["shown_log"] if math.isfinite(v)]
         low, high = (min(finite), max(finite)) if finite else (0.0, 1.0)
-        mapper = LinearColorMapper(palette="Viridis256", low=low,
-                                   high=high if high > low else low + 1, nan_color="#d62728")
+        mapper = LinearColorMapper(
+            palette="Viridis256", low=low, high=high if high > low else low + 1, nan_color="#d62728"
+        )
         facets = list(dict.fromkeys(cols["facet"]))
         if len(facets) > MAX_FACETS:
-            notes.append(f"{len(facets)} combinations of {', '.join(dims[2:])}: the first "
-                         f"{MAX_FACETS} are shown")
+            notes.append(
+                f"{len(facets)} combinations of {', '.join(dims[2:])}: the first "
+                f"{MAX_FACETS} are shown"
+            )
             facets = facets[:MAX_FACETS]
         renderers = []
         for facet in facets:
-            title = f"log10 {SHOWN} (seed mean)" + (f" at {facet}" if facet else "") + \
-                "; red: no successful run"
+            title = (
+                f"log10 {SHOWN} (seed mean)"
+                + (f" at {facet}" if facet else "")
+                + "; red: no successful run"
+            )
             fig = _figure(x_axis, y_axis, title, tools)
             view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
-            renderers.append(fig.scatter(
-                "x", "y", source=source, view=view, size=16, line_color="black",
-                fill_color={"field": "shown_log", "transform": mapper}, name="phase_points"))
+            renderers.append(
+                fig.scatter(
+                    "x",
+                    "y",
+                    source=source,
+                    view=view,
+                    size=16,
+                    line_color="black",
+                    fill_color={"field": "shown_log", "transform": mapper},
+                    name="phase_points",
+                )
+            )
             fig.add_layout(ColorBar(color_mapper=mapper, width=10), "right")
             plots.append(fig)
     series = ColumnDataSource({"t": [], "y": []}, name="series")
-    run_plot = figure(title="sigma2_S(t) of the clicked point's run", width=360, height=260,
-                      y_axis_type="log", x_axis_label="t / tau", y_axis_label="sigma2_S",
-                      tools="pan,wheel_zoom,reset,save", name="run_plot")
+    run_plot = figure(
+        title="sigma2_S(t) of the clicked point's run",
+        width=360,
+        height=260,
+        y_axis_type="log",
+        x_axis_label="t / tau",
+        y_axis_label="sigma2_S",
+        tools="pan,wheel_zoom,reset,save",
+        name="run_plot",
+    )
     run_plot.line("t", "y", source=series, line_width=2, color="#d62728")
     panel = Div(text=HINT, width=360, name="run_panel")
     for fig, renderer in zip(plots, renderers, strict=True):
-        fig.add_tools(HoverTool(renderers=[renderer], tooltips=tooltips),
-                      TapTool(renderers=[renderer]))
-    source.selected.js_on_change("indices", CustomJS(
-        args={"source": source, "series": series, "panel": panel, "run_plot": run_plot},
-        code=ON_TAP))
+        fig.add_tools(
+            HoverTool(renderers=[renderer], tooltips=tooltips), TapTool(renderers=[renderer])
+        )
+    source.selected.js_on_change(
+        "indices",
+        CustomJS(
+            args={"source": source, "series": series, "panel": panel, "run_plot": run_plot},
+            code=ON_TAP,
+        ),
+    )
     diagram = plots[0] if len(plots) == 1 else gridplot(plots, ncols=3)
     return row(diagram, column(panel, run_plot)), embedded, notes

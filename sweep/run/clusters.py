@@ -34,17 +34,21 @@ WORKER_LOSSES = 3
 
 def _security(execution: ExecutionSpec) -> Any:
     if not execution.tls:
-        log.warning("the campaign's dask scheduler runs without TLS (execution.security: %s)",
-                    execution.insecure_reason)
+        log.warning(
+            "the campaign's dask scheduler runs without TLS (execution.security: %s)",
+            execution.insecure_reason,
+        )
         return None
     from distributed import Security
 
     try:
         return Security.temporary()
     except ImportError as e:
-        raise ClusterError(f"TLS for the dask scheduler needs the 'cryptography' package "
-                           f"({e}); install it, or set execution.security: {{tls: false, "
-                           "reason: ...}") from None
+        raise ClusterError(
+            f"TLS for the dask scheduler needs the 'cryptography' package "
+            f"({e}); install it, or set execution.security: {{tls: false, "
+            "reason: ...}"
+        ) from None
 
 
 def private_dir(path: Path) -> Path:
@@ -54,16 +58,20 @@ def private_dir(path: Path) -> Path:
     return path
 
 
-def jobqueue_options(spec: ClusterSpec, execution: ExecutionSpec,
-                     campaign_dir: Path | None) -> tuple[dict[str, Any], Path | None]:
+def jobqueue_options(
+    spec: ClusterSpec, execution: ExecutionSpec, campaign_dir: Path | None
+) -> tuple[dict[str, Any], Path | None]:
     """The keyword arguments of the dask-jobqueue class (security, the dashboard on
     127.0.0.1, the job logs in the campaign's folder unless the YAML says otherwise) and the
     job log folder."""
     options = dict(spec.options)
     if options.get("log_directory") is None and campaign_dir is not None:
         options["log_directory"] = str(campaign_dir / JOB_LOGS)
-    logs = Path(os.path.expandvars(str(options["log_directory"]))).expanduser() \
-        if options.get("log_directory") else None
+    logs = (
+        Path(os.path.expandvars(str(options["log_directory"]))).expanduser()
+        if options.get("log_directory")
+        else None
+    )
     if logs is not None:
         with contextlib.suppress(OSError):
             logs.mkdir(parents=True, exist_ok=True)
@@ -80,8 +88,10 @@ def jobqueue_options(spec: ClusterSpec, execution: ExecutionSpec,
         options["security"] = security
         if options.get("shared_temp_directory") is None:
             if campaign_dir is None:
-                raise ClusterError("TLS credentials for the batch jobs need the campaign's "
-                                   "folder (or execution.cluster.shared_temp_directory)")
+                raise ClusterError(
+                    "TLS credentials for the batch jobs need the campaign's "
+                    "folder (or execution.cluster.shared_temp_directory)"
+                )
             options["shared_temp_directory"] = str(private_dir(campaign_dir / TLS_DIR))
     return options, logs
 
@@ -93,13 +103,17 @@ def make_jobqueue(spec: ClusterSpec, options: dict[str, Any]) -> Any:
     try:
         return cls(**options)
     except (ValueError, TypeError, OSError, RuntimeError) as e:
-        raise ClusterError(f"cannot set up the {cls.__name__} of execution.cluster: "
-                           f"{e}") from None
+        raise ClusterError(f"cannot set up the {cls.__name__} of execution.cluster: {e}") from None
 
 
 @contextlib.contextmanager
-def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: bool = False,
-                 campaign_dir: Path | None = None) -> Iterator[ClusterLink]:
+def open_cluster(
+    execution: ExecutionSpec,
+    *,
+    timeout: float = 30.0,
+    dashboard: bool = False,
+    campaign_dir: Path | None = None,
+) -> Iterator[ClusterLink]:
     """The campaign's cluster (closed on exit): an external scheduler, a dask-jobqueue
     cluster (jobs submitted here; logs and TLS credentials in ``campaign_dir``) or a local
     cluster (its dashboard on 127.0.0.1, a free port, if ``dashboard``)."""
@@ -110,8 +124,9 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
         try:
             client = Client(execution.scheduler, timeout=timeout)
         except (OSError, ValueError, TypeError) as e:
-            raise ClusterError(f"cannot reach the dask scheduler at {execution.scheduler}: "
-                               f"{e}") from None
+            raise ClusterError(
+                f"cannot reach the dask scheduler at {execution.scheduler}: {e}"
+            ) from None
         try:
             yield ClusterLink(client, f"the dask scheduler at {execution.scheduler}")
         finally:
@@ -134,8 +149,9 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
             else:
                 cluster.scale(jobs=spec.jobs)
             with Client(cluster) as client:
-                yield ClusterLink(client, f"the dask-jobqueue {cls_name}",
-                                JobWatch(cluster, spec, logs))
+                yield ClusterLink(
+                    client, f"the dask-jobqueue {cls_name}", JobWatch(cluster, spec, logs)
+                )
         return
     n = local_worker_count(execution)
     log.info("starting a local dask cluster: %d worker process(es)", n)
@@ -146,14 +162,18 @@ def open_cluster(execution: ExecutionSpec, *, timeout: float = 30.0, dashboard: 
     if security is not None:
         kwargs.update(security=security, protocol="tls://")
     with _workers_ignore_sigint():
-        cluster = LocalCluster(n_workers=n, threads_per_worker=execution.threads_per_worker,
-                               processes=True, host="127.0.0.1",
-                               # the scheduler's HTTP server (health, metrics; the dashboard
-                               # if asked for) on the loopback interface, a free port
-                               dashboard_address="127.0.0.1:0",
-                               scheduler_kwargs={"dashboard": dashboard,
-                                                 "allowed_failures": WORKER_LOSSES},
-                               silence_logs=logging.ERROR, **kwargs)
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=execution.threads_per_worker,
+            processes=True,
+            host="127.0.0.1",
+            # the scheduler's HTTP server (health, metrics; the dashboard
+            # if asked for) on the loopback interface, a free port
+            dashboard_address="127.0.0.1:0",
+            scheduler_kwargs={"dashboard": dashboard, "allowed_failures": WORKER_LOSSES},
+            silence_logs=logging.ERROR,
+            **kwargs,
+        )
     with cluster, Client(cluster) as client:
         yield ClusterLink(client, "the local dask cluster")
 
@@ -173,4 +193,3 @@ def _workers_ignore_sigint() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-

@@ -59,21 +59,31 @@ def detached_args(argv: list[str]) -> list[str]:
     return [a for a in argv if a != "--detach"]
 
 
-def start_detached(args: list[str], log: Path, lock_path: Path, *,
-                   wait: float = START_WAIT,
-                   clock: Callable[[], float] = time.monotonic) -> Started:
+def start_detached(
+    args: list[str],
+    log: Path,
+    lock_path: Path,
+    *,
+    wait: float = START_WAIT,
+    clock: Callable[[], float] = time.monotonic,
+) -> Started:
     """``python -m sweep ARGS`` in a new session, its output appended to ``log``; returns
     once it holds the lock at ``lock_path``, has ended, or after ``wait`` seconds."""
     log.parent.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, PYTHONUNBUFFERED="1", **{DRIVER_LOG_ENV: str(log)})
     env.setdefault("COLUMNS", "120")
     with open(log, "ab") as out:
-        out.write(f"# {now_iso()} on {socket.gethostname()}: nematic {' '.join(args)}\n"
-                  .encode())
+        out.write(f"# {now_iso()} on {socket.gethostname()}: nematic {' '.join(args)}\n".encode())
         out.flush()
-        proc = subprocess.Popen([sys.executable, "-m", "sweep", *args], stdin=subprocess.DEVNULL,
-                                stdout=out, stderr=subprocess.STDOUT, env=env,
-                                start_new_session=True, preexec_fn=_detached_child)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "sweep", *args],
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
+            preexec_fn=_detached_child,
+        )
     started = Started(pid=proc.pid, log=log)
     deadline = clock() + wait
     while clock() < deadline:
@@ -113,33 +123,47 @@ class Stopped:
 def _signal(holder: dict[str, Any]) -> str:
     pid, host, job = holder.get("pid"), holder.get("host"), holder.get("slurm_job")
     if not isinstance(pid, int):
-        raise ClusterError(f"the campaign's lock is held, but its holder is not recorded "
-                           f"({holder!r}); stop the driver where it runs (Ctrl-C)")
+        raise ClusterError(
+            f"the campaign's lock is held, but its holder is not recorded "
+            f"({holder!r}); stop the driver where it runs (Ctrl-C)"
+        )
     if host == socket.gethostname():
         try:
             os.kill(pid, signal.SIGTERM)
         except ProcessLookupError:
-            raise ClusterError(f"the driver's process {pid} is not on this host although "
-                               "the host name is this one (another container?); stop it "
-                               "where it runs (Ctrl-C)") from None
+            raise ClusterError(
+                f"the driver's process {pid} is not on this host although "
+                "the host name is this one (another container?); stop it "
+                "where it runs (Ctrl-C)"
+            ) from None
         except PermissionError:
-            raise ClusterError(f"not allowed to signal the driver (pid {pid}, another "
-                               "user's)") from None
+            raise ClusterError(
+                f"not allowed to signal the driver (pid {pid}, another user's)"
+            ) from None
         return "SIGTERM"
     if job and shutil.which("scancel"):
-        done = subprocess.run(["scancel", "--batch", "--signal=TERM", str(job)],
-                              capture_output=True, text=True, timeout=60)
+        done = subprocess.run(
+            ["scancel", "--batch", "--signal=TERM", str(job)],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         if done.returncode != 0:
-            raise ClusterError(f"scancel --batch --signal=TERM {job} failed: "
-                               f"{' '.join((done.stderr or done.stdout).split())}")
+            raise ClusterError(
+                f"scancel --batch --signal=TERM {job} failed: "
+                f"{' '.join((done.stderr or done.stdout).split())}"
+            )
         return f"scancel --batch --signal=TERM {job}"
-    raise ClusterError(f"the driver runs on {host} (pid {pid}), not on this host "
-                       f"({socket.gethostname()}): run 'nematic stop' there, or "
-                       f"'kill -TERM {pid}' on {host}")
+    raise ClusterError(
+        f"the driver runs on {host} (pid {pid}), not on this host "
+        f"({socket.gethostname()}): run 'nematic stop' there, or "
+        f"'kill -TERM {pid}' on {host}"
+    )
 
 
-def stop_driver(lock_path: Path, *, wait: float = STOP_WAIT,
-                clock: Callable[[], float] = time.monotonic) -> Stopped:
+def stop_driver(
+    lock_path: Path, *, wait: float = STOP_WAIT, clock: Callable[[], float] = time.monotonic
+) -> Stopped:
     """Signal the driver holding ``lock_path`` and wait (at most ``wait`` seconds) until it
     has released the lock. Raises :class:`~sweep.errors.ClusterError` when it cannot be
     signalled from here."""
@@ -150,8 +174,11 @@ def stop_driver(lock_path: Path, *, wait: float = STOP_WAIT,
     how = _signal(holder)
     while clock() - t0 < wait:
         now = read_lock_holder(lock_path)
-        if now is None or now.get("pid") != holder.get("pid") \
-                or now.get("host") != holder.get("host"):
+        if (
+            now is None
+            or now.get("pid") != holder.get("pid")
+            or now.get("host") != holder.get("host")
+        ):
             return Stopped(holder=holder, how=how, took=clock() - t0)
         time.sleep(POLL)
     return Stopped(holder=holder, how=how, took=None)

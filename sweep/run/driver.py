@@ -55,12 +55,18 @@ MANIFEST_EVERY = 300.0
 
 # --------------------------------------------------------------------------- clusters
 @contextlib.contextmanager
-def dask_client(execution: ExecutionSpec, *, timeout: float = 30.0,
-                dashboard: bool = False, campaign_dir: Path | None = None) -> Iterator[Client]:
+def dask_client(
+    execution: ExecutionSpec,
+    *,
+    timeout: float = 30.0,
+    dashboard: bool = False,
+    campaign_dir: Path | None = None,
+) -> Iterator[Client]:
     """A dask ``Client`` for the campaign's execution section (closed on exit); see
     :func:`sweep.run.clusters.open_cluster`."""
-    with open_cluster(execution, timeout=timeout, dashboard=dashboard,
-                      campaign_dir=campaign_dir) as link:
+    with open_cluster(
+        execution, timeout=timeout, dashboard=dashboard, campaign_dir=campaign_dir
+    ) as link:
         yield link.client
 
 
@@ -146,10 +152,16 @@ def _worker_lost(exc: BaseException) -> bool:
     return isinstance(exc, KilledWorker)
 
 
-def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | ClusterLink,
-                 plan: Plan, events: RunEvents | None = None, *,
-                 clock: Callable[[], float] = time.monotonic,
-                 limit: FailureLimit | None = None) -> RunSummary:
+def run_campaign(
+    expansion: Expansion,
+    store: CampaignStore,
+    client: Client | ClusterLink,
+    plan: Plan,
+    events: RunEvents | None = None,
+    *,
+    clock: Callable[[], float] = time.monotonic,
+    limit: FailureLimit | None = None,
+) -> RunSummary:
     """Run ``plan.todo`` on the cluster; return when all are done or on Ctrl-C
     (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set).
     A run redone after a failure gets its earlier failures (``plan.history``) in its record.
@@ -166,8 +178,11 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Cl
     link = client if isinstance(client, ClusterLink) else ClusterLink(client, "the dask cluster")
     client = link.client
     t0 = clock()
-    summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
-                         failed_before=len(plan.failed))
+    summary = RunSummary(
+        total=len(expansion),
+        skipped=len(plan.done) + len(plan.failed),
+        failed_before=len(plan.failed),
+    )
     watch = Supervisor(link, campaign.execution, clock=clock)
     watch.wait_for_first()
     if events and hasattr(events, "warming"):
@@ -192,8 +207,7 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Cl
         while queue and ac.count() < watch.window:
             i = queue.pop()
             run = expansion.run(i)
-            task = RunTask.from_spec(run, store, campaign.name, campaign.store,
-                                     plan.history.get(i))
+            task = RunTask.from_spec(run, store, campaign.name, campaign.store, plan.history.get(i))
             # a run that goes again (its result was lost) gets a new key: the old one may
             # still be being released
             again = attempts[i] = attempts.get(i, -1) + 1
@@ -220,31 +234,46 @@ def run_campaign(expansion: Expansion, store: CampaignStore, client: Client | Cl
                 if client.status != "running":
                     summary.lost.append(run)
                 elif attempts.get(i, 0) < WORKER_LOSSES:
-                    log.warning("the result of run %s was lost with its worker (%s); it "
-                                "runs again", run.run_id, type(e).__name__)
+                    log.warning(
+                        "the result of run %s was lost with its worker (%s); it runs again",
+                        run.run_id,
+                        type(e).__name__,
+                    )
                     queue.append(i)
                 else:
-                    log.warning("the result of run %s was lost with its worker %d times; "
-                                "it stays pending", run.run_id, attempts.get(i, 0) + 1)
+                    log.warning(
+                        "the result of run %s was lost with its worker %d times; it stays pending",
+                        run.run_id,
+                        attempts.get(i, 0) + 1,
+                    )
                     summary.worker_lost.append(run)
                 return True
         except CancelledError as e:  # the cluster went away under the run: not its fault
             (log.debug if summary.lost else log.warning)(
-                "run %s was cancelled by dask (%s); rerun to redo it", run.run_id,
-                " ".join(str(e).split()))
+                "run %s was cancelled by dask (%s); rerun to redo it",
+                run.run_id,
+                " ".join(str(e).split()),
+            )
             summary.lost.append(run)
             if client.status != "running":  # the futures are gone with the connection
                 if queue or tasks:
-                    log.warning("the connection to %s is lost (client %s): the %d run(s) "
-                                "left stay pending", link.where, client.status,
-                                len(queue) + len(tasks) + 1)
+                    log.warning(
+                        "the connection to %s is lost (client %s): the %d run(s) left stay pending",
+                        link.where,
+                        client.status,
+                        len(queue) + len(tasks) + 1,
+                    )
                 queue.clear()  # nothing more can be submitted
             return True
         except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
             if _worker_lost(e):  # not the run's failure: it stays pending (no record)
-                log.warning("run %s lost its worker %d times (batch jobs cancelled, "
-                            "preempted or past their walltime, or the run kills its worker: "
-                            "memory?); it stays pending", run.run_id, WORKER_LOSSES + 1)
+                log.warning(
+                    "run %s lost its worker %d times (batch jobs cancelled, "
+                    "preempted or past their walltime, or the run kills its worker: "
+                    "memory?); it stays pending",
+                    run.run_id,
+                    WORKER_LOSSES + 1,
+                )
                 summary.worker_lost.append(run)
                 fut.release()
                 return True
@@ -319,11 +348,16 @@ class DriveEvents(RunEvents, Protocol):
 REMOTE_TMP_AGE = 600.0
 
 
-def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
-          check_files: bool = False,
-          events: DriveEvents | None = None,
-          dashboard: bool = False,
-          limit: FailureLimit | None = None) -> tuple[Plan, RunSummary | None]:
+def drive(
+    expansion: Expansion,
+    store: CampaignStore,
+    *,
+    retry_failed: bool = False,
+    check_files: bool = False,
+    events: DriveEvents | None = None,
+    dashboard: bool = False,
+    limit: FailureLimit | None = None,
+) -> tuple[Plan, RunSummary | None]:
     """What ``nematic run`` does while holding the campaign's lock: clean up, record the
     campaign text, plan from disk, run what remains on the campaign's dask cluster and
     refresh the manifest. Returns the plan and the summary (``None`` if nothing was to do;
@@ -333,21 +367,25 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
     store.save_campaign_text(campaign.text, campaign.overrides)
-    plan = plan_runs(expansion, store, retry_failed=retry_failed,
-                      check_files=check_files)
+    plan = plan_runs(expansion, store, retry_failed=retry_failed, check_files=check_files)
     if events:
         events.planned(plan, expansion)
     summary = None
     if plan.todo:
         try:
-            with open_cluster(campaign.execution, dashboard=dashboard,
-                              campaign_dir=store.root) as link:
+            with open_cluster(
+                campaign.execution, dashboard=dashboard, campaign_dir=store.root
+            ) as link:
                 if dashboard and events and hasattr(events, "dashboard"):
                     events.dashboard(dashboard_link(link.client))
                 summary = run_campaign(expansion, store, link, plan, events, limit=limit)
         except KeyboardInterrupt:  # while the cluster was starting or closing
-            summary = RunSummary(total=len(expansion), skipped=len(plan.done) + len(plan.failed),
-                                 failed_before=len(plan.failed), interrupted=True)
+            summary = RunSummary(
+                total=len(expansion),
+                skipped=len(plan.done) + len(plan.failed),
+                failed_before=len(plan.failed),
+                interrupted=True,
+            )
         finally:
             if local:  # the local workers are gone: whatever they left half-written goes
                 store.clean_temporaries()
@@ -357,10 +395,12 @@ def drive(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = Fa
 
 def describe_failure(run: RunSpec, record: Mapping[str, Any]) -> str:
     """One line: the run, its swept values and seed, why and when it failed."""
-    coords = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
-                       for k, v in run.coords.items())
+    coords = ", ".join(
+        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in run.coords.items()
+    )
     when = record.get("t_failed")
     at = f" at t = {when:.4g}" if isinstance(when, (int, float)) and math.isfinite(when) else ""
     detail = str(record.get("detail") or "").strip().splitlines()
-    return (f"run {run.run_id} ({coords}) failed: {record.get('reason') or 'unknown'}{at}"
-            + (f": {detail[-1]}" if detail else ""))
+    return f"run {run.run_id} ({coords}) failed: {record.get('reason') or 'unknown'}{at}" + (
+        f": {detail[-1]}" if detail else ""
+    )

@@ -11,16 +11,25 @@ from dataclasses import dataclass, field
 from typing import Any
 
 #: What a record's ``previous_failures`` entry keeps of the failure it replaces.
-PREVIOUS_FAILURE_KEYS = ("reason", "detail", "t_failed", "finished", "wall_time", "host", "pid",
-                         "code_version", "git_commit", "traceback")
+PREVIOUS_FAILURE_KEYS = (
+    "reason",
+    "detail",
+    "t_failed",
+    "finished",
+    "wall_time",
+    "host",
+    "pid",
+    "code_version",
+    "git_commit",
+    "traceback",
+)
 
 
 def previous_failures(record: Mapping[str, Any]) -> list[dict[str, Any]]:
     """The failures a new attempt of a failed run keeps: the earlier ones the record carries,
     oldest first, then the record's own failure."""
     earlier = record.get("previous_failures")
-    out = [dict(x) for x in earlier if isinstance(x, Mapping)] \
-        if isinstance(earlier, list) else []
+    out = [dict(x) for x in earlier if isinstance(x, Mapping)] if isinstance(earlier, list) else []
     out.append({k: record.get(k) for k in PREVIOUS_FAILURE_KEYS})
     return out
 
@@ -43,8 +52,10 @@ class FailureLimit:
         """A count (a whole number >= 0) or a fraction (a number between 0 and 1, exclusive);
         raises ``ValueError`` with what is allowed."""
         value = text.strip()
-        allowed = ("a count of runs (a whole number, 0 stops at the first failure) or a "
-                   "fraction of the runs to do (a number between 0 and 1, e.g. 0.1)")
+        allowed = (
+            "a count of runs (a whole number, 0 stops at the first failure) or a "
+            "fraction of the runs to do (a number between 0 and 1, e.g. 0.1)"
+        )
         if value.isdigit():
             return cls(count=int(value))
         try:
@@ -75,11 +86,14 @@ class FailureLimit:
     def describe(self) -> str:
         if self.count is not None:
             return f"--max-failures {self.count}"
-        return (f"--max-failures {self.fraction:g}: {self.allowed:g} of the {self.planned} "
-                "run(s) to do")
+        return (
+            f"--max-failures {self.fraction:g}: {self.allowed:g} of the {self.planned} run(s) to do"
+        )
 
     def message(self) -> str:
         """Why the campaign stopped (one sentence)."""
         reasons = ", ".join(f"{k}: {v}" for k, v in self.reasons.most_common())
-        return (f"too many runs failed: {self.failed} failed this session, more than "
-                f"{self.describe()} allows ({reasons})")
+        return (
+            f"too many runs failed: {self.failed} failed this session, more than "
+            f"{self.describe()} allows ({reasons})"
+        )

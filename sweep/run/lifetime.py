@@ -88,5 +88,7 @@ def worker_lifetime(kind: str, options: Mapping[str, Any]) -> tuple[list[str], s
         return extra, None
     lifetime, stagger = lifetime_rule(walltime)
     args = [*extra, "--lifetime", f"{lifetime:.0f}s", "--lifetime-stagger", f"{stagger:.0f}s"]
-    return args, (f"batch workers retire after {lifetime:.0f} s +- {stagger:.0f} s of their "
-                  f"walltime {given} ({walltime:.0f} s); their jobs are then replaced")
+    return args, (
+        f"batch workers retire after {lifetime:.0f} s +- {stagger:.0f} s of their "
+        f"walltime {given} ({walltime:.0f} s); their jobs are then replaced"
+    )

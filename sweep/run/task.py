@@ -60,22 +60,36 @@ class RunTask:
     previous_failures: tuple[dict[str, Any], ...] = ()
 
     @classmethod
-    def from_spec(cls, run: RunSpec, store: CampaignStore, campaign: str,
-                  store_spec: StoreSpec,
-                  previous_failures: list[dict[str, Any]] | None = None) -> RunTask:
-        return cls(run_id=run.run_id, seed=run.seed,
-                   parameters=run.point.parameters.to_dict(),
-                   numerics=run.point.numerics.to_dict(),
-                   runs_dir=str(store.runs_dir.resolve()), campaign=campaign,
-                   coords=dict(run.point.coords), snapshot_fields=store_spec.snapshot_fields,
-                   snapshot_dtype=store_spec.snapshot_dtype,
-                   previous_failures=tuple(previous_failures or ()))
+    def from_spec(
+        cls,
+        run: RunSpec,
+        store: CampaignStore,
+        campaign: str,
+        store_spec: StoreSpec,
+        previous_failures: list[dict[str, Any]] | None = None,
+    ) -> RunTask:
+        return cls(
+            run_id=run.run_id,
+            seed=run.seed,
+            parameters=run.point.parameters.to_dict(),
+            numerics=run.point.numerics.to_dict(),
+            runs_dir=str(store.runs_dir.resolve()),
+            campaign=campaign,
+            coords=dict(run.point.coords),
+            snapshot_fields=store_spec.snapshot_fields,
+            snapshot_dtype=store_spec.snapshot_dtype,
+            previous_failures=tuple(previous_failures or ()),
+        )
 
     def identity(self) -> dict[str, Any]:
         """What every record of this run carries besides the result: its settings, swept
         values, campaign and earlier failures."""
-        out: dict[str, Any] = {"parameters": self.parameters, "numerics": self.numerics,
-                               "coords": self.coords, "campaign": self.campaign}
+        out: dict[str, Any] = {
+            "parameters": self.parameters,
+            "numerics": self.numerics,
+            "coords": self.coords,
+            "campaign": self.campaign,
+        }
         if self.previous_failures:
             out["previous_failures"] = list(self.previous_failures)
         return out
@@ -86,8 +100,11 @@ def prepare_dataset(ds: xr.Dataset, task: RunTask) -> tuple[xr.Dataset, dict[str
     precision; return the Dataset and its netCDF encoding (snapshots zlib-compressed)."""
     ds = ds.copy(deep=False)
     if task.snapshot_fields is not None:
-        drop = [n for n, v in ds.data_vars.items()
-                if "snapshot_time" in v.dims and n not in task.snapshot_fields]
+        drop = [
+            n
+            for n, v in ds.data_vars.items()
+            if "snapshot_time" in v.dims and n not in task.snapshot_fields
+        ]
         ds = ds.drop_vars(drop)
     encoding: dict[str, Any] = {}
     for name, var in ds.data_vars.items():
@@ -95,17 +112,28 @@ def prepare_dataset(ds: xr.Dataset, task: RunTask) -> tuple[xr.Dataset, dict[str
             encoding[str(name)] = {"zlib": True, "complevel": 4}
             if task.snapshot_dtype == "float32" and var.dtype.kind == "f":
                 ds[name] = var.astype("float32")
-    ds.attrs.update(run_id=task.run_id, campaign=task.campaign,
-                    identity_schema=SCHEMA_VERSION)
+    ds.attrs.update(run_id=task.run_id, campaign=task.campaign, identity_schema=SCHEMA_VERSION)
     return ds, encoding
 
 
 def failure_record(task: RunTask, reason: str, detail: str, tb: str, wall: float) -> Record:
     """The record of a run that failed (or was lost) before it produced a result."""
-    return {"run_id": task.run_id, "status": "failed", "reason": reason, "detail": detail,
-            "t_failed": None, "traceback": tb, "seed": task.seed, "wall_time": wall,
-            "nc_bytes": None, "scalars": {}, "code_version": "", "git_commit": "",
-            "finished": now_iso(), "host": socket.gethostname()}
+    return {
+        "run_id": task.run_id,
+        "status": "failed",
+        "reason": reason,
+        "detail": detail,
+        "t_failed": None,
+        "traceback": tb,
+        "seed": task.seed,
+        "wall_time": wall,
+        "nc_bytes": None,
+        "scalars": {},
+        "code_version": "",
+        "git_commit": "",
+        "finished": now_iso(),
+        "host": socket.gethostname(),
+    }
 
 
 #: ``status`` of the record :func:`execute_run` returns (and does not write) when the
@@ -126,8 +154,13 @@ def spool_dir(runs_dir: str | Path) -> Path:
     return base / f"{runs.parent.name}-{tag}"
 
 
-def _unsaved(task: RunTask, error: StorageError, ds: xr.Dataset | None,
-             encoding: Mapping[str, Any], wall: float) -> Record:
+def _unsaved(
+    task: RunTask,
+    error: StorageError,
+    ds: xr.Dataset | None,
+    encoding: Mapping[str, Any],
+    wall: float,
+) -> Record:
     """The record of a run whose result could not be written: kept in the spool if possible
     (and the message says where), no record written (the run stays pending)."""
     detail = str(error)
@@ -138,8 +171,9 @@ def _unsaved(task: RunTask, error: StorageError, ds: xr.Dataset | None,
             path.parent.mkdir(parents=True, exist_ok=True)
             atomic_to_netcdf(ds, path, encoding)
             saved_to = str(path)
-            detail += f"; the result is kept in {path} (moved into the results folder by " \
-                      "the next run)"
+            detail += (
+                f"; the result is kept in {path} (moved into the results folder by the next run)"
+            )
         except (OSError, StoreError) as e:
             detail += f"; it could not be kept elsewhere either ({e})"
             with contextlib.suppress(OSError):
@@ -175,7 +209,8 @@ def restore_heap_reuse() -> bool:
     except (OSError, AttributeError):
         return False
     return bool(mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD)) and bool(
-        mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
+        mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD)
+    )
 
 
 def execute_run(task: RunTask) -> Record:
@@ -192,11 +227,17 @@ def execute_run(task: RunTask) -> Record:
     store = CampaignStore(Path(task.runs_dir).parent.parent, Path(task.runs_dir).parent.name)
     t0 = time.perf_counter()
     try:
-        ds = simulate(Parameters.from_dict(task.parameters), Numerics.from_dict(task.numerics),
-                      task.seed)
+        ds = simulate(
+            Parameters.from_dict(task.parameters), Numerics.from_dict(task.numerics), task.seed
+        )
     except Exception as e:  # noqa: BLE001 - any crash is recorded, the campaign goes on
-        record = failure_record(task, "exception", f"{type(e).__name__}: {e}",
-                                traceback.format_exc(), time.perf_counter() - t0)
+        record = failure_record(
+            task,
+            "exception",
+            f"{type(e).__name__}: {e}",
+            traceback.format_exc(),
+            time.perf_counter() - t0,
+        )
     else:
         encoding: dict[str, Any] = {}
         try:
@@ -210,8 +251,13 @@ def execute_run(task: RunTask) -> Record:
         except StorageError as e:
             return _unsaved(task, e, ds, encoding, time.perf_counter() - t0)
         except Exception as e:  # noqa: BLE001 - a bug, not the storage: recorded as failed
-            record = failure_record(task, "write_error", f"{type(e).__name__}: {e}",
-                                    traceback.format_exc(), time.perf_counter() - t0)
+            record = failure_record(
+                task,
+                "write_error",
+                f"{type(e).__name__}: {e}",
+                traceback.format_exc(),
+                time.perf_counter() - t0,
+            )
     record.update(task.identity(), pid=os.getpid())
     try:
         store.write_record(record)
@@ -254,9 +300,17 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
         hosts.setdefault(str(info.get("host", addr)), addr)
     kinds = warm_kinds(expansion)
     token = uuid.uuid4().hex[:12]  # a shared scheduler may warm several campaigns at once
-    futures = [client.submit(warm_worker, kinds, workers=[addr], pure=False,
-                             allow_other_workers=False, key=f"nematic-warmup-{token}-{i}")
-               for i, addr in enumerate(hosts.values())]
+    futures = [
+        client.submit(
+            warm_worker,
+            kinds,
+            workers=[addr],
+            pure=False,
+            allow_other_workers=False,
+            key=f"nematic-warmup-{token}-{i}",
+        )
+        for i, addr in enumerate(hosts.values())
+    ]
     out = []
     for fut in futures:
         try:
@@ -264,5 +318,3 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
         except Exception as e:  # noqa: BLE001 - reported by the environment check
             log.warning("warm-up failed on a worker: %s: %s", type(e).__name__, e)
     return out
-
-

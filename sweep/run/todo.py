@@ -40,8 +40,13 @@ class Plan:
         return len(self.redone)
 
 
-def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool = False,
-              check_files: bool = False) -> Plan:
+def plan_runs(
+    expansion: Expansion,
+    store: CampaignStore,
+    *,
+    retry_failed: bool = False,
+    check_files: bool = False,
+) -> Plan:
     """Classify every run: done (skipped), failed (skipped unless ``retry_failed``: then
     its failure goes into :attr:`Plan.history`, kept by its next record), to do.
 
@@ -59,16 +64,18 @@ def plan_runs(expansion: Expansion, store: CampaignStore, *, retry_failed: bool 
             rec = store.adopt(rid)
             if rec is not None:
                 plan.adopted += 1
-        problem = None if rec is None else store.check_run_file(rid, rec,
-                                                                  check_files=check_files)
+        problem = None if rec is None else store.check_run_file(rid, rec, check_files=check_files)
         if rec is not None and problem is not None:
             log.warning("run %s: %s; it will be redone", rid, problem)
             store.discard(rid)
             records.pop(rid, None)
             plan.redone.append((rid, problem))
             rec = None
-        elif rec is not None and rec.get("nc_bytes") is not None and (
-                not rec.get("nc_sha256") or rec.get("nc_mtime_ns") != _mtime(store, rid)):
+        elif (
+            rec is not None
+            and rec.get("nc_bytes") is not None
+            and (not rec.get("nc_sha256") or rec.get("nc_mtime_ns") != _mtime(store, rid))
+        ):
             store.refresh_stamp(rid)  # intact, but copied or checksum-less: stat next time
         if rec is None:
             plan.todo.append(i)

@@ -59,8 +59,10 @@ WAIT_REPORT_EVERY = 60.0
 JOB_LOGS = "jobs"
 TLS_DIR = "tls"
 #: Lines of a job log that report an error (the last one is quoted when giving up).
-ERROR_LINE = re.compile(r"\w*(Error|Exception)\b|\b(error|ERROR|FATAL|Killed)\b|CANCELLED|"
-                        r"No such file|command not found|[Pp]ermission denied")
+ERROR_LINE = re.compile(
+    r"\w*(Error|Exception)\b|\b(error|ERROR|FATAL|Killed)\b|CANCELLED|"
+    r"No such file|command not found|[Pp]ermission denied"
+)
 
 
 def scheduler_workers(client: Client) -> dict[str, dict[str, Any]]:
@@ -95,18 +97,24 @@ def worker_environment() -> dict[str, Any]:
 def refusal(env: Any, mine: dict[str, Any]) -> str | None:
     """Why a worker that reported ``env`` (or raised it) cannot run this campaign, or ``None``."""
     if isinstance(env, BaseException):
-        return (f"it cannot run the model ({type(env).__name__}: {env}); install this "
-                "package in the workers' environment")
+        return (
+            f"it cannot run the model ({type(env).__name__}: {env}); install this "
+            "package in the workers' environment"
+        )
     if not isinstance(env, dict):
         return f"it answered the environment check with {env!r}"
     if env.get("code_version") != mine.get("code_version"):
-        return (f"its code version is {env.get('code_version')!r}, the driver's is "
-                f"{mine.get('code_version')!r}: install the same version of this package "
-                "on both sides")
+        return (
+            f"its code version is {env.get('code_version')!r}, the driver's is "
+            f"{mine.get('code_version')!r}: install the same version of this package "
+            "on both sides"
+        )
     theirs, ours = str(env.get("git_commit") or ""), str(mine.get("git_commit") or "")
     if theirs and ours and "unknown" not in (theirs, ours) and theirs != ours:
-        return (f"its code is at commit {theirs}, the driver's at {ours}: the workers must run "
-                "the driver's checkout (a shared filesystem) or the same commit")
+        return (
+            f"its code is at commit {theirs}, the driver's at {ours}: the workers must run "
+            "the driver's checkout (a shared filesystem) or the same commit"
+        )
     return None
 
 
@@ -117,8 +125,11 @@ def last_worker_error(log_directory: Path | None, newest: int = 20) -> tuple[str
     if log_directory is None:
         return None
     try:
-        files = sorted((p for p in log_directory.iterdir() if p.is_file()),
-                       key=lambda p: p.stat().st_mtime, reverse=True)[:newest]
+        files = sorted(
+            (p for p in log_directory.iterdir() if p.is_file()),
+            key=lambda p: p.stat().st_mtime,
+            reverse=True,
+        )[:newest]
     except OSError:
         return None
     for path in files:
@@ -167,29 +178,47 @@ class JobWatch:
         if self.kind != "slurm":
             return None
         try:
-            out = subprocess.run(["squeue", "-h", "-o", "%i", "-u", getpass.getuser()],
-                                 capture_output=True, text=True, timeout=30, check=True).stdout
+            out = subprocess.run(
+                ["squeue", "-h", "-o", "%i", "-u", getpass.getuser()],
+                capture_output=True,
+                text=True,
+                timeout=30,
+                check=True,
+            ).stdout
         except (OSError, subprocess.SubprocessError) as e:
             if not self._reported_queue_error:
-                log.warning("cannot list the batch queue (%s); lost jobs are noticed only "
-                            "after their workers leave", e)
+                log.warning(
+                    "cannot list the batch queue (%s); lost jobs are noticed only "
+                    "after their workers leave",
+                    e,
+                )
                 self._reported_queue_error = True
             return None
         return {line.strip() for line in out.splitlines() if line.strip()}
 
     def check(self, worker_names: set[str]) -> None:
         """Note which jobs' workers joined, find the jobs that ended and replace them."""
-        jobs = {name: str(getattr(job, "job_id", None) or "")
-                for name, job in list(self.cluster.workers.items())}
+        jobs = {
+            name: str(getattr(job, "job_id", None) or "")
+            for name, job in list(self.cluster.workers.items())
+        }
         for wname in worker_names:  # a replacement job has its predecessor's name
             job = wname if wname in jobs else wname.rsplit("-", 1)[0]
             if jobs.get(job) and jobs[job] not in self.joined:
                 self.joined.add(jobs[job])
                 self.failed_starts = 0
         queued = self._queued() if jobs else None
-        ended = [] if queued is None else [
-            name for name, jid in jobs.items() if jid and jid not in queued
-            and not any(w == name or w.startswith(name + "-") for w in worker_names)]
+        ended = (
+            []
+            if queued is None
+            else [
+                name
+                for name, jid in jobs.items()
+                if jid
+                and jid not in queued
+                and not any(w == name or w.startswith(name + "-") for w in worker_names)
+            ]
+        )
         for name in ended:
             jid = jobs[name]
             self.ended += 1
@@ -198,12 +227,18 @@ class JobWatch:
                 log.warning("batch job %s (%s) ended; submitting a replacement", jid, name)
             else:
                 self.failed_starts += 1
-                log.warning("batch job %s (%s) ended before its worker joined%s", jid, name,
-                            f" (logs in {self.log_directory})" if self.log_directory else "")
+                log.warning(
+                    "batch job %s (%s) ended before its worker joined%s",
+                    jid,
+                    name,
+                    f" (logs in {self.log_directory})" if self.log_directory else "",
+                )
         if ended:
+
             def drop() -> None:
                 for name in ended:
                     self.cluster.workers.pop(name, None)
+
             self.cluster.loop.add_callback(drop)
         missing = set(self.cluster.worker_spec) - set(jobs) | set(ended)
         if missing and self.cluster.status.name == "running":
@@ -211,8 +246,11 @@ class JobWatch:
             self.cluster.scale(jobs=len(self.cluster.worker_spec))
 
     def describe_logs(self) -> str:
-        where = (f"job logs: {self.log_directory}" if self.log_directory
-                 else "job logs: where the batch system writes them (no log_directory)")
+        where = (
+            f"job logs: {self.log_directory}"
+            if self.log_directory
+            else "job logs: where the batch system writes them (no log_directory)"
+        )
         found = last_worker_error(self.log_directory)
         if found:
             line, path = found
@@ -269,14 +307,12 @@ class Supervisor:
         self.last_check = now
         status = getattr(self.client, "status", "running")
         if status not in ("running", "newly-created"):
-            self._no_workers(now, f"the connection to {self.link.where} is lost (client "
-                             f"{status})")
+            self._no_workers(now, f"the connection to {self.link.where} is lost (client {status})")
             return
         try:
             info = scheduler_workers(self.client)
         except Exception as e:  # noqa: BLE001 - the scheduler went away: judged by time
-            self._no_workers(now, f"{self.link.where} does not answer ({type(e).__name__}: "
-                             f"{e})")
+            self._no_workers(now, f"{self.link.where} does not answer ({type(e).__name__}: {e})")
             return
         for addr in list(self.accepted):
             if addr not in info:
@@ -293,30 +329,39 @@ class Supervisor:
             return
         if self.refused and not self.accepted:
             reasons = sorted(set(self.refused.values()))
-            raise ClusterError(f"refusing the workers of {self.link.where}: "
-                               f"{len(self.refused)} worker(s) joined and none can run this "
-                               f"campaign: {reasons[0]}" + self._logs())
+            raise ClusterError(
+                f"refusing the workers of {self.link.where}: "
+                f"{len(self.refused)} worker(s) joined and none can run this "
+                f"campaign: {reasons[0]}" + self._logs()
+            )
         jobs = self.link.jobs
         if jobs is not None and jobs.failed_starts >= 2 * max(1, jobs.target):
-            raise ClusterError(f"every batch job of {self.link.where} ends before its dask "
-                               f"worker joins ({jobs.failed_starts} in a row, the last job "
-                               f"{jobs.last_ended}){self._logs()}. Fix the workers' "
-                               "environment (execution.cluster: python or "
-                               "job_script_prologue) and rerun the same command: finished "
-                               "runs are kept")
+            raise ClusterError(
+                f"every batch job of {self.link.where} ends before its dask "
+                f"worker joins ({jobs.failed_starts} in a row, the last job "
+                f"{jobs.last_ended}){self._logs()}. Fix the workers' "
+                "environment (execution.cluster: python or "
+                "job_script_prologue) and rerun the same command: finished "
+                "runs are kept"
+            )
         if running:
             self._no_workers(now, f"no worker is left in {self.link.where}")
 
     def _no_workers(self, now: float, why: str) -> None:
         if self.no_worker_since is None:
             self.no_worker_since = now
-            log.warning("%s; giving up after %g s without a worker "
-                        "(execution.give_up_after)", why, self.execution.give_up_after)
+            log.warning(
+                "%s; giving up after %g s without a worker (execution.give_up_after)",
+                why,
+                self.execution.give_up_after,
+            )
         elif now - self.no_worker_since >= self.execution.give_up_after:
-            raise ClusterError(f"{why} and none came back within "
-                               f"{self.execution.give_up_after:g} s "
-                               f"(execution.give_up_after){self._logs()}. The finished runs "
-                               "are kept: rerun the same command to resume")
+            raise ClusterError(
+                f"{why} and none came back within "
+                f"{self.execution.give_up_after:g} s "
+                f"(execution.give_up_after){self._logs()}. The finished runs "
+                "are kept: rerun the same command to resume"
+            )
 
     def _check_workers(self, addrs: list[str], info: dict[str, Any]) -> None:
         try:
@@ -330,9 +375,13 @@ class Supervisor:
             why = refusal(envs[addr], self.mine)
             if why is None:
                 self.accepted[addr] = int(info.get(addr, {}).get("nthreads", 1) or 1)
-                log.info("worker %s joined (%d thread(s)); %d worker(s), window %d", addr,
-                         self.accepted[addr], len(self.accepted),
-                         window_size(self.threads))
+                log.info(
+                    "worker %s joined (%d thread(s)); %d worker(s), window %d",
+                    addr,
+                    self.accepted[addr],
+                    len(self.accepted),
+                    window_size(self.threads),
+                )
             else:
                 self.refused[addr] = why
                 log.warning("refusing worker %s: %s", addr, why)
@@ -352,19 +401,30 @@ class Supervisor:
             if self.accepted:
                 return
             now = self.clock()
-            if last is None and now - t0 >= 1.0 or last is not None \
-                    and now - last >= WAIT_REPORT_EVERY:
-                log.warning("waiting for a dask worker to join %s (%.0f s so far%s)",
-                            self.link.where, now - t0,
-                            f", giving up after {limit:g} s" if limit else "")
+            if (
+                last is None
+                and now - t0 >= 1.0
+                or last is not None
+                and now - last >= WAIT_REPORT_EVERY
+            ):
+                log.warning(
+                    "waiting for a dask worker to join %s (%.0f s so far%s)",
+                    self.link.where,
+                    now - t0,
+                    f", giving up after {limit:g} s" if limit else "",
+                )
                 last = now
             if limit and now - t0 >= limit:
                 if self.execution.scheduler:
-                    hint = (f"start workers with `dask worker {self.execution.scheduler} "
-                            "--nthreads 1` from this package's environment")
+                    hint = (
+                        f"start workers with `dask worker {self.execution.scheduler} "
+                        "--nthreads 1` from this package's environment"
+                    )
                 else:
                     hint = "check the batch system's queue"
-                raise ClusterError(f"no dask worker joined {self.link.where} within "
-                                   f"{limit:g} s (execution.wait_for_workers){self._logs()}; "
-                                   f"{hint}, or raise the wait (0 waits for ever)")
+                raise ClusterError(
+                    f"no dask worker joined {self.link.where} within "
+                    f"{limit:g} s (execution.wait_for_workers){self._logs()}; "
+                    f"{hint}, or raise the wait (0 waits for ever)"
+                )
             time.sleep(0.5 if now - t0 < 5 else 1.0)

@@ -69,8 +69,22 @@ from .verify import read_verify
 from .yaml_input import read_document
 
 #: The top-level keys, in the order error messages list them.
-TOP_KEYS = ("name", "description", "parameters", "numerics", "sweep", "seeds", "store", "fits",
-            "figures", "execution", "limits", "refine", "precision", "verify")
+TOP_KEYS = (
+    "name",
+    "description",
+    "parameters",
+    "numerics",
+    "sweep",
+    "seeds",
+    "store",
+    "fits",
+    "figures",
+    "execution",
+    "limits",
+    "refine",
+    "precision",
+    "verify",
+)
 
 
 class Section(NamedTuple):
@@ -127,8 +141,9 @@ class Overrides:
         return tuple(out)
 
 
-def _apply_overrides(doc: dict[str, Any], ov: Overrides, origins: dict[KeyPath, str],
-                     c: Checker) -> None:
+def _apply_overrides(
+    doc: dict[str, Any], ov: Overrides, origins: dict[KeyPath, str], c: Checker
+) -> None:
     pnames, nnames = set(PARAMETER_TYPES), set(NUMERICS_TYPES)
     for key, value in ov.settings.items():
         label = f"--set {key}={value!r}"
@@ -137,9 +152,14 @@ def _apply_overrides(doc: dict[str, Any], ov: Overrides, origins: dict[KeyPath, 
         elif key in nnames:
             section = "numerics"
         else:
-            c.problems.append(Problem(key, f"unknown name{suggest(key, sorted(pnames | nnames))}"
-                                      f"; allowed: {', '.join(sorted(pnames | nnames))}",
-                                      "command line --set"))
+            c.problems.append(
+                Problem(
+                    key,
+                    f"unknown name{suggest(key, sorted(pnames | nnames))}"
+                    f"; allowed: {', '.join(sorted(pnames | nnames))}",
+                    "command line --set",
+                )
+            )
             continue
         if not isinstance(doc.get(section) or {}, Mapping):
             continue
@@ -167,8 +187,12 @@ def _apply_overrides(doc: dict[str, Any], ov: Overrides, origins: dict[KeyPath, 
         doc["execution"] = ex
 
 
-def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | None = None,
-                   default_name: str | None = None) -> Campaign:
+def parse_campaign(
+    text: str,
+    source: str = "<string>",
+    overrides: Overrides | None = None,
+    default_name: str | None = None,
+) -> Campaign:
     """Validate campaign YAML ``text``; raise :class:`CampaignError` listing every problem.
 
     Every grid point is then checked by the model's own :class:`Parameters` and
@@ -178,9 +202,17 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     overrides = overrides or Overrides()
     node, doc, lines, dups = read_document(text, source)
     if node is None:
-        raise CampaignError(source, [Problem("", "the campaign file is empty; allowed: a "
-                                             "mapping with keys " + ", ".join(TOP_KEYS),
-                                             source)])
+        raise CampaignError(
+            source,
+            [
+                Problem(
+                    "",
+                    "the campaign file is empty; allowed: a "
+                    "mapping with keys " + ", ".join(TOP_KEYS),
+                    source,
+                )
+            ],
+        )
     origins: dict[KeyPath, str] = {}
     c = Checker(source, lines, origins)
     for d in dups:
@@ -199,16 +231,22 @@ def parse_campaign(text: str, source: str = "<string>", overrides: Overrides | N
     read: dict[str, Any] = {}
     for section in SECTIONS:
         read[section.key] = section.read(c, doc.get(section.key), read)
-    campaign = Campaign(**{section.attr: read[section.key] for section in SECTIONS},
-                        source=source, text=text, overrides=overrides.describe())
+    campaign = Campaign(
+        **{section.attr: read[section.key] for section in SECTIONS},
+        source=source,
+        text=text,
+        overrides=overrides.describe(),
+    )
     limits, dims, seeds = campaign.limits, campaign.dims, campaign.seeds
     # Sizes first, by arithmetic: nothing below is built for a grid that is too large.
     before_bounds = len(c.problems)
     if campaign.n_runs > limits.max_runs:
         sizes = " x ".join(f"{len(d)} ({d.name})" for d in dims)
-        c.add(("sweep",) if dims else ("seeds",),
-              f"{campaign.n_runs} runs ({sizes + ' x ' if dims else ''}{len(seeds)} seeds); "
-              f"allowed: at most {limits.max_runs} (limits.max_runs)")
+        c.add(
+            ("sweep",) if dims else ("seeds",),
+            f"{campaign.n_runs} runs ({sizes + ' x ' if dims else ''}{len(seeds)} seeds); "
+            f"allowed: at most {limits.max_runs} (limits.max_runs)",
+        )
     _check_memory(c, campaign)
     if len(c.problems) > before_bounds:  # out of bounds: stop before any point is built
         c.raise_if_any()
@@ -260,22 +298,28 @@ def _check_memory(c: Checker, campaign: Campaign) -> None:
     if limit is None:
         return
     axes = {a.name: a.values for a in campaign.axes}
-    resolutions = axes.get("resolution", (campaign.numerics.get("resolution",
-                                                                Numerics.resolution),))
-    mechanics = axes.get("mechanics", (campaign.numerics.get("mechanics",
-                                                             Numerics.mechanics),))
+    resolutions = axes.get(
+        "resolution", (campaign.numerics.get("resolution", Numerics.resolution),)
+    )
+    mechanics = axes.get("mechanics", (campaign.numerics.get("mechanics", Numerics.mechanics),))
     for n in resolutions:
         for mech in mechanics:
             if not is_int(n) or n < 1:
                 continue  # the model's own check reports it
             need = run_memory_bytes(int(n), str(mech))
             if need > limit:
-                path: KeyPath = (("sweep", "axes", "resolution") if "resolution" in axes
-                                 else ("numerics", "resolution"))
-                c.add(path, f"got {n}: one run ({mech} mechanics) needs about "
-                      f"{fmt_bytes(need)}, more than {what} allows ({fmt_bytes(limit)}); "
-                      "allowed: a lower resolution, or more memory per run (limits.run_memory,"
-                      " execution.memory_limit, fewer workers)")
+                path: KeyPath = (
+                    ("sweep", "axes", "resolution")
+                    if "resolution" in axes
+                    else ("numerics", "resolution")
+                )
+                c.add(
+                    path,
+                    f"got {n}: one run ({mech} mechanics) needs about "
+                    f"{fmt_bytes(need)}, more than {what} allows ({fmt_bytes(limit)}); "
+                    "allowed: a lower resolution, or more memory per run (limits.run_memory,"
+                    " execution.memory_limit, fewer workers)",
+                )
                 return
 
 
@@ -285,8 +329,9 @@ def load_campaign(path: str | Path, overrides: Overrides | None = None) -> Campa
     try:
         text = p.read_text(encoding="utf-8")
     except OSError as e:
-        raise CampaignError(str(p), [Problem("", f"cannot read the file: {e.strerror}",
-                                             str(p))]) from None
+        raise CampaignError(
+            str(p), [Problem("", f"cannot read the file: {e.strerror}", str(p))]
+        ) from None
     except UnicodeDecodeError:
         raise CampaignError(str(p), [Problem("", "not a UTF-8 text file", str(p))]) from None
     return parse_campaign(text, str(p), overrides, default_name=p.stem)

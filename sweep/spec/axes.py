@@ -20,8 +20,9 @@ RANGE_KEYS = ("start", "stop", "num")
 
 
 def _range_values(c: Checker, kind: str, spec: Any, path: KeyPath) -> list[Any] | None:
-    usage = ("[start, stop, num] or {start: .., stop: .., num: ..}"
-             + (" (exponents of 10)" if kind == "logspace" else ""))
+    usage = "[start, stop, num] or {start: .., stop: .., num: ..}" + (
+        " (exponents of 10)" if kind == "logspace" else ""
+    )
     if isinstance(spec, Sequence) and not isinstance(spec, str):
         if len(spec) != 3:
             c.bad(path, spec, usage)
@@ -81,8 +82,12 @@ def _check_axis(c: Checker, name: str, raw: Any, path: KeyPath) -> Axis | None:
         values = list(raw)
         vpaths = [(*path, i) for i in range(len(values))]
     else:
-        c.bad(path, raw, "a list of values or {linspace|logspace|geomspace: [start, stop, num]} "
-              "(a single value belongs under 'parameters:' or 'numerics:')")
+        c.bad(
+            path,
+            raw,
+            "a list of values or {linspace|logspace|geomspace: [start, stop, num]} "
+            "(a single value belongs under 'parameters:' or 'numerics:')",
+        )
         return None
     if not values:
         c.bad(path, raw, "a non-empty list of values (an empty axis would give no runs)")
@@ -109,27 +114,41 @@ def _check_axis(c: Checker, name: str, raw: Any, path: KeyPath) -> Axis | None:
 def read_sweep(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Dim, ...]:
     """``sweep:`` -> the grid's dims; ``read`` holds the base ``parameters`` and ``numerics``
     (a name may be swept or set, not both)."""
-    base = {**{k: "parameters" for k in read["parameters"]},
-            **{k: "numerics" for k in read["numerics"]}}
+    base = {
+        **{k: "parameters" for k in read["parameters"]},
+        **{k: "numerics" for k in read["numerics"]},
+    }
     sweep = c.mapping(("sweep",), raw, SWEEP_KEYS)
     axes_raw = c.mapping(("sweep", "axes"), sweep.get("axes"), None)
     axes: dict[str, Axis] = {}
     for name, spec in axes_raw.items():
         path = ("sweep", "axes", name)
         if name not in AXIS_TYPES:
-            c.unknown(path, name, sorted(AXIS_TYPES),
-                      "" if name not in NUMERICS_TYPES else " (snapshot_times cannot be swept)")
+            c.unknown(
+                path,
+                name,
+                sorted(AXIS_TYPES),
+                "" if name not in NUMERICS_TYPES else " (snapshot_times cannot be swept)",
+            )
             continue
         if name in base:
             origin = c.origins.get((base[name], name))
             if origin is not None:  # a command-line --set
-                c.problems.append(Problem(
-                    name, f"{name!r} is a swept axis of this campaign (sweep.axes.{name}); "
-                    "--set changes only base values: drop it from the command line, or "
-                    "give the campaign a file of its own", f"command line {origin}"))
+                c.problems.append(
+                    Problem(
+                        name,
+                        f"{name!r} is a swept axis of this campaign (sweep.axes.{name}); "
+                        "--set changes only base values: drop it from the command line, or "
+                        "give the campaign a file of its own",
+                        f"command line {origin}",
+                    )
+                )
             else:
-                c.add(path, f"{name!r} is both swept and set in "
-                      f"'{base[name]}:'; remove it from one of them")
+                c.add(
+                    path,
+                    f"{name!r} is both swept and set in "
+                    f"'{base[name]}:'; remove it from one of them",
+                )
             continue
         axis = _check_axis(c, name, spec, path)
         if axis is not None:
@@ -138,8 +157,10 @@ def read_sweep(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Dim, ...]
         c.add(("sweep", "axes", AMB), "sweep either 'alpha' or 'alpha_minus_B', not both")
     for a, b in ((AMB, "alpha"), ("alpha", AMB)):
         if a in axes_raw and base.get(b) == "parameters":
-            c.add(("sweep", "axes", a), f"conflicts with parameters.{b} (alpha = B + "
-                  "alpha_minus_B): set only one of them")
+            c.add(
+                ("sweep", "axes", a),
+                f"conflicts with parameters.{b} (alpha = B + alpha_minus_B): set only one of them",
+            )
 
     groups: list[list[str]] = []
     zip_raw = sweep.get("zip")
@@ -150,18 +171,31 @@ def read_sweep(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Dim, ...]
         grouped: dict[str, int] = {}
         for gi, group in enumerate(zip_raw):
             gpath: KeyPath = ("sweep", "zip", gi)
-            if (not isinstance(group, Sequence) or isinstance(group, str) or len(group) < 2
-                    or not all(isinstance(n, str) for n in group)):
+            if (
+                not isinstance(group, Sequence)
+                or isinstance(group, str)
+                or len(group) < 2
+                or not all(isinstance(n, str) for n in group)
+            ):
                 c.bad(gpath, group, "a list of two or more axis names")
                 continue
             names: list[str] = []
             for ni, n in enumerate(group):
                 if n not in axes_raw:
-                    c.bad((*gpath, ni), n, "the name of an axis under sweep.axes"
-                          + suggest(n, list(axes_raw)) + f" (axes: {', '.join(axes_raw)})")
+                    c.bad(
+                        (*gpath, ni),
+                        n,
+                        "the name of an axis under sweep.axes"
+                        + suggest(n, list(axes_raw))
+                        + f" (axes: {', '.join(axes_raw)})",
+                    )
                 elif n in grouped:
-                    c.bad((*gpath, ni), n, "each axis in at most one zip group (it is already "
-                          f"in sweep.zip[{grouped[n]}])")
+                    c.bad(
+                        (*gpath, ni),
+                        n,
+                        "each axis in at most one zip group (it is already "
+                        f"in sweep.zip[{grouped[n]}])",
+                    )
                 else:
                     grouped[n] = gi
                     names.append(n)

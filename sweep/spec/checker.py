@@ -121,4 +121,3 @@ def coerce(kind: str, value: Any) -> Any:
             raise ValueError("a string")
         return value
     return value
-

@@ -92,8 +92,9 @@ def read_collection(path: str | Path) -> Collection | None:
             members.append(member)
     if c.problems:
         raise CampaignError(str(p), c.problems)
-    return Collection(name=name, description=" ".join(description.split()), source=str(p),
-                      members=tuple(members))
+    return Collection(
+        name=name, description=" ".join(description.split()), source=str(p), members=tuple(members)
+    )
 
 
 def duplicate_names(names: list[str], sources: list[str]) -> list[Problem]:
@@ -103,8 +104,13 @@ def duplicate_names(names: list[str], sources: list[str]) -> list[Problem]:
     out = []
     for name, source in zip(names, sources, strict=True):
         if name in first:
-            out.append(Problem("name", f"campaign name {name!r} is also the name of "
-                               f"{first[name]}: two members would share results/{name}/",
-                               source))
+            out.append(
+                Problem(
+                    "name",
+                    f"campaign name {name!r} is also the name of "
+                    f"{first[name]}: two members would share results/{name}/",
+                    source,
+                )
+            )
         first.setdefault(name, source)
     return out

@@ -21,15 +21,35 @@ from ..campaign import (
 from ..limits import max_local_workers
 from .checker import Checker, KeyPath, is_int, is_number, suggest
 
-EXECUTION_KEYS = ("workers", "threads_per_worker", "memory_limit", "scheduler", "cluster",
-                  "wait_for_workers", "give_up_after", "security")
+EXECUTION_KEYS = (
+    "workers",
+    "threads_per_worker",
+    "memory_limit",
+    "scheduler",
+    "cluster",
+    "wait_for_workers",
+    "give_up_after",
+    "security",
+)
 SECURITY_KEYS = ("tls", "reason")
 #: Most batch jobs of a dask-jobqueue cluster.
 MAX_JOBS = 100_000
 SCHEDULER_RE = re.compile(r"^(tcp|tls|inproc|ucx|ws|wss)://\S+$")
 #: Arguments of the dask-jobqueue classes that the campaign manager sets itself.
-_CLUSTER_RESERVED = {"self", "scheduler", "name", "config_name", "job_cls", "loop", "asynchronous",
-                     "n_workers", "base_class_kwargs", "job_kwargs", "kwargs", "security"}
+_CLUSTER_RESERVED = {
+    "self",
+    "scheduler",
+    "name",
+    "config_name",
+    "job_cls",
+    "loop",
+    "asynchronous",
+    "n_workers",
+    "base_class_kwargs",
+    "job_kwargs",
+    "kwargs",
+    "security",
+}
 
 
 def cluster_option_names(kind: str) -> list[str]:
@@ -50,8 +70,12 @@ def read_execution(c: Checker, raw: Any, read: Mapping[str, Any]) -> ExecutionSp
     workers = ex.get("workers")
     most = max_local_workers()
     if workers is not None and (not is_int(workers) or not 1 <= workers <= most):
-        c.bad(("execution", "workers"), workers, f"an integer from 1 to {most} (local worker "
-              f"processes; this machine has {os.cpu_count() or 1} core(s))")
+        c.bad(
+            ("execution", "workers"),
+            workers,
+            f"an integer from 1 to {most} (local worker "
+            f"processes; this machine has {os.cpu_count() or 1} core(s))",
+        )
         workers = None
     tpw = ex.get("threads_per_worker", 1)
     if not is_int(tpw) or not 1 <= tpw <= most:
@@ -62,10 +86,14 @@ def read_execution(c: Checker, raw: Any, read: Mapping[str, Any]) -> ExecutionSp
         c.bad(("execution", "memory_limit"), memory, "a size such as '4GB', or 'auto'")
         memory = None
     scheduler = ex.get("scheduler")
-    if scheduler is not None and (not isinstance(scheduler, str)
-                                  or not SCHEDULER_RE.match(scheduler)):
-        c.bad(("execution", "scheduler"), scheduler,
-              "a dask scheduler address such as 'tcp://10.0.0.1:8786'")
+    if scheduler is not None and (
+        not isinstance(scheduler, str) or not SCHEDULER_RE.match(scheduler)
+    ):
+        c.bad(
+            ("execution", "scheduler"),
+            scheduler,
+            "a dask scheduler address such as 'tcp://10.0.0.1:8786'",
+        )
         scheduler = None
     cluster = None
     if ex.get("cluster") is not None:
@@ -73,27 +101,47 @@ def read_execution(c: Checker, raw: Any, read: Mapping[str, Any]) -> ExecutionSp
     if scheduler and ex.get("cluster") is not None:
         c.add(("execution", "cluster"), "give either 'scheduler' or 'cluster', not both")
     if (scheduler or ex.get("cluster") is not None) and "workers" in ex:
-        c.add(("execution", "workers"), "'workers' sizes the local cluster only; with "
-              "'scheduler' the cluster is sized elsewhere, with 'cluster' use cluster.jobs")
+        c.add(
+            ("execution", "workers"),
+            "'workers' sizes the local cluster only; with "
+            "'scheduler' the cluster is sized elsewhere, with 'cluster' use cluster.jobs",
+        )
     wait = ex.get("wait_for_workers", DEFAULT_WORKER_WAIT)
     if not is_number(wait) or not 0 <= wait < math.inf:
-        c.bad(("execution", "wait_for_workers"), wait, "a number of seconds >= 0 (0: wait "
-              "for ever, with a line every minute)")
+        c.bad(
+            ("execution", "wait_for_workers"),
+            wait,
+            "a number of seconds >= 0 (0: wait for ever, with a line every minute)",
+        )
         wait = DEFAULT_WORKER_WAIT
     give_up = ex.get("give_up_after", DEFAULT_GIVE_UP)
     if not is_number(give_up) or not 0 < give_up < math.inf:
-        c.bad(("execution", "give_up_after"), give_up, "a number of seconds > 0 (how long a "
-              "running campaign goes on without any usable worker)")
+        c.bad(
+            ("execution", "give_up_after"),
+            give_up,
+            "a number of seconds > 0 (how long a "
+            "running campaign goes on without any usable worker)",
+        )
         give_up = DEFAULT_GIVE_UP
     tls, reason = _check_security(c, ex.get("security"))
     if tls and cluster is not None and cluster.options.get("protocol") not in (None, "tls://"):
-        c.add(("execution", "cluster", "protocol"), f"{cluster.options['protocol']!r} is not "
-              "encrypted: the scheduler uses TLS ('tls://') unless execution.security says "
-              "{tls: false, reason: ...}")
-    return ExecutionSpec(workers=workers, threads_per_worker=int(tpw),
-                         memory_limit=None if memory is None else str(memory),
-                         scheduler=scheduler, cluster=cluster, wait_for_workers=float(wait),
-                         give_up_after=float(give_up), tls=tls, insecure_reason=reason)
+        c.add(
+            ("execution", "cluster", "protocol"),
+            f"{cluster.options['protocol']!r} is not "
+            "encrypted: the scheduler uses TLS ('tls://') unless execution.security says "
+            "{tls: false, reason: ...}",
+        )
+    return ExecutionSpec(
+        workers=workers,
+        threads_per_worker=int(tpw),
+        memory_limit=None if memory is None else str(memory),
+        scheduler=scheduler,
+        cluster=cluster,
+        wait_for_workers=float(wait),
+        give_up_after=float(give_up),
+        tls=tls,
+        insecure_reason=reason,
+    )
 
 
 def _check_security(c: Checker, raw: Any) -> tuple[bool, str | None]:
@@ -108,13 +156,15 @@ def _check_security(c: Checker, raw: Any) -> tuple[bool, str | None]:
         return True, None
     reason = sec.get("reason")
     if reason is not None and (not isinstance(reason, str) or not reason.strip()):
-        c.bad((*path, "reason"), reason, "a sentence saying why the scheduler may run "
-              "without TLS")
+        c.bad((*path, "reason"), reason, "a sentence saying why the scheduler may run without TLS")
         return tls, None
     if not tls and reason is None:
-        c.add((*path, "tls"), "turning TLS off needs a stated reason: add "
-              "'reason: <why plain tcp is acceptable here>' (without TLS anyone who can "
-              "reach the scheduler can run code as you)")
+        c.add(
+            (*path, "tls"),
+            "turning TLS off needs a stated reason: add "
+            "'reason: <why plain tcp is acceptable here>' (without TLS anyone who can "
+            "reach the scheduler can run code as you)",
+        )
     return tls, None if reason is None else reason.strip()
 
 
@@ -125,8 +175,13 @@ def _check_cluster(c: Checker, raw: Any) -> ClusterSpec | None:
         return None
     kind = raw.get("kind")
     if kind not in CLUSTER_KINDS:
-        c.bad((*path, "kind"), kind, "one of " + ", ".join(CLUSTER_KINDS)
-              + (suggest(kind, list(CLUSTER_KINDS)) if isinstance(kind, str) else ""))
+        c.bad(
+            (*path, "kind"),
+            kind,
+            "one of "
+            + ", ".join(CLUSTER_KINDS)
+            + (suggest(kind, list(CLUSTER_KINDS)) if isinstance(kind, str) else ""),
+        )
         return None
     valid = cluster_option_names(kind)
     jobs = raw.get("jobs", 1)
@@ -140,8 +195,9 @@ def _check_cluster(c: Checker, raw: Any) -> ClusterSpec | None:
         if not is_int(lo) or lo < 0:
             c.bad((*path, "adapt", "minimum_jobs"), lo, "an integer >= 0")
         elif hi is None or not is_int(hi) or not max(lo, 1) <= hi <= MAX_JOBS:
-            c.bad((*path, "adapt", "maximum_jobs"), hi,
-                  f"an integer from max(1, {lo}) to {MAX_JOBS}")
+            c.bad(
+                (*path, "adapt", "maximum_jobs"), hi, f"an integer from max(1, {lo}) to {MAX_JOBS}"
+            )
         else:
             adapt = (int(lo), int(hi))  # type: ignore[arg-type]  # checked by _is_int
     options = {}
@@ -149,8 +205,12 @@ def _check_cluster(c: Checker, raw: Any) -> ClusterSpec | None:
         if key in ("kind", "jobs", "adapt"):
             continue
         if key not in valid:
-            c.unknown((*path, str(key)), key, ["kind", "jobs", "adapt", *valid],
-                      f" (options of dask_jobqueue.{CLUSTER_KINDS[kind]})")
+            c.unknown(
+                (*path, str(key)),
+                key,
+                ["kind", "jobs", "adapt", *valid],
+                f" (options of dask_jobqueue.{CLUSTER_KINDS[kind]})",
+            )
         else:
             options[key] = value
     return ClusterSpec(kind=kind, jobs=int(jobs), adapt=adapt, options=options)

@@ -28,8 +28,17 @@ from ..campaign import PrecisionSpec
 from .checker import Checker, is_finite_number, is_int, suggest
 from .refine import observable_sources, read_classes
 
-KEYS = ("observable", "width", "relative", "confidence", "unanimous", "patterned_above",
-        "classes", "initial", "add")
+KEYS = (
+    "observable",
+    "width",
+    "relative",
+    "confidence",
+    "unanimous",
+    "patterned_above",
+    "classes",
+    "initial",
+    "add",
+)
 
 
 def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSpec | None:
@@ -49,47 +58,69 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     observable = sec.get("observable")
     sources = observable_sources()
     if not isinstance(observable, str) or observable not in sources:
-        c.bad((*path, "observable"), observable, "one of " + ", ".join(sorted(sources))
-              + (suggest(observable, list(sources)) if isinstance(observable, str) else ""))
+        c.bad(
+            (*path, "observable"),
+            observable,
+            "one of "
+            + ", ".join(sorted(sources))
+            + (suggest(observable, list(sources)) if isinstance(observable, str) else ""),
+        )
         observable = "sigma2_S"
 
     width = sec.get("width")
     if width is not None and (not is_finite_number(width) or not width > 0):
-        c.bad((*path, "width"), width, "a number > 0 (the widest acceptable confidence "
-              "interval of the seed mean)")
+        c.bad(
+            (*path, "width"),
+            width,
+            "a number > 0 (the widest acceptable confidence interval of the seed mean)",
+        )
     relative = sec.get("relative", True)
     if not isinstance(relative, bool):
-        c.bad((*path, "relative"), relative, "true (width relative to |seed mean|) or false "
-              "(absolute, in the observable's units)")
+        c.bad(
+            (*path, "relative"),
+            relative,
+            "true (width relative to |seed mean|) or false (absolute, in the observable's units)",
+        )
     confidence = sec.get("confidence", 0.95)
     if not is_finite_number(confidence) or not 0 < confidence < 1:
         c.bad((*path, "confidence"), confidence, "a number in (0, 1)")
 
     unanimous = sec.get("unanimous")
-    if unanimous is not None and (not is_int(unanimous)
-                                  or not 2 <= unanimous <= max(n_seeds, 2)):
-        c.bad((*path, "unanimous"), unanimous, f"an integer from 2 to {n_seeds} (the "
-              "campaign's seeds): the fewest seeds that stop a point when they all share "
-              "the pattern class")
+    if unanimous is not None and (not is_int(unanimous) or not 2 <= unanimous <= max(n_seeds, 2)):
+        c.bad(
+            (*path, "unanimous"),
+            unanimous,
+            f"an integer from 2 to {n_seeds} (the "
+            "campaign's seeds): the fewest seeds that stop a point when they all share "
+            "the pattern class",
+        )
     patterned = sec.get("patterned_above")
     classes = read_classes(c, (*path, "classes"), sec["classes"]) if "classes" in sec else ()
     if patterned is not None and "classes" in sec:
-        c.add((*path, "patterned_above"), "not with classes: (each observable of classes has "
-              "its threshold); remove one of the two")
+        c.add(
+            (*path, "patterned_above"),
+            "not with classes: (each observable of classes has "
+            "its threshold); remove one of the two",
+        )
     elif unanimous is not None and patterned is None and "classes" not in sec:
-        c.add((*path, "patterned_above"), "missing; allowed: a number (a run's pattern class "
-              "is sigma2_S above it; or classes: for several observables); needed by "
-              "unanimous")
+        c.add(
+            (*path, "patterned_above"),
+            "missing; allowed: a number (a run's pattern class "
+            "is sigma2_S above it; or classes: for several observables); needed by "
+            "unanimous",
+        )
     elif patterned is not None and not is_finite_number(patterned):
         c.bad((*path, "patterned_above"), patterned, "a finite number")
     if width is None and unanimous is None:
-        c.add(path, "no stopping rule; allowed: width (the interval of the seed mean), "
-              "unanimous (the pattern class), or both")
+        c.add(
+            path,
+            "no stopping rule; allowed: width (the interval of the seed mean), "
+            "unanimous (the pattern class), or both",
+        )
 
     initial = sec.get("initial", min(4, n_seeds) or 1)
     if not is_int(initial) or not 1 <= initial <= max(n_seeds, 1):
-        c.bad((*path, "initial"), initial, f"an integer from 1 to {n_seeds} (the campaign's "
-              "seeds)")
+        c.bad((*path, "initial"), initial, f"an integer from 1 to {n_seeds} (the campaign's seeds)")
     add = sec.get("add", initial)
     if not is_int(add) or add < 1:
         c.bad((*path, "add"), add, "an integer >= 1")
@@ -97,8 +128,14 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     if len(c.problems) > before:
         return None
     return PrecisionSpec(
-        observable=observable, source=sources[observable],
-        width=None if width is None else float(width), relative=relative,
-        confidence=float(confidence), unanimous=unanimous,
+        observable=observable,
+        source=sources[observable],
+        width=None if width is None else float(width),
+        relative=relative,
+        confidence=float(confidence),
+        unanimous=unanimous,
         patterned_above=None if patterned is None else float(patterned),
-        initial=int(initial), add=int(add), classes=classes or ())
+        initial=int(initial),
+        add=int(add),
+        classes=classes or (),
+    )

@@ -61,8 +61,20 @@ from ..campaign import (
 )
 from .checker import Checker, KeyPath, is_finite_number, is_int, suggest
 
-KEYS = ("axis", "axes", "log", "observable", "classes", "criterion", "patterned_above",
-        "fraction", "jump", "rounds", "min_spacing", "seeds")
+KEYS = (
+    "axis",
+    "axes",
+    "log",
+    "observable",
+    "classes",
+    "criterion",
+    "patterned_above",
+    "fraction",
+    "jump",
+    "rounds",
+    "min_spacing",
+    "seeds",
+)
 SEED_KEYS = ("initial", "add", "max_width", "confidence")
 CRITERIA = ("fraction", "jump")
 #: The derived observable read from the run files (the stability fit's criterion).
@@ -84,15 +96,24 @@ def read_classes(c: Checker, path: KeyPath, raw: Any) -> tuple[Threshold, ...] |
     ``None`` (problems added to ``c``) when it is not one."""
     sources = observable_sources()
     if not isinstance(raw, Mapping) or not raw:
-        c.bad(path, raw, "a mapping observable -> threshold (a run's class is which "
-              "thresholds it is above), e.g. {sigma2_S: 1.0e-6, cos2theta: 0.5}")
+        c.bad(
+            path,
+            raw,
+            "a mapping observable -> threshold (a run's class is which "
+            "thresholds it is above), e.g. {sigma2_S: 1.0e-6, cos2theta: 0.5}",
+        )
         return None
     out: list[Threshold] = []
     ok = True
     for name, above in raw.items():
         if not isinstance(name, str) or name not in sources:
-            c.bad((*path, str(name)), name, "an observable: one of " + ", ".join(sorted(sources))
-                  + (suggest(name, list(sources)) if isinstance(name, str) else ""))
+            c.bad(
+                (*path, str(name)),
+                name,
+                "an observable: one of "
+                + ", ".join(sorted(sources))
+                + (suggest(name, list(sources)) if isinstance(name, str) else ""),
+            )
             ok = False
         elif not is_finite_number(above):
             c.bad((*path, name), above, "a finite number (the run is above it or not)")
@@ -108,37 +129,53 @@ def read_classes(c: Checker, path: KeyPath, raw: Any) -> tuple[Threshold, ...] |
 def read_refine(c: Checker, raw: Any, read: Mapping[str, Any]) -> RefineSpec | None:
     """The reader of the ``refine:`` section (a row of :data:`sweep.spec.SECTIONS`): needs the
     ``sweep``, ``seeds`` and ``precision`` sections read before it."""
-    return check_refine(c, raw, read.get("sweep") or (), read.get("seeds") or (),
-                        read.get("precision"))
+    return check_refine(
+        c, raw, read.get("sweep") or (), read.get("seeds") or (), read.get("precision")
+    )
 
 
-def _axis_values(c: Checker, path: KeyPath, axis: Any, dims: Sequence[Dim]
-                 ) -> tuple[Any, ...] | None:
+def _axis_values(
+    c: Checker, path: KeyPath, axis: Any, dims: Sequence[Dim]
+) -> tuple[Any, ...] | None:
     """The grid values of a refinable axis named ``axis``, or ``None`` (problem added)."""
     names = [a.name for d in dims for a in d.axes]
     if not isinstance(axis, str) or axis not in names:
-        c.bad(path, axis, "a sweep axis of this campaign (" + (", ".join(names) or "none") + ")"
-              + (suggest(axis, names) if isinstance(axis, str) else ""))
+        c.bad(
+            path,
+            axis,
+            "a sweep axis of this campaign ("
+            + (", ".join(names) or "none")
+            + ")"
+            + (suggest(axis, names) if isinstance(axis, str) else ""),
+        )
         return None
     dim = next(d for d in dims if any(a.name == axis for a in d.axes))
     values = next(a.values for a in dim.axes if a.name == axis)
     if len(dim.axes) > 1:
-        c.bad(path, axis, "an axis of its own (this one is in the zip group "
-              f"{', '.join(a.name for a in dim.axes)}): refined points have no value on the "
-              "zipped axes")
+        c.bad(
+            path,
+            axis,
+            "an axis of its own (this one is in the zip group "
+            f"{', '.join(a.name for a in dim.axes)}): refined points have no value on the "
+            "zipped axes",
+        )
     elif AXIS_TYPES.get(axis) != "float":
-        c.bad(path, axis, "a real-valued axis (refined points are midpoints; "
-              f"{axis} is of type {AXIS_TYPES.get(axis)})")
+        c.bad(
+            path,
+            axis,
+            "a real-valued axis (refined points are midpoints; "
+            f"{axis} is of type {AXIS_TYPES.get(axis)})",
+        )
     elif len(values) < 2:
-        c.bad(path, axis, "an axis with at least two values (the cells between them are "
-              "refined)")
+        c.bad(path, axis, "an axis with at least two values (the cells between them are refined)")
     else:
         return values
     return None
 
 
-def _refined_axes(c: Checker, path: KeyPath, sec: Mapping[str, Any], dims: Sequence[Dim]
-                  ) -> dict[str, tuple[Any, ...]] | None:
+def _refined_axes(
+    c: Checker, path: KeyPath, sec: Mapping[str, Any], dims: Sequence[Dim]
+) -> dict[str, tuple[Any, ...]] | None:
     """``axis:`` or ``axes:`` as axis -> grid values in the campaign's order of dims."""
     if "axis" in sec and "axes" in sec:
         c.add((*path, "axes"), "give axis (one refined axis) or axes (several), not both")
@@ -163,8 +200,7 @@ def _refined_axes(c: Checker, path: KeyPath, sec: Mapping[str, Any], dims: Seque
     return {name: found[name] for name in sorted(found, key=order.index)}
 
 
-def _log_axes(c: Checker, path: KeyPath, raw: Any, axes: Mapping[str, tuple[Any, ...]]
-              ) -> set[str]:
+def _log_axes(c: Checker, path: KeyPath, raw: Any, axes: Mapping[str, tuple[Any, ...]]) -> set[str]:
     if raw is None:
         return set()
     if not isinstance(raw, list) or not all(isinstance(n, str) for n in raw):
@@ -173,44 +209,67 @@ def _log_axes(c: Checker, path: KeyPath, raw: Any, axes: Mapping[str, tuple[Any,
     out: set[str] = set()
     for i, name in enumerate(raw):
         if name not in axes:
-            c.bad((*path, i), name, "a refined axis (" + ", ".join(axes) + ")"
-                  + suggest(name, list(axes)))
+            c.bad(
+                (*path, i),
+                name,
+                "a refined axis (" + ", ".join(axes) + ")" + suggest(name, list(axes)),
+            )
         elif not all(is_finite_number(v) and v > 0 for v in axes[name]):
-            c.bad((*path, i), name, "an axis whose values are all > 0 (a geometric midpoint "
-                  f"needs them; {name} has {min(axes[name])!r})")
+            c.bad(
+                (*path, i),
+                name,
+                "an axis whose values are all > 0 (a geometric midpoint "
+                f"needs them; {name} has {min(axes[name])!r})",
+            )
         else:
             out.add(name)
     return out
 
 
-def _spacing(c: Checker, path: KeyPath, spacing: Any, values: Sequence[Any], log: bool
-             ) -> float | None:
+def _spacing(
+    c: Checker, path: KeyPath, spacing: Any, values: Sequence[Any], log: bool
+) -> float | None:
     finite = len(values) >= 2 and all(is_finite_number(v) for v in values)
     span = None
     if finite:
-        span = (math.log10(max(values) / min(values)) if log else max(values) - min(values))
+        span = math.log10(max(values) / min(values)) if log else max(values) - min(values)
     if not is_finite_number(spacing) or not spacing > 0 or (span is not None and spacing >= span):
-        where = (f" and below the axis's span ({span:g}" + (" decades)" if log else ")")
-                 if span is not None else "")
+        where = (
+            f" and below the axis's span ({span:g}" + (" decades)" if log else ")")
+            if span is not None
+            else ""
+        )
         c.bad(path, spacing, ("a number of decades > 0" if log else "a number > 0") + where)
         return None
     return float(spacing)
 
 
-def _spacings(c: Checker, path: KeyPath, raw: Any, axes: Mapping[str, tuple[Any, ...]],
-              log: set[str]) -> dict[str, float] | None:
+def _spacings(
+    c: Checker, path: KeyPath, raw: Any, axes: Mapping[str, tuple[Any, ...]], log: set[str]
+) -> dict[str, float] | None:
     """``min_spacing:`` per refined axis: a number (one axis) or a mapping."""
     several = ", ".join(axes)
     if raw is None:
-        c.add(path, "missing; allowed: a number > 0 (a cell is split only while both halves "
-              "are at least this wide)" + ("" if len(axes) == 1 else
-                                           f"; several axes: a mapping axis -> number ({several};"
-                                           " in decades on a log axis)"))
+        c.add(
+            path,
+            "missing; allowed: a number > 0 (a cell is split only while both halves "
+            "are at least this wide)"
+            + (
+                ""
+                if len(axes) == 1
+                else f"; several axes: a mapping axis -> number ({several};"
+                " in decades on a log axis)"
+            ),
+        )
         return None
     if not isinstance(raw, Mapping):
         if len(axes) > 1:
-            c.bad(path, raw, f"a mapping axis -> smallest spacing for each of {several} "
-                  "(several axes are refined; in decades on a log axis)")
+            c.bad(
+                path,
+                raw,
+                f"a mapping axis -> smallest spacing for each of {several} "
+                "(several axes are refined; in decades on a log axis)",
+            )
             return None
         name = next(iter(axes))
         value = _spacing(c, path, raw, axes[name], name in log)
@@ -221,8 +280,11 @@ def _spacings(c: Checker, path: KeyPath, raw: Any, axes: Mapping[str, tuple[Any,
             c.unknown((*path, str(key)), key, list(axes), " (not a refined axis)")
     for name, values in axes.items():
         if name not in raw:
-            c.add((*path, name), f"missing; allowed: the smallest spacing of {name}, a number "
-                  "> 0" + (" (decades: a log axis)" if name in log else ""))
+            c.add(
+                (*path, name),
+                f"missing; allowed: the smallest spacing of {name}, a number "
+                "> 0" + (" (decades: a log axis)" if name in log else ""),
+            )
             continue
         value = _spacing(c, (*path, name), raw[name], values, name in log)
         if value is not None:
@@ -230,8 +292,13 @@ def _spacings(c: Checker, path: KeyPath, raw: Any, axes: Mapping[str, tuple[Any,
     return out if len(out) == len(axes) and set(raw) <= set(axes) else None
 
 
-def check_refine(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int],
-                 precision: PrecisionSpec | None = None) -> RefineSpec | None:
+def check_refine(
+    c: Checker,
+    raw: Any,
+    dims: Sequence[Dim],
+    seeds: Sequence[int],
+    precision: PrecisionSpec | None = None,
+) -> RefineSpec | None:
     """The ``refine:`` section as a :class:`RefineSpec`, or ``None`` when there is none (or
     it has problems, which are added to ``c``)."""
     if raw is None:
@@ -256,53 +323,83 @@ def check_refine(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
         read = read_classes(c, (*path, "classes"), sec["classes"])
         classes = read or ()
         if criterion != "fraction":
-            c.add((*path, "classes"), "used by criterion 'fraction' only; this section has "
-                  "criterion 'jump' (remove it, or set criterion: fraction)")
+            c.add(
+                (*path, "classes"),
+                "used by criterion 'fraction' only; this section has "
+                "criterion 'jump' (remove it, or set criterion: fraction)",
+            )
         for key in ("observable", "patterned_above"):
             if key in sec:
-                c.add((*path, key), "not with classes: (each observable of classes has its "
-                      "threshold); remove one of the two")
+                c.add(
+                    (*path, key),
+                    "not with classes: (each observable of classes has its "
+                    "threshold); remove one of the two",
+                )
 
     sources = observable_sources()
     observable = sec.get("observable", classes[0].observable if classes else "sigma2_S")
     if not isinstance(observable, str) or observable not in sources:
-        c.bad((*path, "observable"), observable, "one of " + ", ".join(sorted(sources))
-              + (suggest(observable, list(sources)) if isinstance(observable, str) else ""))
+        c.bad(
+            (*path, "observable"),
+            observable,
+            "one of "
+            + ", ".join(sorted(sources))
+            + (suggest(observable, list(sources)) if isinstance(observable, str) else ""),
+        )
         observable = "sigma2_S"
 
     patterned = sec.get("patterned_above")
     if criterion == "fraction":
         if patterned is None and "classes" not in sec:
-            c.add((*path, "patterned_above"), "missing; allowed: a number (a run counts as "
-                  f"patterned when its {observable} is above it); needed by criterion "
-                  "'fraction' (or classes: for several observables)")
+            c.add(
+                (*path, "patterned_above"),
+                "missing; allowed: a number (a run counts as "
+                f"patterned when its {observable} is above it); needed by criterion "
+                "'fraction' (or classes: for several observables)",
+            )
         elif patterned is not None and not is_finite_number(patterned):
             c.bad((*path, "patterned_above"), patterned, "a finite number")
     elif patterned is not None:
-        c.add((*path, "patterned_above"), "used by criterion 'fraction' only; this section "
-              "has criterion 'jump' (remove it, or set criterion: fraction)")
+        c.add(
+            (*path, "patterned_above"),
+            "used by criterion 'fraction' only; this section "
+            "has criterion 'jump' (remove it, or set criterion: fraction)",
+        )
 
     fraction = sec.get("fraction", list(DEFAULT_FRACTION))
-    if (not isinstance(fraction, Sequence) or isinstance(fraction, str) or len(fraction) != 2
-            or not all(is_finite_number(f) for f in fraction)
-            or not 0 <= fraction[0] < fraction[1] <= 1):
+    if (
+        not isinstance(fraction, Sequence)
+        or isinstance(fraction, str)
+        or len(fraction) != 2
+        or not all(is_finite_number(f) for f in fraction)
+        or not 0 <= fraction[0] < fraction[1] <= 1
+    ):
         c.bad((*path, "fraction"), fraction, "[low, high] with 0 <= low < high <= 1")
         fraction = list(DEFAULT_FRACTION)
 
     jump = sec.get("jump", DEFAULT_JUMP)
     if not is_finite_number(jump) or not jump > 1:
-        c.bad((*path, "jump"), jump, "a factor > 1 (the change of the geometric seed mean "
-              "that marks a boundary cell)")
+        c.bad(
+            (*path, "jump"),
+            jump,
+            "a factor > 1 (the change of the geometric seed mean that marks a boundary cell)",
+        )
         jump = DEFAULT_JUMP
 
     rounds = sec.get("rounds", DEFAULT_ROUNDS)
     if not is_int(rounds) or not 0 <= rounds <= MAX_ROUNDS:
-        c.bad((*path, "rounds"), rounds, f"an integer from 0 to {MAX_ROUNDS} (refinement "
-              "rounds after the grid's)")
+        c.bad(
+            (*path, "rounds"),
+            rounds,
+            f"an integer from 0 to {MAX_ROUNDS} (refinement rounds after the grid's)",
+        )
         rounds = DEFAULT_ROUNDS
 
-    spacings = _spacings(c, (*path, "min_spacing"), sec.get("min_spacing"), axes or {}, log) \
-        if axes is not None else None
+    spacings = (
+        _spacings(c, (*path, "min_spacing"), sec.get("min_spacing"), axes or {}, log)
+        if axes is not None
+        else None
+    )
 
     initial, add, width, confidence = _seeds(c, path, sec, len(seeds), criterion, precision)
 
@@ -310,38 +407,64 @@ def check_refine(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
         return None
     spec = RefineSpec(
         axes=tuple(RefinedAxis(name, spacings[name], name in log) for name in axes),
-        observable=observable, source=sources[observable], criterion=criterion,
-        patterned_above=None if patterned is None else float(patterned), classes=classes,
-        fraction=(float(fraction[0]), float(fraction[1])), jump=float(jump),
-        rounds=int(rounds), initial=initial, add=add, max_width=width,
-        confidence=confidence)
+        observable=observable,
+        source=sources[observable],
+        criterion=criterion,
+        patterned_above=None if patterned is None else float(patterned),
+        classes=classes,
+        fraction=(float(fraction[0]), float(fraction[1])),
+        jump=float(jump),
+        rounds=int(rounds),
+        initial=initial,
+        add=add,
+        max_width=width,
+        confidence=confidence,
+    )
     # the union grid phase.nc holds (and the most runs) is bounded like a grid
     lines = math.prod(len(d) for d in dims if d.name not in axes)
-    bound = lines * math.prod(points_bound(axes[a.name], a, spec.rounds) for a in spec.axes) \
+    bound = (
+        lines
+        * math.prod(points_bound(axes[a.name], a, spec.rounds) for a in spec.axes)
         * len(seeds)
+    )
     if bound > c.max_runs:
-        c.add((*path, "min_spacing"), f"got {sec.get('min_spacing')!r}: the refined grid may "
-              f"reach {bound} runs; allowed: at most {c.max_runs} (limits.max_runs): a larger "
-              "smallest spacing, fewer rounds or a smaller grid")
+        c.add(
+            (*path, "min_spacing"),
+            f"got {sec.get('min_spacing')!r}: the refined grid may "
+            f"reach {bound} runs; allowed: at most {c.max_runs} (limits.max_runs): a larger "
+            "smallest spacing, fewer rounds or a smaller grid",
+        )
         return None
     return spec
 
 
-def _seeds(c: Checker, path: KeyPath, sec: Mapping[str, Any], n_seeds: int, criterion: str,
-           precision: PrecisionSpec | None) -> tuple[int, int, float, float]:
+def _seeds(
+    c: Checker,
+    path: KeyPath,
+    sec: Mapping[str, Any],
+    n_seeds: int,
+    criterion: str,
+    precision: PrecisionSpec | None,
+) -> tuple[int, int, float, float]:
     """``seeds:`` as (initial, add, max_width, confidence); with a ``precision:`` section its
     ``initial`` and ``add`` (and ``seeds:`` here is refused)."""
     if precision is not None:
         if "seeds" in sec:
-            c.add((*path, "seeds"), "not with a precision: section, whose rules decide the "
-                  "seeds of every point, grid and refined (its initial and add); remove one "
-                  "of the two")
+            c.add(
+                (*path, "seeds"),
+                "not with a precision: section, whose rules decide the "
+                "seeds of every point, grid and refined (its initial and add); remove one "
+                "of the two",
+            )
         return precision.initial, precision.add, DEFAULT_MAX_WIDTH, DEFAULT_CONFIDENCE
     sd = c.mapping((*path, "seeds"), sec.get("seeds"), SEED_KEYS)
     initial = sd.get("initial", n_seeds)
     if not is_int(initial) or not 1 <= initial <= max(n_seeds, 1):
-        c.bad((*path, "seeds", "initial"), initial, f"an integer from 1 to {n_seeds} (the "
-              "campaign's seeds)")
+        c.bad(
+            (*path, "seeds", "initial"),
+            initial,
+            f"an integer from 1 to {n_seeds} (the campaign's seeds)",
+        )
         initial = max(n_seeds, 1)
     add = sd.get("add", initial)
     if not is_int(add) or add < 1:
@@ -349,10 +472,13 @@ def _seeds(c: Checker, path: KeyPath, sec: Mapping[str, Any], n_seeds: int, crit
         add = 1
     width = sd.get("max_width", DEFAULT_MAX_WIDTH)
     if not is_finite_number(width) or not width > 0 or (criterion == "fraction" and width > 1):
-        c.bad((*path, "seeds", "max_width"), width,
-              "a number in (0, 1] (the widest acceptable interval on the patterned fraction)"
-              if criterion == "fraction" else "a number > 0 (decades: the widest acceptable "
-              "interval on the log10 seed mean)")
+        c.bad(
+            (*path, "seeds", "max_width"),
+            width,
+            "a number in (0, 1] (the widest acceptable interval on the patterned fraction)"
+            if criterion == "fraction"
+            else "a number > 0 (decades: the widest acceptable interval on the log10 seed mean)",
+        )
         width = DEFAULT_MAX_WIDTH
     confidence = sd.get("confidence", DEFAULT_CONFIDENCE)
     if not is_finite_number(confidence) or not 0 < confidence < 1:
@@ -371,5 +497,5 @@ def points_bound(values: Sequence[float], axis: RefinedAxis, rounds: int) -> int
         depth = 0
         while depth < rounds and width / 2 ** (depth + 1) >= axis.min_spacing * (1 - 1e-9):
             depth += 1
-        total += 2 ** depth - 1
+        total += 2**depth - 1
     return total

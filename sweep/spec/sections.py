@@ -37,15 +37,19 @@ def read_limits(c: Checker, raw: Any, read: Mapping[str, Any]) -> LimitsSpec:
     lim = c.mapping(("limits",), raw, LIMITS_KEYS)
     max_runs = lim.get("max_runs", DEFAULT_MAX_RUNS)
     if not is_int(max_runs) or max_runs < 1:
-        c.bad(("limits", "max_runs"), max_runs, "an integer >= 1 (the most runs a campaign "
-              "may have)")
+        c.bad(
+            ("limits", "max_runs"), max_runs, "an integer >= 1 (the most runs a campaign may have)"
+        )
         max_runs = DEFAULT_MAX_RUNS
     memory = None
     if lim.get("run_memory") is not None:
         memory = parse_size(lim["run_memory"])
         if memory is None:
-            c.bad(("limits", "run_memory"), lim["run_memory"], "a size such as '8GB' (the "
-                  "most memory one run may need)")
+            c.bad(
+                ("limits", "run_memory"),
+                lim["run_memory"],
+                "a size such as '8GB' (the most memory one run may need)",
+            )
     c.max_runs = int(max_runs)
     return LimitsSpec(max_runs=int(max_runs), run_memory=memory)
 
@@ -53,8 +57,10 @@ def read_limits(c: Checker, raw: Any, read: Mapping[str, Any]) -> LimitsSpec:
 def read_name(c: Checker, raw: Any, read: Mapping[str, Any]) -> str:
     """``name:`` (default: the file's stem); the results go to ``results/<name>/``."""
     path: KeyPath = ("name",)
-    allowed = ("letters, digits, '.', '_' or '-', starting with a letter or digit, at most 100 "
-               "characters (the results go to results/<name>/)")
+    allowed = (
+        "letters, digits, '.', '_' or '-', starting with a letter or digit, at most 100 "
+        "characters (the results go to results/<name>/)"
+    )
     if raw is None:
         c.add(path, f"missing; allowed: {allowed}")
         return "invalid"
@@ -82,15 +88,20 @@ def read_parameters(c: Checker, raw: Any, read: Mapping[str, Any]) -> dict[str, 
 def read_numerics(c: Checker, raw: Any, read: Mapping[str, Any]) -> dict[str, Any]:
     """``numerics:``: base values of numerics fields. With both base sections read, also
     refuses ``parameters:`` that set both ``alpha`` and ``alpha_minus_B``."""
-    numerics = _check_settings(c, raw, "numerics", NUMERICS_TYPES, PARAMETER_TYPES,
-                               "parameters")
+    numerics = _check_settings(c, raw, "numerics", NUMERICS_TYPES, PARAMETER_TYPES, "parameters")
     if AMB in read["parameters"] and "alpha" in read["parameters"]:
         c.add(("parameters", AMB), "set either 'alpha' or 'alpha_minus_B', not both")
     return numerics
 
 
-def _check_settings(c: Checker, raw: Any, section: str, types: Mapping[str, str],
-                    other: Mapping[str, str], other_section: str) -> dict[str, Any]:
+def _check_settings(
+    c: Checker,
+    raw: Any,
+    section: str,
+    types: Mapping[str, str],
+    other: Mapping[str, str],
+    other_section: str,
+) -> dict[str, Any]:
     if raw is None:
         return {}
     if not isinstance(raw, Mapping):
@@ -102,8 +113,11 @@ def _check_settings(c: Checker, raw: Any, section: str, types: Mapping[str, str]
         if key in types:
             out[key] = value
         elif key in other:
-            c.add(path, f"{key!r} is a {other_section} setting, not a {section} one; move it "
-                  f"under '{other_section}:'")
+            c.add(
+                path,
+                f"{key!r} is a {other_section} setting, not a {section} one; move it "
+                f"under '{other_section}:'",
+            )
         else:
             c.unknown(path, key, sorted(types))
     return out
@@ -122,13 +136,19 @@ def read_store(c: Checker, raw: Any, read: Mapping[str, Any]) -> StoreSpec:
     if "snapshot_fields" in store:
         raw_fields = store["snapshot_fields"]
         if not isinstance(raw_fields, Sequence) or isinstance(raw_fields, str):
-            c.bad(("store", "snapshot_fields"), raw_fields,
-                  "a list of field names from " + ", ".join(SNAPSHOT_FIELDS))
+            c.bad(
+                ("store", "snapshot_fields"),
+                raw_fields,
+                "a list of field names from " + ", ".join(SNAPSHOT_FIELDS),
+            )
         else:
             for i, f in enumerate(raw_fields):
                 if f not in SNAPSHOT_FIELDS:
-                    c.bad(("store", "snapshot_fields", i), f, "one of "
-                          + ", ".join(SNAPSHOT_FIELDS) + suggest(str(f), SNAPSHOT_FIELDS))
+                    c.bad(
+                        ("store", "snapshot_fields", i),
+                        f,
+                        "one of " + ", ".join(SNAPSHOT_FIELDS) + suggest(str(f), SNAPSHOT_FIELDS),
+                    )
             fields = tuple(f for f in SNAPSHOT_FIELDS if f in raw_fields)
     dtype = store.get("snapshot_dtype", "float64")
     if dtype not in SNAPSHOT_DTYPES:
@@ -154,8 +174,7 @@ def read_seeds(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[int, ...]
         m = c.mapping(path, raw, ("count", "start"))
         count, start = m.get("count", DEFAULT_SEEDS), m.get("start", 0)
         if not is_int(count) or count < 1 or count > c.max_runs:
-            c.bad((*path, "count"), count, f"an integer from 1 to {c.max_runs} "
-                  "(limits.max_runs)")
+            c.bad((*path, "count"), count, f"an integer from 1 to {c.max_runs} (limits.max_runs)")
             return ()
         if not is_int(start) or start < 0 or start + count > MAX_SEED:
             c.bad((*path, "start"), start, "an integer >= 0")
@@ -203,9 +222,12 @@ def _check_products(c: Checker, raw: Any, kind: str) -> tuple[Product, ...]:
         options: dict[str, Any]
         if isinstance(item, str):
             name, options = item, {}
-        elif (isinstance(item, Mapping) and len(item) == 1
-              and isinstance(next(iter(item)), str)
-              and isinstance(next(iter(item.values())), (Mapping, type(None)))):
+        elif (
+            isinstance(item, Mapping)
+            and len(item) == 1
+            and isinstance(next(iter(item)), str)
+            and isinstance(next(iter(item.values())), (Mapping, type(None)))
+        ):
             name, raw_options = next(iter(item.items()))
             options = dict(raw_options or {})
         else:
@@ -238,9 +260,14 @@ def check_product_options(c: Checker, campaign: Campaign) -> None:
             for key in AXIS_OPTIONS:
                 value = options.get(key)
                 if value is not None and value not in names:
-                    c.bad((*path, key), value, "a sweep axis of this campaign ("
-                          + (", ".join(names) or "none") + ")"
-                          + (suggest(value, names) if isinstance(value, str) else ""))
+                    c.bad(
+                        (*path, key),
+                        value,
+                        "a sweep axis of this campaign ("
+                        + (", ".join(names) or "none")
+                        + ")"
+                        + (suggest(value, names) if isinstance(value, str) else ""),
+                    )
             chosen = [options.get(k) for k in SELECT_OPTIONS]
             snaps = options.get("snapshots")
             if isinstance(snaps, Sequence) and not isinstance(snaps, str):
@@ -250,8 +277,12 @@ def check_product_options(c: Checker, campaign: Campaign) -> None:
                     continue
                 for axis in mapping:
                     if axis not in names:
-                        c.bad((*path,), axis, "sweep axes of this campaign in select / "
-                              "snapshot options (" + (", ".join(names) or "none") + ")")
+                        c.bad(
+                            (*path,),
+                            axis,
+                            "sweep axes of this campaign in select / "
+                            "snapshot options (" + (", ".join(names) or "none") + ")",
+                        )
 
 
 def registry(kind: str) -> Mapping[str, Any]:
@@ -273,5 +304,6 @@ def _registry_problems(kind: str, product: Product) -> list[str]:
         return figure_problems(product.name, product.options)
     from ..analysis.registry import option_problems as fit_problems
 
-    return [] if product.name not in registry("fits") else fit_problems(product.name,
-                                                                        product.options)
+    return (
+        [] if product.name not in registry("fits") else fit_problems(product.name, product.options)
+    )

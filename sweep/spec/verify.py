@@ -51,8 +51,16 @@ from ..campaign import (
 )
 from .checker import Checker, coerce, is_int, is_number, suggest
 
-KEYS = ("variants", "points", "corners", "seeds", "threshold", "patterned_above",
-        "observables", "before")
+KEYS = (
+    "variants",
+    "points",
+    "corners",
+    "seeds",
+    "threshold",
+    "patterned_above",
+    "observables",
+    "before",
+)
 #: Observables a verification compares (phase.nc names) -> the run scalar, and whether it
 #: measures a pattern (compared only where the base or the variant is patterned).
 #: Observables in :data:`ABSOLUTE` are compared by their absolute change (<cos 2 theta> lies
@@ -101,8 +109,9 @@ def variant_name(settings: Mapping[str, Any], seeds: Sequence[int] | None) -> st
     return ", ".join(parts)
 
 
-def resolve(variant: Variant, parameters: Parameters, numerics: Numerics
-            ) -> tuple[Parameters, Numerics]:
+def resolve(
+    variant: Variant, parameters: Parameters, numerics: Numerics
+) -> tuple[Parameters, Numerics]:
     """The model's objects of ``variant`` at a point whose own are given. Raises
     :class:`~model.errors.ParameterError` when the result is not a valid run."""
     p, n = parameters.to_dict(), numerics.to_dict()
@@ -121,8 +130,12 @@ def resolve(variant: Variant, parameters: Parameters, numerics: Numerics
             target[key] = int(round(new)) if kind == "int" else normalise_float(new)
         else:
             target[key] = coerce(kind, value)
-    if (n["resolution"] != numerics.resolution and p.get("initial") == "per_node"
-            and not p.get("texture_resolution") and "texture_resolution" not in variant.settings):
+    if (
+        n["resolution"] != numerics.resolution
+        and p.get("initial") == "per_node"
+        and not p.get("texture_resolution")
+        and "texture_resolution" not in variant.settings
+    ):
         p["texture_resolution"] = numerics.resolution  # the same physical initial field
     params, nums = Parameters.from_dict(p), Numerics.from_dict(n)
     check_compatible(params, nums)
@@ -132,16 +145,32 @@ def resolve(variant: Variant, parameters: Parameters, numerics: Numerics
 def read_verify(c: Checker, raw: Any, read: Mapping[str, Any]) -> VerifySpec | None:
     """The reader of the ``verify:`` section (a row of :data:`sweep.spec.SECTIONS`): needs the
     ``parameters``, ``numerics``, ``sweep`` and ``seeds`` sections read before it."""
-    return check_verify(c, raw, read.get("sweep") or (), read.get("seeds") or (),
-                        read.get("parameters") or {}, read.get("numerics") or {})
+    return check_verify(
+        c,
+        raw,
+        read.get("sweep") or (),
+        read.get("seeds") or (),
+        read.get("parameters") or {},
+        read.get("numerics") or {},
+    )
 
 
-def _variant(c: Checker, path: tuple[str | int, ...], raw: Any, seeds: Sequence[int],
-             parameters: Parameters | None, numerics: Numerics | None) -> Variant | None:
+def _variant(
+    c: Checker,
+    path: tuple[str | int, ...],
+    raw: Any,
+    seeds: Sequence[int],
+    parameters: Parameters | None,
+    numerics: Numerics | None,
+) -> Variant | None:
     names = _names()
     if not isinstance(raw, Mapping) or not raw:
-        c.bad(path, raw, "a mapping of the settings changed (e.g. resolution: x2, "
-              "tolerance: /10, mechanics: finite, seeds: [100, 101])")
+        c.bad(
+            path,
+            raw,
+            "a mapping of the settings changed (e.g. resolution: x2, "
+            "tolerance: /10, mechanics: finite, seeds: [100, 101])",
+        )
         return None
     before = len(c.problems)
     settings: dict[str, Any] = {}
@@ -151,13 +180,21 @@ def _variant(c: Checker, path: tuple[str | int, ...], raw: Any, seeds: Sequence[
             if is_int(value) and 1 <= value <= MAX_SEEDS:
                 start = max(seeds, default=-1) + 1
                 other = tuple(range(start, start + int(value)))
-            elif (isinstance(value, Sequence) and not isinstance(value, str) and value
-                  and len(value) <= MAX_SEEDS
-                  and all(is_int(s) and 0 <= s <= MAX_SEED for s in value)):
+            elif (
+                isinstance(value, Sequence)
+                and not isinstance(value, str)
+                and value
+                and len(value) <= MAX_SEEDS
+                and all(is_int(s) and 0 <= s <= MAX_SEED for s in value)
+            ):
                 other = tuple(int(s) for s in value)
             else:
-                c.bad((*path, "seeds"), value, f"a list of seeds, or a count from 1 to "
-                      f"{MAX_SEEDS} (the seeds after the campaign's)")
+                c.bad(
+                    (*path, "seeds"),
+                    value,
+                    f"a list of seeds, or a count from 1 to "
+                    f"{MAX_SEEDS} (the seeds after the campaign's)",
+                )
             continue
         if not isinstance(key, str) or key not in names:
             c.unknown((*path, str(key)), key, [*names, "seeds"])
@@ -166,8 +203,12 @@ def _variant(c: Checker, path: tuple[str | int, ...], raw: Any, seeds: Sequence[
         f = _factor(value)
         if isinstance(value, str) and value.strip()[:1] in "x*/" and kind in ("int", "float"):
             if f is None:
-                c.bad((*path, key), value, "a value, or a factor of the point's own value: "
-                      "'x2', '/10' (a positive number after x or /)")
+                c.bad(
+                    (*path, key),
+                    value,
+                    "a value, or a factor of the point's own value: "
+                    "'x2', '/10' (a positive number after x or /)",
+                )
             settings[key] = value
             continue
         try:
@@ -181,15 +222,21 @@ def _variant(c: Checker, path: tuple[str | int, ...], raw: Any, seeds: Sequence[
         try:
             resolve(variant, parameters, numerics)
         except ParameterError as e:
-            c.add(path, f"at the campaign's base values: {e.name} = {e.value!r}; allowed: "
-                  f"{e.allowed}")
+            c.add(
+                path, f"at the campaign's base values: {e.name} = {e.value!r}; allowed: {e.allowed}"
+            )
             return None
     return variant
 
 
-def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int],
-                 parameters: Mapping[str, Any], numerics: Mapping[str, Any]
-                 ) -> VerifySpec | None:
+def check_verify(
+    c: Checker,
+    raw: Any,
+    dims: Sequence[Dim],
+    seeds: Sequence[int],
+    parameters: Mapping[str, Any],
+    numerics: Mapping[str, Any],
+) -> VerifySpec | None:
     """The ``verify:`` section as a :class:`VerifySpec`, or ``None`` when there is none (or it
     has problems, which are added to ``c``)."""
     if raw is None:
@@ -208,10 +255,17 @@ def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
 
     raw_variants = sec.get("variants")
     variants: list[Variant] = []
-    if (not isinstance(raw_variants, Sequence) or isinstance(raw_variants, str)
-            or not 1 <= len(raw_variants) <= MAX_VARIANTS):
-        c.bad((*path, "variants"), raw_variants, f"a list of 1 to {MAX_VARIANTS} mappings, "
-              "each the settings one variant changes (e.g. - resolution: x2)")
+    if (
+        not isinstance(raw_variants, Sequence)
+        or isinstance(raw_variants, str)
+        or not 1 <= len(raw_variants) <= MAX_VARIANTS
+    ):
+        c.bad(
+            (*path, "variants"),
+            raw_variants,
+            f"a list of 1 to {MAX_VARIANTS} mappings, "
+            "each the settings one variant changes (e.g. - resolution: x2)",
+        )
     else:
         for i, item in enumerate(raw_variants):
             v = _variant(c, (*path, "variants", i), item, seeds, base_p, base_n)
@@ -225,9 +279,13 @@ def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
     points = sec.get("points", "auto")
     selections: tuple[Mapping[str, Any], ...] | None = None
     if points != "auto":
-        if (not isinstance(points, Sequence) or isinstance(points, str) or not points):
-            c.bad((*path, "points"), points, "auto, or a list of selections ({AXIS: VALUE, "
-                  "...}: every grid point with these values)")
+        if not isinstance(points, Sequence) or isinstance(points, str) or not points:
+            c.bad(
+                (*path, "points"),
+                points,
+                "auto, or a list of selections ({AXIS: VALUE, "
+                "...}: every grid point with these values)",
+            )
         else:
             chosen = []
             for i, sel in enumerate(points):
@@ -242,9 +300,12 @@ def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
                         continue
                     match = [v for v in axes[axis] if same_value(v, value)]
                     if not match:
-                        c.bad((*p_path, axis), value, "a value of the axis: "
-                              + ", ".join(f"{v:g}" if is_number(v) else str(v)
-                                          for v in axes[axis]))
+                        c.bad(
+                            (*p_path, axis),
+                            value,
+                            "a value of the axis: "
+                            + ", ".join(f"{v:g}" if is_number(v) else str(v) for v in axes[axis]),
+                        )
                         continue
                     out[axis] = match[0]
                 chosen.append(out)
@@ -256,8 +317,12 @@ def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
         corners = True
     n = sec.get("seeds", 2)
     if not is_int(n) or not 1 <= n <= max(len(seeds), 1):
-        c.bad((*path, "seeds"), n, f"an integer from 1 to {len(seeds)} (the campaign's first "
-              "seeds run at each sampled point)")
+        c.bad(
+            (*path, "seeds"),
+            n,
+            f"an integer from 1 to {len(seeds)} (the campaign's first "
+            "seeds run at each sampled point)",
+        )
         n = 1
     threshold = sec.get("threshold", 0.05)
     if not is_number(threshold) or not 0 < threshold < 10:
@@ -268,12 +333,24 @@ def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
         c.bad((*path, "patterned_above"), patterned, "a sigma2_S level in (0, 1)")
         patterned = 1e-6
     observables = sec.get("observables", list(DEFAULT_VERIFY_OBSERVABLES))
-    if (not isinstance(observables, Sequence) or isinstance(observables, str) or not observables
-            or any(o not in OBSERVABLES for o in observables)):
-        bad = [o for o in observables if o not in OBSERVABLES] if isinstance(
-            observables, list) else []
-        c.bad((*path, "observables"), observables, "a list of " + ", ".join(OBSERVABLES)
-              + (suggest(str(bad[0]), list(OBSERVABLES)) if bad else ""))
+    if (
+        not isinstance(observables, Sequence)
+        or isinstance(observables, str)
+        or not observables
+        or any(o not in OBSERVABLES for o in observables)
+    ):
+        bad = (
+            [o for o in observables if o not in OBSERVABLES]
+            if isinstance(observables, list)
+            else []
+        )
+        c.bad(
+            (*path, "observables"),
+            observables,
+            "a list of "
+            + ", ".join(OBSERVABLES)
+            + (suggest(str(bad[0]), list(OBSERVABLES)) if bad else ""),
+        )
         observables = ["sigma2_S"]
     before_flag = sec.get("before", False)
     if not isinstance(before_flag, bool):
@@ -281,9 +358,13 @@ def check_verify(c: Checker, raw: Any, dims: Sequence[Dim], seeds: Sequence[int]
         before_flag = False
     if len(c.problems) > before:
         return None
-    return VerifySpec(variants=tuple(variants), points=selections, corners=corners,
-                      seeds=int(n), threshold=float(threshold),
-                      patterned_above=float(patterned),
-                      observables=tuple(dict.fromkeys(str(o) for o in observables)),
-                      before=before_flag)
-
+    return VerifySpec(
+        variants=tuple(variants),
+        points=selections,
+        corners=corners,
+        seeds=int(n),
+        threshold=float(threshold),
+        patterned_above=float(patterned),
+        observables=tuple(dict.fromkeys(str(o) for o in observables)),
+        before=before_flag,
+    )

@@ -24,7 +24,9 @@ class _Loader(yaml.SafeLoader):
 
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"^(?:[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+|[-+]?\.[0-9_]+[eE][-+]?[0-9]+)$"),
+    re.compile(
+        r"^(?:[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+|[-+]?\.[0-9_]+[eE][-+]?[0-9]+)$"
+    ),
     list("-+0123456789."),
 )
 
@@ -104,15 +106,24 @@ def _walk(node: yaml.Node, path: KeyPath, lines: dict[KeyPath, int], dups: list[
             _walk(item, (*path, i), lines, dups)
 
 
-def read_document(text: str, source: str) -> tuple[yaml.Node | None, Any, dict[KeyPath, int],
-                                                   list[KeyPath]]:
+def read_document(
+    text: str, source: str
+) -> tuple[yaml.Node | None, Any, dict[KeyPath, int], list[KeyPath]]:
     """``text`` parsed: its root node (``None`` for an empty document), the document, the line
     of every key path and the key paths written twice in one mapping. Raises
     :class:`CampaignError` for text that is too long, not YAML, nested too deeply, or that
     expands through its aliases to more than :data:`MAX_YAML_NODES` values."""
     if len(text) > MAX_TEXT_BYTES:
-        raise CampaignError(source, [Problem("", f"the file has {len(text)} characters; "
-                                             f"allowed: at most {MAX_TEXT_BYTES}", source)])
+        raise CampaignError(
+            source,
+            [
+                Problem(
+                    "",
+                    f"the file has {len(text)} characters; allowed: at most {MAX_TEXT_BYTES}",
+                    source,
+                )
+            ],
+        )
     try:
         loader = _Loader(text)
         try:
@@ -120,10 +131,17 @@ def read_document(text: str, source: str) -> tuple[yaml.Node | None, Any, dict[K
             if node is not None:
                 size = _expanded_size(node)
                 if size > MAX_YAML_NODES:
-                    raise CampaignError(source, [Problem(
-                        "", f"the YAML expands to more than {MAX_YAML_NODES} values through "
-                        "its aliases (*name); allowed: a campaign without such nesting",
-                        f"{source}:{node.start_mark.line + 1}")])
+                    raise CampaignError(
+                        source,
+                        [
+                            Problem(
+                                "",
+                                f"the YAML expands to more than {MAX_YAML_NODES} values through "
+                                "its aliases (*name); allowed: a campaign without such nesting",
+                                f"{source}:{node.start_mark.line + 1}",
+                            )
+                        ],
+                    )
             doc = loader.construct_document(node) if node is not None else None
         finally:
             loader.dispose()
@@ -133,8 +151,9 @@ def read_document(text: str, source: str) -> tuple[yaml.Node | None, Any, dict[K
         msg = " ".join(str(getattr(e, "problem", None) or e).split())
         raise CampaignError(source, [Problem("", f"not valid YAML: {msg}", where)]) from None
     except RecursionError:
-        raise CampaignError(source, [Problem("", "the YAML is nested too deeply", source)]
-                            ) from None
+        raise CampaignError(
+            source, [Problem("", "the YAML is nested too deeply", source)]
+        ) from None
     lines: dict[KeyPath, int] = {}
     dups: list[KeyPath] = []
     if node is None:
@@ -142,6 +161,7 @@ def read_document(text: str, source: str) -> tuple[yaml.Node | None, Any, dict[K
     try:
         _walk(node, (), lines, dups)
     except RecursionError:
-        raise CampaignError(source, [Problem("", "the YAML is nested too deeply", source)]
-                            ) from None
+        raise CampaignError(
+            source, [Problem("", "the YAML is nested too deeply", source)]
+        ) from None
     return node, doc, lines, dups

@@ -18,5 +18,7 @@ REQUIRED = ("converged", "patterned", "patterned_base", "variant_name", "label",
 
 def stale(missing: list[str]) -> str:
     """Why a verify.nc without the ``missing`` variables cannot be read."""
-    return (f"it has no {', '.join(missing)} (written by another version: rerun nematic "
-            "verify, which rewrites it from the runs)")
+    return (
+        f"it has no {', '.join(missing)} (written by another version: rerun nematic "
+        "verify, which rewrites it from the runs)"
+    )

@@ -48,8 +48,10 @@ class VerifyOutcome:
 
     @property
     def failed(self) -> list[Any]:
-        return [*(self.base.failed if self.base else []),
-                *(self.variants.failed if self.variants else [])]
+        return [
+            *(self.base.failed if self.base else []),
+            *(self.variants.failed if self.variants else []),
+        ]
 
 
 def load_fits_or_none(store: CampaignStore) -> Any:
@@ -77,9 +79,15 @@ def sample_of(campaign: Campaign, store: CampaignStore, *, before: bool = False)
     return plan_sample(campaign, expansion, None if before else load_fits_or_none(store))
 
 
-def run_verification(campaign: Campaign, store: CampaignStore, *, before: bool = False,
-                     events: Any = None, dashboard: bool = False,
-                     say: Callable[[str], None] = print) -> VerifyOutcome:
+def run_verification(
+    campaign: Campaign,
+    store: CampaignStore,
+    *,
+    before: bool = False,
+    events: Any = None,
+    dashboard: bool = False,
+    say: Callable[[str], None] = print,
+) -> VerifyOutcome:
     """Run what the sample needs and write ``verify.nc``; the caller holds the lock."""
     sample = sample_of(campaign, store, before=before)
     outcome = VerifyOutcome(sample)
@@ -90,17 +98,22 @@ def run_verification(campaign: Campaign, store: CampaignStore, *, before: bool =
     base = RunList(campaign, sample.base_list())
     variants = RunList(campaign, sample.variant_list())
     plan_b, plan_v = plan_runs(base, store), plan_runs(variants, vstore)
-    say(f"verify {campaign.name}: {len(sample.points)} points x {len(sample.seeds)} seeds, "
+    say(
+        f"verify {campaign.name}: {len(sample.points)} points x {len(sample.seeds)} seeds, "
         f"{len(sample.variants)} variant(s): {len(base)} base runs ({len(plan_b.todo)} to "
-        f"do), {len(variants)} variant runs ({len(plan_v.todo)} to do) -> {vstore.root}")
+        f"do), {len(variants)} variant runs ({len(plan_v.todo)} to do) -> {vstore.root}"
+    )
     local = campaign.execution.mode == "local"
     if plan_b.todo or plan_v.todo:
         with contextlib.ExitStack() as stack:
             try:
-                link = stack.enter_context(open_cluster(
-                    campaign.execution, dashboard=dashboard, campaign_dir=store.root))
-                for runs, where, plan, attr in ((base, store, plan_b, "base"),
-                                                (variants, vstore, plan_v, "variants")):
+                link = stack.enter_context(
+                    open_cluster(campaign.execution, dashboard=dashboard, campaign_dir=store.root)
+                )
+                for runs, where, plan, attr in (
+                    (base, store, plan_b, "base"),
+                    (variants, vstore, plan_v, "variants"),
+                ):
                     if not plan.todo:
                         continue
                     where.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)

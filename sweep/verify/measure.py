@@ -51,12 +51,15 @@ from . import REQUIRED, VERIFY, stale
 from .sample import Sample, point_label
 
 CONVERGED, CHANGED, NOT_COMPARED, MISSING = 1, 0, -1, -2
-VERDICT_ATTRS = {"flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
-                 "flag_meanings": "missing not_compared changed converged"}
+VERDICT_ATTRS = {
+    "flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
+    "flag_meanings": "missing not_compared changed converged",
+}
 
 
-def _values(runs: Sequence[RunSpec] | None, records: Mapping[str, Record], source: str
-            ) -> tuple[np.ndarray, int]:
+def _values(
+    runs: Sequence[RunSpec] | None, records: Mapping[str, Record], source: str
+) -> tuple[np.ndarray, int]:
     """The runs' values of ``source`` (NaN where missing) and how many runs are ok."""
     if not runs:
         return np.full(0, np.nan), 0
@@ -89,8 +92,9 @@ def relative_change(base: float, value: float) -> float:
     return (value - base) / abs(base)
 
 
-def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
-                   variant_records: Mapping[str, Record]) -> xr.Dataset:
+def verify_dataset(
+    sample: Sample, base_records: Mapping[str, Record], variant_records: Mapping[str, Record]
+) -> xr.Dataset:
     """The verify.nc Dataset of ``sample`` from the records of the campaign (base runs) and
     of its verify folder (variant runs)."""
     spec = sample.spec
@@ -108,31 +112,41 @@ def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
             vals, ok = _values(runs, variant_records, sig_src)
             var_sig[p][v] = vals
             var_frac[p, v] = _fraction(vals, ok, level)
-            complete[p, v] = (runs is not None and ok == len(runs)
-                              and base_sig[p][1] == len(sample.base[p]))
+            complete[p, v] = (
+                runs is not None and ok == len(runs) and base_sig[p][1] == len(sample.base[p])
+            )
     data: dict[str, xr.Variable] = {}
     worst = np.ones((n_p, n_v), dtype=bool)
     for name in spec.observables:
         source, pattern = OBSERVABLES[name]
         geometric = name == "sigma2_S"
 
-        def mean(vals: np.ndarray, sig: np.ndarray, pattern: bool = pattern,
-                 geometric: bool = geometric) -> float:
+        def mean(
+            vals: np.ndarray, sig: np.ndarray, pattern: bool = pattern, geometric: bool = geometric
+        ) -> float:
             # a pattern measure is the mean over the patterned runs only: a relaxed run's
             # sigma2_S (1e-13, at the solver's floor) or lambda (the texture's) is no pattern's
             return seed_mean(vals[sig > level] if pattern else vals, geometric)
 
-        base = np.array([mean(_values(runs, base_records, source)[0], base_sig[p][0])
-                         for p, runs in enumerate(sample.base)])
+        base = np.array(
+            [
+                mean(_values(runs, base_records, source)[0], base_sig[p][0])
+                for p, runs in enumerate(sample.base)
+            ]
+        )
         value = np.full((n_p, n_v), np.nan)
         change = np.full((n_p, n_v), np.nan)
         verdict = np.full((n_p, n_v), MISSING, dtype=np.int8)
         for v in range(n_v):
             for p in range(n_p):
-                value[p, v] = mean(_values(sample.variant_runs[v][p], variant_records,
-                                           source)[0], var_sig[p][v])
-                change[p, v] = (value[p, v] - base[p] if name in ABSOLUTE
-                                else relative_change(base[p], value[p, v]))
+                value[p, v] = mean(
+                    _values(sample.variant_runs[v][p], variant_records, source)[0], var_sig[p][v]
+                )
+                change[p, v] = (
+                    value[p, v] - base[p]
+                    if name in ABSOLUTE
+                    else relative_change(base[p], value[p, v])
+                )
                 if not complete[p, v]:
                     continue
                 if not (math.isfinite(base[p]) and math.isfinite(value[p, v])):
@@ -145,59 +159,104 @@ def verify_dataset(sample: Sample, base_records: Mapping[str, Record],
         worst &= verdict != CHANGED
         long = PHASE_OBSERVABLES[name][1]
         over = " over the patterned runs" if pattern else ""
-        data[f"{name}_base"] = xr.Variable(("point",), base, {
-            "long_name": f"base runs' seed mean{over} of {name}: {long}", "units": "1"})
-        data[name] = xr.Variable(("point", "variant"), value, {
-            "long_name": f"variant runs' seed mean{over} of {name}", "units": "1"})
-        data[f"{name}_change"] = xr.Variable(("point", "variant"), change, {
-            "long_name": f"absolute change of {name}: variant - base" if name in ABSOLUTE
-            else f"relative change of {name}: (variant - base) / |base|", "units": "1"})
-        data[f"{name}_verdict"] = xr.Variable(("point", "variant"), verdict, {
-            "long_name": f"verdict on {name}", **VERDICT_ATTRS})
+        data[f"{name}_base"] = xr.Variable(
+            ("point",),
+            base,
+            {"long_name": f"base runs' seed mean{over} of {name}: {long}", "units": "1"},
+        )
+        data[name] = xr.Variable(
+            ("point", "variant"),
+            value,
+            {"long_name": f"variant runs' seed mean{over} of {name}", "units": "1"},
+        )
+        data[f"{name}_change"] = xr.Variable(
+            ("point", "variant"),
+            change,
+            {
+                "long_name": f"absolute change of {name}: variant - base"
+                if name in ABSOLUTE
+                else f"relative change of {name}: (variant - base) / |base|",
+                "units": "1",
+            },
+        )
+        data[f"{name}_verdict"] = xr.Variable(
+            ("point", "variant"), verdict, {"long_name": f"verdict on {name}", **VERDICT_ATTRS}
+        )
     kept = var_frac == base_frac[:, None]
     converged = np.where(~complete, MISSING, np.where(kept & worst, CONVERGED, CHANGED))
-    data["patterned_base"] = xr.Variable(("point",), base_frac, {
-        "long_name": "fraction of the base runs that patterned (sigma2_S above "
-                     "patterned_above)", "units": "1"})
-    data["patterned"] = xr.Variable(("point", "variant"), var_frac, {
-        "long_name": "fraction of the variant runs that patterned", "units": "1"})
-    data["converged"] = xr.Variable(("point", "variant"), converged.astype(np.int8), {
-        "long_name": "verdict at the point: the patterned fraction kept and no compared "
-                     "observable changed by more than the threshold", **VERDICT_ATTRS})
+    data["patterned_base"] = xr.Variable(
+        ("point",),
+        base_frac,
+        {
+            "long_name": "fraction of the base runs that patterned (sigma2_S above "
+            "patterned_above)",
+            "units": "1",
+        },
+    )
+    data["patterned"] = xr.Variable(
+        ("point", "variant"),
+        var_frac,
+        {"long_name": "fraction of the variant runs that patterned", "units": "1"},
+    )
+    data["converged"] = xr.Variable(
+        ("point", "variant"),
+        converged.astype(np.int8),
+        {
+            "long_name": "verdict at the point: the patterned fraction kept and no compared "
+            "observable changed by more than the threshold",
+            **VERDICT_ATTRS,
+        },
+    )
     coords: dict[str, Any] = {
-        "point": xr.Variable(("point",), np.arange(n_p), {"long_name": "sampled point",
-                                                          "units": "1"}),
-        "variant": xr.Variable(("variant",), np.arange(n_v), {"long_name": "variant",
-                                                              "units": "1"}),
-        "variant_name": xr.Variable(("variant",), np.array([v.name for v in sample.variants]),
-                                    {"long_name": "variant: the settings changed"}),
-        "label": xr.Variable(("point",), np.array([point_label(p) for p in sample.points]),
-                             {"long_name": "the point's swept values"}),
-        "why": xr.Variable(("point",), np.array(sample.why),
-                           {"long_name": "why the point is sampled"}),
+        "point": xr.Variable(
+            ("point",), np.arange(n_p), {"long_name": "sampled point", "units": "1"}
+        ),
+        "variant": xr.Variable(
+            ("variant",), np.arange(n_v), {"long_name": "variant", "units": "1"}
+        ),
+        "variant_name": xr.Variable(
+            ("variant",),
+            np.array([v.name for v in sample.variants]),
+            {"long_name": "variant: the settings changed"},
+        ),
+        "label": xr.Variable(
+            ("point",),
+            np.array([point_label(p) for p in sample.points]),
+            {"long_name": "the point's swept values"},
+        ),
+        "why": xr.Variable(
+            ("point",), np.array(sample.why), {"long_name": "why the point is sampled"}
+        ),
     }
     for axis in sample.campaign.axes:
-        coords[axis.name] = xr.Variable(("point",), np.array(
-            [p.coords[axis.name] for p in sample.points]), coord_attrs(axis.name))
+        coords[axis.name] = xr.Variable(
+            ("point",),
+            np.array([p.coords[axis.name] for p in sample.points]),
+            coord_attrs(axis.name),
+        )
     ds = xr.Dataset(data, coords=coords)
     if sample.transitions:
         _transitions(ds, sample, base_records, variant_records)
-    ds.attrs.update({
-        "Conventions": "CF-1.11",
-        "title": f"verification of campaign {sample.campaign.name}",
-        "campaign": sample.campaign.name,
-        "source": "active-nematic-solids campaign manager (nematic verify)",
-        "code_version": code_version(), "git_commit": git_commit(),
-        "library_versions": library_versions_text(),
-        "created": now_iso(),
-        "history": f"{now_iso()}: {n_p} points x {n_v} variants compared",
-        "verify_spec": json.dumps(spec.to_dict()),
-        "variant_settings": json.dumps({v.name: v.to_dict() for v in sample.variants}),
-        "seeds": ", ".join(str(s) for s in sample.seeds),
-        "threshold": spec.threshold, "patterned_above": spec.patterned_above,
-        "problems": "; ".join(sample.problems),
-        "summary": summary_line(ds),
-    })
+    ds.attrs.update(
+        {
+            "Conventions": "CF-1.11",
+            "title": f"verification of campaign {sample.campaign.name}",
+            "campaign": sample.campaign.name,
+            "source": "active-nematic-solids campaign manager (nematic verify)",
+            "code_version": code_version(),
+            "git_commit": git_commit(),
+            "library_versions": library_versions_text(),
+            "created": now_iso(),
+            "history": f"{now_iso()}: {n_p} points x {n_v} variants compared",
+            "verify_spec": json.dumps(spec.to_dict()),
+            "variant_settings": json.dumps({v.name: v.to_dict() for v in sample.variants}),
+            "seeds": ", ".join(str(s) for s in sample.seeds),
+            "threshold": spec.threshold,
+            "patterned_above": spec.patterned_above,
+            "problems": "; ".join(sample.problems),
+            "summary": summary_line(ds),
+        }
+    )
     return ds
 
 
@@ -209,8 +268,12 @@ def _fraction(sigma2: np.ndarray, ok: int, level: float) -> float:
     return float(np.mean(finite > level))
 
 
-def _transitions(ds: xr.Dataset, sample: Sample, base_records: Mapping[str, Record],
-                 variant_records: Mapping[str, Record]) -> None:
+def _transitions(
+    ds: xr.Dataset,
+    sample: Sample,
+    base_records: Mapping[str, Record],
+    variant_records: Mapping[str, Record],
+) -> None:
     n_t, n_v = len(sample.transitions), len(sample.variants)
     loc_v = np.full((n_t, n_v), np.nan)
     loc_b = np.full(n_t, np.nan)
@@ -218,9 +281,13 @@ def _transitions(ds: xr.Dataset, sample: Sample, base_records: Mapping[str, Reco
         source = PHASE_OBSERVABLES.get(tr.observable, (tr.observable, ""))[0]
         x = [sample.points[tr.below].coords[tr.axis], sample.points[tr.above].coords[tr.axis]]
 
-        def location(runs: Sequence[Sequence[RunSpec] | None],
-                     records: Mapping[str, Record], tr: Any = tr, x: Any = x,
-                     source: str = source) -> float:
+        def location(
+            runs: Sequence[Sequence[RunSpec] | None],
+            records: Mapping[str, Record],
+            tr: Any = tr,
+            x: Any = x,
+            source: str = source,
+        ) -> float:
             if any(r is None for r in runs):
                 return math.nan
             vals = [_values(r, records, source)[0] for r in runs]
@@ -228,39 +295,74 @@ def _transitions(ds: xr.Dataset, sample: Sample, base_records: Mapping[str, Reco
             table = np.full((2, width), np.nan)
             for k, v in enumerate(vals):
                 table[k, : v.size] = v
-            fit = fit_transition(x, table, log=tr.log, min_jump=tr.min_jump, mean=tr.mean,
-                                 n_boot=1)
+            fit = fit_transition(x, table, log=tr.log, min_jump=tr.min_jump, mean=tr.mean, n_boot=1)
             return fit.location
+
         loc_b[t] = location([sample.base[tr.below], sample.base[tr.above]], base_records)
         for v in range(n_v):
-            loc_v[t, v] = location([sample.variant_runs[v][tr.below],
-                                    sample.variant_runs[v][tr.above]], variant_records)
+            loc_v[t, v] = location(
+                [sample.variant_runs[v][tr.below], sample.variant_runs[v][tr.above]],
+                variant_records,
+            )
     lower = np.array([tr.lower for tr in sample.transitions])
     upper = np.array([tr.upper for tr in sample.transitions])
     within = ((loc_v >= lower[:, None]) & (loc_v <= upper[:, None])).astype(np.int8)
-    ds.coords["transition"] = xr.Variable(("transition",), np.arange(n_t), {
-        "long_name": "fitted transition sampled", "units": "1"})
-    ds["transition_fit"] = xr.Variable(("transition",), np.array(
-        [f"{tr.prefix} along {tr.axis}" + "".join(f", {k} = {v:g}" for k, v in tr.where.items())
-         for tr in sample.transitions]), {"long_name": "the fitted transition"})
-    ds["transition_location"] = xr.Variable(("transition",), np.array(
-        [tr.location for tr in sample.transitions]), {"long_name": "the fit's location",
-                                                       "units": "1"})
-    ds["transition_lower"] = xr.Variable(("transition",), lower, {
-        "long_name": "the fit's interval, lower end", "units": "1"})
-    ds["transition_upper"] = xr.Variable(("transition",), upper, {
-        "long_name": "the fit's interval, upper end", "units": "1"})
-    ds["transition_location_base"] = xr.Variable(("transition",), loc_b, {
-        "long_name": "location recomputed on the sampled bracket with the base runs",
-        "units": "1"})
-    ds["transition_location_variant"] = xr.Variable(("transition", "variant"), loc_v, {
-        "long_name": "location recomputed on the sampled bracket with the variant's runs "
-                     "(NaN: no jump between the bracket's points)", "units": "1"})
-    ds["transition_shift"] = xr.Variable(("transition", "variant"), loc_v - loc_b[:, None], {
-        "long_name": "shift of the recomputed location, variant - base", "units": "1"})
-    ds["transition_within"] = xr.Variable(("transition", "variant"), within, {
-        "long_name": "1 when the variant's location lies in the fit's own interval",
-        "flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "outside within"})
+    ds.coords["transition"] = xr.Variable(
+        ("transition",), np.arange(n_t), {"long_name": "fitted transition sampled", "units": "1"}
+    )
+    ds["transition_fit"] = xr.Variable(
+        ("transition",),
+        np.array(
+            [
+                f"{tr.prefix} along {tr.axis}"
+                + "".join(f", {k} = {v:g}" for k, v in tr.where.items())
+                for tr in sample.transitions
+            ]
+        ),
+        {"long_name": "the fitted transition"},
+    )
+    ds["transition_location"] = xr.Variable(
+        ("transition",),
+        np.array([tr.location for tr in sample.transitions]),
+        {"long_name": "the fit's location", "units": "1"},
+    )
+    ds["transition_lower"] = xr.Variable(
+        ("transition",), lower, {"long_name": "the fit's interval, lower end", "units": "1"}
+    )
+    ds["transition_upper"] = xr.Variable(
+        ("transition",), upper, {"long_name": "the fit's interval, upper end", "units": "1"}
+    )
+    ds["transition_location_base"] = xr.Variable(
+        ("transition",),
+        loc_b,
+        {
+            "long_name": "location recomputed on the sampled bracket with the base runs",
+            "units": "1",
+        },
+    )
+    ds["transition_location_variant"] = xr.Variable(
+        ("transition", "variant"),
+        loc_v,
+        {
+            "long_name": "location recomputed on the sampled bracket with the variant's runs "
+            "(NaN: no jump between the bracket's points)",
+            "units": "1",
+        },
+    )
+    ds["transition_shift"] = xr.Variable(
+        ("transition", "variant"),
+        loc_v - loc_b[:, None],
+        {"long_name": "shift of the recomputed location, variant - base", "units": "1"},
+    )
+    ds["transition_within"] = xr.Variable(
+        ("transition", "variant"),
+        within,
+        {
+            "long_name": "1 when the variant's location lies in the fit's own interval",
+            "flag_values": np.array([0, 1], dtype=np.int8),
+            "flag_meanings": "outside within",
+        },
+    )
 
 
 def _pct(x: float, name: str) -> str:
@@ -290,18 +392,26 @@ def summary_line(ds: xr.Dataset, worst: int = 2) -> str:
                 continue
             b, f = float(ds["patterned_base"].values[p]), float(ds["patterned"].values[p, v])
             if b != f:
-                notes.append((math.inf, f"{labels[p]}: the patterned fraction changes from "
-                              f"{b:.2g} to {f:.2g} with {variants[v]}"))
+                notes.append(
+                    (
+                        math.inf,
+                        f"{labels[p]}: the patterned fraction changes from "
+                        f"{b:.2g} to {f:.2g} with {variants[v]}",
+                    )
+                )
                 continue
             best = (-1.0, "")
-            for name in [str(k)[: -len("_verdict")] for k in ds.data_vars
-                         if str(k).endswith("_verdict")]:
+            for name in [
+                str(k)[: -len("_verdict")] for k in ds.data_vars if str(k).endswith("_verdict")
+            ]:
                 if ds[f"{name}_verdict"].values[p, v] == CHANGED:
                     c = float(ds[f"{name}_change"].values[p, v])
                     size = abs(c) if math.isfinite(c) else math.inf
                     if size > best[0]:
-                        best = (size, f"{labels[p]}: {name} changes {_pct(c, name)} with "
-                                f"{variants[v]}")
+                        best = (
+                            size,
+                            f"{labels[p]}: {name} changes {_pct(c, name)} with {variants[v]}",
+                        )
             if best[1]:
                 notes.append(best)
     notes.sort(key=lambda t: -t[0])
@@ -317,15 +427,22 @@ def summary_line(ds: xr.Dataset, worst: int = 2) -> str:
 
 def write_verify(root: Path, ds: xr.Dataset) -> Path:
     path = root / VERIFY
-    text = {name: {"dtype": "S1"} for name in ("variant_name", "label", "why", "transition_fit")
-            if name in ds.variables}
+    text = {
+        name: {"dtype": "S1"}
+        for name in ("variant_name", "label", "why", "transition_fit")
+        if name in ds.variables
+    }
     atomic_to_netcdf(ds, path, text)
     return path
 
 
 #: How a verdict reads in tables.
-VERDICT_TEXT = {CONVERGED: "converged", CHANGED: "CHANGED", NOT_COMPARED: "not compared",
-                MISSING: "missing"}
+VERDICT_TEXT = {
+    CONVERGED: "converged",
+    CHANGED: "CHANGED",
+    NOT_COMPARED: "not compared",
+    MISSING: "missing",
+}
 
 
 def read_verify(root: Path) -> xr.Dataset | None:
@@ -365,9 +482,15 @@ def verdict_rows(ds: xr.Dataset) -> list[dict[str, str]]:
             b, f = float(ds["patterned_base"].values[p]), float(ds["patterned"].values[p, v])
             if b != f and math.isfinite(b) and math.isfinite(f):
                 verdict += f" (patterned fraction {b:.2g} -> {f:.2g})"
-            rows.append({"point": str(ds["label"].values[p]), "why": str(ds["why"].values[p]),
-                         "variant": str(variant), "verdict": verdict,
-                         "changes": ", ".join(changes)})
+            rows.append(
+                {
+                    "point": str(ds["label"].values[p]),
+                    "why": str(ds["why"].values[p]),
+                    "variant": str(variant),
+                    "verdict": verdict,
+                    "changes": ", ".join(changes),
+                }
+            )
     return rows
 
 
@@ -380,9 +503,18 @@ def transition_rows(ds: xr.Dataset) -> list[dict[str, str]]:
         lo, hi = float(ds["transition_lower"].values[t]), float(ds["transition_upper"].values[t])
         for v, variant in enumerate(ds["variant_name"].values):
             loc = float(ds["transition_location_variant"].values[t, v])
-            where = ("no jump in the bracket" if not math.isfinite(loc) else
-                     f"at {loc:g}, " + ("in" if ds["transition_within"].values[t, v]
-                                        else "outside") + f" the fit's interval [{lo:g}, {hi:g}]")
-            rows.append({"transition": str(ds["transition_fit"].values[t]),
-                         "variant": str(variant), "where": where})
+            where = (
+                "no jump in the bracket"
+                if not math.isfinite(loc)
+                else f"at {loc:g}, "
+                + ("in" if ds["transition_within"].values[t, v] else "outside")
+                + f" the fit's interval [{lo:g}, {hi:g}]"
+            )
+            rows.append(
+                {
+                    "transition": str(ds["transition_fit"].values[t]),
+                    "variant": str(variant),
+                    "where": where,
+                }
+            )
     return rows

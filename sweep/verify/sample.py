@@ -87,24 +87,32 @@ class Sample:
 
 
 def point_label(point: GridPoint) -> str:
-    return ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
-                     for k, v in point.coords.items())
+    return ", ".join(
+        f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}" for k, v in point.coords.items()
+    )
 
 
 def _matching(expansion: Expansion, where: Mapping[str, Any]) -> list[int]:
-    return [i for i, p in enumerate(expansion.points)
-            if all(k not in p.coords or same_value(p.coords[k], v) for k, v in where.items())]
+    return [
+        i
+        for i, p in enumerate(expansion.points)
+        if all(k not in p.coords or same_value(p.coords[k], v) for k, v in where.items())
+    ]
 
 
 def corner_points(expansion: Expansion) -> list[int]:
     """The grid points at an end of every dim (2^d of them, fewer for one-value dims)."""
     shape = expansion.campaign.shape
-    return [i for i, p in enumerate(expansion.points)
-            if all(k in (0, n - 1) for k, n in zip(p.index, shape, strict=True))]
+    return [
+        i
+        for i, p in enumerate(expansion.points)
+        if all(k in (0, n - 1) for k, n in zip(p.index, shape, strict=True))
+    ]
 
 
-def fitted_transitions(fits: Any) -> Iterable[tuple[str, str, dict[str, Any], dict[str, float],
-                                                     dict[str, Any]]]:
+def fitted_transitions(
+    fits: Any,
+) -> Iterable[tuple[str, str, dict[str, Any], dict[str, float], dict[str, Any]]]:
     """(prefix, axis, other dims' values, {location, lower, upper, grid_lower, grid_upper},
     the fit's options) of every transition in a fits Dataset with a grid bracket."""
     if fits is None:
@@ -120,16 +128,25 @@ def fitted_transitions(fits: Any) -> Iterable[tuple[str, str, dict[str, Any], di
         lo = fits[name]
         for idx in np.ndindex(*lo.shape):
             sel = dict(zip(lo.dims, idx, strict=True))
-            vals = {k: float(fits[f"{prefix}_{k}"].isel(sel).values)
-                    for k in ("location", "lower", "upper", "grid_lower", "grid_upper")}
+            vals = {
+                k: float(fits[f"{prefix}_{k}"].isel(sel).values)
+                for k in ("location", "lower", "upper", "grid_lower", "grid_upper")
+            }
             if not all(math.isfinite(vals[k]) for k in ("grid_lower", "grid_upper")):
                 continue
             where = {d: fits[d].values[i].item() for d, i in sel.items() if d in fits.coords}
-            yield (prefix, str(axis), where, vals, {
-                "log": bool(int(attrs.get("fit_log", 1))),
-                "min_jump": float(attrs.get("fit_min_jump", 1.0)),
-                "observable": str(attrs.get("fit_observable", "sigma2_S")),
-                "mean": str(attrs.get("fit_mean", "geometric"))})
+            yield (
+                prefix,
+                str(axis),
+                where,
+                vals,
+                {
+                    "log": bool(int(attrs.get("fit_log", 1))),
+                    "min_jump": float(attrs.get("fit_min_jump", 1.0)),
+                    "observable": str(attrs.get("fit_observable", "sigma2_S")),
+                    "mean": str(attrs.get("fit_mean", "geometric")),
+                },
+            )
 
 
 def plan_sample(campaign: Campaign, expansion: Expansion, fits: Any = None) -> Sample:
@@ -139,8 +156,9 @@ def plan_sample(campaign: Campaign, expansion: Expansion, fits: Any = None) -> S
     spec = campaign.verify
     assert spec is not None
     chosen: dict[int, list[str]] = {}
-    transitions: list[tuple[str, str, dict[str, Any], dict[str, float], dict[str, Any], int,
-                            int]] = []
+    transitions: list[
+        tuple[str, str, dict[str, Any], dict[str, float], dict[str, Any], int, int]
+    ] = []
     if spec.points is None:
         for prefix, axis, where, vals, options in fitted_transitions(fits):
             ends = []
@@ -167,26 +185,41 @@ def plan_sample(campaign: Campaign, expansion: Expansion, fits: Any = None) -> S
     for i in order:
         first = i * n_seeds
         base.append([expansion.run(first + k) for k in range(len(seeds))])
-    sample = Sample(campaign, spec, points, [", ".join(chosen[i]) for i in order], seeds, base,
-                    [])
+    sample = Sample(campaign, spec, points, [", ".join(chosen[i]) for i in order], seeds, base, [])
     for variant in spec.variants:
         per_point: list[list[RunSpec] | None] = []
         for point in points:
             try:
                 params, numerics = resolve(variant, point.parameters, point.numerics)
             except ParameterError as e:
-                sample.problems.append(f"variant {variant.name} at {point_label(point)}: "
-                                       f"{e.name} = {e.value!r}; allowed: {e.allowed}")
+                sample.problems.append(
+                    f"variant {variant.name} at {point_label(point)}: "
+                    f"{e.name} = {e.value!r}; allowed: {e.allowed}"
+                )
                 per_point.append(None)
                 continue
             vpoint = GridPoint(point.index, point.coords, params, numerics)
             hasher = PointHasher(params.to_dict(), numerics.to_dict())
             vseeds = variant.seeds if variant.seeds is not None else seeds
-            per_point.append([RunSpec(rid, s, vpoint)
-                              for rid, s in zip(hasher.many(vseeds), vseeds, strict=True)])
+            per_point.append(
+                [
+                    RunSpec(rid, s, vpoint)
+                    for rid, s in zip(hasher.many(vseeds), vseeds, strict=True)
+                ]
+            )
         sample.variant_runs.append(per_point)
     for prefix, axis, where, vals, options, lo, hi in transitions:
-        sample.transitions.append(Transition(
-            prefix, axis, where, vals["location"], vals["lower"], vals["upper"],
-            position[lo], position[hi], **options))
+        sample.transitions.append(
+            Transition(
+                prefix,
+                axis,
+                where,
+                vals["location"],
+                vals["lower"],
+                vals["upper"],
+                position[lo],
+                position[hi],
+                **options,
+            )
+        )
     return sample

@@ -27,8 +27,9 @@ def test_passive_stress_is_energy_derivative(rng):
         for j in range(2):
             E = np.zeros_like(F)
             E[i, j] = h
-            num[i, j] = (cl.energy_density(F + E, Q, M_PASSIVE)
-                         - cl.energy_density(F - E, Q, M_PASSIVE)) / (2 * h)
+            num[i, j] = (
+                cl.energy_density(F + E, Q, M_PASSIVE) - cl.energy_density(F - E, Q, M_PASSIVE)
+            ) / (2 * h)
     # central differences: error ~ h^2 * W''' ~ 1e-11; roundoff ~ 1e-16 / h ~ 1e-10
     np.testing.assert_allclose(P, num, atol=1e-8)
 
@@ -108,8 +109,9 @@ def test_every_compiled_kernel_has_a_numpy_twin_with_its_signature():
     from model.backend import Kernels, kernels
     from model.compiled import kernels as kern
 
-    members = sorted(n for n, v in vars(Kernels).items()
-                     if inspect.isfunction(v) and not n.startswith("_"))
+    members = sorted(
+        n for n, v in vars(Kernels).items() if inspect.isfunction(v) and not n.startswith("_")
+    )
     assert len(members) == 24
     assert sorted(kern.__all__) == sorted(twin.__all__) == members
     for name in members:
@@ -140,9 +142,12 @@ def test_numba_apply_tangent_matches_numpy_reference(rng):
 
     Kp = rng.standard_normal((10, 6, 6))  # packed: the full tangent is its symmetric matrix
     dF = rng.standard_normal((2, 2, 6, 6))
-    np.testing.assert_allclose(apply_tangent_kernel(Kp, dF),
-                               cl.apply_tangent(T.unpack_symmetric(Kp), dF), rtol=1e-14,
-                               atol=1e-14)
+    np.testing.assert_allclose(
+        apply_tangent_kernel(Kp, dF),
+        cl.apply_tangent(T.unpack_symmetric(Kp), dF),
+        rtol=1e-14,
+        atol=1e-14,
+    )
 
 
 @pytest.mark.parametrize("incompressible", [False, True])
@@ -153,15 +158,23 @@ def test_numba_linear_response_matches_numpy_reference(rng, incompressible, B_pr
     from model.parameters import Parameters
 
     g = SpectralGrid(16)
-    mech = LinearMechanics(Parameters(B_prime=B_prime, eps=0.03, alpha=1.3), g,
-                           incompressible=incompressible)
+    mech = LinearMechanics(
+        Parameters(B_prime=B_prime, eps=0.03, alpha=1.3), g, incompressible=incompressible
+    )
     q = 0.2 * rng.standard_normal((2, 16, 16))
     q_hat = g.forward(q)
     QQ_hat = g.forward(2 * (q[0] ** 2 + q[1] ** 2)) if B_prime else None
-    numpy_twin = LinearMechanics(Parameters(B_prime=B_prime, eps=0.03, alpha=1.3), g,
-                                 incompressible=incompressible, backend="numpy")
-    for fast, ref in zip(mech.spectral_response(q_hat, QQ_hat),
-                         numpy_twin.spectral_response(q_hat, QQ_hat), strict=True):
+    numpy_twin = LinearMechanics(
+        Parameters(B_prime=B_prime, eps=0.03, alpha=1.3),
+        g,
+        incompressible=incompressible,
+        backend="numpy",
+    )
+    for fast, ref in zip(
+        mech.spectral_response(q_hat, QQ_hat),
+        numpy_twin.spectral_response(q_hat, QQ_hat),
+        strict=True,
+    ):
         np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
 
 
@@ -178,30 +191,42 @@ def test_numba_pointwise_stepper_kernels_match_numpy(rng):
     for fast, ref in ((L, L_ref), (p1, p1_ref), (p2, p2_ref)):
         np.testing.assert_allclose(fast, ref, rtol=1e-14)
     bulk = A + C * 2 * (q1**2 + q2**2) - 2 * Bp * tr
-    np.testing.assert_allclose(kern.bulk_terms(q1, q2, A, tr, C, 2 * Bp),
-                               np.stack([-bulk * q1, -bulk * q2]), rtol=1e-14)
-    np.testing.assert_allclose(kern.activity_rate(A, tr, zeta, chi, s, tau),
-                               (-zeta * A - chi * tr - s * A**3) / tau, rtol=1e-14, atol=1e-15)
-    np.testing.assert_allclose(kern.jaumann_products(tr, q1, q2),
-                               np.stack([-2 * tr * q2, 2 * tr * q1]), rtol=1e-15)
+    np.testing.assert_allclose(
+        kern.bulk_terms(q1, q2, A, tr, C, 2 * Bp), np.stack([-bulk * q1, -bulk * q2]), rtol=1e-14
+    )
+    np.testing.assert_allclose(
+        kern.activity_rate(A, tr, zeta, chi, s, tau),
+        (-zeta * A - chi * tr - s * A**3) / tau,
+        rtol=1e-14,
+        atol=1e-15,
+    )
+    np.testing.assert_allclose(
+        kern.jaumann_products(tr, q1, q2), np.stack([-2 * tr * q2, 2 * tr * q1]), rtol=1e-15
+    )
     R, grad = rng.standard_normal((2, 8, 8)), rng.standard_normal((2, 2, 8, 8))
     qdot, omega = kern.corotational_rate(R, grad, q1, q2)
     w = 0.5 * (grad[1, 0] - grad[0, 1])
     np.testing.assert_allclose(omega, w, rtol=1e-15)
-    np.testing.assert_allclose(qdot, R + np.stack([-2 * w * q2, 2 * w * q1]), rtol=1e-14,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        qdot, R + np.stack([-2 * w * q2, 2 * w * q1]), rtol=1e-14, atol=1e-15
+    )
     E0, E1, lap1, lap2 = rng.standard_normal((4, 8, 8))
     A0, B, K = -0.3, 1.2, 1e-3
-    H = kern.molecular_field_kernel(q1, q2, A, tr, np.stack([E0, E1]), np.stack([lap1, lap2]),
-                                    A0, C, 2 * Bp, B, K)
+    H = kern.molecular_field_kernel(
+        q1, q2, A, tr, np.stack([E0, E1]), np.stack([lap1, lap2]), A0, C, 2 * Bp, B, K
+    )
     bulk0 = bulk + A0
-    np.testing.assert_allclose(H, np.stack([-bulk0 * q1 + B * E0 + K * lap1,
-                                            -bulk0 * q2 + B * E1 + K * lap2]), rtol=1e-13,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        H,
+        np.stack([-bulk0 * q1 + B * E0 + K * lap1, -bulk0 * q2 + B * E1 + K * lap2]),
+        rtol=1e-13,
+        atol=1e-15,
+    )
     a, b = rng.standard_normal((2, 8, 5)) + 1j * rng.standard_normal((2, 8, 5))
     m1, m2 = rng.standard_normal((2, 8, 5))
-    np.testing.assert_allclose(kern.symbol_combination(a, m1, m2, a, b), a - (m1 * a + m2 * b),
-                               rtol=1e-14)
+    np.testing.assert_allclose(
+        kern.symbol_combination(a, m1, m2, a, b), a - (m1 * a + m2 * b), rtol=1e-14
+    )
 
 
 @pytest.mark.parametrize("complex_", [False, True])
@@ -212,14 +237,19 @@ def test_runge_kutta_stage_kernels_are_the_numpy_expressions(rng, complex_):
     from model.compiled import kernels as kern
 
     shape = (2, 8, 5) if complex_ else (2, 2, 8, 8)
-    x0, v0, v1, v2, v3 = (rng.standard_normal(shape) + (1j * rng.standard_normal(shape)
-                                                       if complex_ else 0.0) for _ in range(5))
+    x0, v0, v1, v2, v3 = (
+        rng.standard_normal(shape) + (1j * rng.standard_normal(shape) if complex_ else 0.0)
+        for _ in range(5)
+    )
     h = 0.37
     np.testing.assert_array_equal(kern.rk_stage(x0, 0.5 * h, v0), x0 + 0.5 * h * v0)
-    np.testing.assert_array_equal(kern.rk4_update(x0, h / 6.0, v0, v1, v2, v3),
-                                  x0 + (h / 6.0) * (v0 + 2.0 * v1 + 2.0 * v2 + v3))
-    np.testing.assert_array_equal(ref.rk4_update(x0, h / 6.0, v0, v1, v2, v3),
-                                  kern.rk4_update(x0, h / 6.0, v0, v1, v2, v3))
+    np.testing.assert_array_equal(
+        kern.rk4_update(x0, h / 6.0, v0, v1, v2, v3),
+        x0 + (h / 6.0) * (v0 + 2.0 * v1 + 2.0 * v2 + v3),
+    )
+    np.testing.assert_array_equal(
+        ref.rk4_update(x0, h / 6.0, v0, v1, v2, v3), kern.rk4_update(x0, h / 6.0, v0, v1, v2, v3)
+    )
 
 
 def test_balance_residual_kernel_matches_numpy_twin(rng):
@@ -249,16 +279,26 @@ def test_numba_finite_strain_kernels_match_numpy_references(rng):
     Q, dQ = T.nematic(q[0], q[1]), T.nematic(d[0], d[1])
     np.testing.assert_allclose(
         kern.first_piola_kernel(F, q[0], q[1], M.kappa, M.B, M.B_prime, M.alpha),
-        cl.first_piola(F, Q, M), rtol=1e-12, atol=1e-13)
+        cl.first_piola(F, Q, M),
+        rtol=1e-12,
+        atol=1e-13,
+    )
     np.testing.assert_allclose(
         kern.q_increment_kernel(F, q[0], q[1], d[0], d[1], M.B, M.B_prime, M.alpha),
-        cl.first_piola_q_increment(F, Q, dQ, M), rtol=1e-12, atol=1e-13)
+        cl.first_piola_q_increment(F, Q, dQ, M),
+        rtol=1e-12,
+        atol=1e-13,
+    )
     K = cl.tangent(F, Q, M)
     E = cl.first_piola_q_increment(F, Q, d[0] * np.eye(2)[:, :, None, None], M)
     G = rng.standard_normal((2, 2, 6, 6))
     omega = 0.5 * (G[1, 0] - G[0, 1])
-    np.testing.assert_allclose(kern.apply_tangent_spin_kernel(T.pack_symmetric(K), G, E),
-                               cl.apply_tangent(K, G) + E * omega, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(
+        kern.apply_tangent_spin_kernel(T.pack_symmetric(K), G, E),
+        cl.apply_tangent(K, G) + E * omega,
+        rtol=1e-12,
+        atol=1e-13,
+    )
 
 
 def test_numba_spectral_kernels_match_numpy_references(rng):
@@ -270,17 +310,24 @@ def test_numba_spectral_kernels_match_numpy_references(rng):
     v = g.forward(rng.standard_normal((2, 16, 16)))
     Th = g.forward(rng.standard_normal((2, 2, 16, 16)))
     np.testing.assert_allclose(kern.grad_hat_kernel(v, g.kx, g.ky), g.grad_hat(v), rtol=1e-15)
-    np.testing.assert_allclose(kern.neg_div_hat_kernel(Th, g.kx, g.ky), -g.div_hat(Th),
-                               rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(
+        kern.neg_div_hat_kernel(Th, g.kx, g.ky), -g.div_hat(Th), rtol=1e-14, atol=1e-12
+    )
     kh, inv_k2 = g.khat, np.where(g.active, 1.0 / np.where(g.active, g.kd2, 1.0), 0.0)
-    np.testing.assert_allclose(kern.green_kernel(v, kh[0], kh[1], inv_k2, 0.7),
-                               twin.green_kernel(v, kh[0], kh[1], inv_k2, 0.7),
-                               rtol=1e-14, atol=1e-16)
+    np.testing.assert_allclose(
+        kern.green_kernel(v, kh[0], kh[1], inv_k2, 0.7),
+        twin.green_kernel(v, kh[0], kh[1], inv_k2, 0.7),
+        rtol=1e-14,
+        atol=1e-16,
+    )
     for name in ("grad_hat_kernel", "neg_div_hat_kernel", "div_hat_kernel"):
         arg = v if name == "grad_hat_kernel" else Th
-        np.testing.assert_allclose(getattr(twin, name)(arg, g.kx, g.ky),
-                                   getattr(kern, name)(arg, g.kx, g.ky), rtol=1e-14,
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            getattr(twin, name)(arg, g.kx, g.ky),
+            getattr(kern, name)(arg, g.kx, g.ky),
+            rtol=1e-14,
+            atol=1e-12,
+        )
 
 
 def test_phi_functions_match_their_integral_definition():
@@ -297,9 +344,16 @@ def test_phi_functions_match_their_integral_definition():
     numpy_phis = phi_functions(z, 3)
     for i, zi in enumerate(z):
         exact = [math.exp(zi)] + [
-            quad(lambda s, k=k, zi=zi: (math.exp((1 - s) * zi) * s ** (k - 1)
-                                        / math.factorial(k - 1)),
-                 0, 1, epsabs=0, epsrel=1e-13, limit=200)[0] for k in (1, 2, 3)]
+            quad(
+                lambda s, k=k, zi=zi: math.exp((1 - s) * zi) * s ** (k - 1) / math.factorial(k - 1),
+                0,
+                1,
+                epsabs=0,
+                epsrel=1e-13,
+                limit=200,
+            )[0]
+            for k in (1, 2, 3)
+        ]
         np.testing.assert_allclose([p[i] for p in numpy_phis], exact, rtol=1e-11)
         np.testing.assert_allclose(etd._phi0123(zi), exact, rtol=1e-11)
 
@@ -334,10 +388,10 @@ def test_numba_strain_measures_and_divergence_match_numpy_references(rng):
 
     F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 8, 8))
     P = rng.standard_normal((2, 2, 8, 8))
-    for fast, ref in zip(strain_measures_kernel(F, P), strain_measures_twin(F, P),
-                         strict=True):
+    for fast, ref in zip(strain_measures_kernel(F, P), strain_measures_twin(F, P), strict=True):
         np.testing.assert_allclose(fast, ref, rtol=1e-13, atol=1e-14)
     g = SpectralGrid(8)
     T_hat = g.forward(P)
-    np.testing.assert_allclose(div_hat_kernel(T_hat, g.kx, g.ky), g.div_hat(T_hat),
-                               rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(
+        div_hat_kernel(T_hat, g.kx, g.ky), g.div_hat(T_hat), rtol=1e-14, atol=1e-14
+    )

@@ -29,10 +29,18 @@ def _final(ds):
     return np.stack([ds[k].values[-1] for k in ("q1", "q2", "A")])
 
 
-@pytest.mark.parametrize(("mechanics", "incompressible", "compiled", "B_prime"), [
-    ("linear", False, True, 0.1), ("linear", False, True, 0.0), ("linear", True, True, 0.1),
-    ("linear", False, False, 0.1), ("linear", True, False, 0.1), ("finite", False, True, 0.1),
-    ("finite", False, False, 0.1)])
+@pytest.mark.parametrize(
+    ("mechanics", "incompressible", "compiled", "B_prime"),
+    [
+        ("linear", False, True, 0.1),
+        ("linear", False, True, 0.0),
+        ("linear", True, True, 0.1),
+        ("linear", False, False, 0.1),
+        ("linear", True, False, 0.1),
+        ("finite", False, True, 0.1),
+        ("finite", False, False, 0.1),
+    ],
+)
 def test_fast_split_rate_equals_numpy_reference(mechanics, incompressible, compiled, B_prime):
     """ETDRK2's L u + N(u) is the PDE's readable ``evolution_rate`` (different code paths):
     both the compiled paths (native FFTW: the whole linear right-hand side,
@@ -42,8 +50,14 @@ def test_fast_split_rate_equals_numpy_reference(mechanics, incompressible, compi
         pytest.skip("native FFTW not available")
     linear = mechanics == "linear"
     p = SMALL.replace(eps=0.03, B_prime=B_prime, alpha_minus_B=1.5 if linear else 1.0)
-    num = Numerics(resolution=32, mechanics=mechanics, spin_tol=1e-12, newton_tol=1e-12,
-                   incompressible=incompressible, backend="compiled" if compiled else "numpy")
+    num = Numerics(
+        resolution=32,
+        mechanics=mechanics,
+        spin_tol=1e-12,
+        newton_tol=1e-12,
+        incompressible=incompressible,
+        backend="compiled" if compiled else "numpy",
+    )
     eq = ActiveNematicPDE(p, num)
     state = make_state(*initial_fields(p, 32, seed=4))
     if linear:
@@ -57,16 +71,16 @@ def test_fast_split_rate_equals_numpy_reference(mechanics, incompressible, compi
     np.testing.assert_allclose(fast, ref, atol=1e-9 * np.abs(ref).max())
 
 
-@pytest.mark.parametrize(("mechanics", "scheme"), [
-    ("linear", "etdrk4"), ("finite", "etdrk4"), ("finite", "etdrk2")])
+@pytest.mark.parametrize(
+    ("mechanics", "scheme"), [("linear", "etdrk4"), ("finite", "etdrk4"), ("finite", "etdrk2")]
+)
 def test_numpy_backend_runs_the_same_trajectory(mechanics, scheme):
     """A whole adaptive run with ``backend = "numpy"`` (the readable references) takes the
     same steps to the same state as the compiled one (rounding apart)."""
     if not HAVE_FFTW:
         pytest.skip("native FFTW not available: both backends are the numpy path")
     p = SMALL.replace(alpha_minus_B=1.0, eps=0.02)
-    num = Numerics(resolution=32, t_final=5.0, save_every=2.5, mechanics=mechanics,
-                   scheme=scheme)
+    num = Numerics(resolution=32, t_final=5.0, save_every=2.5, mechanics=mechanics, scheme=scheme)
     ours, ref = run(p, num, 3), run(p, num.replace(backend="numpy"), 3)
     assert ours.attrs["status"] == ref.attrs["status"] == "ok"
     np.testing.assert_array_equal(ours["steps"].values, ref["steps"].values)
@@ -86,44 +100,72 @@ def test_numpy_backend_runs_no_compiled_code():
         "    ds = run(p, Numerics(resolution=16, t_final=1.0, save_every=0.5, mechanics=mech,\n"
         "                         backend='numpy'), 0)\n"
         "    assert ds.attrs['status'] == 'ok'\n"
-        "print(json.dumps(compile_counts()))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=600, check=True).stdout
+        "print(json.dumps(compile_counts()))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True
+    ).stdout
     assert json.loads(out.strip().splitlines()[-1]) == {"compiled": 0, "loaded": 0}
 
 
-@pytest.mark.parametrize(("solver", "dt", "atol"), [
-    (ETDRK2Solver, 0.005, 5e-5),  # global error ~ C dt^2 ~ 1.3e-5 here (5e-5 at dt = 0.01)
-    (ETDRK4Solver, 0.05, 5e-6),  # global error ~ C dt^4 (measured 1e-6 at dt = 0.05)
-])
+@pytest.mark.parametrize(
+    ("solver", "dt", "atol"),
+    [
+        (ETDRK2Solver, 0.005, 5e-5),  # global error ~ C dt^2 ~ 1.3e-5 here (5e-5 at dt = 0.01)
+        (ETDRK4Solver, 0.05, 5e-6),  # global error ~ C dt^4 (measured 1e-6 at dt = 0.05)
+    ],
+)
 def test_pypde_explicit_solver_runs_the_pde_class_and_agrees(solver, dt, atol):
     """py-pde's own adaptive Runge-Kutta on the same PDE class reaches the same state."""
     p = SMALL
     num = Numerics(resolution=32, mechanics="linear", spin_tol=1e-12)
     eq = ActiveNematicPDE(p, num)
     state = make_state(*initial_fields(p, 32, seed=1))
-    theirs = eq.solve(state.copy(), t_range=1.0, dt=1e-3, solver="runge-kutta",
-                      adaptive=True, tolerance=1e-7, backend="numpy", tracker=None)
-    ours = eq.solve(state.copy(), t_range=1.0, dt=dt, solver=solver, adaptive=False,
-                    tracker=None)
+    theirs = eq.solve(
+        state.copy(),
+        t_range=1.0,
+        dt=1e-3,
+        solver="runge-kutta",
+        adaptive=True,
+        tolerance=1e-7,
+        backend="numpy",
+        tracker=None,
+    )
+    ours = eq.solve(state.copy(), t_range=1.0, dt=dt, solver=solver, adaptive=False, tracker=None)
     assert isinstance(ours, FieldCollection)
     np.testing.assert_allclose(ours.data, theirs.data, atol=atol)
 
 
-@pytest.mark.parametrize(("scheme", "dts", "order"), [
-    ("etdrk2", (0.08, 0.04, 0.02), 1.8),
-    # measured 4.06, 3.86 (linear), 4.19, 4.14 (finite, integrated), 3.83, 3.89 (equilibrium)
-    ("etdrk4", (0.1, 0.05, 0.025), 3.5),
-])
-@pytest.mark.parametrize(("mechanics", "displacement"), [
-    ("linear", "integrated"),
-    pytest.param("finite", "integrated", marks=pytest.mark.slow),
-    pytest.param("finite", "equilibrium", marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    ("scheme", "dts", "order"),
+    [
+        ("etdrk2", (0.08, 0.04, 0.02), 1.8),
+        # measured 4.06, 3.86 (linear), 4.19, 4.14 (finite, integrated), 3.83, 3.89 (equilibrium)
+        ("etdrk4", (0.1, 0.05, 0.025), 3.5),
+    ],
+)
+@pytest.mark.parametrize(
+    ("mechanics", "displacement"),
+    [
+        ("linear", "integrated"),
+        pytest.param("finite", "integrated", marks=pytest.mark.slow),
+        pytest.param("finite", "equilibrium", marks=pytest.mark.slow),
+    ],
+)
 def test_time_step_convergence_order(mechanics, displacement, scheme, dts, order):
     """The orders of both schemes, for finite strain with the displacement integrated with
     the state (projected once per step) and with force balance solved at every stage."""
-    num = Numerics(resolution=32, t_final=4, adaptive=False, mechanics=mechanics, scheme=scheme,
-                   save_every=4, spin_tol=1e-12, newton_tol=1e-12, displacement=displacement)
+    num = Numerics(
+        resolution=32,
+        t_final=4,
+        adaptive=False,
+        mechanics=mechanics,
+        scheme=scheme,
+        save_every=4,
+        spin_tol=1e-12,
+        newton_tol=1e-12,
+        displacement=displacement,
+    )
     ref = _final(run(SMALL, num.replace(dt=0.005), 2))
     errs = [np.abs(_final(run(SMALL, num.replace(dt=dt), 2)) - ref).max() for dt in dts]
     orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
@@ -160,8 +202,10 @@ def test_adaptive_error_control_tracks_the_tolerance():
     """Tightening the tolerance 10x reduces the error of sigma2_S (to a fine reference)."""
     num = Numerics(resolution=32, t_final=10, save_every=10, mechanics="linear")
     ref = run(SMALL, num.replace(adaptive=False, dt=0.005), 1)["sigma2_S"].values[-1]
-    errors = [abs(run(SMALL, num.replace(tolerance=tol), 1)["sigma2_S"].values[-1] - ref)
-              for tol in (1e-2, 1e-3, 1e-4)]
+    errors = [
+        abs(run(SMALL, num.replace(tolerance=tol), 1)["sigma2_S"].values[-1] - ref)
+        for tol in (1e-2, 1e-3, 1e-4)
+    ]
     assert errors[2] < errors[1] < errors[0]
     assert errors[2] < 1e-3 * ref
 
@@ -169,8 +213,9 @@ def test_adaptive_error_control_tracks_the_tolerance():
 @pytest.mark.parametrize("mechanics", ["linear", "finite"])
 def test_passive_free_energy_never_increases(mechanics):
     """alpha = 0, chi = 0 (A stays 0): Eq. (4) is a gradient flow of Eq. (1)."""
-    p = Parameters(alpha=0.0, chi=0.0, A0=-0.2, K=1e-3, S0=0.3, B=0.5, B_prime=0.1,
-                   eps=0.02, noise_modes=4)
+    p = Parameters(
+        alpha=0.0, chi=0.0, A0=-0.2, K=1e-3, S0=0.3, B=0.5, B_prime=0.1, eps=0.02, noise_modes=4
+    )
     ds = run(p, Numerics(resolution=32, t_final=20, save_every=0.5, mechanics=mechanics), 3)
     assert ds.attrs["status"] == "ok"
     E = ds["free_energy"].values
@@ -183,16 +228,26 @@ def test_passive_free_energy_never_increases(mechanics):
 def test_rotating_the_initial_state_rotates_the_result(mechanics):
     """X -> R X with R the 90-degree rotation: Q -> R Q R^T (q -> -q), eps -> -eps."""
     p = SMALL.replace(eps=0.03)
-    num = Numerics(resolution=32, t_final=3, save_every=3, dt=0.05, adaptive=False,
-                   mechanics=mechanics, spin_tol=1e-12, newton_tol=1e-12)
+    num = Numerics(
+        resolution=32,
+        t_final=3,
+        save_every=3,
+        dt=0.05,
+        adaptive=False,
+        mechanics=mechanics,
+        spin_tol=1e-12,
+        newton_tol=1e-12,
+    )
     q1, q2, A = initial_fields(p, 32, seed=7)
     rot = [-np.rot90(q1), -np.rot90(q2), np.rot90(A)]
     eq_a = ActiveNematicPDE(p, num)
     eq_b = ActiveNematicPDE(p.replace(eps=-0.03), num)
-    a = eq_a.solve(make_state(q1, q2, A), t_range=3, dt=0.05, solver=ETDRK2Solver,
-                   adaptive=False, tracker=None)
-    b = eq_b.solve(make_state(*rot), t_range=3, dt=0.05, solver=ETDRK2Solver,
-                   adaptive=False, tracker=None)
+    a = eq_a.solve(
+        make_state(q1, q2, A), t_range=3, dt=0.05, solver=ETDRK2Solver, adaptive=False, tracker=None
+    )
+    b = eq_b.solve(
+        make_state(*rot), t_range=3, dt=0.05, solver=ETDRK2Solver, adaptive=False, tracker=None
+    )
     expected = np.stack([-np.rot90(a.data[0]), -np.rot90(a.data[1]), np.rot90(a.data[2])])
     assert np.abs(a.data).max() > 0.1  # something happened
     np.testing.assert_allclose(b.data, expected, atol=1e-9)
@@ -212,14 +267,20 @@ def test_bitwise_identical_across_processes():
     import subprocess
     import sys
 
-    code = ("import hashlib; from model.parameters import Parameters, Numerics; "
-            "from model.simulate import run; "
-            "ds = run(Parameters(noise_modes=6, K=1e-3, S0=0.2), Numerics(resolution=32, "
-            "t_final=3, save_every=3), 5); "
-            "print(hashlib.sha256(ds['q1'].values.tobytes() + ds['A'].values.tobytes())"
-            ".hexdigest())")
-    digests = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                              check=True).stdout.strip() for _ in range(2)}
+    code = (
+        "import hashlib; from model.parameters import Parameters, Numerics; "
+        "from model.simulate import run; "
+        "ds = run(Parameters(noise_modes=6, K=1e-3, S0=0.2), Numerics(resolution=32, "
+        "t_final=3, save_every=3), 5); "
+        "print(hashlib.sha256(ds['q1'].values.tobytes() + ds['A'].values.tobytes())"
+        ".hexdigest())"
+    )
+    digests = {
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        for _ in range(2)
+    }
     assert len(digests) == 1
 
 
@@ -229,8 +290,9 @@ def test_initial_field_is_resolution_independent():
     for N in (16, 40, 64):
         x = (np.arange(N) + 0.5) / N
         X, Y = np.meshgrid(x, x, indexing="ij")
-        direct = sum(ck * np.exp(2j * np.pi * (nk * X + mk * Y))
-                     for nk, mk, ck in zip(n, m, c, strict=True))
+        direct = sum(
+            ck * np.exp(2j * np.pi * (nk * X + mk * Y)) for nk, mk, ck in zip(n, m, c, strict=True)
+        )
         np.testing.assert_allclose(band_limited_field(5, 6, N), direct, atol=1e-12)
     q1, q2, A = initial_fields(Parameters(S0=0.1, noise_modes=6), 64, 5)
     np.testing.assert_allclose(np.hypot(q1, q2), 0.1, rtol=1e-12)  # homogeneous S0

@@ -20,8 +20,12 @@ from sweep.spec import parse_campaign
 from sweep.store import record_from_dataset
 
 PARAMS = Parameters.from_dict({"alpha_minus_B": 1.0, "noise_modes": 8})
-BASE: dict[str, Any] = {"resolution": 32, "t_final": 100.0, "save_every": 1.0,
-                        "mechanics": "linear"}
+BASE: dict[str, Any] = {
+    "resolution": 32,
+    "t_final": 100.0,
+    "save_every": 1.0,
+    "mechanics": "linear",
+}
 
 
 @pytest.fixture(scope="module")
@@ -29,8 +33,7 @@ def pair():
     """The same patterned run (32^2, linear, alpha - B = 1) to t = 100 and with early stop
     (2 % over 10 tau)."""
     full = run(PARAMS, Numerics.from_dict(BASE), 0)
-    early = run(PARAMS, Numerics.from_dict({**BASE, "steady_tol": 0.02,
-                                          "steady_window": 10.0}), 0)
+    early = run(PARAMS, Numerics.from_dict({**BASE, "steady_tol": 0.02, "steady_window": 10.0}), 0)
     return full, early
 
 
@@ -67,8 +70,11 @@ def test_a_steady_run_stops_early_and_says_so(pair):
     def steady_at(t: float) -> bool:
         now = full.sel(t=t)
         then = full.sel(t=t - 10.0)
-        return all(abs(float(now[k]) - float(then[k]))
-                   <= 0.02 * max(abs(float(now[k])), abs(float(then[k]))) for k in STEADY)
+        return all(
+            abs(float(now[k]) - float(then[k]))
+            <= 0.02 * max(abs(float(now[k])), abs(float(then[k])))
+            for k in STEADY
+        )
 
     assert steady_at(t_stop)
     assert not any(steady_at(float(t)) for t in full.t.values if 10.0 <= t < t_stop)
@@ -81,20 +87,25 @@ def test_the_record_and_so_phase_nc_carry_the_early_stop(pair):
     assert rec["scalars"]["t_stopped"] == float(early.t_stopped)
 
 
-@pytest.mark.parametrize(("changes", "words"), [
-    ({"steady_tol": -0.1}, "a number >= 0"),
-    ({"steady_tol": 0.01, "steady_window": 0.5}, "at least save_every (1.0)"),
-    ({"steady_tol": 0.01, "steady_window": 100.0}, "below t_final (100.0)"),
-    ({"steady_window": 0.0}, "a number > 0"),
-])
+@pytest.mark.parametrize(
+    ("changes", "words"),
+    [
+        ({"steady_tol": -0.1}, "a number >= 0"),
+        ({"steady_tol": 0.01, "steady_window": 0.5}, "at least save_every (1.0)"),
+        ({"steady_tol": 0.01, "steady_window": 100.0}, "below t_final (100.0)"),
+        ({"steady_window": 0.0}, "a number > 0"),
+    ],
+)
 def test_bad_early_stop_settings_are_refused(changes, words):
     with pytest.raises(ParameterError, match=words.replace("(", r"\(").replace(")", r"\)")):
         Numerics.from_dict({**BASE, **changes})
 
 
 def test_early_stop_in_a_campaign_is_checked_like_any_numerics():
-    text = ("name: c\nnumerics: {resolution: 128, t_final: 10, save_every: 1, "
-            "steady_tol: 0.01, steady_window: 20}\nsweep: {axes: {alpha_minus_B: [0.5, 1.0]}}\n")
+    text = (
+        "name: c\nnumerics: {resolution: 128, t_final: 10, save_every: 1, "
+        "steady_tol: 0.01, steady_window: 20}\nsweep: {axes: {alpha_minus_B: [0.5, 1.0]}}\n"
+    )
     with pytest.raises(CampaignError, match="numerics.steady_window"):
         parse_campaign(text, "c.yaml")
     ok = parse_campaign(text.replace("steady_window: 20", "steady_window: 5"), "c.yaml")

@@ -17,8 +17,7 @@ from model.solver import ETDRK4Solver
 
 OBSERVABLES = ("sigma2_S", "cos2theta", "lambda")
 #: the reference: force balance solved at every stage, every tolerance tight
-TIGHT = {"displacement": "equilibrium", "tolerance": 1e-4, "spin_tol": 1e-9,
-         "newton_tol": 1e-10}
+TIGHT = {"displacement": "equilibrium", "tolerance": 1e-4, "spin_tol": 1e-9, "newton_tol": 1e-10}
 
 
 def _final(ds) -> dict[str, float]:
@@ -80,9 +79,11 @@ def test_displacement_error_counts_by_its_strain():
         q_hat = g.forward(u[:2])
         zero_q = np.zeros_like(q_hat)
         grad = g.inverse(g.grad_hat(g.forward(field)))  # the strain of the error, (2, 2, n, n)
-        _, err = solver._finish(u, q_hat, q_hat, u[2], zero_q, u[2],
-                                (g.forward(field), grad), grad)
-        expected = (2 * np.pi * d * np.abs(np.cos(2 * np.pi * g.x)).max() if norm == "max"
-                    else 2 * np.pi * d / np.sqrt(2))
+        _, err = solver._finish(u, q_hat, q_hat, u[2], zero_q, u[2], (g.forward(field), grad), grad)
+        expected = (
+            2 * np.pi * d * np.abs(np.cos(2 * np.pi * g.x)).max()
+            if norm == "max"
+            else 2 * np.pi * d / np.sqrt(2)
+        )
         assert err == pytest.approx(expected, rel=1e-9)
         assert solver._pending_disp is not None  # kept for the projection

@@ -19,7 +19,7 @@ def _misaligned(shape, dtype):
     size = int(np.prod(shape)) * dtype.itemsize
     raw = np.empty(size + 128, dtype=np.uint8)
     off = (-raw.ctypes.data) % 64 + 8
-    out = raw[off:off + size].view(dtype).reshape(shape)
+    out = raw[off : off + size].view(dtype).reshape(shape)
     assert out.ctypes.data % 16 == 8
     return out
 
@@ -74,8 +74,11 @@ def test_irfft_through_a_scratch_even_the_input_itself(rng):
     f, i = fftw_native.plans(n)
     a = rng.standard_normal((n, n))
     spec = scipy.fft.rfft2(a)
-    for scratch in (fftw_native.aligned_empty(spec.shape, complex),
-                    _misaligned(spec.shape, complex), "self"):
+    for scratch in (
+        fftw_native.aligned_empty(spec.shape, complex),
+        _misaligned(spec.shape, complex),
+        "self",
+    ):
         src = spec.copy()
         out = np.empty((n, n))
         fftw_native.irfft2_via(i, src, out, src if isinstance(scratch, str) else scratch)
@@ -89,8 +92,13 @@ def _run(code: str, env: dict[str, str]) -> str:
     import subprocess
     import sys
 
-    return subprocess.run([sys.executable, "-c", code], env={**os.environ, **env}, check=True,
-                          capture_output=True, text=True).stdout.strip()
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, **env},
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
 
 
 _TRANSFORM = """
@@ -110,8 +118,11 @@ def test_shipped_wisdom_plans_are_the_same_in_every_process(tmp_path):
     it without timing: their transforms are bitwise identical; a size the wisdom does not hold
     gets FFTW_ESTIMATE's plan (also deterministic)."""
     wisdom = tmp_path / "wisdom.txt"
-    _run(f"from model.compiled import fftw as fx; open({str(wisdom)!r}, 'w').write("
-         "fx.patient_wisdom([16]))", {"NEMATIC_FFTW_WISDOM": ""})
+    _run(
+        f"from model.compiled import fftw as fx; open({str(wisdom)!r}, 'w').write("
+        "fx.patient_wisdom([16]))",
+        {"NEMATIC_FFTW_WISDOM": ""},
+    )
     env = {"NEMATIC_FFTW_WISDOM": str(wisdom)}
     one, two = (_run(_TRANSFORM.format(n=16), env) for _ in range(2))
     assert one == two

@@ -59,8 +59,8 @@ def test_the_vectorised_sums_do_not_depend_on_alignment(rng):
     n = a.size
     for offset in range(8):  # complex128 views starting 0, 16, ..., 112 bytes into a buffer
         buf = np.empty(2 * n + 16, dtype=complex)
-        a2 = buf[offset:offset + n].reshape(shape)
-        b2 = buf[n + 8 + offset:n + 8 + offset + n].reshape(shape)
+        a2 = buf[offset : offset + n].reshape(shape)
+        b2 = buf[n + 8 + offset : n + 8 + offset + n].reshape(shape)
         a2[...], b2[...] = a, b
         assert ck.weighted_inner(a2, b2, w) == ref
         assert ck.axpy_inner(a2, 0.3, b2, a2, w) == ref_norm
@@ -77,8 +77,9 @@ def test_mgs_column_is_modified_gram_schmidt(shape, rng):
             H = np.zeros((k + 2, k + 1))
             ck.mgs_column(V, v, H, i - 1, w)
         ck.scaled(V[i], v, np.sqrt(ck.weighted_inner(v, v, w)))
-    gram = np.array([[ck.weighted_inner(V[i], V[j], w) for j in range(k + 1)]
-                     for i in range(k + 1)])
+    gram = np.array(
+        [[ck.weighted_inner(V[i], V[j], w) for j in range(k + 1)] for i in range(k + 1)]
+    )
     np.testing.assert_allclose(gram, np.eye(k + 1), atol=1e-12)
     wv = _spectra(rng, shape)
     plain, H_plain = wv.copy(), np.zeros((k + 2, k + 1))
@@ -112,15 +113,17 @@ def test_gmres_from_zero_needs_no_operator_application_for_its_residual(rng):
     solution = np.linalg.solve(A, b)
     for x0 in (np.zeros(n), solution + 0.1 * rng.standard_normal(n)):
         calls.clear()
-        x, it, status, Lx = krylov.gmres_aux(op, b, x0, lambda r: r, np.dot, rtol=1e-10,
-                                             maxiter=100)
+        x, it, status, Lx = krylov.gmres_aux(
+            op, b, x0, lambda r: r, np.dot, rtol=1e-10, maxiter=100
+        )
         assert status == "ok"
         np.testing.assert_allclose(x, solution, atol=1e-8)
         np.testing.assert_allclose(Lx, L @ x, atol=1e-8)
         assert len(calls) == it + (0 if not np.any(x0) else 1)
     calls.clear()
-    x, it, status, Lx = krylov.gmres_aux(op, np.zeros(n), np.zeros(n), lambda r: r, np.dot,
-                                         rtol=1e-10, maxiter=100)
+    x, it, status, Lx = krylov.gmres_aux(
+        op, np.zeros(n), np.zeros(n), lambda r: r, np.dot, rtol=1e-10, maxiter=100
+    )
     assert (it, status) == (0, "ok")
     assert not np.any(x)
     assert Lx.shape == (2,)
@@ -146,17 +149,27 @@ def test_compiled_spin_gmres_from_zero_meets_its_tolerance(rng):
     V, LZ = fast_linear.workspace(n)
     # (numba's Dispatcher type does not carry the compiled function's signature)
     x, j, its, ok, nop = fast_linear.spin_gmres(  # type: ignore[call-arg, misc]
-        b, np.zeros_like(b), q1, q2, m1, m2, w, *g.fft.plans, 1e-6, 100, V, LZ)
+        b, np.zeros_like(b), q1, q2, m1, m2, w, *g.fft.plans, 1e-6, 100, V, LZ
+    )
     assert ok
     assert its > 2
     assert nop == its  # no application for the zero start's residual
     Ax, jx = np.empty_like(b), np.empty((2,) + b.shape, complex)
     fast_linear._spin_operator(  # type: ignore[call-arg, misc]
-        x, q1, q2, m1, m2, *g.fft.plans, np.empty((n, n)), np.empty((2, n, n)),
-        fftw_native.aligned_empty(b.shape, complex), Ax, jx)
+        x,
+        q1,
+        q2,
+        m1,
+        m2,
+        *g.fft.plans,
+        np.empty((n, n)),
+        np.empty((2, n, n)),
+        fftw_native.aligned_empty(b.shape, complex),
+        Ax,
+        jx,
+    )
     r = b - Ax
-    assert np.sqrt(ck.weighted_inner(r, r, w)) <= 1.01e-6 * np.sqrt(
-        ck.weighted_inner(b, b, w))
+    assert np.sqrt(ck.weighted_inner(r, r, w)) <= 1.01e-6 * np.sqrt(ck.weighted_inner(b, b, w))
     np.testing.assert_allclose(j, jx, atol=1e-10 * np.abs(jx).max())  # accumulated = direct
 
 

@@ -117,8 +117,10 @@ def test_spin_of_linear_and_finite_agree_at_small_amplitude(grid, rng):
     diffs = []
     for amp in (1e-2, 1e-3):
         q1, q2 = amp * base
-        lin, fin = LinearMechanics(p, grid, spin_tol=1e-12), FiniteMechanics(
-            p, grid, tol=1e-12, spin_tol=1e-12)
+        lin, fin = (
+            LinearMechanics(p, grid, spin_tol=1e-12),
+            FiniteMechanics(p, grid, tol=1e-12, spin_tol=1e-12),
+        )
         _, w_lin = lin.corotational(lin.solve(q1, q2), q1, q2, R)
         _, w_fin = fin.corotational(fin.solve(q1, q2), q1, q2, R)
         diffs.append(np.abs(w_lin - w_fin).max())
@@ -144,8 +146,7 @@ def test_rate_solve_returns_the_gradient_of_its_solution(grid, rng, backend):
         scale = np.abs(G).max()
         assert scale > 1e-3
         np.testing.assert_allclose(fm.udot_grad, G, rtol=0, atol=1e-12 * scale)
-        np.testing.assert_allclose(omega, 0.5 * (G[1, 0] - G[0, 1]), rtol=0,
-                                   atol=1e-12 * scale)
+        np.testing.assert_allclose(omega, 0.5 * (G[1, 0] - G[0, 1]), rtol=0, atol=1e-12 * scale)
 
 
 def test_finite_state_carries_what_the_rate_problem_reuses(grid, rng):
@@ -171,6 +172,5 @@ def test_finite_state_carries_what_the_rate_problem_reuses(grid, rng):
     fm.corotational(mech, q1, q2, _band_limited(grid, np.random.default_rng(5), 1.0))
     assert mech.spin_coupling is not None
     assert mech.spin_coupling.shape == (2, 2, N, N)
-    assert fm.rate_margin(q1, q2, mech) == fm.rate_margin(
-        q1, q2, replace(mech, spin_coupling=None))
+    assert fm.rate_margin(q1, q2, mech) == fm.rate_margin(q1, q2, replace(mech, spin_coupling=None))
     assert fm.solve(q1, q2).tangent is None  # converged guess: no Newton step

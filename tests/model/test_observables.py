@@ -53,13 +53,34 @@ def test_fig_a1_lambda_reaches_the_fastest_growing_mode():
     """Fig. A1's setting above threshold (chi (alpha - B) = 10, eps = 0.15: growth rate 0.16 /
     tau, fastest lattice mode 2 pi (0, 1) by model.stability): lambda reaches L / |(0, 1)|
     (within 5 % by t = 60) while the mean-|k| length stays far below it."""
-    p = Parameters.from_dict(dict(S0=0.0, A0=1.0, alpha_minus_B=1.0, B=0.5, K=1e-4, chi=10.0,
-                                  eps=0.15, noise_amplitude=1e-3, noise_modes=8,
-                                  zeta=1.0))  # campaigns/figA1.yaml's constants
+    p = Parameters.from_dict(
+        dict(
+            S0=0.0,
+            A0=1.0,
+            alpha_minus_B=1.0,
+            B=0.5,
+            K=1e-4,
+            chi=10.0,
+            eps=0.15,
+            noise_amplitude=1e-3,
+            noise_modes=8,
+            zeta=1.0,
+        )
+    )  # campaigns/figA1.yaml's constants
     om, mode = max_growth_rate(p, incompressible=True, nmax=12)
     assert om.real > 0.1
-    ds = run(p, Numerics(resolution=32, t_final=60, save_every=5, mechanics="linear",
-                         incompressible=True, tolerance=1e-4), seed=0)
+    ds = run(
+        p,
+        Numerics(
+            resolution=32,
+            t_final=60,
+            save_every=5,
+            mechanics="linear",
+            incompressible=True,
+            tolerance=1e-4,
+        ),
+        seed=0,
+    )
     assert ds.attrs["status"] == "ok"
     assert float(ds["lambda"][-1]) == pytest.approx(1.0 / np.hypot(*mode), rel=0.05)
     assert float(ds["lambda_mean"][-1]) < 0.8
@@ -72,8 +93,11 @@ def test_fig3_patterns_are_pinned_neither_to_the_box_nor_to_the_grid():
     phase lambda lies well inside (8 grid spacings, box) and grows with K."""
     lam = []
     for K in (1e-5, 3e-5, 1e-4):
-        ds = run(Parameters.from_dict({"alpha_minus_B": 1.0, "K": K}),
-                 Numerics(resolution=128, t_final=60, save_every=1, mechanics="linear"), 0)
+        ds = run(
+            Parameters.from_dict({"alpha_minus_B": 1.0, "K": K}),
+            Numerics(resolution=128, t_final=60, save_every=1, mechanics="linear"),
+            0,
+        )
         assert ds.attrs["status"] == "ok"
         assert 5 < float(ds["t_peak"]) < 59  # the growth phase ended inside the run
         # (t = 15 / 24 / 41 for the three K)
@@ -86,9 +110,9 @@ def _series(t: np.ndarray, bumps: list[tuple[float, float]], *, overshoot: float
     """A sigma2_S-like curve: decay of the initial noise, logistic growth to a plateau near
     t = 20 with an optional overshoot, and Gaussian bumps (time, height) on the plateau."""
     v = 0.002 * np.exp(-t) + 0.01 / (1 + np.exp(-(t - 12.0) / 1.5)) + 2e-6 * t  # slow creep
-    v += overshoot * np.exp(-((t - 20.0) / 3.0) ** 2)
+    v += overshoot * np.exp(-(((t - 20.0) / 3.0) ** 2))
     for tb, hb in bumps:
-        v += hb * np.exp(-((t - tb) / 6.0) ** 2)
+        v += hb * np.exp(-(((t - tb) / 6.0) ** 2))
     return v
 
 
@@ -151,13 +175,16 @@ def test_growth_peak_skips_a_rise_that_stalls_far_below_the_pattern():
     assert 70 <= t[growth_peak(v, t)] <= 90
 
 
-@pytest.mark.parametrize(("name", "window"), [
-    # real runs (128^2, linear mechanics; the files' headers say how they were made) on
-    # which the rule without the main-rise search returned t = 0.75, 3 and 4
-    ("per_node_K1e-5_amb1.0_seed0", (35, 50)),
-    ("band32_K1e-5_amb0.6_seed0", (35, 50)),
-    ("band16_K3e-5_amb0.6_seed0", (28, 45)),
-])
+@pytest.mark.parametrize(
+    ("name", "window"),
+    [
+        # real runs (128^2, linear mechanics; the files' headers say how they were made) on
+        # which the rule without the main-rise search returned t = 0.75, 3 and 4
+        ("per_node_K1e-5_amb1.0_seed0", (35, 50)),
+        ("band32_K1e-5_amb0.6_seed0", (35, 50)),
+        ("band16_K3e-5_amb0.6_seed0", (28, 45)),
+    ],
+)
 def test_growth_peak_on_real_series_with_early_transients(name, window):
     data = np.loadtxt(DATA / f"growth_{name}.csv", delimiter=",")
     t, s, lam = data.T

@@ -55,8 +55,11 @@ def test_resolution_study_sigma2_converged_at_default_resolution():
     96 -> 128 change."""
     values = {}
     for n in (96, 128, 256):
-        ds = run(FIG2.replace(alpha_minus_B=1.0),
-                 Numerics(resolution=n, t_final=50, save_every=50, mechanics="linear"), 0)
+        ds = run(
+            FIG2.replace(alpha_minus_B=1.0),
+            Numerics(resolution=n, t_final=50, save_every=50, mechanics="linear"),
+            0,
+        )
         assert ds.attrs["status"] == "ok"
         values[n] = float(ds["sigma2_S_final"])
     d1 = abs(values[128] - values[96])

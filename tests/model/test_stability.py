@@ -25,12 +25,38 @@ ROOT = Path(__file__).resolve().parents[2]
 # are the constants campaigns/figA1.yaml pins and docs/stability.md §7 quotes (zeta = 1, C = 3,
 # s = 10, B' = 0; kappa = 10 for the compressible column), written out so that a change of
 # defaults does not silently change these tests.
-FIG_A1 = Parameters(S0=0.0, A0=1.0, gamma=1.0, tau=1.0, B=0.5, alpha=1.5, K=1e-4, chi=10.0,
-                    zeta=1.0, C=3.0, s=10.0, B_prime=0.0, kappa=10.0)
+FIG_A1 = Parameters(
+    S0=0.0,
+    A0=1.0,
+    gamma=1.0,
+    tau=1.0,
+    B=0.5,
+    alpha=1.5,
+    K=1e-4,
+    chi=10.0,
+    zeta=1.0,
+    C=3.0,
+    s=10.0,
+    B_prime=0.0,
+    kappa=10.0,
+)
 
 # A generic point exercising every term (B' != 0 gives A_b != 0, finite kappa, gamma != tau).
-GENERIC = Parameters(A0=0.7, B=0.5, B_prime=0.3, C=1.3, K=1e-3, kappa=3.0, alpha=1.4, chi=2.0,
-                     zeta=1.2, s=0.8, gamma=1.3, tau=0.6, eps=0.12)
+GENERIC = Parameters(
+    A0=0.7,
+    B=0.5,
+    B_prime=0.3,
+    C=1.3,
+    K=1e-3,
+    kappa=3.0,
+    alpha=1.4,
+    chi=2.0,
+    zeta=1.2,
+    s=0.8,
+    gamma=1.3,
+    tau=0.6,
+    eps=0.12,
+)
 
 MODES = [(0, 1), (1, 2), (2, -1), (1, 0), (0, 0)]
 
@@ -92,15 +118,18 @@ def _reference_rhs(p: Parameters, incompressible: bool):
         tau = [[a * q1 + iso, a * q2], [a * q2, -a * q1 + iso]]
         tau_hat = [[np.fft.fft2(t) for t in row] for row in tau]
         u_hat = green(tau_hat)
-        grad = [[np.real(np.fft.ifft2(1j * (KX, KY)[j] * u_hat[i])) for j in range(2)]
-                for i in range(2)]
+        grad = [
+            [np.real(np.fft.ifft2(1j * (KX, KY)[j] * u_hat[i])) for j in range(2)] for i in range(2)
+        ]
         e11 = p.eps + grad[0][0]
         e22 = -p.eps + grad[1][1]
         e12 = 0.5 * (grad[0][1] + grad[1][0])
         tre = e11 + e22
         if incompressible:
-            p_hat = sum((KX, KY)[i] * tau_hat[i][j] * (KX, KY)[j]
-                        for i in range(2) for j in range(2)) * inv_k2
+            p_hat = (
+                sum((KX, KY)[i] * tau_hat[i][j] * (KX, KY)[j] for i in range(2) for j in range(2))
+                * inv_k2
+            )
             trs = -2 * np.real(np.fft.ifft2(p_hat)) + tau[0][0] + tau[1][1]
         else:
             trs = 2 * p.kappa * tre + tau[0][0] + tau[1][1]
@@ -115,8 +144,12 @@ def _reference_rhs(p: Parameters, incompressible: bool):
         for _ in range(200):  # w = curl(u_dot)/2, u_dot = Green[a Q_dot] (B' part is curl free)
             qd1 = H11 / p.gamma - 2 * w * q2
             qd2 = H12 / p.gamma + 2 * w * q1
-            ud = green([[np.fft.fft2(a * qd1), np.fft.fft2(a * qd2)],
-                        [np.fft.fft2(a * qd2), np.fft.fft2(-a * qd1)]])
+            ud = green(
+                [
+                    [np.fft.fft2(a * qd1), np.fft.fft2(a * qd2)],
+                    [np.fft.fft2(a * qd2), np.fft.fft2(-a * qd1)],
+                ]
+            )
             w_new = np.real(np.fft.ifft2(0.5j * (KX * ud[1] - KY * ud[0])))
             done = np.max(np.abs(w_new - w)) < 1e-15
             w = w_new
@@ -151,8 +184,9 @@ def test_operator_matches_model_rates(incompressible, mode):
     """The model's own right-hand side (``ActiveNematicPDE.rates``, linear mechanics)."""
     from model.pde import ActiveNematicPDE
 
-    numerics = Numerics(resolution=16, mechanics="linear", incompressible=incompressible,
-                        spin_tol=1e-14)
+    numerics = Numerics(
+        resolution=16, mechanics="linear", incompressible=incompressible, spin_tol=1e-14
+    )
 
     def rhs(u):
         # a fresh PDE per call: the spin solve is warm-started from the previous call, and
@@ -174,8 +208,13 @@ def test_unsheared_spectrum_is_closed_form_and_stable(incompressible, mode):
     p = GENERIC.replace(eps=0.0, B_prime=0.0)
     k2 = TWO_PI**2 * (mode[0] ** 2 + mode[1] ** 2)
     a, beta = p.alpha - p.B, (1.0 if incompressible else p.kappa / (p.kappa + 1))
-    expected = sorted([-(p.A0 + p.K * k2 + (1 - beta) * a * p.B / 2) / p.gamma,
-                       -(p.A0 + p.K * k2 + a * p.B / 2) / p.gamma, -p.zeta / p.tau])
+    expected = sorted(
+        [
+            -(p.A0 + p.K * k2 + (1 - beta) * a * p.B / 2) / p.gamma,
+            -(p.A0 + p.K * k2 + a * p.B / 2) / p.gamma,
+            -p.zeta / p.tau,
+        ]
+    )
     ev = np.linalg.eigvals(_operator(p, mode, incompressible))
     np.testing.assert_allclose(sorted(ev.real), expected, rtol=1e-12)
     np.testing.assert_allclose(ev.imag, 0.0, atol=1e-12)
@@ -192,7 +231,8 @@ def test_growth_rate_along_y_matches_s8():
         D = p.A0 + 6 * p.C * q * q + p.K * (TWO_PI * m) ** 2
         tr = D / p.gamma + p.zeta / p.tau
         disc = (D / p.gamma - p.zeta / p.tau) ** 2 + 8 * p.chi * (p.alpha - p.B) * q / (
-            p.gamma * p.tau)
+            p.gamma * p.tau
+        )
         expected = 0.5 * (-tr + math.sqrt(disc))
         om = st.growth_rate(p, (0.0, TWO_PI * m), incompressible=True)
         assert om.imag == 0.0
@@ -205,8 +245,10 @@ def test_fast_activity_limit_slaves_A():
     q = st.base_state(p).q1
     D = p.A0 + 6 * p.C * q * q + p.K * TWO_PI**2
     slaved = (2 * p.chi * (p.alpha - p.B) * q / p.zeta - D) / p.gamma
-    errors = [abs(st.growth_rate(p.replace(tau=t), (0.0, TWO_PI), incompressible=True).real
-                  - slaved) for t in (1e-2, 1e-4, 1e-6)]
+    errors = [
+        abs(st.growth_rate(p.replace(tau=t), (0.0, TWO_PI), incompressible=True).real - slaved)
+        for t in (1e-2, 1e-4, 1e-6)
+    ]
     assert errors[-1] < 1e-5 * abs(slaved)
     assert errors[0] > errors[1] > errors[2]  # converges as tau -> 0
 
@@ -225,8 +267,9 @@ def test_quarter_turn_symmetry():
     for incompressible in (True, False):
         for k in [(0.0, TWO_PI), (TWO_PI, 2 * TWO_PI), (3 * TWO_PI, -TWO_PI)]:
             a = st.growth_rate(GENERIC, k, incompressible=incompressible)
-            b = st.growth_rate(GENERIC.replace(eps=-GENERIC.eps), (-k[1], k[0]),
-                               incompressible=incompressible)
+            b = st.growth_rate(
+                GENERIC.replace(eps=-GENERIC.eps), (-k[1], k[0]), incompressible=incompressible
+            )
             assert a == pytest.approx(b, rel=1e-12, abs=1e-14)
 
 
@@ -235,7 +278,8 @@ def test_base_state_solves_s1():
         b = st.base_state(p)
         assert (b.A + p.A0 + 2 * p.C * b.q1**2) * b.q1 == pytest.approx(p.B * p.eps, rel=1e-13)
         assert p.zeta * b.A + p.s * b.A**3 == pytest.approx(
-            4 * p.chi * p.B_prime * b.q1**2, rel=1e-12, abs=1e-15)
+            4 * p.chi * p.B_prime * b.q1**2, rel=1e-12, abs=1e-15
+        )
 
 
 # --- critical strain ------------------------------------------------------------------------
@@ -245,11 +289,13 @@ def test_base_state_solves_s1():
     ("params", "incompressible"),
     [(FIG_A1.replace(chi=chi), True) for chi in (4.5, 5.0, 10.0, 20.0)]
     + [(FIG_A1.replace(chi=3.0, C=1.0), True)]
-    + [(FIG_A1.replace(chi=10.0), False),
-       (Parameters(), False),  # the defaults (Fig. 2 values)
-       (GENERIC.replace(chi=8.0), False),  # B' != 0: the scalar-root branch
-       (GENERIC.replace(chi=8.0), True),
-       (FIG_A1.replace(chi=10.0, K=1e-2, kappa=2.0), False)],
+    + [
+        (FIG_A1.replace(chi=10.0), False),
+        (Parameters(), False),  # the defaults (Fig. 2 values)
+        (GENERIC.replace(chi=8.0), False),  # B' != 0: the scalar-root branch
+        (GENERIC.replace(chi=8.0), True),
+        (FIG_A1.replace(chi=10.0, K=1e-2, kappa=2.0), False),
+    ],
 )
 def test_closed_form_matches_bisection(params, incompressible):
     closed = st.critical_eps_closed_form(params, incompressible=incompressible)
@@ -259,10 +305,8 @@ def test_closed_form_matches_bisection(params, incompressible):
     assert crit.eps == pytest.approx(closed, rel=1e-7)
     assert crit.mode == (0, 1)
     # just above threshold the critical mode grows, just below every lattice mode decays
-    assert st.max_growth_rate(params, incompressible=incompressible,
-                              eps=closed * 1.001)[0].real > 0
-    assert st.max_growth_rate(params, incompressible=incompressible,
-                              eps=closed * 0.999)[0].real < 0
+    assert st.max_growth_rate(params, incompressible=incompressible, eps=closed * 1.001)[0].real > 0
+    assert st.max_growth_rate(params, incompressible=incompressible, eps=closed * 0.999)[0].real < 0
 
 
 def test_fig_a1_number():
@@ -270,11 +314,14 @@ def test_fig_a1_number():
     R = 1 + 4 * math.pi**2 * 1e-4
     q = R / (10 + math.sqrt(100 - 6 * 3 * R))
     assert st.critical_eps_closed_form(FIG_A1, incompressible=True) == pytest.approx(
-        q * (1 + 6 * q * q) / 0.5, rel=1e-14)
+        q * (1 + 6 * q * q) / 0.5, rel=1e-14
+    )
     assert st.critical_eps_closed_form(FIG_A1, incompressible=True) == pytest.approx(
-        0.10715, abs=5e-6)
+        0.10715, abs=5e-6
+    )
     assert st.critical_eps_closed_form(FIG_A1.replace(C=0.0), incompressible=True) == (
-        pytest.approx(0.10039, abs=5e-6))
+        pytest.approx(0.10039, abs=5e-6)
+    )
     assert st.critical_eps_closed_form(FIG_A1) == pytest.approx(0.12267, abs=5e-6)
     assert st.paper_eq6(FIG_A1) == pytest.approx(0.20079, abs=5e-6)
 
@@ -295,7 +342,8 @@ def test_half_of_paper_eq6_without_quartic_term(chi):
     """C -> 0, incompressible: exactly half of Eq. (6) (the 2-D trace of -p I, docs §6)."""
     p = FIG_A1.replace(C=0.0, chi=chi)
     assert st.critical_eps_closed_form(p, incompressible=True) == pytest.approx(
-        0.5 * st.paper_eq6(p), rel=1e-14)
+        0.5 * st.paper_eq6(p), rel=1e-14
+    )
 
 
 def test_no_instability_below_minimum_activity():
@@ -308,8 +356,15 @@ def test_no_instability_below_minimum_activity():
 # --- against the model's solver (linear mechanics) -------------------------------------------
 
 
-def _simulated_rate(p: Parameters, mode: tuple[int, int], incompressible: bool, T: float,
-                    n: int = 16, dt: float = 0.02, amp: float = 1e-4) -> float:
+def _simulated_rate(
+    p: Parameters,
+    mode: tuple[int, int],
+    incompressible: bool,
+    T: float,
+    n: int = 16,
+    dt: float = 0.02,
+    amp: float = 1e-4,
+) -> float:
     """Start from base + amp * v cos(k.x) (v the leading eigenvector), integrate with the
     model's ETDRK2 solver, return log(amplitude ratio) / T."""
     from pde.solvers import Controller
@@ -317,9 +372,17 @@ def _simulated_rate(p: Parameters, mode: tuple[int, int], incompressible: bool, 
     from model.pde import ActiveNematicPDE, make_state
     from model.solver import ETDRK2Solver
 
-    eq = ActiveNematicPDE(p, Numerics(resolution=n, mechanics="linear",
-                                      incompressible=incompressible, adaptive=False, dt=dt,
-                                      t_final=T))
+    eq = ActiveNematicPDE(
+        p,
+        Numerics(
+            resolution=n,
+            mechanics="linear",
+            incompressible=incompressible,
+            adaptive=False,
+            dt=dt,
+            t_final=T,
+        ),
+    )
     ev, V = np.linalg.eig(_operator(p, mode, incompressible))
     i = int(np.argmax(ev.real))
     v = V[:, i].real / np.linalg.norm(V[:, i].real)
@@ -362,8 +425,14 @@ def test_onset_in_seeded_simulation_within_5_percent():
 
     p0 = FIG_A1.replace(noise_amplitude=1e-4, noise_modes=4)
     eps_c = st.critical_eps_closed_form(p0, incompressible=True)
-    num = Numerics(resolution=16, mechanics="linear", incompressible=True, t_final=60.0,
-                   save_every=10.0, tolerance=1e-6)
+    num = Numerics(
+        resolution=16,
+        mechanics="linear",
+        incompressible=True,
+        t_final=60.0,
+        save_every=10.0,
+        tolerance=1e-6,
+    )
     trend = {}
     for factor in (0.95, 1.05):
         ds = run(p0.replace(eps=factor * eps_c), num, seed=3)
@@ -382,24 +451,46 @@ def _app() -> typer.Typer:
     return app
 
 
-FIG_A1_ARGS = ["--set", "A0=1", "--set", "K=1e-4", "--set", "alpha_minus_B=1", "--set",
-               "chi=10", "--set", "incompressible=true", "--set", "S0=0", "--set", "C=3",
-               "--set", "zeta=1", "--set", "s=10"]
+FIG_A1_ARGS = [
+    "--set",
+    "A0=1",
+    "--set",
+    "K=1e-4",
+    "--set",
+    "alpha_minus_B=1",
+    "--set",
+    "chi=10",
+    "--set",
+    "incompressible=true",
+    "--set",
+    "S0=0",
+    "--set",
+    "C=3",
+    "--set",
+    "zeta=1",
+    "--set",
+    "s=10",
+]
 
 
 def test_cli_json():
     res = CliRunner().invoke(_app(), [*FIG_A1_ARGS, "--set", "eps=0.2", "--json", "--nmax", "3"])
     assert res.exit_code == 0, res.output
     out = json.loads(res.output)
-    assert {"critical_eps_closed_form", "critical_eps_numerical", "critical_k",
-            "growth_rate"} <= set(out)
+    assert {
+        "critical_eps_closed_form",
+        "critical_eps_numerical",
+        "critical_k",
+        "growth_rate",
+    } <= set(out)
     assert out["critical_eps_closed_form"] == pytest.approx(
-        st.critical_eps_closed_form(FIG_A1, incompressible=True), rel=1e-12)
-    assert out["critical_eps_numerical"] == pytest.approx(out["critical_eps_closed_form"],
-                                                          rel=1e-7)
+        st.critical_eps_closed_form(FIG_A1, incompressible=True), rel=1e-12
+    )
+    assert out["critical_eps_numerical"] == pytest.approx(out["critical_eps_closed_form"], rel=1e-7)
     assert out["critical_k"] == pytest.approx([0.0, TWO_PI])
     assert out["growth_rate"] == pytest.approx(
-        st.growth_rate(FIG_A1.replace(eps=0.2), (0.0, TWO_PI), incompressible=True).real)
+        st.growth_rate(FIG_A1.replace(eps=0.2), (0.0, TWO_PI), incompressible=True).real
+    )
 
 
 def test_cli_text_and_stable_case():
@@ -413,9 +504,17 @@ def test_cli_text_and_stable_case():
     assert out["critical_k"] is None
 
 
-@pytest.mark.parametrize("bad", [["--set", "chi"], ["--set", "chii=3"], ["--set", "K=-1"],
-                                 ["--set", "K=abc"], ["--set", "mechanics=finite"],
-                                 ["--set", "chi=1", "--set", "chi=2"]])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        ["--set", "chi"],
+        ["--set", "chii=3"],
+        ["--set", "K=-1"],
+        ["--set", "K=abc"],
+        ["--set", "mechanics=finite"],
+        ["--set", "chi=1", "--set", "chi=2"],
+    ],
+)
 def test_cli_bad_input_exit_2(bad):
     res = CliRunner().invoke(_app(), bad)
     assert res.exit_code == 2

@@ -31,8 +31,12 @@ def test_warm_kinds_one_per_kind_of_run(tmp_path):
     assert numerics["mechanics"] == "finite"
     assert params["noise_modes"] == 8  # the campaign's own parameters
     text = path.read_text().replace("save_every: 0.5", "save_every: 0.5, mechanics: linear")
-    path.write_text(text.replace("alpha_minus_B: [0.1, 0.2, 0.3]",
-                                 "alpha_minus_B: [0.1, 0.2]\n    incompressible: [false, true]"))
+    path.write_text(
+        text.replace(
+            "alpha_minus_B: [0.1, 0.2, 0.3]",
+            "alpha_minus_B: [0.1, 0.2]\n    incompressible: [false, true]",
+        )
+    )
     kinds = warm_kinds(expand(load_campaign(path)))
     assert sorted(n["incompressible"] for _, n in kinds) == [False, True]
 
@@ -62,8 +66,9 @@ def test_the_numba_cache_is_named_by_the_compiled_sources(tmp_path, monkeypatch)
     if not __import__("os").environ.get("NUMBA_CACHE_DIR"):
         assert str(here) == numba.config.CACHE_DIR  # type: ignore[attr-defined]
     copy = tmp_path / "compiled"
-    shutil.copytree(Path(compiled.__file__).parent, copy,
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(
+        Path(compiled.__file__).parent, copy, ignore=shutil.ignore_patterns("__pycache__")
+    )
     assert compiled.source_digest(copy) == compiled.source_digest()
     krylov = copy / "krylov.py"
     krylov.write_text(krylov.read_text() + "\n# an edit\n")
@@ -132,8 +137,12 @@ def test_the_listed_entry_points_read_back_as_numba_types():
     pair = typeof(Pair(1, 2.0))
     with pytest.raises(ValueError, match="does not read back"):  # a local class: no name
         type_text(types.Tuple([pair]))
-    same = (typeof(np.zeros((2, 2))[:, ::2]), typeof((np.zeros(3), np.zeros(3))), types.int64,
-            typeof((1, 2.0)))
+    same = (
+        typeof(np.zeros((2, 2))[:, ::2]),
+        typeof((np.zeros(3), np.zeros(3))),
+        types.int64,
+        typeof((1, 2.0)),
+    )
     assert read_types(type_text(types.Tuple(list(same)))) == same
 
 
@@ -145,12 +154,15 @@ def test_entry_points_are_compiled_by_module_after_the_modules_they_import():
     modules = [g[0].function.rpartition(".")[0] for g in groups]
     assert sorted(e.line() for g in groups for e in g) == sorted(e.line() for e in entries)
     assert len(set(modules)) == len(modules)  # one task per module
-    assert all(e.function.startswith(m + ".") for m, g in zip(modules, groups, strict=True)
-               for e in g)
+    assert all(
+        e.function.startswith(m + ".") for m, g in zip(modules, groups, strict=True) for e in g
+    )
     order = {m.rpartition(".")[2]: i for i, m in enumerate(modules)}
-    for caller, callees in (("finite_krylov", ("fftw", "constitutive", "spectral")),
-                            ("linear_rhs", ("fftw", "rates")),
-                            ("wellposedness", ("constitutive",))):
+    for caller, callees in (
+        ("finite_krylov", ("fftw", "constitutive", "spectral")),
+        ("linear_rhs", ("fftw", "rates")),
+        ("wellposedness", ("constitutive",)),
+    ):
         assert all(order[c] < order[caller] for c in callees), modules
 
 
@@ -175,8 +187,7 @@ def test_cache_writes_from_several_processes_keep_every_entry(tmp_path):
 
     ctx = multiprocessing.get_context("spawn")
     workers, count = 3, 100  # without the lock, some entries are lost or wrong at this count
-    procs = [ctx.Process(target=_save_many, args=(str(tmp_path), w, count))
-             for w in range(workers)]
+    procs = [ctx.Process(target=_save_many, args=(str(tmp_path), w, count)) for w in range(workers)]
     for p in procs:
         p.start()
     for p in procs:
@@ -191,8 +202,14 @@ def test_cache_writes_from_several_processes_keep_every_entry(tmp_path):
 def _in_fresh_process(tmp_path: Path, *args: str) -> Any:
     """``python *args`` with the numba cache in ``tmp_path`` (empty at first)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
-    return subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True,
-                          timeout=1200, cwd=Path(__file__).resolve().parents[2])
+    return subprocess.run(
+        [sys.executable, *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=1200,
+        cwd=Path(__file__).resolve().parents[2],
+    )
 
 
 def _warmup(tmp_path: Path, *args: str) -> Any:
@@ -201,17 +218,21 @@ def _warmup(tmp_path: Path, *args: str) -> Any:
 
 def test_a_failure_in_a_compiling_process_is_one_line_and_a_nonzero_exit(tmp_path):
     listed = tmp_path / "entry_points.txt"
-    listed.write_text("# two entry points that cannot compile\n"
-                      "2.0\tmodel.compiled.spectral.grad_hat_kernel\ttup(int64, int64, int64)\n"
-                      "1.0\tmodel.compiled.spectral.no_such_kernel\ttup(int64)\n")
+    listed.write_text(
+        "# two entry points that cannot compile\n"
+        "2.0\tmodel.compiled.spectral.grad_hat_kernel\ttup(int64, int64, int64)\n"
+        "1.0\tmodel.compiled.spectral.no_such_kernel\ttup(int64)\n"
+    )
     done = _warmup(tmp_path, "--jobs", "2", "--entry-points", str(listed))
     assert done.returncode == 1, done
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 2, done.stderr  # one line per failure, no traceback
     assert "Traceback" not in done.stderr
     by_kernel = {line.split("(")[0]: line for line in lines}
-    assert "TypingError: Failed in nopython mode pipeline" in by_kernel[
-        "error: compiling model.compiled.spectral.grad_hat_kernel"]
+    assert (
+        "TypingError: Failed in nopython mode pipeline"
+        in by_kernel["error: compiling model.compiled.spectral.grad_hat_kernel"]
+    )
     assert "AttributeError" in by_kernel["error: compiling model.compiled.spectral.no_such_kernel"]
     assert "kernels ready" not in done.stdout  # it stopped there
 
@@ -224,12 +245,17 @@ def test_the_parallel_warm_up_leaves_a_cache_a_fresh_process_only_loads(tmp_path
     2 cores."""
     first = _warmup(tmp_path, "--jobs", "2")
     assert first.returncode == 0, first
-    assert re.search(r"ready in \d+ s in 2 processes \([1-9]\d* signatures compiled",
-                     first.stdout), first.stdout
-    assert re.search(r"kernels ready in \d+ s \(0 compiled, [1-9]\d* loaded", first.stdout), \
+    assert re.search(
+        r"ready in \d+ s in 2 processes \([1-9]\d* signatures compiled", first.stdout
+    ), first.stdout
+    assert re.search(r"kernels ready in \d+ s \(0 compiled, [1-9]\d* loaded", first.stdout), (
         first.stdout
-    fresh = _in_fresh_process(tmp_path, "-c", "import json; from model.warmup import warm_up; "
-                                               "print(json.dumps(warm_up()))")
+    )
+    fresh = _in_fresh_process(
+        tmp_path,
+        "-c",
+        "import json; from model.warmup import warm_up; print(json.dumps(warm_up()))",
+    )
     assert fresh.returncode == 0, fresh
     info = json.loads(fresh.stdout.strip().splitlines()[-1])
     assert info["errors"] == [], info

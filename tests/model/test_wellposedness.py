@@ -14,8 +14,9 @@ from model.parameters import Numerics, Parameters
 from model.simulate import run
 
 
-def _uniform(S: float, theta: float, n: int = 4, F: np.ndarray | None = None
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _uniform(
+    S: float, theta: float, n: int = 4, F: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     q1 = np.full((n, n), S * np.cos(2 * theta))
     q2 = np.full((n, n), S * np.sin(2 * theta))
     if F is None:
@@ -41,8 +42,9 @@ def test_finite_margin_of_the_computed_symbol_is_the_closed_form(amb, theta):
     for S in (0.1, 0.3, 0.45, 0.6):
         F, q1, q2 = _uniform(S, theta)
         m, _, phi = wp.finite_margin(*_symbol(F, q1, q2, p), p.kappa)
-        assert m == pytest.approx(wp.uniform_margin(S, p.alpha, p.B, p.kappa, linear=False),
-                                  abs=1e-5)
+        assert m == pytest.approx(
+            wp.uniform_margin(S, p.alpha, p.B, p.kappa, linear=False), abs=1e-5
+        )
         gap = abs((phi - theta - np.pi / 2 + np.pi / 2) % np.pi - np.pi / 2)
         assert gap < 1e-3  # k perpendicular to n
 
@@ -105,8 +107,11 @@ def test_linear_margin_is_the_spin_amplification_of_the_linear_solver():
 def test_run_crossing_the_limit_fails_with_its_reason_finite():
     """Finite strain, alpha - B = 3: S grows from 0.1 through the limit 1/6 and the run stops
     with rate_problem_ill_posed (value and place named), not ellipticity_lost."""
-    ds = run(Parameters.from_dict({"alpha_minus_B": 3.0, "noise_modes": 4}),
-             Numerics(resolution=16, t_final=20, save_every=1), seed=0)
+    ds = run(
+        Parameters.from_dict({"alpha_minus_B": 3.0, "noise_modes": 4}),
+        Numerics(resolution=16, t_final=20, save_every=1),
+        seed=0,
+    )
     assert ds.attrs["status"] == "failed"
     assert ds.attrs["reason"] == "rate_problem_ill_posed"
     assert ds.attrs["t_failed"] > 0
@@ -119,8 +124,11 @@ def test_run_crossing_the_limit_fails_with_its_reason_finite():
 
 def test_run_crossing_the_limit_fails_with_its_reason_linear():
     """Small strain, alpha - B = 3: the limit is (alpha - B) S = 1."""
-    ds = run(Parameters.from_dict({"alpha_minus_B": 3.0, "noise_modes": 4, "C": 1.0}),
-             Numerics(resolution=16, t_final=20, save_every=1, mechanics="linear"), seed=0)
+    ds = run(
+        Parameters.from_dict({"alpha_minus_B": 3.0, "noise_modes": 4, "C": 1.0}),
+        Numerics(resolution=16, t_final=20, save_every=1, mechanics="linear"),
+        seed=0,
+    )
     assert ds.attrs["reason"] == "rate_problem_ill_posed"
     assert ds.attrs["t_failed"] > 0
     # the first state past the limit: (alpha - B) max S just above 1
@@ -130,13 +138,19 @@ def test_run_crossing_the_limit_fails_with_its_reason_linear():
 
 def test_well_posed_run_records_its_margin():
     """A healthy run: the margin series lies in (0, 1] and its minimum is recorded."""
-    ds = run(Parameters.from_dict({"alpha_minus_B": 1.0, "noise_modes": 4}),
-             Numerics(resolution=16, t_final=5, save_every=1), seed=0)
+    ds = run(
+        Parameters.from_dict({"alpha_minus_B": 1.0, "noise_modes": 4}),
+        Numerics(resolution=16, t_final=5, save_every=1),
+        seed=0,
+    )
     assert ds.attrs["status"] == "ok"
     m = ds["rate_margin"].values
     assert np.all((m > 0) & (m <= 1))
     assert 0 < float(ds["rate_margin_min"]) <= m.min() + 1e-12
-    lin = run(Parameters.from_dict({"alpha_minus_B": 1.0, "noise_modes": 4}),
-              Numerics(resolution=16, t_final=5, save_every=1, mechanics="linear"), seed=0)
+    lin = run(
+        Parameters.from_dict({"alpha_minus_B": 1.0, "noise_modes": 4}),
+        Numerics(resolution=16, t_final=5, save_every=1, mechanics="linear"),
+        seed=0,
+    )
     S = np.hypot(lin["q1"].values[-1], lin["q2"].values[-1])
     assert float(lin["rate_margin"][-1]) == pytest.approx(1.0 - S.max())

@@ -33,32 +33,54 @@ HOSTILE = {
     "seed_count": ("seeds: {count: 1000000000, start: 5}\n", "an integer from 1 to 1000000"),
     "alias_bomb": (_bomb(), "expands to more than 100000 values"),
     "recursive_alias": ("a: &a [*a]\n", "expands to more than"),
-    "grid": ("sweep:\n  axes:\n    K: {linspace: [1e-5, 1e-3, 1000]}\n"
-             "    eps: {linspace: [0, 0.1, 1000]}\nseeds: 10\n",
-             "10000000 runs (1000 (K) x 1000 (eps) x 10 seeds); allowed: at most 1000000"),
-    "linspace_num": ("sweep: {axes: {K: {linspace: [1e-5, 1e-3, 1000000000]}}}\n",
-                     "at most 1000000 values"),
+    "grid": (
+        "sweep:\n  axes:\n    K: {linspace: [1e-5, 1e-3, 1000]}\n"
+        "    eps: {linspace: [0, 0.1, 1000]}\nseeds: 10\n",
+        "10000000 runs (1000 (K) x 1000 (eps) x 10 seeds); allowed: at most 1000000",
+    ),
+    "linspace_num": (
+        "sweep: {axes: {K: {linspace: [1e-5, 1e-3, 1000000000]}}}\n",
+        "at most 1000000 values",
+    ),
     "resolution": ("numerics: {resolution: 100000}\nseeds: 1\n", "needs about 16 TiB"),
     "t_final": ("numerics: {t_final: 1.0e30}\nseeds: 1\n", "at most 1000000 saved times"),
-    "steps": ("numerics: {t_final: 1.0e8, save_every: 1000, dt_max: 0.5}\nseeds: 1\n",
-              "at most 1e+08 time steps"),
+    "steps": (
+        "numerics: {t_final: 1.0e8, save_every: 1000, dt_max: 0.5}\nseeds: 1\n",
+        "at most 1e+08 time steps",
+    ),
     "workers": ("execution: {workers: 100000}\nseeds: 1\n", "execution.workers: got 100000"),
-    "jobs": ("execution: {cluster: {kind: slurm, jobs: 10000000, cores: 1, memory: 1GB}}\n"
-             "seeds: 1\n", "an integer from 0 to 100000"),
+    "jobs": (
+        "execution: {cluster: {kind: slurm, jobs: 10000000, cores: 1, memory: 1GB}}\nseeds: 1\n",
+        "an integer from 0 to 100000",
+    ),
     "empty": ("# nothing but a comment\n", "the campaign file is empty"),
-    "fit_axis": ("sweep: {axes: {alpha_minus_B: [0.1, 0.2]}}\nseeds: 1\n"
-                 "fits: [{transition: {axis: nonexistent}}]\n",
-                 "fits[0].transition.axis: got 'nonexistent'; allowed: a sweep axis"),
-    "fit_option": ("sweep: {axes: {alpha_minus_B: [0.1, 0.2]}}\nseeds: 1\n"
-                   "fits: [{transition: {n_boot: -3}}]\n", "n_boot = -3"),
-    "figure_select": ("sweep: {axes: {alpha_minus_B: [0.1, 0.2]}}\nseeds: 1\n"
-                      "figures: [{fig2: {select: {nope: 1}}}]\n", "got 'nope'"),
-    "figure_option": ("sweep: {axes: {alpha_minus_B: [0.1, 0.2]}}\nseeds: 1\n"
-                      "figures: [{fig2: {colour: red}}]\n", "unknown option 'colour'"),
-    "max_runs": ("sweep: {axes: {K: [1e-5, 2e-5, 3e-5]}}\nseeds: 2\nlimits: {max_runs: 5}\n",
-                 "6 runs (3 (K) x 2 seeds); allowed: at most 5"),
-    "run_memory": ("numerics: {resolution: 1024}\nseeds: 1\nlimits: {run_memory: 500MB}\n",
-                   "more than limits.run_memory allows"),
+    "fit_axis": (
+        "sweep: {axes: {alpha_minus_B: [0.1, 0.2]}}\nseeds: 1\n"
+        "fits: [{transition: {axis: nonexistent}}]\n",
+        "fits[0].transition.axis: got 'nonexistent'; allowed: a sweep axis",
+    ),
+    "fit_option": (
+        "sweep: {axes: {alpha_minus_B: [0.1, 0.2]}}\nseeds: 1\n"
+        "fits: [{transition: {n_boot: -3}}]\n",
+        "n_boot = -3",
+    ),
+    "figure_select": (
+        "sweep: {axes: {alpha_minus_B: [0.1, 0.2]}}\nseeds: 1\n"
+        "figures: [{fig2: {select: {nope: 1}}}]\n",
+        "got 'nope'",
+    ),
+    "figure_option": (
+        "sweep: {axes: {alpha_minus_B: [0.1, 0.2]}}\nseeds: 1\nfigures: [{fig2: {colour: red}}]\n",
+        "unknown option 'colour'",
+    ),
+    "max_runs": (
+        "sweep: {axes: {K: [1e-5, 2e-5, 3e-5]}}\nseeds: 2\nlimits: {max_runs: 5}\n",
+        "6 runs (3 (K) x 2 seeds); allowed: at most 5",
+    ),
+    "run_memory": (
+        "numerics: {resolution: 1024}\nseeds: 1\nlimits: {run_memory: 500MB}\n",
+        "more than limits.run_memory allows",
+    ),
 }
 
 #: Validates every hostile text in one process under a 1 GiB address-space limit; prints
@@ -84,8 +106,13 @@ print(json.dumps(out))
 
 
 def test_hostile_campaigns_are_refused_fast_in_little_memory():
-    proc = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True,
-                          input=json.dumps({k: v[0] for k, v in HOSTILE.items()}), timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", PROBE],
+        capture_output=True,
+        text=True,
+        input=json.dumps({k: v[0] for k, v in HOSTILE.items()}),
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
     for name, (_, words) in HOSTILE.items():
@@ -134,15 +161,27 @@ def assert_message(result, code: int, *words: str) -> None:
         assert w in out, out
 
 
-FAST = ["--set", "resolution=32", "--set", "noise_modes=6", "--set", "t_final=1",
-        "--set", "mechanics=linear", "--quiet"]
+FAST = [
+    "--set",
+    "resolution=32",
+    "--set",
+    "noise_modes=6",
+    "--set",
+    "t_final=1",
+    "--set",
+    "mechanics=linear",
+    "--quiet",
+]
 
 
-@pytest.mark.parametrize(("args", "words"), [
-    (["--seed", "-1"], ["'seed': -1", "between 0 and"]),
-    (["--set", "resolution=100000"], ["resolution", "needs about", "TiB"]),
-    (["--set", "t_final=1e30"], ["t_final", "at most 1000000 saved times"]),
-])
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["--seed", "-1"], ["'seed': -1", "between 0 and"]),
+        (["--set", "resolution=100000"], ["resolution", "needs about", "TiB"]),
+        (["--set", "t_final=1e30"], ["t_final", "at most 1000000 saved times"]),
+    ],
+)
 def test_simulate_refuses_hostile_values_before_running(args, words):
     assert_message(invoke("simulate", *args, "--quiet"), 2, *words)
 
@@ -162,10 +201,15 @@ def test_commands_on_unusable_paths_give_one_message(tmp_path):
     campaign.write_text("sweep: {axes: {K: [1e-5, 2e-5]}}\nseeds: 1\n")
     blocker = tmp_path / "file"
     blocker.write_text("")
-    assert_message(invoke("run", campaign, "--results", blocker), 2, "cannot create",
-                   "not a folder")
-    assert_message(invoke("status", campaign, "--results", blocker), 2,
-                   "not a folder", "--debug shows the traceback")
+    assert_message(
+        invoke("run", campaign, "--results", blocker), 2, "cannot create", "not a folder"
+    )
+    assert_message(
+        invoke("status", campaign, "--results", blocker),
+        2,
+        "not a folder",
+        "--debug shows the traceback",
+    )
     assert_message(invoke("validate", tmp_path), 2, "cannot read the file")
     bad = tmp_path / "bad.yaml"
     bad.write_bytes(b"\xff\xfe not text")

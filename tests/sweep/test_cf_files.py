@@ -37,16 +37,19 @@ def files(tmp_path_factory):
     store = CampaignStore(folder / "results", campaign.name)
     store.ensure()
     for i in range(len(expansion)):
-        record = execute_run(RunTask.from_spec(expansion.run(i), store, campaign.name,
-                                               campaign.store))
+        record = execute_run(
+            RunTask.from_spec(expansion.run(i), store, campaign.name, campaign.store)
+        )
         assert record["status"] == "ok", record
     write_phase(expansion, store)
     fits_path, failures = write_fits(store.root, [("transition", {})])
     assert not failures
     run_file = next(iter(sorted(store.runs_dir.glob("*.nc"))))
     # verify.nc of a verification whose variant reproduces the base runs (records reused)
-    checked = parse_campaign(path.read_text() + "fits: [transition]\nverify: {seeds: 2, "
-                             "variants: [{tolerance: /10}]}\n", str(path))
+    checked = parse_campaign(
+        path.read_text() + "fits: [transition]\nverify: {seeds: 2, variants: [{tolerance: /10}]}\n",
+        str(path),
+    )
     sample = plan_sample(checked, expansion, load_fits(store.root))
     records = store.scan()
     by_point = {(r.point.index, r.seed): records[r.run_id] for r in sample.base_list()}
@@ -57,8 +60,10 @@ def files(tmp_path_factory):
 
 def _variables(path: Path) -> dict[str, dict]:
     with netCDF4.Dataset(path) as nc:
-        return {name: {k: v.getncattr(k) for k in v.ncattrs()} | {"_dims": v.dimensions}
-                for name, v in nc.variables.items()}
+        return {
+            name: {k: v.getncattr(k) for k in v.ncattrs()} | {"_dims": v.dimensions}
+            for name, v in nc.variables.items()
+        }
 
 
 def _globals(path: Path) -> dict:
@@ -136,11 +141,16 @@ def _checker_messages(path: Path, tmp_path: Path) -> list[str]:
         pytest.fail("compliance-checker is not installed: pip install -e '.[test]'")
     CheckSuite.load_all_available_checkers()
     out = tmp_path / f"{path.stem}.json"
-    ComplianceChecker.run_checker(str(path), ["cf:1.11"], 0, "normal",
-                                  output_filename=str(out), output_format="json")
+    ComplianceChecker.run_checker(
+        str(path), ["cf:1.11"], 0, "normal", output_filename=str(out), output_format="json"
+    )
     report = json.loads(out.read_text())["cf:1.11"]
-    return [m for key in ("high_priorities", "medium_priorities", "low_priorities")
-            for item in report[key] for m in item["msgs"]]
+    return [
+        m
+        for key in ("high_priorities", "medium_priorities", "low_priorities")
+        for item in report[key]
+        for m in item["msgs"]
+    ]
 
 
 @pytest.mark.parametrize("which", ["run", "phase", "fits", "verify"])
@@ -161,16 +171,22 @@ def _cfchecks(path: Path, tmp_path: Path, version: tuple[int, int]) -> dict[str,
         import compliance_checker
         from cfchecker.cfchecks import CFChecker, CFVersion
     except ImportError as e:  # a test dependency: never skip silently
-        pytest.fail(f"cfchecks cannot be loaded ({e}): pip install -e '.[test]' and the "
-                    "UDUNITS-2 library (Debian: apt-get install libudunits2-0)")
+        pytest.fail(
+            f"cfchecks cannot be loaded ({e}): pip install -e '.[test]' and the "
+            "UDUNITS-2 library (Debian: apt-get install libudunits2-0)"
+        )
     names = Path(compliance_checker.__file__).parent / "data" / "cf-standard-name-table.xml"
     tables = {}
     for kind, root in (("area", "area_type_table"), ("region", "standardized_region_list")):
         tables[kind] = tmp_path / f"{kind}.xml"
         tables[kind].write_text(EMPTY_TABLE.format(root))
-    checker = CFChecker(cfStandardNamesXML=str(names), cfAreaTypesXML=str(tables["area"]),
-                        cfRegionNamesXML=str(tables["region"]), version=CFVersion(version),
-                        silent=True)
+    checker = CFChecker(
+        cfStandardNamesXML=str(names),
+        cfAreaTypesXML=str(tables["area"]),
+        cfRegionNamesXML=str(tables["region"]),
+        version=CFVersion(version),
+        silent=True,
+    )
     results = checker.checker(str(path))
     out: dict[str, list[str]] = {"FATAL": [], "ERROR": [], "WARN": []}
     for scope in [results["global"], *results["variables"].values()]:

@@ -39,11 +39,13 @@ seeds: 2
 
 def test_every_kind_of_change_is_described():
     old = parse_campaign(BASE)
-    new = parse_campaign(BASE.replace("[0.1, 0.2, 0.3]", "[0.1, 0.3, 0.4, 0.5]")
-                         .replace("chi: [5.0, 10.0]", "eps: [0.0, 0.05]")
-                         .replace("K: 1.0e-4}", "K: 2.0e-4, C: 2.0}")
-                         .replace("t_final: 2}", "t_final: 3}")
-                         .replace("seeds: 2", "seeds: [0, 1, 7]\nexecution: {workers: 1}"))
+    new = parse_campaign(
+        BASE.replace("[0.1, 0.2, 0.3]", "[0.1, 0.3, 0.4, 0.5]")
+        .replace("chi: [5.0, 10.0]", "eps: [0.0, 0.05]")
+        .replace("K: 1.0e-4}", "K: 2.0e-4, C: 2.0}")
+        .replace("t_final: 2}", "t_final: 3}")
+        .replace("seeds: 2", "seeds: [0, 1, 7]\nexecution: {workers: 1}")
+    )
     assert describe_changes(old, new) == [
         "axis alpha_minus_B: values added 0.4, 0.5; values removed 0.2",
         "axis eps added: 0, 0.05",
@@ -53,19 +55,29 @@ def test_every_kind_of_change_is_described():
         "seeds: 2 -> 3; added 7",
         "also changed (no effect on the run ids): execution",
     ]
-    zipped = parse_campaign(BASE.replace("chi: [5.0, 10.0]", "chi: [5.0, 10.0, 15.0]\n"
-                                         "  zip: [[alpha_minus_B, chi]]"))
-    assert describe_changes(old, zipped) == ["axis chi: values added 15",
-                                             "zip groups: none -> [alpha_minus_B, chi]"]
+    zipped = parse_campaign(
+        BASE.replace("chi: [5.0, 10.0]", "chi: [5.0, 10.0, 15.0]\n  zip: [[alpha_minus_B, chi]]")
+    )
+    assert describe_changes(old, zipped) == [
+        "axis chi: values added 15",
+        "zip groups: none -> [alpha_minus_B, chi]",
+    ]
     assert describe_changes(old, parse_campaign("# a comment\n" + BASE)) == [
-        "nothing that changes the runs (comments or layout)"]
+        "nothing that changes the runs (comments or layout)"
+    ]
 
 
 def test_status_says_what_changed_and_counts_the_runs(copy_of_small):
     unchanged = invoke("status", copy_of_small.path, "--results", copy_of_small.results)
     assert "differs from the one its results were made with" not in unchanged.output
-    assert json.loads(invoke("status", copy_of_small.path, "--results", copy_of_small.results,
-                             "--json").output)["changes"] is None
+    assert (
+        json.loads(
+            invoke(
+                "status", copy_of_small.path, "--results", copy_of_small.results, "--json"
+            ).output
+        )["changes"]
+        is None
+    )
     text = copy_of_small.path.read_text()
     copy_of_small.path.write_text(text.replace("[0.1, 0.2, 20.0]", "[0.1, 0.15, 20.0]"))
     out = flat(invoke("status", copy_of_small.path, "--results", copy_of_small.results).output)
@@ -74,11 +86,16 @@ def test_status_says_what_changed_and_counts_the_runs(copy_of_small):
     assert "axis alpha_minus_B: values added 0.15; values removed 0.2" in out
     assert "runs: 2 new, 4 kept, 2 orphaned" in out
     assert "the orphaned runs are kept; 'nematic run --prune' removes them" in out
-    report = json.loads(invoke("status", copy_of_small.path, "--results",
-                               copy_of_small.results, "--json").output)
+    report = json.loads(
+        invoke("status", copy_of_small.path, "--results", copy_of_small.results, "--json").output
+    )
     assert report["changes"] == {
-        "copy": str(copy), "changes": ["axis alpha_minus_B: values added 0.15; values "
-                                       "removed 0.2"], "new": 2, "kept": 4, "orphaned": 2}
+        "copy": str(copy),
+        "changes": ["axis alpha_minus_B: values added 0.15; values removed 0.2"],
+        "new": 2,
+        "kept": 4,
+        "orphaned": 2,
+    }
 
 
 def test_run_reports_the_change_first_and_prunes_only_when_asked(copy_of_small):
@@ -87,8 +104,15 @@ def test_run_reports_the_change_first_and_prunes_only_when_asked(copy_of_small):
     assert len(orphans) == 2
     text = copy_of_small.path.read_text()
     copy_of_small.path.write_text(text.replace("[0.1, 0.2, 20.0]", "[0.1, 0.15, 20.0]"))
-    result = invoke("run", copy_of_small.path, "--results", copy_of_small.results,
-                    "--no-figures", "--workers", "1")
+    result = invoke(
+        "run",
+        copy_of_small.path,
+        "--results",
+        copy_of_small.results,
+        "--no-figures",
+        "--workers",
+        "1",
+    )
     assert result.exit_code == 1, result.output  # alpha - B = 20 still fails
     out = flat(result.output)
     assert "axis alpha_minus_B: values added 0.15; values removed 0.2" in out
@@ -97,22 +121,32 @@ def test_run_reports_the_change_first_and_prunes_only_when_asked(copy_of_small):
     assert out.index("2 orphaned") < out.index("workers ready")  # before running anything
     assert all((copy_of_small.runs / f"{rid}.nc").exists() for rid in orphans)
     # the campaign copy is now the new file: nothing changed, the orphans stay until --prune
-    again = invoke("run", copy_of_small.path, "--results", copy_of_small.results,
-                   "--no-figures", "--prune")
+    again = invoke(
+        "run", copy_of_small.path, "--results", copy_of_small.results, "--no-figures", "--prune"
+    )
     assert again.exit_code == 1, again.output
     out = flat(again.output)
     assert "differs from the one its results were made with" not in out
-    assert f"pruned 2 orphaned run(s) (their records and run files) from " \
-           f"{copy_of_small.runs}" in out
+    assert (
+        f"pruned 2 orphaned run(s) (their records and run files) from {copy_of_small.runs}" in out
+    )
     left = records(copy_of_small.runs)
     assert not orphans & set(left)
     assert not any((copy_of_small.runs / f"{rid}.nc").exists() for rid in orphans)
     assert len(left) == 6
     assert {rid for rid in old if rid not in orphans} <= set(left)
-    once_more = invoke("run", copy_of_small.path, "--results", copy_of_small.results,
-                       "--no-figures", "--no-aggregate", "--prune")
-    assert "nothing to prune: every run in the folder is planned by this campaign" in \
-        flat(once_more.output)
+    once_more = invoke(
+        "run",
+        copy_of_small.path,
+        "--results",
+        copy_of_small.results,
+        "--no-figures",
+        "--no-aggregate",
+        "--prune",
+    )
+    assert "nothing to prune: every run in the folder is planned by this campaign" in flat(
+        once_more.output
+    )
 
 
 REFINED = """\
@@ -138,14 +172,25 @@ def test_runs_a_refinement_can_plan_are_not_orphaned(tmp_path):
     store = CampaignStore(tmp_path / "results", "r")
     store.runs_dir.mkdir(parents=True)
     namer = RunNamer(campaign)
-    refined = namer.run_id((0,), 0.05, 1)      # a midpoint a later round may plan
-    outside = namer.run_id((0,), 0.45, 1)      # beyond the refined axis's grid
-    other_seed = namer.run_id((1,), 0.05, 9)   # a seed the campaign does not have
-    for rid, chi, eps, seed in ((refined, 5.0, 0.05, 1), (outside, 5.0, 0.45, 1),
-                                (other_seed, 10.0, 0.05, 9)):
-        store.write_record({"run_id": rid, "status": "failed", "reason": "nan",
-                            "nc_bytes": None, "seed": seed, "scalars": {},
-                            "coords": {"chi": chi, "eps": eps}})
+    refined = namer.run_id((0,), 0.05, 1)  # a midpoint a later round may plan
+    outside = namer.run_id((0,), 0.45, 1)  # beyond the refined axis's grid
+    other_seed = namer.run_id((1,), 0.05, 9)  # a seed the campaign does not have
+    for rid, chi, eps, seed in (
+        (refined, 5.0, 0.05, 1),
+        (outside, 5.0, 0.45, 1),
+        (other_seed, 10.0, 0.05, 9),
+    ):
+        store.write_record(
+            {
+                "run_id": rid,
+                "status": "failed",
+                "reason": "nan",
+                "nc_bytes": None,
+                "seed": seed,
+                "scalars": {},
+                "coords": {"chi": chi, "eps": eps},
+            }
+        )
     expansion = expansion_for(campaign, store)
     assert refined not in expansion.position  # not in the rounds replayed so far
     counts = run_counts(campaign, expansion, store, store.scan())

@@ -32,8 +32,9 @@ def test_version():
     result = invoke("--version")
     assert result.exit_code == 0, result.output
     # the model's version (each run file records it) and the git commit of the code
-    assert re.match(r"nematic \d+\.\d+\.\d+ \(git ([0-9a-f]{40}(\+dirty)?|unknown)\)",
-                    result.output), result.output
+    assert re.match(
+        r"nematic \d+\.\d+\.\d+ \(git ([0-9a-f]{40}(\+dirty)?|unknown)\)", result.output
+    ), result.output
     assert result.output.split()[1] == model.__version__
 
 
@@ -56,15 +57,18 @@ def test_run_has_a_dashboard_switch():
     group = typer.main.get_command(app)
     assert isinstance(group, typer.core.TyperGroup)
     command = group.commands["run"]
-    opts = {o for p in command.params
-            for o in getattr(p, "opts", []) + getattr(p, "secondary_opts", [])}
+    opts = {
+        o for p in command.params for o in getattr(p, "opts", []) + getattr(p, "secondary_opts", [])
+    }
     assert {"--dashboard", "--no-dashboard"} <= opts
 
 
 def _bad_campaign(tmp_path):
     path = tmp_path / "bad.yaml"
-    path.write_text("name: bad\nparamters: {B: 0.5}\nnumerics: {t_final: -3}\n"
-                    "sweep:\n  axes:\n    alpha_minus_B: {linspace: [0.1, 1.0]}\n")
+    path.write_text(
+        "name: bad\nparamters: {B: 0.5}\nnumerics: {t_final: -3}\n"
+        "sweep:\n  axes:\n    alpha_minus_B: {linspace: [0.1, 1.0]}\n"
+    )
     return path
 
 
@@ -164,8 +168,11 @@ def test_py_pde_tracker_time_warning_is_not_printed(caplog):
 
     logger = logging.getLogger("pde.solvers.controller")
     with caplog.at_level(logging.INFO):
-        logger.warning("Spent more time on handling trackers (%.3g) than on the actual "
-                       "simulation (%.3g)", 39.2, 20.5)
+        logger.warning(
+            "Spent more time on handling trackers (%.3g) than on the actual simulation (%.3g)",
+            39.2,
+            20.5,
+        )
         logger.warning("another warning")
     messages = [r.getMessage() for r in caplog.records]
     assert "another warning" in messages
@@ -193,8 +200,12 @@ def test_dashboard_link_of_an_external_scheduler():
     from sweep.run.driver import dashboard_link, dask_client
 
     for served in (True, False):
-        with LocalCluster(n_workers=0, processes=False, dashboard_address="127.0.0.1:0",
-                          scheduler_kwargs={"dashboard": served}) as cluster:
+        with LocalCluster(
+            n_workers=0,
+            processes=False,
+            dashboard_address="127.0.0.1:0",
+            scheduler_kwargs={"dashboard": served},
+        ) as cluster:
             spec = ExecutionSpec(scheduler=cluster.scheduler_address)
             with dask_client(spec, dashboard=True) as client:
                 link = dashboard_link(client)

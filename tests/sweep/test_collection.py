@@ -79,11 +79,12 @@ def test_a_collection_file_is_read_and_a_campaign_file_is_not_one(folder):
 def test_collection_mistakes_are_listed_with_line_and_key(folder):
     (folder / "bad.yaml").write_text(
         "name: a/b\ncolour: red\ncampaigns:\n  - one.yaml\n  - nothere.yaml\n  - one.yaml\n"
-        "  - both.yaml\n  - 3\n  - notes.txt\n")
+        "  - both.yaml\n  - 3\n  - notes.txt\n"
+    )
     (folder / "notes.txt").write_text("")
     found = problems(folder / "bad.yaml")
     text = "\n".join(found)
-    assert "bad.yaml:1" in text and "name" in text          # noqa: PT018
+    assert "bad.yaml:1" in text and "name" in text  # noqa: PT018
     assert "unknown key 'colour'" in text
     assert "campaigns[1]" in text and "no campaign file" in text  # noqa: PT018
     assert "listed twice" in text
@@ -144,8 +145,7 @@ def test_a_collection_runs_its_campaigns_in_order_and_resumes(folder):
     status = invoke("status", folder / "both.yaml", "--results", results)
     assert status.exit_code == 0
     assert flat(status.output).count("2 done, 0 failed, 0 pending of 2") == 2
-    js = json.loads(invoke("status", folder / "both.yaml", "--results", results,
-                           "--json").output)
+    js = json.loads(invoke("status", folder / "both.yaml", "--results", results, "--json").output)
     assert js["collection"] == "both"
     assert set(js["campaigns"]) == {"one", "two"}
     stop = invoke("stop", folder / "both.yaml", "--results", results)
@@ -182,9 +182,18 @@ def test_an_interrupt_stops_the_collection(folder):
         ran.append(member)
         raise typer.Exit(130)
 
-    options = {"results": folder / "results", "set_": None, "seeds": None, "scheduler": None,
-               "workers": None, "retry_failed": False, "dry_run": False, "detach": False,
-               "prune": False, "quiet": True}
+    options = {
+        "results": folder / "results",
+        "set_": None,
+        "seeds": None,
+        "scheduler": None,
+        "workers": None,
+        "retry_failed": False,
+        "dry_run": False,
+        "detach": False,
+        "prune": False,
+        "quiet": True,
+    }
     with pytest.raises(typer.Exit) as e:
         run_collection(coll, fake_run, options)
     assert e.value.exit_code == 130
@@ -201,14 +210,30 @@ def test_a_detached_collection_is_stopped_by_nematic_stop(folder):
     """`run COLLECTION --detach` runs the collection's driver in the background (its log in
     results/NAME/driver.log); `nematic stop COLLECTION` stops the member running, which ends
     the collection: the rest is not run, and the summary says so."""
-    (folder / "one.yaml").write_text(SMALL.format(name="one").replace(
-        "[0.2, 0.8]", "[0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]").replace("t_final: 2.0",
-                                                                     "t_final: 6.0"))
+    (folder / "one.yaml").write_text(
+        SMALL.format(name="one")
+        .replace("[0.2, 0.8]", "[0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]")
+        .replace("t_final: 2.0", "t_final: 6.0")
+    )
     results = folder / "results"
-    out = subprocess.run([sys.executable, "-m", "sweep", "run", str(folder / "both.yaml"),
-                          "--results", str(results), "--no-figures", "--no-dashboard",
-                          "--detach"], capture_output=True, text=True, timeout=240,
-                         env=dict(os.environ, COLUMNS="300"))
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sweep",
+            "run",
+            str(folder / "both.yaml"),
+            "--results",
+            str(results),
+            "--no-figures",
+            "--no-dashboard",
+            "--detach",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        env=dict(os.environ, COLUMNS="300"),
+    )
     assert out.returncode == 0, out.stdout + out.stderr
     log = results / "both" / "driver.log"
     assert f"nematic stop {folder / 'both.yaml'}" in out.stdout

@@ -26,11 +26,18 @@ def detach_from_a_shell(path: Path, results: Path, tmp_path: Path) -> tuple[str,
     """`nematic run --detach` from a shell in a session of its own, which then exits; the
     shell's process group is sent SIGHUP, as a terminal that closes does. Returns the
     shell's output and the detached driver's pid."""
-    cmd = (f"{sys.executable} -m sweep run {path} --results {results} --no-figures "
-           "--detach; echo exit=$?")
-    shell = subprocess.Popen(["bash", "-c", cmd], stdout=subprocess.PIPE,
-                             stderr=subprocess.STDOUT, text=True, start_new_session=True,
-                             env=dict(os.environ, COLUMNS="300"))
+    cmd = (
+        f"{sys.executable} -m sweep run {path} --results {results} --no-figures "
+        "--detach; echo exit=$?"
+    )
+    shell = subprocess.Popen(
+        ["bash", "-c", cmd],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+        env=dict(os.environ, COLUMNS="300"),
+    )
     out, _ = shell.communicate(timeout=240)
     assert "exit=0" in out, out
     with_hup = group_alive(shell.pid)
@@ -52,13 +59,19 @@ def alive(pid: int) -> bool:
 
 
 def test_the_command_line_of_the_background_driver():
-    assert detached_args(["--debug", "run", "c.yaml", "--detach", "--seeds", "2"]) == \
-        ["--debug", "run", "c.yaml", "--seeds", "2"]
+    assert detached_args(["--debug", "run", "c.yaml", "--detach", "--seeds", "2"]) == [
+        "--debug",
+        "run",
+        "c.yaml",
+        "--seeds",
+        "2",
+    ]
 
 
 def test_a_detached_driver_outlives_its_shell_and_completes(tmp_path):
-    path = write_campaign(tmp_path, name="detached", values="[0.1, 0.2]", seeds=2,
-                          t_final=2.0, workers=1)
+    path = write_campaign(
+        tmp_path, name="detached", values="[0.1, 0.2]", seeds=2, t_final=2.0, workers=1
+    )
     results = tmp_path / "results"
     folder = results / "detached"
     out, pid = detach_from_a_shell(path, results, tmp_path)
@@ -84,15 +97,22 @@ def test_a_detached_driver_outlives_its_shell_and_completes(tmp_path):
 
 
 def test_stop_ends_the_driver_and_leaves_no_run_half_written(tmp_path):
-    path = write_campaign(tmp_path, name="stopped", values="[0.1, 0.12, 0.14, 0.16, 0.18]",
-                          seeds=2, t_final=4.0, workers=2)
+    path = write_campaign(
+        tmp_path,
+        name="stopped",
+        values="[0.1, 0.12, 0.14, 0.16, 0.18]",
+        seeds=2,
+        t_final=4.0,
+        workers=2,
+    )
     results = tmp_path / "results"
     folder = results / "stopped"
     runs = folder / "runs"
     _, pid = detach_from_a_shell(path, results, tmp_path)
     try:
-        wait_for(lambda: len(list(runs.glob("*.json"))) >= 1 or not alive(pid), 240,
-                 "a finished run")
+        wait_for(
+            lambda: len(list(runs.glob("*.json"))) >= 1 or not alive(pid), 240, "a finished run"
+        )
         result = invoke("stop", "stopped", "--results", results)
     finally:
         if read_lock_holder(folder / ".lock") is not None:
@@ -111,8 +131,7 @@ def test_stop_ends_the_driver_and_leaves_no_run_half_written(tmp_path):
     assert not list(runs.glob(".*"))
     n = len(run_ids(path))
     status = json.loads(invoke("status", path, "--results", results, "--json").output)
-    assert (status["done"], status["failed"], status["pending"]) == (len(recs), 0,
-                                                                     n - len(recs))
+    assert (status["done"], status["failed"], status["pending"]) == (len(recs), 0, n - len(recs))
     assert status["unreadable"] == 0
     assert 1 <= len(recs) < n
     # nothing left to stop: says so, exit 1; by the campaign file too
@@ -137,8 +156,7 @@ def test_detach_on_a_campaign_in_use_is_refused(copy_of_small):
     lock = CampaignLock(copy_of_small.results / "small" / ".lock")
     lock.acquire(command="nematic run small.yaml")
     try:
-        result = invoke("run", copy_of_small.path, "--results", copy_of_small.results,
-                        "--detach")
+        result = invoke("run", copy_of_small.path, "--results", copy_of_small.results, "--detach")
     finally:
         lock.release()
     assert result.exit_code == 2

@@ -74,20 +74,36 @@ def write(folder: Path, text: str, name: str = "c") -> Path:
     return path
 
 
-def fake_run(store: CampaignStore, run_id: str, seconds: float, *, status: str = "ok",
-             scalars: dict | None = None) -> None:
+def fake_run(
+    store: CampaignStore,
+    run_id: str,
+    seconds: float,
+    *,
+    status: str = "ok",
+    scalars: dict | None = None,
+) -> None:
     """A finished run as the worker leaves it: a run file and a record naming its stamp."""
     path = store.nc_path(run_id)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(run_id.encode())
-    store.write_record({"run_id": run_id, "status": status,
-                        "reason": "" if status == "ok" else "nan", "wall_time": seconds,
-                        "scalars": scalars or {}, "seed": 0, **file_stamp(path)})
+    store.write_record(
+        {
+            "run_id": run_id,
+            "status": status,
+            "reason": "" if status == "ok" else "nan",
+            "wall_time": seconds,
+            "scalars": scalars or {},
+            "seed": 0,
+            **file_stamp(path),
+        }
+    )
 
 
 def tree(folder: Path) -> dict[str, tuple[int, int]]:
-    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
-            for p in folder.rglob("*")}
+    return {
+        str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
+        for p in folder.rglob("*")
+    }
 
 
 # --------------------------------------------------------------------------- the cost model
@@ -99,12 +115,15 @@ def test_cost_model_constants_are_the_benchmarks_fit():
             assert const.__dict__[name] == pytest.approx(fit[mech][name], rel=5e-3, abs=1e-9)
         assert [list(p) for p in const.steps_curve] == fit[mech]["steps_curve"]
     assert pytest.approx(fit["spread"], abs=5e-3) == MODEL_SPREAD
-    factors = {("linear", "scheme", "etdrk2"): fit["linear"]["variants"]["scheme=etdrk2"],
-               ("finite", "scheme", "etdrk2"): fit["finite"]["variants"]["scheme=etdrk2"],
-               ("linear", "error_norm", "rms"): fit["linear"]["variants"]["error_norm=rms"],
-               ("linear", "incompressible", True): fit["linear"]["variants"]["incompressible"],
-               ("finite", "displacement", "equilibrium"):
-                   fit["finite"]["variants"]["displacement=equilibrium"]}
+    factors = {
+        ("linear", "scheme", "etdrk2"): fit["linear"]["variants"]["scheme=etdrk2"],
+        ("finite", "scheme", "etdrk2"): fit["finite"]["variants"]["scheme=etdrk2"],
+        ("linear", "error_norm", "rms"): fit["linear"]["variants"]["error_norm=rms"],
+        ("linear", "incompressible", True): fit["linear"]["variants"]["incompressible"],
+        ("finite", "displacement", "equilibrium"): fit["finite"]["variants"][
+            "displacement=equilibrium"
+        ],
+    }
     for key, value in factors.items():
         assert cost_model.VARIANT_FACTORS[key] == pytest.approx(value["time"], abs=5e-3)
 
@@ -121,10 +140,11 @@ def test_model_scales_with_resolution_length_and_mechanics():
     assert secs(mechanics="linear") < secs(mechanics="finite")
     # steps: the curve, scaled by the tolerance (etdrk4: 1/4 power), floored by dt_max
     n = Numerics(t_final=300.0)
-    assert model_steps(n) == pytest.approx(curve_steps(cost_model.COSTS["finite"].steps_curve,
-                                                       300.0))
+    assert model_steps(n) == pytest.approx(
+        curve_steps(cost_model.COSTS["finite"].steps_curve, 300.0)
+    )
     tighter = Numerics(t_final=300.0, tolerance=1e-4)
-    assert model_steps(tighter) == pytest.approx(model_steps(n) * 10 ** 0.25)
+    assert model_steps(tighter) == pytest.approx(model_steps(n) * 10**0.25)
     assert model_steps(Numerics(t_final=300.0, dt_max=0.01)) == pytest.approx(30000.0)
     assert model_steps(Numerics(t_final=300.0, adaptive=False, dt=0.5)) == 600.0
     # beyond the curve's last time: its last slope
@@ -134,7 +154,7 @@ def test_model_scales_with_resolution_length_and_mechanics():
 
 
 def test_makespan_deals_runs_to_the_first_free_worker():
-    assert makespan([10.0, 20.0, 30.0], 2) == 40.0   # 10 | 20, then 30 after the 10
+    assert makespan([10.0, 20.0, 30.0], 2) == 40.0  # 10 | 20, then 30 after the 10
     assert makespan([5.0] * 8, 2) == 20.0
     assert makespan([5.0] * 3, 8) == 5.0
     assert makespan([], 4) == 0.0
@@ -147,12 +167,12 @@ def test_estimate_from_finished_runs_is_exact(tmp_path):
     campaign = load_campaign(path)
     store = CampaignStore(tmp_path / "results", "c")
     exp = expand(campaign)
-    for i, seconds in ((0, 10.0), (2, 20.0), (4, 30.0)):   # seed 0 of each point
+    for i, seconds in ((0, 10.0), (2, 20.0), (4, 30.0)):  # seed 0 of each point
         fake_run(store, exp.run_ids[i], seconds)
     e = estimate(campaign, store, load_cores=QUIET)
     assert (e.total, e.done, e.failed, e.to_do, e.measured) == (6, 3, 0, 3, 3)
     assert e.cpu[0] == pytest.approx(60.0)
-    assert e.wall[0] == pytest.approx(40.0)          # 10 | 20, then 30
+    assert e.wall[0] == pytest.approx(40.0)  # 10 | 20, then 30
     assert e.workers == 2
     assert e.overhead == driver_overhead(1.0)
     assert [c.seconds for c in e.points] == [10.0, 20.0, 30.0]
@@ -180,8 +200,11 @@ def test_points_with_several_runs_give_the_seed_spread(tmp_path):
 
 def test_unmeasured_points_are_scaled_by_the_cost_model(tmp_path):
     """Runs at 32^2 measured; the 64^2 runs cost that ratio times the model's 64^2 cost."""
-    text = GRID.format(name="c", seeds=1).replace("resolution: 32, ", "").replace(
-        "[0.1, 0.2, 0.3]", "[0.1, 0.2, 0.3]\n    resolution: [32, 64]")
+    text = (
+        GRID.format(name="c", seeds=1)
+        .replace("resolution: 32, ", "")
+        .replace("[0.1, 0.2, 0.3]", "[0.1, 0.2, 0.3]\n    resolution: [32, 64]")
+    )
     path = write(tmp_path, text)
     campaign = load_campaign(path)
     store = CampaignStore(tmp_path / "results", "c")
@@ -208,7 +231,7 @@ def test_a_busy_machine_stretches_the_cost_model_and_the_driver(tmp_path):
     one = model_seconds(expand(campaign).points[0].numerics)
     e = estimate(campaign, store, load_cores=(6.0, 2))
     assert e.stretch == 4.0
-    assert e.cpu[0] == pytest.approx(6 * one)           # CPU time: a free core per run
+    assert e.cpu[0] == pytest.approx(6 * one)  # CPU time: a free core per run
     assert e.wall[0] == pytest.approx(3 * one * 4.0)
     assert e.overhead == pytest.approx(driver_overhead(4.0))
     assert "each worker gets about 25 % of a core" in flat("\n".join(lines(e)))
@@ -263,7 +286,7 @@ def test_failed_runs_are_to_do_only_with_retry_failed(tmp_path):
 def test_adaptive_campaign_round_and_bound(tmp_path):
     campaign = parse_campaign(REFINED)
     store = CampaignStore(tmp_path / "results", "r")
-    e = estimate(campaign, store, load_cores=QUIET)   # no results: round 0
+    e = estimate(campaign, store, load_cores=QUIET)  # no results: round 0
     assert not (tmp_path / "results").exists()
     n0 = len(first_round(campaign).runs)
     assert (e.total, e.to_do) == (n0, n0)
@@ -282,7 +305,7 @@ def test_adaptive_campaign_round_and_bound(tmp_path):
     assert ref.current.number == 1
     assert e.to_do == len(ref.current.runs)
     assert e.measured == n0
-    assert e.cpu[0] == pytest.approx(4.0 * e.to_do)   # scaled: every run measured 4 s
+    assert e.cpu[0] == pytest.approx(4.0 * e.to_do)  # scaled: every run measured 4 s
     assert e.later is not None
     assert e.later.runs == run_bound(campaign) - ref.n_runs
     assert e.later.cpu == pytest.approx(4.0 * e.later.runs)
@@ -307,28 +330,35 @@ def test_seeds_by_precision_current_round_and_forecast(tmp_path):
     to need (sweep/precision/forecast.py) at the point's measured cost, with the bound."""
     campaign = parse_campaign(PRECISE)
     store = CampaignStore(tmp_path / "results", "p")
-    e = estimate(campaign, store, load_cores=QUIET)   # nothing run: round 0, the rest unknown
+    e = estimate(campaign, store, load_cores=QUIET)  # nothing run: round 0, the rest unknown
     assert (e.total, e.to_do) == (12, 12)
     assert "seeds by precision: round 0" in lines(e)[0]
     assert e.later is not None
     assert e.later.forecast
     assert e.later.runs == e.later.at_most == 60 - 12
     # round 0 done: 0.1 relaxed (unanimous at 8), 0.2 precise already, 0.3 mixed (the cap)
-    values = {0.1: [1e-12, 3e-12, 2e-13, 5e-12], 0.2: [1.0, 1.01, 0.99, 1.0],
-              0.3: [1e-12, 1.0, 0.02, 2.0]}
+    values = {
+        0.1: [1e-12, 3e-12, 2e-13, 5e-12],
+        0.2: [1.0, 1.01, 0.99, 1.0],
+        0.3: [1e-12, 1.0, 0.02, 2.0],
+    }
     grid = expand(campaign)
     for i, rid in enumerate(grid.run_ids):
         run = grid.run(i)
         x, j = run.point.coords["alpha_minus_B"], grid.seeds.index(run.seed)
         if j < 4:
-            fake_run(store, rid, 2.0 if x < 0.3 else 5.0,
-                     scalars={"sigma2_S_final": values[round(x, 1)][j]})
+            fake_run(
+                store,
+                rid,
+                2.0 if x < 0.3 else 5.0,
+                scalars={"sigma2_S_final": values[round(x, 1)][j]},
+            )
     e = estimate(campaign, store, load_cores=QUIET)
     assert "seeds by precision: round 1" in lines(e)[0]
-    assert e.to_do == 8   # 0.1 and 0.3 get seeds 4-7
+    assert e.to_do == 8  # 0.1 and 0.3 get seeds 4-7
     assert e.cpu[0] == pytest.approx(4 * 2.0 + 4 * 5.0)
     assert e.later is not None
-    assert e.later.runs == 12   # 0.3 on to 20 seeds; 0.1 stops at 8
+    assert e.later.runs == 12  # 0.3 on to 20 seeds; 0.1 stops at 8
     assert e.later.cpu == pytest.approx(12 * 5.0)
     assert e.later.at_most == 60 - 20
     assert "about 12 more runs expected" in flat(" ".join(lines(e)))
@@ -365,15 +395,18 @@ def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path, quiet_machine)
     assert r.exit_code == 0, r.output
     assert tree(results) == before
     out = flat(r.output)
-    assert "basis: from 3 finished runs of this campaign (run times 10 s to 30 s, median 20 s)" \
-        in out
+    assert (
+        "basis: from 3 finished runs of this campaign (run times 10 s to 30 s, median 20 s)" in out
+    )
     assert "alpha_minus_B=0.1: 1 to do, 10 s each" in out
     assert "CPU time: 1 min 00 s = 0.017 CPU-h" in out
     # 3 workers on 2 cores: each gets 2/3 of a core (the driver is stretched, not the runs)
     assert f"wall time: {30 + driver_overhead(1.5):.0f} s on 3 worker(s)" in out
     assert "each worker gets about 67 % of a core" in out
-    assert f"wall time: {40 + driver_overhead(1.0):.0f} s on 2 worker(s) (this machine's " \
+    assert (
+        f"wall time: {40 + driver_overhead(1.0):.0f} s on 2 worker(s) (this machine's "
         "local cluster" in out
+    )
     # -q: the totals only
     r = invoke("run", path, "--results", results, "--dry-run", "-q")
     assert "alpha_minus_B=0.1" not in r.output
@@ -383,8 +416,16 @@ def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path, quiet_machine)
 def test_dry_run_of_a_real_campaign_folder_writes_nothing(copy_of_small, quiet_machine):
     """The small campaign's real records (run times measured by the workers)."""
     before = tree(copy_of_small.results)
-    r = invoke("run", copy_of_small.path, "--results", copy_of_small.results, "--dry-run",
-               "--seeds", "4", "--retry-failed")
+    r = invoke(
+        "run",
+        copy_of_small.path,
+        "--results",
+        copy_of_small.results,
+        "--dry-run",
+        "--seeds",
+        "4",
+        "--retry-failed",
+    )
     assert r.exit_code == 0, r.output
     assert tree(copy_of_small.results) == before
     out = flat(r.output)
@@ -406,8 +447,10 @@ def test_validate_estimate(tmp_path, quiet_machine):
 
 def test_bad_input_is_one_line(tmp_path):
     path = write(tmp_path, GRID.format(name="c", seeds=2))
-    for extra, says in ((["--detach"], "does not take --detach"),
-                        (["--prune"], "does not take --prune")):
+    for extra, says in (
+        (["--detach"], "does not take --detach"),
+        (["--prune"], "does not take --prune"),
+    ):
         r = invoke("run", path, "--results", tmp_path / "results", "--dry-run", *extra)
         assert r.exit_code == 2
         assert says in r.output
@@ -427,10 +470,10 @@ def test_bad_input_is_one_line(tmp_path):
 
 def test_quickstart_estimate_without_results(tmp_path):
     """The quickstart (8 runs, 128^2, finite, t = 40) from the cost model alone."""
-    campaign = load_campaign(ROOT / "campaigns" / "quickstart.yaml",
-                             Overrides(name="estimate-test"))
-    e = estimate(campaign, CampaignStore(tmp_path / "results", campaign.name),
-                 load_cores=QUIET)
+    campaign = load_campaign(
+        ROOT / "campaigns" / "quickstart.yaml", Overrides(name="estimate-test")
+    )
+    e = estimate(campaign, CampaignStore(tmp_path / "results", campaign.name), load_cores=QUIET)
     assert e.to_do == 8
     assert e.workers == 2
     one = model_seconds(Numerics(resolution=128, t_final=40.0, save_every=1.0))
@@ -443,16 +486,17 @@ def test_workers_of_a_batch_cluster_and_of_a_scheduler(tmp_path):
     machine's load); an external scheduler's workers are not known: the local count."""
     text = GRID.format(name="c", seeds=2).replace(
         "execution: {workers: 2}",
-        "execution: {cluster: {kind: slurm, jobs: 3, cores: 2, processes: 2, memory: 4GB}}")
+        "execution: {cluster: {kind: slurm, jobs: 3, cores: 2, processes: 2, memory: 4GB}}",
+    )
     campaign = parse_campaign(text)
     e = estimate(campaign, CampaignStore(tmp_path / "results", "c"), load_cores=(6.0, 2))
     one = model_seconds(expand(campaign).points[0].numerics)
     assert e.workers == 6
     assert "slurm cluster: jobs 3 x cores 2" in e.where
-    assert e.wall[0] == pytest.approx(one)               # 6 runs on 6 workers, not stretched
+    assert e.wall[0] == pytest.approx(one)  # 6 runs on 6 workers, not stretched
     assert e.overhead == pytest.approx(driver_overhead(e.stretch))
     text = GRID.format(name="c", seeds=2).replace(
-        "execution: {workers: 2}", "execution: {scheduler: 'tcp://127.0.0.1:8786'}")
-    e = estimate(parse_campaign(text), CampaignStore(tmp_path / "results", "c"),
-                 load_cores=QUIET)
+        "execution: {workers: 2}", "execution: {scheduler: 'tcp://127.0.0.1:8786'}"
+    )
+    e = estimate(parse_campaign(text), CampaignStore(tmp_path / "results", "c"), load_cores=QUIET)
     assert "its workers are not known here" in e.where

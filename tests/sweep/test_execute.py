@@ -63,8 +63,9 @@ def test_every_run_has_a_complete_self_describing_file(small):
             assert ds.attrs["campaign"] == "small"
             assert ds.attrs["seed"] == recs[rid]["seed"]
             assert ds.attrs["status"] == recs[rid]["status"]
-            assert math.isclose(ds.attrs["param_alpha_minus_B"],
-                                recs[rid]["coords"]["alpha_minus_B"])
+            assert math.isclose(
+                ds.attrs["param_alpha_minus_B"], recs[rid]["coords"]["alpha_minus_B"]
+            )
             assert "num_resolution" in ds.attrs
             assert "git_commit" in ds.attrs
             if recs[rid]["status"] == "ok":
@@ -82,8 +83,7 @@ def test_status_shows_counts_per_value_and_reasons(small):
     assert "0 pending of 6" in out
     reason = next(r["reason"] for r in records(small.runs).values() if r["status"] != "ok")
     assert f"{reason}: 2" in out
-    as_json = json.loads(invoke("status", small.path, "--results", small.results,
-                                "--json").output)
+    as_json = json.loads(invoke("status", small.path, "--results", small.results, "--json").output)
     assert (as_json["done"], as_json["failed"], as_json["pending"]) == (4, 2, 0)
     axis = as_json["per_axis"][0]
     assert axis["labels"] == ["0.1", "0.2", "20"]
@@ -107,16 +107,26 @@ def test_status_eta_from_the_median_run_time(copy_of_small):
     slow.write_text(json.dumps(rec))
     for suffix in (".json", ".nc"):  # one run to do
         (copy_of_small.runs / f"{ok[1]}{suffix}").unlink()
-    report = json.loads(invoke("status", copy_of_small.path, "--results",
-                               copy_of_small.results, "--json", "--workers", "2").output)
+    report = json.loads(
+        invoke(
+            "status",
+            copy_of_small.path,
+            "--results",
+            copy_of_small.results,
+            "--json",
+            "--workers",
+            "2",
+        ).output
+    )
     times = sorted([600.0] + [recs[r]["wall_time"] for r in ok[2:]])
     assert report["pending"] == 1
     assert report["median_run_time"] == pytest.approx(float(np.median(times)))
     assert report["mean_run_time"] > 200  # the mean is what the 600 s run skews
     assert report["eta_seconds"] == pytest.approx(report["median_run_time"] / 2)
     assert "median run time" in report["eta_basis"]
-    text = " ".join(invoke("status", copy_of_small.path, "--results",
-                           copy_of_small.results).output.split())
+    text = " ".join(
+        invoke("status", copy_of_small.path, "--results", copy_of_small.results).output.split()
+    )
     assert f"run time: median {report['median_run_time']:.3g} s" in text
 
 
@@ -148,8 +158,7 @@ def test_phase_nc(small, tmp_path):
                 assert np.isnan(ds["sigma2_S"].values[i, j])
     s = ds["sigma2_S"].values
     np.testing.assert_allclose(ds["sigma2_S_mean"].values[:2], s[:2].mean(axis=1), rtol=1e-14)
-    np.testing.assert_allclose(ds["sigma2_S_std"].values[:2], s[:2].std(axis=1, ddof=1),
-                               rtol=1e-12)
+    np.testing.assert_allclose(ds["sigma2_S_std"].values[:2], s[:2].std(axis=1, ddof=1), rtol=1e-12)
     np.testing.assert_array_equal(ds["sigma2_S_count"].values, [2, 2, 0])
     assert np.isnan(ds["sigma2_S_mean"].values[2])
     # provenance
@@ -183,8 +192,14 @@ def test_retry_failed_and_grid_extension(copy_of_small):
     old_records = records(copy_of_small.runs)
     text = copy_of_small.path.read_text().replace("[0.1, 0.2, 20.0]", "[0.1, 0.15, 0.2, 20.0]")
     copy_of_small.path.write_text(text)
-    result = invoke("run", copy_of_small.path, "--results", copy_of_small.results,
-                    "--retry-failed", "--no-figures")
+    result = invoke(
+        "run",
+        copy_of_small.path,
+        "--results",
+        copy_of_small.results,
+        "--retry-failed",
+        "--no-figures",
+    )
     assert result.exit_code == 1, result.output  # alpha - B = 20 fails again
     out = " ".join(result.output.split())
     assert "8 runs" in out
@@ -253,8 +268,7 @@ def test_aggregate_in_a_fresh_process_writes_the_phase_nc_the_run_wrote(copy_of_
     variables, values, encodings and attributes but the time stamps."""
     with xr.open_dataset(copy_of_small.phase) as ds:
         before = ds.load()
-    modules, out = cli_modules("aggregate", copy_of_small.path, "--results",
-                               copy_of_small.results)
+    modules, out = cli_modules("aggregate", copy_of_small.path, "--results", copy_of_small.results)
     assert "4 ok, 2 failed, 0 missing of 6 runs" in " ".join(out.split()), out
     assert "dask.array" not in modules
     with xr.open_dataset(copy_of_small.phase) as ds:
@@ -265,16 +279,18 @@ def test_aggregate_in_a_fresh_process_writes_the_phase_nc_the_run_wrote(copy_of_
         assert after[name].attrs.keys() == var.attrs.keys(), name
         assert after[name].encoding.get("dtype") == var.encoding.get("dtype"), name
     stamps = {"created", "history"}
-    assert {k: v for k, v in after.attrs.items() if k not in stamps} == \
-        {k: v for k, v in before.attrs.items() if k not in stamps}
+    assert {k: v for k, v in after.attrs.items() if k not in stamps} == {
+        k: v for k, v in before.attrs.items() if k not in stamps
+    }
 
 
 def test_aggregate_marks_missing_runs(copy_of_small):
     victim = copy_of_small.ids[0]
     (copy_of_small.runs / f"{victim}.json").unlink()
     (copy_of_small.runs / f"{victim}.nc").unlink()
-    assert invoke("aggregate", copy_of_small.path, "--results",
-                  copy_of_small.results).exit_code == 0
+    assert (
+        invoke("aggregate", copy_of_small.path, "--results", copy_of_small.results).exit_code == 0
+    )
     with xr.open_dataset(copy_of_small.results / "small" / "phase.nc") as ds:
         assert int(ds["status"].values[0, 0]) == 0
         assert np.isnan(ds["sigma2_S"].values[0, 0])
@@ -285,8 +301,14 @@ def test_aggregate_marks_missing_runs(copy_of_small):
 def test_a_crashing_run_is_recorded_with_its_traceback(tmp_path):
     runs = tmp_path / "results" / "crash" / "runs"
     runs.mkdir(parents=True)
-    task = RunTask(run_id="0123456789abcdef", seed=0, parameters={"K": -1.0},
-                   numerics={"resolution": 32}, runs_dir=str(runs), campaign="crash")
+    task = RunTask(
+        run_id="0123456789abcdef",
+        seed=0,
+        parameters={"K": -1.0},
+        numerics={"resolution": 32},
+        runs_dir=str(runs),
+        campaign="crash",
+    )
     record = execute_run(task)
     assert record["status"] == "failed"
     assert record["reason"] == "exception"
@@ -297,16 +319,19 @@ def test_a_crashing_run_is_recorded_with_its_traceback(tmp_path):
 
 
 def test_sigkill_of_the_driver_then_resume(tmp_path):
-    path = write_campaign(tmp_path, name="killed", values="[0.1, 0.15, 0.2]", seeds=2,
-                          t_final=2.5)
+    path = write_campaign(tmp_path, name="killed", values="[0.1, 0.15, 0.2]", seeds=2, t_final=2.5)
     results = tmp_path / "results"
     runs = results / "killed" / "runs"
     ids = run_ids(path)
-    proc = start_driver(["run", str(path), "--results", str(results), "--no-figures"],
-                        tmp_path / "log")
+    proc = start_driver(
+        ["run", str(path), "--results", str(results), "--no-figures"], tmp_path / "log"
+    )
     try:
-        wait_for(lambda: len(list(runs.glob("*.json"))) >= 2 or proc.poll() is not None, 120,
-                 "two finished runs")
+        wait_for(
+            lambda: len(list(runs.glob("*.json"))) >= 2 or proc.poll() is not None,
+            120,
+            "two finished runs",
+        )
         assert proc.poll() is None, (tmp_path / "log").read_text()
         proc.send_signal(signal.SIGKILL)  # the driver alone, mid-campaign
         proc.wait(timeout=10)
@@ -340,15 +365,19 @@ def test_sigkill_of_the_driver_then_resume(tmp_path):
 
 
 def test_ctrl_c_stops_cleanly(tmp_path):
-    path = write_campaign(tmp_path, name="interrupted", values="[0.1, 0.15, 0.2]",
-                          seeds=2, t_final=2.5)
+    path = write_campaign(
+        tmp_path, name="interrupted", values="[0.1, 0.15, 0.2]", seeds=2, t_final=2.5
+    )
     results = tmp_path / "results"
     runs = results / "interrupted" / "runs"
     log = tmp_path / "log"
     proc = start_driver(["run", str(path), "--results", str(results), "--no-figures"], log)
     try:
-        wait_for(lambda: len(list(runs.glob("*.json"))) >= 1 or proc.poll() is not None, 120,
-                 "a finished run")
+        wait_for(
+            lambda: len(list(runs.glob("*.json"))) >= 1 or proc.poll() is not None,
+            120,
+            "a finished run",
+        )
         assert proc.poll() is None, log.read_text()
         os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
         rc = proc.wait(timeout=60)
@@ -377,19 +406,46 @@ def dask_cluster(tmp_path_factory):
 
     def spawn(args: list[str], name: str) -> subprocess.Popen:
         with open(folder / f"{name}.log", "wb") as log:
-            p = subprocess.Popen([*dask, *args], stdout=log, stderr=subprocess.STDOUT,
-                                 start_new_session=True)
+            p = subprocess.Popen(
+                [*dask, *args], stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+            )
         procs.append(p)
         return p
 
     try:
-        spawn(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-               "--scheduler-file", str(sched_file)], "scheduler")
+        spawn(
+            [
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--no-dashboard",
+                "--scheduler-file",
+                str(sched_file),
+            ],
+            "scheduler",
+        )
         wait_for(sched_file.exists, 60, "the dask scheduler")
         address = json.loads(sched_file.read_text())["address"]
-        workers = [spawn(["worker", address, "--nthreads", "1", "--no-nanny", "--host",
-                          "127.0.0.1", "--no-dashboard", "--name", f"w{i}"], f"worker{i}")
-                   for i in range(2)]
+        workers = [
+            spawn(
+                [
+                    "worker",
+                    address,
+                    "--nthreads",
+                    "1",
+                    "--no-nanny",
+                    "--host",
+                    "127.0.0.1",
+                    "--no-dashboard",
+                    "--name",
+                    f"w{i}",
+                ],
+                f"worker{i}",
+            )
+            for i in range(2)
+        ]
         from distributed import Client
 
         with Client(address, timeout=30) as client:
@@ -402,14 +458,20 @@ def dask_cluster(tmp_path_factory):
 
 def test_cluster_run_gives_the_local_phase_nc(small, dask_cluster, tmp_path):
     results = tmp_path / "results"
-    result = invoke("run", small.path, "--results", results, "--scheduler",
-                    dask_cluster.address, "--no-figures")
+    result = invoke(
+        "run", small.path, "--results", results, "--scheduler", dask_cluster.address, "--no-figures"
+    )
     assert result.exit_code == 1, result.output  # the same two failures
-    with xr.open_dataset(small.results / "small" / "phase.nc") as local, \
-            xr.open_dataset(results / "small" / "phase.nc") as remote:
+    with (
+        xr.open_dataset(small.results / "small" / "phase.nc") as local,
+        xr.open_dataset(results / "small" / "phase.nc") as remote,
+    ):
         local, remote = local.load(), remote.load()
-        differ = {n: (local[n].values, remote[n].values) for n in local.data_vars
-                  if not local[n].equals(remote[n])}
+        differ = {
+            n: (local[n].values, remote[n].values)
+            for n in local.data_vars
+            if not local[n].equals(remote[n])
+        }
         # bitwise: the model is deterministic across processes (same seed, same numerics)
         assert not differ, differ
         xr.testing.assert_equal(local, remote)  # data, dims and coords
@@ -419,16 +481,30 @@ def test_cluster_run_gives_the_local_phase_nc(small, dask_cluster, tmp_path):
 
 
 def test_a_worker_killed_mid_campaign(dask_cluster, tmp_path):
-    path = write_campaign(tmp_path, name="worker-killed", values="[0.1, 0.15, 0.2]", seeds=2,
-                          t_final=3.0)
+    path = write_campaign(
+        tmp_path, name="worker-killed", values="[0.1, 0.15, 0.2]", seeds=2, t_final=3.0
+    )
     results = tmp_path / "results"
     runs = results / "worker-killed" / "runs"
     log = tmp_path / "log"
-    driver = start_driver(["run", str(path), "--results", str(results), "--scheduler",
-                           dask_cluster.address, "--no-figures"], log)
+    driver = start_driver(
+        [
+            "run",
+            str(path),
+            "--results",
+            str(results),
+            "--scheduler",
+            dask_cluster.address,
+            "--no-figures",
+        ],
+        log,
+    )
     try:
-        wait_for(lambda: len(list(runs.glob("*.json"))) >= 1 or driver.poll() is not None,
-                 120, "a finished run")
+        wait_for(
+            lambda: len(list(runs.glob("*.json"))) >= 1 or driver.poll() is not None,
+            120,
+            "a finished run",
+        )
         assert driver.poll() is None, log.read_text()
         victim = dask_cluster.workers[0]
         victim.send_signal(signal.SIGKILL)
@@ -451,7 +527,8 @@ def test_store_section_keeps_the_chosen_snapshot_fields(tmp_path):
     campaign = parse_campaign(
         "name: stored\nparameters: {noise_modes: 8, alpha_minus_B: 0.1}\n"
         "numerics: {resolution: 32, t_final: 1}\nseeds: 1\n"
-        "store: {snapshot_times: [0.5], snapshot_fields: [q1, A], snapshot_dtype: float32}\n")
+        "store: {snapshot_times: [0.5], snapshot_fields: [q1, A], snapshot_dtype: float32}\n"
+    )
     run = next(iter(expand(campaign)))
     store = CampaignStore(tmp_path, "stored")
     store.ensure()
@@ -491,8 +568,9 @@ ok = restore_heap_reuse()
 print(plain, faults(), ok)
 """
     env = dict(os.environ, MALLOC_TRIM_THRESHOLD_="65536")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
-                         check=True).stdout.split()
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    ).stdout.split()
     plain, tuned, ok = int(out[0]), int(out[1]), out[2] == "True"
     if not ok:
         pytest.skip("not glibc: mallopt is not available")

@@ -51,11 +51,24 @@ def test_the_limit_is_exceeded_by_more_failures_than_allowed():
 
 
 def test_previous_failures_accumulate_oldest_first():
-    first = {"status": "failed", "reason": "nan", "detail": "NaN in q", "t_failed": 1.5,
-             "finished": "2026-01-01T00:00:00+00:00", "traceback": "", "host": "a"}
-    second = {"status": "failed", "reason": "exception", "detail": "boom", "t_failed": None,
-              "finished": "2026-01-02T00:00:00+00:00", "traceback": "Traceback ...",
-              "previous_failures": previous_failures(first)}
+    first = {
+        "status": "failed",
+        "reason": "nan",
+        "detail": "NaN in q",
+        "t_failed": 1.5,
+        "finished": "2026-01-01T00:00:00+00:00",
+        "traceback": "",
+        "host": "a",
+    }
+    second = {
+        "status": "failed",
+        "reason": "exception",
+        "detail": "boom",
+        "t_failed": None,
+        "finished": "2026-01-02T00:00:00+00:00",
+        "traceback": "Traceback ...",
+        "previous_failures": previous_failures(first),
+    }
     kept = previous_failures(second)
     assert [f["reason"] for f in kept] == ["nan", "exception"]
     assert kept[0]["detail"] == "NaN in q"
@@ -68,8 +81,7 @@ def test_status_groups_failures_by_reason_with_the_first_run(small):
     recs = records(small.runs)
     failed = [rid for rid in small.ids if recs[rid]["status"] == "failed"]
     reason = recs[failed[0]]["reason"]
-    report = json.loads(invoke("status", small.path, "--results", small.results,
-                               "--json").output)
+    report = json.loads(invoke("status", small.path, "--results", small.results, "--json").output)
     (group,) = report["failure_groups"]
     assert group["reason"] == reason
     assert group["count"] == 2
@@ -88,8 +100,16 @@ def test_status_groups_failures_by_reason_with_the_first_run(small):
 def test_retry_failed_keeps_the_earlier_failure_in_the_record(copy_of_small):
     old = records(copy_of_small.runs)
     failed = [rid for rid, rec in old.items() if rec["status"] == "failed"]
-    result = invoke("run", copy_of_small.path, "--results", copy_of_small.results,
-                    "--retry-failed", "--no-figures", "--workers", "1")
+    result = invoke(
+        "run",
+        copy_of_small.path,
+        "--results",
+        copy_of_small.results,
+        "--retry-failed",
+        "--no-figures",
+        "--workers",
+        "1",
+    )
     assert result.exit_code == 1, result.output  # alpha - B = 20 fails again
     new = records(copy_of_small.runs)
     for rid in failed:
@@ -103,15 +123,23 @@ def test_retry_failed_keeps_the_earlier_failure_in_the_record(copy_of_small):
 def test_max_failures_stops_the_campaign_with_exit_3(tmp_path):
     # one worker runs them in order: the failing runs first; of the 15 runs at most the
     # submission window (8) is ever submitted before the first failure is seen
-    path = write_campaign(tmp_path, name="stops", values="[20.0, 0.1, 0.15, 0.2, 0.25]",
-                          seeds=3, t_final=2.0, workers=1)
+    path = write_campaign(
+        tmp_path,
+        name="stops",
+        values="[20.0, 0.1, 0.15, 0.2, 0.25]",
+        seeds=3,
+        t_final=2.0,
+        workers=1,
+    )
     results = tmp_path / "results"
     result = invoke("run", path, "--results", results, "--max-failures", "0", "--no-figures")
     out = flat(result.output)
     assert result.exit_code == EXIT_TOO_MANY_FAILURES, result.output
     assert "Traceback" not in result.output
-    assert "error: stopped: too many runs failed: 1 failed this session, more than " \
-           "--max-failures 0 allows" in out
+    assert (
+        "error: stopped: too many runs failed: 1 failed this session, more than "
+        "--max-failures 0 allows" in out
+    )
     assert "the runs not finished stay pending" in out
     runs = results / "stops" / "runs"
     assert not list(runs.glob(".*"))  # nothing half-written

@@ -114,8 +114,9 @@ def test_verify_finds_corruption_that_kept_the_mtime(copy):
     assert (len(plan.done), len(plan.failed), len(plan.todo)) == (4, 2, 0)
     plan = plan_runs(expansion, store, check_files=True)
     assert (len(plan.done), len(plan.failed), len(plan.todo)) == (3, 2, 1)
-    assert plan.redone == [(rid, "its file is corrupt (its content is not the one checksummed "
-                                 "when it was written)")]
+    assert plan.redone == [
+        (rid, "its file is corrupt (its content is not the one checksummed when it was written)")
+    ]
     assert not nc.exists()  # discarded, to be redone
     assert status_counts(copy) == (3, 2, 1)
 
@@ -136,8 +137,12 @@ def test_a_legacy_write_error_record_is_redone_by_default(copy):
     versions) are not model failures: pending in status, redone by a plain run."""
     rid = copy.ok[0]
     rec = json.loads((copy.runs / f"{rid}.json").read_text())
-    rec.update(status="failed", reason="write_error", nc_bytes=None,
-               detail="RuntimeError: NetCDF: HDF error")
+    rec.update(
+        status="failed",
+        reason="write_error",
+        nc_bytes=None,
+        detail="RuntimeError: NetCDF: HDF error",
+    )
     (copy.runs / f"{rid}.json").write_text(json.dumps(rec))
     (copy.runs / f"{rid}.nc").unlink()
     assert status_counts(copy) == (3, 2, 1)
@@ -165,18 +170,31 @@ def test_corrupt_phase_and_fits_are_rebuilt_with_a_message(copy):
 
 
 # --------------------------------------------------------------------------- storage faults
-def nematic(args: list[object], *, fsize: int | None = None, env: dict | None = None,
-            wrap: list[str] | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
+def nematic(
+    args: list[object],
+    *,
+    fsize: int | None = None,
+    env: dict | None = None,
+    wrap: list[str] | None = None,
+    timeout: float = 300,
+) -> subprocess.CompletedProcess:
     """``nematic ARGS`` in a subprocess, optionally under a file-size limit (SIGXFSZ ignored,
     as Python does: writes past the limit fail with EFBIG) or inside ``wrap`` (unshare)."""
+
     def limit() -> None:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         if fsize is not None:
             resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
 
     cmd = [*(wrap or []), sys.executable, "-m", "sweep", *map(str, args)]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
-                          preexec_fn=limit, env={**os.environ, "COLUMNS": "200", **(env or {})})
+    return subprocess.run(
+        cmd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        preexec_fn=limit,
+        env={**os.environ, "COLUMNS": "200", **(env or {})},
+    )
 
 
 def test_a_file_size_limit_keeps_runs_pending_and_a_rerun_completes(copy, tmp_path):
@@ -189,8 +207,11 @@ def test_a_file_size_limit_keeps_runs_pending_and_a_rerun_completes(copy, tmp_pa
     (copy.runs / f"{victim}.nc").unlink()
     spool = tmp_path / "spool"
     env = {"NEMATIC_SPOOL": str(spool)}
-    proc = nematic(["run", path, "--results", results, "--no-figures", "--workers", "1"],
-                   fsize=64 * 1024, env=env)
+    proc = nematic(
+        ["run", path, "--results", results, "--no-figures", "--workers", "1"],
+        fsize=64 * 1024,
+        env=env,
+    )
     out = " ".join((proc.stdout + proc.stderr).split())
     assert proc.returncode == 2, out
     assert_no_traceback(proc.stdout + proc.stderr)
@@ -203,11 +224,11 @@ def test_a_file_size_limit_keeps_runs_pending_and_a_rerun_completes(copy, tmp_pa
     assert victim not in records(runs)  # nothing recorded as failed
     assert not list(spool.glob("*/*.nc"))  # the limit applies there too
     assert status_counts(copy) == (3, 2, 1)
-    proc = nematic(["run", path, "--results", results, "--no-figures", "--workers", "1"],
-                   env=env)
+    proc = nematic(["run", path, "--results", results, "--no-figures", "--workers", "1"], env=env)
     assert proc.returncode == 1, proc.stderr  # the earlier model failures only
     assert "3 done, 2 failed (skipped; --retry-failed redoes them), 1 to run" in " ".join(
-        proc.stderr.split())
+        proc.stderr.split()
+    )
     assert records(runs)[victim]["status"] == "ok"
     assert status_counts(copy) == (4, 2, 0)
 
@@ -215,8 +236,9 @@ def test_a_file_size_limit_keeps_runs_pending_and_a_rerun_completes(copy, tmp_pa
 def _can_mount() -> bool:
     if os.geteuid() != 0 or shutil.which("unshare") is None:
         return False
-    probe = subprocess.run(["unshare", "-m", "sh", "-c", "mount -t tmpfs -o size=64k tmpfs /mnt"],
-                           capture_output=True)
+    probe = subprocess.run(
+        ["unshare", "-m", "sh", "-c", "mount -t tmpfs -o size=64k tmpfs /mnt"], capture_output=True
+    )
     return probe.returncode == 0
 
 
@@ -264,9 +286,14 @@ def test_a_read_only_results_folder_gives_one_message_per_command(copy):
     """run, aggregate and figures on a read-only bind mount: exit 2, the cause named, no
     traceback."""
     root = copy.results
-    wrap = ["unshare", "-m", "sh", "-c",
-            f"mount --bind {root} {root} && mount -o remount,bind,ro {root} && exec \"$@\"",
-            "sh"]
+    wrap = [
+        "unshare",
+        "-m",
+        "sh",
+        "-c",
+        f'mount --bind {root} {root} && mount -o remount,bind,ro {root} && exec "$@"',
+        "sh",
+    ]
     for command in ("run", "aggregate", "figures"):
         proc = nematic([command, copy.path, "--results", root], wrap=wrap)
         text = proc.stdout + proc.stderr
@@ -285,18 +312,25 @@ def test_a_result_that_cannot_be_written_is_kept_and_moved_in(tmp_path, monkeypa
     from sweep.run.todo import import_spool
 
     def fake_run(params, numerics, seed):  # the storage is under test, not the model
-        return xr.Dataset({"sigma2_S": ("t", [0.0, 0.1]), "sigma2_S_final": ((), 0.1)},
-                          coords={"t": [0.0, 1.0]}, attrs={"status": "ok", "seed": seed})
+        return xr.Dataset(
+            {"sigma2_S": ("t", [0.0, 0.1]), "sigma2_S_final": ((), 0.1)},
+            coords={"t": [0.0, 1.0]},
+            attrs={"status": "ok", "seed": seed},
+        )
 
     monkeypatch.setattr(model.simulate, "run", fake_run)
     monkeypatch.setenv("NEMATIC_SPOOL", str(tmp_path / "spool"))
     store = CampaignStore(tmp_path / "results", "c")
     store.root.mkdir(parents=True)
     store.runs_dir.write_text("not a folder")
-    task = RunTask(run_id="0123456789abcdef", seed=0,
-                   parameters={"noise_modes": 6},
-                   numerics={"resolution": 32, "t_final": 1.0, "mechanics": "linear"},
-                   runs_dir=str(store.runs_dir), campaign="c")
+    task = RunTask(
+        run_id="0123456789abcdef",
+        seed=0,
+        parameters={"noise_modes": 6},
+        numerics={"resolution": 32, "t_final": 1.0, "mechanics": "linear"},
+        runs_dir=str(store.runs_dir),
+        campaign="c",
+    )
     rec = execute_run(task)
     assert rec["status"] == "unsaved"
     assert "a part of the path is not a folder" in rec["storage_error"]
@@ -321,17 +355,33 @@ def test_a_scheduler_without_workers_gives_up_with_a_message(tmp_path):
     sched_file = tmp_path / "scheduler.json"
     with open(tmp_path / "scheduler.log", "wb") as log:
         scheduler = subprocess.Popen(
-            [sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
-             "--no-dashboard", "--scheduler-file", str(sched_file)], stdout=log,
-            stderr=subprocess.STDOUT, start_new_session=True)
+            [
+                sys.executable,
+                "-m",
+                "dask",
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--no-dashboard",
+                "--scheduler-file",
+                str(sched_file),
+            ],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
     try:
         wait_for(sched_file.exists, 60, "the dask scheduler")
         address = json.loads(sched_file.read_text())["address"]
         path = write_campaign(tmp_path, name="lonely", values="[0.1]", seeds=1, workers=1)
-        path.write_text(path.read_text().replace("execution: {workers: 1}",
-                                                 "execution: {wait_for_workers: 3}"))
-        proc = nematic(["run", path, "--results", tmp_path / "results", "--scheduler", address],
-                       timeout=120)
+        path.write_text(
+            path.read_text().replace("execution: {workers: 1}", "execution: {wait_for_workers: 3}")
+        )
+        proc = nematic(
+            ["run", path, "--results", tmp_path / "results", "--scheduler", address], timeout=120
+        )
     finally:
         kill_group(scheduler)
     text = proc.stdout + proc.stderr

@@ -84,8 +84,9 @@ def build(folder: Path, text: str) -> SimpleNamespace:
     for run in expansion:
         execute_run(RunTask.from_spec(run, store, campaign.name, campaign.store))
     write_phase(expansion, store)
-    return SimpleNamespace(path=path, campaign=campaign, results=folder / "results",
-                           root=store.root)
+    return SimpleNamespace(
+        path=path, campaign=campaign, results=folder / "results", root=store.root
+    )
 
 
 @pytest.fixture(scope="module")
@@ -117,8 +118,7 @@ def test_registry_names_match_the_campaign_schema():
     from sweep.spec.sections import registry
 
     assert sorted(registry("figures")) == ["fig2", "fig3", "fig3_growth", "fig4", "figA1"]
-    assert set(registry("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy",
-                                     "stability"}
+    assert set(registry("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy", "stability"}
 
 
 def test_fig2_and_fig3_render_and_fits_are_written(sizes):
@@ -137,9 +137,17 @@ def test_fig2_and_fig3_render_and_fits_are_written(sizes):
 
 
 def test_fig2_options_pick_the_snapshot_and_the_other_dims(sizes):
-    paths = draw("fig2", sizes.root, {"select": {"K": 1e-3}, "seed": 1, "curves": 2,
-                                      "snapshot": {"alpha_minus_B": 1.0, "seed": 1,
-                                                   "time": 1.5}, "yscale": "log"})
+    paths = draw(
+        "fig2",
+        sizes.root,
+        {
+            "select": {"K": 1e-3},
+            "seed": 1,
+            "curves": 2,
+            "snapshot": {"alpha_minus_B": 1.0, "seed": 1, "time": 1.5},
+            "yscale": "log",
+        },
+    )
     assert_figure(paths, "fig2", sizes.root)
     with pytest.raises(FigureError, match="unknown option 'snapshots'"):
         draw("fig2", sizes.root, {"snapshots": []})
@@ -176,14 +184,17 @@ def test_fig4_of_a_refined_union_grid_shows_the_points_run(phase4, tmp_path):
     root = tmp_path / "refined"
     shutil.copytree(phase4.root, root)
     phase = xr.load_dataset(root / "phase.nc")
-    fill = {name: 0 if var.dtype.kind in "iu" else "" if var.dtype.kind in "OUS" else np.nan
-            for name, var in phase.data_vars.items()}
+    fill = {
+        name: 0 if var.dtype.kind in "iu" else "" if var.dtype.kind in "OUS" else np.nan
+        for name, var in phase.data_vars.items()
+    }
     union = phase.reindex(chi=[0.0, 2.5, 5.0], fill_value=fill)
     at = {"K": 1.0e-4, "eps": 0.0}
     for name, var in phase.data_vars.items():  # chi = 2.5 run at one (K, eps) only
         if "chi" in var.dims:
-            union[name].loc[{"chi": 2.5, **{k: v for k, v in at.items() if k in var.dims}}] = \
+            union[name].loc[{"chi": 2.5, **{k: v for k, v in at.items() if k in var.dims}}] = (
                 var.sel(chi=0.0).sel({k: v for k, v in at.items() if k in var.dims})
+            )
     union["seed_count"] = (union["status"] != 0).sum("seed")
     assert int(union["seed_count"].sum()) == 9
     union.to_netcdf(root / "phase.nc")
@@ -214,20 +225,23 @@ def test_figA1_renders_with_the_theory_line(stab):
         # docs/stability.md section 7: eps_c = 0.10715 at chi (alpha - B) = 10
         assert theory == pytest.approx(0.10715, rel=1e-4)
         assert np.isinf(f["stability_eps_c_theory"].sel(chi=3.0).item()) or np.isnan(
-            f["stability_eps_c_theory"].sel(chi=3.0).item())
+            f["stability_eps_c_theory"].sel(chi=3.0).item()
+        )
         assert set(np.unique(unstable)) <= {-1, 0, 1}
         assert f["stability_fraction_unstable"].dims == ("chi", "eps")
 
 
 def test_cli_figures(sizes, tmp_path):
     runner = CliRunner()
-    result = runner.invoke(app, ["figures", str(sizes.path), "--results", str(sizes.results),
-                                 "--only", "fig3"])
+    result = runner.invoke(
+        app, ["figures", str(sizes.path), "--results", str(sizes.results), "--only", "fig3"]
+    )
     assert result.exit_code == 0, result.output
     assert "fig3.png" in result.output
     assert "fits.nc" in result.output
-    result = runner.invoke(app, ["figures", str(sizes.path), "--results", str(sizes.results),
-                                 "--only", "fig9"])
+    result = runner.invoke(
+        app, ["figures", str(sizes.path), "--results", str(sizes.results), "--only", "fig9"]
+    )
     assert result.exit_code == 2
     assert "unknown figure" in result.output
     empty = runner.invoke(app, ["figures", str(sizes.path), "--results", str(tmp_path)])
@@ -274,8 +288,7 @@ def test_empty_figures_list_draws_nothing_after_a_run(sizes, tmp_path):
     assert result.exit_code == 0, result.output
     assert "no figures: the campaign lists none (figures: [])" in " ".join(result.output.split())
     assert not (root / "figures").exists()
-    result = runner.invoke(app, ["figures", str(path), "--results", str(results),
-                                 "--only", "fig3"])
+    result = runner.invoke(app, ["figures", str(path), "--results", str(results), "--only", "fig3"])
     assert result.exit_code == 0, result.output
     assert (root / "figures" / "fig3.png").is_file()
 
@@ -283,8 +296,9 @@ def test_empty_figures_list_draws_nothing_after_a_run(sizes, tmp_path):
 def test_cli_figures_prints_the_fit_notes(sizes):
     """Runs left out of the size fits (first peak of sigma2_S at t_final in these short
     runs) and alpha_cr at its bound are reported under the fits.nc line."""
-    result = CliRunner().invoke(app, ["figures", str(sizes.path), "--results",
-                                      str(sizes.results), "--only", "fig3"])
+    result = CliRunner().invoke(
+        app, ["figures", str(sizes.path), "--results", str(sizes.results), "--only", "fig3"]
+    )
     assert result.exit_code == 0, result.output
     out = " ".join(result.output.split())
     with xr.open_dataset(sizes.root / FITS) as f:
@@ -301,9 +315,20 @@ def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(stab):
     """fig2 needs alpha - B swept; this grid sweeps chi and eps: exit 1 with the reason,
     figA1 still drawn (from the fits.nc on disk: --no-fits)."""
     produce(stab.campaign, stab.results, names=["figA1"])  # fits.nc present
-    result = CliRunner().invoke(app, ["figures", str(stab.path), "--results",
-                                      str(stab.results), "--only", "fig2", "--only", "figA1",
-                                      "--no-fits"])
+    result = CliRunner().invoke(
+        app,
+        [
+            "figures",
+            str(stab.path),
+            "--results",
+            str(stab.results),
+            "--only",
+            "fig2",
+            "--only",
+            "figA1",
+            "--no-fits",
+        ],
+    )
     assert result.exit_code == 1, result.output
     out = " ".join(result.output.split())
     assert "fig2: fig2 needs alpha_minus_B" in out
@@ -312,10 +337,10 @@ def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(stab):
 
 def test_option_problems_for_campaign_validation():
     assert option_problems("fig2", {"seed": 3, "yscale": "log"}) == []
-    assert option_problems("fig3", {"seed": 3}) == [
-        "unknown option 'seed'; allowed: none"]
+    assert option_problems("fig3", {"seed": 3}) == ["unknown option 'seed'; allowed: none"]
     problems = option_problems("fig4", {"snapshots": [{"K": 1e-6}, 3]})
     assert len(problems) == 1
     assert "snapshots" in problems[0]
     assert option_problems("fig2", {"yscale": "symlog"}) == [
-        "yscale = 'symlog'; expected 'linear' or 'log'"]
+        "yscale = 'symlog'; expected 'linear' or 'log'"
+    ]

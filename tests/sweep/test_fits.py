@@ -29,11 +29,16 @@ def phase(data: dict[str, np.ndarray], coords: dict[str, np.ndarray], **attrs) -
     """A phase.nc-like Dataset: observables over (sweep dims..., seed)."""
     dims = [*coords, "seed"]
     n_seed = next(iter(data.values())).shape[-1]
-    ds = xr.Dataset({k: (dims, v) for k, v in data.items()},
-                    coords={**coords, "seed": np.arange(n_seed)}, attrs=attrs)
+    ds = xr.Dataset(
+        {k: (dims, v) for k, v in data.items()},
+        coords={**coords, "seed": np.arange(n_seed)},
+        attrs=attrs,
+    )
     shape = ds[next(iter(data))].shape
-    ds["status"] = (dims, np.where(np.isfinite(ds[next(iter(data))].values), 1, 2)
-                    .astype(np.int8).reshape(shape))
+    ds["status"] = (
+        dims,
+        np.where(np.isfinite(ds[next(iter(data))].values), 1, 2).astype(np.int8).reshape(shape),
+    )
     return ds
 
 
@@ -111,14 +116,12 @@ AMB = np.linspace(0.6, 1.6, 6)
 def sizes(rng, exponent=0.5, c=2.0, noise=0.05, n_seeds=30):
     """lambda = c (K / (alpha - B - alpha_cr))^exponent with 5 % log-normal noise per seed."""
     x = K_TRUE[:, None] / (AMB[None, :] - ACR_TRUE[:, None])
-    return c * x[..., None] ** exponent * np.exp(noise * rng.standard_normal((*x.shape,
-                                                                              n_seeds)))
+    return c * x[..., None] ** exponent * np.exp(noise * rng.standard_normal((*x.shape, n_seeds)))
 
 
 def size_phase(lam, sigma2=None):
     sigma2 = np.full(lam.shape, 1e-2) if sigma2 is None else sigma2
-    return phase({"lambda_peak": lam, "sigma2_S": sigma2},
-                 {"K": K_TRUE, "alpha_minus_B": AMB})
+    return phase({"lambda_peak": lam, "sigma2_S": sigma2}, {"K": K_TRUE, "alpha_minus_B": AMB})
 
 
 @pytest.mark.parametrize("method", ["linear", "nonlinear"])
@@ -140,8 +143,9 @@ def test_scaling_exponent_recovered_within_bootstrap_interval(rng):
     assert hi - lo < 0.1
     assert float(out["scaling_prefactor"]) == pytest.approx(2.0, rel=0.1)
     assert int(out["scaling_used"].sum()) == K_TRUE.size * AMB.size
-    assert np.all((out["alpha_cr_lower"].values <= ACR_TRUE)
-                  & (out["alpha_cr_upper"].values >= ACR_TRUE))
+    assert np.all(
+        (out["alpha_cr_lower"].values <= ACR_TRUE) & (out["alpha_cr_upper"].values >= ACR_TRUE)
+    )
 
 
 def test_power_law_fit_recovers_other_exponents(rng):
@@ -163,15 +167,18 @@ def test_relaxed_runs_are_excluded_from_the_size_fits(rng):
     assert patterned_level(sigma2) == pytest.approx(10**-7)
     clean = scaling(size_phase(lam, sigma2), {"n_boot": 100})
     dirty = scaling(size_phase(lam_bad, sigma2), {"n_boot": 100})
-    assert float(dirty["scaling_exponent"]) == pytest.approx(float(clean["scaling_exponent"]),
-                                                             abs=1e-12)
+    assert float(dirty["scaling_exponent"]) == pytest.approx(
+        float(clean["scaling_exponent"]), abs=1e-12
+    )
     assert patterned_level(np.full(5, 1e-2)) == 0.0  # no gap: every run counts
 
 
 def test_size_fit_asks_for_select_when_another_dim_varies(rng):
     lam = sizes(rng, n_seeds=3)
-    ds = phase({"lambda_peak": np.stack([lam, lam]), "sigma2_S": np.full((2, *lam.shape), 0.1)},
-               {"eps": np.array([0.0, 0.1]), "K": K_TRUE, "alpha_minus_B": AMB})
+    ds = phase(
+        {"lambda_peak": np.stack([lam, lam]), "sigma2_S": np.full((2, *lam.shape), 0.1)},
+        {"eps": np.array([0.0, 0.1]), "K": K_TRUE, "alpha_minus_B": AMB},
+    )
     with pytest.raises(FitError, match="select"):
         scaling(ds, {"n_boot": 10})
     out = scaling(ds, {"n_boot": 10, "select": {"eps": 0.1}})
@@ -198,8 +205,12 @@ def test_runs_without_a_peak_are_left_out_and_counted(rng):
     flagged = t_peak >= 99.0
     bad[flagged] *= 5.0  # still-growing patterns: meaningless sizes
     t_peak[3, 0, 4], sigma2[3, 0, 4] = 100.0, 1e-12  # relaxed run: not patterned anyway
-    ds = phase({"lambda_peak": bad, "sigma2_S": sigma2, "t_peak": t_peak},
-               {"K": K_TRUE, "alpha_minus_B": AMB}, num_t_final=100.0, num_save_every=1.0)
+    ds = phase(
+        {"lambda_peak": bad, "sigma2_S": sigma2, "t_peak": t_peak},
+        {"K": K_TRUE, "alpha_minus_B": AMB},
+        num_t_final=100.0,
+        num_save_every=1.0,
+    )
     out = scaling(ds, {"n_boot": 100})
 
     expected = flagged.sum(-1)
@@ -212,21 +223,35 @@ def test_runs_without_a_peak_are_left_out_and_counted(rng):
         assert out[name].attrs["fit_n_unpeaked"] == 5
         assert out[name].attrs["fit_n_patterned"] == lam.size - 1
         assert out[name].attrs["fit_require_peak"] == 1
-    np.testing.assert_array_equal(out["scaling_lambda_count"].values, 6 - flagged.sum(-1)
-                                  - (np.arange(6) == 0)[None, :] * [[0], [0], [0], [1]])
+    np.testing.assert_array_equal(
+        out["scaling_lambda_count"].values,
+        6 - flagged.sum(-1) - (np.arange(6) == 0)[None, :] * [[0], [0], [0], [1]],
+    )
 
     # the same fit as with those runs missing (NaN) and no peak check
     clean = lam.copy()
     clean[flagged] = np.nan
     clean[3, 0, 4] = np.nan
-    ref = scaling(phase({"lambda_peak": clean, "sigma2_S": np.full(lam.shape, 1e-2)},
-                             {"K": K_TRUE, "alpha_minus_B": AMB}), {"n_boot": 100})
-    for name in ("alpha_cr", "alpha_cr_lower", "alpha_cr_upper", "scaling_exponent",
-                 "scaling_exponent_lower", "scaling_exponent_upper", "scaling_lambda_mean"):
-        np.testing.assert_allclose(out[name].values, ref[name].values, rtol=1e-12,
-                                   err_msg=name)
-    assert np.all((out["alpha_cr_lower"].values <= ACR_TRUE)
-                  & (out["alpha_cr_upper"].values >= ACR_TRUE))
+    ref = scaling(
+        phase(
+            {"lambda_peak": clean, "sigma2_S": np.full(lam.shape, 1e-2)},
+            {"K": K_TRUE, "alpha_minus_B": AMB},
+        ),
+        {"n_boot": 100},
+    )
+    for name in (
+        "alpha_cr",
+        "alpha_cr_lower",
+        "alpha_cr_upper",
+        "scaling_exponent",
+        "scaling_exponent_lower",
+        "scaling_exponent_upper",
+        "scaling_lambda_mean",
+    ):
+        np.testing.assert_allclose(out[name].values, ref[name].values, rtol=1e-12, err_msg=name)
+    assert np.all(
+        (out["alpha_cr_lower"].values <= ACR_TRUE) & (out["alpha_cr_upper"].values >= ACR_TRUE)
+    )
 
     # require_peak: false keeps them (and the fit moves), peak_margin: 0 keeps t < t_final
     kept = scaling(ds, {"n_boot": 10, "require_peak": False})
@@ -236,8 +261,9 @@ def test_runs_without_a_peak_are_left_out_and_counted(rng):
     strict = alpha_cr(ds, {"n_boot": 10, "peak_margin": 0})
     assert strict["alpha_cr"].attrs["fit_n_unpeaked"] == 3
     # an observable at t_final has no peak to reach: nothing is left out by default
-    lam_final = alpha_cr(ds.assign(lambda_final=ds["lambda_peak"]),
-                              {"n_boot": 10, "observable": "lambda_final"})
+    lam_final = alpha_cr(
+        ds.assign(lambda_final=ds["lambda_peak"]), {"n_boot": 10, "observable": "lambda_final"}
+    )
     assert lam_final["alpha_cr"].attrs["fit_n_unpeaked"] == 0
 
 
@@ -247,29 +273,33 @@ def test_peak_check_with_swept_t_final_and_without_t_peak(rng):
     lam = sizes(rng, n_seeds=3)
     t_final = np.array([50.0, 100.0, 100.0, 200.0])
     t_peak = np.full(lam.shape, 60.0)  # reached, except where t_final = 50
-    ds = phase({"lambda_peak": lam, "sigma2_S": np.full(lam.shape, 1e-2), "t_peak": t_peak},
-               {"K": K_TRUE, "alpha_minus_B": AMB}, num_save_every=2.0)
+    ds = phase(
+        {"lambda_peak": lam, "sigma2_S": np.full(lam.shape, 1e-2), "t_peak": t_peak},
+        {"K": K_TRUE, "alpha_minus_B": AMB},
+        num_save_every=2.0,
+    )
     ds = ds.assign_coords(t_final=("K", t_final))
     out = alpha_cr(ds, {"n_boot": 10})
     np.testing.assert_array_equal(out["alpha_cr_n_unpeaked"].values, [AMB.size * 3, 0, 0, 0])
     assert np.isnan(out["alpha_cr"].values[0])
     assert np.all(np.isfinite(out["alpha_cr"][1:]))
-    assert fit_notes(out)[0].startswith(f"alpha_cr/scaling: {AMB.size * 3} of "
-                                        f"{lam.size} patterned run(s) left out")
+    assert fit_notes(out)[0].startswith(
+        f"alpha_cr/scaling: {AMB.size * 3} of {lam.size} patterned run(s) left out"
+    )
     blind = alpha_cr(ds.drop_vars("t_peak"), {"n_boot": 10})
     assert blind["alpha_cr"].attrs["fit_n_unpeaked"] == 0
     assert blind["alpha_cr"].attrs["fit_peak_check"] == "not done: phase.nc has no t_peak"
     assert "not looked for" in fit_notes(blind)[0]
     np.testing.assert_array_equal(
         peak_not_reached([10.0, 98.0, 99.0, 100.0, np.nan], 100.0, 2.0),
-        [False, True, True, True, False])
+        [False, True, True, True, False],
+    )
 
 
 def acr_sizes(rng, acr, n_seeds=30, noise=0.05, amb=AMB):
     """Eq. (7) sizes with the critical activity ``acr`` for every K."""
     x = K_TRUE[:, None] / (amb[None, :] - acr)
-    return 2.0 * x[..., None] ** 0.5 * np.exp(noise * rng.standard_normal((*x.shape,
-                                                                           n_seeds)))
+    return 2.0 * x[..., None] ** 0.5 * np.exp(noise * rng.standard_normal((*x.shape, n_seeds)))
 
 
 @pytest.mark.parametrize("method", ["linear", "nonlinear"])
@@ -278,8 +308,7 @@ def test_alpha_cr_is_bounded_at_zero(rng, method):
     default fit stops at the bound 0 and says so; a true alpha_cr of 0 is found at or just
     above 0, never below."""
     lam = acr_sizes(rng, -0.3)
-    free = alpha_cr(size_phase(lam), {"method": method, "n_boot": 100,
-                                      "alpha_cr_min": None})
+    free = alpha_cr(size_phase(lam), {"method": method, "n_boot": 100, "alpha_cr_min": None})
     np.testing.assert_allclose(free["alpha_cr"].values, -0.3, atol=0.1)
     assert np.all(free["alpha_cr_upper"].values < 0)  # the data push it below zero
     np.testing.assert_array_equal(free["alpha_cr_at_bound"].values, 0)
@@ -295,17 +324,19 @@ def test_alpha_cr_is_bounded_at_zero(rng, method):
     assert out["scaling_exponent"].attrs["fit_n_alpha_cr_at_bound"] == K_TRUE.size
     assert np.isfinite(float(out["scaling_exponent"]))
     np.testing.assert_allclose(out["scaling_x"].values, K_TRUE[:, None] / AMB[None, :])
-    assert fit_notes(out)[-1] == ("alpha_cr at its bound 0.0 for K = 1e-05, 3e-05, "
-                                  "0.0001, 0.0003 (the unbounded fit would put it lower)")
+    assert fit_notes(out)[-1] == (
+        "alpha_cr at its bound 0.0 for K = 1e-05, 3e-05, "
+        "0.0001, 0.0003 (the unbounded fit would put it lower)"
+    )
 
-    zero = alpha_cr(size_phase(acr_sizes(rng, 0.0, n_seeds=10)),
-                         {"method": method, "n_boot": 200})
+    zero = alpha_cr(size_phase(acr_sizes(rng, 0.0, n_seeds=10)), {"method": method, "n_boot": 200})
     assert np.all(zero["alpha_cr"].values >= 0)
     assert np.all(zero["alpha_cr_lower"].values >= 0)
     assert np.all(zero["alpha_cr_lower"].values == 0)  # 0 lies within the interval
     assert np.all(zero["alpha_cr_upper"].values < 0.2)
-    assert np.all((zero["alpha_cr_bound_fraction"].values > 0)
-                  & (zero["alpha_cr_bound_fraction"].values < 1))
+    assert np.all(
+        (zero["alpha_cr_bound_fraction"].values > 0) & (zero["alpha_cr_bound_fraction"].values < 1)
+    )
 
 
 def test_bounded_linear_fit_is_the_constrained_least_squares_optimum(rng):
@@ -333,8 +364,9 @@ def test_bounded_linear_fit_is_the_constrained_least_squares_optimum(rng):
     inside = alpha_cr_from_sizes(amb, lam, 1e-4, alpha_cr_min=-5.0)
     assert inside == free
     # nonlinear: no admissible alpha_cr when the bound is at or above the smallest alpha - B
-    assert np.isnan(alpha_cr_from_sizes(amb, lam, 1e-4, method="nonlinear",
-                                        alpha_cr_min=0.5).alpha_cr)
+    assert np.isnan(
+        alpha_cr_from_sizes(amb, lam, 1e-4, method="nonlinear", alpha_cr_min=0.5).alpha_cr
+    )
 
 
 # --------------------------------------------------------------------------- anisotropy
@@ -342,8 +374,7 @@ def test_anisotropy_slope_recovered_within_interval(rng):
     eps = np.linspace(0.0, 0.1, 5)
     chi = np.array([0.0, 5.0])
     slopes = np.array([0.5, 4.0])
-    cos = (slopes[:, None, None] * eps[None, :, None] + 0.02
-           + 0.03 * rng.standard_normal((2, 5, 20)))
+    cos = slopes[:, None, None] * eps[None, :, None] + 0.02 + 0.03 * rng.standard_normal((2, 5, 20))
     out = anisotropy(phase({"cos2theta": cos}, {"chi": chi, "eps": eps}), {"n_boot": 400})
     lo, hi = out["anisotropy_slope_lower"].values, out["anisotropy_slope_upper"].values
     assert np.all((lo <= slopes) & (slopes <= hi))
@@ -355,8 +386,9 @@ def test_anisotropy_with_one_seed_has_no_interval(rng):
     """A single seed has no seed-to-seed spread: the interval is NaN, not of zero width."""
     eps = np.linspace(0.0, 0.1, 5)
     cos = 2.0 * eps[None, :, None] + 0.01 * rng.standard_normal((1, 5, 1))
-    out = anisotropy(phase({"cos2theta": cos}, {"chi": np.array([5.0]), "eps": eps}),
-                          {"n_boot": 50})
+    out = anisotropy(
+        phase({"cos2theta": cos}, {"chi": np.array([5.0]), "eps": eps}), {"n_boot": 50}
+    )
     assert np.isfinite(out["anisotropy_slope"].values).all()
     assert np.isnan(out["anisotropy_slope_lower"].values).all()
     assert np.isnan(out["anisotropy_slope_upper"].values).all()
@@ -381,8 +413,14 @@ def test_same_phase_same_fits(rng):
 
 
 def test_resolve_merges_included_fits_and_rejects_unknown():
-    out = resolve([("alpha_cr", {"method": "nonlinear"}), ("scaling", {"n_boot": 10}),
-                        ("transition", {}), ("transition", {"axis": "chi"})])
+    out = resolve(
+        [
+            ("alpha_cr", {"method": "nonlinear"}),
+            ("scaling", {"n_boot": 10}),
+            ("transition", {}),
+            ("transition", {"axis": "chi"}),
+        ]
+    )
     assert out == [("scaling", {"method": "nonlinear", "n_boot": 10}), ("transition", {})]
     with pytest.raises(FitError, match="unknown fit 'scalling'"):
         resolve([("scalling", {})])
@@ -403,9 +441,14 @@ def test_fits_nc_round_trip(rng, tmp_path):
     recorded, not fatal."""
     ds = size_phase(sizes(rng, n_seeds=4), sigma2=10 ** rng.uniform(-3, -1, (4, 6, 4)))
     atomic_to_netcdf(ds.assign_attrs(campaign="synthetic"), tmp_path / "phase.nc")
-    path, failures = write_fits(tmp_path, [("scaling", {"n_boot": 20}),
-                                                ("transition", {"n_boot": 20, "min_jump": 0.1}),
-                                                ("anisotropy", {})])
+    path, failures = write_fits(
+        tmp_path,
+        [
+            ("scaling", {"n_boot": 20}),
+            ("transition", {"n_boot": 20, "min_jump": 0.1}),
+            ("anisotropy", {}),
+        ],
+    )
     assert path == tmp_path / "fits.nc"
     assert set(failures) == {"anisotropy"}  # no eps axis and no cos2theta
     back = load_fits(tmp_path)
@@ -422,12 +465,16 @@ def test_option_problems_for_campaign_validation():
     problems = option_problems("transition", {"axes": "chi", "n_boot": 0})
     assert any("unknown option 'axes'" in p for p in problems)
     assert any("n_boot = 0" in p for p in problems)
-    problems = option_problems("scaling", {"alpha_cr_min": "zero", "require_peak": 1,
-                                           "peak_margin": -1})
+    problems = option_problems(
+        "scaling", {"alpha_cr_min": "zero", "require_peak": 1, "peak_margin": -1}
+    )
     assert any("alpha_cr_min = 'zero'" in p for p in problems)
     assert any("require_peak = 1" in p for p in problems)
     assert any("peak_margin = -1" in p for p in problems)
-    assert option_problems("alpha_cr", {"alpha_cr_min": None, "require_peak": False,
-                                        "peak_margin": 0}) == []
+    assert (
+        option_problems("alpha_cr", {"alpha_cr_min": None, "require_peak": False, "peak_margin": 0})
+        == []
+    )
     assert option_problems("nope", {}) == [
-        "unknown fit 'nope'; registered: alpha_cr, anisotropy, scaling, stability, transition"]
+        "unknown fit 'nope'; registered: alpha_cr, anisotropy, scaling, stability, transition"
+    ]

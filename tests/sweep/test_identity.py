@@ -19,12 +19,38 @@ from sweep.identity import (
 from sweep.spec import parse_campaign
 
 # Complete, explicit dicts: the golden hashes must not move when the model's defaults do.
-P = {"S0": 0.1, "A0": 0.1, "B": 0.5, "B_prime": 0.0, "C": 1.0, "K": 5e-05, "kappa": 10.0,
-     "alpha": 0.9, "chi": 10.0, "zeta": 1.0, "s": 1.0, "gamma": 1.0, "tau": 1.0, "eps": 0.0,
-     "noise_modes": 16}
-N = {"resolution": 128, "t_final": 300.0, "dt": 0.05, "adaptive": True, "tolerance": 0.001,
-     "dt_max": 1.0, "save_every": 5.0, "snapshot_times": [100.0, 300.0], "mechanics": "finite",
-     "incompressible": False, "newton_tol": 1e-08, "max_newton": 30, "spin_tol": 1e-08}
+P = {
+    "S0": 0.1,
+    "A0": 0.1,
+    "B": 0.5,
+    "B_prime": 0.0,
+    "C": 1.0,
+    "K": 5e-05,
+    "kappa": 10.0,
+    "alpha": 0.9,
+    "chi": 10.0,
+    "zeta": 1.0,
+    "s": 1.0,
+    "gamma": 1.0,
+    "tau": 1.0,
+    "eps": 0.0,
+    "noise_modes": 16,
+}
+N = {
+    "resolution": 128,
+    "t_final": 300.0,
+    "dt": 0.05,
+    "adaptive": True,
+    "tolerance": 0.001,
+    "dt_max": 1.0,
+    "save_every": 5.0,
+    "snapshot_times": [100.0, 300.0],
+    "mechanics": "finite",
+    "incompressible": False,
+    "newton_tol": 1e-08,
+    "max_newton": 30,
+    "spin_tol": 1e-08,
+}
 
 GOLDEN = {0: "c483160a9a6aa705", 1: "10f815a531a5b374", 49: "f090e8046b4a6e3b"}
 
@@ -41,7 +67,8 @@ def test_canonical_text_is_pinned():
         '"save_every":"5","snapshot_times":["100","300"],"spin_tol":"1e-08","t_final":"300",'
         '"tolerance":"0.001"},"parameters":{"A0":"0.1","B":"0.5","B_prime":"0","C":"1",'
         '"K":"5e-05","S0":"0.1","alpha":"0.9","chi":"10","eps":"0","gamma":"1","kappa":"10",'
-        '"noise_modes":"16","s":"1","tau":"1","zeta":"1"},"schema":1,"seed":"0"}')
+        '"noise_modes":"16","s":"1","tau":"1","zeta":"1"},"schema":1,"seed":"0"}'
+    )
 
 
 @pytest.mark.parametrize(("seed", "expected"), sorted(GOLDEN.items()))
@@ -50,8 +77,9 @@ def test_golden_hashes(seed, expected):
 
 
 def test_other_golden():
-    assert hash_canonical(dict(P, alpha=1.5, K=1e-4), dict(N, resolution=64), 7) == \
-        "8b92d798b0613bce"
+    assert (
+        hash_canonical(dict(P, alpha=1.5, K=1e-4), dict(N, resolution=64), 7) == "8b92d798b0613bce"
+    )
 
 
 def test_key_order_does_not_matter():
@@ -112,15 +140,19 @@ def test_point_hasher_equals_hash_canonical():
 
 
 def test_expansion_ids_match_single_run_ids():
-    c = parse_campaign("name: x\nsweep: {axes: {alpha_minus_B: [0.1, 0.4], K: [1.0e-4, "
-                       "1.0e-3]}}\nseeds: 3\nnumerics: {resolution: 128}")
+    c = parse_campaign(
+        "name: x\nsweep: {axes: {alpha_minus_B: [0.1, 0.4], K: [1.0e-4, "
+        "1.0e-3]}}\nseeds: 3\nnumerics: {resolution: 128}"
+    )
     e = expand(c)
     assert len(set(e.run_ids)) == 12
     for run in e:
         assert run.run_id == run_id_for(run.point.parameters, run.point.numerics, run.seed)
     # the same grid written with alpha instead of alpha_minus_B is the same set of runs
-    c2 = parse_campaign("name: y\nparameters: {B: 0.5}\nsweep: {axes: {alpha: [0.6, 0.9], "
-                        "K: [0.0001, 0.001]}}\nseeds: [0, 1, 2]\nnumerics: {resolution: 128}")
+    c2 = parse_campaign(
+        "name: y\nparameters: {B: 0.5}\nsweep: {axes: {alpha: [0.6, 0.9], "
+        "K: [0.0001, 0.001]}}\nseeds: [0, 1, 2]\nnumerics: {resolution: 128}"
+    )
     assert expand(c2).run_ids == e.run_ids
 
 
@@ -130,8 +162,9 @@ def test_the_band_texture_keeps_the_ids_it_had_before_initial_existed():
     assert hash_canonical(dict(P, initial="band"), N, 0) == GOLDEN[0]
     # the constants that were the defaults before `initial` existed (band 16, zeta = 1,
     # kappa = 10): the id this point had then
-    old = Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5, "noise_modes": 16,
-                                "zeta": 1.0, "kappa": 10.0})
+    old = Parameters.from_dict(
+        {"alpha_minus_B": 0.6, "K": 3e-5, "noise_modes": 16, "zeta": 1.0, "kappa": 10.0}
+    )
     assert run_id_for(old, Numerics(t_final=150, save_every=1), 7) == "702b95bdf3bae1f3"
 
 
@@ -139,13 +172,18 @@ def test_runs_of_other_defaults_are_other_runs():
     """The defaults chosen by the joint calibration (band 32, zeta = 0.5, kappa = 20) give the same
     campaign point new run ids, so results made with the earlier defaults never enter a
     phase diagram of the current ones."""
-    now = run_id_for(Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5}),
-                     Numerics(t_final=150, save_every=1), 7)
+    now = run_id_for(
+        Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5}),
+        Numerics(t_final=150, save_every=1),
+        7,
+    )
     assert now != "702b95bdf3bae1f3"
     for name, value in (("noise_modes", 16), ("zeta", 1.0), ("kappa", 10.0)):
         one_old = Parameters.from_dict({"alpha_minus_B": 0.6, "K": 3e-5, name: value})
         assert run_id_for(one_old, Numerics(t_final=150, save_every=1), 7) not in (
-            now, "702b95bdf3bae1f3")
+            now,
+            "702b95bdf3bae1f3",
+        )
 
 
 def test_the_per_node_texture_is_another_run_and_ignores_noise_modes():
@@ -153,5 +191,6 @@ def test_the_per_node_texture_is_another_run_and_ignores_noise_modes():
     assert per_node != GOLDEN[0]
     # the band's width does not enter the per-node texture, so it does not split its runs
     assert hash_canonical(dict(P, initial="per_node", noise_modes=48), N, 0) == per_node
-    assert run_id_for(Parameters(initial="per_node", noise_modes=8), Numerics(), 0) == \
-        run_id_for(Parameters(initial="per_node"), Numerics(), 0)
+    assert run_id_for(Parameters(initial="per_node", noise_modes=8), Numerics(), 0) == run_id_for(
+        Parameters(initial="per_node"), Numerics(), 0
+    )

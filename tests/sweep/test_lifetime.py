@@ -8,11 +8,24 @@ import pytest
 from sweep.run.lifetime import lifetime_rule, walltime_seconds, worker_lifetime
 
 
-@pytest.mark.parametrize(("text", "seconds"), [
-    ("04:00:00", 14400.0), ("00:02:00", 120.0), ("90:00", 5400.0), ("30", 1800.0),
-    ("1-00:00:00", 86400.0), ("2-12", 2 * 86400.0 + 12 * 3600.0), ("1-01:30", 91800.0),
-    (600, 600.0), ("", None), ("soon", None), ("00:00:00", None), (True, None), (-5, None),
-])
+@pytest.mark.parametrize(
+    ("text", "seconds"),
+    [
+        ("04:00:00", 14400.0),
+        ("00:02:00", 120.0),
+        ("90:00", 5400.0),
+        ("30", 1800.0),
+        ("1-00:00:00", 86400.0),
+        ("2-12", 2 * 86400.0 + 12 * 3600.0),
+        ("1-01:30", 91800.0),
+        (600, 600.0),
+        ("", None),
+        ("soon", None),
+        ("00:00:00", None),
+        (True, None),
+        (-5, None),
+    ],
+)
 def test_walltime_formats(text, seconds):
     assert walltime_seconds(text) == seconds
 
@@ -30,15 +43,18 @@ def test_the_lifetime_rule():
 
 
 def test_worker_arguments_from_the_walltime():
-    args, line = worker_lifetime("slurm", {"walltime": "00:02:00",
-                                           "worker_extra_args": ["--resources", "x=1"]})
+    args, line = worker_lifetime(
+        "slurm", {"walltime": "00:02:00", "worker_extra_args": ["--resources", "x=1"]}
+    )
     assert args == ["--resources", "x=1", "--lifetime", "84s", "--lifetime-stagger", "6s"]
     assert line is not None
     assert "84 s +- 6 s" in line
     # the campaign's own --lifetime wins (["--lifetime", "0"] turns retirement off)
     own = ["--lifetime", "0"]
-    assert worker_lifetime("slurm", {"walltime": "01:00:00", "worker_extra_args": own}) == \
-        (own, None)
+    assert worker_lifetime("slurm", {"walltime": "01:00:00", "worker_extra_args": own}) == (
+        own,
+        None,
+    )
     # no walltime given: dask-jobqueue's configured default (30 min for SLURM)
     args, _ = worker_lifetime("slurm", {})
     assert args[args.index("--lifetime") + 1] == f"{lifetime_rule(1800.0)[0]:.0f}s"
@@ -50,8 +66,11 @@ def test_the_job_script_retires_its_worker_before_the_walltime(tmp_path):
     from sweep.campaign import ClusterSpec, ExecutionSpec
     from sweep.run.driver import make_cluster
 
-    spec = ClusterSpec(kind="slurm", jobs=1, options={
-        "cores": 1, "processes": 1, "memory": "1GB", "walltime": "00:02:00"})
+    spec = ClusterSpec(
+        kind="slurm",
+        jobs=1,
+        options={"cores": 1, "processes": 1, "memory": "1GB", "walltime": "00:02:00"},
+    )
     cluster = make_cluster(ExecutionSpec(cluster=spec), tmp_path)
     try:
         script = cluster.job_script()

@@ -28,13 +28,16 @@ def test_a_run_whose_worker_is_lost_too_often_stays_pending(tmp_path, monkeypatc
 
     def lost_with_its_worker(task):  # what the scheduler reports after the last retry
         if task.run_id == victim:
-            raise KilledWorker(f"nematic-run-{victim}",
-                               SimpleNamespace(address="tls://lost:1"), 3)  # type: ignore[arg-type]
+            raise KilledWorker(f"nematic-run-{victim}", SimpleNamespace(address="tls://lost:1"), 3)  # type: ignore[arg-type]
         return real(task)
 
     monkeypatch.setattr(execute, "execute_run", lost_with_its_worker)
-    with LocalCluster(n_workers=1, processes=False, threads_per_worker=1,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+    with (
+        LocalCluster(
+            n_workers=1, processes=False, threads_per_worker=1, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
         summary = execute.run_campaign(expansion, store, client, plan)
     assert [r.run_id for r in summary.worker_lost] == [victim]
     assert summary.ok == 1

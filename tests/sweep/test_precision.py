@@ -55,35 +55,59 @@ def spec(**kw) -> PrecisionSpec:
 
 # --------------------------------------------------------------------------- the section
 def test_the_precision_section_parses():
-    c = parse_campaign(BASE + textwrap.dedent("""\
+    c = parse_campaign(
+        BASE
+        + textwrap.dedent("""\
         precision: {observable: lambda_peak, width: 0.1, unanimous: 4,
                     patterned_above: 1.0e-6, initial: 2, add: 3}
-        """), "c.yaml")
+        """),
+        "c.yaml",
+    )
     assert c.precision == PrecisionSpec(
-        observable="lambda_peak", source="lambda_peak", width=0.1, relative=True,
-        confidence=0.95, unanimous=4, patterned_above=1e-6, initial=2, add=3)
+        observable="lambda_peak",
+        source="lambda_peak",
+        width=0.1,
+        relative=True,
+        confidence=0.95,
+        unanimous=4,
+        patterned_above=1e-6,
+        initial=2,
+        add=3,
+    )
     assert parse_campaign(BASE, "c.yaml").precision is None
 
 
-@pytest.mark.parametrize(("section", "words"), [
-    ("{observable: lamda, width: 0.1}", ["c.yaml:8: precision.observable", "'lamda'",
-                                         "did you mean 'lambda'"]),
-    ("{observable: sigma2_S, width: -1}", ["precision.width", "-1", "a number > 0"]),
-    ("{observable: sigma2_S, width: 0.1, relative: yes please}",
-     ["precision.relative", "true", "false"]),
-    ("{observable: sigma2_S, width: 0.1, confidence: 1.5}", ["precision.confidence",
-                                                             "(0, 1)"]),
-    ("{observable: sigma2_S, unanimous: 9, patterned_above: 0}",
-     ["precision.unanimous", "from 2 to 8"]),
-    ("{observable: sigma2_S, unanimous: 3}", ["precision.patterned_above", "missing",
-                                              "needed by unanimous"]),
-    ("{observable: sigma2_S}", ["precision:", "no stopping rule", "width", "unanimous"]),
-    ("{observable: sigma2_S, width: 0.1, initial: 20}", ["precision.initial", "from 1 to 8"]),
-    ("{observable: sigma2_S, width: 0.1, add: 0}", ["precision.add", ">= 1"]),
-    ("{observable: sigma2_S, width: 0.1, widht: 2}", ["precision.widht", "did you mean "
-                                                      "'width'"]),
-    ("[width]", ["precision", "a mapping"]),
-])
+@pytest.mark.parametrize(
+    ("section", "words"),
+    [
+        (
+            "{observable: lamda, width: 0.1}",
+            ["c.yaml:8: precision.observable", "'lamda'", "did you mean 'lambda'"],
+        ),
+        ("{observable: sigma2_S, width: -1}", ["precision.width", "-1", "a number > 0"]),
+        (
+            "{observable: sigma2_S, width: 0.1, relative: yes please}",
+            ["precision.relative", "true", "false"],
+        ),
+        ("{observable: sigma2_S, width: 0.1, confidence: 1.5}", ["precision.confidence", "(0, 1)"]),
+        (
+            "{observable: sigma2_S, unanimous: 9, patterned_above: 0}",
+            ["precision.unanimous", "from 2 to 8"],
+        ),
+        (
+            "{observable: sigma2_S, unanimous: 3}",
+            ["precision.patterned_above", "missing", "needed by unanimous"],
+        ),
+        ("{observable: sigma2_S}", ["precision:", "no stopping rule", "width", "unanimous"]),
+        ("{observable: sigma2_S, width: 0.1, initial: 20}", ["precision.initial", "from 1 to 8"]),
+        ("{observable: sigma2_S, width: 0.1, add: 0}", ["precision.add", ">= 1"]),
+        (
+            "{observable: sigma2_S, width: 0.1, widht: 2}",
+            ["precision.widht", "did you mean 'width'"],
+        ),
+        ("[width]", ["precision", "a mapping"]),
+    ],
+)
 def test_precision_mistakes_are_reported_with_file_line_and_key_path(section, words):
     found = problems(BASE + f"precision: {section}\n")
     assert len(found) == 1, found
@@ -107,13 +131,19 @@ def test_precision_combines_with_refine_whose_seeds_it_decides():
 
 
 def test_the_class_from_several_observables():
-    c = parse_campaign(BASE + textwrap.dedent("""\
+    c = parse_campaign(
+        BASE
+        + textwrap.dedent("""\
         precision: {observable: sigma2_S, unanimous: 4,
                     classes: {sigma2_S: 1.0e-6, cos2theta: 0.5}}
-        """), "c.yaml")
+        """),
+        "c.yaml",
+    )
     assert c.precision is not None
     assert [(t.observable, t.source, t.above) for t in c.precision.thresholds] == [
-        ("sigma2_S", "sigma2_S_final", 1e-6), ("cos2theta", "cos2theta_final", 0.5)]
+        ("sigma2_S", "sigma2_S_final", 1e-6),
+        ("cos2theta", "cos2theta_final", 0.5),
+    ]
     s = c.precision
     aligned = [(1e-3, 0.9)] * 4
     assert decide(s, [1.0, 2.0, 3.0, 9.0], aligned, 8).state == "unanimous"
@@ -122,14 +152,20 @@ def test_the_class_from_several_observables():
     assert decide(s, [1.0, 2.0, 3.0, 9.0], [*aligned[:3], (1e-3, 0.1)], 8).state == "pending"
     assert decide(s, [1.0] * 4, [*aligned[:3], (1e-3, math.nan)], 8).state == "pending"
     for section, words in [
-            ("{observable: sigma2_S, unanimous: 4, classes: {cos2thta: 0.5}}",
-             ["precision.classes.cos2thta", "did you mean 'cos2theta'"]),
-            ("{observable: sigma2_S, unanimous: 4, classes: {cos2theta: high}}",
-             ["precision.classes.cos2theta", "a finite number"]),
-            ("{observable: sigma2_S, unanimous: 4, patterned_above: 0, classes: {mean_S: 0}}",
-             ["precision.patterned_above", "not with classes"]),
-            ("{observable: sigma2_S, unanimous: 4, classes: []}", ["precision.classes",
-                                                                    "a mapping"])]:
+        (
+            "{observable: sigma2_S, unanimous: 4, classes: {cos2thta: 0.5}}",
+            ["precision.classes.cos2thta", "did you mean 'cos2theta'"],
+        ),
+        (
+            "{observable: sigma2_S, unanimous: 4, classes: {cos2theta: high}}",
+            ["precision.classes.cos2theta", "a finite number"],
+        ),
+        (
+            "{observable: sigma2_S, unanimous: 4, patterned_above: 0, classes: {mean_S: 0}}",
+            ["precision.patterned_above", "not with classes"],
+        ),
+        ("{observable: sigma2_S, unanimous: 4, classes: []}", ["precision.classes", "a mapping"]),
+    ]:
         found = problems(BASE + f"precision: {section}\n")
         assert len(found) == 1, found
         for w in words:
@@ -182,7 +218,7 @@ def test_a_precise_mean_stops_early():
     assert 4 < n < 50
     assert (n - 4) % 4 == 0
     mean, width = interval_width(loose[:n], 0.95)
-    assert width < 0.1 * abs(mean) <= interval_width(loose[:n - 4], 0.95)[1]
+    assert width < 0.1 * abs(mean) <= interval_width(loose[: n - 4], 0.95)[1]
 
 
 def test_relative_and_absolute_widths():
@@ -338,4 +374,3 @@ def test_a_real_campaign_decides_every_point_and_resumes_to_the_same_decisions(t
     assert after.indices() == before.indices()
     ds2 = xr.open_dataset(results / "prec" / "phase.nc")
     assert decisions(ds2) == ["unanimous", "precise", "cap"]
-

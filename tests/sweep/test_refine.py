@@ -99,42 +99,70 @@ def problems(text: str) -> list[str]:
 
 
 def test_refine_section_parses():
-    c = parse_campaign(BASE + textwrap.dedent("""\
+    c = parse_campaign(
+        BASE
+        + textwrap.dedent("""\
         refine:
           axis: eps
           observable: sigma2_S
           patterned_above: 1.0e-6
           min_spacing: 0.05
           seeds: {initial: 2}
-        """), "c.yaml")
+        """),
+        "c.yaml",
+    )
     assert c.refine is not None
-    assert (c.refine.axis, c.refine.source, c.refine.criterion) == ("eps", "sigma2_S_final",
-                                                                    "fraction")
+    assert (c.refine.axis, c.refine.source, c.refine.criterion) == (
+        "eps",
+        "sigma2_S_final",
+        "fraction",
+    )
     assert (c.refine.initial, c.refine.add, c.refine.rounds) == (2, 2, 4)
     assert parse_campaign(BASE, "c.yaml").refine is None
 
 
-@pytest.mark.parametrize(("section", "words"), [
-    ("refine: {axis: epz, patterned_above: 0, min_spacing: 0.1}",
-     ["refine.axis", "'epz'", "did you mean 'eps'"]),
-    ("refine: {axis: K, patterned_above: 0, min_spacing: 1.0e-4}",
-     ["refine.axis", "zip group"]),
-    ("refine: {axis: eps, min_spacing: 0.1}",
-     ["refine.patterned_above", "missing", "criterion 'fraction'"]),
-    ("refine: {axis: eps, patterned_above: 0}", ["refine.min_spacing", "missing"]),
-    ("refine: {axis: eps, patterned_above: 0, min_spacing: 0.5}",
-     ["refine.min_spacing", "below the axis's span (0.4)"]),
-    ("refine: {axis: eps, patterned_above: 0, min_spacing: 0.1, seeds: {initial: 5}}",
-     ["refine.seeds.initial", "from 1 to 4"]),
-    ("refine: {axis: eps, patterned_above: 0, min_spacing: 0.1, roundz: 3}",
-     ["refine.roundz", "did you mean 'rounds'"]),
-    ("refine: {axis: eps, criterion: jump, jump: 0.5, min_spacing: 0.1}",
-     ["refine.jump", "factor > 1"]),
-    ("refine: {axis: eps, observable: sigma2, patterned_above: 0, min_spacing: 0.1}",
-     ["refine.observable", "sigma2"]),
-    ("refine: {axis: eps, fraction: [0.9, 0.1], patterned_above: 0, min_spacing: 0.1}",
-     ["refine.fraction", "0 <= low < high <= 1"]),
-])
+@pytest.mark.parametrize(
+    ("section", "words"),
+    [
+        (
+            "refine: {axis: epz, patterned_above: 0, min_spacing: 0.1}",
+            ["refine.axis", "'epz'", "did you mean 'eps'"],
+        ),
+        (
+            "refine: {axis: K, patterned_above: 0, min_spacing: 1.0e-4}",
+            ["refine.axis", "zip group"],
+        ),
+        (
+            "refine: {axis: eps, min_spacing: 0.1}",
+            ["refine.patterned_above", "missing", "criterion 'fraction'"],
+        ),
+        ("refine: {axis: eps, patterned_above: 0}", ["refine.min_spacing", "missing"]),
+        (
+            "refine: {axis: eps, patterned_above: 0, min_spacing: 0.5}",
+            ["refine.min_spacing", "below the axis's span (0.4)"],
+        ),
+        (
+            "refine: {axis: eps, patterned_above: 0, min_spacing: 0.1, seeds: {initial: 5}}",
+            ["refine.seeds.initial", "from 1 to 4"],
+        ),
+        (
+            "refine: {axis: eps, patterned_above: 0, min_spacing: 0.1, roundz: 3}",
+            ["refine.roundz", "did you mean 'rounds'"],
+        ),
+        (
+            "refine: {axis: eps, criterion: jump, jump: 0.5, min_spacing: 0.1}",
+            ["refine.jump", "factor > 1"],
+        ),
+        (
+            "refine: {axis: eps, observable: sigma2, patterned_above: 0, min_spacing: 0.1}",
+            ["refine.observable", "sigma2"],
+        ),
+        (
+            "refine: {axis: eps, fraction: [0.9, 0.1], patterned_above: 0, min_spacing: 0.1}",
+            ["refine.fraction", "0 <= low < high <= 1"],
+        ),
+    ],
+)
 def test_refine_mistakes_are_reported_with_file_line_and_what_is_allowed(section, words):
     found = problems(BASE + section + "\n")
     assert len(found) == 1, found
@@ -144,15 +172,20 @@ def test_refine_mistakes_are_reported_with_file_line_and_what_is_allowed(section
 
 
 def test_refine_mistakes_are_collected_with_the_rest_of_the_file():
-    text = BASE.replace("seeds: 4", "seeds: 4\nexecution: {workerz: 2}") + \
-        "refine: {axis: chi, patterned_above: 0, min_spacing: 0.1, rounds: -1}\n"
+    text = (
+        BASE.replace("seeds: 4", "seeds: 4\nexecution: {workerz: 2}")
+        + "refine: {axis: chi, patterned_above: 0, min_spacing: 0.1, rounds: -1}\n"
+    )
     found = problems(text)
     assert any("execution.workerz" in p for p in found), found
     assert any("refine.rounds" in p and "from 0 to 50" in p for p in found), found
     # an integer axis cannot take midpoints
-    found = problems(BASE.replace("seeds: 4", "seeds: 4\nparameters: {}").replace(
-        "    chi: [5.0, 10.0]", "    noise_modes: [8, 16]")
-        + "refine: {axis: noise_modes, patterned_above: 0, min_spacing: 1}\n")
+    found = problems(
+        BASE.replace("seeds: 4", "seeds: 4\nparameters: {}").replace(
+            "    chi: [5.0, 10.0]", "    noise_modes: [8, 16]"
+        )
+        + "refine: {axis: noise_modes, patterned_above: 0, min_spacing: 1}\n"
+    )
     assert any("a real-valued axis" in p and "int" in p for p in found), found
 
 
@@ -243,8 +276,11 @@ def test_sequential_seeds_are_added_only_where_the_seeds_disagree():
             return 1.0 if seed % 2 else -1.0
         return 1.0 if x > 0.25 else -1.0
 
-    nxt = next_round(c, 1, {(r.line, r.x): {s: outcome(r.line, r.x, s) for s in (0, 1)}
-                            for r in first_round(c).runs})
+    nxt = next_round(
+        c,
+        1,
+        {(r.line, r.x): {s: outcome(r.line, r.x, s) for s in (0, 1)} for r in first_round(c).runs},
+    )
     added = [r for r in nxt.runs if r.why.startswith("uncertain")]
     assert {(r.line, r.x, r.seed) for r in added} == {((1,), 0.2, 2), ((1,), 0.2, 3)}
     assert "1/2 patterned" in added[0].why
@@ -260,8 +296,10 @@ def test_failed_runs_are_run_but_not_classified():
     nan = math.nan
     # chi = 10: eps = 0.2 failed for both seeds; its neighbours 0.1 (stable) and 0.3
     # (unstable) make the boundary cell; nothing is split around the failed point itself
-    outcomes: dict = {((1,), x): {0: v, 1: v} for x, v in
-                ((0.0, -1.0), (0.1, -1.0), (0.2, nan), (0.3, 1.0), (0.4, 1.0))}
+    outcomes: dict = {
+        ((1,), x): {0: v, 1: v}
+        for x, v in ((0.0, -1.0), (0.1, -1.0), (0.2, nan), (0.3, 1.0), (0.4, 1.0))
+    }
     nxt = next_round(c, 1, outcomes)
     # the cell 0.1-0.3 has its midpoint 0.2 already: no new point, and a failed point gets
     # no seeds (it is not uncertain: nothing was classified)
@@ -270,12 +308,15 @@ def test_failed_runs_are_run_but_not_classified():
     nxt = next_round(c, 1, outcomes)
     assert {(r.x, r.seed) for r in nxt.runs} == {(0.15, 0), (0.15, 1), (0.2, 2), (0.2, 3)}
     assert next(r.why for r in nxt.runs if r.x == 0.2) == (
-        "uncertain: 1/1 patterned, interval 0.73 wider than 0.6")
+        "uncertain: 1/1 patterned, interval 0.73 wider than 0.6"
+    )
 
 
 def test_the_jump_criterion_splits_where_the_geometric_mean_jumps():
-    text = LINE_CAMPAIGN.replace("patterned_above: 0.0\n  observable: growth",
-                                 "criterion: jump\n  jump: 10\n  observable: sigma2_S")
+    text = LINE_CAMPAIGN.replace(
+        "patterned_above: 0.0\n  observable: growth",
+        "criterion: jump\n  jump: 10\n  observable: sigma2_S",
+    )
     c = parse_campaign(text, "p.yaml")
     assert c.refine is not None
     assert c.refine.criterion == "jump"
@@ -288,7 +329,9 @@ def test_the_jump_criterion_splits_where_the_geometric_mean_jumps():
     outcomes[((0,), 0.4)] = {0: 1e-3, 1: 1e-1}
     nxt = next_round(c, 1, outcomes)
     assert {(r.x, r.seed) for r in nxt.runs if r.why.startswith("uncertain")} == {
-        (0.4, 2), (0.4, 3)}
+        (0.4, 2),
+        (0.4, 3),
+    }
 
 
 def test_the_run_bound_holds_for_any_outcomes():
@@ -317,9 +360,14 @@ def test_refined_points_keep_the_grid_run_identity():
             assert full.run(i).coords == {"chi": 10.0, "eps": eps, "seed": seed}
     # midpoints are normalised like grid values (0.1 + 0.2 is 0.30000000000000004)
     c = parse_campaign(LINE_CAMPAIGN, "p.yaml")
-    nxt = next_round(c, 1, {(r.line, r.x): {0: (1.0 if r.x > 0.2 else -1.0),
-                                            1: (1.0 if r.x > 0.2 else -1.0)}
-                            for r in first_round(c).runs})
+    nxt = next_round(
+        c,
+        1,
+        {
+            (r.line, r.x): {0: (1.0 if r.x > 0.2 else -1.0), 1: (1.0 if r.x > 0.2 else -1.0)}
+            for r in first_round(c).runs
+        },
+    )
     assert {r.x for r in nxt.runs} == {0.25}
     assert (0.2 + 0.3) / 2 == 0.25
     assert (0.1 + 0.2) != 0.3
@@ -352,15 +400,38 @@ def test_the_fig2_refine_variant_validates_at_full_and_reduced_size():
 
 # --------------------------------------------------------------------------- real campaigns
 #: campaigns/fig2_adaptive.yaml at small size
-SMALL_FIG2 = ["--set", "resolution=32", "--set", "noise_modes=8", "--set", "mechanics=linear",
-              "--seeds", "6", "--name", "fig2_small"]
+SMALL_FIG2 = [
+    "--set",
+    "resolution=32",
+    "--set",
+    "noise_modes=8",
+    "--set",
+    "mechanics=linear",
+    "--seeds",
+    "6",
+    "--name",
+    "fig2_small",
+]
 
 
 def theory(chi: float) -> float:
     """eps_c of the linear stability analysis (docs/stability.md Eq. S10) at the A1 values."""
-    p = Parameters.from_dict({"S0": 0.0, "A0": 1.0, "gamma": 1.0, "tau": 1.0,
-                              "alpha_minus_B": 1.0, "B": 0.5, "K": 1e-4, "B_prime": 0.0,
-                              "C": 3.0, "zeta": 1.0, "s": 10.0, "chi": chi})
+    p = Parameters.from_dict(
+        {
+            "S0": 0.0,
+            "A0": 1.0,
+            "gamma": 1.0,
+            "tau": 1.0,
+            "alpha_minus_B": 1.0,
+            "B": 0.5,
+            "K": 1e-4,
+            "B_prime": 0.0,
+            "C": 3.0,
+            "zeta": 1.0,
+            "s": 10.0,
+            "chi": chi,
+        }
+    )
     return float(critical_eps_closed_form(p, incompressible=True))
 
 
@@ -443,15 +514,17 @@ def test_a_killed_driver_resumes_to_the_same_plan_and_seeds_stop_where_they_agre
     path = a1(tmp_path, "killed", "[8.0, 12.5]", 3)
     results = tmp_path / "results"
     store = CampaignStore(results, "killed")
-    proc = start_driver(["run", str(path), "--results", str(results), "--no-dashboard"],
-                        tmp_path / "log")
+    proc = start_driver(
+        ["run", str(path), "--results", str(results), "--no-dashboard"], tmp_path / "log"
+    )
 
     def in_round_1() -> bool:
         plan = read_plan(store)
         if plan is None or len(plan["rounds"]) < 2:
             return proc.poll() is not None
-        return any(r["state"] == "done" for r in plan["rounds"][1]["runs"]) or \
-            proc.poll() is not None
+        return (
+            any(r["state"] == "done" for r in plan["rounds"][1]["runs"]) or proc.poll() is not None
+        )
 
     try:
         wait_for(in_round_1, 240, "a finished run of round 1")
@@ -479,7 +552,7 @@ def test_a_killed_driver_resumes_to_the_same_plan_and_seeds_stop_where_they_agre
         return [[(r["run_id"], r["why"]) for r in rnd["runs"]] for rnd in plan["rounds"]]
 
     recorded = runs(at_kill)
-    assert runs(final)[:len(recorded)] == recorded
+    assert runs(final)[: len(recorded)] == recorded
     copy = tmp_path / "elsewhere"
     shutil.copytree(results, copy)  # other mtimes: the files are checksummed, not re-run
     again = replay(load_campaign(path), CampaignStore(copy, "killed"))
@@ -510,8 +583,9 @@ def test_the_fig2_refine_variant_runs_at_small_size(tmp_path):
     from sweep.analysis.transition import transition
 
     results = tmp_path / "results"
-    result = invoke("run", FIG2_ADAPTIVE, *SMALL_FIG2, "--results", results, "--no-dashboard",
-                    "--no-figures")
+    result = invoke(
+        "run", FIG2_ADAPTIVE, *SMALL_FIG2, "--results", results, "--no-dashboard", "--no-figures"
+    )
     assert result.exit_code == 0, result.output
     assert "refinement finished" in result.output
     phase = xr.open_dataset(results / "fig2_small" / "phase.nc")

@@ -88,54 +88,92 @@ seeds: 4
 
 
 def test_several_axes_parse_in_the_order_of_the_dims():
-    c = parse_campaign(BASE + textwrap.dedent("""\
+    c = parse_campaign(
+        BASE
+        + textwrap.dedent("""\
         refine:
           axes: [K, eps, chi]
           log: [K]
           classes: {sigma2_S: 1.0e-6, cos2theta: 0.5}
           min_spacing: {eps: 0.05, chi: 1.0, K: 0.5}
           seeds: {initial: 2}
-        """), "c.yaml")
+        """),
+        "c.yaml",
+    )
     spec = c.refine
     assert spec is not None
     assert [(a.name, a.min_spacing, a.log) for a in spec.axes] == [
-        ("eps", 0.05, False), ("chi", 1.0, False), ("K", 0.5, True)]
+        ("eps", 0.05, False),
+        ("chi", 1.0, False),
+        ("K", 0.5, True),
+    ]
     assert [(t.observable, t.source, t.above) for t in spec.thresholds] == [
-        ("sigma2_S", "sigma2_S_final", 1e-6), ("cos2theta", "cos2theta_final", 0.5)]
+        ("sigma2_S", "sigma2_S_final", 1e-6),
+        ("cos2theta", "cos2theta_final", 0.5),
+    ]
     with pytest.raises(ValueError, match="not one axis"):
         _ = spec.axis
     # the bound: the other dim's 2 values x (3 + 2 x 3) eps x (3 + 2 x 3) chi x (3 + 2 x 3) K
     assert run_bound(c) == 2 * 9 * 9 * 9 * 4
 
 
-@pytest.mark.parametrize(("section", "words"), [
-    ("{axis: eps, axes: [chi], patterned_above: 0, min_spacing: 0.1}",
-     ["refine.axes", "give axis", "not both"]),
-    ("{axes: [eps, chi, eps], patterned_above: 0, min_spacing: {eps: 0.1, chi: 1}}",
-     ["refine.axes[2]", "each axis once"]),
-    ("{axes: [eps, kappa], patterned_above: 0, min_spacing: {eps: 0.1, kappa: 1}}",
-     ["refine.axes[1]", "zip group"]),
-    ("{axes: [eps, chi], patterned_above: 0, min_spacing: 0.1}",
-     ["refine.min_spacing", "a mapping axis -> smallest spacing for each of eps, chi"]),
-    ("{axes: [eps, chi], patterned_above: 0, min_spacing: {eps: 0.1}}",
-     ["refine.min_spacing.chi", "missing"]),
-    ("{axes: [eps, chi], patterned_above: 0, min_spacing: {eps: 0.1, chi: 1, K: 1}}",
-     ["refine.min_spacing.K", "not a refined axis"]),
-    ("{axes: [eps, K], log: [K], patterned_above: 0, min_spacing: {eps: 0.1, K: 4}}",
-     ["refine.min_spacing.K", "below the axis's span (4 decades)"]),
-    ("{axes: [eps, K], log: [eps], patterned_above: 0, min_spacing: {eps: 0.1, K: 1e-4}}",
-     ["refine.log[0]", "values are all > 0", "eps has 0.0"]),
-    ("{axes: [eps, K], log: [chi], patterned_above: 0, min_spacing: {eps: 0.1, K: 1e-4}}",
-     ["refine.log[0]", "a refined axis (eps, K)"]),
-    ("{axis: eps, criterion: jump, classes: {sigma2_S: 0}, min_spacing: 0.1}",
-     ["refine.classes", "criterion 'fraction' only"]),
-    ("{axis: eps, patterned_above: 0, classes: {sigma2_S: 0}, min_spacing: 0.1}",
-     ["refine.patterned_above", "not with classes"]),
-    ("{axis: eps, classes: {sigma2_S: 0, sigma2_S_final: 1}, min_spacing: 0.1}",
-     ["refine.classes", "each observable once"]),
-    ("{axis: eps, classes: {cos2thta: 0.5}, min_spacing: 0.1}",
-     ["refine.classes.cos2thta", "did you mean 'cos2theta'"]),
-])
+@pytest.mark.parametrize(
+    ("section", "words"),
+    [
+        (
+            "{axis: eps, axes: [chi], patterned_above: 0, min_spacing: 0.1}",
+            ["refine.axes", "give axis", "not both"],
+        ),
+        (
+            "{axes: [eps, chi, eps], patterned_above: 0, min_spacing: {eps: 0.1, chi: 1}}",
+            ["refine.axes[2]", "each axis once"],
+        ),
+        (
+            "{axes: [eps, kappa], patterned_above: 0, min_spacing: {eps: 0.1, kappa: 1}}",
+            ["refine.axes[1]", "zip group"],
+        ),
+        (
+            "{axes: [eps, chi], patterned_above: 0, min_spacing: 0.1}",
+            ["refine.min_spacing", "a mapping axis -> smallest spacing for each of eps, chi"],
+        ),
+        (
+            "{axes: [eps, chi], patterned_above: 0, min_spacing: {eps: 0.1}}",
+            ["refine.min_spacing.chi", "missing"],
+        ),
+        (
+            "{axes: [eps, chi], patterned_above: 0, min_spacing: {eps: 0.1, chi: 1, K: 1}}",
+            ["refine.min_spacing.K", "not a refined axis"],
+        ),
+        (
+            "{axes: [eps, K], log: [K], patterned_above: 0, min_spacing: {eps: 0.1, K: 4}}",
+            ["refine.min_spacing.K", "below the axis's span (4 decades)"],
+        ),
+        (
+            "{axes: [eps, K], log: [eps], patterned_above: 0, min_spacing: {eps: 0.1, K: 1e-4}}",
+            ["refine.log[0]", "values are all > 0", "eps has 0.0"],
+        ),
+        (
+            "{axes: [eps, K], log: [chi], patterned_above: 0, min_spacing: {eps: 0.1, K: 1e-4}}",
+            ["refine.log[0]", "a refined axis (eps, K)"],
+        ),
+        (
+            "{axis: eps, criterion: jump, classes: {sigma2_S: 0}, min_spacing: 0.1}",
+            ["refine.classes", "criterion 'fraction' only"],
+        ),
+        (
+            "{axis: eps, patterned_above: 0, classes: {sigma2_S: 0}, min_spacing: 0.1}",
+            ["refine.patterned_above", "not with classes"],
+        ),
+        (
+            "{axis: eps, classes: {sigma2_S: 0, sigma2_S_final: 1}, min_spacing: 0.1}",
+            ["refine.classes", "each observable once"],
+        ),
+        (
+            "{axis: eps, classes: {cos2thta: 0.5}, min_spacing: 0.1}",
+            ["refine.classes.cos2thta", "did you mean 'cos2theta'"],
+        ),
+    ],
+)
 def test_mistakes_in_several_axes_and_classes_are_reported(section, words):
     found = problems(BASE + f"refine: {section}\n")
     assert len(found) == 1, found
@@ -203,10 +241,10 @@ def test_a_boundary_in_the_plane_is_found_along_both_axes():
 
 
 def test_a_one_axis_axes_list_plans_exactly_as_axis():
-    one = PLANE.replace("axes: [chi, eps]", "axis: eps").replace(
-        "{chi: 0.5, eps: 0.025}", "0.025")
+    one = PLANE.replace("axes: [chi, eps]", "axis: eps").replace("{chi: 0.5, eps: 0.025}", "0.025")
     listed = PLANE.replace("axes: [chi, eps]", "axes: [eps]").replace(
-        "{chi: 0.5, eps: 0.025}", "{eps: 0.025}")
+        "{chi: 0.5, eps: 0.025}", "{eps: 0.025}"
+    )
 
     def outcome(line, x, seed):
         return 1.0 if x > edge([2.0, 6.0, 10.0][line[0]]) + 0.01 * (seed == 1) else -1.0
@@ -245,8 +283,10 @@ def patterned(chi: float, k: float, eps: float) -> bool:
 
 def fig4_like(line, x, seed) -> dict[str, float]:
     chi, k, eps = values_at(x)
-    return {"sigma2_S_final": 1e-2 if patterned(chi, k, eps) else 1e-14,
-            "cos2theta_final": 0.99 if eps > 0.004 else 0.05}
+    return {
+        "sigma2_S_final": 1e-2 if patterned(chi, k, eps) else 1e-14,
+        "cos2theta_final": 0.99 if eps > 0.004 else 0.05,
+    }
 
 
 def test_a_boundary_in_three_dimensions_with_geometric_midpoints_and_spacings_per_axis():
@@ -275,8 +315,10 @@ def test_a_boundary_in_three_dimensions_with_geometric_midpoints_and_spacings_pe
     assert lo < 6.0 < hi
     assert hi - lo == 1.25
     assert n_runs(rounds) <= run_bound(c)
-    assert "boundary: K 1e-06 (2/2 sigma2_S > 1e-06, 0/2 cos2theta > 0.5) | 0.0001 (0/2 " \
+    assert (
+        "boundary: K 1e-06 (2/2 sigma2_S > 1e-06, 0/2 cos2theta > 0.5) | 0.0001 (0/2 "
         "sigma2_S > 1e-06, 0/2 cos2theta > 0.5)" in {r.why for r in rounds[1].runs}
+    )
 
 
 LINE = """\
@@ -304,32 +346,48 @@ def test_the_class_from_two_observables():
 
     # every run patterned; 0 not aligned, 0.1 aligned: the class changes by cos2theta alone.
     # At 0.3 the seeds disagree on the alignment only: a mixed point.
-    outcomes: dict = {((), 0.0): {0: row(1e-2, 0.1), 1: row(1e-2, 0.2)},
-                      ((), 0.1): {0: row(1e-2, 0.9), 1: row(1e-2, 0.95)},
-                      ((), 0.2): {0: row(1e-2, 0.9), 1: row(1e-2, 0.95)},
-                      ((), 0.3): {0: row(1e-2, 0.9), 1: row(1e-2, 0.1)}}
+    outcomes: dict = {
+        ((), 0.0): {0: row(1e-2, 0.1), 1: row(1e-2, 0.2)},
+        ((), 0.1): {0: row(1e-2, 0.9), 1: row(1e-2, 0.95)},
+        ((), 0.2): {0: row(1e-2, 0.9), 1: row(1e-2, 0.95)},
+        ((), 0.3): {0: row(1e-2, 0.9), 1: row(1e-2, 0.1)},
+    }
     nxt = next_round(c, 1, outcomes)
     by_x: dict = {}
     for r in nxt.runs:
         by_x.setdefault(r.x, (r.why, []))[1].append(r.seed)
     assert set(by_x) == {0.05, 0.25, 0.3}
-    assert by_x[0.05] == ("boundary: eps 0 (2/2 sigma2_S > 1e-06, 0/2 cos2theta > 0.5) | "
-                          "0.1 (2/2 sigma2_S > 1e-06, 2/2 cos2theta > 0.5)", [0, 1])
-    assert by_x[0.3] == ("uncertain: 2/2 sigma2_S > 1e-06, 1/2 cos2theta > 0.5, interval "
-                         "0.76 wider than 0.6", [2, 3])
+    assert by_x[0.05] == (
+        "boundary: eps 0 (2/2 sigma2_S > 1e-06, 0/2 cos2theta > 0.5) | "
+        "0.1 (2/2 sigma2_S > 1e-06, 2/2 cos2theta > 0.5)",
+        [0, 1],
+    )
+    assert by_x[0.3] == (
+        "uncertain: 2/2 sigma2_S > 1e-06, 1/2 cos2theta > 0.5, interval 0.76 wider than 0.6",
+        [2, 3],
+    )
     assert by_x[0.25][0].startswith("boundary: eps 0.2 (")
     # one observable in classes: is observable + patterned_above
-    one = parse_campaign(LINE.replace("{sigma2_S: 1.0e-6, cos2theta: 0.5}", "{cos2theta: 0.5}"),
-                         "l.yaml")
+    one = parse_campaign(
+        LINE.replace("{sigma2_S: 1.0e-6, cos2theta: 0.5}", "{cos2theta: 0.5}"), "l.yaml"
+    )
     assert "refine eps: patterned when cos2theta > 0.5; a point is mixed" in flat(
-        "\n".join(validation_lines(one)))
-    assert next_round(one, 1, outcomes) == next_round(parse_campaign(LINE.replace(
-        "classes: {sigma2_S: 1.0e-6, cos2theta: 0.5}",
-        "observable: cos2theta\n  patterned_above: 0.5"), "l.yaml"), 1, outcomes)
+        "\n".join(validation_lines(one))
+    )
+    assert next_round(one, 1, outcomes) == next_round(
+        parse_campaign(
+            LINE.replace(
+                "classes: {sigma2_S: 1.0e-6, cos2theta: 0.5}",
+                "observable: cos2theta\n  patterned_above: 0.5",
+            ),
+            "l.yaml",
+        ),
+        1,
+        outcomes,
+    )
     # a run without one of the two values is not classified
     outcomes[((), 0.1)] = {0: row(1e-2, math.nan), 1: row(math.nan, 0.9)}
-    assert {r.x for r in next_round(c, 1, outcomes).runs if r.why.startswith("bound")} == {
-        0.25}
+    assert {r.x for r in next_round(c, 1, outcomes).runs if r.why.startswith("bound")} == {0.25}
 
 
 def test_the_plan_over_several_axes_does_not_depend_on_the_order_of_the_outcomes():
@@ -337,8 +395,13 @@ def test_the_plan_over_several_axes_does_not_depend_on_the_order_of_the_outcomes
     rng = random.Random(3)
     outcomes = {}
     for point, seeds in points_of([first_round(c)]).items():
-        outcomes[point] = {s: {"sigma2_S_final": rng.choice([1e-14, 1e-2, math.nan]),
-                               "cos2theta_final": rng.choice([0.0, 1.0])} for s in seeds}
+        outcomes[point] = {
+            s: {
+                "sigma2_S_final": rng.choice([1e-14, 1e-2, math.nan]),
+                "cos2theta_final": rng.choice([0.0, 1.0]),
+            }
+            for s in seeds
+        }
     reference = next_round(c, 1, outcomes)
     assert reference.runs
     for k in range(6):
@@ -408,15 +471,33 @@ def test_seeds_by_precision_at_grid_and_refined_points():
     assert (c.refine.initial, c.refine.add) == (4, 2)
     rounds, values = simulate(c, mixed_line)
     seeds = by_eps(points_of(rounds))
-    states = by_eps({point: decision(c, [values[point][k] for k in s]).state
-                     for point, s in points_of(rounds).items()})
+    states = by_eps(
+        {
+            point: decision(c, [values[point][k] for k in s]).state
+            for point, s in points_of(rounds).items()
+        }
+    )
     # relaxed points stop at 4 unanimous seeds, patterned ones at a precise mean; where the
     # seeds disagree (0.2 on the grid, 0.25 refined in round 2) they run to the cap, always
     # the campaign's seeds in order
-    assert states == {0.0: "unanimous", 0.1: "unanimous", 0.15: "unanimous", 0.2: "cap",
-                      0.25: "cap", 0.3: "precise", 0.4: "precise"}
-    assert {x: len(s) for x, s in seeds.items()} == {0.0: 4, 0.1: 4, 0.15: 4, 0.2: 8,
-                                                     0.25: 8, 0.3: 4, 0.4: 4}
+    assert states == {
+        0.0: "unanimous",
+        0.1: "unanimous",
+        0.15: "unanimous",
+        0.2: "cap",
+        0.25: "cap",
+        0.3: "precise",
+        0.4: "precise",
+    }
+    assert {x: len(s) for x, s in seeds.items()} == {
+        0.0: 4,
+        0.1: 4,
+        0.15: 4,
+        0.2: 8,
+        0.25: 8,
+        0.3: 4,
+        0.4: 4,
+    }
     assert seeds[0.25] == list(range(8))
     # two refinement rounds, then rounds that only add seeds (0.25's) until it is decided
     assert len(rounds) == 5
@@ -432,8 +513,17 @@ def write_run(store: CampaignStore, run_id: str, scalars: dict[str, float]) -> N
     path = store.nc_path(run_id)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(run_id.encode())
-    store.write_record({"run_id": run_id, "status": "ok", "reason": "", "wall_time": 1.0,
-                        "scalars": scalars, "seed": 0, **file_stamp(path)})
+    store.write_record(
+        {
+            "run_id": run_id,
+            "status": "ok",
+            "reason": "",
+            "wall_time": 1.0,
+            "scalars": scalars,
+            "seed": 0,
+            **file_stamp(path),
+        }
+    )
 
 
 def run_to_the_end(campaign, store: CampaignStore):
@@ -453,12 +543,20 @@ def test_the_replay_from_the_run_files_resumes_to_the_same_decisions(tmp_path):
     ref = run_to_the_end(c, store)
     planned, _ = simulate(c, mixed_line)
     assert ref.rounds == planned
-    assert ref.stop == ("rounds used (2 after the grid); every point's seeds decided (4 "
-                        "precise, 6 unanimous, 4 cap, 0 pending)")
+    assert ref.stop == (
+        "rounds used (2 after the grid); every point's seeds decided (4 "
+        "precise, 6 unanimous, 4 cap, 0 pending)"
+    )
     before = ref.to_dict()
     assert {(p["coords"]["eps"], p["seeds_run"], p["decision"]) for p in before["points"]} == {
-        (0.0, 4, "unanimous"), (0.1, 4, "unanimous"), (0.15, 4, "unanimous"),
-        (0.2, 8, "cap"), (0.25, 8, "cap"), (0.3, 4, "precise"), (0.4, 4, "precise")}
+        (0.0, 4, "unanimous"),
+        (0.1, 4, "unanimous"),
+        (0.15, 4, "unanimous"),
+        (0.2, 8, "cap"),
+        (0.25, 8, "cap"),
+        (0.3, 4, "precise"),
+        (0.4, 4, "precise"),
+    }
     assert len(before["points"]) == 14
     assert before["precision"]["unanimous"] == 4
 
@@ -470,12 +568,18 @@ def test_the_replay_from_the_run_files_resumes_to_the_same_decisions(tmp_path):
     assert ds.chi.values.tolist() == [5.0, 6.0]
     for row in range(2):
         decided = [names[int(v) + 1] for v in ds["seed_decision"].values[row]]
-        assert decided == ["unanimous", "unanimous", "unanimous", "cap", "cap", "precise",
-                           "precise"]
+        assert decided == [
+            "unanimous",
+            "unanimous",
+            "unanimous",
+            "cap",
+            "cap",
+            "precise",
+            "precise",
+        ]
         assert ds["seed_count"].values[row].tolist() == [4, 4, 4, 8, 8, 4, 4]
         assert ds["refine_round"].values[row].tolist() == [0, 1, 2, 0, 2, 1, 0]
-        assert np.isfinite(ds["sigma2_S"].values[row]).sum(-1).tolist() == [4, 4, 4, 8, 8,
-                                                                            4, 4]
+        assert np.isfinite(ds["sigma2_S"].values[row]).sum(-1).tolist() == [4, 4, 4, 8, 8, 4, 4]
 
     # the last round's runs lost (a killed driver): the replay stops there, then the same plan
     last = ref.rounds[-1]
@@ -488,8 +592,7 @@ def test_the_replay_from_the_run_files_resumes_to_the_same_decisions(tmp_path):
     assert mid.current.number == last.number
     assert len(mid.pending) == len(last.runs)
     assert mid.rounds == ref.rounds
-    assert {d.state for p, d in mid.decisions.items() if values_at(p[1])[1] == 0.25} == {
-        "pending"}
+    assert {d.state for p, d in mid.decisions.items() if values_at(p[1])[1] == 0.25} == {"pending"}
     again = run_to_the_end(c, store)
     assert again.to_dict() == before
 
@@ -557,10 +660,10 @@ def test_a_real_campaign_refined_over_two_axes_with_seeds_by_precision(tmp_path)
     # theory: chi = 4 is stable at any strain, chi = 12 unstable above eps = 0.087: chi is
     # refined at eps = 0.2 (8: unstable above 0.14) and eps at chi = 12
     out = flat(result.output)
-    assert "chi=8, eps=0.2: seeds 0, 1: boundary: chi 4 (0/2 patterned) | 12 (2/2 " \
-        "patterned)" in out
-    assert "chi=12, eps=0.1: seeds 0, 1: boundary: eps 0 (0/2 patterned) | 0.2 (2/2 " \
-        "patterned)" in out
+    assert "chi=8, eps=0.2: seeds 0, 1: boundary: chi 4 (0/2 patterned) | 12 (2/2 patterned)" in out
+    assert (
+        "chi=12, eps=0.1: seeds 0, 1: boundary: eps 0 (0/2 patterned) | 0.2 (2/2 patterned)" in out
+    )
     assert {4.0, 8.0, 12.0} <= set(ds.chi.values.tolist())
     assert {0.0, 0.1, 0.2} <= set(ds.eps.values.tolist())
     assert ds.attrs["refine_axis"] == "chi, eps"
@@ -588,8 +691,10 @@ def test_the_fig4_adaptive_campaign_validates_and_shares_fig4s_runs():
     result = invoke("validate", FIG4_ADAPTIVE)
     assert result.exit_code == 0, result.output
     text = flat(result.output)
-    assert "refine chi, K, eps: a run's class is which of sigma2_S > 1e-06, cos2theta > 0.5 " \
+    assert (
+        "refine chi, K, eps: a run's class is which of sigma2_S > 1e-06, cos2theta > 0.5 "
         "hold" in text
+    )
     assert "round 0 (the grid): 27 points x 4 seed(s) = 108 runs" in text
     c = load_campaign(FIG4_ADAPTIVE)
     assert c.refine is not None
@@ -612,12 +717,20 @@ def test_runs_a_refinement_over_several_axes_can_plan_are_not_orphaned(tmp_path)
     store = CampaignStore(tmp_path / "results", "precise")
     store.runs_dir.mkdir(parents=True)
     namer = RunNamer(c)
-    inside = namer.run_id((), (5.5, 0.35), 7)   # refined along both axes, a later seed
+    inside = namer.run_id((), (5.5, 0.35), 7)  # refined along both axes, a later seed
     outside = namer.run_id((), (5.5, 0.45), 1)  # beyond eps's grid
     for rid, chi, eps, seed in ((inside, 5.5, 0.35, 7), (outside, 5.5, 0.45, 1)):
-        store.write_record({"run_id": rid, "status": "failed", "reason": "nan",
-                            "nc_bytes": None, "seed": seed, "scalars": {},
-                            "coords": {"chi": chi, "eps": eps}})
+        store.write_record(
+            {
+                "run_id": rid,
+                "status": "failed",
+                "reason": "nan",
+                "nc_bytes": None,
+                "seed": seed,
+                "scalars": {},
+                "coords": {"chi": chi, "eps": eps},
+            }
+        )
     expansion = expansion_for(c, store)
     assert inside not in expansion.position
     counts = run_counts(c, expansion, store, store.scan())

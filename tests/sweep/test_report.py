@@ -86,8 +86,7 @@ def test_run_writes_a_report_listing_every_failure_and_round(adaptive):
     assert plan is not None
     assert len(plan["rounds"]) == 2  # the grid and one refined round
     for rnd in plan["rounds"]:
-        assert (f'<h3 class="refine-round">round {rnd["round"]}: {len(rnd["runs"])} run(s)'
-                in html)
+        assert f'<h3 class="refine-round">round {rnd["round"]}: {len(rnd["runs"])} run(s)' in html
     assert "boundary: alpha_minus_B 0.1" in html  # why round 1 ran its points
     assert "8: 6 done, 2 failed, 0 pending" in " ".join(html.split())
     # the verification: the grid's 4 corners under one variant, the failed ones missing
@@ -108,7 +107,7 @@ def test_the_report_is_self_contained(adaptive):
     # one snapshot per grid point that has a run to show, and the histogram of run times
     assert html.count("data:image/png;base64,") >= 6
     assert '<img alt="run time histogram" src="data:image/svg+xml;base64,' in html
-    assert "<h2 id=\"refine\">" in html
+    assert '<h2 id="refine">' in html
     assert "(seed mean)" in html
 
 
@@ -166,8 +165,9 @@ def test_report_and_status_import_only_what_they_need(adaptive, tmp_path):
     matplotlib; ``status`` reads no netCDF: no xarray, no pandas (benchmarks/report_time.py
     measures the times)."""
     path, results, _ = adaptive
-    modules, out = cli_modules("report", "rep", "--results", results,
-                               "--output", tmp_path / "r.html")
+    modules, out = cli_modules(
+        "report", "rep", "--results", results, "--output", tmp_path / "r.html"
+    )
     assert "wrote" in out, out
     for heavy in ("numba", "model.compiled", "distributed", "dask.array", "matplotlib"):
         assert heavy not in modules, heavy
@@ -187,20 +187,28 @@ def test_nematic_report_of_an_unknown_campaign_is_one_error_line(tmp_path):
 
 def test_fit_tables_put_intervals_with_their_values_and_label_units():
     fits = xr.Dataset(
-        {"transition_location": ((), 0.35, {"long_name": "transition location",
-                                            "fit": "transition"}),
-         "transition_location_lower": ((), 0.3, {"fit": "transition"}),
-         "transition_location_upper": ((), 0.4, {"fit": "transition"}),
-         "alpha_cr": (("K",), [0.1, np.nan], {"long_name": "critical activity", "units": "1",
-                                               "fit": "alpha_cr"}),
-         "alpha_cr_lower": (("K",), [0.05, np.nan], {"fit": "alpha_cr"}),
-         "alpha_cr_upper": (("K",), [0.2, np.nan], {"fit": "alpha_cr"}),
-         "wall": (("K",), [3.0, 4.0], {"units": "s", "fit": "alpha_cr"})},
-        coords={"K": ("K", [1e-4, 1e-3], {"units": "1"})})
+        {
+            "transition_location": (
+                (),
+                0.35,
+                {"long_name": "transition location", "fit": "transition"},
+            ),
+            "transition_location_lower": ((), 0.3, {"fit": "transition"}),
+            "transition_location_upper": ((), 0.4, {"fit": "transition"}),
+            "alpha_cr": (
+                ("K",),
+                [0.1, np.nan],
+                {"long_name": "critical activity", "units": "1", "fit": "alpha_cr"},
+            ),
+            "alpha_cr_lower": (("K",), [0.05, np.nan], {"fit": "alpha_cr"}),
+            "alpha_cr_upper": (("K",), [0.2, np.nan], {"fit": "alpha_cr"}),
+            "wall": (("K",), [3.0, 4.0], {"units": "s", "fit": "alpha_cr"}),
+        },
+        coords={"K": ("K", [1e-4, 1e-3], {"units": "1"})},
+    )
     tables = {t.title: t for t in fit_tables(fits)}
     scalar = tables["transition"]
-    assert scalar.rows == [["transition_location", "0.35", "[0.3, 0.4]", "",
-                            "transition location"]]
+    assert scalar.rows == [["transition_location", "0.35", "[0.3, 0.4]", "", "transition location"]]
     over_k = tables["alpha_cr over K"]
     assert over_k.columns == ["K", "alpha_cr", "alpha_cr_lower", "alpha_cr_upper", "wall [s]"]
     assert over_k.rows == [["0.0001", "0.1", "0.05", "0.2", "3"], ["0.001", "-", "-", "-", "4"]]
@@ -209,10 +217,13 @@ def test_fit_tables_put_intervals_with_their_values_and_label_units():
 
 def test_hover_texts_give_each_seed_and_skip_points_not_run(tmp_path):
     phase = xr.Dataset(
-        {"status": (("eps", "seed"), [[1, 2], [0, 0]]),
-         "run_id": (("eps", "seed"), [["a", "b"], ["c", "d"]]),
-         "sigma2_S": (("eps", "seed"), [[1e-3, np.nan], [np.nan, np.nan]])},
-        coords={"eps": [0.1, 0.2], "seed": [3, 7]})
+        {
+            "status": (("eps", "seed"), [[1, 2], [0, 0]]),
+            "run_id": (("eps", "seed"), [["a", "b"], ["c", "d"]]),
+            "sigma2_S": (("eps", "seed"), [[1e-3, np.nan], [np.nan, np.nan]]),
+        },
+        coords={"eps": [0.1, 0.2], "seed": [3, 7]},
+    )
     cols = point_columns(phase, tmp_path, ["eps"])  # no run files: hover only
     assert cols["eps"] == ["0.1"]  # eps = 0.2 has no run
     assert cols["seeds_sigma2_S"] == ["3: 0.001, 7: failed"]
@@ -225,8 +236,14 @@ def test_hover_texts_give_each_seed_and_skip_points_not_run(tmp_path):
 def test_axes_spanning_a_decade_of_positive_values_are_logarithmic():
     from sweep.report.phase_plot import Axis
 
-    phase = xr.Dataset(coords={"K": [1e-4, 1e-3], "chi": [0.0, 5.0, 10.0],
-                               "amb": [0.1, 0.3, 0.7], "S0": [1.0, 10.0, 100.0]})
+    phase = xr.Dataset(
+        coords={
+            "K": [1e-4, 1e-3],
+            "chi": [0.0, 5.0, 10.0],
+            "amb": [0.1, 0.3, 0.7],
+            "S0": [1.0, 10.0, 100.0],
+        }
+    )
     assert Axis.of(phase, "K").log  # a decade (K logspaced)
     assert Axis.of(phase, "S0").log
     assert not Axis.of(phase, "chi").log  # zero
@@ -238,10 +255,13 @@ def _phase(shape: dict[str, list], seeds: int = 1) -> xr.Dataset:
     size = [len(v) for v in shape.values()] + [seeds]
     n = int(np.prod(size))
     return xr.Dataset(
-        {"status": (dims, np.ones(size, dtype=int)),
-         "run_id": (dims, np.array([f"r{i}" for i in range(n)]).reshape(size)),
-         "sigma2_S": (dims, np.linspace(1e-4, 1e-2, n).reshape(size))},
-        coords={**shape, "seed": list(range(seeds))})
+        {
+            "status": (dims, np.ones(size, dtype=int)),
+            "run_id": (dims, np.array([f"r{i}" for i in range(n)]).reshape(size)),
+            "sigma2_S": (dims, np.linspace(1e-4, 1e-2, n).reshape(size)),
+        },
+        coords={**shape, "seed": list(range(seeds))},
+    )
 
 
 def _plots(layout) -> list:
@@ -253,28 +273,43 @@ def _plots(layout) -> list:
 def test_one_two_and_more_dims_give_a_line_a_scatter_and_facets(tmp_path):
     from sweep.report.phase_plot import MAX_FACETS, phase_layout
 
-    layout, embedded, notes = phase_layout(_phase({"alpha_minus_B": [0.1, 0.3, 0.5]}),
-                                           tmp_path)
+    layout, embedded, notes = phase_layout(_phase({"alpha_minus_B": [0.1, 0.3, 0.5]}), tmp_path)
     (plot,) = _plots(layout)
     assert plot.yaxis[0].axis_label == "sigma2_S (seed mean)"
     assert embedded == 0  # no run files here
-    assert notes == ["0 of 3 points show a run when clicked (at most 200; a run that failed "
-                     "at once may leave nothing to show)"]
+    assert notes == [
+        "0 of 3 points show a run when clicked (at most 200; a run that failed "
+        "at once may leave nothing to show)"
+    ]
     # 2-D with a text axis: its values become tick labels at 0, 1
     layout, _, _ = phase_layout(
-        _phase({"alpha_minus_B": [0.1, 0.3], "mechanics": ["linear", "finite"]}), tmp_path)
+        _phase({"alpha_minus_B": [0.1, 0.3], "mechanics": ["linear", "finite"]}), tmp_path
+    )
     (plot,) = _plots(layout)
     assert plot.yaxis[0].major_label_overrides == {0: "linear", 1: "finite"}
     source = layout.select_one({"name": "points"})
     assert sorted(zip(source.data["x"], source.data["y"], strict=True)) == [
-        (0.1, 0.0), (0.1, 1.0), (0.3, 0.0), (0.3, 1.0)]
+        (0.1, 0.0),
+        (0.1, 1.0),
+        (0.3, 0.0),
+        (0.3, 1.0),
+    ]
     # 4-D: the first two dims, one facet per combination of the others, at most MAX_FACETS
     layout, _, notes = phase_layout(
-        _phase({"alpha_minus_B": [0.1, 0.3], "K": [1e-4, 1e-3], "eps": [0.0, 0.1, 0.2],
-                "chi": [1.0, 2.0, 3.0, 4.0]}), tmp_path)
+        _phase(
+            {
+                "alpha_minus_B": [0.1, 0.3],
+                "K": [1e-4, 1e-3],
+                "eps": [0.0, 0.1, 0.2],
+                "chi": [1.0, 2.0, 3.0, 4.0],
+            }
+        ),
+        tmp_path,
+    )
     plots = _plots(layout)
     assert len(plots) == MAX_FACETS < 12
     shown = {p.title.text.split(" at ")[1].split(";")[0] for p in plots}
     assert shown == {f"eps={e}, chi={c}" for e in ("0", "0.1") for c in (1, 2, 3, 4)} | {
-        "eps=0.2, chi=1"}  # in the grid's order, chi varying fastest
+        "eps=0.2, chi=1"
+    }  # in the grid's order, chi varying fastest
     assert notes[-1] == f"12 combinations of eps, chi: the first {MAX_FACETS} are shown"

@@ -61,7 +61,9 @@ const find = (model) => {
   return null;
 };
 """
-POINTS = FIND + """
+POINTS = (
+    FIND
+    + """
 const plot = find(named("phase_diagram")[0]);
 const glyph = plot.renderer_views.get(named("phase_points")[0]).glyph;
 const canvas = plot.canvas_view.el.getBoundingClientRect();
@@ -69,7 +71,10 @@ return {left: canvas.left, top: canvas.top, width: canvas.width, height: canvas.
         sx: Array.from(glyph.sx), sy: Array.from(glyph.sy),
         run_ids: named("points")[0].data.run_id};
 """
-SHOWN = FIND + """
+)
+SHOWN = (
+    FIND
+    + """
 const panel = find(named("run_panel")[0]);
 const root = panel.shadow_el ?? panel.el.shadowRoot ?? panel.el;
 const img = root.querySelector("img.snapshot");
@@ -79,6 +84,7 @@ return {selected: named("points")[0].selected.indices,
         image_width: img && img.complete ? img.naturalWidth : 0,
         series: named("series")[0].data.t.length};
 """
+)
 REQUESTS = """
 return performance.getEntriesByType("resource").map(e => e.name)
   .filter(n => !n.startsWith("data:") && !n.startsWith("file:") && !n.startsWith("blob:"));
@@ -88,16 +94,24 @@ return performance.getEntriesByType("resource").map(e => e.name)
 @pytest.fixture(scope="module")
 def browser():
     if CHROMIUM is None or CHROMEDRIVER is None:
-        pytest.skip("needs Chromium and its driver (Debian: apt-get install chromium "
-                    "chromium-driver; .ci/run installs them)")
+        pytest.skip(
+            "needs Chromium and its driver (Debian: apt-get install chromium "
+            "chromium-driver; .ci/run installs them)"
+        )
     webdriver = pytest.importorskip(
-        "selenium.webdriver", reason="needs selenium (a test dependency: pip install selenium)")
+        "selenium.webdriver", reason="needs selenium (a test dependency: pip install selenium)"
+    )
     from selenium.webdriver.chrome.service import Service
 
     options = webdriver.ChromeOptions()
     options.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                "--window-size=1300,1050"):
+    for arg in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1300,1050",
+    ):
         options.add_argument(arg)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
@@ -112,8 +126,9 @@ def report(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("browser")
     path = folder / "browser.yaml"
     path.write_text(CAMPAIGN)
-    result = CliRunner().invoke(app, ["run", str(path), "--results", str(folder / "results"),
-                                      "--no-dashboard"])
+    result = CliRunner().invoke(
+        app, ["run", str(path), "--results", str(folder / "results"), "--no-dashboard"]
+    )
     assert result.exit_code == 0, result.output
     page = folder / "results" / "browser" / "report.html"
     assert page.is_file(), result.output
@@ -150,8 +165,7 @@ def test_the_screenshot_goes_to_the_docs_only_when_asked(tmp_path, monkeypatch):
     assert screenshot_path(tmp_path) == SCREENSHOT
 
 
-def test_the_phase_diagram_renders_and_a_click_shows_the_points_run(browser, report,
-                                                                    tmp_path):
+def test_the_phase_diagram_renders_and_a_click_shows_the_points_run(browser, report, tmp_path):
     from selenium.webdriver.common.actions.action_builder import ActionBuilder
 
     browser.get(report.as_uri())
@@ -169,8 +183,9 @@ def test_the_phase_diagram_renders_and_a_click_shows_the_points_run(browser, rep
 
     i = 2  # alpha - B = 0.5
     action = ActionBuilder(browser)
-    action.pointer_action.move_to_location(int(points["left"] + points["sx"][i]),
-                                           int(points["top"] + points["sy"][i])).click()
+    action.pointer_action.move_to_location(
+        int(points["left"] + points["sx"][i]), int(points["top"] + points["sy"][i])
+    ).click()
     action.perform()
     shown = _wait(browser, SHOWN, lambda v: v["image_width"] > 0 and v["series"] > 0)
     assert shown["selected"] == [i]

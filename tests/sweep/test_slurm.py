@@ -49,8 +49,9 @@ def slurm():
         pytest.skip(why)
     was_up = subprocess.run(["bash", str(SCRIPT), "status"], capture_output=True).returncode == 0
     t0 = time.monotonic()
-    start = subprocess.run(["bash", str(SCRIPT), "start"], capture_output=True, text=True,
-                           timeout=600)
+    start = subprocess.run(
+        ["bash", str(SCRIPT), "start"], capture_output=True, text=True, timeout=600
+    )
     assert start.returncode == 0, start.stdout + start.stderr
     print(f"SLURM started in {time.monotonic() - t0:.0f} s")
     try:
@@ -76,30 +77,42 @@ execution:
 {extra}"""
 
 
-def slurm_campaign(folder: Path, name: str, *, values: str = "[0.1, 0.2]", seeds: int = 2,
-                   t_final: float = 2.0, python: str = sys.executable, give_up: float = 120,
-                   extra: str = "", scale: str = "jobs: 2") -> Path:
-    path = write_campaign(folder, name=name, values=values, seeds=seeds, t_final=t_final,
-                          workers=1)
+def slurm_campaign(
+    folder: Path,
+    name: str,
+    *,
+    values: str = "[0.1, 0.2]",
+    seeds: int = 2,
+    t_final: float = 2.0,
+    python: str = sys.executable,
+    give_up: float = 120,
+    extra: str = "",
+    scale: str = "jobs: 2",
+) -> Path:
+    path = write_campaign(folder, name=name, values=values, seeds=seeds, t_final=t_final, workers=1)
     text = path.read_text().replace("execution: {workers: 1}\n", "")
-    path.write_text(text + CLUSTER.format(python=python, give_up=give_up, extra=extra,
-                                              scale=scale))
+    path.write_text(text + CLUSTER.format(python=python, give_up=give_up, extra=extra, scale=scale))
     return path
 
 
 def nematic(args: list[object], timeout: float = 300) -> tuple[int, str, float]:
     t0 = time.monotonic()
-    proc = subprocess.run([sys.executable, "-m", "sweep", *map(str, args), "--no-figures"],
-                          capture_output=True, text=True, timeout=timeout,
-                          env=dict(os.environ, COLUMNS="300"))
+    proc = subprocess.run(
+        [sys.executable, "-m", "sweep", *map(str, args), "--no-figures"],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=dict(os.environ, COLUMNS="300"),
+    )
     text = proc.stdout + proc.stderr
     assert "Traceback" not in text, text
     return proc.returncode, " ".join(text.split()), time.monotonic() - t0
 
 
 def queue() -> list[str]:
-    out = subprocess.run(["squeue", "-h", "-o", "%i"], capture_output=True, text=True,
-                         check=True).stdout
+    out = subprocess.run(
+        ["squeue", "-h", "-o", "%i"], capture_output=True, text=True, check=True
+    ).stdout
     return out.split()
 
 
@@ -114,22 +127,26 @@ def run_in_background(path: Path, results: Path, log: Path) -> subprocess.Popen:
 
 
 def wait_for_records(runs: Path, n: int, driver: subprocess.Popen, log: Path) -> None:
-    wait_for(lambda: len(list(runs.glob("*.json"))) >= n or driver.poll() is not None, 180,
-             f"{n} finished run(s)")
+    wait_for(
+        lambda: len(list(runs.glob("*.json"))) >= n or driver.poll() is not None,
+        180,
+        f"{n} finished run(s)",
+    )
     assert driver.poll() is None, log.read_text()
 
 
 def test_slurm_campaign_gives_the_local_phase_nc_with_tls(slurm, tmp_path):
     path = slurm_campaign(tmp_path / "slurm", "twin")
-    local = write_campaign(tmp_path / "local", name="twin", values="[0.1, 0.2]", seeds=2,
-                           workers=1)
+    local = write_campaign(tmp_path / "local", name="twin", values="[0.1, 0.2]", seeds=2, workers=1)
     rc, out, _ = nematic(["run", local, "--results", tmp_path / "local-results"])
     assert rc == 0, out
     rc, out, took = nematic(["run", path, "--results", tmp_path / "results"])
     print(f"SLURM campaign (2 jobs, 4 runs) in {took:.0f} s")
     assert rc == 0, out
-    with xr.open_dataset(tmp_path / "local-results" / "twin" / "phase.nc") as a, \
-            xr.open_dataset(tmp_path / "results" / "twin" / "phase.nc") as b:
+    with (
+        xr.open_dataset(tmp_path / "local-results" / "twin" / "phase.nc") as a,
+        xr.open_dataset(tmp_path / "results" / "twin" / "phase.nc") as b,
+    ):
         xr.testing.assert_equal(a.load(), b.load())  # bitwise data, dims and coords
     folder = tmp_path / "results" / "twin"
     # the workers ran in the batch jobs, over TLS, with credentials only the owner reads
@@ -137,7 +154,8 @@ def test_slurm_campaign_gives_the_local_phase_nc_with_tls(slurm, tmp_path):
     assert hosts
     logs = "".join(p.read_text() for p in (folder / "jobs").glob("*.err"))
     assert "Registered to:      tls://" in logs or "Registered to: tls://" in " ".join(
-        logs.split()), logs[-2000:]
+        logs.split()
+    ), logs[-2000:]
     assert stat.S_IMODE((folder / "tls").stat().st_mode) == 0o700
     assert not list((folder / "tls").iterdir())  # removed with the cluster
     wait_for(lambda: not queue(), 60, "the jobs to end with the campaign")
@@ -164,9 +182,13 @@ def test_one_job_cancelled_mid_campaign(slurm, tmp_path):
 @pytest.mark.parametrize("scale", ["jobs: 2", "adapt: {minimum_jobs: 0, maximum_jobs: 2}"])
 def test_every_job_cancelled_is_replaced(slurm, tmp_path, scale):
     # long enough that runs remain when every job is cancelled after the first record
-    path = slurm_campaign(tmp_path, "all-cancelled", values="[0.1, 0.12, 0.14, 0.16, 0.18, 0.2]",
-                          t_final=12.0,
-                          scale=scale)
+    path = slurm_campaign(
+        tmp_path,
+        "all-cancelled",
+        values="[0.1, 0.12, 0.14, 0.16, 0.18, 0.2]",
+        t_final=12.0,
+        scale=scale,
+    )
     results, log = tmp_path / "results", tmp_path / "log"
     runs = results / "all-cancelled" / "runs"
     driver = run_in_background(path, results, log)
@@ -192,10 +214,11 @@ def test_replacements_that_keep_dying_end_the_driver_then_a_rerun_resumes(slurm,
     every job is cancelled the driver gives up quickly, naming the job logs and quoting the
     error; without the marker a rerun completes the campaign."""
     marker = tmp_path / "broken"
-    prologue = (f"    job_script_prologue: ['if [ -e {marker} ]; then echo \"error: node "
-                f"broken ({marker} exists)\" >&2; exit 1; fi']\n")
-    path = slurm_campaign(tmp_path, "dying", values="[0.1, 0.15, 0.2]", t_final=4.0,
-                          extra=prologue)
+    prologue = (
+        f"    job_script_prologue: ['if [ -e {marker} ]; then echo \"error: node "
+        f"broken ({marker} exists)\" >&2; exit 1; fi']\n"
+    )
+    path = slurm_campaign(tmp_path, "dying", values="[0.1, 0.15, 0.2]", t_final=4.0, extra=prologue)
     results, log = tmp_path / "results", tmp_path / "log"
     runs = results / "dying" / "runs"
     driver = run_in_background(path, results, log)
@@ -226,15 +249,17 @@ def test_replacements_that_keep_dying_end_the_driver_then_a_rerun_resumes(slurm,
 
 def test_a_wrong_python_fails_fast_quoting_the_worker_error(slurm, tmp_path):
     bare = tmp_path / "bare"  # an interpreter without the project (nor dask)
-    subprocess.run([sys.base_prefix + "/bin/python3", "-m", "venv", "--without-pip",
-                    str(bare)], check=True)
+    subprocess.run(
+        [sys.base_prefix + "/bin/python3", "-m", "venv", "--without-pip", str(bare)], check=True
+    )
     path = slurm_campaign(tmp_path, "wrong-python", python=str(bare / "bin" / "python"))
     rc, out, took = nematic(["run", path, "--results", tmp_path / "results"], timeout=240)
     print(f"a wrong python refused in {took:.0f} s")
     assert rc == 2, out
     assert took < 90, out
-    assert "every batch job of the dask-jobqueue SLURMCluster ends before its dask worker " \
-           "joins" in out, out
+    assert (
+        "every batch job of the dask-jobqueue SLURMCluster ends before its dask worker joins" in out
+    ), out
     assert f"job logs: {tmp_path / 'results' / 'wrong-python' / 'jobs'}" in out
     assert "No module named 'distributed'" in out, out
     assert "python or job_script_prologue" in out
@@ -245,7 +270,7 @@ def docs_slurm_example() -> str:
     """The SLURM campaign of docs/campaigns.md (the yaml block starting `name: fig2-slurm`)."""
     text = (ROOT / "docs" / "campaigns.md").read_text()
     start = text.index("```yaml\nname: fig2-slurm\n") + len("```yaml\n")
-    return text[start:text.index("```", start)]
+    return text[start : text.index("```", start)]
 
 
 def test_the_docs_slurm_example_runs_on_one_machine(slurm, tmp_path):
@@ -253,19 +278,36 @@ def test_the_docs_slurm_example_runs_on_one_machine(slurm, tmp_path):
     (activated by the prologue), the job logs where the YAML puts them; the grid reduced."""
     venv = Path(sys.prefix)
     text = docs_slurm_example()
-    for old, new in [("interface: ib0", "interface: lo"), ("jobs: 4 ", "jobs: 2 "),
-                     ("cores: 8 ", "cores: 1 "), ("processes: 8 ", "processes: 1 "),
-                     ("memory: 16GB", "memory: 1GB"),
-                     ("/shared/me/nematic-logs", str(tmp_path / "logs")),
-                     ("/shared/me/nematic/.venv", str(venv)),
-                     ("num: 17", "num: 2")]:
+    for old, new in [
+        ("interface: ib0", "interface: lo"),
+        ("jobs: 4 ", "jobs: 2 "),
+        ("cores: 8 ", "cores: 1 "),
+        ("processes: 8 ", "processes: 1 "),
+        ("memory: 16GB", "memory: 1GB"),
+        ("/shared/me/nematic-logs", str(tmp_path / "logs")),
+        ("/shared/me/nematic/.venv", str(venv)),
+        ("num: 17", "num: 2"),
+    ]:
         assert old in text, old
         text = text.replace(old, new)
     path = tmp_path / "fig2-slurm.yaml"
     path.write_text(text)
-    rc, out, took = nematic(["run", path, "--results", tmp_path / "results", "--seeds", "1",
-                             "--set", "resolution=32", "--set", "noise_modes=8",
-                             "--set", "t_final=2"])
+    rc, out, took = nematic(
+        [
+            "run",
+            path,
+            "--results",
+            tmp_path / "results",
+            "--seeds",
+            "1",
+            "--set",
+            "resolution=32",
+            "--set",
+            "noise_modes=8",
+            "--set",
+            "t_final=2",
+        ]
+    )
     print(f"the docs' SLURM example (reduced) in {took:.0f} s")
     assert rc == 0, out
     assert "2 run(s) in" in out, out
@@ -280,8 +322,15 @@ def test_a_job_cancelled_mid_run_has_its_run_redone_not_failed(slurm, tmp_path):
     """One job, one worker: once a run is recorded the worker is on the next one, so
     cancelling the job cuts a run short; that run goes back to pending and is redone by the
     replacement job, and no run is recorded as failed."""
-    path = slurm_campaign(tmp_path, "cut", values="[0.1, 0.12, 0.14, 0.16, 0.18, 0.2]",
-                          seeds=3, t_final=4.0, scale="jobs: 1", extra=LOW_PRIORITY)
+    path = slurm_campaign(
+        tmp_path,
+        "cut",
+        values="[0.1, 0.12, 0.14, 0.16, 0.18, 0.2]",
+        seeds=3,
+        t_final=4.0,
+        scale="jobs: 1",
+        extra=LOW_PRIORITY,
+    )
     results, log = tmp_path / "results", tmp_path / "log"
     runs = results / "cut" / "runs"
     driver = run_in_background(path, results, log)
@@ -307,9 +356,16 @@ def test_workers_retire_before_a_walltime_shorter_than_the_campaign(slurm, tmp_p
     about 21 s (sweep/run/lifetime.py), before SLURM would kill them; their jobs are replaced
     and a campaign several times longer completes with every run ok. (So short a walltime
     that the campaign outlasts several worker lifetimes however fast the machine is.)"""
-    path = slurm_campaign(tmp_path, "short-walltime", values="{linspace: [0.1, 0.5, 40]}",
-                          seeds=5, t_final=4.0, scale="jobs: 1", give_up=180,
-                          extra=LOW_PRIORITY)
+    path = slurm_campaign(
+        tmp_path,
+        "short-walltime",
+        values="{linspace: [0.1, 0.5, 40]}",
+        seeds=5,
+        t_final=4.0,
+        scale="jobs: 1",
+        give_up=180,
+        extra=LOW_PRIORITY,
+    )
     path.write_text(path.read_text().replace('walltime: "00:10:00"', 'walltime: "00:00:30"'))
     results = tmp_path / "results"
     rc, out, took = nematic(["run", path, "--results", results], timeout=900)
@@ -333,7 +389,7 @@ def docs_driver_script() -> str:
     """The driver's batch script of docs/campaigns.md (the sh block starting `#!/bin/bash`)."""
     text = (ROOT / "docs" / "campaigns.md").read_text()
     start = text.index("```sh\n#!/bin/bash\n") + len("```sh\n")
-    return text[start:text.index("```", start)]
+    return text[start : text.index("```", start)]
 
 
 def test_the_driver_as_a_batch_job_and_nematic_stop(slurm, tmp_path, monkeypatch):
@@ -346,11 +402,20 @@ def test_the_driver_as_a_batch_job_and_nematic_stop(slurm, tmp_path, monkeypatch
     from sweep.cli import app
 
     venv = Path(sys.prefix)
-    campaign = slurm_campaign(tmp_path, "fig2-slurm", values="{linspace: [0.1, 0.5, 20]}",
-                              seeds=4, t_final=4.0, scale="jobs: 1", extra=LOW_PRIORITY)
+    campaign = slurm_campaign(
+        tmp_path,
+        "fig2-slurm",
+        values="{linspace: [0.1, 0.5, 20]}",
+        seeds=4,
+        t_final=4.0,
+        scale="jobs: 1",
+        extra=LOW_PRIORITY,
+    )
     script = docs_driver_script()
-    for old, new in [("/shared/me/nematic/.venv", str(venv)),
-                     ("fig2-driver-%j.log", str(tmp_path / "driver-%j.log"))]:
+    for old, new in [
+        ("/shared/me/nematic/.venv", str(venv)),
+        ("fig2-driver-%j.log", str(tmp_path / "driver-%j.log")),
+    ]:
         assert old in script, old
         script = script.replace(old, new)
     (tmp_path / "driver.sh").write_text(script)
@@ -358,14 +423,20 @@ def test_the_driver_as_a_batch_job_and_nematic_stop(slurm, tmp_path, monkeypatch
     env = dict(os.environ, NEMATIC_RESULTS=str(results), COLUMNS="300")
 
     def submit() -> str:
-        return subprocess.run(["sbatch", "--parsable", str(tmp_path / "driver.sh")],
-                              cwd=tmp_path, env=env, capture_output=True, text=True,
-                              check=True).stdout.strip()
+        return subprocess.run(
+            ["sbatch", "--parsable", str(tmp_path / "driver.sh")],
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
 
     runs = results / "fig2-slurm" / "runs"
     job = submit()
-    wait_for(lambda: len(list(runs.glob("*.json"))) >= 1 or job not in queue(), 300,
-             "a finished run")
+    wait_for(
+        lambda: len(list(runs.glob("*.json"))) >= 1 or job not in queue(), 300, "a finished run"
+    )
     assert job in queue(), (tmp_path / f"driver-{job}.log").read_text()
     status = CliRunner().invoke(app, ["status", str(campaign), "--results", str(results)])
     assert f"SLURM job {job}" in status.output, status.output

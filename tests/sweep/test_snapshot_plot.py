@@ -21,11 +21,15 @@ def run_dataset(i1bar: np.ndarray) -> xr.Dataset:
     t = np.arange(0.0, 11.0)
     field = ("snapshot_time", "x", "y")
     return xr.Dataset(
-        {"q1": (field, (S * np.cos(2 * theta))[None]), "q2": (field, (S * np.sin(2 * theta))[None]),
-         "I1bar": (field, i1bar[None].astype(np.float32)), "sigma2_S": ("t", 1e-3 * t)},
+        {
+            "q1": (field, (S * np.cos(2 * theta))[None]),
+            "q2": (field, (S * np.sin(2 * theta))[None]),
+            "I1bar": (field, i1bar[None].astype(np.float32)),
+            "sigma2_S": ("t", 1e-3 * t),
+        },
         coords={"x": x, "y": x, "snapshot_time": [10.0], "t": t},
-        attrs={"param_alpha_minus_B": 0.5, "seed": 0, "num_mechanics": "linear",
-               "status": "ok"})
+        attrs={"param_alpha_minus_B": 0.5, "seed": 0, "num_mechanics": "linear", "status": "ok"},
+    )
 
 
 def pattern(n: int = 32) -> np.ndarray:

@@ -76,11 +76,14 @@ def test_figures_empty_list_means_none_and_absent_means_default(tmp_path):
     empty = load_campaign(write(tmp_path, base + "figures: []\n", "empty.yaml"))
     assert empty.figures == ()
     assert [p.name for p in empty.fits] == ["scaling"]  # the fits are unaffected
-    listed = load_campaign(write(tmp_path, base + "figures: [fig3, {fig2: {seed: 1}}]\n",
-                                 "listed.yaml"))
+    listed = load_campaign(
+        write(tmp_path, base + "figures: [fig3, {fig2: {seed: 1}}]\n", "listed.yaml")
+    )
     assert listed.figures is not None
-    assert [(p.name, dict(p.options)) for p in listed.figures] == [("fig3", {}),
-                                                                    ("fig2", {"seed": 1})]
+    assert [(p.name, dict(p.options)) for p in listed.figures] == [
+        ("fig3", {}),
+        ("fig2", {"seed": 1}),
+    ]
     runner = CliRunner()
     out = runner.invoke(app, ["validate", str(tmp_path / "empty.yaml")]).output
     assert "fits: scaling; figures: none" in out
@@ -89,16 +92,19 @@ def test_figures_empty_list_means_none_and_absent_means_default(tmp_path):
 
 
 def test_seed_list_and_geomspace(tmp_path):
-    c = parse_campaign("name: g\nsweep: {axes: {K: {geomspace: [1.0e-5, 1.0e-3, 3]}}}\n"
-                       "seeds: [3, 1, 7]")
+    c = parse_campaign(
+        "name: g\nsweep: {axes: {K: {geomspace: [1.0e-5, 1.0e-3, 3]}}}\nseeds: [3, 1, 7]"
+    )
     assert c.seeds == (3, 1, 7)
     np.testing.assert_allclose(c.dims[0].axes[0].values, [1e-5, 1e-4, 1e-3])
 
 
 def test_numerics_axis_and_int_values():
-    c = parse_campaign("name: n\n"
-                       "sweep: {axes: {resolution: [32, 64], mechanics: [linear, finite]}}\n"
-                       "seeds: 1\nparameters: {noise_modes: 8}")
+    c = parse_campaign(
+        "name: n\n"
+        "sweep: {axes: {resolution: [32, 64], mechanics: [linear, finite]}}\n"
+        "seeds: 1\nparameters: {noise_modes: 8}"
+    )
     assert c.dims[0].axes[0].values == (32, 64)
     assert all(isinstance(v, int) for v in c.dims[0].axes[0].values)
     assert c.dims[1].axes[0].values == ("linear", "finite")
@@ -106,8 +112,9 @@ def test_numerics_axis_and_int_values():
 
 def test_overrides_apply_before_validation(tmp_path):
     path = write(tmp_path, GOOD)
-    c = load_campaign(path, Overrides(settings={"resolution": 64, "S0": 0.2}, seeds=2,
-                                      name="reduced", workers=1))
+    c = load_campaign(
+        path, Overrides(settings={"resolution": 64, "S0": 0.2}, seeds=2, name="reduced", workers=1)
+    )
     assert c.numerics["resolution"] == 64
     assert c.parameters["S0"] == 0.2
     assert c.seeds == (0, 1)
@@ -127,7 +134,10 @@ def test_overrides_apply_before_validation(tmp_path):
 
 def test_parse_assignments():
     assert parse_assignments(["K=1e-4", "resolution=64", "mechanics=linear"]) == {
-        "K": 1e-4, "resolution": 64, "mechanics": "linear"}
+        "K": 1e-4,
+        "resolution": 64,
+        "mechanics": "linear",
+    }
     with pytest.raises(CampaignError):
         parse_assignments(["K"])
 
@@ -161,63 +171,93 @@ BASE = "numerics: {resolution: 64, t_final: 4}\n"
 
 #: (YAML text, substrings every one of which must appear in the message)
 BAD = {
-    "unknown top-level key": ("paramters: {K: 1.0e-4}\n",
-                              ["paramters", "did you mean 'parameters'"]),
-    "unknown parameter": ("parameters: {chii: 1}\n",
-                          ["parameters.chii", "did you mean 'chi'"]),
-    "parameter in numerics": ("numerics: {K: 1.0e-4}\n",
-                              ["numerics.K", "move it under 'parameters:'"]),
+    "unknown top-level key": (
+        "paramters: {K: 1.0e-4}\n",
+        ["paramters", "did you mean 'parameters'"],
+    ),
+    "unknown parameter": ("parameters: {chii: 1}\n", ["parameters.chii", "did you mean 'chi'"]),
+    "parameter in numerics": (
+        "numerics: {K: 1.0e-4}\n",
+        ["numerics.K", "move it under 'parameters:'"],
+    ),
     "wrong type": ("parameters: {K: abc}\n", ["parameters.K", "'abc'", "real number"]),
     "impossible value": ("parameters: {K: -1}\n", ["parameters.K", "-1", ">= 0"]),
-    "resolution below the initial noise": ("parameters: {noise_modes: 40}\n",
-                                           ["numerics.resolution", "noise_modes"]),
-    "odd resolution": ("numerics: {resolution: 33, t_final: 4}\n",
-                       ["numerics.resolution", "33", "even"]),
+    "resolution below the initial noise": (
+        "parameters: {noise_modes: 40}\n",
+        ["numerics.resolution", "noise_modes"],
+    ),
+    "odd resolution": (
+        "numerics: {resolution: 33, t_final: 4}\n",
+        ["numerics.resolution", "33", "even"],
+    ),
     "unequal zip lengths": (
         "sweep: {axes: {K: [1.0e-4, 1.0e-3], eps: [0, 0.1, 0.2]}, zip: [[K, eps]]}\n",
-        ["sweep.zip[0]", "K has 2", "eps has 3", "equal length"]),
-    "zip of unknown axis": ("sweep: {axes: {K: [1.0e-4, 1.0e-3]}, zip: [[K, chi]]}\n",
-                            ["sweep.zip[0][1]", "'chi'"]),
+        ["sweep.zip[0]", "K has 2", "eps has 3", "equal length"],
+    ),
+    "zip of unknown axis": (
+        "sweep: {axes: {K: [1.0e-4, 1.0e-3]}, zip: [[K, chi]]}\n",
+        ["sweep.zip[0][1]", "'chi'"],
+    ),
     "empty axis": ("sweep: {axes: {chi: []}}\n", ["sweep.axes.chi", "non-empty"]),
-    "unknown axis": ("sweep: {axes: {alpha_minus_b: [0.1]}}\n",
-                     ["sweep.axes.alpha_minus_b", "did you mean 'alpha_minus_B'"]),
+    "unknown axis": (
+        "sweep: {axes: {alpha_minus_b: [0.1]}}\n",
+        ["sweep.axes.alpha_minus_b", "did you mean 'alpha_minus_B'"],
+    ),
     "scalar axis": ("sweep: {axes: {chi: 5}}\n", ["sweep.axes.chi", "got 5", "a list"]),
-    "bad linspace": ("sweep: {axes: {chi: {linspace: [0, 10, 0]}}}\n",
-                     ["sweep.axes.chi.linspace.num", "got 0"]),
-    "unknown range kind": ("sweep: {axes: {chi: {linspase: [0, 10, 3]}}}\n",
-                           ["sweep.axes.chi.linspase", "did you mean 'linspace'"]),
-    "duplicate axis values": ("sweep: {axes: {chi: [1, 2, 1]}}\n",
-                              ["sweep.axes.chi", "distinct"]),
-    "swept and fixed": ("parameters: {K: 1.0e-4}\nsweep: {axes: {K: [1.0e-4, 1.0e-3]}}\n",
-                        ["sweep.axes.K", "both swept and set"]),
-    "alpha twice": ("parameters: {alpha: 1, alpha_minus_B: 0.5}\n",
-                    ["parameters.alpha_minus_B", "not both"]),
-    "impossible value at a grid point": ("sweep: {axes: {eps: [0, 0.7]}}\n",
-                                         ["sweep.axes.eps", "0.7", "eps=0.7"]),
+    "bad linspace": (
+        "sweep: {axes: {chi: {linspace: [0, 10, 0]}}}\n",
+        ["sweep.axes.chi.linspace.num", "got 0"],
+    ),
+    "unknown range kind": (
+        "sweep: {axes: {chi: {linspase: [0, 10, 3]}}}\n",
+        ["sweep.axes.chi.linspase", "did you mean 'linspace'"],
+    ),
+    "duplicate axis values": ("sweep: {axes: {chi: [1, 2, 1]}}\n", ["sweep.axes.chi", "distinct"]),
+    "swept and fixed": (
+        "parameters: {K: 1.0e-4}\nsweep: {axes: {K: [1.0e-4, 1.0e-3]}}\n",
+        ["sweep.axes.K", "both swept and set"],
+    ),
+    "alpha twice": (
+        "parameters: {alpha: 1, alpha_minus_B: 0.5}\n",
+        ["parameters.alpha_minus_B", "not both"],
+    ),
+    "impossible value at a grid point": (
+        "sweep: {axes: {eps: [0, 0.7]}}\n",
+        ["sweep.axes.eps", "0.7", "eps=0.7"],
+    ),
     "name escapes results/": ("name: ../../etc\n", ["name", "'../../etc'"]),
     "absolute name": ("name: /tmp/x\n", ["name", "'/tmp/x'"]),
     "zero seeds": ("seeds: 0\n", ["seeds", "got 0"]),
     "duplicate seeds": ("seeds: [1, 2, 1]\n", ["seeds[2]", "distinct"]),
     "negative seed": ("seeds: [1, -2]\n", ["seeds[1]", "-2"]),
-    "workers not an integer": ("execution: {workers: many}\n",
-                               ["execution.workers", "'many'"]),
-    "scheduler without scheme": ("execution: {scheduler: 'localhost:8786'}\n",
-                                 ["execution.scheduler", "'localhost:8786'", "tcp://"]),
-    "unknown cluster kind": ("execution: {cluster: {kind: slurmm}}\n",
-                             ["execution.cluster.kind", "did you mean 'slurm'"]),
-    "unknown cluster option": ("execution: {cluster: {kind: slurm, queu: short}}\n",
-                               ["execution.cluster.queu", "did you mean 'queue'"]),
+    "workers not an integer": ("execution: {workers: many}\n", ["execution.workers", "'many'"]),
+    "scheduler without scheme": (
+        "execution: {scheduler: 'localhost:8786'}\n",
+        ["execution.scheduler", "'localhost:8786'", "tcp://"],
+    ),
+    "unknown cluster kind": (
+        "execution: {cluster: {kind: slurmm}}\n",
+        ["execution.cluster.kind", "did you mean 'slurm'"],
+    ),
+    "unknown cluster option": (
+        "execution: {cluster: {kind: slurm, queu: short}}\n",
+        ["execution.cluster.queu", "did you mean 'queue'"],
+    ),
     "scheduler and cluster": (
         "execution: {scheduler: 'tcp://h:1', cluster: {kind: pbs}}\n",
-        ["execution.cluster", "not both"]),
-    "unknown snapshot field": ("store: {snapshot_fields: [q1, q3]}\n",
-                               ["store.snapshot_fields[1]", "'q3'"]),
-    "snapshot after t_final": ("store: {snapshot_times: [1, 10]}\n",
-                               ["snapshot_times", "t_final"]),
+        ["execution.cluster", "not both"],
+    ),
+    "unknown snapshot field": (
+        "store: {snapshot_fields: [q1, q3]}\n",
+        ["store.snapshot_fields[1]", "'q3'"],
+    ),
+    "snapshot after t_final": ("store: {snapshot_times: [1, 10]}\n", ["snapshot_times", "t_final"]),
     "not YAML": ("parameters: {K: [1, 2\n", ["not valid YAML"]),
     "not a mapping": ("- 1\n- 2\n", ["<document>", "a mapping"]),
-    "duplicate key": ("parameters: {K: 1.0e-4}\nparameters: {chi: 1}\n",
-                      ["parameters", "duplicate key"]),
+    "duplicate key": (
+        "parameters: {K: 1.0e-4}\nparameters: {chi: 1}\n",
+        ["parameters", "duplicate key"],
+    ),
 }
 
 

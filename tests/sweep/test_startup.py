@@ -22,8 +22,15 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def python(code: str) -> str:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=env, cwd=ROOT, timeout=120, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=120,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     return done.stdout
 
@@ -31,38 +38,51 @@ def python(code: str) -> str:
 def test_the_help_imports_no_numerical_library():
     modules, out = cli_modules("--help")
     assert "Usage" in out
-    for heavy in ("numpy", "yaml", "xarray", "pandas", "dask", "distributed", "numba",
-                  "matplotlib", "bokeh"):
+    for heavy in (
+        "numpy",
+        "yaml",
+        "xarray",
+        "pandas",
+        "dask",
+        "distributed",
+        "numba",
+        "matplotlib",
+        "bokeh",
+    ):
         assert heavy not in modules, heavy
 
 
 def test_xarray_recognises_dask_arrays_made_after_the_deferral():
-    out = python("import sys\n"
-                 "import numpy as np, xarray as xr\n"
-                 "from sweep.startup import defer_dask_array\n"
-                 "assert defer_dask_array()\n"
-                 "ds = xr.Dataset({'a': ('x', np.arange(3.0))})\n"
-                 "assert float(ds['a'].sum()) == 3.0\n"
-                 "print('dask.array' in sys.modules)\n"
-                 "import dask.array as da\n"
-                 "v = xr.Variable(('x',), da.ones(4, chunks=2))\n"
-                 "print(type(v.data).__name__, v.chunks)\n"
-                 "m = xr.Variable(('x',), np.ma.masked_array([1.0, 2.0], mask=[True, False]))\n"
-                 "print(np.isnan(m.values[0]))\n"
-                 "print(defer_dask_array())\n")
+    out = python(
+        "import sys\n"
+        "import numpy as np, xarray as xr\n"
+        "from sweep.startup import defer_dask_array\n"
+        "assert defer_dask_array()\n"
+        "ds = xr.Dataset({'a': ('x', np.arange(3.0))})\n"
+        "assert float(ds['a'].sum()) == 3.0\n"
+        "print('dask.array' in sys.modules)\n"
+        "import dask.array as da\n"
+        "v = xr.Variable(('x',), da.ones(4, chunks=2))\n"
+        "print(type(v.data).__name__, v.chunks)\n"
+        "m = xr.Variable(('x',), np.ma.masked_array([1.0, 2.0], mask=[True, False]))\n"
+        "print(np.isnan(m.values[0]))\n"
+        "print(defer_dask_array())\n"
+    )
     assert out.split() == ["False", "Array", "((2,", "2),)", "True", "False"]
 
 
 def test_the_fftw_version_is_read_without_numba():
-    out = python("import sys\n"
-                 "from model.provenance import _fftw_version, fftw_candidates\n"
-                 "light = _fftw_version()\n"
-                 "print('numba' in sys.modules)\n"
-                 "import model.compiled.fftw as fftw\n"
-                 "_fftw_version.cache_clear()\n"
-                 "print(light == _fftw_version())\n"
-                 "print(list(fftw_candidates()) == fftw._candidates())\n"
-                 "print(bool(light) == fftw.AVAILABLE)\n")
+    out = python(
+        "import sys\n"
+        "from model.provenance import _fftw_version, fftw_candidates\n"
+        "light = _fftw_version()\n"
+        "print('numba' in sys.modules)\n"
+        "import model.compiled.fftw as fftw\n"
+        "_fftw_version.cache_clear()\n"
+        "print(light == _fftw_version())\n"
+        "print(list(fftw_candidates()) == fftw._candidates())\n"
+        "print(bool(light) == fftw.AVAILABLE)\n"
+    )
     assert out.split() == ["False", "True", "True", "True"]
 
 

@@ -32,8 +32,15 @@ def dataset() -> xr.Dataset:
     return xr.Dataset(
         {"field": (("x", "y"), np.arange(12.0).reshape(3, 4)), "scalar": ((), 1.5)},
         coords={"x": [0.0, 0.5, 1.0]},
-        attrs={"flag": True, "nothing": None, "times": [1.0, 2.0], "empty": [],
-               "mapping": {"a": 1}, "text": "x"})
+        attrs={
+            "flag": True,
+            "nothing": None,
+            "times": [1.0, 2.0],
+            "empty": [],
+            "mapping": {"a": 1},
+            "text": "x",
+        },
+    )
 
 
 def test_atomic_netcdf_round_trip(tmp_path):
@@ -87,9 +94,11 @@ def test_lock_excludes_a_second_holder(tmp_path):
 
 def test_a_killed_holder_releases_the_lock(tmp_path):
     path = tmp_path / ".lock"
-    code = ("import sys, time; from sweep.store import CampaignLock; "
-            f"CampaignLock(__import__('pathlib').Path({str(path)!r})).acquire(); "
-            "print('locked', flush=True); time.sleep(60)")
+    code = (
+        "import sys, time; from sweep.store import CampaignLock; "
+        f"CampaignLock(__import__('pathlib').Path({str(path)!r})).acquire(); "
+        "print('locked', flush=True); time.sleep(60)"
+    )
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE)
     try:
         assert proc.stdout is not None
@@ -106,10 +115,21 @@ def test_a_killed_holder_releases_the_lock(tmp_path):
 
 
 def record(rid: str, status: str = "ok", nc_bytes: int | None = 10) -> dict:
-    return {"run_id": rid, "status": status, "reason": "" if status == "ok" else "nan",
-            "detail": "", "t_failed": None, "traceback": "", "seed": 0, "wall_time": 1.0,
-            "nc_bytes": nc_bytes, "scalars": {"sigma2_S_final": 0.5}, "code_version": "v",
-            "git_commit": "c", "finished": "2026-01-01T00:00:00+00:00"}
+    return {
+        "run_id": rid,
+        "status": status,
+        "reason": "" if status == "ok" else "nan",
+        "detail": "",
+        "t_failed": None,
+        "traceback": "",
+        "seed": 0,
+        "wall_time": 1.0,
+        "nc_bytes": nc_bytes,
+        "scalars": {"sigma2_S_final": 0.5},
+        "code_version": "v",
+        "git_commit": "c",
+        "finished": "2026-01-01T00:00:00+00:00",
+    }
 
 
 def test_scan_caches_records_and_sees_changes(tmp_path):
@@ -220,8 +240,10 @@ def test_storage_cause_names_the_fault(tmp_path):
     assert efbig.startswith("the file size limit was reached")
     if resource.getrlimit(resource.RLIMIT_FSIZE)[0] == resource.RLIM_INFINITY:
         # netCDF's "HDF error" says nothing: the folder is asked (writable here: the error)
-        assert storage_cause(target, RuntimeError("NetCDF: HDF error")) == \
-            "RuntimeError: NetCDF: HDF error"
+        assert (
+            storage_cause(target, RuntimeError("NetCDF: HDF error"))
+            == "RuntimeError: NetCDF: HDF error"
+        )
     blocker = tmp_path / "file"
     blocker.write_text("")
     assert "is a file" in storage_cause(blocker / "x.nc", OSError(errno.EACCES, "x"))

@@ -79,12 +79,15 @@ def test_export_writes_the_table_as_csv(copy_of_small):
     expected = open_campaign(copy_of_small.path, results=copy_of_small.results).runs()
     assert list(table.columns) == list(expected.columns)
     assert gone not in set(table["run_id"])
-    pd.testing.assert_frame_equal(table[["alpha_minus_B", "seed", "sigma2_S"]],
-                                  expected[["alpha_minus_B", "seed", "sigma2_S"]])
+    pd.testing.assert_frame_equal(
+        table[["alpha_minus_B", "seed", "sigma2_S"]],
+        expected[["alpha_minus_B", "seed", "sigma2_S"]],
+    )
     assert not list(path.parent.glob(".*.tmp"))
     out = copy_of_small.results.parent / "elsewhere" / "small.csv"
-    result = invoke("export", copy_of_small.path, "--results", copy_of_small.results,
-                    "--output", out)
+    result = invoke(
+        "export", copy_of_small.path, "--results", copy_of_small.results, "--output", out
+    )
     assert result.exit_code == 0, result.output
     assert len(pd.read_csv(out)) == 5
 
@@ -107,8 +110,7 @@ def test_parquet_without_pyarrow_names_the_extra_to_install(copy_of_small, monke
     monkeypatch.setitem(sys.modules, "fastparquet", None)
     with pytest.raises(ExportError, match=r"pip install 'active-nematic-solids\[parquet\]'"):
         parquet_engine()
-    result = invoke("export", "small", "--results", copy_of_small.results, "--format",
-                    "parquet")
+    result = invoke("export", "small", "--results", copy_of_small.results, "--format", "parquet")
     assert result.exit_code == 2
     assert "error: Parquet needs pyarrow" in flat(result.output)
     assert not (copy_of_small.results / "small" / "runs.parquet").exists()
@@ -136,8 +138,11 @@ seeds: 2
 
 def test_a_zip_group_gives_a_column_per_axis():
     expansion = expand(parse_campaign(ZIPPED))
-    recs = {rid: {"status": "ok", "scalars": {"sigma2_S_final": float(i)}}
-            for i, rid in enumerate(expansion.run_ids) if i % 3}  # every third run missing
+    recs = {
+        rid: {"status": "ok", "scalars": {"sigma2_S_final": float(i)}}
+        for i, rid in enumerate(expansion.run_ids)
+        if i % 3
+    }  # every third run missing
     table = runs_table(build_phase(expansion, recs))
     assert list(table.columns[:6]) == ["K", "eps", "alpha_minus_B", "seed", "run_id", "status"]
     assert len(table) == len(recs)
@@ -145,7 +150,11 @@ def test_a_zip_group_gives_a_column_per_axis():
         i = expansion.position[row.run_id]
         run = expansion.run(i)
         assert (row.K, row.eps, row.alpha_minus_B, row.seed) == (
-            run.coords["K"], run.coords["eps"], run.coords["alpha_minus_B"], run.seed)
+            run.coords["K"],
+            run.coords["eps"],
+            run.coords["alpha_minus_B"],
+            run.seed,
+        )
         assert row.sigma2_S == float(i)
 
 
@@ -171,8 +180,9 @@ def test_open_by_name_reads_the_campaign_copy_with_its_overrides(tmp_path):
     from sweep.spec import Overrides
     from sweep.store import CampaignStore
 
-    overrides = Overrides(settings={"resolution": 48, "initial": "per_node", "C": 2.5},
-                          seeds=[3, 5], name="reduced")
+    overrides = Overrides(
+        settings={"resolution": 48, "initial": "per_node", "C": 2.5}, seeds=[3, 5], name="reduced"
+    )
     store = CampaignStore(tmp_path / "results", "reduced")
     store.root.mkdir(parents=True)
     store.save_campaign_text(ZIPPED, overrides.describe())  # what `nematic run` leaves there

@@ -77,27 +77,45 @@ def test_the_section_reads_variants_seeds_and_defaults():
     assert spec.variants[2].seeds == (7, 8)
     assert not spec.variants[2].settings
     assert (spec.seeds, spec.threshold, spec.points, spec.corners, spec.before) == (
-        2, 0.05, None, True, False)
+        2,
+        0.05,
+        None,
+        True,
+        False,
+    )
     assert campaign("").verify is None
 
 
-@pytest.mark.parametrize(("section", "where", "says"), [
-    ("verify: {variants: [{resolution: x0.1}]}", "verify.variants[0]",
-     "resolution = 3"),
-    ("verify: {variants: [{tolerance: 'x'}]}", "verify.variants[0].tolerance", "factor"),
-    ("verify: {variants: [{resolutoin: 64}]}", "verify.variants[0].resolutoin",
-     "did you mean 'resolution'"),
-    ("verify: {variants: []}", "verify.variants", "a list of 1 to"),
-    ("verify: {variants: [{tolerance: /10}], seeds: 4}", "verify.seeds", "from 1 to 3"),
-    ("verify: {variants: [{tolerance: /10}], points: [{K: 0.5}]}", "verify.points[0].K",
-     "a value of the axis"),
-    ("verify: {variants: [{tolerance: /10}], observables: [lamda]}", "verify.observables",
-     "did you mean 'lambda'"),
-    ("verify: {variants: [{tolerance: /10}, {tolerance: /10}]}", "verify.variants",
-     "given twice"),
-    ("verify: {variants: [{tolerance: /10}], thresold: 0.1}", "verify.thresold",
-     "unknown key"),
-])
+@pytest.mark.parametrize(
+    ("section", "where", "says"),
+    [
+        ("verify: {variants: [{resolution: x0.1}]}", "verify.variants[0]", "resolution = 3"),
+        ("verify: {variants: [{tolerance: 'x'}]}", "verify.variants[0].tolerance", "factor"),
+        (
+            "verify: {variants: [{resolutoin: 64}]}",
+            "verify.variants[0].resolutoin",
+            "did you mean 'resolution'",
+        ),
+        ("verify: {variants: []}", "verify.variants", "a list of 1 to"),
+        ("verify: {variants: [{tolerance: /10}], seeds: 4}", "verify.seeds", "from 1 to 3"),
+        (
+            "verify: {variants: [{tolerance: /10}], points: [{K: 0.5}]}",
+            "verify.points[0].K",
+            "a value of the axis",
+        ),
+        (
+            "verify: {variants: [{tolerance: /10}], observables: [lamda]}",
+            "verify.observables",
+            "did you mean 'lambda'",
+        ),
+        (
+            "verify: {variants: [{tolerance: /10}, {tolerance: /10}]}",
+            "verify.variants",
+            "given twice",
+        ),
+        ("verify: {variants: [{tolerance: /10}], thresold: 0.1}", "verify.thresold", "unknown key"),
+    ],
+)
 def test_section_mistakes_are_reported_with_their_key(section, where, says):
     with pytest.raises(CampaignError) as e:
         campaign(section)
@@ -161,10 +179,20 @@ def test_texture_resolution_zero_keeps_every_earlier_run_id():
 def _fits(c, lower: float, upper: float) -> xr.Dataset:
     k = [a.values for a in c.axes if a.name == "K"][0]
     ds = xr.Dataset(coords={"K": list(k)})
-    attrs = {"fit_axis": "alpha_minus_B", "fit_log": 1, "fit_min_jump": 1.0,
-             "fit_observable": "sigma2_S", "fit_mean": "geometric"}
-    for name, value in (("location", (lower + upper) / 2), ("lower", lower),
-                        ("upper", upper), ("grid_lower", lower), ("grid_upper", upper)):
+    attrs = {
+        "fit_axis": "alpha_minus_B",
+        "fit_log": 1,
+        "fit_min_jump": 1.0,
+        "fit_observable": "sigma2_S",
+        "fit_mean": "geometric",
+    }
+    for name, value in (
+        ("location", (lower + upper) / 2),
+        ("lower", lower),
+        ("upper", upper),
+        ("grid_lower", lower),
+        ("grid_upper", upper),
+    ):
         ds[f"transition_{name}"] = ("K", [value, math.nan])  # no transition at K = 1e-3
         ds[f"transition_{name}"].attrs.update(attrs)
     return ds
@@ -174,10 +202,17 @@ def test_the_sample_is_the_transition_bracket_and_the_corners():
     c = campaign()
     ex = expand(c)
     s = plan_sample(c, ex, _fits(c, 0.1, 0.5))
-    got = {(p.coords["alpha_minus_B"], p.coords["K"]): why for p, why in zip(
-        s.points, s.why, strict=True)}
-    assert got == {(0.1, 1e-4): "transition lower, corner", (0.5, 1e-4): "transition upper",
-                   (0.9, 1e-4): "corner", (0.1, 1e-3): "corner", (0.9, 1e-3): "corner"}
+    got = {
+        (p.coords["alpha_minus_B"], p.coords["K"]): why
+        for p, why in zip(s.points, s.why, strict=True)
+    }
+    assert got == {
+        (0.1, 1e-4): "transition lower, corner",
+        (0.5, 1e-4): "transition upper",
+        (0.9, 1e-4): "corner",
+        (0.1, 1e-3): "corner",
+        (0.9, 1e-3): "corner",
+    }
     assert len(s.transitions) == 1
     assert s.transitions[0].where == {"K": 1e-4}
     # base runs are the campaign's own runs, seeds 0 and 1
@@ -186,8 +221,7 @@ def test_the_sample_is_the_transition_bracket_and_the_corners():
     # variant runs: new ids, the variant's numerics, the variant's seeds
     res, tol, seeds = s.variant_runs
     assert all(r.point.numerics.resolution == 64 for runs in res for r in runs or ())
-    assert all(math.isclose(r.point.numerics.tolerance, 1e-4) for runs in tol
-               for r in runs or ())
+    assert all(math.isclose(r.point.numerics.tolerance, 1e-4) for runs in tol for r in runs or ())
     assert {r.seed for runs in seeds for r in runs or ()} == {7, 8}
     assert not ids & {r.run_id for r in s.variant_list()}
     before = plan_sample(c, ex, None)  # before the grid has fits: the corners only
@@ -203,9 +237,16 @@ def test_listed_points_select_every_grid_point_with_their_values():
 
 # --------------------------------------------------------------------------- the verdicts
 def _record(value: float, lam: float = 0.2, cos: float = 0.0) -> dict:
-    return {"status": "ok", "scalars": {"sigma2_S_final": value, "lambda_final": lam,
-                                        "cos2theta_final": cos, "lambda_peak": lam,
-                                        "t_peak": 3.0}}
+    return {
+        "status": "ok",
+        "scalars": {
+            "sigma2_S_final": value,
+            "lambda_final": lam,
+            "cos2theta_final": cos,
+            "lambda_peak": lam,
+            "t_peak": 3.0,
+        },
+    }
 
 
 def test_verdicts_from_known_records():
@@ -247,8 +288,10 @@ def test_verdicts_from_known_records():
     assert ds["transition_within"].values[0, v["resolution x2"]] == 0
     line = summary_line(ds)
     assert line.startswith("0 of 5 sampled points converged (5 with runs missing)")
-    assert ("alpha_minus_B = 0.5, K = 0.0001: the patterned fraction changes from 1 to 0 with "
-            "resolution x2") in line
+    assert (
+        "alpha_minus_B = 0.5, K = 0.0001: the patterned fraction changes from 1 to 0 with "
+        "resolution x2"
+    ) in line
 
 
 # --------------------------------------------------------------------------- real runs
@@ -256,8 +299,11 @@ def test_verdicts_from_known_records():
 def verified(tmp_path_factory):
     folder = tmp_path_factory.mktemp("verify")
     path = folder / "v.yaml"
-    path.write_text(BASE.format(verify="verify:\n  seeds: 1\n  variants:\n"
-                                "    - resolution: x2\n    - tolerance: /10\n"))
+    path.write_text(
+        BASE.format(
+            verify="verify:\n  seeds: 1\n  variants:\n    - resolution: x2\n    - tolerance: /10\n"
+        )
+    )
     results = folder / "results"
     return path, results, invoke("run", path, "--results", results, "--no-dashboard")
 
@@ -298,12 +344,16 @@ def test_verify_again_runs_nothing_and_status_shows_the_summary(verified):
 
 def test_verify_before_runs_the_corners_into_the_campaign(tmp_path):
     path = tmp_path / "v.yaml"
-    path.write_text(BASE.format(verify="verify:\n  before: true\n  seeds: 1\n  variants:\n"
-                                "    - tolerance: /10\n"))
+    path.write_text(
+        BASE.format(
+            verify="verify:\n  before: true\n  seeds: 1\n  variants:\n    - tolerance: /10\n"
+        )
+    )
     results = tmp_path / "results"
     # verify.before: nematic run verifies the corners first, then runs the grid around them
-    run = invoke("run", path, "--results", results, "--no-dashboard", "--no-figures",
-                 "--seeds", "1")
+    run = invoke(
+        "run", path, "--results", results, "--no-dashboard", "--no-figures", "--seeds", "1"
+    )
     assert run.exit_code == 0, run.output
     text = " ".join(run.output.split())
     assert "verify v: 4 points x 1 seeds" in text
@@ -331,8 +381,16 @@ def test_verify_without_a_section_or_results_is_one_error_line(tmp_path):
 def test_check_files_keeps_the_former_verify_spelling(verified):
     path, results, _ = verified
     for flag in ("--check-files", "--verify"):
-        result = invoke("run", path, "--results", results, "--no-dashboard", flag,
-                        "--no-verification", "--no-figures")
+        result = invoke(
+            "run",
+            path,
+            "--results",
+            results,
+            "--no-dashboard",
+            flag,
+            "--no-verification",
+            "--no-figures",
+        )
         assert result.exit_code == 0, result.output
         assert "18 done" in " ".join(result.output.split())
     assert "--verify " not in invoke("run", "--help").output

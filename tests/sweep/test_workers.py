@@ -34,29 +34,59 @@ from sweep.run.workers import (
 # --------------------------------------------------------------------------- a real scheduler
 def spawn(args: list[str], log: Path) -> subprocess.Popen:
     with open(log, "wb") as out:
-        return subprocess.Popen([sys.executable, "-m", "dask", *args], stdout=out,
-                                stderr=subprocess.STDOUT, start_new_session=True)
+        return subprocess.Popen(
+            [sys.executable, "-m", "dask", *args],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
 
 
 def start_scheduler(folder: Path) -> tuple[subprocess.Popen, str]:
     sched_file = folder / "scheduler.json"
     sched_file.unlink(missing_ok=True)
-    proc = spawn(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-                  "--scheduler-file", str(sched_file)], folder / "scheduler.log")
+    proc = spawn(
+        [
+            "scheduler",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--no-dashboard",
+            "--scheduler-file",
+            str(sched_file),
+        ],
+        folder / "scheduler.log",
+    )
     wait_for(sched_file.exists, 60, "the dask scheduler")
     return proc, json.loads(sched_file.read_text())["address"]
 
 
 def start_worker(address: str, folder: Path, name: str) -> subprocess.Popen:
-    return spawn(["worker", address, "--nthreads", "1", "--no-nanny", "--host", "127.0.0.1",
-                  "--no-dashboard", "--name", name], folder / f"{name}.log")
+    return spawn(
+        [
+            "worker",
+            address,
+            "--nthreads",
+            "1",
+            "--no-nanny",
+            "--host",
+            "127.0.0.1",
+            "--no-dashboard",
+            "--name",
+            name,
+        ],
+        folder / f"{name}.log",
+    )
 
 
 def campaign(folder: Path, name: str) -> Path:
-    path = write_campaign(folder, name=name, values="[0.1, 0.15, 0.2]", seeds=2, t_final=3.0,
-                          workers=1)
-    path.write_text(path.read_text().replace("execution: {workers: 1}",
-                                             "execution: {give_up_after: 8}"))
+    path = write_campaign(
+        folder, name=name, values="[0.1, 0.15, 0.2]", seeds=2, t_final=3.0, workers=1
+    )
+    path.write_text(
+        path.read_text().replace("execution: {workers: 1}", "execution: {give_up_after: 8}")
+    )
     return path
 
 
@@ -64,10 +94,24 @@ def rerun_completes(path: Path, results: Path, folder: Path, done_before: int) -
     scheduler, address = start_scheduler(folder)
     worker = start_worker(address, folder, "again")
     try:
-        proc = subprocess.run([sys.executable, "-m", "sweep", "run", str(path), "--results",
-                               str(results), "--scheduler", address, "--no-figures"],
-                              capture_output=True, text=True, timeout=300,
-                              env=dict(os.environ, COLUMNS="300"))
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "sweep",
+                "run",
+                str(path),
+                "--results",
+                str(results),
+                "--scheduler",
+                address,
+                "--no-figures",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=dict(os.environ, COLUMNS="300"),
+        )
     finally:
         kill_group(worker)
         kill_group(scheduler)
@@ -88,10 +132,15 @@ def test_a_driver_that_loses_its_cluster_gives_up_in_bounded_time(tmp_path, lose
     scheduler, address = start_scheduler(tmp_path)
     worker = start_worker(address, tmp_path, "w0")
     try:
-        driver = start_driver(["run", str(path), "--results", str(results), "--scheduler",
-                               address, "--no-figures"], log)
-        wait_for(lambda: len(list(runs.glob("*.json"))) >= 1 or driver.poll() is not None,
-                 120, "a finished run")
+        driver = start_driver(
+            ["run", str(path), "--results", str(results), "--scheduler", address, "--no-figures"],
+            log,
+        )
+        wait_for(
+            lambda: len(list(runs.glob("*.json"))) >= 1 or driver.poll() is not None,
+            120,
+            "a finished run",
+        )
         assert driver.poll() is None, log.read_text()
         victims = [scheduler] if lose == "scheduler" else [worker]
         for v in victims:
@@ -111,8 +160,10 @@ def test_a_driver_that_loses_its_cluster_gives_up_in_bounded_time(tmp_path, lose
     if lose == "scheduler":  # dask cancels the runs in flight at once
         assert rc == 1, text
         assert f"the connection to the dask scheduler at {address} is lost" in text, text
-        assert "were cancelled by dask (the scheduler or cluster went away); rerun the same " \
-               "command to do them" in text, text
+        assert (
+            "were cancelled by dask (the scheduler or cluster went away); rerun the same "
+            "command to do them" in text
+        ), text
     else:
         assert rc == 2, text
         assert f"no worker is left in the dask scheduler at {address}" in text, text
@@ -164,9 +215,11 @@ def test_the_workers_are_asked_of_the_scheduler_not_of_the_clients_cache():
     import dask
     from distributed import Client, LocalCluster
 
-    with dask.config.set({"distributed.client.scheduler-info-interval": "5ms"}), \
-            LocalCluster(n_workers=2, processes=False, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+    with (
+        dask.config.set({"distributed.client.scheduler-info-interval": "5ms"}),
+        LocalCluster(n_workers=2, processes=False, dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):
         seen = [len(scheduler_workers(client)) for _ in range(3000)]
     assert set(seen) == {2}
 
@@ -175,8 +228,12 @@ MINE = {"code_version": "1.0", "git_commit": "abc"}
 
 
 def supervisor(client: FakeClient, now: list[float], **execution) -> Supervisor:
-    return Supervisor(ClusterLink(client, "the test cluster"),  # type: ignore[arg-type]
-                      ExecutionSpec(**execution), clock=lambda: now[0], mine=dict(MINE))
+    return Supervisor(
+        ClusterLink(client, "the test cluster"),  # type: ignore[arg-type]
+        ExecutionSpec(**execution),
+        clock=lambda: now[0],
+        mine=dict(MINE),
+    )
 
 
 def test_the_window_follows_the_workers_as_they_join_and_leave():
@@ -205,19 +262,29 @@ def test_the_window_follows_the_workers_as_they_join_and_leave():
     del client.workers["tcp://c:1"]
     watch.check()
     now[0] = 62.0
-    with pytest.raises(ClusterError, match="no worker is left in the test cluster and none "
-                       "came back within 30 s"):
+    with pytest.raises(
+        ClusterError, match="no worker is left in the test cluster and none came back within 30 s"
+    ):
         watch.check()
 
 
-@pytest.mark.parametrize(("answer", "reason"), [
-    (ModuleNotFoundError("No module named 'model'"),
-     "it cannot run the model (ModuleNotFoundError: No module named 'model')"),
-    ({"code_version": "0.9", "git_commit": "abc"},
-     "its code version is '0.9', the driver's is '1.0'"),
-    ({"code_version": "1.0", "git_commit": "def"},
-     "its code is at commit def, the driver's at abc"),
-])
+@pytest.mark.parametrize(
+    ("answer", "reason"),
+    [
+        (
+            ModuleNotFoundError("No module named 'model'"),
+            "it cannot run the model (ModuleNotFoundError: No module named 'model')",
+        ),
+        (
+            {"code_version": "0.9", "git_commit": "abc"},
+            "its code version is '0.9', the driver's is '1.0'",
+        ),
+        (
+            {"code_version": "1.0", "git_commit": "def"},
+            "its code is at commit def, the driver's at abc",
+        ),
+    ],
+)
 def test_a_worker_that_cannot_run_the_campaign_is_refused(answer, reason):
     client, now = FakeClient(), [0.0]
     client.join("tcp://bad:1", 1, answer)
@@ -241,9 +308,11 @@ def test_the_last_worker_error_of_the_job_logs(tmp_path):
     old = tmp_path / "dask-worker-1.err"
     old.write_text("INFO - Start worker\nslurmstepd: error: *** JOB 1 CANCELLED ***\n")
     new = tmp_path / "dask-worker-2.err"
-    new.write_text("/usr/bin/python3: Error while finding module specification for "
-                   "'distributed.cli.dask_worker' (ModuleNotFoundError: No module named "
-                   "'distributed')\n")
+    new.write_text(
+        "/usr/bin/python3: Error while finding module specification for "
+        "'distributed.cli.dask_worker' (ModuleNotFoundError: No module named "
+        "'distributed')\n"
+    )
     (tmp_path / "dask-worker-2.out").write_text("")
     t = time.time()
     os.utime(old, (t - 10, t - 10))
@@ -280,11 +349,13 @@ def test_tls_can_be_turned_off_only_with_a_reason(tmp_path):
     from sweep.spec import parse_campaign
 
     base = "name: x\nsweep: {axes: {chi: [1]}}\nseeds: 1\n"
-    with pytest.raises(CampaignError, match="execution.security.tls: turning TLS off needs a "
-                       "stated reason"):
+    with pytest.raises(
+        CampaignError, match="execution.security.tls: turning TLS off needs a stated reason"
+    ):
         parse_campaign(base + "execution: {security: {tls: false}}\n")
-    c = parse_campaign(base + "execution: {workers: 1, security: {tls: false, reason: "
-                       "'a private network'}}\n")
+    c = parse_campaign(
+        base + "execution: {workers: 1, security: {tls: false, reason: 'a private network'}}\n"
+    )
     assert (c.execution.tls, c.execution.insecure_reason) == (False, "a private network")
     with open_cluster(c.execution) as link:
         client = link.client
@@ -300,8 +371,9 @@ def test_tls_can_be_turned_off_only_with_a_reason(tmp_path):
 def test_batch_jobs_get_credentials_only_the_owner_can_read(tmp_path):
     """The jobqueue scheduler: TLS, credential files 0600 in <campaign>/tls (0700) named in
     the job script, dashboard on 127.0.0.1, job logs in <campaign>/jobs. No job submitted."""
-    spec = ClusterSpec(kind="slurm", jobs=1, options={"cores": 1, "memory": "1GB",
-                                                      "interface": "lo"})
+    spec = ClusterSpec(
+        kind="slurm", jobs=1, options={"cores": 1, "memory": "1GB", "interface": "lo"}
+    )
     options, logs = jobqueue_options(spec, ExecutionSpec(cluster=spec), tmp_path)
     assert logs == tmp_path / "jobs"
     assert options["scheduler_options"]["dashboard_address"] == "127.0.0.1:0"
@@ -328,8 +400,9 @@ def test_a_tls_scheduler_without_credentials_is_refused(tmp_path):
     """What a stranger on the cluster network gets from the jobqueue scheduler."""
     from distributed import Client, Security
 
-    spec = ClusterSpec(kind="slurm", jobs=1, options={"cores": 1, "memory": "1GB",
-                                                      "interface": "lo"})
+    spec = ClusterSpec(
+        kind="slurm", jobs=1, options={"cores": 1, "memory": "1GB", "interface": "lo"}
+    )
     options, _ = jobqueue_options(spec, ExecutionSpec(cluster=spec), tmp_path)
     cluster = make_jobqueue(spec, options)
     try:
@@ -344,7 +417,6 @@ def test_a_tls_scheduler_without_credentials_is_refused(tmp_path):
         cluster.close()
 
 
-
 def test_the_docs_slurm_example_is_a_valid_campaign(tmp_path):
     from test_slurm import docs_slurm_example
 
@@ -355,5 +427,6 @@ def test_the_docs_slurm_example_is_a_valid_campaign(tmp_path):
     c = load_campaign(path)
     assert c.execution.cluster is not None
     assert c.execution.cluster.options["job_script_prologue"] == [
-        "source /shared/me/nematic/.venv/bin/activate"]
+        "source /shared/me/nematic/.venv/bin/activate"
+    ]
     assert (c.execution.give_up_after, c.execution.tls) == (300, True)

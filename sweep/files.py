@@ -6,6 +6,7 @@ of a file that was written (size, checksum, a netCDF that opens)."""
 from __future__ import annotations
 
 import contextlib
+import datetime as _dt
 import errno
 import hashlib
 import json
@@ -247,3 +248,9 @@ def netcdf_problem(path: Path, variables: Iterable[str] = ()) -> str | None:
 def series_time(run: xr.Dataset) -> xr.DataArray:
     """The time coordinate of a run's series: ``t`` (``time`` in run files of schema 1)."""
     return run["t"] if "t" in run.variables else run["time"]
+
+
+def now_iso() -> str:
+    """The UTC time now as ISO 8601 text (to the second): the stamp of records, locks and
+    files."""
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")

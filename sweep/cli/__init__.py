@@ -15,12 +15,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, driver, export, figures, report, simulate, stability, status, verify
+from . import campaigns, driver, export, figures, report, run, simulate, stability, status, verify
 from .app import app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
     "validate": campaigns.validate,
-    "run": campaigns.run,
+    "run": run.run,
     "status": status.status,
     "aggregate": campaigns.aggregate,
     "verify": verify.verify,

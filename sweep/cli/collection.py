@@ -106,7 +106,8 @@ def estimate_lines(
     """The cost of the whole collection: one line per member (runs to do, CPU and wall time
     of its current round, the later rounds' forecast or bound) and the total, the members
     one after the other."""
-    from ..cost.estimate import estimate, fmt_seconds
+    from ..cost.estimate import estimate
+    from ..cost.result import fmt_seconds
     from ..store import CampaignStore
 
     rows = []
@@ -302,8 +303,9 @@ def write_index(coll: Collection, campaigns: list[Campaign], results: Path) -> P
 def run_detached(coll: Collection, campaigns: list[Campaign], results: Path, quiet: bool) -> None:
     """``nematic run COLLECTION --detach``: the collection's driver in the background, its
     output in ``results/NAME/driver.log``; exits."""
+    from ..lock import read_lock_holder
     from ..run.detach import DRIVER_LOG, detached_args, log_tail, start_detached
-    from ..store import CampaignStore, read_lock_holder
+    from ..store import CampaignStore
 
     err = err_console()
     say = Console(highlight=False, soft_wrap=True, quiet=quiet)
@@ -366,7 +368,8 @@ def stop_collection(coll: Collection, stop: Callable[..., None], options: dict[s
     """``nematic stop COLLECTION``: stop the driver of each member that has one (the
     collection's driver holds one member's lock at a time; stopping it ends the collection);
     exit 1 if none was running."""
-    from ..store import CampaignStore, read_lock_holder
+    from ..lock import read_lock_holder
+    from ..store import CampaignStore
 
     campaigns = load_members(coll, None, None)
     running = [

@@ -29,8 +29,9 @@ from .collection import collection_or_none, stop_collection
 def run_detached(c: Campaign, results: Path, campaign: Path, quiet: bool) -> None:
     """``nematic run --detach``: start the driver in the background and say how to follow
     it; exits (0, or the driver's own code if it ended at once)."""
+    from ..lock import read_lock_holder
     from ..run.detach import DRIVER_LOG, detached_args, log_tail, start_detached
-    from ..store import CampaignStore, read_lock_holder
+    from ..store import CampaignStore
 
     err = err_console()
     say = Console(highlight=False, soft_wrap=True, quiet=quiet)

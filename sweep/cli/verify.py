@@ -200,7 +200,7 @@ def verification_lines(root: Path, *, detail: bool = False) -> list[str]:
         if missing:
             return [f"verification: {path} cannot be read: {stale(missing)}"]
         return [f"verification ({path}): {summary}"]
-    from ..verify.measure import read_verify
+    from ..verify.summary import read_verify
 
     try:
         ds = read_verify(root)
@@ -212,7 +212,7 @@ def verification_lines(root: Path, *, detail: bool = False) -> list[str]:
 def dataset_lines(ds: Any, path: Path | None) -> list[str]:
     """The summary line of a verification's Dataset, one line per point and variant, and the
     variants that could not run."""
-    from ..verify.measure import summary_line
+    from ..verify.summary import summary_line
 
     lines = [f"verification ({path}): {summary_line(ds)}", *point_lines(ds)]
     if ds.attrs.get("problems"):
@@ -223,7 +223,7 @@ def dataset_lines(ds: Any, path: Path | None) -> list[str]:
 def point_lines(ds: Any) -> list[str]:
     """One line per sampled point and variant (the verdict and the changes), then one per
     fitted transition and variant."""
-    from ..verify.measure import transition_rows, verdict_rows
+    from ..verify.summary import transition_rows, verdict_rows
 
     out = [
         f"  {r['point']} [{r['why']}] {r['variant']}: {r['verdict']}"

@@ -83,7 +83,7 @@ class Results:
     def verified(self) -> list[tuple[dict[str, Any], int]]:
         """The points verify.nc sampled: (swept values, verdict over every variant: 1
         converged, 0 changed, -2 runs missing); empty without a readable verify.nc."""
-        from ..verify.measure import read_verify
+        from ..verify.summary import read_verify
 
         try:
             v = read_verify(self.root)

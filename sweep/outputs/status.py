@@ -16,7 +16,8 @@ import numpy as np
 
 from ..campaign import local_worker_count
 from ..expand import Expansion
-from ..store import RETRYABLE_REASONS, CampaignStore, read_lock_holder
+from ..lock import read_lock_holder
+from ..store import RETRYABLE_REASONS, CampaignStore
 
 DONE, FAILED, PENDING = "done", "failed", "pending"
 MAX_EXAMPLES = 10

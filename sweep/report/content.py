@@ -260,7 +260,7 @@ def refine_rounds(plan: Mapping[str, Any] | None) -> dict[str, Any] | None:
 def verification(root: Path) -> dict[str, Any] | None:
     """The verification's summary, verdicts and transitions from ``verify.nc`` (``None``
     without one; a note when it cannot be read)."""
-    from ..verify.measure import read_verify, summary_line, transition_rows, verdict_rows
+    from ..verify.summary import read_verify, summary_line, transition_rows, verdict_rows
 
     try:
         ds = read_verify(root)

@@ -25,7 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ClusterError
-from ..store import DRIVER_LOG_ENV, now_iso, read_lock_holder
+from ..lock import DRIVER_LOG_ENV, read_lock_holder
+from ..store import now_iso
 
 #: The detached driver's output, in the campaign's results folder.
 DRIVER_LOG = "driver.log"

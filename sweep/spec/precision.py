@@ -26,7 +26,7 @@ from typing import Any
 
 from ..campaign import PrecisionSpec
 from .checker import Checker, is_finite_number, is_int, suggest
-from .refine import observable_sources, read_classes
+from .observables import observable_sources, read_classes
 
 KEYS = (
     "observable",

@@ -52,7 +52,6 @@ from ..campaign import (
     DEFAULT_JUMP,
     DEFAULT_MAX_WIDTH,
     DEFAULT_ROUNDS,
-    OBSERVABLES,
     Dim,
     PrecisionSpec,
     RefinedAxis,
@@ -60,6 +59,7 @@ from ..campaign import (
     Threshold,
 )
 from .checker import Checker, KeyPath, is_finite_number, is_int, suggest
+from .observables import observable_sources, read_classes
 
 KEYS = (
     "axis",
@@ -77,53 +77,7 @@ KEYS = (
 )
 SEED_KEYS = ("initial", "add", "max_width", "confidence")
 CRITERIA = ("fraction", "jump")
-#: The derived observable read from the run files (the stability fit's criterion).
-GROWTH = "growth"
 MAX_ROUNDS = 50
-
-
-def observable_sources() -> dict[str, str]:
-    """Observable name -> the run scalar it is read from (phase.nc names and the scalars
-    themselves), plus ``growth``."""
-    out = {name: src for name, (src, _) in OBSERVABLES.items()}
-    out.update({src: src for src in list(out.values())})
-    out[GROWTH] = GROWTH
-    return out
-
-
-def read_classes(c: Checker, path: KeyPath, raw: Any) -> tuple[Threshold, ...] | None:
-    """A ``classes:`` mapping (observable -> threshold) as thresholds, in the order written;
-    ``None`` (problems added to ``c``) when it is not one."""
-    sources = observable_sources()
-    if not isinstance(raw, Mapping) or not raw:
-        c.bad(
-            path,
-            raw,
-            "a mapping observable -> threshold (a run's class is which "
-            "thresholds it is above), e.g. {sigma2_S: 1.0e-6, cos2theta: 0.5}",
-        )
-        return None
-    out: list[Threshold] = []
-    ok = True
-    for name, above in raw.items():
-        if not isinstance(name, str) or name not in sources:
-            c.bad(
-                (*path, str(name)),
-                name,
-                "an observable: one of "
-                + ", ".join(sorted(sources))
-                + (suggest(name, list(sources)) if isinstance(name, str) else ""),
-            )
-            ok = False
-        elif not is_finite_number(above):
-            c.bad((*path, name), above, "a finite number (the run is above it or not)")
-            ok = False
-        else:
-            out.append(Threshold(name, sources[name], float(above)))
-    if ok and len({t.source for t in out}) < len(out):
-        c.bad(path, dict(raw), "each observable once (a name and its run scalar are one)")
-        ok = False
-    return tuple(out) if ok else None
 
 
 def read_refine(c: Checker, raw: Any, read: Mapping[str, Any]) -> RefineSpec | None:

@@ -5,11 +5,15 @@
 - :mod:`sweep.verify.sample`: the sampled points (both sides of each fitted transition, the
   grid's corners, or the points listed), their base runs and the variants' runs.
 - :mod:`sweep.verify.measure`: ``verify.nc`` (values, relative changes, verdicts, the
-  transitions recomputed) and its one-line summary.
+  transitions recomputed).
+- :mod:`sweep.verify.summary`: ``verify.nc`` read back, its one-line summary and the rows of
+  the report's and ``status -v``'s tables.
 - :mod:`sweep.verify.driver`: running a verification on one dask cluster (``nematic verify``,
   and ``nematic run`` of a campaign with a ``verify:`` section).
 """
 
+#: A verdict (the flag values of verify.nc's ``*_verdict`` and ``converged``).
+CONVERGED, CHANGED, NOT_COMPARED, MISSING = 1, 0, -1, -2
 #: The verification's file in the campaign's results folder.
 VERIFY = "verify.nc"
 #: What every reader of verify.nc relies on.

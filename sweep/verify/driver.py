@@ -20,8 +20,9 @@ from ..run.clusters import open_cluster
 from ..run.driver import REMOTE_TMP_AGE, RunSummary, run_campaign
 from ..run.todo import plan_runs
 from ..store import CampaignStore
-from .measure import summary_line, verify_dataset, write_verify
+from .measure import verify_dataset, write_verify
 from .sample import Sample, plan_sample
+from .summary import summary_line
 
 log = logging.getLogger(__name__)
 

@@ -20,8 +20,9 @@ from typer.testing import CliRunner
 from sweep.cli import app
 from sweep.cli.collection import run_collection
 from sweep.errors import CampaignError
+from sweep.lock import read_lock_holder
 from sweep.spec.collection import read_collection
-from sweep.store import CampaignStore, read_lock_holder
+from sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parents[2]
 

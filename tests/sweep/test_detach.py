@@ -14,8 +14,8 @@ from sweep_helpers import group_alive, records, run_ids, wait_for, write_campaig
 from typer.testing import CliRunner
 
 from sweep.cli import app
+from sweep.lock import read_lock_holder
 from sweep.run.detach import detached_args
-from sweep.store import read_lock_holder
 
 
 def invoke(*args: object):
@@ -151,7 +151,7 @@ def test_stop_of_an_unknown_campaign_is_one_error_line(tmp_path):
 
 
 def test_detach_on_a_campaign_in_use_is_refused(copy_of_small):
-    from sweep.store import CampaignLock
+    from sweep.lock import CampaignLock
 
     lock = CampaignLock(copy_of_small.results / "small" / ".lock")
     lock.acquire(command="nematic run small.yaml")

@@ -16,8 +16,9 @@ from model.parameters import Numerics
 from sweep.cli import app
 from sweep.cost import estimate as estimate_module
 from sweep.cost import model as cost_model
-from sweep.cost.estimate import driver_overhead, estimate, lines, makespan
+from sweep.cost.estimate import driver_overhead, estimate, makespan
 from sweep.cost.model import MODEL_SPREAD, curve_steps, model_seconds, model_steps
+from sweep.cost.result import lines
 from sweep.expand import expand
 from sweep.files import file_stamp
 from sweep.refine.plan import first_round, run_bound

@@ -28,8 +28,8 @@ from sweep_helpers import (
 from typer.testing import CliRunner
 
 from sweep.cli import app
+from sweep.lock import CampaignLock, read_lock_holder
 from sweep.run.task import RunTask, execute_run
-from sweep.store import CampaignLock, read_lock_holder
 
 
 def invoke(*args: object):

@@ -11,14 +11,8 @@ import xarray as xr
 from sweep.analysis.anisotropy import anisotropy
 from sweep.analysis.fits_file import compute_fits, fit_notes, load_fits, write_fits
 from sweep.analysis.registry import option_problems, resolve
-from sweep.analysis.sizes import (
-    alpha_cr,
-    alpha_cr_from_sizes,
-    patterned_level,
-    peak_not_reached,
-    scaling,
-    size_scaling,
-)
+from sweep.analysis.size_laws import alpha_cr_from_sizes, patterned_level, size_scaling
+from sweep.analysis.sizes import alpha_cr, peak_not_reached, scaling
 from sweep.analysis.statistics import bootstrap_seed_means
 from sweep.analysis.transition import fit_transition, transition
 from sweep.errors import FitError

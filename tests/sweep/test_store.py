@@ -15,7 +15,8 @@ import xarray as xr
 
 from sweep.errors import CampaignLocked
 from sweep.files import atomic_to_netcdf, atomic_write_text, file_stamp, netcdf_attr, series_time
-from sweep.store import CampaignLock, CampaignStore, read_lock_holder
+from sweep.lock import CampaignLock, read_lock_holder
+from sweep.store import CampaignStore
 
 
 def test_series_time_reads_both_run_file_schemas():
@@ -95,7 +96,7 @@ def test_lock_excludes_a_second_holder(tmp_path):
 def test_a_killed_holder_releases_the_lock(tmp_path):
     path = tmp_path / ".lock"
     code = (
-        "import sys, time; from sweep.store import CampaignLock; "
+        "import sys, time; from sweep.lock import CampaignLock; "
         f"CampaignLock(__import__('pathlib').Path({str(path)!r})).acquire(); "
         "print('locked', flush=True); time.sleep(60)"
     )

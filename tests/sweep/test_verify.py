@@ -27,15 +27,10 @@ from sweep.expand import expand
 from sweep.identity import PointHasher
 from sweep.spec import parse_campaign
 from sweep.spec.verify import resolve
-from sweep.verify.measure import (
-    CHANGED,
-    CONVERGED,
-    MISSING,
-    NOT_COMPARED,
-    summary_line,
-    verify_dataset,
-)
+from sweep.verify import CHANGED, CONVERGED, MISSING, NOT_COMPARED
+from sweep.verify.measure import verify_dataset
 from sweep.verify.sample import plan_sample
+from sweep.verify.summary import summary_line
 
 BASE = """\
 name: v

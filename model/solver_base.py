@@ -1,0 +1,325 @@
+r"""The machinery that both exponential integrators of :mod:`model.solver` share:
+:class:`ETDSolver`.
+
+It holds what does not depend on the scheme: the split right-hand side (:mod:`model.split`),
+the phi functions of :math:`L_q = -(A_0 + K k^2)/\gamma` cached per step size, the spectra
+reused between steps, the well-posedness monitor (:mod:`model.wellposedness`), the
+integrated displacement's projection onto force balance (Eq. (3)) once per accepted step, and
+py-pde's stepper with the step control below. The schemes (:class:`model.solver.ETDRK2Solver`,
+:class:`model.solver.ETDRK4Solver`) define the step and the order of its error estimate.
+
+
+**Step control** (both): the error is the largest pointwise error (``error_norm = "max"``,
+default; ``"rms"``: the RMS over the grid), maximum over the three fields; a step is accepted
+if it is below ``numerics.tolerance`` and the next step is scaled by
+:math:`0.9\,(\mathrm{tol}/\mathrm{err})^{1/p}` (p = 3 for ETDRK4, 2 for ETDRK2), clipped to
+[0.2, 2] and ``dt_max``, and rounded down onto the ladder ``dt_max 2^(-j/8)`` so that the phi
+functions of :math:`L_q` are reused. A step whose stage cannot be evaluated (non-finite, a spin
+or Newton solve that fails: a too-large step can throw a stage out of the well-posed range) is
+retried with h/4; if it still fails at ``h <= 1e-3 dt_max`` the failure is the run's.
+``adaptive = False`` gives the fixed-step schemes (orders tested).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+import numpy as np
+from pde.solvers.base import SolverBase
+
+from model.backend import kernels
+from model.errors import IllPosed, SimulationFailure
+from model.mechanics import MechanicalState, Mechanics
+from model.pde import ActiveNematicPDE
+from model.reference_kernels import phi_functions
+from model.split import make_split
+
+#: the solvers' logger (model.solver: the name under which they have always logged)
+log = logging.getLogger("model.solver")
+Array = np.ndarray
+
+
+class ETDSolver(SolverBase):
+    """Shared machinery of the exponential integrators for :class:`ActiveNematicPDE`: the
+    split right-hand side, cached phi functions, spectra reuse and the adaptive step control
+    (see module docstring). Subclasses define :meth:`step` and ``error_order`` (the local
+    error estimate is O(h^error_order))."""
+
+    dt_min = 1e-7
+    error_order = 2
+    #: a step whose stage fails (non-finite state or a spin / Newton solve that does not
+    #: converge) is retried with h / 4 while h > this; below it the failure is the run's.
+    retry_floor = 1e-3
+
+    def __init__(
+        self,
+        pde: ActiveNematicPDE,
+        *,
+        backend: str = "numpy",
+        adaptive: bool | None = None,
+        tolerance: float | None = None,
+        dt_max: float | None = None,
+    ):
+        super().__init__(pde, backend=backend)
+        self.pde: ActiveNematicPDE = pde
+        num = pde.numerics
+        self.adaptive = num.adaptive if adaptive is None else adaptive
+        self.tolerance = num.tolerance if tolerance is None else tolerance
+        self.dt_max = num.dt_max if dt_max is None else dt_max
+        self.error_norm = num.error_norm
+        p, g = pde.params, pde.spectral
+        self.Lq = -(p.A0 + p.K * g.k2) / p.gamma  # the q1, q2 symbol (Fourier space)
+        #: the pointwise kernels of the backend (model.backend)
+        self.k = kernels(num.backend)
+        self._known: list[tuple[Array, Array]] = []
+        self._phi_cache: dict[tuple[float, int], tuple[Array, ...]] = {}
+        self.on_step: Callable[[float, float], None] | None = None
+        #: the split right-hand side (model.split: spectral for linear mechanics, compiled
+        #: where the mechanics is)
+        self._split = make_split(pde.mechanics, pde, self.Lq)
+        #: whether the mechanics' warm start was checkpointed in the current step (after its
+        #: first right-hand side)
+        self._checkpointed = False
+        #: the integrated displacement spectrum at the end of the last step and its
+        #: deformation gradient (projected onto force balance when the step is accepted)
+        self._pending_disp: tuple[Array, Array] | None = None
+        self.stats = {
+            "steps": 0,
+            "rejected": 0,
+            "stage_failures": 0,
+            "rhs": 0,
+            "newton": 0,
+            "projections": 0,
+        }
+        #: the mechanical state of the last force-balance right-hand side (its tangent and E
+        #: serve the well-posedness check of the step's start)
+        self._last_mech: MechanicalState | None = None
+        #: smallest well-posedness margin over the accepted states (model.wellposedness)
+        self.margin_min = float("inf")
+        self._checked_at = float("nan")
+
+    # --- the split right-hand side -----------------------------------------------------
+    def split(
+        self, u: Array, q_hat: Array, t: float, disp: Array | None = None, F: Array | None = None
+    ) -> tuple[Array, Array]:
+        """Return ``(N_q hat, Adot)`` for the state ``u = [q1, q2, A]`` with ``q_hat`` the
+        spectra of q1, q2 (:mod:`model.split`). Where the mechanics integrates the
+        displacement: at the displacement spectrum ``disp`` with deformation gradient ``F`` (its
+        rate is then the mechanics' ``udot_hat``, with gradient ``udot_grad``)."""
+        self.stats["rhs"] += 1
+        Nq, Adot, mech = self._split(u, q_hat, t, disp, F)
+        if mech is not None:
+            self._last_mech = mech
+            self.stats["newton"] += mech.iterations
+        return Nq, Adot
+
+    def full_rate(self, u: Array, t: float = 0.0) -> Array:
+        """:math:`\\dot u` assembled from the split (equals ``pde.evolution_rate``; tested)."""
+        g = self.pde.spectral
+        q_hat = g.forward(u[:2])
+        Nq, Adot = self.split(u, q_hat, t)
+        return np.concatenate([g.inverse(self.Lq * q_hat + Nq), Adot[None]])
+
+    # --- one step ----------------------------------------------------------------------
+    def _phis(self, h: float, kmax: int = 2) -> tuple[Array, ...]:
+        """exp(L_q h), phi_1..phi_kmax(L_q h), cached per step size (q1, q2 share them)."""
+        cached = self._phi_cache.get((h, kmax))
+        if cached is None:
+            cached = phi_functions(self.Lq * h, kmax)
+            if len(self._phi_cache) > 64:
+                self._phi_cache.clear()
+            self._phi_cache[(h, kmax)] = cached
+        return cached
+
+    def _spectrum(self, q: Array) -> Array:
+        """The spectra of q1, q2, reused when ``q`` is the state the last step started from
+        (a rejected step) or produced (the next step): saves two transforms per step."""
+        for real, hat in self._known:
+            if np.array_equal(real, q):
+                return hat
+        return self.pde.spectral.forward(q)
+
+    def step(self, u: Array, t: float, h: float) -> tuple[Array, float]:
+        """One step from ``(u, t)`` of size ``h``; returns (new state, error estimate)."""
+        raise NotImplementedError
+
+    def check_wellposed(self, u: Array, t: float) -> float:
+        """The well-posedness margin of the state ``u`` (an accepted state: every step checks
+        its start after the first right-hand side, reusing that evaluation's tangent); raises
+        :class:`model.errors.IllPosed` when it is <= 0, naming the value and the place."""
+        if t == self._checked_at:  # a rejected step retried from the same state
+            return self.margin_min
+        self._checked_at = t
+        margin, idx, phi = self.pde.mechanics.rate_margin(u[0], u[1], self._last_mech)
+        self.margin_min = min(self.margin_min, margin)
+        if margin <= 0.0:
+            n = self.pde.spectral.n
+            ix, iy = divmod(idx, n)
+            S = float(np.hypot(u[0].flat[idx], u[1].flat[idx]))
+            amb = self.pde.params.alpha_minus_B
+            raise IllPosed(
+                f"well-posedness margin {margin:.3g} <= 0 at x = {(ix + 0.5) / n:.3f}, "
+                f"y = {(iy + 0.5) / n:.3f} (S = {S:.3f}, (alpha - B) S = {amb * S:.3f}, "
+                f"wave vector at {np.degrees(phi):.0f} deg)",
+                t,
+            )
+        return margin
+
+    def _integrated_mechanics(self) -> Mechanics | None:
+        """The mechanics if it integrates the displacement with the state, else None."""
+        mech = self.pde.mechanics
+        return mech if mech.integrated else None
+
+    def _checkpoint(self) -> None:
+        """Remember the mechanics' warm start after the step's first right-hand side (so a
+        rejected step can put it back)."""
+        self.pde.mechanics.checkpoint()
+        self._checkpointed = True
+
+    def _restore(self) -> None:
+        """Undo a rejected or failed step's mechanical work: the warm start back to the
+        step's start (if it got that far), the integrated displacement it produced dropped."""
+        self._pending_disp = None
+        if self._checkpointed:
+            self.pde.mechanics.restore()
+
+    def _finish(
+        self,
+        u: Array,
+        q_hat: Array,
+        new_q_hat: Array,
+        new_A: Array,
+        err_q: Array,
+        err_A: Array,
+        new_disp: tuple[Array, Array] | None = None,
+        err_grad: Array | None = None,
+    ) -> tuple[Array, float]:
+        """The new state, its spectra remembered for the next step, and the error estimate
+        of ``err_q`` (spectra) and ``err_A`` (real space): the largest pointwise error
+        (``error_norm = "max"``, two inverse transforms) or the RMS over the grid, maximum
+        over the three fields. With the integrated displacement, ``new_disp`` (spectrum and
+        deformation gradient) is kept for the projection of an accepted step, and the
+        displacement's error counts by its strain ``err_grad`` (real space), each component of
+        :math:`\\nabla e_u` like a field."""
+        g = self.pde.spectral
+        new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
+        self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
+        if self.error_norm == "max":
+            err = max(float(np.abs(g.inverse(err_q)).max()), float(np.abs(err_A).max()))
+        else:
+            err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]), float(np.sqrt(np.mean(err_A**2))))
+        self._pending_disp = new_disp
+        if err_grad is not None:
+            err = max(
+                err,
+                float(np.abs(err_grad).max())
+                if self.error_norm == "max"
+                else float(np.sqrt(np.mean(err_grad**2, axis=(2, 3))).max()),
+            )
+        return new, err
+
+    def _project(self, new: Array, t: float) -> None:
+        """Put the integrated displacement of an accepted step back onto force balance
+        (Eq. 3): Newton from it, usually no or one iteration; it becomes the mechanics'
+        displacement, from which the next step starts."""
+        disp, self._pending_disp = self._pending_disp, None
+        if disp is None:
+            return
+        state = self.pde.mechanics.solve(new[0], new[1], u_guess=disp[0], t=t, F_guess=disp[1])
+        self.stats["newton"] += state.iterations
+        self.stats["projections"] += 1
+
+    def _retry(self, exc: SimulationFailure, h_try: float, t: float) -> float:
+        """A failed stage or projection: the step size to retry with (h / 4), or raise
+        ``exc`` when the failure is the run's (fixed steps, an ill-posed accepted state, or a
+        step at the retry floor)."""
+        # a too-large step can throw a stage out of the well-posed range: retry smaller; a
+        # failure that persists at small steps is the run's, and so is an ill-posed accepted
+        # state (a shorter step cannot change it)
+        self._restore()
+        if (
+            not self.adaptive
+            or isinstance(exc, IllPosed)
+            or h_try <= self.retry_floor * self.dt_max
+        ):
+            raise exc
+        log.debug("step %g at t = %g failed (%s): retrying with h / 4", h_try, t, exc)
+        self.stats["rejected"] += 1
+        self.stats["stage_failures"] += 1
+        return self._quantize(h_try / 4)
+
+    def _quantize(self, h: float) -> float:
+        """Round a proposed step down onto the ladder dt_max * 2^(-j/8), so that only a few
+        distinct step sizes occur and their phi functions are reused."""
+        j = np.ceil(-8.0 * np.log2(h / self.dt_max) - 1e-9)
+        return float(self.dt_max * 2.0 ** (-max(j, 0.0) / 8.0))
+
+    # --- py-pde interface --------------------------------------------------------------
+    def make_stepper(self, state, dt: float | None = None):  # type: ignore[override]
+        self.info["dt"] = dt = float(dt or self.pde.numerics.dt)
+        self.info["steps"] = 0
+        self.info["stochastic"] = False
+        self.info["dt_adaptive"] = self.adaptive
+        self._dt = dt
+
+        def stepper(state, t_start: float, t_end: float) -> float:
+            u = state.data
+            t = t_start
+            h = self._dt
+            while t < t_end - 1e-12 * max(1.0, abs(t_end)):
+                # land exactly on t_end (the next save time)
+                h_try = min(h, self.dt_max, t_end - t) if self.adaptive else min(h, t_end - t)
+                try:
+                    new, err = self.step(u, t, h_try)
+                    if not np.all(np.isfinite(new)):
+                        raise SimulationFailure("nan", "non-finite state after a step", t)
+                except SimulationFailure as exc:
+                    h = self._retry(exc, h_try, t)
+                    continue
+                if self.adaptive:
+                    fac = (
+                        2.0
+                        if err == 0
+                        else float(
+                            np.clip(
+                                0.9 * (self.tolerance / err) ** (1.0 / self.error_order), 0.2, 2.0
+                            )
+                        )
+                    )
+                    if err > self.tolerance:
+                        self.stats["rejected"] += 1
+                        self._restore()
+                        # a rejected step is retried at most half as long: the estimate
+                        # near the stability limit does not scale as h^p (measured: repeated
+                        # rejections at 0.9 (tol/err)^(1/p))
+                        h = self._quantize(h_try * min(fac, 0.5))
+                        if h < self.dt_min:
+                            raise SimulationFailure(
+                                "step_size_collapsed",
+                                f"adaptive time step fell below {self.dt_min:g}",
+                                t,
+                            )
+                        continue
+                try:
+                    self._project(new, t + h_try)
+                except SimulationFailure as exc:
+                    h = self._retry(exc, h_try, t)
+                    continue
+                if self.adaptive:
+                    if h_try == min(h, self.dt_max):  # not shortened to hit t_end
+                        h = self._quantize(min(h_try * fac, self.dt_max))
+                    else:
+                        h = max(h, h_try * fac) if fac > 1 else min(h, h_try * fac)
+                        h = self._quantize(h)
+                u[...] = new
+                t += h_try
+                self.stats["steps"] += 1
+                self.info["steps"] += 1
+                if self.on_step is not None:
+                    self.on_step(t, h_try)
+            self._dt = h
+            self.info["dt_last"] = h
+            return t
+
+        return stepper

@@ -1,0 +1,182 @@
+"""The cost before launch as data and as text: what :func:`sweep.cost.estimate.estimate`
+returns (:class:`Estimate`, the points' :class:`Costed` runs, the :class:`LaterRounds`) and the
+lines ``nematic run --dry-run`` and ``validate --estimate`` print (:func:`lines`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+#: points listed one per line (the rest are counted)
+MAX_POINTS = 20
+
+
+@dataclass
+class Costed:
+    """The runs to do at one point with their estimated seconds each (and the range)."""
+
+    label: str
+    runs: int
+    seconds: float
+    low: float
+    high: float
+    basis: str
+
+
+@dataclass
+class LaterRounds:
+    """The rounds after the current one: for an adaptive campaign a bound; with seeds by
+    precision (``forecast``) the runs each point is expected to need, and the bound as
+    ``at_most`` runs."""
+
+    rounds: int
+    runs: int
+    cpu: float
+    wall: float
+    forecast: bool = False
+    at_most: int = 0
+
+
+@dataclass
+class Estimate:
+    campaign: str
+    folder: str
+    total: int
+    done: int
+    failed: int
+    to_do: int
+    measured: int
+    basis: str
+    workers: int
+    where: str
+    local_workers: int
+    #: (estimate, low, high) in seconds: the sum of the run times to do, and the makespan of
+    #: the runs (without the driver's :attr:`overhead`) on :attr:`workers` and on
+    #: :attr:`local_workers`
+    cpu: tuple[float, float, float]
+    wall: tuple[float, float, float]
+    local_wall: tuple[float, float, float]
+    longest: float
+    #: the driver's own wall time (:data:`DRIVER_OVERHEAD`) on :attr:`workers` and on
+    #: :attr:`local_workers` at the machine's load
+    overhead: float
+    local_overhead: float
+    #: this machine's 1-minute load average and cores when the estimate was made, and how
+    #: much longer a run and the driver take here than on a free core (:func:`slowdown`), on
+    #: :attr:`workers` (1 off a local cluster) and on :attr:`local_workers`
+    load: float = 0.0
+    cores: int = 1
+    stretch: float = 1.0
+    local_stretch: float = 1.0
+    #: whether some runs are costed by the cost model alone (stretched by the load)
+    modelled: bool = False
+    #: whether the runs go on this machine (a local cluster)
+    local: bool = True
+    points: list[Costed] = field(default_factory=list)
+    later: LaterRounds | None = None
+    round_note: str = ""
+    #: what changed since the results were made (:mod:`sweep.outputs.changes`), as lines
+    changes: list[str] = field(default_factory=list)
+
+
+def fmt_seconds(seconds: float) -> str:
+    """12.3 s, 4 min 05 s, 2 h 03 min."""
+    if seconds < 60:
+        return f"{seconds:.2g} s" if seconds < 10 else f"{seconds:.0f} s"
+    if seconds < 3600:
+        m, s = divmod(round(seconds), 60)
+        return f"{m} min {s:02d} s"
+    h, m = divmod(round(seconds / 60), 60)
+    return f"{h} h {m:02d} min"
+
+
+def _hours(seconds: float) -> str:
+    return f"{seconds / 3600:.2g} CPU-h"
+
+
+def _wall_line(
+    e: Estimate, workers: int, where: str, runs: tuple[float, float, float], overhead: float
+) -> str:
+    total = [r + overhead for r in runs]
+    return (
+        f"wall time: {fmt_seconds(total[0])} on {workers} worker(s) ({where}; 10-90 %: "
+        f"{fmt_seconds(total[1])} to {fmt_seconds(total[2])}): "
+        f"{fmt_seconds(runs[0])} of runs (the longest {fmt_seconds(e.longest)}) + about "
+        f"{fmt_seconds(overhead)} of the driver's own (cluster start, warm-up, "
+        "phase.nc, figures, report)"
+    )
+
+
+def lines(e: Estimate, *, brief: bool = False) -> list[str]:
+    """The estimate as plain lines (``nematic run --dry-run``, ``validate --estimate``);
+    ``brief``: without the runs to do point by point."""
+    out = [
+        f"runs: {e.total} planned, {e.done} done, {e.failed} failed (not redone), "
+        f"{e.to_do} to do" + (f"; {e.round_note}" if e.round_note else "")
+    ]
+    for c in [] if brief else e.points[:MAX_POINTS]:
+        out.append(
+            f"  {c.label or '(the one point)'}: {c.runs} to do, "
+            f"{fmt_seconds(c.seconds)} each ({fmt_seconds(c.low)} to "
+            f"{fmt_seconds(c.high)}; {c.basis})"
+        )
+    if len(e.points) > MAX_POINTS and not brief:
+        rest = e.points[MAX_POINTS:]
+        out.append(
+            f"  ... and {len(rest)} more point(s) with {sum(c.runs for c in rest)} run(s) to do"
+        )
+    out.append(f"basis: {e.basis}")
+    if e.to_do == 0:
+        out.append(
+            "nothing to do" + ("; --retry-failed redoes the failed runs" if e.failed else "")
+        )
+    else:
+        out.append(
+            f"CPU time: {fmt_seconds(e.cpu[0])} = {_hours(e.cpu[0])} (10-90 %: "
+            f"{fmt_seconds(e.cpu[1])} to {fmt_seconds(e.cpu[2])}), one core per run"
+        )
+        out.append(_wall_line(e, e.workers, e.where, e.wall, e.overhead))
+        if e.stretch > 1.0 and not e.local:
+            out.append(
+                f"  this machine: load average {e.load:.1f} on {e.cores} core(s): "
+                f"part of the driver's time is stretched {e.stretch:.2g}x"
+            )
+        elif e.stretch > 1.0:
+            what = (
+                "the cost model's run times (and part of the driver's time) are stretched "
+                f"{e.stretch:.2g}x; "
+                if e.modelled
+                else "part of the driver's time is stretched as much; "
+            )
+            out.append(
+                f"  this machine: load average {e.load:.1f} on {e.cores} core(s), so "
+                f"each worker gets about {100 / e.stretch:.0f} % of a core: {what}"
+                "measured run times are taken as they are"
+            )
+        if e.local_workers != e.workers:
+            out.append(
+                "  "
+                + _wall_line(
+                    e,
+                    e.local_workers,
+                    "this machine's local cluster",
+                    e.local_wall,
+                    e.local_overhead,
+                )
+            )
+    if e.later is not None and e.later.forecast:
+        out.append(
+            f"later rounds: about {e.later.runs} more runs expected (each point's "
+            "seeds so far projected to its rule), about "
+            f"{_hours(e.later.cpu)} ({fmt_seconds(e.later.cpu)}) and "
+            f"{fmt_seconds(e.later.wall)} wall on {e.workers} worker(s); at most "
+            f"{e.later.at_most} more runs (every point to the cap) in at most "
+            f"{e.later.rounds} more round(s)"
+        )
+    elif e.later is not None:
+        out.append(
+            f"later rounds: at most {e.later.rounds} more, at most {e.later.runs} more "
+            f"runs (the run bound), about {_hours(e.later.cpu)} "
+            f"({fmt_seconds(e.later.cpu)}) and at most {fmt_seconds(e.later.wall)} "
+            f"wall on {e.workers} worker(s)"
+        )
+    return out

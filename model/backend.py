@@ -17,8 +17,8 @@ from typing import Protocol
 
 import numpy as np
 
-from model import reference_kernels
-from model.compiled import kernels as compiled_kernels
+from . import reference_kernels
+from .compiled import kernels as compiled_kernels
 
 Array = np.ndarray
 

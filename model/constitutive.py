@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from model import tensors as T
+from . import tensors as T
 
 Array = np.ndarray
 

@@ -16,7 +16,7 @@ import math
 import numpy as np
 import scipy.fft
 
-from model.compiled import fftw
+from .compiled import fftw
 
 log = logging.getLogger(__name__)
 

@@ -35,8 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from model.errors import ParameterError
-from model.parameters import Parameters
+from .errors import ParameterError
+from .parameters import Parameters
 
 Array = np.ndarray
 

@@ -28,10 +28,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import peak_prominences
 
-from model import constitutive as cl
-from model import tensors as T
-from model.fourier import SpectralGrid
-from model.parameters import Parameters
+from . import constitutive as cl
+from . import tensors as T
+from .fourier import SpectralGrid
+from .parameters import Parameters
 
 Array = np.ndarray
 

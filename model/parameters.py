@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-from model.errors import ParameterError
+from .errors import ParameterError
 
 MECHANICS = ("finite", "linear")
 #: the initial director texture (Parameters.initial; docs/model.md section 5)

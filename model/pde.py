@@ -28,10 +28,10 @@ import numpy as np
 from pde import CartesianGrid, FieldCollection, ScalarField
 from pde.pdes.base import PDEBase
 
-from model.errors import SimulationFailure
-from model.fourier import SpectralGrid
-from model.mechanics import MechanicalState, make_mechanics
-from model.parameters import Numerics, Parameters
+from .errors import SimulationFailure
+from .fourier import SpectralGrid
+from .mechanics import MechanicalState, make_mechanics
+from .parameters import Numerics, Parameters
 
 Array = np.ndarray
 LABELS = ("q1", "q2", "A")

@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
-from model import constitutive as cl
-from model import tensors
-from model.wellposedness import finite_margin_samples
+from . import constitutive as cl
+from . import tensors
+from .wellposedness import finite_margin_samples
 
 Array = np.ndarray
 

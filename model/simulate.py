@@ -31,15 +31,15 @@ from pde.solvers import Controller
 from pde.trackers import CallbackTracker
 from pde.trackers.base import FinishedSimulation
 
-from model import __version__
-from model import tensors as T
-from model.errors import ParameterError, SimulationFailure
-from model.initial import initial_fields
-from model.observables import first_peak, growth_peak, snapshot_observables
-from model.parameters import Numerics, Parameters, check_compatible
-from model.pde import ActiveNematicPDE, make_state
-from model.provenance import git_commit, library_versions_text
-from model.solver import SCHEMES, ETDSolver
+from . import __version__
+from . import tensors as T
+from .errors import ParameterError, SimulationFailure
+from .initial import initial_fields
+from .observables import first_peak, growth_peak, snapshot_observables
+from .parameters import Numerics, Parameters, check_compatible
+from .pde import ActiveNematicPDE, make_state
+from .provenance import git_commit, library_versions_text
+from .solver import SCHEMES, ETDSolver
 
 log = logging.getLogger(__name__)
 

@@ -57,10 +57,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from model.pde import ActiveNematicPDE
+from .pde import ActiveNematicPDE
 
 # ETDSolver is imported from here too (model.simulate)
-from model.solver_base import Array, ETDSolver
+from .solver_base import Array, ETDSolver
 
 
 class ETDRK2Solver(ETDSolver):

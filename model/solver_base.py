@@ -8,7 +8,6 @@ integrated displacement's projection onto force balance (Eq. (3)) once per accep
 py-pde's stepper with the step control below. The schemes (:class:`model.solver.ETDRK2Solver`,
 :class:`model.solver.ETDRK4Solver`) define the step and the order of its error estimate.
 
-
 **Step control** (both): the error is the largest pointwise error (``error_norm = "max"``,
 default; ``"rms"``: the RMS over the grid), maximum over the three fields; a step is accepted
 if it is below ``numerics.tolerance`` and the next step is scaled by
@@ -28,12 +27,12 @@ from collections.abc import Callable
 import numpy as np
 from pde.solvers.base import SolverBase
 
-from model.backend import kernels
-from model.errors import IllPosed, SimulationFailure
-from model.mechanics import MechanicalState, Mechanics
-from model.pde import ActiveNematicPDE
-from model.reference_kernels import phi_functions
-from model.split import make_split
+from .backend import kernels
+from .errors import IllPosed, SimulationFailure
+from .mechanics import MechanicalState, Mechanics
+from .pde import ActiveNematicPDE
+from .reference_kernels import phi_functions
+from .split import make_split
 
 #: the solvers' logger (model.solver: the name under which they have always logged)
 log = logging.getLogger("model.solver")

@@ -22,10 +22,10 @@ import functools
 
 import numpy as np
 
-from model.compiled import linear_rhs
-from model.errors import SimulationFailure
-from model.mechanics import LinearMechanics, MechanicalState, Mechanics
-from model.pde import ActiveNematicPDE
+from .compiled import linear_rhs
+from .errors import SimulationFailure
+from .mechanics import LinearMechanics, MechanicalState, Mechanics
+from .pde import ActiveNematicPDE
 
 Array = np.ndarray
 

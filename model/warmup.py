@@ -16,76 +16,42 @@ code from Python, listed in ``model/compiled/entry_points.txt`` (made by
 ``scripts/kernel_entry_points.py``), one task per module, each after the modules it imports
 (:func:`entry_groups`). Each process writes the disk cache, and loads from it the callees
 another process has saved already; then :func:`warm_up` runs in the calling process and loads
-everything from it, compiling only what the list missed (reported). numba's cache index (one
-file per function) is read, changed and rewritten without a lock, so two processes that save
-two signatures of one function at once could lose one or give both the same data file: the
-compiling processes hold a file lock around numba's cache reads and writes
-(:func:`lock_cache_files`).
+everything from it, compiling only what the list missed (reported). The list's format is
+:mod:`model.entry_points`; the compiling processes hold a file lock around numba's cache reads
+and writes (:func:`model.kernel_cache.lock_cache_files`).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib
 import json
 import multiprocessing
 import os
 import sys
 import time
 import traceback
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from model.parameters import Numerics, Parameters
+# the names imported ``as`` themselves are importable from here too, where they used to be
+# defined (the tests, scripts/kernel_entry_points.py)
+from .entry_points import ENTRY_POINTS_FILE, EntryPoint, compile_entry_point, read_entry_points
+from .entry_points import read_types as read_types
+from .entry_points import type_text as type_text
+from .kernel_cache import KERNEL_MODULES as KERNEL_MODULES
+from .kernel_cache import compile_counts, lock_cache_files
+from .kernel_cache import kernel_dispatchers as kernel_dispatchers
+from .parameters import Numerics, Parameters
 
-#: Modules holding the compiled kernels.
-KERNEL_MODULES = (
-    "model.compiled.arith",
-    "model.compiled.constitutive",
-    "model.compiled.spectral",
-    "model.compiled.etd",
-    "model.compiled.rates",
-    "model.compiled.wellposedness",
-    "model.compiled.krylov",
-    "model.compiled.linear_rhs",
-    "model.compiled.finite_krylov",
-    "model.compiled.fftw",
-)
 WARM_RESOLUTION = 16
 WARM_T_FINAL = 0.5
-#: The kernels' entry points, compiled in parallel by ``python -m model.warmup``.
-ENTRY_POINTS_FILE = Path(__file__).with_name("compiled") / "entry_points.txt"
 #: At most this many compiling processes unless ``--jobs`` says otherwise (each holds a
 #: numba compiler, a few hundred MB; the tasks are the 8 kernel modules of the list).
 MAX_DEFAULT_JOBS = 8
-
-
-def kernel_dispatchers() -> list[Any]:
-    """Every numba dispatcher of :data:`KERNEL_MODULES` (imported here if needed)."""
-    import importlib
-
-    from numba.core.dispatcher import Dispatcher
-
-    out: list[Any] = []
-    for name in KERNEL_MODULES:
-        module = importlib.import_module(name)
-        out.extend(v for v in vars(module).values() if isinstance(v, Dispatcher))
-    return out
-
-
-def compile_counts() -> dict[str, int]:
-    """Kernel signatures this process has compiled (cache misses) and loaded from the disk
-    cache (cache hits) so far."""
-    misses = hits = 0
-    for d in kernel_dispatchers():
-        misses += sum(d.stats.cache_misses.values())
-        hits += sum(d.stats.cache_hits.values())
-    return {"compiled": misses, "loaded": hits}
 
 
 def warm_numerics(numerics: Numerics) -> Numerics:
@@ -104,7 +70,7 @@ def warm_up(kinds: Iterable[tuple[Parameters, Numerics]] | None = None) -> dict[
     defaults with finite and with linear mechanics) so that every kernel they use is
     compiled (or loaded from the cache). Returns the wall time and :func:`compile_counts`.
     Never raises for a failed tiny run (the real run reports its own failure)."""
-    from model.simulate import run
+    from .simulate import run
 
     if kinds is None:
         kinds = [(Parameters(), Numerics(mechanics=m)) for m in ("finite", "linear")]
@@ -117,113 +83,6 @@ def warm_up(kinds: Iterable[tuple[Parameters, Numerics]] | None = None) -> dict[
         except Exception as e:  # noqa: BLE001 - a warm-up never stops the real work
             errors.append(f"{type(e).__name__}: {e}")
     return {"seconds": time.perf_counter() - t0, **compile_counts(), "errors": errors}
-
-
-@dataclass(frozen=True)
-class EntryPoint:
-    """One signature with which Python calls a compiled kernel: ``function`` (its module and
-    name), ``args`` (its numba argument types as :func:`type_text` writes them; numba's cache
-    keys a compiled signature by these types) and ``seconds``, what compiling it took when the
-    list was made (the longest of a module go first)."""
-
-    function: str
-    args: str
-    seconds: float = 0.0
-
-    def arg_types(self) -> tuple[Any, ...]:
-        """The numba types of ``args`` (:func:`read_types`)."""
-        return read_types(self.args)
-
-    def dispatcher(self) -> Any:
-        """The numba dispatcher of ``function``."""
-        module, _, name = self.function.rpartition(".")
-        return getattr(importlib.import_module(module), name)
-
-    def label(self) -> str:
-        """``module.function(types)``, with numba's short type names."""
-        try:
-            return f"{self.function}({', '.join(str(t) for t in self.arg_types())})"
-        except Exception:  # noqa: BLE001 - a label never fails
-            return f"{self.function}{self.args}"
-
-    def line(self) -> str:
-        """Its line in :data:`ENTRY_POINTS_FILE`."""
-        return f"{self.seconds:.2f}\t{self.function}\t{self.args}"
-
-
-def _type_namespace() -> dict[str, Any]:
-    from numba.core import types
-
-    def tup(*items: Any) -> Any:
-        return types.BaseTuple.from_types(list(items))
-
-    def named(cls: str, *items: Any) -> Any:
-        module, _, name = cls.rpartition(".")
-        return types.BaseTuple.from_types(
-            list(items), getattr(importlib.import_module(module), name)
-        )
-
-    return {**vars(types), "tup": tup, "named": named}
-
-
-def type_text(t: Any) -> str:
-    """numba type ``t`` as text that :func:`read_types` reads back: its ``repr``
-    (``Array(float64, 2, 'C', False, aligned=True)``), tuples as ``tup(...)`` and named tuples
-    as ``named('module.Class', ...)`` (the argument types of a ``typing.NamedTuple`` defined
-    at a module's top level). Raises ``ValueError`` for a type that does not read back."""
-    from numba.core import types
-
-    if isinstance(t, types.BaseTuple):
-        members: Any = t  # a tuple type iterates over its members' types
-        items = ", ".join(type_text(i) for i in members)
-        cls = getattr(t, "instance_class", None)
-        if cls is not None and cls is not tuple:
-            text = f"named({cls.__module__ + '.' + cls.__qualname__!r}, {items})"
-        else:
-            text = f"tup({items})"
-    else:
-        text = repr(t)
-    try:
-        same = read_types(f"tup({text})") == (t,)
-    except Exception:  # noqa: BLE001 - said below
-        same = False
-    if not same:
-        raise ValueError(f"numba type {t} does not read back from {text}")
-    return text
-
-
-def read_types(text: str) -> tuple[Any, ...]:
-    """The tuple of numba types that ``text`` (``tup(...)`` of :func:`type_text`) spells."""
-    from numba.core import types
-
-    # the text comes from our own file (ENTRY_POINTS_FILE); no builtins
-    value: Any = eval(text, {"__builtins__": {}}, _type_namespace())
-    if not isinstance(value, types.BaseTuple):
-        raise ValueError(f"not a tuple of numba types: {text}")
-    members: Any = value
-    return tuple(members)
-
-
-def read_entry_points(path: Path = ENTRY_POINTS_FILE) -> list[EntryPoint]:
-    """The entry points of ``path`` (lines ``seconds<TAB>module.function<TAB>types``; ``#``
-    starts a comment)."""
-    out = []
-    for number, raw in enumerate(path.read_text().splitlines(), 1):
-        text = raw.strip()
-        if not text or text.startswith("#"):
-            continue
-        fields = text.split("\t")
-        if len(fields) != 3:
-            raise ValueError(
-                f"{path}:{number}: expected seconds, function and types separated by tabs"
-            )
-        out.append(EntryPoint(fields[1], fields[2], float(fields[0])))
-    return out
-
-
-def compile_entry_point(entry: EntryPoint) -> None:
-    """Compile ``entry`` in this process (or load it from the disk cache)."""
-    entry.dispatcher().compile(entry.arg_types())
 
 
 def one_line(e: BaseException) -> str:
@@ -242,47 +101,6 @@ def default_jobs() -> int:
     except AttributeError:  # pragma: no cover - not Linux
         cores = os.cpu_count() or 1
     return max(1, min(cores, MAX_DEFAULT_JOBS))
-
-
-@contextlib.contextmanager
-def _locked(folder: str, exclusive: bool) -> Iterator[None]:
-    """An advisory lock on ``folder/.nematic-cache.lock`` (nothing if the folder is absent)."""
-    import fcntl
-
-    if not os.path.isdir(folder):
-        yield
-        return
-    fd = os.open(os.path.join(folder, ".nematic-cache.lock"), os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
-        yield
-    finally:
-        os.close(fd)  # releases the lock
-
-
-def lock_cache_files() -> None:
-    """Make numba's cache reads and writes in this process take a file lock in the cache
-    folder: a write (read the index, choose a data file, write both) excludes every other
-    read and write, so processes that compile at once never give one data file to two
-    signatures, nor lose an index entry. Patches ``numba.core.caching.IndexDataCacheFile``'s
-    ``save`` and ``load`` (numba has no public hook); idempotent."""
-    from numba.core import caching
-
-    cls = caching.IndexDataCacheFile
-    if getattr(cls, "_nematic_locked", False):
-        return
-    save, load = cls.save, cls.load
-
-    def locked_save(self: Any, key: Any, data: Any) -> None:
-        with _locked(self._cache_path, exclusive=True):
-            save(self, key, data)
-
-    def locked_load(self: Any, key: Any) -> Any:
-        with _locked(self._cache_path, exclusive=False):
-            return load(self, key)
-
-    cls.save, cls.load = locked_save, locked_load  # type: ignore[method-assign]
-    cls._nematic_locked = True  # type: ignore[attr-defined]
 
 
 def _compile_group(entries: list[EntryPoint], verbose: bool) -> list[dict[str, Any]]:
@@ -417,7 +235,7 @@ def _ready_stamp(entry_points: Path) -> dict[str, str]:
 
     import numba
 
-    from model.compiled import source_digest
+    from .compiled import source_digest
 
     try:
         listed = hashlib.sha256(entry_points.read_bytes()).hexdigest()[:16]
@@ -437,7 +255,7 @@ def _ready_file() -> Path:
     to start). If it is wrong (cache files deleted), :func:`warm_up` compiles what is missing."""
     import numba
 
-    from model import compiled  # noqa: F401 - points numba's cache at the compiled sources' folder
+    from . import compiled  # noqa: F401 - points numba's cache at the compiled sources' folder
 
     return Path(numba.config.CACHE_DIR) / "nematic-ready.json"  # type: ignore[attr-defined]
 
@@ -474,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
     if not os.environ.get("NUMBA_CACHE_DIR"):  # the hashed folders are ours to tidy
-        from model.compiled import prune_stale_caches
+        from .compiled import prune_stale_caches
 
         for path in prune_stale_caches():
             print(f"removed the kernel cache of an earlier version: {path}", flush=True)

@@ -46,7 +46,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from model import tensors
+from . import tensors
 
 Array = np.ndarray
 

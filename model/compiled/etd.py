@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from model.compiled.arith import rmul
+from .arith import rmul
 
 #: 1/j! for j = 0..21, the Taylor coefficients of the phi functions
 _RECIP_FACT = np.array([1.0 / float(np.prod(np.arange(1, j + 1))) for j in range(22)])

@@ -27,12 +27,12 @@ import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
-from model.compiled import fftw as fx
-from model.compiled import krylov
-from model.compiled.arith import imul
-from model.compiled.constitutive import apply_tangent_into
-from model.compiled.krylov import apply_operator, precondition
-from model.compiled.spectral import green_into
+from . import fftw as fx
+from . import krylov
+from .arith import imul
+from .constitutive import apply_tangent_into
+from .krylov import apply_operator, precondition
+from .spectral import green_into
 
 Array = np.ndarray
 

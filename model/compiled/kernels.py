@@ -4,7 +4,7 @@ two modules)."""
 
 from __future__ import annotations
 
-from model.compiled.constitutive import (
+from .constitutive import (
     apply_tangent_kernel,
     apply_tangent_spin_kernel,
     first_piola_kernel,
@@ -12,21 +12,21 @@ from model.compiled.constitutive import (
     strain_measures_kernel,
     tangent_kernel,
 )
-from model.compiled.etd import (
+from .etd import (
     activity_exponential,
     activity_krogstad,
     etd_combination,
     rk4_update,
     rk_stage,
 )
-from model.compiled.rates import (
+from .rates import (
     activity_rate,
     bulk_terms,
     corotational_rate,
     jaumann_products,
     molecular_field_kernel,
 )
-from model.compiled.spectral import (
+from .spectral import (
     balance_residual_kernel,
     div_hat_kernel,
     grad_hat_kernel,
@@ -35,7 +35,7 @@ from model.compiled.spectral import (
     neg_div_hat_kernel,
     symbol_combination,
 )
-from model.compiled.wellposedness import finite_margin_kernel
+from .wellposedness import finite_margin_kernel
 
 __all__ = [
     "activity_exponential",

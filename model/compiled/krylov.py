@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from model.compiled.arith import rmul
+from .arith import rmul
 
 
 @njit(cache=True)

@@ -31,10 +31,10 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from model.compiled import fftw as fx
-from model.compiled.arith import rmul
-from model.compiled.krylov import apply_operator, gmres, precondition
-from model.compiled.rates import activity_rate, bulk_terms
+from . import fftw as fx
+from .arith import rmul
+from .krylov import apply_operator, gmres, precondition
+from .rates import activity_rate, bulk_terms
 
 Array = np.ndarray
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from model.compiled.arith import imul, rmul
+from .arith import imul, rmul
 
 
 @njit(cache=True)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from model.compiled.constitutive import PACKED
+from .constitutive import PACKED
 
 
 @njit(cache=True)

@@ -14,11 +14,11 @@ module      what it holds
 
 from __future__ import annotations
 
-from model.fourier import SpectralGrid
-from model.mechanics.base import MechanicalState, Mechanics, applied_deformation
-from model.mechanics.finite import FiniteMechanics
-from model.mechanics.linear import LinearMechanics
-from model.parameters import Numerics, Parameters
+from ..fourier import SpectralGrid
+from ..parameters import Numerics, Parameters
+from .base import MechanicalState, Mechanics, applied_deformation
+from .finite import FiniteMechanics
+from .linear import LinearMechanics
 
 __all__ = [
     "FiniteMechanics",

@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from model import constitutive as cl
-from model.backend import kernels
-from model.fourier import SpectralGrid
-from model.parameters import Parameters
+from .. import constitutive as cl
+from ..backend import kernels
+from ..fourier import SpectralGrid
+from ..parameters import Parameters
 
 Array = np.ndarray
 

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from model import krylov
-from model import tensors as T
-from model import wellposedness as wp
-from model.errors import SimulationFailure
-from model.fourier import SpectralGrid
-from model.mechanics.base import MechanicalState, Mechanics
-from model.parameters import Parameters
+from .. import krylov
+from .. import tensors as T
+from .. import wellposedness as wp
+from ..errors import SimulationFailure
+from ..fourier import SpectralGrid
+from ..parameters import Parameters
+from .base import MechanicalState, Mechanics
 
 Array = np.ndarray
 

@@ -385,9 +385,7 @@ def forecast_rounds(plan: Any, basis: Basis, workers: int) -> LaterRounds | None
         idx = [p * cap + j for j in range(planned[p])]
         done = [i for i in idx if plan.outcomes.get(i) is not None]
         values = [float(plan.outcomes[i]) for i in done]
-        classes = [
-            math.nan if plan.classes.get(i) is None else float(plan.classes[i]) for i in done
-        ]
+        classes = [plan.classes.get(i) or () for i in done]
         more = expected_seeds(plan.spec, values, classes, cap, planned[p]) - planned[p]
         if more > 0:
             label = point_label(point)

@@ -39,7 +39,11 @@ def round_counts(spec: PrecisionSpec, cap: int) -> list[int]:
 
 
 def expected_seeds(
-    spec: PrecisionSpec, values: Sequence[float], classes: Sequence[float], cap: int, planned: int
+    spec: PrecisionSpec,
+    values: Sequence[float],
+    classes: Sequence[float | tuple[float, ...]],
+    cap: int,
+    planned: int,
 ) -> int:
     """The seeds a point is expected to end with: ``values`` and ``classes`` of its finished
     seeds (in order, NaN where a run has none), ``planned`` the seeds its rounds so far give
@@ -67,11 +71,19 @@ def expected_seeds(
             ),
             cap,
         )
-    if (
-        spec.unanimous is not None
-        and spec.patterned_above is not None
-        and all(math.isfinite(c) for c in classes)
-        and len({c > spec.patterned_above for c in classes}) == 1
-    ):
+    if spec.unanimous is not None and unanimous_so_far(spec, classes):
         best = min(best, next((m for m in counts if m >= spec.unanimous), cap))
     return best
+
+
+def unanimous_so_far(spec: PrecisionSpec, classes: Sequence[float | tuple[float, ...]]) -> bool:
+    """Whether the finished seeds all have one class (``classes``: each seed's class values,
+    a number or a tuple in the order of the section's thresholds, as
+    :func:`~sweep.precision.decide.decide` takes them)."""
+    thresholds = spec.thresholds
+    rows = [c if isinstance(c, tuple) else (c,) for c in classes]
+    if not rows or not all(
+        len(r) == len(thresholds) and all(math.isfinite(x) for x in r) for r in rows
+    ):
+        return False
+    return len({tuple(x > t.above for x, t in zip(r, thresholds, strict=True)) for r in rows}) == 1

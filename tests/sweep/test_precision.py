@@ -17,7 +17,7 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from sweep.campaign import PrecisionSpec
+from sweep.campaign import PrecisionSpec, Threshold
 from sweep.cli import app
 from sweep.errors import CampaignError
 from sweep.precision.decide import decide, interval_width, rounds_bound, t_quantile
@@ -279,6 +279,21 @@ def test_the_forecast_of_the_unanimity_rule():
     both = spec(width=0.1, unanimous=12, patterned_above=1e-6, initial=4, add=4)
     assert expected_seeds(both, [0.01, 1.0, 0.02, 2.0], relaxed, 50, 4) == 12
     assert expected_seeds(both, [0.17, 0.23, 0.2, 0.2], relaxed, 50, 4) <= 12
+    # a class from two observables (classes:): a tuple per seed, unanimous when every seed
+    # is above (or below) the same thresholds
+    two = spec(
+        unanimous=8,
+        classes=(
+            Threshold("sigma2_S", "sigma2_S_final", 1e-6),
+            Threshold("cos2theta", "cos2theta_final", 0.5),
+        ),
+        initial=4,
+        add=4,
+    )
+    aligned = [(1e-3, 0.9)] * 4
+    assert expected_seeds(two, [1.0] * 4, aligned, 50, 4) == 8
+    assert expected_seeds(two, [1.0] * 4, [*aligned[:3], (1e-3, 0.1)], 50, 4) == 50
+    assert expected_seeds(two, [1.0] * 4, [*aligned[:3], ()], 50, 4) == 50
 
 
 def test_the_rounds_bound():

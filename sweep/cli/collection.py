@@ -15,14 +15,13 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.console import Console
 
 from ..campaign import Campaign
 from ..errors import CampaignError
-from ..spec.collection import Collection, duplicate_names, read_collection
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
@@ -35,6 +34,9 @@ from .app import (
     load,
 )
 
+if TYPE_CHECKING:  # the spec package (and the model) load only when a command needs them
+    from ..spec.collection import Collection
+
 #: exit codes from the most to the least severe: the collection exits with its worst
 SEVERITY = (EXIT_INTERRUPTED, EXIT_BAD_INPUT, EXIT_TOO_MANY_FAILURES, EXIT_FAILED_RUNS, EXIT_OK)
 INDEX = "index.html"
@@ -43,6 +45,8 @@ INDEX = "index.html"
 def collection_or_none(path: Path) -> Collection | None:
     """The collection at ``path`` (exit 2 listing its problems), or ``None`` for a campaign
     file."""
+    from ..spec.collection import read_collection
+
     try:
         return read_collection(path)
     except CampaignError as e:
@@ -76,6 +80,8 @@ def load_members(
             out.append(load(err, member, set_, seeds, None, scheduler, workers))
         except typer.Exit:
             bad = True
+    from ..spec.collection import duplicate_names
+
     problems = duplicate_names([c.name for c in out], [c.source for c in out])
     if problems:
         error(err, CampaignError(coll.source, problems))

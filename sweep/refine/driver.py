@@ -5,7 +5,7 @@ on one dask cluster.
 The loop (:func:`drive_rounds`): replay the rounds from the folder
 (:func:`sweep.refine.rounds.replay`), record the plan (``refine.json``) and print a new
 round's plan; stop when the replay says the campaign is finished; else run the planned runs
-that are not done (:func:`sweep.run.driver.plan_runs` and :func:`~sweep.run.driver.run_campaign`,
+that are not done (:func:`sweep.run.todo.plan_runs` and :func:`~sweep.run.driver.run_campaign`,
 as for a grid) and go round again. Every decision is taken by the replay from the files, so
 an interrupted or killed driver resumes to the same plan.
 """
@@ -21,7 +21,7 @@ from ..campaign import Campaign
 from ..errors import StoreError
 from ..expand import Expansion
 from ..run.clusters import open_cluster
-from ..run.driver import REMOTE_TMP_AGE, RunSummary, dashboard_link, run_campaign
+from ..run.driver import REMOTE_TMP_AGE, RunEvents, RunSummary, dashboard_link, run_campaign
 from ..run.failures import FailureLimit
 from ..run.todo import Plan, plan_runs
 from ..store import CampaignStore
@@ -53,7 +53,7 @@ def drive_rounds(
     *,
     retry_failed: bool = False,
     check_files: bool = False,
-    events: Any = None,
+    events: RunEvents | None = None,
     dashboard: bool = False,
     say: Callable[[str], None] = print,
     limit: FailureLimit | None = None,
@@ -116,7 +116,7 @@ def drive_rounds(
                             campaign.execution, dashboard=dashboard, campaign_dir=store.root
                         )
                     )
-                    if dashboard and events is not None and hasattr(events, "dashboard"):
+                    if dashboard and events is not None:
                         events.dashboard(dashboard_link(link.client))
                 summary = run_campaign(runs, store, link, plan, events, limit=limit)
                 if total is None:

@@ -59,7 +59,7 @@ class Outcomes:
 
 class RunList(Expansion):
     """The planned runs of a refined campaign as an :class:`~sweep.expand.Expansion` (what
-    :func:`sweep.run.driver.plan_runs` and :func:`~sweep.run.driver.run_campaign` take)."""
+    :func:`sweep.run.todo.plan_runs` and :func:`~sweep.run.driver.run_campaign` take)."""
 
     def __init__(self, campaign: Campaign, runs: list[RunSpec]):
         self.campaign = campaign

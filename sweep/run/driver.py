@@ -101,11 +101,23 @@ def dashboard_link(client: Client, timeout: float = 5.0) -> str | None:
 
 
 class RunEvents(Protocol):
-    """What the driver reports (the CLI draws the progress bar from these)."""
+    """What the driver reports (the command line prints it and draws the progress bar from
+    it: :class:`sweep.cli.progress.ProgressEvents`)."""
 
-    def started(self, plan: Plan, total: int, workers: int) -> None: ...
+    def dashboard(self, link: str | None) -> None:
+        """The dask dashboard's link (``None``: none answers from here)."""
 
-    def finished_run(self, run: RunSpec, record: Record) -> None: ...
+    def warming(self) -> None:
+        """The workers start loading (or compiling) the model's kernels."""
+
+    def warmed(self, infos: list[dict[str, Any]], seconds: float) -> None:
+        """The workers are ready: what each host's warm-up reported, and how long it took."""
+
+    def started(self, plan: Plan, total: int, workers: int) -> None:
+        """The runs of ``plan`` are submitted: ``total`` runs in all, on ``workers``."""
+
+    def finished_run(self, run: RunSpec, record: Record) -> None:
+        """A run ended, ok or failed, with its record."""
 
 
 @dataclass
@@ -185,12 +197,12 @@ def run_campaign(
     )
     watch = Supervisor(link, campaign.execution, clock=clock)
     watch.wait_for_first()
-    if events and hasattr(events, "warming"):
+    if events:
         events.warming()
     warm0 = clock()
     warmed = warm_workers(client, expansion)
     log.info("warm-up on %d host(s) in %.1f s: %s", len(warmed), clock() - warm0, warmed)
-    if events and hasattr(events, "warmed"):
+    if events:
         events.warmed(warmed, clock() - warm0)
     watch.check()
     if events:
@@ -376,7 +388,7 @@ def drive(
             with open_cluster(
                 campaign.execution, dashboard=dashboard, campaign_dir=store.root
             ) as link:
-                if dashboard and events and hasattr(events, "dashboard"):
+                if dashboard and events:
                     events.dashboard(dashboard_link(link.client))
                 summary = run_campaign(expansion, store, link, plan, events, limit=limit)
         except KeyboardInterrupt:  # while the cluster was starting or closing

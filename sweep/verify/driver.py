@@ -17,7 +17,7 @@ from typing import Any
 from ..campaign import Campaign
 from ..refine.rounds import RunList
 from ..run.clusters import open_cluster
-from ..run.driver import REMOTE_TMP_AGE, RunSummary, run_campaign
+from ..run.driver import REMOTE_TMP_AGE, RunEvents, RunSummary, run_campaign
 from ..run.todo import plan_runs
 from ..store import CampaignStore
 from .measure import verify_dataset, write_verify
@@ -85,7 +85,7 @@ def run_verification(
     store: CampaignStore,
     *,
     before: bool = False,
-    events: Any = None,
+    events: RunEvents | None = None,
     dashboard: bool = False,
     say: Callable[[str], None] = print,
 ) -> VerifyOutcome:

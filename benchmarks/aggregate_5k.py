@@ -67,7 +67,7 @@ execution: {{workers: 2}}
 FAILED_FRACTION = 0.02
 
 
-def real_run(campaign: Any, expansion: Any, store: Any) -> dict[str, Any]:
+def real_run(campaign: Any, expansion: Any, store: Any) -> Any:
     """The campaign's first run, simulated and stored by the worker's code."""
     from sweep.run.task import RunTask, execute_run
 

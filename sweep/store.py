@@ -29,7 +29,7 @@ import socket
 import time
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict, cast
 
 import numpy as np
 
@@ -83,7 +83,46 @@ MAX_DETAIL = 500
 #: worker nor the driver writes such records now; a results folder may still hold some).
 RETRYABLE_REASONS = ("write_error", "killed_worker")
 
-Record = dict[str, Any]
+
+class Record(TypedDict, total=False):
+    """A run's record (``runs/<run_id>.json``; the manifest keeps :data:`MANIFEST_KEYS`):
+    written by the worker task (:mod:`sweep.run.task`) or on adopting a run file
+    (:func:`record_from_dataset`), read back by every reader of the results folder."""
+
+    run_id: str
+    #: "ok" or "failed"
+    status: str
+    #: why a run failed (a short word: nan, ill_posed, exception, ...) and the detail
+    reason: str
+    detail: str
+    t_failed: float | None
+    traceback: str
+    seed: int | None
+    #: the run's seconds, and the run scalars (sigma2_S_final, lambda_peak, ...)
+    wall_time: float | None
+    scalars: dict[str, float]
+    #: the run file as the worker wrote it: size, checksum, modification time
+    nc_bytes: int | None
+    nc_sha256: str | None
+    nc_mtime_ns: int | None
+    code_version: str
+    git_commit: str
+    finished: str
+    host: str
+    parameters: dict[str, Any]
+    numerics: dict[str, Any]
+    #: the run's file when the results folder could not take it (the spool)
+    saved_to: str | None
+    storage_error: str
+    #: the earlier failures of a run redone with --retry-failed
+    previous_failures: list[dict[str, Any]]
+    #: what the run is: its campaign, settings and swept values (:meth:`RunTask.identity`)
+    campaign: str
+    coords: dict[str, Any]
+    #: the worker process that wrote it
+    pid: int
+    #: the manifest's copy of the run file's stamp (size, mtime), beside the record's own
+    stamp: list[int]
 
 
 # --------------------------------------------------------------------------- run records
@@ -146,7 +185,7 @@ def slim(record: Mapping[str, Any], stamp: list[int]) -> Record:
     if isinstance(out["detail"], str) and len(out["detail"]) > MAX_DETAIL:
         out["detail"] = out["detail"][:MAX_DETAIL] + "..."
     out["stamp"] = stamp
-    return out
+    return cast(Record, out)
 
 
 # --------------------------------------------------------------------------- the lock
@@ -198,7 +237,7 @@ class CampaignStore:
             data = json.loads(self.record_path(run_id).read_text(encoding="utf-8"))
         except (OSError, ValueError):  # missing, unreadable, not JSON: no record
             return None
-        return dict(data) if isinstance(data, dict) else None
+        return cast(Record, dict(data)) if isinstance(data, dict) else None
 
     def load_manifest(self) -> dict[str, Record]:
         """The cached records (columnar JSON: one list per key, one entry per run)."""
@@ -215,7 +254,7 @@ class CampaignStore:
             values = zip(*(data["scalars"][k] for k in names), strict=True) if names else None
             records = {}
             for rid, row in zip(data["run_id"], rows, strict=True):
-                rec = dict(zip(keys, row, strict=True))
+                rec = cast(Record, dict(zip(keys, row, strict=True)))
                 scalar_row = next(values) if values is not None else ()
                 rec["scalars"] = {
                     k: v for k, v in zip(names, scalar_row, strict=True) if v is not None
@@ -345,7 +384,7 @@ class CampaignStore:
             return
         path = self.nc_path(run_id)
         try:
-            full.update(file_stamp(path))
+            full.update(cast(Record, file_stamp(path)))
             self.write_record(full)
         except (OSError, StoreError) as e:
             log.debug("record of %s not refreshed: %s", run_id, e)

@@ -7,13 +7,16 @@ import math
 import statistics
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress, TaskID
 
 from .app import fmt_time
+
+if TYPE_CHECKING:
+    from ..store import Record
 
 
 class ProgressEvents:
@@ -154,7 +157,7 @@ class ProgressEvents:
             self.last_log = self.clock()
             self.console.print(self.progress_line(), highlight=False, markup=False, soft_wrap=True)
 
-    def finished_run(self, run: Any, record: dict[str, Any]) -> None:
+    def finished_run(self, run: Any, record: Record) -> None:
         from ..run.driver import describe_failure
 
         if record.get("status") == "ok":

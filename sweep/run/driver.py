@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from ..campaign import ExecutionSpec
 from ..errors import ClusterError
@@ -290,7 +290,7 @@ def run_campaign(
                 fut.release()
                 return True
             record = _lost_task_record(task, e)
-            record.update(task.identity())
+            record.update(cast(Record, task.identity()))
             store.write_record(record)
         fut.release()
         if record.get("status") == UNSAVED:

@@ -21,7 +21,7 @@ import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from model.parameters import Numerics, Parameters
 
@@ -179,7 +179,9 @@ def _unsaved(
             with contextlib.suppress(OSError):
                 path.parent.rmdir()
     record = failure_record(task, "storage", detail, "", wall)
-    record.update(status=UNSAVED, saved_to=saved_to, storage_error=str(error))
+    record["status"] = UNSAVED
+    record["saved_to"] = saved_to
+    record["storage_error"] = str(error)
     return record
 
 
@@ -258,7 +260,8 @@ def execute_run(task: RunTask) -> Record:
                 traceback.format_exc(),
                 time.perf_counter() - t0,
             )
-    record.update(task.identity(), pid=os.getpid())
+    record.update(cast(Record, task.identity()))
+    record["pid"] = os.getpid()
     try:
         store.write_record(record)
     except StorageError as e:

@@ -21,6 +21,7 @@ from sweep.expand import expand
 from sweep.outputs.aggregate import build_phase
 from sweep.outputs.tables import open_campaign, parquet_engine, runs_table, write_table
 from sweep.spec import parse_campaign
+from sweep.store import Record
 
 
 def invoke(*args: object):
@@ -138,7 +139,7 @@ seeds: 2
 
 def test_a_zip_group_gives_a_column_per_axis():
     expansion = expand(parse_campaign(ZIPPED))
-    recs = {
+    recs: dict[str, Record] = {
         rid: {"status": "ok", "scalars": {"sigma2_S_final": float(i)}}
         for i, rid in enumerate(expansion.run_ids)
         if i % 3

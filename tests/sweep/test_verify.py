@@ -27,6 +27,7 @@ from sweep.expand import expand
 from sweep.identity import PointHasher
 from sweep.spec import parse_campaign
 from sweep.spec.verify import resolve
+from sweep.store import Record
 from sweep.verify import CHANGED, CONVERGED, MISSING, NOT_COMPARED
 from sweep.verify.measure import verify_dataset
 from sweep.verify.sample import plan_sample
@@ -231,7 +232,7 @@ def test_listed_points_select_every_grid_point_with_their_values():
 
 
 # --------------------------------------------------------------------------- the verdicts
-def _record(value: float, lam: float = 0.2, cos: float = 0.0) -> dict:
+def _record(value: float, lam: float = 0.2, cos: float = 0.0) -> Record:
     return {
         "status": "ok",
         "scalars": {
@@ -248,12 +249,12 @@ def test_verdicts_from_known_records():
     c = campaign()
     s = plan_sample(c, expand(c), _fits(c, 0.1, 0.5))
     label = {i: (p.coords["alpha_minus_B"], p.coords["K"]) for i, p in enumerate(s.points)}
-    base = {}
+    base: dict[str, Record] = {}
     for i, runs in enumerate(s.base):
         for r in runs:
             # relaxed below the transition, patterned above it
             base[r.run_id] = _record(1e-9 if label[i][0] == 0.1 else 1e-2)
-    var = {}
+    var: dict[str, Record] = {}
     res, tol, seeds = s.variant_runs
     for i in range(len(s.points)):
         a = label[i][0]

@@ -11,7 +11,6 @@ import html
 import io
 import json
 import os
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -33,6 +32,7 @@ from .app import (
     fmt_time,
     load,
 )
+from .background import launch_detached
 
 if TYPE_CHECKING:  # the spec package (and the model) load only when a command needs them
     from ..spec.collection import Collection
@@ -310,11 +310,10 @@ def run_detached(coll: Collection, campaigns: list[Campaign], results: Path, qui
     """``nematic run COLLECTION --detach``: the collection's driver in the background, its
     output in ``results/NAME/driver.log``; exits."""
     from ..lock import read_lock_holder
-    from ..run.detach import DRIVER_LOG, detached_args, log_tail, start_detached
+    from ..run.detach import DRIVER_LOG
     from ..store import CampaignStore
 
     err = err_console()
-    say = Console(highlight=False, soft_wrap=True, quiet=quiet)
     for c in campaigns:
         holder = read_lock_holder(CampaignStore(results, c.name).lock_path)
         if holder is not None:
@@ -325,28 +324,16 @@ def run_detached(coll: Collection, campaigns: list[Campaign], results: Path, qui
                 f"'nematic stop {coll.source}' stops it",
             )
             raise typer.Exit(EXIT_BAD_INPUT)
-    log = results / coll.name / DRIVER_LOG
-    first = CampaignStore(results, campaigns[0].name).lock_path
-    started = start_detached(detached_args(sys.argv[1:]), log, first)
-    if started.returncode is not None:
-        (error if started.returncode else lambda _c, t: say.print(t, markup=False))(
-            err,
-            f"the collection's driver (pid {started.pid}) ended at once with exit code "
-            f"{started.returncode}; the end of {log}:",
-        )
-        for line in log_tail(log):
-            (err if started.returncode else say).print(f"  {line}", markup=False)
-        raise typer.Exit(started.returncode)
-    say.print(
-        f"collection {coll.name} running in the background: pid {started.pid}; its "
-        f"output goes to {log}\n"
-        f"  follow it:  tail -f {log}\n"
-        f"  progress:   nematic status {coll.source}\n"
-        f"  stop it:    nematic stop {coll.source}"
-        + (f" --results {results}" if results != Path("results") else ""),
-        markup=False,
+    launch_detached(
+        results / coll.name / DRIVER_LOG,
+        CampaignStore(results, campaigns[0].name).lock_path,
+        who="the collection's driver",
+        title=f"collection {coll.name}",
+        status_target=coll.source,
+        stop_target=coll.source,
+        results=results,
+        quiet=quiet,
     )
-    raise typer.Exit(EXIT_OK)
 
 
 def status_collection(

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -14,7 +13,6 @@ from ..campaign import Campaign
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
-    EXIT_OK,
     QuietOpt,
     ResultsOpt,
     VerboseOpt,
@@ -23,6 +21,7 @@ from .app import (
     load,
     setup_logging,
 )
+from .background import launch_detached
 from .collection import collection_or_none, stop_collection
 
 
@@ -30,11 +29,10 @@ def run_detached(c: Campaign, results: Path, campaign: Path, quiet: bool) -> Non
     """``nematic run --detach``: start the driver in the background and say how to follow
     it; exits (0, or the driver's own code if it ended at once)."""
     from ..lock import read_lock_holder
-    from ..run.detach import DRIVER_LOG, detached_args, log_tail, start_detached
+    from ..run.detach import DRIVER_LOG
     from ..store import CampaignStore
 
     err = err_console()
-    say = Console(highlight=False, soft_wrap=True, quiet=quiet)
     store = CampaignStore(results, c.name)
     holder = read_lock_holder(store.lock_path)
     if holder is not None:
@@ -46,32 +44,16 @@ def run_detached(c: Campaign, results: Path, campaign: Path, quiet: bool) -> Non
             f"'nematic stop {c.name}' stops it",
         )
         raise typer.Exit(EXIT_BAD_INPUT)
-    log = store.root / DRIVER_LOG
-    started = start_detached(detached_args(sys.argv[1:]), log, store.lock_path)
-    if started.returncode is not None:
-        text = (
-            f"the driver (pid {started.pid}) ended at once with exit code "
-            f"{started.returncode}; the end of {log}:"
-        )
-        out = err if started.returncode else say
-        if started.returncode:
-            error(err, text)
-        else:
-            say.print(text, markup=False)
-        for line in log_tail(log):
-            out.print(f"  {line}", markup=False)
-        raise typer.Exit(started.returncode)
-    state = "running" if started.holds_lock else "starting (it has not taken the lock yet)"
-    say.print(
-        f"driver {state} in the background: pid {started.pid}; its output goes to "
-        f"{log}\n"
-        f"  follow it:  tail -f {log}\n"
-        f"  progress:   nematic status {campaign}\n"
-        f"  stop it:    nematic stop {c.name}"
-        + (f" --results {results}" if results != Path("results") else ""),
-        markup=False,
+    launch_detached(
+        store.root / DRIVER_LOG,
+        store.lock_path,
+        who="the driver",
+        title="driver",
+        status_target=str(campaign),
+        stop_target=c.name,
+        results=results,
+        quiet=quiet,
     )
-    raise typer.Exit(EXIT_OK)
 
 
 def stop(

@@ -92,21 +92,30 @@ def decide(
     else:
         what = "no width rule"
     if spec.unanimous is not None and n >= spec.unanimous:
-        thresholds = spec.thresholds
-        rows = [c if isinstance(c, tuple) else (c,) for c in classes]
-        if all(len(r) == len(thresholds) and all(math.isfinite(x) for x in r) for r in rows):
-            found = {tuple(x > t.above for x, t in zip(r, thresholds, strict=True)) for r in rows}
-            if len(found) == 1:
-                return Decision(
-                    "unanimous",
-                    n,
-                    f"{n} of {n} seeds " + class_name(spec, found.pop()),
-                    mean,
-                    width,
-                )
+        shared = common_class(spec, classes)
+        if shared is not None:
+            return Decision(
+                "unanimous", n, f"{n} of {n} seeds " + class_name(spec, shared), mean, width
+            )
     if n >= cap:
         return Decision("cap", n, f"every seed run ({n}); {what}", mean, width)
     return Decision("pending", n, what, mean, width)
+
+
+def common_class(
+    spec: PrecisionSpec, classes: Sequence[float | tuple[float, ...]]
+) -> tuple[bool, ...] | None:
+    """The class every seed of ``classes`` has (which of the section's thresholds it is
+    above), or ``None`` when they differ, a seed has no class (NaN, a missing value) or there
+    is no seed."""
+    thresholds = spec.thresholds
+    rows = [c if isinstance(c, tuple) else (c,) for c in classes]
+    if not rows or not all(
+        len(r) == len(thresholds) and all(math.isfinite(x) for x in r) for r in rows
+    ):
+        return None
+    found = {tuple(x > t.above for x, t in zip(r, thresholds, strict=True)) for r in rows}
+    return found.pop() if len(found) == 1 else None
 
 
 def class_name(spec: PrecisionSpec, above: tuple[bool, ...]) -> str:

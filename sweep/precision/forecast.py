@@ -26,7 +26,7 @@ import math
 from collections.abc import Sequence
 
 from ..campaign import PrecisionSpec
-from .decide import decide, interval_width, t_quantile
+from .decide import common_class, decide, interval_width, t_quantile
 
 
 def round_counts(spec: PrecisionSpec, cap: int) -> list[int]:
@@ -71,19 +71,6 @@ def expected_seeds(
             ),
             cap,
         )
-    if spec.unanimous is not None and unanimous_so_far(spec, classes):
+    if spec.unanimous is not None and common_class(spec, classes) is not None:
         best = min(best, next((m for m in counts if m >= spec.unanimous), cap))
     return best
-
-
-def unanimous_so_far(spec: PrecisionSpec, classes: Sequence[float | tuple[float, ...]]) -> bool:
-    """Whether the finished seeds all have one class (``classes``: each seed's class values,
-    a number or a tuple in the order of the section's thresholds, as
-    :func:`~sweep.precision.decide.decide` takes them)."""
-    thresholds = spec.thresholds
-    rows = [c if isinstance(c, tuple) else (c,) for c in classes]
-    if not rows or not all(
-        len(r) == len(thresholds) and all(math.isfinite(x) for x in r) for r in rows
-    ):
-        return False
-    return len({tuple(x > t.above for x, t in zip(r, thresholds, strict=True)) for r in rows}) == 1

@@ -23,6 +23,22 @@ def observable_sources() -> dict[str, str]:
     return out
 
 
+def read_observable(c: Checker, path: KeyPath, value: Any, sources: Mapping[str, str]) -> str:
+    """The observable a section names (one of ``sources``, :func:`observable_sources`);
+    ``sigma2_S`` when it is not one (the problem is added to ``c``), so that the rest of the
+    section is still checked."""
+    if isinstance(value, str) and value in sources:
+        return value
+    c.bad(
+        path,
+        value,
+        "one of "
+        + ", ".join(sorted(sources))
+        + (suggest(value, list(sources)) if isinstance(value, str) else ""),
+    )
+    return "sigma2_S"
+
+
 def read_classes(c: Checker, path: KeyPath, raw: Any) -> tuple[Threshold, ...] | None:
     """A ``classes:`` mapping (observable -> threshold) as thresholds, in the order written;
     ``None`` (problems added to ``c``) when it is not one."""

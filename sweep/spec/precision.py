@@ -25,8 +25,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..campaign import PrecisionSpec
-from .checker import Checker, is_finite_number, is_int, suggest
-from .observables import observable_sources, read_classes
+from .checker import Checker, is_finite_number, is_int
+from .observables import observable_sources, read_classes, read_observable
 
 KEYS = (
     "observable",
@@ -57,15 +57,7 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
 
     observable = sec.get("observable")
     sources = observable_sources()
-    if not isinstance(observable, str) or observable not in sources:
-        c.bad(
-            (*path, "observable"),
-            observable,
-            "one of "
-            + ", ".join(sorted(sources))
-            + (suggest(observable, list(sources)) if isinstance(observable, str) else ""),
-        )
-        observable = "sigma2_S"
+    observable = read_observable(c, (*path, "observable"), observable, sources)
 
     width = sec.get("width")
     if width is not None and (not is_finite_number(width) or not width > 0):

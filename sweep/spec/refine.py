@@ -59,7 +59,7 @@ from ..campaign import (
     Threshold,
 )
 from .checker import Checker, KeyPath, is_finite_number, is_int, suggest
-from .observables import observable_sources, read_classes
+from .observables import observable_sources, read_classes, read_observable
 
 KEYS = (
     "axis",
@@ -292,15 +292,7 @@ def check_refine(
 
     sources = observable_sources()
     observable = sec.get("observable", classes[0].observable if classes else "sigma2_S")
-    if not isinstance(observable, str) or observable not in sources:
-        c.bad(
-            (*path, "observable"),
-            observable,
-            "one of "
-            + ", ".join(sorted(sources))
-            + (suggest(observable, list(sources)) if isinstance(observable, str) else ""),
-        )
-        observable = "sigma2_S"
+    observable = read_observable(c, (*path, "observable"), observable, sources)
 
     patterned = sec.get("patterned_above")
     if criterion == "fraction":

@@ -113,24 +113,18 @@ def estimate_lines(
     of its current round, the later rounds' forecast or bound) and the total, the members
     one after the other."""
     from ..cost.estimate import estimate
-    from ..cost.result import fmt_seconds
+    from ..cost.result import fmt_hours, fmt_seconds
     from ..store import CampaignStore
 
     rows = []
-    total = {
-        "todo": 0,
-        "cpu": 0.0,
-        "wall": 0.0,
-        "later": 0,
-        "later_cpu": 0.0,
-        "later_wall": 0.0,
-        "bound": 0,
-    }
+    todo = later_runs = 0
+    cpu = wall_sum = later_cpu = later_wall = 0.0
+    any_later = False
     for c in campaigns:
         e = estimate(c, CampaignStore(results, c.name), retry_failed=retry_failed)
         wall = e.wall[0] + e.overhead if e.to_do else 0.0
         line = f"  {c.name}: {e.total} planned, {e.done} done, {e.to_do} to do" + (
-            f": {e.cpu[0] / 3600:.2g} CPU-h, {fmt_seconds(wall)} wall on {e.workers} worker(s)"
+            f": {fmt_hours(e.cpu[0])}, {fmt_seconds(wall)} wall on {e.workers} worker(s)"
             if e.to_do
             else ""
         )
@@ -138,29 +132,27 @@ def estimate_lines(
             kind = "expected" if e.later.forecast else "at most"
             line += (
                 f"; later rounds: {kind} {e.later.runs} more runs, "
-                f"{e.later.cpu / 3600:.2g} CPU-h, {fmt_seconds(e.later.wall)} wall"
+                f"{fmt_hours(e.later.cpu)}, {fmt_seconds(e.later.wall)} wall"
             )
-            total["later"] += e.later.runs
-            total["later_cpu"] += e.later.cpu
-            total["later_wall"] += e.later.wall
-            total["bound"] += e.later.at_most if e.later.forecast else e.later.runs
+            any_later = True
+            later_runs += e.later.runs
+            later_cpu += e.later.cpu
+            later_wall += e.later.wall
         rows.append(line)
-        total["todo"] += e.to_do
-        total["cpu"] += e.cpu[0]
-        total["wall"] += wall
+        todo += e.to_do
+        cpu += e.cpu[0]
+        wall_sum += wall
     out = [
         f"collection {coll.name} ({coll.source}): {len(campaigns)} campaign(s), run one "
         "after the other",
         *rows,
-        f"  total now: {total['todo']} runs, {total['cpu'] / 3600:.2g} CPU-h, "
-        f"{fmt_seconds(total['wall'])} wall",
+        f"  total now: {todo} runs, {fmt_hours(cpu)}, {fmt_seconds(wall_sum)} wall",
     ]
-    if total["later"] or total["bound"]:
+    if any_later:
         out.append(
-            f"  total with the later rounds: about {total['todo'] + total['later']} "
-            f"runs, {(total['cpu'] + total['later_cpu']) / 3600:.2g} CPU-h, "
-            f"{fmt_seconds(total['wall'] + total['later_wall'])} wall (the rounds' "
-            "forecasts and bounds as each campaign's --dry-run gives them)"
+            f"  total with the later rounds: about {todo + later_runs} runs, "
+            f"{fmt_hours(cpu + later_cpu)}, {fmt_seconds(wall_sum + later_wall)} wall (the "
+            "rounds' forecasts and bounds as each campaign's --dry-run gives them)"
         )
     out.append(
         "  (each campaign's own `nematic run FILE --dry-run` lists its points and the "

@@ -89,7 +89,8 @@ def fmt_seconds(seconds: float) -> str:
     return f"{h} h {m:02d} min"
 
 
-def _hours(seconds: float) -> str:
+def fmt_hours(seconds: float) -> str:
+    """CPU seconds as CPU-hours: 0.38 CPU-h."""
     return f"{seconds / 3600:.2g} CPU-h"
 
 
@@ -131,7 +132,7 @@ def lines(e: Estimate, *, brief: bool = False) -> list[str]:
         )
     else:
         out.append(
-            f"CPU time: {fmt_seconds(e.cpu[0])} = {_hours(e.cpu[0])} (10-90 %: "
+            f"CPU time: {fmt_seconds(e.cpu[0])} = {fmt_hours(e.cpu[0])} (10-90 %: "
             f"{fmt_seconds(e.cpu[1])} to {fmt_seconds(e.cpu[2])}), one core per run"
         )
         out.append(_wall_line(e, e.workers, e.where, e.wall, e.overhead))
@@ -167,7 +168,7 @@ def lines(e: Estimate, *, brief: bool = False) -> list[str]:
         out.append(
             f"later rounds: about {e.later.runs} more runs expected (each point's "
             "seeds so far projected to its rule), about "
-            f"{_hours(e.later.cpu)} ({fmt_seconds(e.later.cpu)}) and "
+            f"{fmt_hours(e.later.cpu)} ({fmt_seconds(e.later.cpu)}) and "
             f"{fmt_seconds(e.later.wall)} wall on {e.workers} worker(s); at most "
             f"{e.later.at_most} more runs (every point to the cap) in at most "
             f"{e.later.rounds} more round(s)"
@@ -175,7 +176,7 @@ def lines(e: Estimate, *, brief: bool = False) -> list[str]:
     elif e.later is not None:
         out.append(
             f"later rounds: at most {e.later.rounds} more, at most {e.later.runs} more "
-            f"runs (the run bound), about {_hours(e.later.cpu)} "
+            f"runs (the run bound), about {fmt_hours(e.later.cpu)} "
             f"({fmt_seconds(e.later.cpu)}) and at most {fmt_seconds(e.later.wall)} "
             f"wall on {e.workers} worker(s)"
         )

@@ -376,17 +376,14 @@ def forecast_rounds(plan: Any, basis: Basis, workers: int) -> LaterRounds | None
     from ..precision.forecast import expected_seeds
 
     cap = plan.cap
-    planned = [0] * len(plan.grid.points)
-    for rnd in plan.rounds:
-        for p, _ in rnd.runs:
-            planned[p] += 1
     runs = cpu = longest = 0.0
     for p, point in enumerate(plan.grid.points):
-        idx = [p * cap + j for j in range(planned[p])]
+        planned = plan.decisions[p].n  # the seeds its rounds so far give it
+        idx = [p * cap + j for j in range(planned)]
         done = [i for i in idx if plan.outcomes.get(i) is not None]
         values = [float(plan.outcomes[i]) for i in done]
         classes = [plan.classes.get(i) or () for i in done]
-        more = expected_seeds(plan.spec, values, classes, cap, planned[p]) - planned[p]
+        more = expected_seeds(plan.spec, values, classes, cap, planned) - planned
         if more > 0:
             label = point_label(point)
             seconds = basis.cost(point, label, model_seconds(point.numerics))[0]

@@ -242,20 +242,8 @@ def load(
 ) -> Campaign:
     from ..errors import CampaignError
     from ..spec import Overrides, load_campaign
-    from ..spec.collection import read_collection
     from ..spec.yaml_input import parse_assignments
 
-    try:
-        if read_collection(path) is not None:
-            error(
-                console,
-                f"{path} is a collection of campaigns (its campaigns: list): this "
-                "command takes one of its campaign files; validate, run, status and stop "
-                "take the collection",
-            )
-            raise typer.Exit(EXIT_BAD_INPUT)
-    except CampaignError:
-        pass  # its problems are the campaign reader's to report
     try:
         overrides = Overrides(
             settings=parse_assignments(settings or []),
@@ -266,8 +254,28 @@ def load(
         )
         return load_campaign(path, overrides)
     except CampaignError as e:
-        error(console, e)
+        if _is_collection(path):
+            error(
+                console,
+                f"{path} is a collection of campaigns (its campaigns: list): this "
+                "command takes one of its campaign files; validate, run, status and stop "
+                "take the collection",
+            )
+        else:
+            error(console, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
+
+
+def _is_collection(path: Path) -> bool:
+    """Whether the file that is not a valid campaign is a collection of campaigns (asked
+    only then: a campaign file is read once)."""
+    from ..errors import CampaignError
+    from ..spec.collection import read_collection
+
+    try:
+        return read_collection(path) is not None
+    except CampaignError:
+        return False  # its problems are the campaign reader's to report
 
 
 def err_console() -> Console:

@@ -15,9 +15,12 @@ import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .errors import ParameterError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 MECHANICS = ("finite", "linear")
 #: the initial director texture (Parameters.initial; docs/model.md section 5)
@@ -405,3 +408,13 @@ def split_settings(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str,
 
 
 __all__ = ["MECHANICS", "Numerics", "Parameters", "check_compatible", "split_settings"]
+
+
+def save_times(numerics: Numerics) -> np.ndarray:
+    """The save times of a run: regular saves every ``save_every`` plus ``t_final`` and the
+    snapshot times (the time stepper lands on each, so they shape the steps)."""
+    import numpy as np  # here: the command line's help reads this module without numpy
+
+    regular = np.arange(0.0, numerics.t_final, numerics.save_every)
+    times = np.concatenate([regular, [numerics.t_final], numerics.snapshot_times])
+    return np.unique(np.round(times, 12))

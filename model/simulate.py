@@ -23,7 +23,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 import xarray as xr
@@ -33,10 +33,11 @@ from pde.trackers.base import FinishedSimulation
 
 from . import __version__
 from . import tensors as T
+from .checkpoint import SNAPSHOT_FIELDS, CheckpointError, RunState, Schedule
 from .errors import ParameterError, SimulationFailure
 from .initial import initial_fields
 from .observables import first_peak, growth_peak, snapshot_observables
-from .parameters import Numerics, Parameters, check_compatible
+from .parameters import Numerics, Parameters, check_compatible, save_times
 from .pde import ActiveNematicPDE, make_state
 from .provenance import git_commit, library_versions_text
 from .solver import SCHEMES, ETDSolver
@@ -184,11 +185,32 @@ def _attr(value: Any) -> Any:
     return value
 
 
-def save_times(numerics: Numerics) -> np.ndarray:
-    """Regular saves every ``save_every`` plus ``t_final`` and the snapshot times."""
-    regular = np.arange(0.0, numerics.t_final, numerics.save_every)
-    times = np.concatenate([regular, [numerics.t_final], numerics.snapshot_times])
-    return np.unique(np.round(times, 12))
+@overload
+def run(
+    params: Parameters,
+    numerics: Numerics,
+    seed: int,
+    *,
+    progress: Callable[[float], None] | None = ...,
+    start: RunState | None = ...,
+    checkpoint: Callable[[RunState], None] | None = ...,
+    schedule: Schedule = ...,
+    keep_state: Literal[False] = ...,
+) -> xr.Dataset: ...
+
+
+@overload
+def run(
+    params: Parameters,
+    numerics: Numerics,
+    seed: int,
+    *,
+    progress: Callable[[float], None] | None = ...,
+    start: RunState | None = ...,
+    checkpoint: Callable[[RunState], None] | None = ...,
+    schedule: Schedule = ...,
+    keep_state: Literal[True],
+) -> tuple[xr.Dataset, RunState | None]: ...
 
 
 def run(
@@ -197,23 +219,70 @@ def run(
     seed: int,
     *,
     progress: Callable[[float], None] | None = None,
-) -> xr.Dataset:
-    """Simulate paper Eqs. (1)-(5) from the seeded initial condition; see module docstring."""
+    start: RunState | None = None,
+    checkpoint: Callable[[RunState], None] | None = None,
+    schedule: Schedule = Schedule(),
+    keep_state: bool = False,
+) -> xr.Dataset | tuple[xr.Dataset, RunState | None]:
+    """Simulate paper Eqs. (1)-(5) from the seeded initial condition, or continue the run
+    from ``start`` (a :class:`model.checkpoint.RunState` of this run, whose ``t_final`` may be
+    shorter: the result equals the run that never stopped); see the module docstring.
+
+    ``checkpoint`` is called with the run's state after the saves that ``schedule`` says are
+    due (never at the end); ``keep_state`` returns ``(Dataset, end state)``, the end state
+    (None for a failed run) being what a longer run continues from."""
     check_compatible(params, numerics)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError("seed", seed, "an integer >= 0")
+    if start is not None and (why := start.problem(params, numerics, seed)) is not None:
+        raise CheckpointError(f"the state at t = {start.t:g} does not continue this run: {why}")
     wall0 = time.perf_counter()
     eq = ActiveNematicPDE(params, numerics)
     grid = eq.spectral
     linear = numerics.mechanics == "linear"
-    q1, q2, A = initial_fields(params, numerics.resolution, seed)
-    state = make_state(q1, q2, A)
     solver = SCHEMES[numerics.scheme](eq)
     times = save_times(numerics)
     snap_set = {float(t) for t in np.round(list(numerics.snapshot_times) + [numerics.t_final], 12)}
     rows: list[dict[str, float]] = []
     snaps: list[tuple[float, np.ndarray]] = []
     stopped = [math.nan]  # the time the run ended early
+    wall_before, t_start = 0.0, 0.0
+    if start is None:
+        state = make_state(*initial_fields(params, numerics.resolution, seed))
+    else:
+        state = make_state(*np.array(start.fields, dtype=float))
+        _resume(start, state.data, solver, eq)
+        rows = [dict(r) for r in start.rows]
+        snaps = [s for s in start.snaps if float(np.round(s[0], 12)) in snap_set]
+        wall_before, t_start, stopped[0] = start.wall, start.t, start.stopped
+        if (
+            math.isnan(stopped[0])
+            and rows
+            and rows[-1]["time"] == t_start
+            and steady(rows, numerics)
+        ):
+            stopped[0] = t_start  # a longer run may end where a shorter one reached its end
+        if math.isfinite(stopped[0]):
+            snaps = [s for s in start.snaps if float(np.round(s[0], 12)) in snap_set | {stopped[0]}]
+    last = [t_start, wall0]  # the time and wall clock of the last state handed out
+    end: list[RunState | None] = [None]
+
+    def capture(st, t: float, stop: bool) -> RunState:
+        return RunState(
+            t=float(t),
+            fields=st.data.copy(),
+            solver=solver.saved_state(st.data),
+            mechanics=eq.mechanics.saved_state(),
+            counters=_counters(eq),
+            rows=[dict(r) for r in rows],
+            snaps=list(snaps),
+            parameters=params.to_dict(),
+            numerics=numerics.to_dict(),
+            seed=int(seed),
+            stopped=float(t) if stop else math.nan,
+            wall=wall_before + time.perf_counter() - wall0,
+            lineage=[] if start is None else list(start.lineage),
+        )
 
     def record(st, t: float) -> None:
         d = st.data
@@ -234,6 +303,14 @@ def run(
         # every transform of a save counts as the save's (the parts are disjoint)
         eq.mechanics.fft_parts.update(parts)
         eq.mechanics.fft_parts["saves"] += grid.fft.count - count
+        final = stop or t >= numerics.t_final - 1e-9 * max(numerics.t_final, 1.0)
+        if final and keep_state:
+            end[0] = capture(st, t, stop)
+        elif not final and checkpoint is not None:
+            now = time.perf_counter()
+            if schedule.due(t - last[0], now - last[1]):
+                checkpoint(capture(st, t, stop))
+                last[:] = [t, time.perf_counter()]
         if stop:
             stopped[0] = float(t)
             raise FinishedSimulation("steady")
@@ -241,10 +318,17 @@ def run(
     if progress is not None:
         solver.on_step = lambda t, h: progress(min(t / numerics.t_final, 1.0))
     status, reason, detail, t_failed = "ok", "", "", float("nan")
-    tracker = CallbackTracker(record, interrupts=list(times))
-    controller = Controller(solver, t_range=numerics.t_final, tracker=[tracker])
+    # a continued run's save times start after the state's (its save is in its rows)
+    interrupts = [
+        float(t) for t in times if start is None or t > t_start + 1e-12 * max(1.0, t_start)
+    ]
+    tracker = CallbackTracker(record, interrupts=interrupts)
+    controller = Controller(solver, t_range=(t_start, numerics.t_final), tracker=[tracker])
     try:
-        controller.run(state, numerics.dt)
+        if math.isnan(stopped[0]) and interrupts:
+            controller.run(state, numerics.dt)
+        elif keep_state:
+            end[0] = start
     except SimulationFailure as exc:
         status, reason, detail = "failed", exc.reason, exc.detail
         t_failed = float(exc.t) if exc.t is not None else float("nan")
@@ -255,8 +339,8 @@ def run(
         and not all(np.isfinite(rows[-1][k]) for k in ("mean_S", "sigma2_S", "min_J"))
     ):
         status, reason, detail = "failed", "nan", "non-finite observables at the end"
-    wall = time.perf_counter() - wall0
-    return _to_dataset(
+    wall = wall_before + time.perf_counter() - wall0
+    ds = _to_dataset(
         rows,
         snaps,
         grid.x,
@@ -271,6 +355,31 @@ def run(
         wall=wall,
         t_stopped=stopped[0],
     )
+    if not keep_state:
+        return ds
+    return ds, end[0] if status == "ok" else None
+
+
+def _counters(eq: ActiveNematicPDE) -> dict[str, Any]:
+    """The work a run has counted: transforms (in all and by part), spin and CG iterations."""
+    m = eq.mechanics
+    return {
+        "fft_count": int(eq.spectral.fft.count),
+        "fft_parts": {k: int(v) for k, v in m.fft_parts.items()},
+        "spin_iterations": int(m.spin_iterations),
+        "cg_iterations": int(m.cg_iterations),
+    }
+
+
+def _resume(start: RunState, u: np.ndarray, solver: ETDSolver, eq: ActiveNematicPDE) -> None:
+    """Put the solver and the mechanics in the state ``start`` holds (``u``: its fields)."""
+    solver.resume(start.solver, u)
+    eq.mechanics.resume(start.mechanics, u[0], u[1])
+    c = start.counters
+    eq.spectral.fft.count = int(c["fft_count"])
+    eq.mechanics.fft_parts.update({k: int(v) for k, v in c["fft_parts"].items()})
+    eq.mechanics.spin_iterations = int(c["spin_iterations"])
+    eq.mechanics.cg_iterations = int(c["cg_iterations"])
 
 
 def _to_dataset(
@@ -300,7 +409,7 @@ def _to_dataset(
                 "units": UNITS.get(name, "1"),
             },
         )
-    fields = ("q1", "q2", "A", "u1", "u2", "I1bar")
+    fields = SNAPSHOT_FIELDS
     n = len(x)
     snap_t = np.array([s[0] for s in snaps], dtype=float)
     stack = np.stack([s[1] for s in snaps], axis=1) if snaps else np.zeros((len(fields), 0, n, n))

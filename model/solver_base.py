@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from pde.solvers.base import SolverBase
@@ -37,6 +38,19 @@ from .split import make_split
 #: the solvers' logger (model.solver: the name under which they have always logged)
 log = logging.getLogger("model.solver")
 Array = np.ndarray
+
+
+@dataclass
+class SolverState:
+    """The solver's part of a continued run's state (:mod:`model.checkpoint`): the step size
+    the next step tries, the spectra of q1, q2 as the last step produced them (a forward
+    transform of the fields differs from them by rounding; None before the first step), the
+    counters and the smallest well-posedness margin so far."""
+
+    h: float
+    q_hat: Array | None
+    stats: dict[str, int]
+    margin_min: float
 
 
 class ETDSolver(SolverBase):
@@ -97,6 +111,10 @@ class ETDSolver(SolverBase):
         #: smallest well-posedness margin over the accepted states (model.wellposedness)
         self.margin_min = float("inf")
         self._checked_at = float("nan")
+        #: the step size the next step tries (the step control's state between segments)
+        self._dt = float(num.dt)
+        #: the step size a continued run starts with (:meth:`resume`)
+        self._resume_h: float | None = None
 
     # --- the split right-hand side -----------------------------------------------------
     def split(
@@ -254,13 +272,30 @@ class ETDSolver(SolverBase):
         j = np.ceil(-8.0 * np.log2(h / self.dt_max) - 1e-9)
         return float(self.dt_max * 2.0 ** (-max(j, 0.0) / 8.0))
 
+    # --- continuation (model.checkpoint) ---------------------------------------------
+    def saved_state(self, u: Array) -> SolverState:
+        """What a run continued from the accepted state ``u`` needs of the solver."""
+        q_hat = next((hat.copy() for real, hat in self._known if np.array_equal(real, u[:2])), None)
+        return SolverState(self._dt, q_hat, dict(self.stats), self.margin_min)
+
+    def resume(self, saved: SolverState, u: Array) -> None:
+        """Take back :meth:`saved_state` for the state ``u``: the next :meth:`make_stepper`
+        starts with the saved step size instead of its ``dt``."""
+        self._known = [] if saved.q_hat is None else [(u[:2].copy(), saved.q_hat)]
+        self.stats.update(saved.stats)
+        self.margin_min = saved.margin_min
+        self._resume_h = saved.h
+
     # --- py-pde interface --------------------------------------------------------------
     def make_stepper(self, state, dt: float | None = None):  # type: ignore[override]
         self.info["dt"] = dt = float(dt or self.pde.numerics.dt)
         self.info["steps"] = 0
         self.info["stochastic"] = False
         self.info["dt_adaptive"] = self.adaptive
-        self._dt = dt
+        # a continued run steps on with the step size it had (py-pde's dt, which sets the
+        # trackers' time tolerance, stays the run's initial one)
+        self._dt = dt if self._resume_h is None else self._resume_h
+        self._resume_h = None
 
         def stepper(state, t_start: float, t_end: float) -> float:
             u = state.data

@@ -31,6 +31,10 @@ DEFAULT_WORKER_WAIT = 600.0
 #: Default of ``execution.give_up_after``: how long a running campaign goes on without any
 #: usable worker (every job ended, the scheduler unreachable) before the driver gives up.
 DEFAULT_GIVE_UP = 120.0
+#: Default of ``store.checkpoint_every``: a run in progress writes its state every 10 minutes
+#: of wall time (what a lost worker, a cancelled or timed-out batch job costs at most per
+#: run; a run shorter than that writes none, so short runs pay nothing).
+DEFAULT_CHECKPOINT_WALL = 600.0
 #: ``execution.cluster.kind`` -> the dask-jobqueue class.
 CLUSTER_KINDS = {
     "slurm": "SLURMCluster",
@@ -108,10 +112,16 @@ class Product:
 @dataclass(frozen=True)
 class StoreSpec:
     """What the run files keep: ``snapshot_fields`` (``None`` = every snapshot variable the
-    model writes) in ``snapshot_dtype``."""
+    model writes) in ``snapshot_dtype``; a rolling checkpoint of a run in progress every
+    ``checkpoint_tau`` (simulated time) or ``checkpoint_wall`` (seconds), whichever comes
+    first (both infinite: none); and, with ``end_state``, the run's end state, from which a
+    longer run continues (:mod:`sweep.run.continuation`)."""
 
     snapshot_fields: tuple[str, ...] | None = None
     snapshot_dtype: str = "float64"
+    checkpoint_tau: float = math.inf
+    checkpoint_wall: float = DEFAULT_CHECKPOINT_WALL
+    end_state: bool = True
 
 
 @dataclass(frozen=True)

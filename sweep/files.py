@@ -191,9 +191,13 @@ def netcdf_attr(value: Any) -> Any:
 
 
 def atomic_to_netcdf(
-    ds: xr.Dataset, path: Path, encoding: Mapping[str, Mapping[str, Any]] | None = None
+    ds: xr.Dataset,
+    path: Path,
+    encoding: Mapping[str, Mapping[str, Any]] | None = None,
+    groups: Mapping[str, xr.Dataset] | None = None,
 ) -> int:
-    """Write ``ds`` to ``path`` atomically; return the file's size in bytes."""
+    """Write ``ds`` to ``path`` atomically, with ``groups`` (name -> Dataset) as netCDF groups
+    of the same file; return the file's size in bytes."""
     ds = ds.copy(deep=False)
     ds.attrs = {k: netcdf_attr(v) for k, v in ds.attrs.items()}
     for var in ds.variables.values():
@@ -207,6 +211,8 @@ def atomic_to_netcdf(
         enc.setdefault(str(name), {}).setdefault("_FillValue", None)
     with atomic_path(path) as tmp, dask.config.set(scheduler="synchronous"):
         ds.to_netcdf(tmp, engine="netcdf4", encoding=enc)
+        for name, group in (groups or {}).items():
+            group.to_netcdf(tmp, mode="a", group=name, engine="netcdf4")
         size = tmp.stat().st_size
     return size
 

@@ -12,6 +12,11 @@ Anything that changes a run's result or its file changes the id, so an id names 
 content; the code version and the backend (:data:`EXECUTION_ONLY`: compiled or numpy, equal
 to rounding) do not enter (they are recorded in the file instead).
 Bump :data:`SCHEMA_VERSION` only when the canonical form itself changes.
+
+A run's end (``t_final``) is part of its id: a run file holds one run to one end, and no
+result of one ``t_final`` is read as another's. The runs of one trajectory to different ends
+share a :func:`trajectory_id` (the id without ``t_final``), by which a longer run finds the
+shorter finished run whose end state it continues.
 """
 
 from __future__ import annotations
@@ -125,6 +130,23 @@ def run_id_for(
     p = parameters if isinstance(parameters, Parameters) else Parameters.from_dict(parameters)
     n = numerics if isinstance(numerics, Numerics) else Numerics.from_dict(numerics)
     return hash_canonical(p.to_dict(), n.to_dict(), seed)
+
+
+#: The numerics a run can be continued past (model.checkpoint.MAY_DIFFER): left out of its
+#: trajectory's id.
+CONTINUABLE = ("t_final", "snapshot_times")
+
+
+def trajectory_id(parameters: Mapping[str, Any], numerics: Mapping[str, Any], seed: int) -> str:
+    """The id of a run's trajectory: the hash of its canonical text without ``t_final`` and
+    ``snapshot_times``, shared by the runs of one (parameters, numerics, seed) to different
+    ends, so a longer run finds
+    the shorter ones it continues (:mod:`sweep.run.continuation`). Complete dicts, as for
+    :func:`hash_canonical`; never a run_id (a run's canonical numerics always holds
+    ``t_final``)."""
+    return hash_canonical(
+        parameters, {k: v for k, v in numerics.items() if k not in CONTINUABLE}, seed
+    )
 
 
 class PointHasher:

@@ -21,6 +21,7 @@ missing from it is read again.
 from __future__ import annotations
 
 import contextlib
+import datetime as _dt
 import json
 import logging
 import math
@@ -53,11 +54,13 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 RUNS = "runs"
+#: the rolling checkpoints of the runs in progress (sweep.run.continuation)
+CHECKPOINTS = "checkpoints"
 MANIFEST = "manifest.json"
 PHASE = "phase.nc"
 LOCK = ".lock"
 CAMPAIGN_COPY = "campaign.yaml"
-MANIFEST_VERSION = 4
+MANIFEST_VERSION = 5
 #: Record keys kept in the manifest (the sidecar also has traceback, parameters, numerics).
 MANIFEST_KEYS = (
     "status",
@@ -73,6 +76,8 @@ MANIFEST_KEYS = (
     "code_version",
     "git_commit",
     "finished",
+    "trajectory",
+    "end_state",
 )
 #: Variables every run file holds (checked when a file without a checksum is verified; the
 #: time axis is ``t``, or ``time`` in files of schema 1: see :func:`series_time`).
@@ -123,6 +128,18 @@ class Record(TypedDict, total=False):
     pid: int
     #: the manifest's copy of the run file's stamp (size, mtime), beside the record's own
     stamp: list[int]
+    #: the run's trajectory (:func:`sweep.identity.trajectory_id`: its id without t_final)
+    trajectory: str
+    #: the time of the end state its file keeps (a longer run continues it), or None
+    end_state: float | None
+    #: where this execution of the run started (0, or the time of the state it continued),
+    #: the run whose end state it continued (or ""), and every state it went through
+    #: ("checkpoint@t", "<run_id>@t"; :mod:`sweep.run.continuation`)
+    started_at: float
+    continued_from: str
+    lineage: list[str]
+    #: why a checkpoint or end state it found was not used (corrupt, another run's, ...)
+    start_warning: str
 
 
 # --------------------------------------------------------------------------- run records
@@ -196,6 +213,7 @@ class CampaignStore:
         self.results_root = Path(results_root)
         self.root = self.results_root / name
         self.runs_dir = self.root / RUNS
+        self.checkpoints_dir = self.root / CHECKPOINTS
         self.manifest_path = self.root / MANIFEST
         self.phase_path = self.root / PHASE
         self.lock_path = self.root / LOCK
@@ -209,6 +227,37 @@ class CampaignStore:
 
     def record_path(self, run_id: str) -> Path:
         return self.runs_dir / f"{run_id}.json"
+
+    def checkpoint_path(self, run_id: str) -> Path:
+        """The rolling checkpoint of a run in progress (:mod:`sweep.run.continuation`)."""
+        return self.checkpoints_dir / f"{run_id}.nc"
+
+    def in_progress(self) -> dict[str, dict[str, Any]]:
+        """The runs with a rolling checkpoint: run_id -> ``t`` (the time it holds, NaN if
+        unreadable), ``checkpoint`` (its path) and ``written`` (its mtime, ISO 8601). Reads
+        the attributes alone (one header per run in progress)."""
+        import netCDF4
+
+        out: dict[str, dict[str, Any]] = {}
+        try:
+            entries = sorted(self.checkpoints_dir.glob("*.nc"))
+        except OSError:
+            return out
+        for path in entries:
+            try:
+                written = _dt.datetime.fromtimestamp(path.stat().st_mtime, _dt.UTC)
+                with netCDF4.Dataset(path, "r") as nc:
+                    t = float(nc.getncattr("t"))
+            except FileNotFoundError:  # the run ended meanwhile
+                continue
+            except Exception:  # noqa: BLE001 - unreadable: the run will ignore it too
+                t = math.nan
+            out[path.stem] = {
+                "t": t,
+                "checkpoint": str(path),
+                "written": written.isoformat(timespec="seconds"),
+            }
+        return out
 
     def lock(self) -> CampaignLock:
         return CampaignLock(self.lock_path)
@@ -426,7 +475,7 @@ class CampaignStore:
         run, so the driver passes a safety age there)."""
         n = 0
         now = time.time()
-        for directory in (self.root, self.runs_dir):
+        for directory in (self.root, self.runs_dir, self.checkpoints_dir):
             with contextlib.suppress(FileNotFoundError), os.scandir(directory) as it:
                 for entry in it:
                     if entry.name.startswith(".") and entry.name.endswith(TMP_SUFFIX):

@@ -9,7 +9,8 @@ displacement gradient is exactly that).
 :class:`Mechanics` is what the time stepper and the PDE call (:meth:`~Mechanics.solve`,
 :meth:`~Mechanics.state_at`, :meth:`~Mechanics.corotational`, :meth:`~Mechanics.rate_margin`,
 and the warm start's :meth:`~Mechanics.checkpoint`, :meth:`~Mechanics.restore`,
-:meth:`~Mechanics.predict`); :class:`MechanicalState` is what a solve returns. The two
+:meth:`~Mechanics.predict`, and for a continued run :meth:`~Mechanics.saved_state` and
+:meth:`~Mechanics.resume`); :class:`MechanicalState` is what a solve returns. The two
 mechanics are :class:`model.mechanics.linear.LinearMechanics` and
 :class:`model.mechanics.finite.FiniteMechanics`.
 
@@ -173,6 +174,14 @@ class Mechanics(ABC):
 
     def predict(self, dt: float) -> None:  # noqa: B027 (no warm start: nothing to do)
         """Move Newton's warm start ``dt`` ahead along the displacement rate."""
+
+    def saved_state(self) -> dict[str, Array]:
+        """What a run continued from this moment needs of the mechanics besides the fields
+        (:mod:`model.checkpoint`): nothing here (every solve starts from zero)."""
+        return {}
+
+    def resume(self, arrays: dict[str, Array], q1: Array, q2: Array) -> None:  # noqa: B027
+        """Take back :meth:`saved_state` (taken after the save at the order ``q1``, ``q2``)."""
 
     # --- shared helpers ----------------------------------------------------------------
     def _green(self, b_hat: Array, a: float) -> Array:

@@ -71,6 +71,25 @@ class FiniteMechanics(Mechanics):
     def predict(self, dt: float) -> None:
         self.u_hat = self.u_hat + dt * self.udot_hat
 
+    def saved_state(self) -> dict[str, Array]:
+        """The displacement (warm start or integrated), its rate and the rate's gradient."""
+        return {
+            "u_hat": self.u_hat.copy(),
+            "udot_hat": self.udot_hat.copy(),
+            "udot_grad": self.udot_grad.copy(),
+        }
+
+    def resume(self, arrays: dict[str, Array], q1: Array, q2: Array) -> None:
+        """Take back :meth:`saved_state`, taken right after the save's solve: its solution
+        (F and P of ``u_hat`` at this order, which :meth:`state_at` reuses in the next step)
+        is evaluated again, a pure function of them (F from ``u_hat``: the save's solve had
+        no F guess), so the next step starts from bitwise the same data."""
+        self.u_hat = np.array(arrays["u_hat"], dtype=complex)
+        self.udot_hat = np.array(arrays["udot_hat"], dtype=complex)
+        self.udot_grad = np.array(arrays["udot_grad"], dtype=float)
+        F, P, _, _ = self._evaluate(self.u_hat, q1, q2)
+        self._solution = (self.u_hat, q1.copy(), q2.copy(), F, P)
+
     def _tangent(self, F: Array, q1: Array, q2: Array) -> Array:
         """The tangent dP/dF (the backend's ``tangent_kernel``)."""
         m = self.moduli

@@ -124,6 +124,22 @@ def status(
             f"run time: median {report.median_run_time:.3g} s, mean "
             f"{report.mean_run_time:.3g} s (successful runs)"
         )
+    if report.in_progress:
+        console.print(
+            f"{len(report.in_progress)} pending run(s) with a checkpoint (in progress, or "
+            "continued from it by the next 'nematic run'):"
+        )
+        for run in report.in_progress[:MAX_IN_PROGRESS]:
+            coords = ", ".join(f"{k} = {_label(v)}" for k, v in run["coords"].items())
+            console.print(
+                f"  {run['run_id']} ({coords}): t = {run['t']:.6g} of {run['t_final']:g}, "
+                f"checkpoint {run['checkpoint']} (written {run['written']})",
+                markup=False,
+            )
+        if len(report.in_progress) > MAX_IN_PROGRESS:
+            console.print(
+                f"  ... and {len(report.in_progress) - MAX_IN_PROGRESS} more (--json lists all)"
+            )
     for ax in report.per_axis:
         table = Table(title=f"by {ax.dim}", title_justify="left", show_edge=False)
         for col in (ax.dim, "done", "failed", "pending"):
@@ -155,6 +171,14 @@ def status(
 
     for line in verification_lines(store.root, detail=verbose):
         console.print(line, markup=False)
+
+
+#: runs in progress listed by name (``--json`` has all)
+MAX_IN_PROGRESS = 20
+
+
+def _label(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def driver_line(running: dict[str, Any] | None, name: str) -> str:

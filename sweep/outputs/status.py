@@ -62,6 +62,9 @@ class StatusReport:
     #: runs whose file is missing, truncated or corrupt (counted as pending: redone by `run`)
     unreadable: int = 0
     unreadable_examples: list[dict[str, str]] = field(default_factory=list)
+    #: pending runs with a rolling checkpoint (in progress, or interrupted): ``run_id``,
+    #: ``coords``, ``t`` (the time reached), ``t_final``, ``checkpoint`` (its path), ``written``
+    in_progress: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -190,6 +193,13 @@ def campaign_status(
         unreadable_examples=unreadable,
     )
     report.running = read_lock_holder(store.lock_path)
+    for rid, info in store.in_progress().items():
+        pos = expansion.position.get(rid)
+        if pos is not None and state[pos] == 2:
+            run = expansion.run(pos)
+            report.in_progress.append(
+                {"run_id": rid, "coords": run.coords, "t_final": run.point.numerics.t_final, **info}
+            )
     if times:
         report.mean_run_time = float(np.mean(times))
         report.median_run_time = float(np.median(times))

@@ -219,7 +219,9 @@ def run_campaign(
         while queue and ac.count() < watch.window:
             i = queue.pop()
             run = expansion.run(i)
-            task = RunTask.from_spec(run, store, campaign.name, campaign.store, plan.history.get(i))
+            task = RunTask.from_spec(
+                run, store, campaign.name, campaign.store, plan.history.get(i), plan.parents.get(i)
+            )
             # a run that goes again (its result was lost) gets a new key: the old one may
             # still be being released
             again = attempts[i] = attempts.get(i, -1) + 1

@@ -13,6 +13,7 @@ import contextlib
 import ctypes
 import ctypes.util
 import logging
+import math
 import os
 import socket
 import time
@@ -29,12 +30,15 @@ from ..campaign import StoreSpec
 from ..errors import StorageError, StoreError
 from ..expand import Expansion, RunSpec
 from ..files import atomic_to_netcdf, file_stamp
-from ..identity import SCHEMA_VERSION
+from ..identity import SCHEMA_VERSION, trajectory_id
 from ..store import CampaignStore, Record, now_iso, record_from_dataset
+from . import continuation
 
 if TYPE_CHECKING:
     import xarray as xr
     from distributed import Client
+
+    from model.checkpoint import RunState
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +62,15 @@ class RunTask:
     #: the earlier failures of a run that is redone (``--retry-failed``), oldest first: its
     #: new record keeps them as ``previous_failures``
     previous_failures: tuple[dict[str, Any], ...] = ()
+    #: the run's trajectory id (:func:`sweep.identity.trajectory_id`)
+    trajectory: str = ""
+    #: the finished shorter run of its trajectory whose end state it continues (or None)
+    parent: str | None = None
+    #: the rolling checkpoint's interval: simulated time, wall seconds (store.checkpoint_every)
+    checkpoint_tau: float = math.inf
+    checkpoint_wall: float = math.inf
+    #: whether the run file keeps the end state (store.end_state)
+    end_state: bool = True
 
     @classmethod
     def from_spec(
@@ -67,18 +80,25 @@ class RunTask:
         campaign: str,
         store_spec: StoreSpec,
         previous_failures: list[dict[str, Any]] | None = None,
+        parent: str | None = None,
     ) -> RunTask:
+        parameters, numerics = run.point.parameters.to_dict(), run.point.numerics.to_dict()
         return cls(
             run_id=run.run_id,
             seed=run.seed,
-            parameters=run.point.parameters.to_dict(),
-            numerics=run.point.numerics.to_dict(),
+            parameters=parameters,
+            numerics=numerics,
             runs_dir=str(store.runs_dir.resolve()),
             campaign=campaign,
             coords=dict(run.point.coords),
             snapshot_fields=store_spec.snapshot_fields,
             snapshot_dtype=store_spec.snapshot_dtype,
             previous_failures=tuple(previous_failures or ()),
+            trajectory=trajectory_id(parameters, numerics, run.seed),
+            parent=parent,
+            checkpoint_tau=store_spec.checkpoint_tau,
+            checkpoint_wall=store_spec.checkpoint_wall,
+            end_state=store_spec.end_state,
         )
 
     def identity(self) -> dict[str, Any]:
@@ -223,14 +243,24 @@ def execute_run(task: RunTask) -> Record:
     read-only, file size limit) is not a failure of the run: no record is written (the run
     stays pending), the Dataset is kept in :func:`spool_dir` if possible, and the returned
     record has status :data:`UNSAVED` with the cause (the driver stops)."""
+    from model.checkpoint import Schedule
     from model.simulate import run as simulate
 
     restore_heap_reuse()
     store = CampaignStore(Path(task.runs_dir).parent.parent, Path(task.runs_dir).parent.name)
     t0 = time.perf_counter()
+    start = continuation.Start()
+    end_state: RunState | None = None
     try:
-        ds = simulate(
-            Parameters.from_dict(task.parameters), Numerics.from_dict(task.numerics), task.seed
+        start = continuation.starting_state(task, store)
+        ds, end_state = simulate(
+            Parameters.from_dict(task.parameters),
+            Numerics.from_dict(task.numerics),
+            task.seed,
+            start=start.state,
+            checkpoint=continuation.Checkpointer(store, task.run_id),
+            schedule=Schedule(task.checkpoint_tau, task.checkpoint_wall),
+            keep_state=True,
         )
     except Exception as e:  # noqa: BLE001 - any crash is recorded, the campaign goes on
         record = failure_record(
@@ -244,12 +274,20 @@ def execute_run(task: RunTask) -> Record:
         encoding: dict[str, Any] = {}
         try:
             ds, encoding = prepare_dataset(ds, task)
+            ds.attrs.update(continuation.run_attrs(start))
             path = store.nc_path(task.run_id)
-            atomic_to_netcdf(ds, path, encoding)
+            keep = task.end_state and end_state is not None
+            groups = (
+                {continuation.STATE_GROUP: end_state.to_dataset(snapshots=False)}
+                if keep and end_state is not None
+                else {}
+            )
+            atomic_to_netcdf(ds, path, encoding, groups)
             stamp = file_stamp(path)
             record = record_from_dataset(ds, task.run_id, stamp["nc_bytes"], stamp)
             if record.get("wall_time") is None:
                 record["wall_time"] = time.perf_counter() - t0
+            record["end_state"] = end_state.t if groups and end_state is not None else None
         except StorageError as e:
             return _unsaved(task, e, ds, encoding, time.perf_counter() - t0)
         except Exception as e:  # noqa: BLE001 - a bug, not the storage: recorded as failed
@@ -262,10 +300,15 @@ def execute_run(task: RunTask) -> Record:
             )
     record.update(cast(Record, task.identity()))
     record["pid"] = os.getpid()
+    record["trajectory"] = task.trajectory
+    record.update(cast(Record, continuation.run_attrs(start)))
+    if start.warning:
+        record["start_warning"] = start.warning
     try:
         store.write_record(record)
     except StorageError as e:
         return _unsaved(task, e, None, {}, time.perf_counter() - t0)
+    continuation.remove_checkpoint(store, task.run_id)
     return record
 
 

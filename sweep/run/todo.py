@@ -12,6 +12,7 @@ from typing import Any
 from ..expand import Expansion
 from ..files import atomic_path
 from ..store import RETRYABLE_REASONS, CampaignStore, Record
+from . import continuation
 from .failures import previous_failures
 from .task import spool_dir
 
@@ -34,6 +35,9 @@ class Plan:
     #: failed runs redone (``--retry-failed``): position -> the failures their new record
     #: keeps as ``previous_failures`` (:func:`sweep.run.failures.previous_failures`)
     history: dict[int, list[dict[str, Any]]] = field(default_factory=dict)
+    #: runs to do that continue the end state of a shorter finished run of their
+    #: trajectory (a campaign whose t_final grew): position -> that run's id
+    parents: dict[int, str] = field(default_factory=dict)
 
     @property
     def discarded(self) -> int:
@@ -87,6 +91,9 @@ def plan_runs(
             plan.history[i] = previous_failures(full if full is not None else rec)
         else:
             plan.failed.append(i)
+    for i in (*plan.done, *plan.failed):  # killed between its record and the cleanup
+        continuation.remove_checkpoint(store, expansion.run_ids[i])
+    plan.parents = continuation.find_parents(expansion, plan.todo, records)
     return plan
 
 

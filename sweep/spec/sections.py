@@ -6,12 +6,14 @@ against their registries and the campaign's axes."""
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 from ..campaign import (
     AMB,
+    DEFAULT_CHECKPOINT_WALL,
     DEFAULT_SEEDS,
     MAX_SEED,
     NUMERICS_TYPES,
@@ -25,7 +27,18 @@ from ..limits import DEFAULT_MAX_RUNS, parse_size
 from .checker import Checker, KeyPath, is_int, suggest
 
 LIMITS_KEYS = ("max_runs", "run_memory")
-STORE_KEYS = ("snapshot_times", "snapshot_fields", "snapshot_dtype")
+STORE_KEYS = (
+    "snapshot_times",
+    "snapshot_fields",
+    "snapshot_dtype",
+    "checkpoint_every",
+    "end_state",
+)
+#: ``store.checkpoint_every`` as wall time: a number and a unit
+WALL_RE = re.compile(
+    r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|sec|seconds?|min|minutes?|h|hours?)\s*$"
+)
+WALL_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0}
 #: Snapshot variables of a run file (model.simulate.run contract).
 SNAPSHOT_FIELDS = ("q1", "q2", "A", "u1", "u2", "I1bar")
 SNAPSHOT_DTYPES = ("float64", "float32")
@@ -154,7 +167,40 @@ def read_store(c: Checker, raw: Any, read: Mapping[str, Any]) -> StoreSpec:
     if dtype not in SNAPSHOT_DTYPES:
         c.bad(("store", "snapshot_dtype"), dtype, " or ".join(SNAPSHOT_DTYPES))
         dtype = "float64"
-    return StoreSpec(snapshot_fields=fields, snapshot_dtype=dtype)
+    tau, wall = math.inf, DEFAULT_CHECKPOINT_WALL
+    if "checkpoint_every" in store:
+        tau, wall = _checkpoint_every(c, store["checkpoint_every"])
+    end_state = store.get("end_state", True)
+    if not isinstance(end_state, bool):
+        c.bad(("store", "end_state"), end_state, "true or false")
+        end_state = True
+    return StoreSpec(
+        snapshot_fields=fields,
+        snapshot_dtype=dtype,
+        checkpoint_tau=tau,
+        checkpoint_wall=wall,
+        end_state=end_state,
+    )
+
+
+def _checkpoint_every(c: Checker, raw: Any) -> tuple[float, float]:
+    """``store.checkpoint_every`` -> (tau, wall seconds): a number is simulated time, a text
+    such as "10 min" (s, min, h) wall time, ``false`` none."""
+    allowed = (
+        "a time in tau (a number > 0), a wall time such as '10 min', '30 s' or '2 h', "
+        "or false (no checkpoints)"
+    )
+    if raw is False:
+        return math.inf, math.inf
+    if isinstance(raw, (int, float)) and not isinstance(raw, bool):
+        if raw > 0 and math.isfinite(raw):
+            return float(raw), math.inf
+    elif isinstance(raw, str) and (m := WALL_RE.match(raw)):
+        seconds = float(m.group(1)) * WALL_UNITS[m.group(2)[0]]
+        if seconds > 0:
+            return math.inf, seconds
+    c.bad(("store", "checkpoint_every"), raw, allowed)
+    return math.inf, DEFAULT_CHECKPOINT_WALL
 
 
 def read_seeds(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[int, ...]:

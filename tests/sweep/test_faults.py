@@ -311,12 +311,13 @@ def test_a_result_that_cannot_be_written_is_kept_and_moved_in(tmp_path, monkeypa
     from sweep.run.task import RunTask, execute_run, spool_dir
     from sweep.run.todo import import_spool
 
-    def fake_run(params, numerics, seed):  # the storage is under test, not the model
-        return xr.Dataset(
+    def fake_run(params, numerics, seed, **kw):  # the storage is under test, not the model
+        ds = xr.Dataset(
             {"sigma2_S": ("t", [0.0, 0.1]), "sigma2_S_final": ((), 0.1)},
             coords={"t": [0.0, 1.0]},
             attrs={"status": "ok", "seed": seed},
         )
+        return (ds, None) if kw.get("keep_state") else ds
 
     monkeypatch.setattr(model.simulate, "run", fake_run)
     monkeypatch.setenv("NEMATIC_SPOOL", str(tmp_path / "spool"))

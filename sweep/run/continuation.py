@@ -1,0 +1,227 @@
+"""Where a run starts from: its own rolling checkpoint (it was interrupted in progress), the
+end state of a shorter finished run of its trajectory (a campaign whose ``t_final`` grew), or
+t = 0. Either way the result equals the run that never stopped (:mod:`model.checkpoint`).
+
+Files:
+
+- ``results/<campaign>/checkpoints/<run_id>.nc``: the rolling checkpoint of a run in
+  progress (:meth:`model.checkpoint.RunState.to_dataset`), written atomically at
+  ``store.checkpoint_every``, each one replacing the last, removed once the run's record is
+  written. One per run in progress, so the folder stays bounded.
+- the group ``state`` of a finished run's file: its end state (``store.end_state``, on by
+  default), without the snapshots (the file holds them).
+
+A checkpoint or end state that cannot be read, is corrupt (its checksum) or is another run's
+is never loaded: the run starts from the next option and its record says why
+(``start_warning``). A longer run continues a shorter one's end state only if that run file
+holds every snapshot field the new run keeps, at its precision (else the earlier snapshots
+could not be written as a straight run would write them).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+from model.parameters import Numerics, Parameters
+
+from ..errors import StorageError
+from ..files import atomic_to_netcdf
+from ..identity import trajectory_id
+from ..store import CampaignStore, Record
+
+if TYPE_CHECKING:
+    from model.checkpoint import RunState
+
+    from ..expand import Expansion
+
+log = logging.getLogger(__name__)
+
+
+class Run(Protocol):
+    """What this module reads of a run to do (a :class:`sweep.run.task.RunTask`)."""
+
+    @property
+    def run_id(self) -> str: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def parameters(self) -> dict[str, Any]: ...
+    @property
+    def numerics(self) -> dict[str, Any]: ...
+    @property
+    def parent(self) -> str | None: ...
+    @property
+    def snapshot_fields(self) -> tuple[str, ...] | None: ...
+    @property
+    def snapshot_dtype(self) -> str: ...
+
+
+#: the run file's group holding the run's end state
+STATE_GROUP = "state"
+
+
+def checkpoint_path(store: CampaignStore, run_id: str) -> Path:
+    """Where the rolling checkpoint of ``run_id`` is."""
+    return store.checkpoint_path(run_id)
+
+
+def remove_checkpoint(store: CampaignStore, run_id: str) -> None:
+    """Remove the rolling checkpoint of a run whose record is written."""
+    with contextlib.suppress(FileNotFoundError):
+        checkpoint_path(store, run_id).unlink()
+
+
+@dataclass
+class Start:
+    """What a run starts from: ``state`` (None: t = 0), ``origin`` ("checkpoint", the run
+    id of the run it continues, or ""), and why a checkpoint or end state found was not used."""
+
+    state: RunState | None = None
+    origin: str = ""
+    warning: str = ""
+
+
+def _model_of(task: Run) -> tuple[Parameters, Numerics]:
+    return Parameters.from_dict(task.parameters), Numerics.from_dict(task.numerics)
+
+
+def starting_state(task: Run, store: CampaignStore) -> Start:
+    """The run's own checkpoint if it holds a state of this run, else the end state of the
+    run ``task.parent`` if it continues to this one, else t = 0 (see the module docstring)."""
+    from model.checkpoint import CheckpointError, load
+
+    params, numerics = _model_of(task)
+    warnings: list[str] = []
+    path = checkpoint_path(store, task.run_id)
+    if path.exists():
+        try:
+            state = load(path)
+            why = state.problem(params, numerics, task.seed)
+            if why is not None:
+                raise CheckpointError(f"{path}: not this run's state: {why}")
+        except CheckpointError as e:
+            warnings.append(f"checkpoint ignored: {e}")
+            log.warning("run %s: checkpoint ignored: %s", task.run_id, e)
+        else:
+            state.lineage = [*state.lineage, f"checkpoint@{state.t:.12g}"]
+            return Start(state, "checkpoint", "; ".join(warnings))
+    if task.parent:
+        try:
+            state = read_end_state(store.nc_path(task.parent), task)
+            why = state.problem(params, numerics, task.seed)
+            if why is not None:
+                raise CheckpointError(f"it does not continue to this run: {why}")
+        except CheckpointError as e:
+            warnings.append(f"end state of run {task.parent} not used: {e}")
+            log.warning("run %s: end state of run %s not used: %s", task.run_id, task.parent, e)
+        else:
+            state.lineage = [*state.lineage, f"{task.parent}@{state.t:.12g}"]
+            return Start(state, task.parent, "; ".join(warnings))
+    return Start(None, "", "; ".join(warnings))
+
+
+def read_end_state(path: Path, task: Run) -> RunState:
+    """The end state in the run file ``path``, its snapshots taken from the file; raises
+    :class:`CheckpointError` if there is none, it is unreadable, or the file lacks a
+    snapshot field ``task`` keeps (or keeps it at a lower precision)."""
+    import numpy as np
+    import xarray as xr
+
+    from model.checkpoint import SNAPSHOT_FIELDS, CheckpointError, RunState
+
+    try:
+        group = xr.load_dataset(path, group=STATE_GROUP, engine="netcdf4")
+        main = xr.load_dataset(path, engine="netcdf4")
+    except FileNotFoundError as e:
+        raise CheckpointError(f"{path} does not exist") from e
+    except (OSError, ValueError, RuntimeError, KeyError) as e:
+        raise CheckpointError(f"{path} holds no readable end state ({e})") from e
+    try:
+        state = RunState.from_dataset(group)
+    except CheckpointError as e:
+        raise CheckpointError(f"{path}: {e}") from e
+    keep = task.snapshot_fields if task.snapshot_fields is not None else SNAPSHOT_FIELDS
+    for name in keep:
+        if name not in main.data_vars:
+            raise CheckpointError(f"{path} has no snapshots of {name}, which this run keeps")
+        if task.snapshot_dtype == "float64" and main[name].dtype != np.float64:
+            raise CheckpointError(f"{path} keeps {name} as {main[name].dtype}, this run as float64")
+    n = state.fields.shape[-1]
+    snaps = []
+    for i, t in enumerate(main["snapshot_time"].values if "snapshot_time" in main else ()):
+        stack = np.full((len(SNAPSHOT_FIELDS), n, n), math.nan)
+        for j, name in enumerate(SNAPSHOT_FIELDS):
+            if name in main.data_vars:
+                stack[j] = np.asarray(main[name].values[i], dtype=float)
+        snaps.append((float(t), stack))
+    state.snaps = snaps
+    return state
+
+
+class Checkpointer:
+    """The callback :func:`model.simulate.run` hands each due state to: writes it as the
+    run's rolling checkpoint, atomically. A checkpoint that cannot be written (a full disk)
+    does not stop the run: it is logged, counted in :attr:`failed`, and the run goes on."""
+
+    def __init__(self, store: CampaignStore, run_id: str):
+        self.path = checkpoint_path(store, run_id)
+        self.run_id = run_id
+        self.written = 0
+        self.failed = ""
+
+    def __call__(self, state: RunState) -> None:
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_to_netcdf(state.to_dataset(), self.path)
+            self.written += 1
+        except (OSError, StorageError) as e:
+            self.failed = str(e)
+            log.warning("run %s: checkpoint at t = %g not written: %s", self.run_id, state.t, e)
+
+
+def find_parents(
+    expansion: Expansion, todo: list[int], records: Mapping[str, Record]
+) -> dict[int, str]:
+    """For each run to do, the finished run of its trajectory it continues: the one with an
+    end state (ok, ``end_state`` recorded) that reached furthest below its ``t_final``."""
+    ends: dict[str, tuple[float, str]] = {}
+    for rid, rec in records.items():
+        t_end, traj = rec.get("end_state"), rec.get("trajectory")
+        if rec.get("status") == "ok" and isinstance(t_end, (int, float)) and traj:
+            best = ends.get(str(traj))
+            if best is None or float(t_end) > best[0]:
+                ends[str(traj)] = (float(t_end), rid)
+    if not ends:
+        return {}
+    out: dict[int, str] = {}
+    for i in todo:
+        run = expansion.run(i)
+        numerics = run.point.numerics
+        traj = trajectory_id(run.point.parameters.to_dict(), numerics.to_dict(), run.seed)
+        found = ends.get(traj)
+        if found is not None and found[1] != run.run_id and found[0] < numerics.t_final:
+            out[i] = found[1]
+    return out
+
+
+def run_attrs(start: Start) -> dict[str, Any]:
+    """The run file's attributes that say where the run started: ``started_at`` (0 or the
+    state's time), ``continued_from`` (the run id whose end state it continued, or "") and
+    ``lineage`` (every state it went through: "checkpoint@t", "<run_id>@t")."""
+    state = start.state
+    parent = start.origin if start.origin not in ("", "checkpoint") else ""
+    if state is not None and not parent:  # a checkpoint of a run that continued another
+        parent = next(
+            (e.split("@")[0] for e in state.lineage if not e.startswith("checkpoint")), ""
+        )
+    return {
+        "started_at": 0.0 if state is None else float(state.t),
+        "continued_from": parent,
+        "lineage": [] if state is None else list(state.lineage),
+    }

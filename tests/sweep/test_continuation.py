@@ -1,0 +1,279 @@
+"""Runs that go on (sweep.run.continuation): a worker or a driver SIGKILLed at random points
+resumes each run from its rolling checkpoint with a result equal, array by array, to the run
+that never stopped; a campaign whose t_final grew continues its finished runs from their end
+states (recomputing nothing); a corrupt or foreign checkpoint is ignored with a warning;
+``store.checkpoint_every`` is read and checked."""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from sweep_helpers import file_stamps, kill_group, records, start_driver, wait_for
+from typer.testing import CliRunner
+
+from model.checkpoint import RunState, Schedule, load
+from model.parameters import Numerics, Parameters
+from model.simulate import run as simulate
+from sweep.cli import app
+from sweep.errors import CampaignError
+from sweep.expand import expand
+from sweep.run.continuation import STATE_GROUP, checkpoint_path
+from sweep.run.task import RunTask, execute_run
+from sweep.spec import load_campaign
+from sweep.store import CampaignStore
+
+CAMPAIGN = """\
+name: {name}
+description: continuation test
+parameters: {{noise_modes: 8}}
+numerics: {{resolution: {n}, t_final: {t_final}, save_every: {save}, mechanics: {mechanics},
+           snapshot_times: [{snap}]}}
+sweep:
+  axes:
+    alpha_minus_B: {values}
+seeds: {seeds}
+store: {{checkpoint_every: {every}}}
+execution: {{workers: 2}}
+"""
+
+
+def campaign(folder: Path, name: str, **kw) -> Path:
+    values = dict(
+        n=32, t_final=300, save=5, mechanics="finite", snap=100, values="[0.3]", seeds=1, every=1
+    )
+    values.update(kw)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{name}.yaml"
+    path.write_text(CAMPAIGN.format(name=name, **values))
+    return path
+
+
+def invoke(*args: object):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def straight(task: RunTask) -> xr.Dataset:
+    """The run as one uninterrupted simulation."""
+    return simulate(
+        Parameters.from_dict(task.parameters), Numerics.from_dict(task.numerics), task.seed
+    )
+
+
+def assert_equal_runs(ref: xr.Dataset, path: Path) -> None:
+    """Every array of the run file equal to the straight run's, bit for bit, and its steps."""
+    with xr.open_dataset(path) as ds:
+        for name in ref.data_vars:
+            if name != "wall_time":
+                assert np.array_equal(ref[name].values, ds[name].values, equal_nan=True), name
+        for key in ("solver_steps", "solver_rejected", "solver_rhs", "solver_newton"):
+            assert int(ds.attrs[key]) == int(ref.attrs[key]), key
+
+
+def tasks_of(path: Path, results: Path) -> tuple[CampaignStore, list[RunTask]]:
+    c = load_campaign(path)
+    expansion = expand(c)
+    store = CampaignStore(results, c.name)
+    store.ensure()
+    return store, [
+        RunTask.from_spec(expansion.run(i), store, c.name, c.store) for i in range(len(expansion))
+    ]
+
+
+#: a worker process that runs one task (what a dask worker does with it)
+WORKER = (
+    "import pickle, sys\n"
+    "from sweep.run.task import execute_run\n"
+    "execute_run(pickle.load(open(sys.argv[1], 'rb')))\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("mechanics", "n"), [("finite", 32), ("linear", 64)], ids=["finite", "linear"]
+)
+def test_a_worker_killed_at_random_points_resumes_exactly(tmp_path, mechanics, n):
+    """SIGKILL of the worker process twice, each at a random moment after its run has
+    written a checkpoint (mid-step, mid-save or mid-write), then a third worker finishes:
+    every array equals the straight run's."""
+    rng = random.Random(f"{mechanics}-{os.getpid()}")
+    store, (task,) = tasks_of(
+        campaign(tmp_path, f"kill-{mechanics}", mechanics=mechanics, n=n), tmp_path / "results"
+    )
+    pickled = tmp_path / "task.pickle"
+    pickled.write_bytes(pickle.dumps(task))
+    ckpt = checkpoint_path(store, task.run_id)
+    resumed_from = []
+    for _ in range(2):
+        before = ckpt.stat().st_mtime_ns if ckpt.exists() else None
+        proc = subprocess.Popen([sys.executable, "-c", WORKER, str(pickled)])
+        try:
+            # a new checkpoint of this worker, then a random moment
+            wait_for(
+                lambda before=before: ckpt.exists() and ckpt.stat().st_mtime_ns != before,
+                120,
+                "a checkpoint",
+                interval=0.01,
+            )
+            time.sleep(rng.uniform(0.0, 0.25))
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert not store.nc_path(task.run_id).exists(), "the run finished before the kill"
+        resumed_from.append(load(ckpt).t)
+    record = execute_run(task)
+    assert record["status"] == "ok", record
+    lineage = record["lineage"]
+    assert lineage
+    assert all(e.startswith("checkpoint@") for e in lineage)
+    assert float(lineage[-1].split("@")[1]) == resumed_from[-1]
+    assert record["started_at"] == resumed_from[-1] > 0
+    assert not ckpt.exists()  # folded into the run file as its end state
+    assert_equal_runs(straight(task), store.nc_path(task.run_id))
+
+
+def test_sigkill_of_the_driver_and_its_workers_then_resume(tmp_path):
+    path = campaign(tmp_path, "driver", values="[0.2, 0.3]", seeds=1)
+    results = tmp_path / "results"
+    store, tasks = tasks_of(path, results)
+    checkpoints = store.root / "checkpoints"
+    proc = start_driver(
+        ["run", str(path), "--results", str(results), "--no-figures"], tmp_path / "log"
+    )
+    try:
+        wait_for(
+            lambda: (
+                (checkpoints.exists() and any(checkpoints.glob("*.nc"))) or proc.poll() is not None
+            ),
+            120,
+            "a checkpoint",
+            interval=0.01,
+        )
+        assert proc.poll() is None, (tmp_path / "log").read_text()
+        time.sleep(0.3)
+    finally:
+        kill_group(proc)  # SIGKILL: the driver and its local workers at once
+    in_progress = {p.stem: load(p).t for p in checkpoints.glob("*.nc")}
+    assert in_progress
+    status = json.loads(invoke("status", path, "--results", results, "--json").output)
+    assert status["done"] + status["pending"] == 2
+    shown = {r["run_id"]: r for r in status["in_progress"]}
+    assert set(shown) == set(in_progress)
+    for rid, t in in_progress.items():
+        assert shown[rid]["t"] == t
+        assert shown[rid]["t_final"] == 300
+        assert shown[rid]["checkpoint"] == str(store.checkpoint_path(rid))
+    text = " ".join(invoke("status", path, "--results", results).output.split())
+    assert "pending run(s) with a checkpoint" in text
+    assert f"t = {next(iter(in_progress.values())):.6g} of 300" in text
+    result = invoke("run", path, "--results", results, "--no-figures")
+    assert result.exit_code == 0, result.output
+    recs = records(store.runs_dir)
+    for task in tasks:
+        rec = recs[task.run_id]
+        if task.run_id in in_progress:
+            assert rec["lineage"][-1] == f"checkpoint@{in_progress[task.run_id]:.12g}"
+        assert_equal_runs(straight(task), store.nc_path(task.run_id))
+    assert not list(checkpoints.glob("*"))
+
+
+def test_a_campaign_whose_t_final_grew_continues_its_runs(tmp_path):
+    kw = dict(n=32, t_final=5, save=0.5, snap=1, values="[0.1, 0.2]", seeds=2)
+    path = campaign(tmp_path, "grow", **kw)
+    results = tmp_path / "results"
+    assert invoke("run", path, "--results", results, "--no-figures").exit_code == 0
+    runs = results / "grow" / "runs"
+    short = records(runs)
+    assert len(short) == 4
+    assert all(r["end_state"] == 5.0 for r in short.values())
+    stamps = file_stamps(runs)
+    path.write_text(path.read_text().replace("t_final: 5,", "t_final: 10,"))
+    result = invoke("run", path, "--results", results, "--no-figures")
+    assert result.exit_code == 0, result.output
+    after = records(runs)
+    longer = {rid: r for rid, r in after.items() if rid not in short}
+    assert len(longer) == 4
+    by_trajectory = {r["trajectory"]: rid for rid, r in short.items()}
+    for rec in longer.values():
+        parent = by_trajectory[rec["trajectory"]]
+        assert rec["continued_from"] == parent
+        assert rec["started_at"] == 5.0
+        assert rec["lineage"] == [f"{parent}@5"]
+        assert rec["end_state"] == 10.0
+    assert {k: v for k, v in file_stamps(runs).items() if k in short} == stamps  # untouched
+    # the same runs straight to 10, in another results folder: equal array by array
+    other = tmp_path / "straight"
+    assert invoke("run", path, "--results", other, "--no-figures").exit_code == 0
+    for rid in longer:
+        with xr.open_dataset(other / "grow" / "runs" / f"{rid}.nc") as ref:
+            assert_equal_runs(ref.load(), runs / f"{rid}.nc")
+    # the aggregate reads each run at the campaign's t_final
+    with xr.open_dataset(results / "grow" / "phase.nc") as phase:
+        assert float(phase.attrs.get("num_t_final", 10.0)) == 10.0
+
+
+def test_a_corrupt_or_foreign_checkpoint_is_ignored_with_a_warning(tmp_path):
+    path = campaign(
+        tmp_path, "bad", t_final=10, save=2.5, snap=5, values="[0.2, 0.3]", every="false"
+    )
+    results = tmp_path / "results"
+    store, (a, b) = tasks_of(path, results)
+    # a checkpoint of run a, planted as run b's; garbage as run a's
+    states: list[RunState] = []
+    simulate(
+        Parameters.from_dict(a.parameters),
+        Numerics.from_dict(a.numerics),
+        a.seed,
+        checkpoint=states.append,
+        schedule=Schedule(tau=5.0),
+    )
+    checkpoint_path(store, b.run_id).parent.mkdir(parents=True)
+    states[0].to_dataset().to_netcdf(checkpoint_path(store, b.run_id))
+    checkpoint_path(store, a.run_id).write_bytes(b"CDF\x01 not really a checkpoint")
+    result = invoke("run", path, "--results", results, "--no-figures")
+    assert result.exit_code == 0, result.output
+    recs = records(store.runs_dir)
+    assert "not a readable netCDF" in recs[a.run_id]["start_warning"]
+    assert "not this run's state" in recs[b.run_id]["start_warning"]
+    for task in (a, b):
+        assert recs[task.run_id]["started_at"] == 0.0
+        assert not checkpoint_path(store, task.run_id).exists()
+        assert_equal_runs(straight(task), store.nc_path(task.run_id))
+        with xr.open_dataset(store.nc_path(task.run_id), group=STATE_GROUP) as state:
+            assert float(state.attrs["t"]) == 10.0
+
+
+def test_store_checkpoint_every_is_read_and_checked(tmp_path):
+    def store_of(text: str):
+        p = tmp_path / "c.yaml"
+        p.write_text(textwrap.dedent(f"name: c\nnumerics: {{resolution: 128}}\n{text}"))
+        return load_campaign(p).store
+
+    default = store_of("")
+    assert (default.checkpoint_tau, default.checkpoint_wall, default.end_state) == (
+        np.inf,
+        600.0,
+        True,
+    )
+    assert store_of("store: {checkpoint_every: 25}\n").checkpoint_tau == 25.0
+    assert store_of("store: {checkpoint_every: 2 min}\n").checkpoint_wall == 120.0
+    assert store_of("store: {checkpoint_every: 30 s}\n").checkpoint_wall == 30.0
+    off = store_of("store: {checkpoint_every: false, end_state: false}\n")
+    assert (off.checkpoint_tau, off.checkpoint_wall, off.end_state) == (np.inf, np.inf, False)
+    for bad in ("0", "-3", "ten minutes", "5 weeks", "true"):
+        p = tmp_path / "bad.yaml"
+        p.write_text(f"name: c\nnumerics: {{resolution: 128}}\nstore:\n  checkpoint_every: {bad}\n")
+        with pytest.raises(CampaignError, match=f"{p}:4: store.checkpoint_every"):
+            load_campaign(p)

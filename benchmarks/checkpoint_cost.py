@@ -17,6 +17,7 @@ size, the size of one checkpoint; then the cost of one checkpoint (from ``dense`
 benchmarks/checkpoint_cost.json.
 
     python benchmarks/checkpoint_cost.py [--t-final 100] [--repeat 3] [--dense 5]
+    python benchmarks/checkpoint_cost.py --only default   # one run of one setting
 """
 
 from __future__ import annotations
@@ -57,16 +58,18 @@ def settings(dense: float) -> dict[str, StoreSpec]:
 
 
 def one(task: RunTask, store: CampaignStore) -> dict[str, float]:
+    """One run through the worker's code; the checkpoints' own time measured around each."""
     from sweep.run import continuation
 
-    written: list[int] = []
+    written: list[tuple[int, float]] = []
     original = continuation.Checkpointer.__call__
 
-    def counting(self, state):  # type: ignore[no-untyped-def]
+    def timed(self, state):  # type: ignore[no-untyped-def]
+        t0 = time.perf_counter()
         original(self, state)
-        written.append(self.path.stat().st_size)
+        written.append((self.path.stat().st_size, time.perf_counter() - t0))
 
-    continuation.Checkpointer.__call__ = counting  # type: ignore[method-assign]
+    continuation.Checkpointer.__call__ = timed  # type: ignore[method-assign]
     try:
         store.discard(task.run_id)
         t0 = time.perf_counter()
@@ -84,9 +87,39 @@ def one(task: RunTask, store: CampaignStore) -> dict[str, float]:
         "steps": steps,
         "fft": fft,
         "checkpoints": len(written),
-        "checkpoint_bytes": max(written, default=0),
+        "checkpoint_bytes": max((b for b, _ in written), default=0),
+        "checkpoint_seconds": statistics.median(s for _, s in written) if written else 0.0,
         "run_file_bytes": int(record["nc_bytes"] or 0),
     }
+
+
+def end_state_write(task: RunTask, store: CampaignStore, repeat: int = 5) -> tuple[float, float]:
+    """Median seconds to write the run file without and with its end state (the worker's
+    own atomic write, fsync included)."""
+    from model.simulate import run as simulate
+    from sweep.files import atomic_to_netcdf
+    from sweep.run.continuation import STATE_GROUP
+    from sweep.run.task import prepare_dataset
+
+    params, numerics = expansion_model(task)
+    ds, end = simulate(params, numerics, task.seed, keep_state=True)
+    assert end is not None
+    ds, encoding = prepare_dataset(ds, task)
+    path = store.root / "write-test.nc"
+    times: dict[bool, list[float]] = {False: [], True: []}
+    for _ in range(repeat):
+        for with_state in (False, True):
+            groups = {STATE_GROUP: end.to_dataset(snapshots=False)} if with_state else {}
+            t0 = time.perf_counter()
+            atomic_to_netcdf(ds, path, encoding, groups)
+            times[with_state].append(time.perf_counter() - t0)
+    return statistics.median(times[False]), statistics.median(times[True])
+
+
+def expansion_model(task: RunTask):  # type: ignore[no-untyped-def]
+    from model.parameters import Numerics, Parameters
+
+    return Parameters.from_dict(task.parameters), Numerics.from_dict(task.numerics)
 
 
 def main() -> None:
@@ -94,6 +127,11 @@ def main() -> None:
     ap.add_argument("--t-final", type=float, default=100.0)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--dense", type=float, default=5.0)
+    ap.add_argument(
+        "--only",
+        choices=("off", "default", "dense"),
+        help="one run of one setting, printed, no JSON (to time two settings as processes)",
+    )
     args = ap.parse_args()
     campaign = parse_campaign(CAMPAIGN.format(t_final=args.t_final), "ckpt.yaml")
     expansion = expand(campaign)
@@ -103,6 +141,10 @@ def main() -> None:
         store = CampaignStore(Path(tmp), "ckpt")
         store.ensure()
         specs = settings(args.dense)
+        if args.only:
+            task = RunTask.from_spec(expansion.run(0), store, "ckpt", specs[args.only])
+            print(args.only, one(task, store))
+            return
         for _ in range(args.repeat):
             for name, spec in specs.items():
                 task = RunTask.from_spec(expansion.run(0), store, "ckpt", spec)
@@ -112,11 +154,9 @@ def main() -> None:
         name: {k: statistics.median(r[k] for r in runs) for k in runs[0]}
         for name, runs in out.items()
     }
-    per_checkpoint = (med["dense"]["wall"] - med["off"]["wall"]) / max(
-        med["dense"]["checkpoints"], 1
-    )
+    per_checkpoint = med["dense"]["checkpoint_seconds"]
     at_default = per_checkpoint / DEFAULT_CHECKPOINT_WALL
-    default_here = med["default"]["wall"] / med["off"]["wall"] - 1.0
+    dense_share = med["dense"]["checkpoints"] * per_checkpoint / med["off"]["wall"]
     print()
     print(
         f"128^2 finite strain, t = 0..{args.t_final:g}, {args.repeat} alternated repeats (medians)"
@@ -131,15 +171,24 @@ def main() -> None:
             f"{m['checkpoints']:6.0f} {m['run_file_bytes'] / 1e6:8.2f} MB"
         )
     print(
-        f"one checkpoint: {med['dense']['checkpoint_bytes'] / 1e6:.2f} MB, {per_checkpoint:.3f} s"
+        f"one checkpoint: {med['dense']['checkpoint_bytes'] / 1e6:.2f} MB, written in "
+        f"{per_checkpoint:.3f} s (measured around each write)"
     )
     print(
-        f"at the default interval ({DEFAULT_CHECKPOINT_WALL / 60:g} min of wall time) a longer "
-        f"run pays {100 * at_default:.3f} % for its checkpoints"
+        f"at the default interval ({DEFAULT_CHECKPOINT_WALL / 60:g} min of wall time) a run "
+        f"longer than that pays {100 * at_default:.3f} % for its checkpoints; the dense "
+        f"setting ({med['dense']['checkpoints']:.0f} checkpoints) "
+        f"{100 * dense_share:.1f} % of this run"
     )
+    with tempfile.TemporaryDirectory() as tmp:
+        store = CampaignStore(Path(tmp), "ckpt")
+        store.ensure()
+        task = RunTask.from_spec(expansion.run(0), store, "ckpt", StoreSpec())
+        plain, with_state = end_state_write(task, store)
+    end_share = (with_state - plain) / med["off"]["wall"]
     print(
-        "the defaults on this run (no rolling checkpoint, the end state kept): "
-        f"{100 * default_here:+.1f} %"
+        f"the run file: written in {plain:.3f} s alone, {with_state:.3f} s with its end state: "
+        f"the end state adds {100 * end_share:.1f} % to this run"
     )
     result = {
         "command": "python benchmarks/checkpoint_cost.py " + " ".join(sys.argv[1:]),
@@ -150,7 +199,9 @@ def main() -> None:
         "medians": med,
         "seconds_per_checkpoint": per_checkpoint,
         "overhead_at_default_interval": at_default,
-        "overhead_of_defaults_on_this_run": default_here,
+        "overhead_of_dense_checkpoints_on_this_run": dense_share,
+        "run_file_write_seconds": {"alone": plain, "with_end_state": with_state},
+        "overhead_of_end_state_on_this_run": end_share,
     }
     (ROOT / "benchmarks" / "checkpoint_cost.json").write_text(json.dumps(result, indent=1) + "\n")
 

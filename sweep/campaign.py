@@ -417,6 +417,8 @@ class Campaign:
     precision: PrecisionSpec | None = None
     #: the ``verify:`` section (convergence and sensitivity checks: sweep/verify), or ``None``
     verify: VerifySpec | None = None
+    #: the ``initial:`` section (runs begin from another campaign's: sweep/expand), or None
+    initial: InitialSpec | None = None
 
     @property
     def axes(self) -> tuple[Axis, ...]:
@@ -433,6 +435,24 @@ class Campaign:
     @property
     def n_runs(self) -> int:
         return self.n_points * len(self.seeds)
+
+
+@dataclass(frozen=True)
+class InitialSpec:
+    """``initial.from`` (sweep/expand): the parent campaign, the axis values it pins, the
+    seed (None: the same), the time (None: the end), the parent's file, the file:line."""
+
+    parent: Campaign
+    path: str
+    point: Mapping[str, Any] = field(default_factory=dict)
+    seed: int | None = None
+    time: float | None = None
+    location: str = ""
+
+    @property
+    def time_text(self) -> str:
+        """The time as it enters the identity and the lineage: ``end`` or the number."""
+        return "end" if self.time is None else f"{self.time:.12g}"
 
 
 #: phase.nc variable -> (scalar in the run file, long_name). Units are all "1": the model is

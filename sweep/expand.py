@@ -1,4 +1,5 @@
-"""Campaign -> grid points -> runs.
+"""Campaign -> grid points -> runs (and, for a campaign whose runs begin from another
+campaign's, ``initial: {from: ...}``, the parent run of each: :class:`Parents`).
 
 The grid is the product of the campaign's dims (a zip group is one dim); every grid point is
 run once per seed. Runs are numbered point-major: run ``i`` is point ``i // n_seeds`` with seed
@@ -9,14 +10,14 @@ from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from model.parameters import Numerics, Parameters, check_compatible
 
-from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign
-from .identity import PointHasher
+from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec, same_value
+from .identity import PointHasher, hash_canonical
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +42,9 @@ class RunSpec:
     run_id: str
     seed: int
     point: GridPoint
+    #: where the run begins (``initial.from``): the parent run's ``run`` id, its ``time``
+    #: ("end" or the time) and its ``campaign``; None: the seeded texture
+    start: dict[str, str] | None = None
 
     @property
     def coords(self) -> dict[str, Any]:
@@ -75,19 +79,86 @@ def make_point(campaign: Campaign, index: tuple[int, ...], coords: dict[str, Any
     return point
 
 
+class Parents:
+    """The parent run (its run id, position in the parent's expansion) of each run of a
+    campaign with ``initial.from``: the parent campaign's grid point whose swept values are
+    the ones ``point`` pins, the others the child's own values of the same name, and the seed
+    ``seed`` (``same``: the child's own). The child's run id includes the parent run's id and
+    the time (:func:`sweep.identity.hash_canonical`'s ``start``), so a child of another parent,
+    or of another time, is another run."""
+
+    def __init__(self, spec: InitialSpec, parent: Expansion):
+        self.spec, self.parent = spec, parent
+        self._index = {}
+        for i, point in enumerate(parent.points):
+            self._index[point.index] = i
+
+    def of(self, point: GridPoint, seed: int) -> tuple[str, int]:
+        """(parent run id, its position in the parent expansion) of the child run at
+        ``point`` with ``seed``; ``KeyError`` naming the value that has no parent."""
+        campaign = self.parent.campaign
+        index = []
+        for dim in campaign.dims:
+            found = None
+            for i in range(len(dim)):
+                if all(
+                    same_value(axis.values[i], self.value(axis.name, point.coords))
+                    for axis in dim.axes
+                ):
+                    found = i
+                    break
+            if found is None:
+                names = ", ".join(
+                    f"{a.name} = {self.value(a.name, point.coords)!r}" for a in dim.axes
+                )
+                raise KeyError(f"campaign {campaign.name} has no point with {names}")
+            index.append(found)
+        seed_of_parent = seed if self.spec.seed is None else self.spec.seed
+        if seed_of_parent not in campaign.seeds:
+            raise KeyError(f"campaign {campaign.name} has no seed {seed_of_parent}")
+        p = self._index[tuple(index)] * len(campaign.seeds) + campaign.seeds.index(seed_of_parent)
+        return self.parent.run_ids[p], p
+
+    def value(self, name: str, coords: Mapping[str, Any]) -> Any:
+        """The parent axis ``name``'s value for a child point: pinned, else the child's."""
+        if name in self.spec.point:
+            return self.spec.point[name]
+        if name in coords:
+            return coords[name]
+        raise KeyError(f"the parent's axis {name} is neither pinned in 'point' nor swept here")
+
+
 class Expansion:
     """Every run of a campaign with its run_id (built once; cheap for 10^5 runs)."""
+
+    #: where each run begins (campaigns with ``initial.from``): ``{"run": the parent run's
+    #: id, "time": "end" or the time}``, else None (the seeded texture); class-level defaults
+    #: for the expansions of adaptive campaigns, which build their runs otherwise
+    starts: list[dict[str, str]] | None = None
+    parents: Parents | None = None
 
     def __init__(self, campaign: Campaign):
         self.campaign = campaign
         self.seeds = campaign.seeds
         self.points: list[GridPoint] = []
         self.run_ids: list[str] = []
+        self.starts = None
+        parents = None
+        if campaign.initial is not None:
+            parents, self.starts = Parents(campaign.initial, Expansion(campaign.initial.parent)), []
         for index, coords in iter_points(campaign):
             point = make_point(campaign, index, coords)
             self.points.append(point)
-            hasher = PointHasher(point.parameters.to_dict(), point.numerics.to_dict())
-            self.run_ids.extend(hasher.many(self.seeds))
+            if parents is None or self.starts is None:
+                hasher = PointHasher(point.parameters.to_dict(), point.numerics.to_dict())
+                self.run_ids.extend(hasher.many(self.seeds))
+                continue
+            p, n = point.parameters.to_dict(), point.numerics.to_dict()
+            for seed in self.seeds:
+                start = {"run": parents.of(point, seed)[0], "time": parents.spec.time_text}
+                self.starts.append(start)
+                self.run_ids.append(hash_canonical(p, n, seed, start))
+        self.parents = parents
         self.position = {rid: i for i, rid in enumerate(self.run_ids)}
         if len(self.position) != len(self.run_ids):
             # Two grid points that normalise to the same run (e.g. alpha and alpha_minus_B
@@ -101,7 +172,10 @@ class Expansion:
 
     def run(self, i: int) -> RunSpec:
         n = len(self.seeds)
-        return RunSpec(self.run_ids[i], self.seeds[i % n], self.points[i // n])
+        start = None
+        if self.starts is not None and self.campaign.initial is not None:
+            start = {**self.starts[i], "campaign": self.campaign.initial.parent.name}
+        return RunSpec(self.run_ids[i], self.seeds[i % n], self.points[i // n], start)
 
     def __iter__(self) -> Iterator[RunSpec]:
         return (self.run(i) for i in range(len(self)))

@@ -103,22 +103,35 @@ def _dumps(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
 
 
-def canonical_json(parameters: Mapping[str, Any], numerics: Mapping[str, Any], seed: int) -> str:
+def canonical_json(
+    parameters: Mapping[str, Any],
+    numerics: Mapping[str, Any],
+    seed: int,
+    start: Mapping[str, str] | None = None,
+) -> str:
     """The canonical text that is hashed. The mappings are taken as given: pass complete
-    dicts (``Parameters.to_dict()``), or use :func:`run_id_for`."""
-    return _dumps(
-        {
-            "numerics": canonical_value(identity_numerics(numerics)),
-            "parameters": canonical_value(identity_parameters(parameters)),
-            "schema": SCHEMA_VERSION,
-            "seed": canonical_value(int(seed)),
-        }
-    )
+    dicts (``Parameters.to_dict()``), or use :func:`run_id_for`. ``start`` names the state
+    a run begins from (``{"run": parent run id, "time": "end" or the time}``,
+    :class:`sweep.expand.Parents`); absent for a run from the seeded texture."""
+    payload: dict[str, Any] = {
+        "numerics": canonical_value(identity_numerics(numerics)),
+        "parameters": canonical_value(identity_parameters(parameters)),
+        "schema": SCHEMA_VERSION,
+        "seed": canonical_value(int(seed)),
+    }
+    if start is not None:
+        payload["start"] = canonical_value(dict(start))
+    return _dumps(payload)
 
 
-def hash_canonical(parameters: Mapping[str, Any], numerics: Mapping[str, Any], seed: int) -> str:
+def hash_canonical(
+    parameters: Mapping[str, Any],
+    numerics: Mapping[str, Any],
+    seed: int,
+    start: Mapping[str, str] | None = None,
+) -> str:
     """run_id of complete parameter / numerics dicts (no defaults filled in)."""
-    text = canonical_json(parameters, numerics, seed)
+    text = canonical_json(parameters, numerics, seed, start)
     return hashlib.sha256(text.encode("ascii")).hexdigest()[:ID_LENGTH]
 
 
@@ -137,7 +150,12 @@ def run_id_for(
 CONTINUABLE = ("t_final", "snapshot_times")
 
 
-def trajectory_id(parameters: Mapping[str, Any], numerics: Mapping[str, Any], seed: int) -> str:
+def trajectory_id(
+    parameters: Mapping[str, Any],
+    numerics: Mapping[str, Any],
+    seed: int,
+    start: Mapping[str, str] | None = None,
+) -> str:
     """The id of a run's trajectory: the hash of its canonical text without ``t_final`` and
     ``snapshot_times``, shared by the runs of one (parameters, numerics, seed) to different
     ends, so a longer run finds
@@ -145,7 +163,7 @@ def trajectory_id(parameters: Mapping[str, Any], numerics: Mapping[str, Any], se
     :func:`hash_canonical`; never a run_id (a run's canonical numerics always holds
     ``t_final``)."""
     return hash_canonical(
-        parameters, {k: v for k, v in numerics.items() if k not in CONTINUABLE}, seed
+        parameters, {k: v for k, v in numerics.items() if k not in CONTINUABLE}, seed, start
     )
 
 

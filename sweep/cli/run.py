@@ -18,7 +18,7 @@ from rich.progress import (
     TimeElapsedColumn,
 )
 
-from ..errors import CampaignLocked, ClusterError, StoreError
+from ..errors import CampaignError, CampaignLocked, ClusterError, StoreError
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
@@ -225,6 +225,18 @@ def run(
             brief=quiet,
             header=f"dry run of campaign {c.name} ({results / c.name}): nothing is run or written",
         )
+        if c.initial is not None:  # say now what 'run' would refuse
+            from ..expand import expand as expand_campaign
+            from ..run.todo import parents_not_done
+
+            expansion = expand_campaign(c)
+            done = CampaignStore(results, c.name).scan(save=False)
+            todo = [i for i, r in enumerate(expansion.run_ids) if r not in done]
+            waiting = parents_not_done(expansion, results, todo)
+            if waiting is not None:
+                Console(highlight=False, soft_wrap=True).print(
+                    f"waiting: {waiting.problems[0].message}", markup=False
+                )
         return
     if detach:
         from .driver import run_detached
@@ -293,7 +305,7 @@ def run(
                         )
                 finally:
                     events.close()
-        except (ClusterError, StoreError) as e:
+        except (ClusterError, StoreError, CampaignError) as e:
             error(err, e)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except OSError as e:  # the folder itself (cleaning up, discarding, adopting)

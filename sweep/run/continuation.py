@@ -36,7 +36,7 @@ from ..identity import trajectory_id
 from ..store import CampaignStore, Record
 
 if TYPE_CHECKING:
-    from model.checkpoint import RunState
+    from model.checkpoint import InitialState, RunState
 
     from ..expand import Expansion
 
@@ -60,6 +60,8 @@ class Run(Protocol):
     def snapshot_fields(self) -> tuple[str, ...] | None: ...
     @property
     def snapshot_dtype(self) -> str: ...
+    @property
+    def initial_from(self) -> dict[str, str] | None: ...
 
 
 #: the run file's group holding the run's end state
@@ -85,6 +87,8 @@ class Start:
     state: RunState | None = None
     origin: str = ""
     warning: str = ""
+    #: the fields of another campaign's run it begins from (``initial.from``), at t = 0
+    initial: InitialState | None = None
 
 
 def _model_of(task: Run) -> tuple[Parameters, Numerics]:
@@ -123,7 +127,50 @@ def starting_state(task: Run, store: CampaignStore) -> Start:
         else:
             state.lineage = [*state.lineage, f"{task.parent}@{state.t:.12g}"]
             return Start(state, task.parent, "; ".join(warnings))
-    return Start(None, "", "; ".join(warnings))
+    initial = None
+    if task.initial_from:
+        initial = parent_fields(task.initial_from)
+    return Start(None, "", "; ".join(warnings), initial)
+
+
+def parent_fields(source: Mapping[str, str]) -> InitialState:
+    """The fields a run of ``initial.from`` begins with: the parent run's end state
+    (``time: end``: exact, from the run file's group ``state`` if it has one, else its last
+    snapshot) or its snapshot at the time, with the displacement of that snapshot;
+    :class:`CheckpointError` naming the file if it has neither."""
+    import numpy as np
+
+    from model.checkpoint import CheckpointError, InitialState, RunState, read_netcdf
+
+    path = Path(source["runs_dir"]) / f"{source['run']}.nc"
+    origin = f"{source['campaign']}/{source['run']}@{source['time']}"
+    main = read_netcdf(path)
+    times = main["snapshot_time"].values if "snapshot_time" in main else np.zeros(0)
+    if source["time"] == "end":
+        at = len(times) - 1
+        if main.attrs.get("status") != "ok" or at < 0:
+            raise CheckpointError(
+                f"the parent run {path} did not end (status {main.attrs.get('status')})"
+            )
+    else:
+        hits = np.flatnonzero(np.isclose(times, float(source["time"])))
+        if not len(hits):
+            raise CheckpointError(f"the parent run {path} has no snapshot at t = {source['time']}")
+        at = int(hits[0])
+
+    def field_at(name: str) -> np.ndarray | None:
+        return np.asarray(main[name].values[at], dtype=float) if name in main.data_vars else None
+
+    disp = [field_at("u1"), field_at("u2")]
+    displacement = None if any(d is None for d in disp) else np.stack(disp)  # type: ignore[arg-type]
+    if source["time"] == "end":
+        with contextlib.suppress(CheckpointError):  # no end state kept: the last snapshot
+            group = read_netcdf(path, STATE_GROUP)
+            return InitialState(RunState.from_dataset(group).fields, displacement, origin)
+    fields = [field_at(n) for n in ("q1", "q2", "A")]
+    if any(f is None for f in fields):
+        raise CheckpointError(f"the parent run's file {path} keeps no snapshots of q1, q2 and A")
+    return InitialState(np.stack(fields), displacement, origin)  # type: ignore[arg-type]
 
 
 def read_end_state(path: Path, task: Run) -> RunState:
@@ -131,17 +178,10 @@ def read_end_state(path: Path, task: Run) -> RunState:
     :class:`CheckpointError` if there is none, it is unreadable, or the file lacks a
     snapshot field ``task`` keeps (or keeps it at a lower precision)."""
     import numpy as np
-    import xarray as xr
 
-    from model.checkpoint import SNAPSHOT_FIELDS, CheckpointError, RunState
+    from model.checkpoint import SNAPSHOT_FIELDS, CheckpointError, RunState, read_netcdf
 
-    try:
-        group = xr.load_dataset(path, group=STATE_GROUP, engine="netcdf4")
-        main = xr.load_dataset(path, engine="netcdf4")
-    except FileNotFoundError as e:
-        raise CheckpointError(f"{path} does not exist") from e
-    except (OSError, ValueError, RuntimeError, KeyError) as e:
-        raise CheckpointError(f"{path} holds no readable end state ({e})") from e
+    group, main = read_netcdf(path, STATE_GROUP), read_netcdf(path)
     try:
         state = RunState.from_dataset(group)
     except CheckpointError as e:
@@ -220,7 +260,11 @@ def run_attrs(start: Start) -> dict[str, Any]:
         parent = next(
             (e.split("@")[0] for e in state.lineage if not e.startswith("checkpoint")), ""
         )
+    origin = start.initial.origin if start.initial is not None else ""
+    if state is not None:
+        origin = state.initial_from
     return {
+        "initial_from": origin,
         "started_at": 0.0 if state is None else float(state.t),
         "continued_from": parent,
         "lineage": [] if state is None else list(state.lineage),

@@ -37,7 +37,7 @@ from ..store import (
 from .clusters import WORKER_LOSSES, jobqueue_options, make_jobqueue, open_cluster
 from .failures import FailureLimit
 from .task import UNSAVED, RunTask, execute_run, failure_record, warm_workers
-from .todo import Plan, plan_runs
+from .todo import Plan, parents_not_done, plan_runs
 from .workers import CHECK_EVERY, ClusterLink, Supervisor
 
 if TYPE_CHECKING:
@@ -382,6 +382,9 @@ def drive(
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
     store.save_campaign_text(campaign.text, campaign.overrides)
     plan = plan_runs(expansion, store, retry_failed=retry_failed, check_files=check_files)
+    waiting = parents_not_done(expansion, store.results_root, plan.todo)
+    if waiting is not None:  # a campaign whose runs begin from another's that is not done
+        raise waiting
     if events:
         events.planned(plan, expansion)
     summary = None

@@ -71,6 +71,9 @@ class RunTask:
     checkpoint_wall: float = math.inf
     #: whether the run file keeps the end state (store.end_state)
     end_state: bool = True
+    #: the run of another campaign it begins from (``initial.from``): its ``run`` id, the
+    #: ``time`` ("end" or the time), its ``campaign`` and ``runs_dir``; None: the texture
+    initial_from: dict[str, str] | None = None
 
     @classmethod
     def from_spec(
@@ -83,6 +86,11 @@ class RunTask:
         parent: str | None = None,
     ) -> RunTask:
         parameters, numerics = run.point.parameters.to_dict(), run.point.numerics.to_dict()
+        initial_from, start = None, None
+        if run.start is not None:
+            start = {"run": run.start["run"], "time": run.start["time"]}
+            runs = CampaignStore(store.results_root, run.start["campaign"]).runs_dir
+            initial_from = {**run.start, "runs_dir": str(runs.resolve())}
         return cls(
             run_id=run.run_id,
             seed=run.seed,
@@ -94,11 +102,12 @@ class RunTask:
             snapshot_fields=store_spec.snapshot_fields,
             snapshot_dtype=store_spec.snapshot_dtype,
             previous_failures=tuple(previous_failures or ()),
-            trajectory=trajectory_id(parameters, numerics, run.seed),
+            trajectory=trajectory_id(parameters, numerics, run.seed, start),
             parent=parent,
             checkpoint_tau=store_spec.checkpoint_tau,
             checkpoint_wall=store_spec.checkpoint_wall,
             end_state=store_spec.end_state,
+            initial_from=initial_from,
         )
 
     def identity(self) -> dict[str, Any]:
@@ -243,6 +252,9 @@ def execute_run(task: RunTask) -> Record:
     read-only, file size limit) is not a failure of the run: no record is written (the run
     stays pending), the Dataset is kept in :func:`spool_dir` if possible, and the returned
     record has status :data:`UNSAVED` with the cause (the driver stops)."""
+    from .workers import import_model
+
+    import_model()
     from model.checkpoint import Schedule
     from model.simulate import run as simulate
 
@@ -258,6 +270,7 @@ def execute_run(task: RunTask) -> Record:
             Numerics.from_dict(task.numerics),
             task.seed,
             start=start.state,
+            initial=start.initial,
             checkpoint=continuation.Checkpointer(store, task.run_id),
             schedule=Schedule(task.checkpoint_tau, task.checkpoint_wall),
             keep_state=True,
@@ -328,6 +341,9 @@ def warm_worker(kinds: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str,
     """Run on one worker per host before the campaign: compiles the model's kernels (or
     loads them from the disk cache) with tiny runs, so that the other workers load them
     instead of all compiling at once (:mod:`model.warmup`)."""
+    from .workers import import_model
+
+    import_model()
     from model.warmup import warm_up
 
     info = warm_up([(Parameters.from_dict(p), Numerics.from_dict(n)) for p, n in kinds])

@@ -7,8 +7,10 @@ from __future__ import annotations
 import contextlib
 import logging
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
+from ..errors import CampaignError, Problem
 from ..expand import Expansion
 from ..files import atomic_path
 from ..store import RETRYABLE_REASONS, CampaignStore, Record
@@ -129,3 +131,43 @@ def _mtime(store: CampaignStore, run_id: str) -> int | None:
         return store.nc_path(run_id).stat().st_mtime_ns
     except OSError:
         return None
+
+
+# ----------------------------------------------- the parent runs a campaign waits for
+def unfinished(expansion: Expansion, results_root: Path, todo: list[int]) -> list[str]:
+    """The parent runs of the runs to do (positions ``todo``) that are not done in the
+    parent campaign's results folder under ``results_root``: no ok record, or a file that
+    is missing, truncated or corrupt."""
+    spec = expansion.campaign.initial
+    starts = getattr(expansion, "starts", None)  # an adaptive campaign's expansion has none
+    if spec is None or starts is None or not todo:
+        return []
+    store = CampaignStore(results_root, spec.parent.name)
+    records = store.scan(save=False)
+    need = {starts[i]["run"] for i in todo}
+    return sorted(
+        rid
+        for rid in need
+        if (rec := records.get(rid)) is None
+        or rec.get("status") != "ok"
+        or store.check_run_file(rid, rec) is not None
+    )
+
+
+def parents_not_done(
+    expansion: Expansion, results_root: Path, todo: list[int]
+) -> CampaignError | None:
+    """The error that says which parent runs a campaign waits for, or None."""
+    missing = unfinished(expansion, results_root, todo)
+    spec = expansion.campaign.initial
+    if not missing or spec is None:
+        return None
+    folder = Path(results_root) / spec.parent.name
+    message = (
+        f"{len(missing)} run(s) of campaign {spec.parent.name} that this campaign's runs begin "
+        f"from are not done (in {folder}; e.g. {missing[0]}): run 'nematic run {spec.path} "
+        f"--results {results_root}' first; nothing is run until they are"
+    )
+    return CampaignError(
+        expansion.campaign.source, [Problem("initial.from", message, spec.location)]
+    )

@@ -19,6 +19,7 @@ import math
 import os
 import re
 import subprocess
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -85,11 +86,26 @@ def window_size(threads: int) -> int:
 
 
 # --------------------------------------------------------------------------- worker check
+#: One import of the model at a time in a worker process. The environment check and a run
+#: that arrives with it (a run handed back by a retired worker goes to the next worker at
+#: once) would import it from two threads, and Python's module locks can break that with a
+#: ``_DeadlockError`` in one of them (seen: a worker refused, "deadlock detected by
+#: _ModuleLock('pde.solvers.base')").
+_MODEL_IMPORT = threading.Lock()
+
+
+def import_model() -> None:
+    """Import the model (py-pde, numba, the kernels' modules) in this process, once."""
+    with _MODEL_IMPORT:
+        import model.simulate
+        import model.warmup  # noqa: F401
+
+
 def worker_environment() -> dict[str, Any]:
     """Run on every worker that joins: proves the model imports there; returns its versions."""
-    import model.simulate  # noqa: F401 - the import is the check
-
     from ..provenance import environment
+
+    import_model()  # the import is the check
 
     return environment()
 

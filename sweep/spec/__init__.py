@@ -44,12 +44,13 @@ from typing import Any, NamedTuple
 
 from model.parameters import Numerics
 
-from ..campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign
+from ..campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec
 from ..errors import CampaignError, Problem
 from ..limits import available_memory, fmt_bytes, parse_size, run_memory_bytes
 from .axes import read_sweep
 from .checker import Checker, KeyPath, is_int, suggest
 from .execution import read_execution
+from .initial import READING, InitialRequest, parent_error, read_initial, resolve_initial
 from .points import check_points
 from .precision import read_precision
 from .refine import read_refine
@@ -84,6 +85,7 @@ TOP_KEYS = (
     "refine",
     "precision",
     "verify",
+    "initial",
 )
 
 
@@ -114,6 +116,7 @@ SECTIONS: tuple[Section, ...] = (
     Section("precision", "precision", read_precision),
     Section("refine", "refine", read_refine),
     Section("verify", "verify", read_verify),
+    Section("initial", "initial", read_initial),
 )
 
 
@@ -231,6 +234,8 @@ def parse_campaign(
     read: dict[str, Any] = {}
     for section in SECTIONS:
         read[section.key] = section.read(c, doc.get(section.key), read)
+    if read["initial"] is not None:  # the parent campaign, read and checked against
+        read["initial"] = _initial(c, read["initial"], read)
     campaign = Campaign(
         **{section.attr: read[section.key] for section in SECTIONS},
         source=source,
@@ -262,6 +267,20 @@ def parse_campaign(
         c.problems[:] = structural
     c.raise_if_any()
     return campaign
+
+
+def _initial(c: Checker, request: InitialRequest, read: Mapping[str, Any]) -> InitialSpec | None:
+    """``initial.from``'s parent campaign read (a chain of parents that comes back to itself
+    is refused), then the section checked against it."""
+    token = READING.set((*READING.get(), str(request.file.resolve())))
+    try:
+        parent = load_campaign(request.file)
+    except CampaignError as e:
+        parent_error(c, request, e)
+        return None
+    finally:
+        READING.reset(token)
+    return resolve_initial(c, request, parent, read)
 
 
 def run_memory_limit(campaign: Campaign) -> tuple[int | None, str]:

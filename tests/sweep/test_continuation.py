@@ -277,3 +277,115 @@ def test_store_checkpoint_every_is_read_and_checked(tmp_path):
         p.write_text(f"name: c\nnumerics: {{resolution: 128}}\nstore:\n  checkpoint_every: {bad}\n")
         with pytest.raises(CampaignError, match=f"{p}:4: store.checkpoint_every"):
             load_campaign(p)
+
+
+# ------------------------------------------------------------- runs from another campaign's
+PARENT = """\
+name: parent
+parameters: {noise_modes: 8}
+numerics: {resolution: 32, t_final: 5, save_every: 0.5, snapshot_times: [2.5]}
+sweep:
+  axes:
+    alpha_minus_B: [0.2, 0.3]
+seeds: 2
+execution: {workers: 2}
+"""
+CHILD = """\
+name: {name}
+parameters: {{noise_modes: 8, zeta: 0.0}}
+numerics: {{resolution: 32, t_final: 2, save_every: 0.5, snapshot_times: [0]}}
+sweep:
+  axes:
+    alpha_minus_B: [0.2, 0.3]
+seeds: 2
+execution: {{workers: 2}}
+initial:
+  from:
+    campaign: parent.yaml
+    seed: same
+    time: {time}
+"""
+
+
+def test_a_campaign_begins_from_another_campaigns_runs(tmp_path):
+    """Activity switched off (zeta = 0) from the parent's end states and from its snapshots
+    at t = 2.5: each child run begins with its parent run's fields, bit for bit, under its
+    own parameters; its id names the parent run and the time; a child whose parents are not
+    done is refused before it runs, naming the file and line."""
+    (tmp_path / "parent.yaml").write_text(PARENT)
+    end = tmp_path / "child.yaml"
+    end.write_text(CHILD.format(name="child", time="end"))
+    mid = tmp_path / "mid.yaml"
+    mid.write_text(CHILD.format(name="mid", time="2.5"))
+    results = tmp_path / "results"
+    dry = invoke("run", end, "--results", results, "--dry-run")
+    assert dry.exit_code == 0, dry.output
+    assert "waiting: 4 run(s) of campaign parent" in " ".join(dry.output.split())
+    early = invoke("run", end, "--results", results, "--no-figures")
+    assert early.exit_code == 2, early.output
+    said = " ".join(early.output.split())
+    assert f"{end}:11: initial.from" in said
+    assert "4 run(s) of campaign parent" in said
+    assert "nematic run" in said
+    assert not list((results / "child" / "runs").glob("*.nc"))  # nothing ran
+    assert (
+        invoke("run", tmp_path / "parent.yaml", "--results", results, "--no-figures").exit_code == 0
+    )
+    for path, time_text in ((end, "end"), (mid, "2.5")):
+        result = invoke("run", path, "--results", results, "--no-figures")
+        assert result.exit_code == 0, result.output
+        child = load_campaign(path)
+        expansion = expand(child)
+        parent_runs = results / "parent" / "runs"
+        for i, rid in enumerate(expansion.run_ids):
+            run = expansion.run(i)
+            assert run.start is not None
+            assert run.start["time"] == time_text
+            rec = json.loads((results / child.name / "runs" / f"{rid}.json").read_text())
+            assert rec["status"] == "ok", rec
+            assert rec["initial_from"] == f"parent/{run.start['run']}@{time_text}"
+            with (
+                xr.open_dataset(parent_runs / f"{run.start['run']}.nc") as parent,
+                xr.open_dataset(results / child.name / "runs" / f"{rid}.nc") as ds,
+            ):
+                assert parent.attrs["seed"] == ds.attrs["seed"] == run.seed
+                assert parent.attrs["param_alpha"] == ds.attrs["param_alpha"]
+                at = -1 if time_text == "end" else 0  # the parent's end, or its t = 2.5
+                for name in ("q1", "q2", "A"):
+                    assert np.array_equal(parent[name].values[at], ds[name].values[0]), name
+                assert float(ds.attrs["param_zeta"]) == 0.0
+    ends, mids = expand(load_campaign(end)).run_ids, expand(load_campaign(mid)).run_ids
+    plain = expand(load_campaign(_without_initial(tmp_path, end))).run_ids
+    assert len(set(ends) | set(mids) | set(plain)) == 12  # parent and time are the identity
+
+
+def _without_initial(folder: Path, path: Path) -> Path:
+    out = folder / "plain.yaml"
+    out.write_text(path.read_text().split("initial:")[0])
+    return out
+
+
+@pytest.mark.parametrize(
+    ("change", "expected"),
+    [
+        ("    campaign: parent.yaml", "initial.from.campaign: there is no campaign file"),
+        ("    point: {chi: 1}", "initial.from.point.chi: campaign parent sweeps no 'chi'"),
+        ("    point: {alpha_minus_B: 0.25}", "allowed: one of campaign parent's values"),
+        ("    time: 3", "initial.from.time: got 3; allowed: 'end' (t = 5) or one of"),
+        ("    seed: 7", "initial.from.seed: got 7; allowed: 'same' or one of"),
+    ],
+)
+def test_a_missing_parent_is_refused_with_file_and_line(tmp_path, change, expected):
+    (tmp_path / "parent.yaml").write_text(PARENT)
+    text = CHILD.format(name="child", time="end")
+    if "campaign:" in change:
+        (tmp_path / "parent.yaml").unlink()
+    else:
+        text += change + "\n"
+    path = tmp_path / "child.yaml"
+    path.write_text(text)
+    result = invoke("validate", path)
+    assert result.exit_code == 2, result.output
+    said = " ".join(result.output.split())
+    assert f"{path}:" in said, said
+    assert expected in said, said

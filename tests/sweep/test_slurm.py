@@ -1,6 +1,8 @@
 """Campaigns on a real one-node SLURM (scripts/slurm_local.sh) through execution.cluster:
 the local run's phase.nc, jobs cancelled mid-campaign (one; all, replaced; one mid-run, its
-run redone, not failed), workers retiring before a walltime shorter than the campaign, the
+run redone, not failed; one mid-run past a checkpoint, the run continued from it), workers
+retiring before a walltime shorter than the campaign, runs longer than the walltime finished
+across jobs from their checkpoints, the
 driver as a batch job (the docs' script) stopped by `nematic stop` through scancel and
 resubmitted, replacements that keep dying and a wrong `python` (a bounded, non-zero exit
 naming the job logs and quoting the worker's error; a rerun resumes). TLS is on (the
@@ -13,6 +15,7 @@ are skipped with the reason.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import stat
@@ -21,6 +24,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import xarray as xr
 from sweep_helpers import kill_group, records, run_ids, start_driver, wait_for, write_campaign
@@ -382,6 +386,130 @@ def test_workers_retire_before_a_walltime_shorter_than_the_campaign(slurm, tmp_p
     assert "ended; submitting a replacement" in out
     assert len(logs) >= 2
     assert len({r["pid"] for r in recs.values()}) >= 2
+
+
+def test_runs_longer_than_the_walltime_finish_across_jobs_from_checkpoints(slurm, tmp_path):
+    """Runs of about 30 s of compute under a 30-second walltime (the workers retire after about
+    21 s): no run fits in one job, each is continued by the next job's worker from its
+    checkpoint (every 3 s of wall time) and finishes; `status` meanwhile shows the runs in
+    progress with the time reached and the checkpoint; the result equals the straight run."""
+    path = slurm_campaign(
+        tmp_path,
+        "long-runs",
+        values="[0.3]",
+        seeds=2,
+        t_final=LONG_T_FINAL,
+        scale="jobs: 1",
+        give_up=180,
+        extra=LOW_PRIORITY,
+    )
+    text = path.read_text().replace('walltime: "00:10:00"', 'walltime: "00:00:30"')
+    text = text.replace(
+        f"resolution: 32, t_final: {LONG_T_FINAL}, save_every: 0.5, snapshot_times: [1]",
+        f"resolution: 64, t_final: {LONG_T_FINAL}, save_every: 5, snapshot_times: [100]",
+    )
+    assert "resolution: 64" in text
+    path.write_text(text + 'store: {checkpoint_every: "3 s"}\n')
+    results, log = tmp_path / "results", tmp_path / "log"
+    folder = results / "long-runs"
+    driver = run_in_background(path, results, log)
+    seen: list[dict] = []
+    try:
+        deadline = time.monotonic() + 900
+        while driver.poll() is None and time.monotonic() < deadline:
+            status = subprocess.run(
+                [sys.executable, "-m", "sweep", "status", str(path), "--results", str(results)]
+                + ["--json"],
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+            if status.returncode == 0:
+                seen.extend(json.loads(status.stdout)["in_progress"])
+            time.sleep(10)  # a status is a process of its own: it competes with the worker
+        rc = driver.wait(timeout=60)
+    finally:
+        kill_group(driver)
+    text = " ".join(log.read_text().split())
+    assert rc == 0, text[-3000:]
+    recs = records(folder / "runs")
+    assert sorted(recs) == sorted(run_ids(path))
+    jobs = " ".join(p.read_text() for p in sorted((folder / "jobs").glob("*.err")))
+    assert "Reason: worker-lifetime-reached" in jobs, jobs[-3000:]
+    for rid, rec in recs.items():
+        assert rec["status"] == "ok", rec
+        resumed = [e for e in rec["lineage"] if e.startswith("checkpoint@")]
+        assert resumed, rec["lineage"]  # continued across jobs, not redone from t = 0
+        progress = [r for r in seen if r["run_id"] == rid]
+        assert progress, "status never showed the run in progress"
+        assert all(r["checkpoint"].endswith(f"checkpoints/{rid}.nc") for r in progress)
+        assert all(0 < r["t"] < r["t_final"] == LONG_T_FINAL for r in progress)
+    assert not list((folder / "checkpoints").glob("*.nc"))
+    # the first run against the straight run, array by array
+    from model.parameters import Numerics, Parameters
+    from model.simulate import run as simulate
+
+    rid = run_ids(path)[0]
+    with xr.open_dataset(folder / "runs" / f"{rid}.nc") as ds:
+        ds.load()
+    ref = simulate(
+        Parameters.from_dict(recs[rid]["parameters"]),
+        Numerics.from_dict(recs[rid]["numerics"]),
+        recs[rid]["seed"],
+    )
+    for name in ref.data_vars:
+        if name != "wall_time":
+            assert np.array_equal(ref[name].values, ds[name].values, equal_nan=True), name
+
+
+def test_a_job_cancelled_mid_run_continues_the_run_from_its_checkpoint(slurm, tmp_path):
+    """scancel of the only job while its run is past its first checkpoint: the replacement
+    job's worker continues the run from the checkpoint, and the result equals the straight
+    run array by array."""
+    path = slurm_campaign(
+        tmp_path, "cancel-ckpt", values="[0.3]", seeds=1, t_final=4000.0, scale="jobs: 1"
+    )
+    text = path.read_text().replace(
+        "resolution: 32, t_final: 4000.0, save_every: 0.5, snapshot_times: [1]",
+        "resolution: 64, t_final: 4000.0, save_every: 5, snapshot_times: [100]",
+    )
+    assert "resolution: 64" in text
+    path.write_text(text + 'store: {checkpoint_every: "1 s"}\n')
+    results, log = tmp_path / "results", tmp_path / "log"
+    folder = results / "cancel-ckpt"
+    [rid] = run_ids(path)
+    ckpt = folder / "checkpoints" / f"{rid}.nc"
+    driver = run_in_background(path, results, log)
+    try:
+        wait_for(lambda: ckpt.exists() or driver.poll() is not None, 300, "a checkpoint")
+        assert driver.poll() is None, log.read_text()
+        [victim] = queue()
+        subprocess.run(["scancel", victim], check=True)
+        rc = driver.wait(timeout=600)
+    finally:
+        kill_group(driver)
+    text = " ".join(log.read_text().split())
+    assert rc == 0, text[-3000:]
+    assert f"batch job {victim} (" in text, text
+    rec = records(folder / "runs")[rid]
+    assert rec["status"] == "ok", rec
+    assert any(e.startswith("checkpoint@") for e in rec["lineage"]), rec["lineage"]
+    assert rec["started_at"] > 0
+    from model.parameters import Numerics, Parameters
+    from model.simulate import run as simulate
+
+    ref = simulate(
+        Parameters.from_dict(rec["parameters"]), Numerics.from_dict(rec["numerics"]), rec["seed"]
+    )
+    with xr.open_dataset(folder / "runs" / f"{rid}.nc") as ds:
+        for name in ref.data_vars:
+            if name != "wall_time":
+                assert np.array_equal(ref[name].values, ds[name].values, equal_nan=True), name
+
+
+#: the end of the runs longer than a walltime: about 30 s each at 64^2 on this machine
+#: (3.6 s per 1000 tau, about 1 step per tau)
+LONG_T_FINAL = 8000.0
 
 
 # ----------------------------------------------------------------------------- the driver's job

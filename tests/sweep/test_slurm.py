@@ -383,7 +383,9 @@ def test_workers_retire_before_a_walltime_shorter_than_the_campaign(slurm, tmp_p
     jobs = " ".join(p.read_text() for p in logs)
     assert "Reason: worker-lifetime-reached" in jobs, jobs[-3000:]
     assert "DUE TO TIME LIMIT" not in jobs, jobs[-3000:]  # retired, not killed
-    assert "ended; submitting a replacement" in out
+    # replaced: by the driver ("ended; submitting a replacement") or, when its check comes
+    # after dask-jobqueue's own (the retired worker's job dropped and its spec started again),
+    # by dask-jobqueue without a line: either way a second job ran the runs
     assert len(logs) >= 2
     assert len({r["pid"] for r in recs.values()}) >= 2
 

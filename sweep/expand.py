@@ -17,7 +17,7 @@ from typing import Any
 from model.parameters import Numerics, Parameters, check_compatible
 
 from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec, same_value
-from .identity import PointHasher, hash_canonical
+from .identity import PointHasher, hash_canonical, trajectory_id
 
 log = logging.getLogger(__name__)
 
@@ -179,6 +179,32 @@ class Expansion:
 
     def __iter__(self) -> Iterator[RunSpec]:
         return (self.run(i) for i in range(len(self)))
+
+
+def continued_runs(
+    expansion: Expansion, todo: list[int], records: Mapping[str, Any]
+) -> dict[int, tuple[str, float]]:
+    """For each run to do (positions ``todo``), the finished run of its trajectory it
+    continues, and how far that run went: the one with an end state (ok, ``end_state``
+    recorded) that reached furthest below the run's ``t_final`` (``records``: the store's)."""
+    ends: dict[str, list[tuple[float, str]]] = {}
+    for rid, rec in records.items():
+        t_end, traj = rec.get("end_state"), rec.get("trajectory")
+        if rec.get("status") == "ok" and isinstance(t_end, (int, float)) and traj:
+            ends.setdefault(str(traj), []).append((float(t_end), rid))
+    if not ends:
+        return {}
+    out: dict[int, tuple[str, float]] = {}
+    for i in todo:
+        run = expansion.run(i)
+        numerics = run.point.numerics
+        start = None if run.start is None else {k: run.start[k] for k in ("run", "time")}
+        traj = trajectory_id(run.point.parameters.to_dict(), numerics.to_dict(), run.seed, start)
+        shorter = [e for e in ends.get(traj, ()) if e[0] < numerics.t_final and e[1] != run.run_id]
+        if shorter:
+            t_end, rid = max(shorter)
+            out[i] = (rid, t_end)
+    return out
 
 
 def expand(campaign: Campaign) -> Expansion:

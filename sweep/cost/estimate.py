@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from ..campaign import Campaign, ExecutionSpec, local_worker_count
-from ..expand import Expansion, GridPoint, expand
+from ..expand import Expansion, GridPoint, continued_runs, expand
 from ..store import RETRYABLE_REASONS, CampaignStore, Record
 from .model import MODEL_SPREAD, kind, model_seconds
 from .result import Costed, Estimate, LaterRounds, fmt_seconds
@@ -269,13 +269,20 @@ def estimate(
     costs: dict[str, Costed] = {}
     runs: list[tuple[float, float, float, bool]] = []  # (seconds, low, high, cost model?)
     per_point: dict[int, tuple[str, float, float, float, str]] = {}
+    # a run that continues a finished shorter run of its trajectory (t_final grew) does only
+    # the rest of its time: priced at that fraction of a whole run's cost
+    continuing = continued_runs(expansion, todo, records)
     for i in todo:
         point = expansion.run(i).point
         if id(point) not in per_point:
             label = point_label(point)
             per_point[id(point)] = (label, *basis.cost(point, label, model_seconds(point.numerics)))
         label, est, lo, hi, why = per_point[id(point)]
-        runs.append((est, lo, hi, why == "cost model"))
+        if i in continuing:
+            rest = max(0.0, 1.0 - continuing[i][1] / point.numerics.t_final)
+            est, lo, hi = est * rest, lo * rest, hi * rest
+            why = f"{why}; the rest of a run from t = {continuing[i][1]:g}"
+        runs.append((est, lo, hi, why.startswith("cost model")))
         entry = costs.setdefault(label, Costed(label, 0, est, lo, hi, why))
         entry.runs += 1
     workers, where = concurrency(campaign.execution)

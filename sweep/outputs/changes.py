@@ -39,10 +39,17 @@ class RunCounts:
     new: int
     kept: int
     orphaned: list[str] = field(default_factory=list)
+    #: new runs that continue a finished shorter run of their trajectory (t_final grew)
+    continuing: int = 0
 
     def line(self) -> str:
+        more = (
+            f" ({self.continuing} continue a finished shorter run from its end state)"
+            if self.continuing
+            else ""
+        )
         return (
-            f"runs: {self.new} new, {self.kept} kept, {len(self.orphaned)} orphaned "
+            f"runs: {self.new} new{more}, {self.kept} kept, {len(self.orphaned)} orphaned "
             "(in the folder, not planned by this campaign)"
         )
 
@@ -69,6 +76,7 @@ class CampaignChanges:
             "new": self.counts.new,
             "kept": self.counts.kept,
             "orphaned": len(self.counts.orphaned),
+            "continuing": self.counts.continuing,
         }
 
 
@@ -211,7 +219,13 @@ def run_counts(
         orphaned = [
             rid for rid in orphaned if not _reachable(campaign, rid, store.read_record(rid))
         ]
-    return RunCounts(new=len(ids) - kept, kept=kept, orphaned=orphaned)
+    from ..expand import continued_runs
+
+    todo = [i for i, rid in enumerate(expansion.run_ids) if rid not in records]
+    if planned is not None:
+        todo = [i for i in todo if planned[i]]
+    continuing = len(continued_runs(expansion, todo, records))
+    return RunCounts(new=len(ids) - kept, kept=kept, orphaned=orphaned, continuing=continuing)
 
 
 def _significant(copy_text: str) -> str:

@@ -32,13 +32,11 @@ from model.parameters import Numerics, Parameters
 
 from ..errors import StorageError
 from ..files import atomic_to_netcdf
-from ..identity import trajectory_id
-from ..store import CampaignStore, Record
+from ..store import CampaignStore
 
 if TYPE_CHECKING:
     from model.checkpoint import InitialState, RunState
 
-    from ..expand import Expansion
 
 log = logging.getLogger(__name__)
 
@@ -223,31 +221,6 @@ class Checkpointer:
         except (OSError, StorageError) as e:
             self.failed = str(e)
             log.warning("run %s: checkpoint at t = %g not written: %s", self.run_id, state.t, e)
-
-
-def find_parents(
-    expansion: Expansion, todo: list[int], records: Mapping[str, Record]
-) -> dict[int, str]:
-    """For each run to do, the finished run of its trajectory it continues: the one with an
-    end state (ok, ``end_state`` recorded) that reached furthest below its ``t_final``."""
-    ends: dict[str, tuple[float, str]] = {}
-    for rid, rec in records.items():
-        t_end, traj = rec.get("end_state"), rec.get("trajectory")
-        if rec.get("status") == "ok" and isinstance(t_end, (int, float)) and traj:
-            best = ends.get(str(traj))
-            if best is None or float(t_end) > best[0]:
-                ends[str(traj)] = (float(t_end), rid)
-    if not ends:
-        return {}
-    out: dict[int, str] = {}
-    for i in todo:
-        run = expansion.run(i)
-        numerics = run.point.numerics
-        traj = trajectory_id(run.point.parameters.to_dict(), numerics.to_dict(), run.seed)
-        found = ends.get(traj)
-        if found is not None and found[1] != run.run_id and found[0] < numerics.t_final:
-            out[i] = found[1]
-    return out
 
 
 def run_attrs(start: Start) -> dict[str, Any]:

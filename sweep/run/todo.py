@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CampaignError, Problem
-from ..expand import Expansion
+from ..expand import Expansion, continued_runs
 from ..files import atomic_path
 from ..store import RETRYABLE_REASONS, CampaignStore, Record
 from . import continuation
@@ -95,7 +95,7 @@ def plan_runs(
             plan.failed.append(i)
     for i in (*plan.done, *plan.failed):  # killed between its record and the cleanup
         continuation.remove_checkpoint(store, expansion.run_ids[i])
-    plan.parents = continuation.find_parents(expansion, plan.todo, records)
+    plan.parents = {i: rid for i, (rid, _) in continued_runs(expansion, plan.todo, records).items()}
     return plan
 
 

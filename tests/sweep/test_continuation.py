@@ -200,6 +200,9 @@ def test_a_campaign_whose_t_final_grew_continues_its_runs(tmp_path):
     assert all(r["end_state"] == 5.0 for r in short.values())
     stamps = file_stamps(runs)
     path.write_text(path.read_text().replace("t_final: 5,", "t_final: 10,"))
+    dry = " ".join(invoke("run", path, "--results", results, "--dry-run").output.split())
+    assert "4 new (4 continue a finished shorter run from its end state)" in dry, dry
+    assert "the rest of a run from t = 5" in dry, dry
     result = invoke("run", path, "--results", results, "--no-figures")
     assert result.exit_code == 0, result.output
     after = records(runs)

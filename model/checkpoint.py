@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from . import __version__
 from .errors import NematicError
 from .parameters import Numerics, Parameters, save_times
 from .solver_base import SolverState
@@ -121,6 +122,9 @@ class RunState:
     #: where the run's fields at t = 0 came from (:attr:`InitialState.origin`; "" for the
     #: seeded texture)
     initial_from: str = ""
+    #: the model version that computed it (``model.__version__``): a state of another
+    #: version does not continue a run of this one
+    code_version: str = __version__
 
     @property
     def complete(self) -> bool:
@@ -130,10 +134,12 @@ class RunState:
 
     def problem(self, params: Parameters, numerics: Numerics, seed: int) -> str | None:
         """Why this state does not continue the run ``(params, numerics, seed)``, or None.
-        The parameters, the seed and the numerics but ``t_final`` and ``snapshot_times``
-        must be the same; the run's save times up to the state's time must be the state
-        run's (the stepper lands on each, so they shaped its steps), and the run's snapshots
-        up to then must be among the state's."""
+        The model version, the parameters, the seed and the numerics but ``t_final`` and
+        ``snapshot_times`` must be the same; the run's save times up to the state's time must
+        be the state run's (the stepper lands on each, so they shaped its steps), and the
+        run's snapshots up to then must be among the state's."""
+        if self.code_version != __version__:
+            return f"it was computed by model version {self.code_version}, this is {__version__}"
         if int(seed) != self.seed:
             return f"it is seed {self.seed}'s state, not seed {seed}'s"
         if params.to_dict() != self.parameters:
@@ -199,6 +205,7 @@ class RunState:
             "numerics_json": json.dumps(self.numerics, sort_keys=True),
             "lineage_json": json.dumps(self.lineage),
             "initial_from": self.initial_from,
+            "code_version": self.code_version,
             "complex_json": json.dumps(
                 sorted(k for k, v in data.items() if v[0][0] == "part"), sort_keys=True
             ),
@@ -254,6 +261,7 @@ class RunState:
                 wall=float(a["wall"]),
                 lineage=list(json.loads(a["lineage_json"])),
                 initial_from=str(a.get("initial_from", "")),
+                code_version=str(a["code_version"]),
             )
         except CheckpointError:
             raise

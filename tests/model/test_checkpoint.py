@@ -145,6 +145,8 @@ def test_a_foreign_state_is_refused_with_the_reason():
     num = numerics(t_final=10.0)
     _, states = states_of(num, 1, tau=5.0)
     state = states[0]
+    with pytest.raises(CheckpointError, match="computed by model version 0.0.1, this is"):
+        run(PARAMS, num, 1, start=dataclasses.replace(state, code_version="0.0.1"))
     with pytest.raises(CheckpointError, match="seed 1's state, not seed 2's"):
         run(PARAMS, num, 2, start=state)
     with pytest.raises(CheckpointError, match="parameters differ.*alpha"):

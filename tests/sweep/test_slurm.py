@@ -447,21 +447,22 @@ def test_runs_longer_than_the_walltime_finish_across_jobs_from_checkpoints(slurm
         assert all(r["checkpoint"].endswith(f"checkpoints/{rid}.nc") for r in progress)
         assert all(0 < r["t"] < r["t_final"] == LONG_T_FINAL for r in progress)
     assert not list((folder / "checkpoints").glob("*.nc"))
-    # the first run against the straight run, array by array
+    rid = run_ids(path)[0]
+    assert_straight(recs[rid], folder / "runs" / f"{rid}.nc")  # the first run, array by array
+
+
+def assert_straight(rec: dict, path: Path) -> None:
+    """The run file ``path`` holds, array by array, the run of ``rec`` done in one piece."""
     from model.parameters import Numerics, Parameters
     from model.simulate import run as simulate
 
-    rid = run_ids(path)[0]
-    with xr.open_dataset(folder / "runs" / f"{rid}.nc") as ds:
-        ds.load()
     ref = simulate(
-        Parameters.from_dict(recs[rid]["parameters"]),
-        Numerics.from_dict(recs[rid]["numerics"]),
-        recs[rid]["seed"],
+        Parameters.from_dict(rec["parameters"]), Numerics.from_dict(rec["numerics"]), rec["seed"]
     )
-    for name in ref.data_vars:
-        if name != "wall_time":
-            assert np.array_equal(ref[name].values, ds[name].values, equal_nan=True), name
+    with xr.open_dataset(path) as ds:
+        for name in ref.data_vars:
+            if name != "wall_time":
+                assert np.array_equal(ref[name].values, ds[name].values, equal_nan=True), name
 
 
 def test_a_job_cancelled_mid_run_continues_the_run_from_its_checkpoint(slurm, tmp_path):
@@ -497,16 +498,7 @@ def test_a_job_cancelled_mid_run_continues_the_run_from_its_checkpoint(slurm, tm
     assert rec["status"] == "ok", rec
     assert any(e.startswith("checkpoint@") for e in rec["lineage"]), rec["lineage"]
     assert rec["started_at"] > 0
-    from model.parameters import Numerics, Parameters
-    from model.simulate import run as simulate
-
-    ref = simulate(
-        Parameters.from_dict(rec["parameters"]), Numerics.from_dict(rec["numerics"]), rec["seed"]
-    )
-    with xr.open_dataset(folder / "runs" / f"{rid}.nc") as ds:
-        for name in ref.data_vars:
-            if name != "wall_time":
-                assert np.array_equal(ref[name].values, ds[name].values, equal_nan=True), name
+    assert_straight(rec, folder / "runs" / f"{rid}.nc")
 
 
 #: the end of the runs longer than a walltime: about 30 s each at 64^2 on this machine

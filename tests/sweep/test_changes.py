@@ -95,6 +95,7 @@ def test_status_says_what_changed_and_counts_the_runs(copy_of_small):
         "new": 2,
         "kept": 4,
         "orphaned": 2,
+        "continuing": 0,  # new runs continuing a finished shorter run (none: same t_final)
     }
 
 

@@ -84,13 +84,24 @@ class InitialState:
         with the displacement of the snapshot there (if it has one)."""
         t = state.t if time is None else float(time)
         snap = next((s for s in state.snaps if abs(s[0] - t) <= 1e-9 * max(t, 1.0)), None)
-        if time is not None and snap is None:
-            raise CheckpointError(f"the run has no snapshot at t = {t:g}")
-        fields = np.asarray(state.fields if time is None else snap[1][:3], dtype=float)  # type: ignore[index]
-        disp = None
-        if snap is not None and np.all(np.isfinite(snap[1][3:5])):
-            disp = np.asarray(snap[1][3:5], dtype=float)
-        return cls(fields, disp, origin)
+        if snap is None:
+            if time is not None:
+                raise CheckpointError(f"the run has no snapshot at t = {t:g}")
+            return cls(np.asarray(state.fields, dtype=float), None, origin)
+        out = cls.of_snapshot(snap[1], origin)
+        if time is None:  # the state's own fields, exact (a snapshot may be rounded)
+            out.fields = np.asarray(state.fields, dtype=float)
+        return out
+
+    @classmethod
+    def of_snapshot(cls, snapshot: Array, origin: str = "") -> InitialState:
+        """The fields of one snapshot (:data:`SNAPSHOT_FIELDS`; NaN where a field is not
+        kept), its displacement if it has one; :class:`CheckpointError` without q1, q2, A."""
+        fields = np.asarray(snapshot[:3], dtype=float)
+        if not np.all(np.isfinite(fields)):
+            raise CheckpointError("the snapshot keeps no q1, q2 and A")
+        disp = np.asarray(snapshot[3:5], dtype=float)
+        return cls(fields, disp if np.all(np.isfinite(disp)) else None, origin)
 
 
 class CheckpointError(NematicError):

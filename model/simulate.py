@@ -23,6 +23,7 @@ there (the fields at that time are stored), the scalars ``stopped_early`` (1) an
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -173,7 +174,6 @@ def run(
         state = make_state(*np.array(start.fields, dtype=float))
         _resume(start, state.data, solver, eq)
         rows = [dict(r) for r in start.rows]
-        snaps = [s for s in start.snaps if float(np.round(s[0], 12)) in snap_set]
         wall_before, t_start, stopped[0] = start.wall, start.t, start.stopped
         if (
             math.isnan(stopped[0])
@@ -182,8 +182,9 @@ def run(
             and steady(rows, numerics)
         ):
             stopped[0] = t_start  # a longer run may end where a shorter one reached its end
-        if math.isfinite(stopped[0]):
-            snaps = [s for s in start.snaps if float(np.round(s[0], 12)) in snap_set | {stopped[0]}]
+        # the state's snapshots this run keeps (an early end stores its fields)
+        kept = snap_set | ({stopped[0]} if math.isfinite(stopped[0]) else set())
+        snaps = [s for s in start.snaps if float(np.round(s[0], 12)) in kept]
     origin = initial.origin if initial is not None else start.initial_from if start else ""
     last = [t_start, wall0]  # the time and wall clock of the last state handed out
     end: list[RunState | None] = [None]
@@ -249,8 +250,10 @@ def run(
     try:
         if math.isnan(stopped[0]) and interrupts:
             controller.run(state, numerics.dt)
-        elif keep_state:
-            end[0] = start
+        elif keep_state and start is not None:  # nothing left to integrate: the state is the end
+            end[0] = dataclasses.replace(
+                start, numerics=numerics.to_dict(), snaps=list(snaps), stopped=stopped[0]
+            )
     except SimulationFailure as exc:
         status, reason, detail = "failed", exc.reason, exc.detail
         t_failed = float(exc.t) if exc.t is not None else float("nan")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -89,35 +89,41 @@ class Parents:
 
     def __init__(self, spec: InitialSpec, parent: Expansion):
         self.spec, self.parent = spec, parent
-        self._index = {}
-        for i, point in enumerate(parent.points):
-            self._index[point.index] = i
 
-    def of(self, point: GridPoint, seed: int) -> tuple[str, int]:
-        """(parent run id, its position in the parent expansion) of the child run at
-        ``point`` with ``seed``; ``KeyError`` naming the value that has no parent."""
+    def of(self, point: GridPoint, seeds: Sequence[int]) -> list[str]:
+        """The parent run ids of the child runs at ``point`` with ``seeds``; ``KeyError``
+        naming the value or seed that has no parent."""
         campaign = self.parent.campaign
-        index = []
+        position = 0  # of the parent point, in C order (Expansion's point order)
         for dim in campaign.dims:
-            found = None
-            for i in range(len(dim)):
-                if all(
-                    same_value(axis.values[i], self.value(axis.name, point.coords))
-                    for axis in dim.axes
-                ):
-                    found = i
-                    break
+            values = [self.value(axis.name, point.coords) for axis in dim.axes]
+            found = next(
+                (
+                    i
+                    for i in range(len(dim))
+                    if all(
+                        same_value(a.values[i], v) for a, v in zip(dim.axes, values, strict=True)
+                    )
+                ),
+                None,
+            )
             if found is None:
                 names = ", ".join(
-                    f"{a.name} = {self.value(a.name, point.coords)!r}" for a in dim.axes
+                    f"{a.name} = {v!r}" for a, v in zip(dim.axes, values, strict=True)
                 )
                 raise KeyError(f"campaign {campaign.name} has no point with {names}")
-            index.append(found)
-        seed_of_parent = seed if self.spec.seed is None else self.spec.seed
-        if seed_of_parent not in campaign.seeds:
-            raise KeyError(f"campaign {campaign.name} has no seed {seed_of_parent}")
-        p = self._index[tuple(index)] * len(campaign.seeds) + campaign.seeds.index(seed_of_parent)
-        return self.parent.run_ids[p], p
+            position = position * len(dim) + found
+        out = []
+        for seed in seeds:
+            parent_seed = seed if self.spec.seed is None else self.spec.seed
+            if parent_seed not in campaign.seeds:
+                raise KeyError(f"campaign {campaign.name} has no seed {parent_seed}")
+            out.append(
+                self.parent.run_ids[
+                    position * len(campaign.seeds) + campaign.seeds.index(parent_seed)
+                ]
+            )
+        return out
 
     def value(self, name: str, coords: Mapping[str, Any]) -> Any:
         """The parent axis ``name``'s value for a child point: pinned, else the child's."""
@@ -154,8 +160,8 @@ class Expansion:
                 self.run_ids.extend(hasher.many(self.seeds))
                 continue
             p, n = point.parameters.to_dict(), point.numerics.to_dict()
-            for seed in self.seeds:
-                start = {"run": parents.of(point, seed)[0], "time": parents.spec.time_text}
+            for seed, parent_id in zip(self.seeds, parents.of(point, self.seeds), strict=True):
+                start = {"run": parent_id, "time": parents.spec.time_text}
                 self.starts.append(start)
                 self.run_ids.append(hash_canonical(p, n, seed, start))
         self.parents = parents

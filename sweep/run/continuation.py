@@ -136,39 +136,49 @@ def parent_fields(source: Mapping[str, str]) -> InitialState:
     (``time: end``: exact, from the run file's group ``state`` if it has one, else its last
     snapshot) or its snapshot at the time, with the displacement of that snapshot;
     :class:`CheckpointError` naming the file if it has neither."""
-    import numpy as np
-
     from model.checkpoint import CheckpointError, InitialState, RunState, read_netcdf
 
     path = Path(source["runs_dir"]) / f"{source['run']}.nc"
     origin = f"{source['campaign']}/{source['run']}@{source['time']}"
     main = read_netcdf(path)
-    times = main["snapshot_time"].values if "snapshot_time" in main else np.zeros(0)
-    if source["time"] == "end":
-        at = len(times) - 1
-        if main.attrs.get("status") != "ok" or at < 0:
-            raise CheckpointError(
-                f"the parent run {path} did not end (status {main.attrs.get('status')})"
-            )
-    else:
-        hits = np.flatnonzero(np.isclose(times, float(source["time"])))
-        if not len(hits):
-            raise CheckpointError(f"the parent run {path} has no snapshot at t = {source['time']}")
-        at = int(hits[0])
+    snaps = file_snapshots(main)
+    try:
+        if source["time"] != "end":
+            t = float(source["time"])
+            snap = next((s for s in snaps if math.isclose(s[0], t)), None)
+            if snap is None:
+                raise CheckpointError(f"it has no snapshot at t = {source['time']}")
+            return InitialState.of_snapshot(snap[1], origin)
+        if main.attrs.get("status") != "ok" or not snaps:
+            raise CheckpointError(f"it did not end (status {main.attrs.get('status')})")
+        try:
+            state = RunState.from_dataset(read_netcdf(path, STATE_GROUP))
+        except CheckpointError:  # no end state kept: the last snapshot
+            return InitialState.of_snapshot(snaps[-1][1], origin)
+        state.snaps = snaps
+        return InitialState.at(state, origin=origin)
+    except CheckpointError as e:
+        raise CheckpointError(f"the parent run's file {path}: {e}") from e
 
-    def field_at(name: str) -> np.ndarray | None:
-        return np.asarray(main[name].values[at], dtype=float) if name in main.data_vars else None
 
-    disp = [field_at("u1"), field_at("u2")]
-    displacement = None if any(d is None for d in disp) else np.stack(disp)  # type: ignore[arg-type]
-    if source["time"] == "end":
-        with contextlib.suppress(CheckpointError):  # no end state kept: the last snapshot
-            group = read_netcdf(path, STATE_GROUP)
-            return InitialState(RunState.from_dataset(group).fields, displacement, origin)
-    fields = [field_at(n) for n in ("q1", "q2", "A")]
-    if any(f is None for f in fields):
-        raise CheckpointError(f"the parent run's file {path} keeps no snapshots of q1, q2 and A")
-    return InitialState(np.stack(fields), displacement, origin)  # type: ignore[arg-type]
+def file_snapshots(main: Any) -> list[tuple[float, Any]]:
+    """The snapshots of a run file's Dataset as a run state holds them: ``(time, fields)``,
+    every field of :data:`model.checkpoint.SNAPSHOT_FIELDS` in float64, NaN where the file
+    does not keep it."""
+    import numpy as np
+
+    from model.checkpoint import SNAPSHOT_FIELDS
+
+    times = main["snapshot_time"].values if "snapshot_time" in main else ()
+    n = main.sizes.get("x", 0)
+    out = []
+    for i, t in enumerate(times):
+        stack = np.full((len(SNAPSHOT_FIELDS), n, n), math.nan)
+        for j, name in enumerate(SNAPSHOT_FIELDS):
+            if name in main.data_vars:
+                stack[j] = np.asarray(main[name].values[i], dtype=float)
+        out.append((float(t), stack))
+    return out
 
 
 def read_end_state(path: Path, task: Run) -> RunState:
@@ -190,36 +200,24 @@ def read_end_state(path: Path, task: Run) -> RunState:
             raise CheckpointError(f"{path} has no snapshots of {name}, which this run keeps")
         if task.snapshot_dtype == "float64" and main[name].dtype != np.float64:
             raise CheckpointError(f"{path} keeps {name} as {main[name].dtype}, this run as float64")
-    n = state.fields.shape[-1]
-    snaps = []
-    for i, t in enumerate(main["snapshot_time"].values if "snapshot_time" in main else ()):
-        stack = np.full((len(SNAPSHOT_FIELDS), n, n), math.nan)
-        for j, name in enumerate(SNAPSHOT_FIELDS):
-            if name in main.data_vars:
-                stack[j] = np.asarray(main[name].values[i], dtype=float)
-        snaps.append((float(t), stack))
-    state.snaps = snaps
+    state.snaps = file_snapshots(main)
     return state
 
 
 class Checkpointer:
     """The callback :func:`model.simulate.run` hands each due state to: writes it as the
     run's rolling checkpoint, atomically. A checkpoint that cannot be written (a full disk)
-    does not stop the run: it is logged, counted in :attr:`failed`, and the run goes on."""
+    does not stop the run: it is logged, and the run goes on."""
 
     def __init__(self, store: CampaignStore, run_id: str):
         self.path = checkpoint_path(store, run_id)
         self.run_id = run_id
-        self.written = 0
-        self.failed = ""
 
     def __call__(self, state: RunState) -> None:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             atomic_to_netcdf(state.to_dataset(), self.path)
-            self.written += 1
         except (OSError, StorageError) as e:
-            self.failed = str(e)
             log.warning("run %s: checkpoint at t = %g not written: %s", self.run_id, state.t, e)
 
 

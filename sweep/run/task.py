@@ -289,10 +289,9 @@ def execute_run(task: RunTask) -> Record:
             ds, encoding = prepare_dataset(ds, task)
             ds.attrs.update(continuation.run_attrs(start))
             path = store.nc_path(task.run_id)
-            keep = task.end_state and end_state is not None
             groups = (
                 {continuation.STATE_GROUP: end_state.to_dataset(snapshots=False)}
-                if keep and end_state is not None
+                if task.end_state and end_state is not None
                 else {}
             )
             atomic_to_netcdf(ds, path, encoding, groups)

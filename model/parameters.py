@@ -18,6 +18,7 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any
 
 from .errors import ParameterError
+from .protocol import Protocol, protocol_from
 
 if TYPE_CHECKING:
     import numpy as np
@@ -75,6 +76,9 @@ class Parameters:
             resolution variant of a verification, sweep/verify).
         noise_amplitude: RMS of an extra Gaussian (q1, q2) perturbation drawn from the same
             random field (needed when S0 = 0, as in Fig. A1).
+        protocol: alpha - B, chi and eps as functions of time (:mod:`model.protocol`; empty:
+            constant). Where it makes one time dependent, the plain field holds its value at
+            t = 0 and :meth:`at` gives the constants at a time.
     """
 
     S0: float = 0.1
@@ -95,11 +99,15 @@ class Parameters:
     noise_modes: int = 32
     texture_resolution: int = 0
     noise_amplitude: float = 0.0
+    protocol: Protocol = Protocol()
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.type in ("str", str):
+            if f.name == "protocol":
+                if not isinstance(value, Protocol):
+                    raise ParameterError("protocol", value, "a model.protocol.Protocol")
+            elif f.type in ("str", str):
                 if value not in INITIAL:
                     raise ParameterError(f.name, value, " or ".join(INITIAL))
             elif f.type in ("int", int):
@@ -143,14 +151,51 @@ class Parameters:
                 "0 unless initial = 'per_node' (the band texture is the same "
                 "physical field at every resolution already)",
             )
+        if self.protocol:
+            self._check_protocol()
+
+    def _check_protocol(self) -> None:
+        """Every value the protocol takes is a valid value of its parameter; the plain
+        fields hold the values at t = 0."""
+        bounds = {"chi": (0.0, math.inf, "a number >= 0"), "eps": (-0.5, 0.5, "-0.5 < eps < 0.5")}
+        for name in self.protocol.names:
+            if name not in bounds:
+                continue
+            lo, hi, usage = bounds[name]
+            for v in self.protocol.extremes(name):
+                if v < lo or v > hi or (name == "eps" and abs(v) == 0.5):
+                    raise ParameterError(f"protocol.{name}", v, f"values with {usage}")
+        at0 = self.protocol.values(0.0)
+        if "alpha_minus_B" in at0:
+            object.__setattr__(self, "alpha", self.B + at0["alpha_minus_B"])
+        for name in ("chi", "eps"):
+            if name in at0:
+                object.__setattr__(self, name, at0[name])
 
     @property
     def alpha_minus_B(self) -> float:
         """The contractility alpha - B that the paper's figures are plotted against."""
         return self.alpha - self.B
 
+    def at(self, t: float, after: float | None = None) -> Parameters:
+        """The constants at time ``t`` (on the protocol's pieces that hold ``after``:
+        :meth:`model.protocol.Protocol.values`), without the protocol; ``self`` without one."""
+        if not self.protocol:
+            return self
+        base = self.to_dict()
+        base.pop("protocol")
+        values = self.protocol.values(t, after)
+        if "alpha_minus_B" in values:
+            base["alpha"] = self.B + values.pop("alpha_minus_B")
+        return Parameters(**{**base, **values})
+
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        """Every field; ``protocol`` only where there is one, in its canonical form
+        (:meth:`model.protocol.Protocol.to_dict`)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "protocol"}
+        if self.protocol:
+            out["protocol"] = self.protocol.to_dict()
+        return out
 
     @classmethod
     def names(cls) -> list[str]:
@@ -161,6 +206,13 @@ class Parameters:
         """Build from a mapping; ``alpha_minus_B`` sets ``alpha = B + alpha_minus_B``."""
         values = dict(values)
         valid = cls.names()
+        protocol, constants = protocol_from(values.pop("protocol", None))
+        for name, value in constants.items():  # a constant function is the plain parameter
+            values[name] = value
+            if name == "alpha_minus_B":
+                values.pop("alpha", None)
+        if protocol:
+            values["protocol"] = protocol
         amb = values.pop("alpha_minus_B", None)
         for key in values:
             if key not in valid:

@@ -57,7 +57,12 @@ class ActiveNematicPDE(PDEBase):
 
     def __init__(self, params: Parameters | None = None, numerics: Numerics | None = None):
         super().__init__()
-        self.params = params or Parameters()
+        #: the run's parameters, with their protocol (model.protocol)
+        self.base_params = params or Parameters()
+        self.protocol = self.base_params.protocol
+        #: the constants at the current time (:meth:`at_time`; all of them without a protocol)
+        self.params = self.base_params.at(0.0)
+        self._protocol_key: tuple | None = None  # the values (and rates) last set
         #: without explicit numerics the grid follows the state (:meth:`use_grid_of`)
         self.grid_from_state = numerics is None
         self.numerics = numerics or Numerics()
@@ -69,6 +74,22 @@ class ActiveNematicPDE(PDEBase):
             numerics.resolution, fft_backend="scipy" if numerics.backend == "numpy" else "auto"
         )
         self.mechanics = make_mechanics(self.params, numerics, self.spectral)
+        self._protocol_key = None  # the new mechanics holds the constants at t = 0
+
+    def at_time(self, t: float, after: float | None = None) -> None:
+        """Set the constants (and the mechanics') to the protocol's values at ``t`` on the
+        pieces that hold ``after`` (:meth:`model.protocol.Protocol.values`; default: ``t``,
+        right-continuous), with their rates; nothing without a protocol."""
+        if not self.protocol:
+            return
+        values = self.protocol.values(t, after)
+        rates = self.protocol.rates(t, after)
+        key = (tuple(values.values()), tuple(rates.values()))
+        if key == self._protocol_key:
+            return
+        self._protocol_key = key
+        self.params = self.base_params.at(t, after)
+        self.mechanics.set_parameters(self.params, rates)
 
     def use_grid_of(self, state: FieldCollection) -> None:
         """Match the grid of ``state`` (an N x N periodic unit square, e.g. from
@@ -148,6 +169,7 @@ class ActiveNematicPDE(PDEBase):
 
     def evolution_rate(self, state: FieldCollection, t: float = 0) -> FieldCollection:  # type: ignore[override]
         self.use_grid_of(state)
+        self.at_time(t)
         q1, q2, A = state.data
         rate, _, _ = self.rates(q1, q2, A, t)
         if not np.all(np.isfinite(rate)):

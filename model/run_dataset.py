@@ -122,6 +122,8 @@ def _attr(value: Any) -> Any:
         return int(value)
     if isinstance(value, (list, tuple)):
         return json.dumps(list(value))
+    if isinstance(value, dict):  # a protocol (model.protocol): its canonical form as JSON
+        return json.dumps(value, sort_keys=True)
     return value
 
 

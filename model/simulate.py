@@ -210,9 +210,12 @@ def run(
     def record(st, t: float) -> None:
         d = st.data
         parts, count = dict(eq.mechanics.fft_parts), grid.fft.count
+        eq.at_time(t)  # a save sees a protocol's value after a switch at its time
         mech = eq.mechanics.solve(d[0], d[1], t=t)
         residual = mech.residual if not linear else eq.mechanics.residual(mech.P)
-        obs = snapshot_observables(d[0], d[1], d[2], mech.F, residual, params, grid, linear=linear)
+        obs = snapshot_observables(
+            d[0], d[1], d[2], mech.F, residual, eq.params, grid, linear=linear
+        )
         obs["rate_margin"] = eq.mechanics.rate_margin(d[0], d[1], mech)[0]
         obs["time"] = float(t)
         obs["steps"] = float(solver.stats["steps"])
@@ -300,6 +303,7 @@ def _counters(eq: ActiveNematicPDE) -> dict[str, Any]:
 def _resume(start: RunState, u: np.ndarray, solver: ETDSolver, eq: ActiveNematicPDE) -> None:
     """Put the solver and the mechanics in the state ``start`` holds (``u``: its fields)."""
     solver.resume(start.solver, u)
+    eq.at_time(start.t)  # the constants the state was saved under (model.protocol)
     eq.mechanics.resume(start.mechanics, u[0], u[1])
     c = start.counters
     eq.spectral.fft.count = int(c["fft_count"])

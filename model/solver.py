@@ -93,13 +93,14 @@ class ETDRK2Solver(ETDSolver):
             V0, G0 = fin.udot_hat, fin.udot_grad
             d0 = np.ascontiguousarray(d0)
             da = self.k.rk_stage(d0, h, V0)
-            Fa = self.k.rk_stage(np.ascontiguousarray(fin.deformation_of(d0)), h, G0)
+            if self.carry_deformation:
+                Fa = self.k.rk_stage(np.ascontiguousarray(fin.deformation_of(d0)), h, G0)
         else:  # first-order predictor of Newton's start
             self.pde.mechanics.predict(h)
         Nqa, Adota = self.split(a, aq_hat, t + h, da, Fa)
         corr_q = h * phi2 * (Nqa - Nq0)
         corr_A = h * phi2A * (Adota - Adot0 - LA * (aA - A))
-        if fin is None or da is None or V0 is None or G0 is None or Fa is None:
+        if fin is None or da is None or V0 is None or G0 is None:
             return self._finish(u, q_hat, aq_hat + corr_q, aA + corr_A, corr_q, corr_A)
         corr_d = 0.5 * h * (fin.udot_hat - V0)
         corr_G = 0.5 * h * (fin.udot_grad - G0)
@@ -110,7 +111,7 @@ class ETDRK2Solver(ETDSolver):
             aA + corr_A,
             corr_q,
             corr_A,
-            (da + corr_d, Fa + corr_G),
+            (da + corr_d, None if Fa is None else Fa + corr_G),
             corr_G,
         )
 
@@ -174,11 +175,13 @@ class ETDRK4Solver(ETDSolver):
         rk = self.k.rk_stage  # x0 + c v in one pass
         if fin is not None and d0 is not None:
             d0 = np.ascontiguousarray(d0)
-            F0 = np.ascontiguousarray(fin.deformation_of(d0))
+            # (without carrying F, under a protocol of eps: each stage transforms its own)
+            carry = self.carry_deformation
+            F0 = np.ascontiguousarray(fin.deformation_of(d0)) if carry else np.empty(0)
             V.append(fin.udot_hat)
             G.append(fin.udot_grad)
             d_a = rk(d0, 0.5 * h, V[0])
-            F_a = rk(F0, 0.5 * h, G[0])
+            F_a = rk(F0, 0.5 * h, G[0]) if carry else None
         else:  # Newton's start: the displacement extrapolated with its rate
             self.pde.mechanics.predict(0.5 * h)
         # stage a (t + h/2): ETD1 half step
@@ -193,7 +196,7 @@ class ETDRK4Solver(ETDSolver):
             V.append(fin.udot_hat)
             G.append(fin.udot_grad)
             d_b = rk(d0, 0.5 * h, V[1])
-            F_b = rk(F0, 0.5 * h, G[1])
+            F_b = rk(F0, 0.5 * h, G[1]) if carry else None
         # stage b (t + h/2): Krogstad's correction with phi_2, a + h phi_2(h/2) (N_a - N_u)
         Nq_b, NA_b = rhs(
             combo_q(E2, q_hat, wq["b"], (Nq_u, Nq_a)),
@@ -206,7 +209,7 @@ class ETDRK4Solver(ETDSolver):
             V.append(fin.udot_hat)
             G.append(fin.udot_grad)
             d_c = rk(d0, h, V[2])
-            F_c = rk(F0, h, G[2])
+            F_c = rk(F0, h, G[2]) if carry else None
         else:
             self.pde.mechanics.predict(0.5 * h)
         # stage c (t + h)
@@ -229,7 +232,7 @@ class ETDRK4Solver(ETDSolver):
         V.append(fin.udot_hat)
         G.append(fin.udot_grad)
         new_d = self.k.rk4_update(d0, h / 6.0, *V)  # d0 + h/6 (V0 + 2 V1 + 2 V2 + V3)
-        new_F = self.k.rk4_update(F0, h / 6.0, *G)
+        new_F = self.k.rk4_update(F0, h / 6.0, *G) if self.carry_deformation else None
         return self._finish(
             u, q_hat, new_q_hat, new_A, err_q, err_A, (new_d, new_F), (h / 3.0) * (G[2] - G[1])
         )

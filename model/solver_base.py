@@ -96,7 +96,7 @@ class ETDSolver(SolverBase):
         self._checkpointed = False
         #: the integrated displacement spectrum at the end of the last step and its
         #: deformation gradient (projected onto force balance when the step is accepted)
-        self._pending_disp: tuple[Array, Array] | None = None
+        self._pending_disp: tuple[Array, Array | None] | None = None
         self.stats = {
             "steps": 0,
             "rejected": 0,
@@ -115,6 +115,13 @@ class ETDSolver(SolverBase):
         self._dt = float(num.dt)
         #: the step size a continued run starts with (:meth:`resume`)
         self._resume_h: float | None = None
+        #: the start of the step being taken: its stages use the protocol's pieces that
+        #: hold it (model.protocol; None outside a step: right-continuous)
+        self._after: float | None = None
+        #: the integrated displacement carries its deformation gradient through the stages
+        #: (in real space) unless a protocol moves the applied shear F bar: then each stage
+        #: transforms its displacement (F = F bar(t) + grad u at the stage's time)
+        self.carry_deformation = not pde.protocol.varies("eps")
 
     # --- the split right-hand side -----------------------------------------------------
     def split(
@@ -125,6 +132,7 @@ class ETDSolver(SolverBase):
         displacement: at the displacement spectrum ``disp`` with deformation gradient ``F`` (its
         rate is then the mechanics' ``udot_hat``, with gradient ``udot_grad``)."""
         self.stats["rhs"] += 1
+        self.pde.at_time(t, self._after)
         Nq, Adot, mech = self._split(u, q_hat, t, disp, F)
         if mech is not None:
             self._last_mech = mech
@@ -209,7 +217,7 @@ class ETDSolver(SolverBase):
         new_A: Array,
         err_q: Array,
         err_A: Array,
-        new_disp: tuple[Array, Array] | None = None,
+        new_disp: tuple[Array, Array | None] | None = None,
         err_grad: Array | None = None,
     ) -> tuple[Array, float]:
         """The new state, its spectra remembered for the next step, and the error estimate
@@ -243,6 +251,7 @@ class ETDSolver(SolverBase):
         disp, self._pending_disp = self._pending_disp, None
         if disp is None:
             return
+        self.pde.at_time(t)  # the step's end belongs to the next piece (model.protocol)
         state = self.pde.mechanics.solve(new[0], new[1], u_guess=disp[0], t=t, F_guess=disp[1])
         self.stats["newton"] += state.iterations
         self.stats["projections"] += 1
@@ -297,20 +306,28 @@ class ETDSolver(SolverBase):
         self._dt = dt if self._resume_h is None else self._resume_h
         self._resume_h = None
 
+        protocol = self.pde.protocol
+
         def stepper(state, t_start: float, t_end: float) -> float:
             u = state.data
             t = t_start
             h = self._dt
             while t < t_end - 1e-12 * max(1.0, abs(t_end)):
-                # land exactly on t_end (the next save time)
-                h_try = min(h, self.dt_max, t_end - t) if self.adaptive else min(h, t_end - t)
+                # land exactly on t_end (the next save time) and on the protocol's switch
+                # times (no step crosses one: model.protocol)
+                switch = protocol.next_break(t)
+                target = min(t_end, switch)
+                h_try = min(h, self.dt_max, target - t) if self.adaptive else min(h, target - t)
                 try:
+                    self._after = t
                     new, err = self.step(u, t, h_try)
                     if not np.all(np.isfinite(new)):
                         raise SimulationFailure("nan", "non-finite state after a step", t)
                 except SimulationFailure as exc:
+                    self._after = None
                     h = self._retry(exc, h_try, t)
                     continue
+                self._after = None
                 if self.adaptive:
                     fac = (
                         2.0
@@ -347,7 +364,7 @@ class ETDSolver(SolverBase):
                         h = max(h, h_try * fac) if fac > 1 else min(h, h_try * fac)
                         h = self._quantize(h)
                 u[...] = new
-                t += h_try
+                t = switch if h_try == switch - t else t + h_try
                 self.stats["steps"] += 1
                 self.info["steps"] += 1
                 if self.on_step is not None:

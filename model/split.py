@@ -82,7 +82,26 @@ class SpectralSplit:
                 mech.spin_tol,
                 mech.spin_maxiter,
                 *linear_rhs.workspace(g.n),
+                *mech.unit_spin_symbols,
+                mech.alpha_rate,
             )
+        #: the mechanics' parameter version the compiled data holds (a protocol changes it)
+        self._version = mech.parameter_version
+
+    def _update(self) -> None:
+        """Put a protocol's current constants into the compiled data."""
+        mech, p = self.mech, self.pde.params
+        self._version = mech.parameter_version
+        if self._rhs_data is None:
+            return
+        self._rhs_data = self._rhs_data._replace(
+            m1=mech.spin_symbols[0],
+            m2=mech.spin_symbols[1],
+            S=mech.response_symbols(),
+            mean_dev=p.eps * self.pde.spectral.n**2,
+            chi=p.chi,
+            spin_rate=mech.alpha_rate,
+        )
 
     def __call__(
         self, u: Array, q_hat: Array, t: float, disp: Array | None = None, F: Array | None = None
@@ -91,6 +110,8 @@ class SpectralSplit:
         mechanics is compiled, else by :meth:`reference`."""
         if disp is not None:
             raise ValueError("a given displacement needs finite mechanics")
+        if self._version != self.mech.parameter_version:
+            self._update()
         if self._rhs_data is None:
             return (*self.reference(u, q_hat, t), None)
         mech, g = self.mech, self.pde.spectral
@@ -117,7 +138,7 @@ class SpectralSplit:
         R_hat = H_hat
         R_hat /= p.gamma
         R_hat += Lq_hat  # H / gamma, full
-        qdot_hat = mech.corotational_hat(q1, q2, R_hat, t)  # R + 2 omega J q
+        qdot_hat = mech.corotational_hat(q1, q2, R_hat, t, q_hat)  # R + 2 omega J q
         qdot_hat -= Lq_hat
         Adot = mech.k.activity_rate(A, tr_sigma, p.zeta, p.chi, p.s, p.tau)
         return qdot_hat, Adot

@@ -49,7 +49,7 @@ CLUSTER_KINDS = {
 
 # --------------------------------------------------------------------------- the model's names
 def _field_types(cls: type) -> dict[str, str]:
-    return {f.name: str(f.type) for f in dataclasses.fields(cls)}
+    return {f.name: str(f.type) for f in dataclasses.fields(cls) if f.name != "protocol"}
 
 
 PARAMETER_TYPES: dict[str, str] = {**_field_types(Parameters), AMB: "float"}

@@ -18,6 +18,7 @@ from model.parameters import Numerics, Parameters, check_compatible
 
 from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec, same_value
 from .identity import PointHasher, hash_canonical, trajectory_id
+from .protocols import with_axis_values
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +60,7 @@ def _settings(campaign: Campaign, values: dict[str, Any]) -> tuple[dict[str, Any
             params[name] = value
         elif name in NUMERICS_TYPES:
             numerics[name] = value
+    with_axis_values(params, values)  # the protocol's swept numbers
     return params, numerics
 
 

@@ -127,8 +127,11 @@ class LinearRHS(NamedTuple):
     """What :func:`linear_split` needs besides the state, fixed for a run: the symbols
     (``Lq``, the spin symbols ``m1``, ``m2``, the small-strain response ``S``), the Parseval
     weights ``w``, the FFTW plans, the applied mean strain ``mean_dev`` (eps N^2), the
-    constants of Eqs. (4)-(5), the spin solve's tolerance and iteration cap, and its work
-    arrays ``V``, ``LZ`` (:func:`workspace`)."""
+    constants of Eqs. (4)-(5), the spin solve's tolerance and iteration cap, its work
+    arrays ``V``, ``LZ`` (:func:`workspace`), and under a protocol the rate of alpha - B
+    ``spin_rate`` with the spin symbols per unit alpha - B ``mu1``, ``mu2`` (the spin source
+    :meth:`model.mechanics.LinearMechanics.spin_source`). The constants that a protocol
+    changes are replaced with ``_replace`` (:class:`model.split.SpectralSplit`)."""
 
     Lq: Array
     m1: Array
@@ -150,6 +153,9 @@ class LinearRHS(NamedTuple):
     maxiter: int
     V: Array
     LZ: Array
+    mu1: Array
+    mu2: Array
+    spin_rate: float
 
 
 @njit(cache=True)
@@ -183,6 +189,9 @@ def linear_split(q1, q2, A, q_hat, omega_hat, rhs_data):  # pragma: no cover
         maxiter,
         V,
         LZ,
+        mu1,
+        mu2,
+        spin_rate,
     ) = rhs_data
     n = q1.shape[0]
     shape = q_hat.shape[1:]
@@ -247,6 +256,8 @@ def linear_split(q1, q2, A, q_hat, omega_hat, rhs_data):  # pragma: no cover
             R[0, i, j] = r0
             R[1, i, j] = r1
             rhs[i, j] = rmul(m1[i, j], r0) + rmul(m2[i, j], r1)
+            if spin_rate != 0.0:  # the spin a rate of alpha - B drives at fixed Q
+                rhs[i, j] += spin_rate * (rmul(mu1[i, j], a) + rmul(mu2[i, j], b))
     omega_hat, j_hat, its, ok, nop = spin_gmres(
         rhs, omega_hat, q1, q2, m1, m2, w, pf, pi, spin_tol, maxiter, V, LZ
     )

@@ -119,12 +119,28 @@ class Mechanics(ABC):
         self.fft_parts: dict[str, int] = {"saves": 0}
         self.moduli = cl.Moduli.from_params(params)
         self.Fbar = applied_deformation(params.eps)
+        #: the time derivatives of alpha and eps under a protocol (:meth:`set_parameters`)
+        self.alpha_rate = 0.0
+        self.eps_rate = 0.0
+        #: counts the changes of :meth:`set_parameters` (what caches the constants checks)
+        self.parameter_version = 0
         g = grid
         kh = g.khat
         # Green operator of the isotropic medium (mu = 1, lambda + mu = kappa):
         # [mu k^2 I + (lambda + mu) k k] u = b  ->  u = (I - a khat khat) b / k^2
         self._inv_k2 = np.where(g.active, 1.0 / np.where(g.active, g.kd2, 1.0), 0.0)
         self._khat = kh
+
+    def set_parameters(self, params: Parameters, rates: dict[str, float]) -> None:
+        """The constants at the current time of a protocol (:mod:`model.protocol`) and the
+        time derivatives ``rates`` of alpha - B and eps there (they drive the displacement
+        rate: :meth:`corotational`)."""
+        self.params = params
+        self.moduli = cl.Moduli.from_params(params)
+        self.Fbar = applied_deformation(params.eps)
+        self.alpha_rate = float(rates.get("alpha_minus_B", 0.0))
+        self.eps_rate = float(rates.get("eps", 0.0))
+        self.parameter_version += 1
 
     # --- the interface (abstract, or the defaults of a mechanics without a warm start) -
     @abstractmethod

@@ -61,6 +61,10 @@ class FiniteMechanics(Mechanics):
         #: when asked for the same displacement and order (the first stage after a projection)
         self._solution: tuple[Array, Array, Array, Array, Array] | None = None
 
+    def set_parameters(self, params: Parameters, rates: dict[str, float]) -> None:
+        super().set_parameters(params, rates)
+        self._solution = None  # its stress is of the constants before
+
     def checkpoint(self) -> None:
         self._checkpoint = (self.u_hat.copy(), self.udot_hat.copy())
 
@@ -347,10 +351,13 @@ class FiniteMechanics(Mechanics):
 
         .. math::
             -\mathrm{Div}\big(\mathbb K : \nabla \dot u + E\, \omega(\dot u)\big)
-            = \mathrm{Div}(\partial_Q P : R), \qquad E = \partial_Q P : (2 J q),
+            = \mathrm{Div}(\partial_Q P : R + \dot\alpha F Q + \mathbb K : \dot{\bar F}),
+            \qquad E = \partial_Q P : (2 J q),
             \quad \omega(\dot u) = \tfrac12 (\partial_1 \dot u_2 - \partial_2 \dot u_1),
 
-        by GMRES (Green-preconditioned, warm-started). Returns ``(Qdot components, omega)``.
+        by GMRES (Green-preconditioned, warm-started), with the rates of alpha and of the
+        applied shear under a protocol (:mod:`model.protocol`; zero otherwise). Returns
+        ``(Qdot components, omega)``.
         """
         g, m = self.grid, self.moduli
         K = mech.tangent
@@ -370,6 +377,12 @@ class FiniteMechanics(Mechanics):
             m.B_prime,
             m.alpha,
         )
+        if self.alpha_rate != 0.0:  # dP/dalpha = F Q (the active term of Eq. 2)
+            dP = dP + self.alpha_rate * self.k.q_increment_kernel(F, q1, q2, q1, q2, 0.0, 0.0, 1.0)
+        if self.eps_rate != 0.0:  # the applied shear's rate, K : d(F bar)/dt
+            dFbar = np.zeros((2, 2) + q1.shape)
+            dFbar[0, 0], dFbar[1, 1] = self.eps_rate, -self.eps_rate
+            dP = dP + self.k.apply_tangent_kernel(K, dFbar)
         b = self.k.div_hat_kernel(g.forward(dP), g.kx, g.ky)
 
         count = g.fft.count

@@ -49,12 +49,33 @@ class LinearMechanics(Mechanics):
         self._a = 1.0 if incompressible else k / (k + 1.0)
         self.ebar = np.array([[params.eps, 0.0], [0.0, -params.eps]])
         kx, ky = self._khat
-        c = -0.5 * (self.moduli.alpha - self.moduli.B)
-        #: the spin symbols (m1, m2) of :meth:`spin_multiplier`
-        self.spin_symbols = (c * (-2.0 * kx * ky), c * (kx**2 - ky**2))
+        #: the spin symbols per unit alpha - B: the spin of a rate of alpha - B at fixed Q
+        self.unit_spin_symbols = (-0.5 * (-2.0 * kx * ky), -0.5 * (kx**2 - ky**2))
+        self.spin_symbols = self._spin_symbols()
         #: a zero half spectrum (the spin solve's start; read, never written)
         self.zero_hat = np.zeros(grid.k2.shape, dtype=complex)
         self.spin_maxiter = 100  # GMRES iterations of the spin solve before spin_diverged
+
+    def _spin_symbols(self) -> tuple[Array, Array]:
+        """The spin symbols (m1, m2) of :meth:`spin_multiplier` at the current alpha - B."""
+        kx, ky = self._khat
+        c = -0.5 * (self.moduli.alpha - self.moduli.B)
+        return c * (-2.0 * kx * ky), c * (kx**2 - ky**2)
+
+    def set_parameters(self, params: Parameters, rates: dict[str, float]) -> None:
+        super().set_parameters(params, rates)
+        self.ebar = np.array([[params.eps, 0.0], [0.0, -params.eps]])
+        self.spin_symbols = self._spin_symbols()
+
+    def spin_source(self, q_hat: Array) -> Array | None:
+        r"""The spin that a rate of alpha - B drives at fixed Q,
+        :math:`\dot\alpha\, (\hat m_1 \hat q_1 + \hat m_2 \hat q_2)` with the spin symbols
+        per unit alpha - B (the eigenstress :math:`(\alpha - B) Q` changes at that rate):
+        None without one."""
+        if self.alpha_rate == 0.0:
+            return None
+        mu1, mu2 = self.unit_spin_symbols
+        return self.alpha_rate * (mu1 * q_hat[0] + mu2 * q_hat[1])
 
     def _eigenstress(self, q1: Array, q2: Array) -> Array:
         m = self.moduli
@@ -162,8 +183,16 @@ class LinearMechanics(Mechanics):
         m1, m2 = self.spin_symbols
         return m1 * qdot1_hat + m2 * qdot2_hat
 
-    def corotational_hat(self, q1: Array, q2: Array, R_hat: Array, t: float | None = None) -> Array:
-        r"""Solve :math:`\omega = \Omega[R + 2 \omega J q]` (Jq = (-q2, q1)) by GMRES on
+    def corotational_hat(
+        self,
+        q1: Array,
+        q2: Array,
+        R_hat: Array,
+        t: float | None = None,
+        q_hat: Array | None = None,
+    ) -> Array:
+        r"""Solve :math:`\omega = \Omega[R + 2 \omega J q] + \omega_s` (Jq = (-q2, q1),
+        :math:`\omega_s` the :meth:`spin_source` of the spectra ``q_hat``) by GMRES on
         :math:`\hat\omega`, started from zero; return the spectra of the Qdot components (the
         spin's spectrum is kept in ``omega_hat``).
 
@@ -180,6 +209,9 @@ class LinearMechanics(Mechanics):
 
         m1, m2 = self.spin_symbols
         b = self.k.symbol_combination(self.zero_hat, -m1, -m2, R_hat[0], R_hat[1])
+        if self.alpha_rate != 0.0:
+            source = self.spin_source(g.forward(np.stack([q1, q2])) if q_hat is None else q_hat)
+            b = b + source
         # from zero: its residual is b, no operator application; a warm start from the last
         # spin costs one application for its residual and saves fewer iterations (the spin
         # follows the stage-specific part of Qdot): 4534 iterations + 1256 residuals against

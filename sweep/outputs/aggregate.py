@@ -17,6 +17,7 @@ Written by the driver (or ``nematic aggregate``) alone, atomically.
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
@@ -26,6 +27,7 @@ import numpy as np
 from ..campaign import AMB, NOT_OBSERVABLES, NUMERICS_TYPES, OBSERVABLES, PARAMETER_TYPES
 from ..expand import Expansion
 from ..files import atomic_to_netcdf
+from ..protocols import AXIS_LONG_NAMES, PROTOCOL
 from ..provenance import code_version, git_commit, library_versions_text
 from ..store import RETRYABLE_REASONS, CampaignStore, Record, now_iso
 
@@ -83,8 +85,12 @@ def _seed_stats(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def coord_attrs(name: str) -> dict[str, str]:
-    attrs = {"long_name": PARAMETER_LONG_NAMES.get(name, name)}
-    if name in PARAMETER_TYPES or NUMERICS_TYPES.get(name) in ("int", "float"):
+    attrs = {"long_name": PARAMETER_LONG_NAMES.get(name, AXIS_LONG_NAMES.get(name, name))}
+    if (
+        name in PARAMETER_TYPES
+        or name in AXIS_LONG_NAMES
+        or NUMERICS_TYPES.get(name) in ("int", "float")
+    ):
         attrs["units"] = "1"
     return attrs
 
@@ -217,6 +223,11 @@ def build_phase(
     }
     if AMB not in swept and "alpha" not in swept and "B" not in swept:
         fixed_params[AMB] = first.parameters.alpha_minus_B
+    if PROTOCOL in campaign.parameters:  # as written (its swept numbers are axes)
+        fixed_params[PROTOCOL] = json.dumps(campaign.parameters[PROTOCOL], sort_keys=True)
+        for name in campaign.parameters[PROTOCOL]:  # not constants: no value of their own
+            for key in (name, "alpha") if name == AMB else (name,):
+                fixed_params.pop(key, None)
     fixed_numerics = {k: v for k, v in first.numerics.to_dict().items() if k not in swept}
     n_ok = int((status == STATUS_OK).sum())
     n_failed = int((status == STATUS_FAILED).sum())

@@ -53,6 +53,7 @@ from .execution import read_execution
 from .initial import READING, InitialRequest, parent_error, read_initial, resolve_initial
 from .points import check_points
 from .precision import read_precision
+from .protocol import read_protocol
 from .refine import read_refine
 from .sections import (
     check_product_options,
@@ -74,6 +75,7 @@ TOP_KEYS = (
     "name",
     "description",
     "parameters",
+    "protocol",
     "numerics",
     "sweep",
     "seeds",
@@ -106,6 +108,8 @@ SECTIONS: tuple[Section, ...] = (
     Section("name", "name", read_name),
     Section("description", "description", read_description),
     Section("parameters", "parameters", read_parameters),
+    # the protocol joins the base parameters (the Campaign keeps the merged mapping)
+    Section("protocol", "parameters", read_protocol),
     Section("numerics", "numerics", read_numerics),
     Section("store", "store", read_store),
     Section("sweep", "dims", read_sweep),

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..campaign import AMB, AXIS_TYPES, NUMERICS_TYPES, Axis, Dim
 from ..errors import Problem
+from ..protocols import PROTOCOL, protocol_axes
 from .checker import Checker, KeyPath, coerce, is_int, is_number, suggest
 
 SWEEP_KEYS = ("axes", "zip")
@@ -92,7 +93,7 @@ def _check_axis(c: Checker, name: str, raw: Any, path: KeyPath) -> Axis | None:
     if not values:
         c.bad(path, raw, "a non-empty list of values (an empty axis would give no runs)")
         return None
-    kind_t = AXIS_TYPES[name]
+    kind_t = AXIS_TYPES.get(name, "float")  # a protocol's number (sweep.protocols)
     out: list[Any] = []
     ok = True
     for v, vpath in zip(values, vpaths, strict=True):
@@ -121,14 +122,24 @@ def read_sweep(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Dim, ...]
     sweep = c.mapping(("sweep",), raw, SWEEP_KEYS)
     axes_raw = c.mapping(("sweep", "axes"), sweep.get("axes"), None)
     axes: dict[str, Axis] = {}
+    timed = read["protocol"].get(PROTOCOL, {})
+    offered = protocol_axes(read["protocol"])
     for name, spec in axes_raw.items():
         path = ("sweep", "axes", name)
-        if name not in AXIS_TYPES:
+        if name not in AXIS_TYPES and name not in offered:
             c.unknown(
                 path,
                 name,
-                sorted(AXIS_TYPES),
+                sorted(AXIS_TYPES) + sorted(offered),
                 "" if name not in NUMERICS_TYPES else " (snapshot_times cannot be swept)",
+            )
+            continue
+        if name in timed or (name == "alpha" and AMB in timed):
+            c.add(
+                path,
+                f"{name!r} is a function of time (protocol.{name if name in timed else AMB}); "
+                "sweep the numbers of its function instead (e.g. "
+                f"{AMB}_level of a pulse) or drop it from 'protocol:'",
             )
             continue
         if name in base:

@@ -8,6 +8,7 @@ from model.errors import ParameterError
 
 from ..campaign import AMB, Campaign
 from ..expand import MAX_POINT_PROBLEMS, iter_points, make_point
+from ..protocols import error_path, protocol_axes
 from .checker import Checker
 
 
@@ -15,6 +16,7 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
     """Build the model's objects at every grid point; report each distinct
     :class:`~model.errors.ParameterError` at the key path that caused it."""
     axis_names = {a.name for a in campaign.axes}
+    swept = {k: v for k, v in protocol_axes(campaign.parameters).items() if k in axis_names}
     seen: set[tuple[str, str]] = set()
     for index, coords in iter_points(campaign):
         try:
@@ -23,8 +25,15 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
             name = e.name
             if name == "alpha" and AMB in axis_names:
                 name = AMB
-            if name in axis_names:
-                path: tuple[str | int, ...] = ("sweep", "axes", name)
+            timed = error_path(name, swept)
+            if timed is not None and timed[0] == "sweep":
+                path: tuple[str | int, ...] = timed
+                at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
+                msg = f"got {e.value!r}; allowed: {e.allowed} (at the grid point {at})"
+            elif timed is not None:
+                path, msg = timed, f"got {e.value!r}; allowed: {e.allowed}"
+            elif name in axis_names:
+                path = ("sweep", "axes", name)
                 at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
                 msg = f"got {e.value!r}; allowed: {e.allowed} (at the grid point {at})"
             elif name in campaign.numerics:

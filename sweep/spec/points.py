@@ -8,6 +8,7 @@ from model.errors import ParameterError
 
 from ..campaign import AMB, Campaign
 from ..expand import MAX_POINT_PROBLEMS, iter_points, make_point
+from ..identity import hash_canonical
 from ..protocols import error_path, protocol_axes
 from .checker import Checker
 
@@ -18,9 +19,12 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
     axis_names = {a.name for a in campaign.axes}
     swept = {k: v for k, v in protocol_axes(campaign.parameters).items() if k in axis_names}
     seen: set[tuple[str, str]] = set()
+    runs: dict[str, dict] = {}  # one grid point's run (seed 0) -> its coordinates
     for index, coords in iter_points(campaign):
         try:
-            make_point(campaign, index, coords)
+            point = make_point(campaign, index, coords)
+            if campaign.initial is None and _same_run(checker, point, coords, runs):
+                return
         except ParameterError as e:
             name = e.name
             if name == "alpha" and AMB in axis_names:
@@ -50,3 +54,21 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
             if len(seen) >= MAX_POINT_PROBLEMS:
                 checker.add((), "further grid problems not shown")
                 return
+
+
+def _same_run(checker: Checker, point, coords: dict, runs: dict[str, dict]) -> bool:
+    """Whether ``point`` is a grid point already seen under other coordinates (the same run:
+    e.g. a pulse whose level is its base, which is the constant parameter): reported once."""
+    rid = hash_canonical(point.parameters.to_dict(), point.numerics.to_dict(), 0)
+    first = runs.setdefault(rid, coords)
+    if first is coords:
+        return False
+    fmt = ", ".join
+    checker.add(
+        ("sweep",),
+        f"the grid points ({fmt(f'{k}={v!r}' for k, v in first.items())}) and "
+        f"({fmt(f'{k}={v!r}' for k, v in coords.items())}) are the same run (the same "
+        "parameters and numerics; a protocol that is constant is the plain parameter); drop "
+        "one of their values",
+    )
+    return True

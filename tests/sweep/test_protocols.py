@@ -146,3 +146,12 @@ def test_a_protocol_campaign_runs_each_point_by_its_protocol(tmp_path):
     with xr.open_dataset(run_file) as ds:
         written = json.loads(ds.attrs["param_protocol"])
     assert Parameters.from_dict({"protocol": written}).protocol == spec.point.parameters.protocol
+
+
+def test_grid_points_that_are_one_run_are_refused():
+    text = PULSES.replace("alpha_minus_B_level: [0.05, 0.5]", "alpha_minus_B_level: [0.05, 1.0]")
+    with pytest.raises(CampaignError) as err:
+        parse_campaign(text, source="pulses.yaml")
+    message = str(err.value)
+    assert "pulses.yaml:8: sweep: the grid points (alpha_minus_B_level=1.0" in message, message
+    assert "are the same run" in message

@@ -24,9 +24,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..campaign import AMB, NOT_OBSERVABLES, NUMERICS_TYPES, OBSERVABLES, PARAMETER_TYPES
+from ..campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from ..expand import Expansion
 from ..files import atomic_to_netcdf
+from ..observables import NOT_OBSERVABLES, OBSERVABLES
 from ..protocols import AXIS_LONG_NAMES, PROTOCOL
 from ..provenance import code_version, git_commit, library_versions_text
 from ..store import RETRYABLE_REASONS, CampaignStore, Record, now_iso

@@ -7,7 +7,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ..campaign import OBSERVABLES, Threshold
+from ..campaign import Threshold
+from ..observables import OBSERVABLES
 from .checker import Checker, KeyPath, is_finite_number, suggest
 
 #: The derived observable read from the run files (the stability fit's criterion).

@@ -40,9 +40,9 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.transition import fit_transition
-from ..campaign import OBSERVABLES as PHASE_OBSERVABLES
 from ..expand import RunSpec
 from ..files import atomic_to_netcdf
+from ..observables import OBSERVABLES as PHASE_OBSERVABLES
 from ..outputs.aggregate import coord_attrs
 from ..provenance import code_version, git_commit, library_versions_text
 from ..spec.verify import ABSOLUTE, OBSERVABLES

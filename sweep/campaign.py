@@ -390,6 +390,27 @@ class VerifySpec:
         }
 
 
+#: the name of the grid dimension of a chain's branches (``chain:``, :mod:`sweep.chains`)
+BRANCH = "branch"
+#: the branches a chain may have: along its axis in increasing or decreasing order
+BRANCHES = ("up", "down")
+
+
+@dataclass(frozen=True)
+class ChainSpec:
+    """``chain:`` (:mod:`sweep.chains`): the sweep axis that is walked in order, each point's
+    runs starting from the previous point's end state (same seed, same other values), on
+    each of ``branches`` ("up": increasing values, "down": decreasing); the grid gains the
+    dimension :data:`BRANCH`."""
+
+    axis: str
+    branches: tuple[str, ...] = BRANCHES
+
+    @property
+    def dim(self) -> Dim:
+        return Dim(BRANCH, (Axis(BRANCH, self.branches),))
+
+
 @dataclass(frozen=True)
 class Campaign:
     """A validated campaign. ``parameters`` / ``numerics`` are the base values as written
@@ -419,6 +440,8 @@ class Campaign:
     verify: VerifySpec | None = None
     #: the ``initial:`` section (runs begin from another campaign's: sweep/expand), or None
     initial: InitialSpec | None = None
+    #: the ``chain:`` section (points walked in order along an axis: sweep/chains), or None
+    chain: ChainSpec | None = None
 
     @property
     def axes(self) -> tuple[Axis, ...]:

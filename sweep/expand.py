@@ -17,6 +17,7 @@ from typing import Any
 from model.parameters import Numerics, Parameters, check_compatible
 
 from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec, same_value
+from .chains import chain_parents, in_chain_order
 from .identity import PointHasher, hash_canonical, trajectory_id
 from .protocols import with_axis_values
 
@@ -144,6 +145,9 @@ class Expansion:
     #: for the expansions of adaptive campaigns, which build their runs otherwise
     starts: list[dict[str, str]] | None = None
     parents: Parents | None = None
+    #: where each run of a chain begins: its predecessor's ``run`` id and ``time`` ("end"),
+    #: None for the first run of a branch
+    chain_starts: list[dict[str, str] | None] = []
 
     def __init__(self, campaign: Campaign):
         self.campaign = campaign
@@ -151,10 +155,14 @@ class Expansion:
         self.points: list[GridPoint] = []
         self.run_ids: list[str] = []
         self.starts = None
+        #: each run's predecessor in its chain (``chain:``, sweep.chains), else None
+        self.chain_parents: list[int | None] = chain_parents(campaign)
         parents = None
-        if campaign.initial is not None:
+        if campaign.chain is not None:
+            self._chain_runs(campaign)
+        elif campaign.initial is not None:
             parents, self.starts = Parents(campaign.initial, Expansion(campaign.initial.parent)), []
-        for index, coords in iter_points(campaign):
+        for index, coords in iter_points(campaign) if campaign.chain is None else ():
             point = make_point(campaign, index, coords)
             self.points.append(point)
             if parents is None or self.starts is None:
@@ -175,6 +183,20 @@ class Expansion:
             first = self.run(self.position[dup])
             log.warning("grid points collapse onto one run (%s at %s)", dup, first.coords)
 
+    def _chain_runs(self, campaign: Campaign) -> None:
+        """The points and run ids of a chain: each run after the first of its branch starts
+        from its predecessor's end state, whose id its own includes."""
+        n = len(self.seeds)
+        self.points = [make_point(campaign, index, c) for index, c in iter_points(campaign)]
+        ids: list[str] = [""] * (len(self.points) * n)
+        starts: list[dict[str, str] | None] = [None] * len(ids)
+        for i in in_chain_order(range(len(ids)), self.chain_parents):
+            point, parent = self.points[i // n], self.chain_parents[i]
+            p, num = point.parameters.to_dict(), point.numerics.to_dict()
+            starts[i] = None if parent is None else {"run": ids[parent], "time": "end"}
+            ids[i] = hash_canonical(p, num, self.seeds[i % n], starts[i])
+        self.run_ids, self.chain_starts = ids, starts
+
     def __len__(self) -> int:
         return len(self.run_ids)
 
@@ -183,6 +205,8 @@ class Expansion:
         start = None
         if self.starts is not None and self.campaign.initial is not None:
             start = {**self.starts[i], "campaign": self.campaign.initial.parent.name}
+        elif self.campaign.chain is not None and (chained := self.chain_starts[i]) is not None:
+            start = {**chained, "campaign": self.campaign.name}
         return RunSpec(self.run_ids[i], self.seeds[i % n], self.points[i // n], start)
 
     def __iter__(self) -> Iterator[RunSpec]:

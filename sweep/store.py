@@ -84,9 +84,10 @@ MANIFEST_KEYS = (
 RUN_FILE_VARIABLES = ("sigma2_S",)
 MAX_DETAIL = 500
 #: Reasons of records that say the result could not be stored, or that the run's worker
-#: was lost under it, not that the run failed: such runs are redone by default (neither the
-#: worker nor the driver writes such records now; a results folder may still hold some).
-RETRYABLE_REASONS = ("write_error", "killed_worker")
+#: was lost under it (neither the worker nor the driver writes such records now; a results
+#: folder may still hold some), or that the run it begins from did not end (its parent, or
+#: its predecessor in a chain): not that the run failed. Such runs are redone by default.
+RETRYABLE_REASONS = ("write_error", "killed_worker", "parent_failed")
 
 
 class Record(TypedDict, total=False):

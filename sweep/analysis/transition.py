@@ -13,6 +13,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike
 
+from ..campaign import BRANCH
 from ..errors import FitError
 from .options import bootstrap_rng, check_options
 from .phase import coord_copy, default_axis, other_dims, select, variable, with_dim
@@ -215,4 +216,34 @@ def transition(
     }
     for n in names:
         result[f"{pre}_{n}"].attrs.update({f"fit_{k}": v for k, v in attrs.items()})
+    if BRANCH in others:
+        _loop_width(result, pre, attrs)
     return result
+
+
+def _loop_width(result: xr.Dataset, pre: str, attrs: Mapping[str, Any]) -> None:
+    """A chain's two branches (sweep.chains): the width of the hysteresis loop, the up
+    branch's jump minus the down branch's, with the interval of the two jumps' intervals
+    combined (from the lower end of one to the upper end of the other); NaN without both
+    jumps."""
+    branches = [str(b) for b in result[BRANCH].values]
+    if "up" not in branches or "down" not in branches:
+        return
+    up, down = (result.sel({BRANCH: b}, drop=True) for b in ("up", "down"))
+    width = {
+        "loop_width": up[f"{pre}_location"] - down[f"{pre}_location"],
+        "loop_width_lower": up[f"{pre}_lower"] - down[f"{pre}_upper"],
+        "loop_width_upper": up[f"{pre}_upper"] - down[f"{pre}_lower"],
+    }
+    long = {
+        "loop_width": "hysteresis loop width: the up branch's transition location minus the "
+        "down branch's",
+        "loop_width_lower": "hysteresis loop width, lower end (up branch's lower end minus the "
+        "down branch's upper end)",
+        "loop_width_upper": "hysteresis loop width, upper end (up branch's upper end minus the "
+        "down branch's lower end)",
+    }
+    for name, value in width.items():
+        value.attrs = {"long_name": long[name], "units": "1"}
+        value.attrs.update({f"fit_{k}": v for k, v in attrs.items()})
+        result[f"{pre}_{name}"] = value

@@ -10,13 +10,14 @@ from typing import TYPE_CHECKING, Any
 import xarray as xr
 
 from ..analysis.phase import is_swept
-from ..campaign import AMB
+from ..campaign import AMB, BRANCH
 from .common import Results, invalid_options
 from .fig2 import FIG2_OPTIONS, fig2
 from .fig3 import FIG3_OPTIONS, fig3
 from .fig3_growth import FIG3_GROWTH_OPTIONS, fig3_growth
 from .fig4 import FIG4_OPTIONS, fig4
 from .figA1 import FIGA1_OPTIONS, figA1
+from .loop import LOOP_OPTIONS, loop
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -25,17 +26,28 @@ FigureFunction = Callable[[Results, Mapping[str, Any]], "Figure"]
 
 
 def _swept_all(*names: str) -> Callable[[xr.Dataset], bool]:
-    return lambda phase: all(is_swept(phase, n) for n in names)
+    return lambda phase: BRANCH not in phase.dims and all(is_swept(phase, n) for n in names)
+
+
+def _chained(phase: xr.Dataset) -> bool:
+    return BRANCH in phase.dims
+
+
+def _loop_fits(phase: xr.Dataset) -> list[tuple[str, dict[str, Any]]]:
+    return [("transition", {"axis": str(phase.attrs.get("chain_axis", AMB))})]
 
 
 def _fig4_applies(phase: xr.Dataset) -> bool:
+    if BRANCH in phase.dims:
+        return False
     n = sum(is_swept(phase, a) for a in ("chi", "K", "eps"))
     return n >= 2 and str(phase.attrs.get("num_mechanics", "finite")) == "finite"
 
 
 def _figA1_applies(phase: xr.Dataset) -> bool:
     return (
-        is_swept(phase, "eps")
+        BRANCH not in phase.dims
+        and is_swept(phase, "eps")
         and (is_swept(phase, "chi") or is_swept(phase, AMB))
         and str(phase.attrs.get("num_mechanics", "")) == "linear"
     )
@@ -96,6 +108,13 @@ REGISTRY: dict[str, FigureSpec] = {
         _fig4_fits,
         _fig4_applies,
         FIG4_OPTIONS,
+    ),
+    "loop": FigureSpec(
+        loop,
+        "a chain's hysteresis loop: both branches, each jump, the settling time per point",
+        _loop_fits,
+        _chained,
+        LOOP_OPTIONS,
     ),
     "figA1": FigureSpec(
         figA1,

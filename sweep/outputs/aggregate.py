@@ -252,6 +252,14 @@ def build_phase(
             "zip_groups": "; ".join(
                 ", ".join(a.name for a in d.axes) for d in campaign.dims if len(d.axes) > 1
             ),
+            **(
+                {
+                    "chain_axis": campaign.chain.axis,
+                    "chain_branches": ", ".join(campaign.chain.branches),
+                }
+                if campaign.chain is not None
+                else {}
+            ),
             "n_runs": n,
             "n_ok": n_ok,
             "n_failed": n_failed,

@@ -131,6 +131,12 @@ def starting_state(task: Run, store: CampaignStore) -> Start:
     return Start(None, "", "; ".join(warnings), initial)
 
 
+class ParentFailed(Exception):
+    """The run a run begins from (``initial.from``, or its predecessor in a chain) did not
+    end well or is not done: the run fails with the reason ``parent_failed`` (redone when the
+    campaign runs again)."""
+
+
 def parent_fields(source: Mapping[str, str]) -> InitialState:
     """The fields a run of ``initial.from`` begins with: the parent run's end state
     (``time: end``: exact, from the run file's group ``state`` if it has one, else its last
@@ -140,6 +146,8 @@ def parent_fields(source: Mapping[str, str]) -> InitialState:
 
     path = Path(source["runs_dir"]) / f"{source['run']}.nc"
     origin = f"{source['campaign']}/{source['run']}@{source['time']}"
+    if not path.exists():
+        raise ParentFailed(f"the run it begins from, {origin}, is not done (no {path})")
     main = read_netcdf(path)
     snaps = file_snapshots(main)
     try:
@@ -150,7 +158,10 @@ def parent_fields(source: Mapping[str, str]) -> InitialState:
                 raise CheckpointError(f"it has no snapshot at t = {source['time']}")
             return InitialState.of_snapshot(snap[1], origin)
         if main.attrs.get("status") != "ok" or not snaps:
-            raise CheckpointError(f"it did not end (status {main.attrs.get('status')})")
+            raise ParentFailed(
+                f"the run it begins from, {origin}, did not end "
+                f"(status {main.attrs.get('status')}: {main.attrs.get('reason')})"
+            )
         try:
             state = RunState.from_dataset(read_netcdf(path, STATE_GROUP))
         except CheckpointError:  # no end state kept: the last snapshot

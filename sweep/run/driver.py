@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from ..campaign import ExecutionSpec
+from ..chains import in_chain_order
 from ..errors import ClusterError
 from ..expand import Expansion, RunSpec
 from ..store import (
@@ -209,15 +210,38 @@ def run_campaign(
         events.started(plan, len(expansion), max(1, watch.threads))
     if limit is not None:
         limit.planned += len(plan.todo)
-    queue = list(reversed(plan.todo))
+    # a chain's runs go after their predecessors (sweep.chains): by depth, then position
+    chained = expansion.chain_parents if campaign.chain is not None else None
+    queue = list(reversed(plan.todo if chained is None else in_chain_order(plan.todo, chained)))
     tasks: dict[Any, tuple[RunSpec, RunTask, int]] = {}
     attempts: dict[int, int] = {}
     ac = as_completed()
     last_manifest = clock()
 
+    def next_ready() -> int | None:
+        """The place in the queue of the next run to submit: the last, or for a chain the
+        last whose predecessor is neither queued nor in flight (it has its record)."""
+        if chained is None:
+            return len(queue) - 1
+        busy = set(queue) | {i for _, _, i in tasks.values()}
+        return next(
+            (k for k in range(len(queue) - 1, -1, -1) if chained[queue[k]] not in busy), None
+        )
+
     def submit_more() -> None:
         while queue and ac.count() < watch.window:
-            i = queue.pop()
+            k = next_ready()
+            if k is None:
+                if not tasks:  # their predecessors stay pending this session
+                    log.warning(
+                        "%d run(s) of chains wait for runs that stay pending; rerun the "
+                        "campaign to go on",
+                        len(queue),
+                    )
+                    summary.lost.extend(expansion.run(i) for i in queue)
+                    queue.clear()
+                return
+            i = queue.pop(k)
             run = expansion.run(i)
             task = RunTask.from_spec(
                 run, store, campaign.name, campaign.store, plan.history.get(i), plan.parents.get(i)

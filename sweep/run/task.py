@@ -275,6 +275,8 @@ def execute_run(task: RunTask) -> Record:
             schedule=Schedule(task.checkpoint_tau, task.checkpoint_wall),
             keep_state=True,
         )
+    except continuation.ParentFailed as e:  # redone with its parent (RETRYABLE_REASONS)
+        record = failure_record(task, "parent_failed", str(e), "", time.perf_counter() - t0)
     except Exception as e:  # noqa: BLE001 - any crash is recorded, the campaign goes on
         record = failure_record(
             task,

@@ -48,6 +48,7 @@ from ..campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec
 from ..errors import CampaignError, Problem
 from ..limits import available_memory, fmt_bytes, parse_size, run_memory_bytes
 from .axes import read_sweep
+from .chain import read_chain
 from .checker import Checker, KeyPath, is_int, suggest
 from .execution import read_execution
 from .initial import READING, InitialRequest, parent_error, read_initial, resolve_initial
@@ -88,6 +89,7 @@ TOP_KEYS = (
     "precision",
     "verify",
     "initial",
+    "chain",
 )
 
 
@@ -121,6 +123,7 @@ SECTIONS: tuple[Section, ...] = (
     Section("refine", "refine", read_refine),
     Section("verify", "verify", read_verify),
     Section("initial", "initial", read_initial),
+    Section("chain", "chain", read_chain),
 )
 
 
@@ -240,6 +243,8 @@ def parse_campaign(
         read[section.key] = section.read(c, doc.get(section.key), read)
     if read["initial"] is not None:  # the parent campaign, read and checked against
         read["initial"] = _initial(c, read["initial"], read)
+    if read["chain"] is not None:  # the branches are the grid's first dimension
+        read["sweep"] = (read["chain"].dim, *read["sweep"])
     campaign = Campaign(
         **{section.attr: read[section.key] for section in SECTIONS},
         source=source,

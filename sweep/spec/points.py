@@ -23,7 +23,8 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
     for index, coords in iter_points(campaign):
         try:
             point = make_point(campaign, index, coords)
-            if campaign.initial is None and _same_run(checker, point, coords, runs):
+            plain = campaign.initial is None and campaign.chain is None  # ids of their own
+            if plain and _same_run(checker, point, coords, runs):
                 return
         except ParameterError as e:
             name = e.name

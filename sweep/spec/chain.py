@@ -1,0 +1,57 @@
+"""The ``chain:`` section (sweep.chains): the axis walked in order and the branches, checked
+against the sweep with file:line."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from ..campaign import BRANCH, BRANCHES, ChainSpec
+from .checker import Checker, is_number, suggest
+
+CHAIN_KEYS = ("axis", "branches")
+
+
+def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | None:
+    """``chain: {axis, branches}`` (branches: ``up``, ``down`` or both; default both). The
+    axis is a swept dimension of its own (not zipped) with two or more numbers; a chain
+    begins from the seeded texture, so it has no ``initial``, ``refine``, ``precision`` or
+    ``verify`` section. None without it."""
+    if raw is None:
+        return None
+    spec = c.mapping(("chain",), raw, CHAIN_KEYS)
+    if not isinstance(raw, Mapping):
+        return None
+    dims = {d.name: d for d in read.get("sweep") or ()}
+    axis = spec.get("axis")
+    ok = True
+    if axis not in dims:
+        names = [a.name for d in dims.values() for a in d.axes]
+        hint = f"; the swept axes: {', '.join(names)}" if names else " (nothing is swept)"
+        c.bad(("chain", "axis"), axis, f"a swept axis{suggest(str(axis), names)}{hint}")
+        ok = False
+    elif len(dims[axis].axes) > 1:
+        c.bad(("chain", "axis"), axis, "an axis of its own (not in a zip group)")
+        ok = False
+    elif len(dims[axis]) < 2 or not all(is_number(v) for v in dims[axis].axes[0].values):
+        c.bad(("chain", "axis"), axis, "an axis of two or more numbers")
+        ok = False
+    if BRANCH in dims:
+        c.add(("sweep", "axes", BRANCH), f"'{BRANCH}' names the chain's branches; rename it")
+        ok = False
+    branches: Any = spec.get("branches", list(BRANCHES))
+    if isinstance(branches, str):
+        branches = [branches]
+    if (
+        not isinstance(branches, Sequence)
+        or not branches
+        or any(b not in BRANCHES for b in branches)
+        or len(set(branches)) != len(branches)
+    ):
+        c.bad(("chain", "branches"), spec.get("branches"), "up, down or [up, down]")
+        ok = False
+    others = [k for k in ("initial", "refine", "precision", "verify") if read.get(k) is not None]
+    if others:
+        c.add(("chain",), f"a chain has no {' or '.join(others)} section (it starts from t = 0)")
+        ok = False
+    return ChainSpec(str(axis), tuple(branches)) if ok else None

@@ -83,10 +83,9 @@ MANIFEST_KEYS = (
 #: time axis is ``t``, or ``time`` in files of schema 1: see :func:`series_time`).
 RUN_FILE_VARIABLES = ("sigma2_S",)
 MAX_DETAIL = 500
-#: Reasons of records that say the result could not be stored, or that the run's worker
-#: was lost under it (neither the worker nor the driver writes such records now; a results
-#: folder may still hold some), or that the run it begins from did not end (its parent, or
-#: its predecessor in a chain): not that the run failed. Such runs are redone by default.
+#: Reasons of records that say the result could not be stored or the run's worker was lost
+#: (no longer written; old folders may hold some), or that the run it begins from did not
+#: end (its parent, its predecessor in a chain): not that it failed. Redone by default.
 RETRYABLE_REASONS = ("write_error", "killed_worker", "parent_failed")
 
 

@@ -12,6 +12,7 @@ import xarray as xr
 from ..errors import FitError
 from .anisotropy import ANISOTROPY_OPTIONS, anisotropy
 from .options import invalid_options
+from .recovery import RECOVERY_OPTIONS, recovery
 from .sizes import SIZE_OPTIONS, alpha_cr, scaling
 from .stability import STABILITY_OPTIONS, stability
 from .transition import TRANSITION_OPTIONS, transition
@@ -49,6 +50,12 @@ REGISTRY: dict[str, FitSpec] = {
     ),
     "anisotropy": FitSpec(
         anisotropy, "trend of <cos 2 theta> with the applied strain eps", ANISOTROPY_OPTIONS
+    ),
+    "recovery": FitSpec(
+        recovery,
+        "a pattern through a switch-off of activity: vanished, recovered, how fast, and its "
+        "memory (correlation of S before and after)",
+        RECOVERY_OPTIONS,
     ),
     "stability": FitSpec(
         stability,

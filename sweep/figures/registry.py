@@ -18,6 +18,7 @@ from .fig3_growth import FIG3_GROWTH_OPTIONS, fig3_growth
 from .fig4 import FIG4_OPTIONS, fig4
 from .figA1 import FIGA1_OPTIONS, figA1
 from .loop import LOOP_OPTIONS, loop
+from .switch import LEVEL, SWITCH_OPTIONS, switch
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -115,6 +116,13 @@ REGISTRY: dict[str, FigureSpec] = {
         _loop_fits,
         _chained,
         LOOP_OPTIONS,
+    ),
+    "switch": FigureSpec(
+        switch,
+        "a pattern through a switch-off of activity: sigma2_S(t), how far it fell, its memory",
+        lambda phase: [("recovery", {})],
+        lambda phase: LEVEL in phase.dims,
+        SWITCH_OPTIONS,
     ),
     "figA1": FigureSpec(
         figA1,

@@ -117,7 +117,15 @@ def assert_figure(paths: list[Path], name: str, root: Path) -> None:
 def test_registry_names_match_the_campaign_schema():
     from sweep.spec.sections import registry
 
-    assert sorted(registry("figures")) == ["fig2", "fig3", "fig3_growth", "fig4", "figA1", "loop"]
+    assert sorted(registry("figures")) == [
+        "fig2",
+        "fig3",
+        "fig3_growth",
+        "fig4",
+        "figA1",
+        "loop",
+        "switch",
+    ]
     assert set(registry("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy", "stability"}
 
 

@@ -470,5 +470,6 @@ def test_option_problems_for_campaign_validation():
         == []
     )
     assert option_problems("nope", {}) == [
-        "unknown fit 'nope'; registered: alpha_cr, anisotropy, scaling, stability, transition"
+        "unknown fit 'nope'; registered: alpha_cr, anisotropy, recovery, scaling, stability, "
+        "transition"
     ]

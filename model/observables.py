@@ -121,7 +121,11 @@ def snapshot_observables(
     grid: SpectralGrid,
     *,
     linear: bool,
+    P: Array | None = None,
 ) -> dict[str, float]:
+    """The observables of one saved state (the series of docs/model.md section 6); with the
+    stress ``P`` (first Piola, or the small-strain stress) also the macroscopic stress
+    (:func:`macroscopic_stress`)."""
     S = order_parameter(q1, q2)
     J = T.det(F)
     C = T.matmul(T.transpose(F), F)
@@ -136,6 +140,21 @@ def snapshot_observables(
         "mean_A": float(A.mean()),
         "free_energy": free_energy(q1, q2, A, F, params, grid, linear=linear),
         "residual": float(residual),
+        **(macroscopic_stress(P) if P is not None else {}),
+    }
+
+
+def macroscopic_stress(P: Array) -> dict[str, float]:
+    r"""The area means of the stress (the macroscopic stress of the periodic cell, work
+    conjugate to the applied :math:`\bar F`): ``stress_shear``
+    :math:`\langle (P_{11} - P_{22})/2 \rangle`, the deviatoric part conjugate to the pure
+    shear :math:`\epsilon` (:math:`2 G \epsilon` for the passive matrix at small strain, G = 1),
+    ``stress_xy`` :math:`\langle P_{12} \rangle` and ``stress_mean``
+    :math:`\langle (P_{11} + P_{22})/2 \rangle` (minus the pressure)."""
+    return {
+        "stress_shear": float(0.5 * np.mean(P[0, 0] - P[1, 1])),
+        "stress_xy": float(np.mean(P[0, 1])),
+        "stress_mean": float(0.5 * np.mean(P[0, 0] + P[1, 1])),
     }
 
 

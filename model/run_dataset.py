@@ -39,6 +39,9 @@ SERIES = (
     "free_energy",
     "residual",
     "rate_margin",
+    "stress_shear",
+    "stress_xy",
+    "stress_mean",
 )
 #: CF units: the model is dimensionless (lengths in units of the domain size L, times in units
 #: of tau, energies in units of G L^2), so every quantity has units "1" (UDUNITS: a pure
@@ -55,6 +58,9 @@ UNITS = {
     "free_energy": "1",
     "residual": "1",
     "rate_margin": "1",
+    "stress_shear": "1",
+    "stress_xy": "1",
+    "stress_mean": "1",
 }
 LONG_NAMES = {
     "mean_S": "area mean of the nematic order parameter S",
@@ -70,6 +76,10 @@ LONG_NAMES = {
     "residual": "force-balance residual |Div P|_{H^-1} / max(1, |P|)",
     "rate_margin": "well-posedness margin of the rate problem, min det of its symbol / "
     "(kappa + 1): 1 passive, 0 ill posed",
+    "stress_shear": "macroscopic deviatoric stress <(P11 - P22)/2>, conjugate to the applied "
+    "pure shear eps, in units of G",
+    "stress_xy": "macroscopic shear stress <P12>, in units of G",
+    "stress_mean": "macroscopic mean normal stress <(P11 + P22)/2>, in units of G",
 }
 #: long_name and units of the per-run scalars
 SCALARS = {
@@ -148,7 +158,8 @@ def to_dataset(
     for name in (*SERIES, "steps"):
         data_vars[name] = (
             "t",
-            np.array([r[name] for r in rows], dtype=float),
+            # (a run continued from a state saved before a series existed: NaN there)
+            np.array([r.get(name, math.nan) for r in rows], dtype=float),
             {
                 "long_name": LONG_NAMES.get(name, "accepted time steps"),
                 "units": UNITS.get(name, "1"),

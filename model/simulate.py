@@ -214,7 +214,7 @@ def run(
         mech = eq.mechanics.solve(d[0], d[1], t=t)
         residual = mech.residual if not linear else eq.mechanics.residual(mech.P)
         obs = snapshot_observables(
-            d[0], d[1], d[2], mech.F, residual, eq.params, grid, linear=linear
+            d[0], d[1], d[2], mech.F, residual, eq.params, grid, linear=linear, P=mech.P
         )
         obs["rate_margin"] = eq.mechanics.rate_margin(d[0], d[1], mech)[0]
         obs["time"] = float(t)

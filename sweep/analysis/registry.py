@@ -13,6 +13,7 @@ from ..errors import FitError
 from .anisotropy import ANISOTROPY_OPTIONS, anisotropy
 from .options import invalid_options
 from .recovery import RECOVERY_OPTIONS, recovery
+from .rheology import MODULI_OPTIONS, moduli
 from .sizes import SIZE_OPTIONS, alpha_cr, scaling
 from .stability import STABILITY_OPTIONS, stability
 from .transition import TRANSITION_OPTIONS, transition
@@ -50,6 +51,12 @@ REGISTRY: dict[str, FitSpec] = {
     ),
     "anisotropy": FitSpec(
         anisotropy, "trend of <cos 2 theta> with the applied strain eps", ANISOTROPY_OPTIONS
+    ),
+    "moduli": FitSpec(
+        moduli,
+        "storage and loss moduli G', G'' from the stress under an oscillatory shear (a sine "
+        "of eps)",
+        MODULI_OPTIONS,
     ),
     "recovery": FitSpec(
         recovery,

@@ -470,6 +470,7 @@ def test_option_problems_for_campaign_validation():
         == []
     )
     assert option_problems("nope", {}) == [
-        "unknown fit 'nope'; registered: alpha_cr, anisotropy, recovery, scaling, stability, "
+        "unknown fit 'nope'; registered: alpha_cr, anisotropy, moduli, recovery, scaling, "
+        "stability, "
         "transition"
     ]

@@ -26,6 +26,10 @@ if TYPE_CHECKING:
 MECHANICS = ("finite", "linear")
 #: the initial director texture (Parameters.initial; docs/model.md section 5)
 INITIAL = ("band", "per_node")
+#: the stress that drives the activity in Eq. (5) (Parameters.coupling)
+COUPLINGS = ("trP", "trS")
+#: the choices of the parameters that are words
+CHOICES = {"initial": INITIAL, "coupling": COUPLINGS}
 #: Most saved times (rows of the time series) and snapshots of one run.
 MAX_SAVES = 1_000_000
 #: Most time steps one run may need at its largest step (t_final / dt_max).
@@ -59,7 +63,7 @@ class Parameters:
         K: Frank constant.
         kappa: bulk modulus of the neo-Hookean matrix (2-D, in units of G).
         alpha: active stress magnitude.
-        chi: stress-activity coupling, Eq. (5) f = chi tr P.
+        chi: stress-activity coupling, Eq. (5) f = chi tr P (or tr S: ``coupling``).
         zeta: linear relaxation of the activity A, Eq. (5).
         s: cubic saturation of the activity A, Eq. (5).
         gamma: rotational viscosity of Q, Eq. (4).
@@ -76,6 +80,9 @@ class Parameters:
             resolution variant of a verification, sweep/verify).
         noise_amplitude: RMS of an extra Gaussian (q1, q2) perturbation drawn from the same
             random field (needed when S0 = 0, as in Fig. A1).
+        coupling: the stress of Eq. (5)'s f = chi tr(.): "trP" (the first Piola stress, the
+            paper's Eq. 5) or "trS" (the second Piola stress S = F^-1 P, which the paper's text
+            says it also tried); equal at small strain (linear mechanics uses tr sigma).
         protocol: alpha - B, chi and eps as functions of time (:mod:`model.protocol`; empty:
             constant). Where it makes one time dependent, the plain field holds its value at
             t = 0 and :meth:`at` gives the constants at a time.
@@ -99,6 +106,7 @@ class Parameters:
     noise_modes: int = 32
     texture_resolution: int = 0
     noise_amplitude: float = 0.0
+    coupling: str = "trP"
     protocol: Protocol = Protocol()
 
     def __post_init__(self) -> None:
@@ -108,8 +116,8 @@ class Parameters:
                 if not isinstance(value, Protocol):
                     raise ParameterError("protocol", value, "a model.protocol.Protocol")
             elif f.type in ("str", str):
-                if value not in INITIAL:
-                    raise ParameterError(f.name, value, " or ".join(INITIAL))
+                if value not in CHOICES[f.name]:
+                    raise ParameterError(f.name, value, " or ".join(CHOICES[f.name]))
             elif f.type in ("int", int):
                 if isinstance(value, bool) or not isinstance(value, int):
                     if isinstance(value, float) and value.is_integer():

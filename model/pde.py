@@ -137,9 +137,11 @@ class ActiveNematicPDE(PDEBase):
 
     def activity_rate(self, A: Array, mech: MechanicalState) -> Array:
         r"""Paper Eq. (5): :math:`(-\zeta A - \chi\, \mathrm{tr} P - s A^3)/\tau` (the
-        backend's ``activity_rate``)."""
+        backend's ``activity_rate``); with ``coupling = "trS"`` the trace of the second Piola
+        stress instead (finite strain; at small strain they are one)."""
         p = self.params
-        return self.mechanics.k.activity_rate(A, mech.trP, p.zeta, p.chi, p.s, p.tau)
+        tr = mech.trS if p.coupling == "trS" and mech.trS is not None else mech.trP
+        return self.mechanics.k.activity_rate(A, tr, p.zeta, p.chi, p.s, p.tau)
 
     def rates(
         self,

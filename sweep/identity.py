@@ -48,7 +48,7 @@ EXECUTION_ONLY = ("backend",)
 TEXTURE, TEXTURE_ORIGINAL = "initial", "band"
 #: Parameters added later whose default changes nothing: left out of the canonical text at
 #: that default, so earlier runs keep their ids.
-LATER_DEFAULTS = {"texture_resolution": 0}
+LATER_DEFAULTS = {"texture_resolution": 0, "coupling": "trP"}
 
 
 def identity_parameters(parameters: Mapping[str, Any]) -> dict[str, Any]:

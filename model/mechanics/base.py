@@ -66,6 +66,8 @@ class MechanicalState:
     residual: float = 0.0
     tangent: Array | None = None
     spin_coupling: Array | None = None
+    #: tr S, S = F^-1 P the second Piola stress (finite strain with ``coupling = "trS"``)
+    trS: Array | None = None
 
 
 def applied_deformation(eps: float) -> Array:

@@ -301,12 +301,17 @@ class FiniteMechanics(Mechanics):
         Ebar_dev, Jm1, trP = self.k.strain_measures_kernel(
             np.ascontiguousarray(F), np.ascontiguousarray(P)
         )
+        trS = None
+        if self.params.coupling == "trS":  # tr(F^-1 P), F^-1 = adj F / J
+            adj = F[1, 1] * P[0, 0] - F[0, 1] * P[1, 0] - F[1, 0] * P[0, 1] + F[0, 0] * P[1, 1]
+            trS = adj / T.det(F)
         return MechanicalState(
             F=F,
             P=P,
             Ebar_dev=Ebar_dev,
             Jm1=Jm1,
             trP=trP,
+            trS=trS,
             u_hat=u_hat,
             iterations=iterations,
             residual=residual,

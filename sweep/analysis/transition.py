@@ -19,7 +19,7 @@ from .options import bootstrap_rng, check_options
 from .phase import coord_copy, default_axis, other_dims, select, variable, with_dim
 from .statistics import Array, bootstrap_seed_means, finite_mean, log10, percentiles
 
-TRANSITION_OPTIONS = ("axis", "observable", "log", "min_jump", "mean", "prefix")
+TRANSITION_OPTIONS = ("axis", "observable", "log", "min_jump", "mean", "prefix", "crossing")
 
 
 @dataclass(frozen=True)
@@ -39,15 +39,28 @@ class TransitionFit:
     fraction_high: Array = field(repr=False)
 
 
-def largest_step(x: Array, y: Array) -> tuple[int, int, float]:
+def largest_step(x: Array, y: Array, across: float | None = None) -> tuple[int, int, float]:
     """Indices ``(i, j)`` of the neighbouring finite points (``x`` sorted) with the largest
-    ``|y_j - y_i|`` and that signed step; ``(-1, -1, nan)`` with fewer than two points."""
+    ``|y_j - y_i|`` (among the steps from one side of ``across`` to the other, if given) and
+    that signed step; ``(-1, -1, nan)`` with fewer than two points (or no such step)."""
     idx = np.nonzero(np.isfinite(y))[0]
     if idx.size < 2:
         return -1, -1, math.nan
-    steps = np.diff(y[idx])
-    k = int(np.argmax(np.abs(steps)))
+    steps = crossing_steps(y[idx][None], across)[0]
+    if not np.any(np.isfinite(steps)):
+        return -1, -1, math.nan
+    k = int(np.nanargmax(np.abs(steps)))
     return int(idx[k]), int(idx[k + 1]), float(steps[k])
+
+
+def crossing_steps(y: Array, across: float | None) -> Array:
+    """The steps between neighbours along the last axis of ``y``; with ``across``, NaN
+    where a step does not go from one side of it to the other."""
+    steps = np.diff(y, axis=-1)
+    if across is None:
+        return steps
+    crossed = (y[..., :-1] - across) * (y[..., 1:] - across) < 0
+    return np.where(crossed, steps, np.nan)
 
 
 def fit_transition(
@@ -60,13 +73,17 @@ def fit_transition(
     n_boot: int = 1000,
     confidence: float = 0.95,
     rng: np.random.Generator | None = None,
+    crossing: float | None = None,
 ) -> TransitionFit:
     r"""Locate the jump of the seed mean of ``values`` (shape ``(len(x), n_seeds)``, NaN for
     missing runs) along ``x``; see docs/campaigns.md, "Fits". With ``log`` the step is measured in
     decades, else in the observable's units; a step below ``min_jump`` is not a transition
     (location NaN). ``mean``: ``geometric`` (with ``log``, the seed mean of
     :math:`\log_{10}` values) or ``arithmetic`` (log of the seed mean, which one patterned seed
-    among many relaxed ones already lifts by orders of magnitude: it marks the onset)."""
+    among many relaxed ones already lifts by orders of magnitude: it marks the onset).
+    ``crossing``: a value of the observable the jump must cross (e.g. a patterned level), so
+    that steps among values all below it (the relaxation of a texture at round-off level) or
+    all above it are not the transition."""
     if mean not in ("geometric", "arithmetic"):
         raise FitError(f"transition: mean = {mean!r}; expected 'geometric' or 'arithmetic'")
     rng = rng if rng is not None else np.random.default_rng(0)
@@ -84,7 +101,8 @@ def fit_transition(
         return log10(m) if log and not geometric else m
 
     y = transform(finite_mean(samples))
-    i, j, step = largest_step(xa, y)
+    across = None if crossing is None else (math.log10(crossing) if log else float(crossing))
+    i, j, step = largest_step(xa, y, across)
     nan = math.nan
     frac = np.full(xa.size, np.nan)
     if i < 0 or not abs(step) >= min_jump:
@@ -101,9 +119,9 @@ def fit_transition(
     boot = transform(bootstrap_seed_means(samples, n_boot, rng))
     # A grid value has a (finite) bootstrap mean iff it has a run: the same points as ``y``.
     idx = np.nonzero(np.isfinite(y))[0]
-    steps = np.diff(boot[:, idx], axis=1)
+    steps = np.nan_to_num(crossing_steps(boot[:, idx], across), nan=0.0)
     k = np.argmax(np.abs(steps), axis=1)
-    big = np.abs(np.take_along_axis(steps, k[:, None], axis=1)[:, 0]) >= min_jump
+    big = np.abs(np.take_along_axis(steps, k[:, None], axis=1)[:, 0]) >= max(min_jump, 1e-300)
     lows = np.where(big, xa[idx[k]], np.nan)
     highs = np.where(big, xa[idx[k + 1]], np.nan)
     mids = 0.5 * (lows + highs)
@@ -175,6 +193,7 @@ def transition(
             n_boot=int(options.get("n_boot", 1000)),
             confidence=float(options.get("confidence", 0.95)),
             rng=rng,
+            crossing=None if options.get("crossing") is None else float(options["crossing"]),
         )
         for n in names:
             out[n][k] = getattr(f, n)
@@ -211,6 +230,7 @@ def transition(
         "log": int(log_scale),
         "min_jump": min_jump,
         "mean": mean_kind,
+        "crossing": "none" if options.get("crossing") is None else float(options["crossing"]),
         "method": "largest step of the seed mean; bracket midpoint",
         "n_seeds": int(ds.sizes["seed"]),
     }

@@ -474,3 +474,16 @@ def test_option_problems_for_campaign_validation():
         "stability, "
         "transition"
     ]
+
+
+def test_a_transition_must_cross_the_level_it_is_given():
+    """Without ``crossing`` the largest step of a texture relaxing at round-off level is a
+    'jump'; with it, only a step from below the level to above it (or back) is."""
+    x = [0.0, 1.0, 2.0, 3.0]
+    relaxing = [[1e-12, 2e-12], [1e-14, 1e-14], [1e-15, 1e-15], [1e-18, 1e-18]]
+    assert fit_transition(x, relaxing).location == 2.5
+    assert np.isnan(fit_transition(x, relaxing, crossing=1e-6).location)
+    patterned = [[1e-2, 2e-2], [1e-13, 1e-13], [1e-15, 1e-15], [1e-18, 1e-18]]
+    f = fit_transition(x, patterned, crossing=1e-6)
+    assert f.location == 0.5
+    assert (f.lower, f.upper) == (0.0, 1.0)

@@ -368,12 +368,26 @@ def provenance(phase: xr.Dataset, root: Path) -> tuple[list[tuple[str, str]], st
         ("report made at git commit", str(git_commit() or "-")),
         ("library versions", library_versions_text()),
     ]
-    fixed = [f"{k[len('param_') :]}={fmt(v)}" for k, v in a.items() if k.startswith("param_")]
+    fixed = [
+        f"{k[len('param_') :]}={fmt(v)}"
+        for k, v in a.items()
+        if k.startswith("param_") and k != "param_protocol"
+    ]
     numerics = [f"{k[len('num_') :]}={fmt(v)}" for k, v in a.items() if k.startswith("num_")]
     rows += [
         ("fixed parameters", ", ".join(fixed) or "-"),
         ("fixed numerics", ", ".join(numerics) or "-"),
     ]
+    if a.get("param_protocol"):  # the functions of time (model.protocol), as written
+        rows.append(("time protocol", str(a["param_protocol"])))
+    if a.get("chain_axis"):
+        rows.append(
+            (
+                "chain",
+                f"along {a['chain_axis']} on the branches {a.get('chain_branches', '')}: each "
+                "point's runs begin from the previous point's end state (same seed)",
+            )
+        )
     if a.get("campaign_overrides"):
         rows.append(("command-line overrides", str(a["campaign_overrides"])))
     copy = root / "campaign.yaml"

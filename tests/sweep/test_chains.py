@@ -7,6 +7,7 @@ reason parent_failed and is redone with it."""
 
 from __future__ import annotations
 
+import base64
 from pathlib import Path
 
 import numpy as np
@@ -185,6 +186,10 @@ def test_the_loop_figure_and_the_loop_width(tmp_path):
     root = results / "loop"
     assert (root / "figures" / "loop.png").stat().st_size > 10_000
     assert not (root / "figures" / "fig2.png").exists()  # fig2 is a plain sweep's figure
+    page = (root / "report.html").read_text()
+    assert "<th>chain</th><td>along alpha_minus_B on the branches up, down" in page
+    png = base64.b64encode((root / "figures" / "loop.png").read_bytes()).decode("ascii")
+    assert png in page  # the figure is on the page
     fits = xr.open_dataset(root / "fits.nc")
     up, down = (fits.sel(branch=b) for b in ("up", "down"))
     width = float(fits["transition_loop_width"])

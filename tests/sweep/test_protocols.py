@@ -132,6 +132,8 @@ def test_a_protocol_campaign_runs_each_point_by_its_protocol(tmp_path):
     assert phase.sizes == {"alpha_minus_B_level": 2, "alpha_minus_B_duration": 2, "seed": 1}
     assert phase["alpha_minus_B_level"].attrs["units"] == "1"
     assert json.loads(phase.attrs["param_protocol"])["alpha_minus_B"]["pulse"]["start"] == 2
+    page = (tmp_path / "results" / "pulses" / "report.html").read_text()
+    assert "<th>time protocol</th><td>{&#34;alpha_minus_B&#34;: {&#34;pulse&#34;" in page
     assert "param_alpha_minus_B" not in phase.attrs
     assert "param_eps" not in phase.attrs
     # each run is the model's run with that point's protocol

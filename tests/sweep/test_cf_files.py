@@ -58,6 +58,51 @@ def files(tmp_path_factory):
     return SimpleNamespace(run=run_file, phase=store.phase_path, fits=fits_path, verify=verify)
 
 
+@pytest.fixture(scope="module")
+def chained(tmp_path_factory):
+    """A chain's phase.nc and fits.nc (a branch dimension, the loop width; 32^2, to t = 1)
+    and a protocol campaign's phase.nc (its numbers as coordinates)."""
+    from sweep.chains import in_chain_order
+
+    folder = tmp_path_factory.mktemp("cf_chain")
+    out = {}
+    for name, extra in (
+        ("chain", "chain: {axis: alpha_minus_B}\n"),
+        (
+            "timed",
+            "protocol: {chi: {pulse: {base: 10, level: 0, start: 0.5}}}\n",
+        ),
+    ):
+        path = write_campaign(folder, name=name, values="[0.1, 0.7]", seeds=1, t_final=1.0)
+        text = path.read_text() + extra
+        if name == "timed":
+            text = text.replace("alpha_minus_B: [0.1, 0.7]", "chi_duration: [0.25, 0.5]")
+        path.write_text(text)
+        campaign = load_campaign(path)
+        expansion = expand(campaign)
+        store = CampaignStore(folder / "results", campaign.name)
+        store.ensure()
+        for i in in_chain_order(range(len(expansion)), expansion.chain_parents):
+            record = execute_run(
+                RunTask.from_spec(expansion.run(i), store, campaign.name, campaign.store)
+            )
+            assert record["status"] == "ok", record
+        write_phase(expansion, store)
+        out[f"{name}_phase"] = store.phase_path
+        if name == "chain":
+            out["chain_fits"], failures = write_fits(store.root, [("transition", {})])
+            assert not failures
+    return SimpleNamespace(**out)
+
+
+@pytest.mark.parametrize("which", ["chain_phase", "chain_fits", "timed_phase"])
+def test_chain_and_protocol_files_are_cf_clean(chained, which, tmp_path):
+    path = getattr(chained, which)
+    assert _checker_messages(path, tmp_path) == []
+    for name, attrs in _variables(path).items():
+        assert attrs.get("long_name", "").strip(), f"{name} has no long_name"
+
+
 def _variables(path: Path) -> dict[str, dict]:
     with netCDF4.Dataset(path) as nc:
         return {

@@ -17,6 +17,11 @@ functions of :math:`L_q` are reused. A step whose stage cannot be evaluated (non
 or Newton solve that fails: a too-large step can throw a stage out of the well-posed range) is
 retried with h/4; if it still fails at ``h <= 1e-3 dt_max`` the failure is the run's.
 ``adaptive = False`` gives the fixed-step schemes (orders tested).
+
+**Protocols** (:mod:`model.protocol`): a step never crosses a switch time of the parameters'
+functions of time; one that would is shortened to end on it, and the next starts exactly
+there. Every stage of a step sets the constants at its time on the pieces that hold the step's
+start; the projection and the saves at the step's end use the values after it.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ from .common import LABELS, Results, check_options, fmt
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-LOOP_OPTIONS = ("observable", "seed", "yscale")
+LOOP_OPTIONS = ("observable", "seed", "yscale", "compare")
 COLOURS = {"up": "tab:blue", "down": "tab:red"}
 
 
@@ -71,7 +71,10 @@ def loop(res: Results, options: Mapping[str, Any]) -> Figure:
             )
         _history(ax_c, res, ds, axis, branch, colour, options.get("seed"))
     width = ""
-    if "transition_loop_width" in fits:
+    compare = options.get("compare")
+    if compare:
+        width = _compare(ax_a, res, str(compare), axis, observable, fits)
+    if not width and "transition_loop_width" in fits:
         w = float(fits["transition_loop_width"])
         lo, hi = (
             float(fits["transition_loop_width_lower"]),
@@ -127,3 +130,36 @@ def _history(ax, res: Results, ds, axis: str, branch: str, colour: str, seed: An
             rotation=90,
         )
         offset += float(t[-1]) if t.size else 0.0
+
+
+def _compare(ax, res: Results, name: str, axis: str, observable: str, fits) -> str:
+    """Another campaign's seed means along the same axis (option ``compare``: a campaign in
+    the same results folder, e.g. Fig. 2's runs each from a fresh texture) with its fitted
+    jump; the loop width from that jump down to the down branch's, or ""."""
+    from ..analysis.fits_file import load_fits, load_phase
+    from ..errors import FitError
+
+    root = res.root.parent / name
+    try:
+        other = load_phase(root)
+    except FitError:
+        ax.text(0.02, 0.02, f"no results of {name} to compare", transform=ax.transAxes)
+        return ""
+    x = other[axis].values.astype(float)
+    order = np.argsort(x)
+    mean = other[f"{observable}_mean"].values[order]
+    ax.plot(x[order], mean, "s--", color="k", ms=3.5, lw=1.0, label=f"{name}: fresh texture")
+    jump = load_fits(root)
+    if "transition_location" not in jump or jump["transition_location"].ndim:
+        return ""
+    lo, hi = float(jump["transition_lower"]), float(jump["transition_upper"])
+    ax.axvspan(lo, hi, color="k", alpha=0.08, lw=0)
+    if "transition_location" not in fits or BRANCH not in fits["transition_location"].dims:
+        return ""
+    down = fits.sel({BRANCH: "down"}) if "down" in fits[BRANCH].values else None
+    if down is None or not math.isfinite(float(down["transition_location"])):
+        return ""
+    w = float(jump["transition_location"]) - float(down["transition_location"])
+    wlo = lo - float(down["transition_upper"])
+    whi = hi - float(down["transition_lower"])
+    return f": loop width ({name} to down) {fmt(w)} [{fmt(wlo)}, {fmt(whi)}]"

@@ -18,7 +18,9 @@ from typer.testing import CliRunner
 
 from model.checkpoint import RunState, read_netcdf
 from model.simulate import run as simulate
+from sweep.analysis.fits_file import write_fits
 from sweep.cli import app
+from sweep.figures.produce import draw
 from sweep.errors import CampaignError
 from sweep.expand import expand
 from sweep.run.continuation import STATE_GROUP, parent_fields
@@ -201,3 +203,12 @@ def test_the_loop_figure_and_the_loop_width(tmp_path):
     phase = xr.open_dataset(root / "phase.nc")
     assert phase.attrs["chain_axis"] == "alpha_minus_B"
     assert phase.attrs["chain_branches"] == "up, down"
+    # compared with a plain sweep's jump (here the up branch as a campaign of its own)
+    plain = results / "plain"
+    plain.mkdir()
+    phase.sel(branch="up", drop=True).to_netcdf(plain / "phase.nc")
+    write_fits(plain, [("transition", {"min_jump": 0.5})])
+    jump = xr.open_dataset(plain / "fits.nc")
+    assert float(jump.transition_location) == float(up.transition_location)
+    paths = draw("loop", root, {"compare": "plain"})
+    assert paths[0].stat().st_size > 10_000

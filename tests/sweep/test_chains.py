@@ -20,9 +20,9 @@ from model.checkpoint import RunState, read_netcdf
 from model.simulate import run as simulate
 from sweep.analysis.fits_file import write_fits
 from sweep.cli import app
-from sweep.figures.produce import draw
 from sweep.errors import CampaignError
 from sweep.expand import expand
+from sweep.figures.produce import draw
 from sweep.run.continuation import STATE_GROUP, parent_fields
 from sweep.spec import parse_campaign
 

@@ -53,6 +53,29 @@ def test_the_passive_stress_and_moduli_are_the_analytic_ones(mechanics):
         assert got["nonlinearity"] < 1e-9
 
 
+@pytest.mark.parametrize("mechanics", ["linear", "finite"])
+@pytest.mark.parametrize("period", [10.0, 50.0])
+def test_the_isotropic_state_has_the_analytic_active_moduli(mechanics, period):
+    """The uniform isotropic state (S0 = 0) under eps0 sin(w t): the shear orders Q through B
+    (gamma q' = -A0 q + B eps), the active stress (alpha - B) q adds to the matrix's 2 eps, and
+    A stays 0 (tr sigma = 0): G* = 1 + (alpha - B) B / (2 (A0 + i w gamma)). Its loss modulus
+    is negative for alpha - B > 0: the activity does work on the rheometer."""
+    eps0, amb = 1e-3, 0.3
+    protocol = {"eps": {"sine": {"amplitude": eps0, "period": period}}}
+    p = Parameters.from_dict(
+        {"S0": 0.0, "noise_modes": 8, "alpha_minus_B": amb, "protocol": protocol}
+    )
+    num = Numerics(resolution=32, t_final=6 * period, save_every=period / 40, mechanics=mechanics)
+    ds = run(p, num, 0)
+    got = fit_moduli(ds.t.values, ds.stress_shear.values, eps0, period, 0.0, 3 * period)
+    w = 2 * np.pi / period
+    want = 1 + amb * p.B / (2 * (p.A0 + 1j * w * p.gamma))
+    tol = 2e-4 if mechanics == "linear" else 2e-3  # finite strain: O(eps0) corrections
+    assert got["storage"] == pytest.approx(want.real, abs=tol)
+    assert got["loss"] == pytest.approx(want.imag, abs=tol)
+    assert got["loss"] < 0
+
+
 def test_the_fit_recovers_known_moduli_drift_and_harmonics():
     t = np.arange(0.0, 60.0, 0.5)
     phi = 2 * np.pi * (t - 5.0) / 10.0

@@ -280,7 +280,8 @@ class Numerics:
         steady_tol: early stop (0, the default: off): at a save time t, the run ends when
             sigma2_S and mean_S each changed by at most this fraction of the larger of their
             two values between t - ``steady_window`` and t (the saved values; a relaxing run,
-            whose sigma2_S decays geometrically, never counts as steady).
+            whose sigma2_S decays geometrically, never counts as steady, until it reaches
+            round-off level and stops changing).
         steady_window: the time span of that comparison (units of tau; with steady_tol > 0
             at least save_every and below t_final).
     """

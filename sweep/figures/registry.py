@@ -18,6 +18,7 @@ from .fig3_growth import FIG3_GROWTH_OPTIONS, fig3_growth
 from .fig4 import FIG4_OPTIONS, fig4
 from .figA1 import FIGA1_OPTIONS, figA1
 from .loop import LOOP_OPTIONS, loop
+from .moduli import MODULI_FIGURE_OPTIONS, moduli_figure
 from .switch import LEVEL, SWITCH_OPTIONS, switch
 
 if TYPE_CHECKING:
@@ -28,6 +29,12 @@ FigureFunction = Callable[[Results, Mapping[str, Any]], "Figure"]
 
 def _swept_all(*names: str) -> Callable[[xr.Dataset], bool]:
     return lambda phase: BRANCH not in phase.dims and all(is_swept(phase, n) for n in names)
+
+
+def _oscillatory(phase: xr.Dataset) -> bool:
+    """A campaign whose protocol has a sine of eps (an oscillatory shear)."""
+    raw = str(phase.attrs.get("param_protocol", ""))
+    return '"eps": {"sine"' in raw and BRANCH not in phase.dims
 
 
 def _chained(phase: xr.Dataset) -> bool:
@@ -116,6 +123,13 @@ REGISTRY: dict[str, FigureSpec] = {
         _loop_fits,
         _chained,
         LOOP_OPTIONS,
+    ),
+    "moduli": FigureSpec(
+        moduli_figure,
+        "an oscillatory shear's storage and loss moduli vs the sweep, and the stress-strain loop",
+        lambda phase: [("moduli", {})],
+        _oscillatory,
+        MODULI_FIGURE_OPTIONS,
     ),
     "switch": FigureSpec(
         switch,

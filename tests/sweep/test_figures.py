@@ -124,6 +124,7 @@ def test_registry_names_match_the_campaign_schema():
         "fig4",
         "figA1",
         "loop",
+        "moduli",
         "switch",
     ]
     assert set(registry("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy", "stability"}

@@ -103,7 +103,7 @@ sweep:
     eps_period: [4]
 seeds: 1
 fits: [{moduli: {skip: 1}}]
-figures: []
+figures: [moduli]
 execution: {workers: 2}
 """
 
@@ -113,6 +113,7 @@ def test_a_rheology_campaign_writes_the_moduli(tmp_path):
     path.write_text(RHEO)
     result = CliRunner().invoke(app, ["run", str(path), "--results", str(tmp_path / "results")])
     assert result.exit_code == 0, result.output
+    assert (tmp_path / "results" / "rheo" / "figures" / "moduli.png").stat().st_size > 10_000
     fits = xr.open_dataset(tmp_path / "results" / "rheo" / "fits.nc")
     g = fits.moduli_storage_mean
     assert g.dims == ("alpha_minus_B", "eps_amplitude", "eps_period")

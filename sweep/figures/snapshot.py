@@ -3,7 +3,11 @@ I1bar = tr C / J background. Reads only a run Dataset (as written by ``model.sim
 
 The background shows I1bar - 2 (I1bar >= 2 in 2-D, = 2 without shear), scaled by a power of
 ten that the colour bar's label states when it is small (I1bar differs from 2 by ~1e-5 in a
-weakly strained pattern): the tick labels stay short, without an offset or a multiplier.
+weakly strained pattern): the tick labels stay short, without an offset or a multiplier. A
+background whose spread is below :data:`UNIFORM` of its scale (the largest |I1bar - 2|) is
+structure of rounding, not of the run (a uniformly sheared matrix, stored in float32): its
+colour range is floored to that fraction around its mean, so it is drawn uniform, and the
+colour bar's label says so.
 """
 
 from __future__ import annotations
@@ -20,6 +24,23 @@ from ..files import series_time
 #: |I1bar - 2| below this (or at least BACKGROUND_MAX) is shown times a power of ten.
 BACKGROUND_MIN, BACKGROUND_MAX = 1e-2, 1e3
 BACKGROUND_NAME = r"$\bar I_1 = \mathrm{tr}\,C / J$"
+#: the smallest colour range of the background, as a fraction of its scale
+UNIFORM = 1e-3
+
+
+def background_range(values: np.ndarray) -> tuple[float, float, bool]:
+    """``(vmin, vmax, floored)`` of the background ``values``: their range, or, where it is
+    below :data:`UNIFORM` of their scale (the largest magnitude), that width around their
+    mean (``floored``: drawn uniform)."""
+    finite = values[np.isfinite(values)]
+    if not finite.size:
+        return 0.0, 1.0, False
+    lo, hi = float(finite.min()), float(finite.max())
+    width = UNIFORM * float(np.abs(finite).max())
+    if hi - lo >= width or width == 0.0:
+        return lo, hi, False
+    mid = 0.5 * (lo + hi)
+    return mid - 0.5 * width, mid + 0.5 * width, True
 
 
 def background(i1: np.ndarray) -> tuple[np.ndarray, str]:
@@ -65,6 +86,9 @@ def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32, colo
     x = ds["x"].values
     n = len(x)
     values, label = background(i1)
+    vmin, vmax, floored = background_range(values)
+    if floored:
+        label += f": uniform (spread < {UNIFORM:g} of its scale)"
     bg = ax.imshow(
         values.T,
         origin="lower",
@@ -72,6 +96,8 @@ def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32, colo
         cmap="Greys",
         interpolation="nearest",
         label=label,
+        vmin=vmin,
+        vmax=vmax,
     )
     stride = max(1, n // arrows)
     sl = (slice(stride // 2, None, stride), slice(stride // 2, None, stride))

@@ -1,6 +1,7 @@
 """The snapshot picture (sweep/figures/snapshot.py: fig2 panel (a), `nematic simulate --png`):
 the I1bar background's colour bar has plain, short tick labels however close I1bar is to 2
-(no offset "+2", no "1e-5" multiplier), and its label says what the numbers are."""
+(no offset "+2", no "1e-5" multiplier), and its label says what the numbers are; a background
+uniform to rounding is drawn uniform."""
 
 from __future__ import annotations
 
@@ -78,3 +79,26 @@ def test_background_colorbar_ticks_are_plain(amplitude):
 def test_snapshot_figure_writes_a_png(tmp_path):
     path = snapshot_figure(run_dataset(2.0 + 2e-5 * pattern()), tmp_path / "snap.png")
     assert path.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_background_uniform_to_rounding_is_drawn_uniform():
+    """Fig. 4's panel (4): I1bar - 2 between 0.0100250 and 0.0100252 (uniform shear, float32):
+    the colour range is floored to 1e-3 of the scale and the label says uniform; a pattern's
+    background keeps its own range."""
+    from matplotlib.figure import Figure
+
+    rng = np.random.default_rng(0)
+    flat = 2.0 + 0.010025 + 2e-7 * rng.random((32, 32))
+    for field, uniform in ((flat, True), (2.0 + 0.01 + 0.003 * pattern(), False)):
+        fig = Figure(figsize=(5, 5))
+        ax = fig.add_subplot()
+        draw_snapshot(ax, run_dataset(field))
+        image = ax.images[0]
+        lo, hi = image.get_clim()
+        values, _ = background(field.astype(np.float32))
+        if uniform:
+            assert hi - lo == pytest.approx(1e-3 * np.abs(values).max(), rel=1e-6)
+            assert "uniform" in image.get_label()
+        else:
+            assert (lo, hi) == pytest.approx((values.min(), values.max()), rel=1e-6)
+            assert "uniform" not in image.get_label()

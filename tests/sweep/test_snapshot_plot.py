@@ -98,7 +98,7 @@ def test_a_background_uniform_to_rounding_is_drawn_uniform():
         values, _ = background(field.astype(np.float32))
         if uniform:
             assert hi - lo == pytest.approx(1e-3 * np.abs(values).max(), rel=1e-6)
-            assert "uniform" in image.get_label()
+            assert "uniform" in str(image.get_label())
         else:
             assert (lo, hi) == pytest.approx((values.min(), values.max()), rel=1e-6)
-            assert "uniform" not in image.get_label()
+            assert "uniform" not in str(image.get_label())

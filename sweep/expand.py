@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from model.parameters import Numerics, Parameters, check_compatible
+from model.resolution import resolve
 
 from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec, same_value
 from .chains import chain_parents, in_chain_order
@@ -77,7 +78,10 @@ def iter_points(campaign: Campaign) -> Iterator[tuple[tuple[int, ...], dict[str,
 
 def make_point(campaign: Campaign, index: tuple[int, ...], coords: dict[str, Any]) -> GridPoint:
     params, numerics = _settings(campaign, coords)
-    point = GridPoint(index, coords, Parameters.from_dict(params), Numerics.from_dict(numerics))
+    parameters = Parameters.from_dict(params)
+    if "resolution" in numerics:  # a rule (resolution: auto) gives the point's grid
+        numerics["resolution"] = resolve(numerics["resolution"], parameters.K, parameters.A0)
+    point = GridPoint(index, coords, parameters, Numerics.from_dict(numerics))
     check_compatible(point.parameters, point.numerics)
     return point
 

@@ -16,6 +16,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, check_compatible, split_settings
+from model.resolution import is_rule, read_rule
 
 from ..campaign import MAX_SEED
 from ..errors import CampaignError, StoreError
@@ -63,7 +64,8 @@ def simulate(
             "--set",
             metavar="NAME=VALUE",
             help=f"A model parameter ({_PARAMETER_NAMES}) or numerics field ({_NUMERICS_NAMES}). "
-            "Repeatable.",
+            "Repeatable. resolution=auto chooses the grid from K (docs/model.md, 'Resolution "
+            "from the physics').",
         ),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the random initial director field.")] = 0,
@@ -93,6 +95,9 @@ def simulate(
         settings = parse_assignments(set_ or [])
         pdict, ndict = split_settings(settings)
         params = Parameters.from_dict(pdict)
+        rule = read_rule(ndict["resolution"]) if is_rule(ndict.get("resolution")) else None
+        if rule is not None:  # resolution=auto: the grid from K (model.resolution)
+            ndict["resolution"] = rule.grid(params.K, params.A0)
         numerics = Numerics.from_dict(ndict)
         check_compatible(params, numerics)
         if not 0 <= seed <= MAX_SEED:
@@ -107,6 +112,11 @@ def simulate(
             error(err, problem)
             raise typer.Exit(EXIT_BAD_INPUT)
 
+    if rule is not None and not quiet:
+        held = rule.capped(params.K, params.A0)
+        note = " (held at the cap: coarser than the rule asks)" if held else ""
+        grid = f"{numerics.resolution}^2 at K = {params.K:g}"
+        err.print(f"resolution {rule.describe()}: {grid}{note}")
     from model.simulate import run  # heavy import (py-pde) only when needed
 
     desc = (

@@ -38,6 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from model.resolution import is_rule
+
 from ..campaign import Campaign, ExecutionSpec, local_worker_count
 from ..expand import Expansion, GridPoint, continued_runs, expand
 from ..store import RETRYABLE_REASONS, CampaignStore, Record
@@ -272,6 +274,7 @@ def estimate(
     # a run that continues a finished shorter run of its trajectory (t_final grew) does only
     # the rest of its time: priced at that fraction of a whole run's cost
     continuing = continued_runs(expansion, todo, records)
+    by_rule = is_rule(campaign.numerics.get("resolution"))  # each point's grid in its line
     for i in todo:
         point = expansion.run(i).point
         if id(point) not in per_point:
@@ -283,7 +286,8 @@ def estimate(
             est, lo, hi = est * rest, lo * rest, hi * rest
             why = f"{why}; the rest of a run from t = {continuing[i][1]:g}"
         runs.append((est, lo, hi, why.startswith("cost model")))
-        entry = costs.setdefault(label, Costed(label, 0, est, lo, hi, why))
+        shown = f"{label}, {point.numerics.resolution}^2" if by_rule else label
+        entry = costs.setdefault(label, Costed(shown, 0, est, lo, hi, why))
         entry.runs += 1
     workers, where = concurrency(campaign.execution)
     local = local_worker_count(campaign.execution.__class__())

@@ -112,6 +112,11 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
     status = per_point("status").astype(int)
     run_ids = per_point("run_id")
     observables = {m: per_point(m).astype(float) for m in MAIN if m in phase}
+    grids = (
+        np.asarray(phase["resolution"].transpose(*dims).values).reshape(-1)
+        if "resolution" in phase.data_vars
+        else None
+    )
     extra = {
         str(c): str(phase[c].dims[0])
         for c in phase.coords
@@ -148,9 +153,10 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
             cols[d].append(_label(phase[d].values[at[d]]))
         cols["facet"].append(", ".join(f"{d}={_label(phase[d].values[at[d]])}" for d in dims[2:]))
         cols["where"].append(where)
+        grid = f" on {int(grids[flat])}^2" if grids is not None else ""  # resolution: auto
         cols["counts"].append(
             f"{int((st == STATUS_OK).sum())} ok, "
-            f"{int((st == STATUS_FAILED).sum())} failed of {len(st)} seeds"
+            f"{int((st == STATUS_FAILED).sum())} failed of {len(st)} seeds{grid}"
         )
         for m, values in observables.items():
             cols[f"seeds_{m}"].append(_seed_text(values[flat], seeds, st))

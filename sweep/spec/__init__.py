@@ -42,7 +42,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from model.parameters import Numerics
+from model.errors import ParameterError
+from model.parameters import Numerics, Parameters
+from model.resolution import is_rule, read_rule
 
 from ..campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec
 from ..errors import CampaignError, Problem
@@ -329,6 +331,8 @@ def _check_memory(c: Checker, campaign: Campaign) -> None:
     resolutions = axes.get(
         "resolution", (campaign.numerics.get("resolution", Numerics.resolution),)
     )
+    if is_rule(resolutions[0]):
+        resolutions = tuple(_rule_grids(campaign, axes))
     mechanics = axes.get("mechanics", (campaign.numerics.get("mechanics", Numerics.mechanics),))
     for n in resolutions:
         for mech in mechanics:
@@ -349,6 +353,19 @@ def _check_memory(c: Checker, campaign: Campaign) -> None:
                     " execution.memory_limit, fewer workers)",
                 )
                 return
+
+
+def _rule_grids(campaign: Campaign, axes: dict[str, Any]) -> list[Any]:
+    """The grids a resolution rule gives at the K and A0 values of the campaign's grid (a
+    refined K lies between two of them, so its grid between theirs); [] for a bad rule,
+    which the model's own check reports."""
+    try:
+        rule = read_rule(campaign.numerics["resolution"])
+        ks = axes.get("K", (campaign.parameters.get("K", Parameters.K),))
+        a0s = axes.get("A0", (campaign.parameters.get("A0", Parameters.A0),))
+        return sorted({rule.grid(float(k), float(a)) for k in ks for a in a0s})
+    except (ParameterError, TypeError, ValueError):
+        return []
 
 
 def load_campaign(path: str | Path, overrides: Overrides | None = None) -> Campaign:

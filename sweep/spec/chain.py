@@ -6,6 +6,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from model.resolution import is_rule
+
 from ..campaign import BRANCH, BRANCHES, ChainSpec
 from .checker import Checker, is_number, suggest
 
@@ -35,6 +37,13 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
         ok = False
     elif len(dims[axis]) < 2 or not all(is_number(v) for v in dims[axis].axes[0].values):
         c.bad(("chain", "axis"), axis, "an axis of two or more numbers")
+        ok = False
+    if ok and axis in ("K", "A0") and is_rule((read.get("numerics") or {}).get("resolution")):
+        c.add(
+            ("chain", "axis"),
+            f"a chain along {axis} with resolution: auto would change the grid between a run "
+            "and the next, which starts from its fields; set a resolution (a number)",
+        )
         ok = False
     if BRANCH in dims:
         c.add(("sweep", "axes", BRANCH), f"'{BRANCH}' names the chain's branches; rename it")

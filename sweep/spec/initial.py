@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from model.parameters import Numerics
+from model.resolution import is_rule
 
 from ..campaign import InitialSpec, same_value
 from ..errors import CampaignError
@@ -201,8 +202,16 @@ def _resolution(c: Checker, parent: Any, read: Mapping[str, Any], path: KeyPath)
     if _sweeps(parent.dims, "resolution") or _sweeps(read.get("sweep") or (), "resolution"):
         c.add(path, "with initial.from neither campaign may sweep resolution")
         return
-    mine = int((read.get("numerics") or {}).get("resolution", DEFAULTS.resolution))
-    theirs = int(parent.numerics.get("resolution", DEFAULTS.resolution))
+    mine_set = (read.get("numerics") or {}).get("resolution", DEFAULTS.resolution)
+    theirs_set = parent.numerics.get("resolution", DEFAULTS.resolution)
+    if is_rule(mine_set) or is_rule(theirs_set):
+        c.add(
+            path,
+            "with initial.from both campaigns set a resolution (a number, not auto): a run "
+            "starts from the parent's fields on the parent's grid",
+        )
+        return
+    mine, theirs = int(mine_set), int(theirs_set)
     if mine != theirs:
         c.add(
             path,

@@ -36,6 +36,7 @@ from typing import Any
 
 from model.errors import ParameterError
 from model.parameters import Numerics, Parameters, check_compatible
+from model.resolution import is_rule
 
 from ..campaign import (
     AMB,
@@ -249,7 +250,9 @@ def check_verify(
     before = len(c.problems)
     try:
         base_p: Parameters | None = Parameters.from_dict(parameters)
-        base_n: Numerics | None = Numerics.from_dict(numerics)
+        base_n: Numerics | None = Numerics.from_dict(
+            {k: v for k, v in numerics.items() if not (k == "resolution" and is_rule(v))}
+        )  # a resolution rule: the checks below need no grid
     except (ParameterError, TypeError):
         base_p = base_n = None  # reported by their own sections
 

@@ -442,6 +442,8 @@ class Campaign:
     initial: InitialSpec | None = None
     #: the ``chain:`` section (points walked in order along an axis: sweep/chains), or None
     chain: ChainSpec | None = None
+    #: ``prior:`` the phase.nc whose seeds per point price the later rounds (sweep/cost/later)
+    prior: str | None = None
 
     @property
     def axes(self) -> tuple[Axis, ...]:

@@ -117,9 +117,12 @@ def estimate_lines(
     from ..store import CampaignStore
 
     rows = []
-    todo = later_runs = 0
-    cpu = wall_sum = later_cpu = later_wall = 0.0
-    any_later = False
+    todo = 0
+    cpu = wall_sum = 0.0
+    bound = [0, 0.0, 0.0]  # the later rounds' runs, CPU and wall: at most, and expected
+    expected = [0, 0.0, 0.0]
+    known: list[str] = []
+    unknown: list[str] = []
     for c in campaigns:
         e = estimate(c, CampaignStore(results, c.name), retry_failed=retry_failed)
         wall = e.wall[0] + e.overhead if e.to_do else 0.0
@@ -128,16 +131,26 @@ def estimate_lines(
             if e.to_do
             else ""
         )
-        if e.later is not None:
-            kind = "expected" if e.later.forecast else "at most"
+        later = e.later
+        if later is not None:
             line += (
-                f"; later rounds: {kind} {e.later.runs} more runs, "
-                f"{fmt_hours(e.later.cpu)}, {fmt_seconds(e.later.wall)} wall"
+                f"; later rounds at most {later.runs} more runs, {fmt_hours(later.cpu)}, "
+                f"{fmt_seconds(later.wall)} wall"
             )
-            any_later = True
-            later_runs += e.later.runs
-            later_cpu += e.later.cpu
-            later_wall += e.later.wall
+            for k, v in enumerate((later.runs, later.cpu, later.wall)):
+                bound[k] += v
+            x = later.expected
+            if x is not None and not x.unknown_points:
+                line += (
+                    f", expected {x.runs} more, {fmt_hours(x.cpu)}, {fmt_seconds(x.wall)} "
+                    f"wall ({x.basis})"
+                )
+                for k, v in enumerate((x.runs, x.cpu, x.wall)):
+                    expected[k] += v
+                known.append(c.name)
+            else:
+                line += ", no expected value yet (no data: no finished runs, no prior)"
+                unknown.append(c.name)
         rows.append(line)
         todo += e.to_do
         cpu += e.cpu[0]
@@ -148,11 +161,23 @@ def estimate_lines(
         *rows,
         f"  total now: {todo} runs, {fmt_hours(cpu)}, {fmt_seconds(wall_sum)} wall",
     ]
-    if any_later:
+    if known or unknown:
         out.append(
-            f"  total with the later rounds: about {todo + later_runs} runs, "
-            f"{fmt_hours(cpu + later_cpu)}, {fmt_seconds(wall_sum + later_wall)} wall (the "
-            "rounds' forecasts and bounds as each campaign's --dry-run gives them)"
+            f"  with the later rounds at most: {todo + bound[0]} runs, "
+            f"{fmt_hours(cpu + bound[1])}, {fmt_seconds(wall_sum + bound[2])} wall (the "
+            "bound: every run the rules allow)"
+        )
+    if known and not unknown:
+        out.append(
+            f"  with the later rounds expected: about {todo + expected[0]} runs, "
+            f"{fmt_hours(cpu + expected[1])}, {fmt_seconds(wall_sum + expected[2])} wall "
+            "(each campaign's basis above)"
+        )
+    elif known:
+        out.append(
+            f"  expected for {', '.join(known)} only: about {expected[0]} more runs, "
+            f"{fmt_hours(expected[1])} in their later rounds; {', '.join(unknown)}: no "
+            "expected value until their first round has run (or a prior: is given)"
         )
     out.append(
         "  (each campaign's own `nematic run FILE --dry-run` lists its points and the "

@@ -43,8 +43,9 @@ from model.resolution import is_rule
 from ..campaign import Campaign, ExecutionSpec, local_worker_count
 from ..expand import Expansion, GridPoint, continued_runs, expand
 from ..store import RETRYABLE_REASONS, CampaignStore, Record
+from .later import precision_rounds, refine_rounds
 from .model import MODEL_SPREAD, kind, model_seconds
-from .result import Costed, Estimate, LaterRounds, fmt_seconds
+from .result import Costed, Estimate, fmt_seconds
 
 #: the quantiles of the spread
 QUANTILES = (0.1, 0.9)
@@ -315,7 +316,7 @@ def estimate(
             "VM: benchmarks/cost_model.json)"
         )
     if campaign.refine is not None and not ref.finished:
-        later = later_rounds(
+        later = refine_rounds(
             campaign,
             ref.current.number,
             ref.n_runs,
@@ -323,7 +324,12 @@ def estimate(
             workers,
         )
     elif campaign.precision is not None and not seeds.finished:
-        later = forecast_rounds(seeds, basis, workers)
+        later = precision_rounds(
+            campaign,
+            seeds,
+            lambda point: basis.cost(point, point_label(point), model_seconds(point.numerics))[0],
+            workers,
+        )
     changed = campaign_changes(campaign, store, dense, records)
     return Estimate(
         campaign=campaign.name,
@@ -353,63 +359,4 @@ def estimate(
         later=later,
         round_note=round_note,
         changes=[] if changed is None else changed.lines(),
-    )
-
-
-def later_rounds(
-    campaign: Campaign, current: int, planned: int, per_run: Sequence[float], workers: int
-) -> LaterRounds | None:
-    """A bound on an adaptive campaign's rounds after ``current`` (with seeds by precision,
-    the rounds that only add seeds too): every run :func:`~sweep.refine.plan.run_bound`
-    allows beyond the ``planned`` ones, each at the mean cost of the campaign's runs; each
-    round ends when its longest run does."""
-    from ..refine.plan import run_bound
-
-    assert campaign.refine is not None
-    last = campaign.refine.rounds
-    if campaign.precision is not None:  # rounds that only add seeds follow
-        from ..precision.decide import rounds_bound
-
-        last += rounds_bound(campaign.precision, len(campaign.seeds)) - 1
-    rounds = last - current
-    runs = max(0, run_bound(campaign) - planned)
-    if rounds <= 0 or runs == 0 or not per_run:
-        return None
-    cpu = runs * float(np.mean(per_run))
-    return LaterRounds(rounds, runs, cpu, cpu / workers + rounds * max(per_run))
-
-
-def forecast_rounds(plan: Any, basis: Basis, workers: int) -> LaterRounds | None:
-    """The runs a campaign with seeds by precision is expected to add after its current
-    round (:func:`sweep.precision.forecast.expected_seeds` per point, from the seeds it has
-    finished), each at its point's cost; the wall time as :func:`later_rounds` has it."""
-    from ..precision.decide import rounds_bound
-    from ..precision.forecast import expected_seeds
-
-    cap = plan.cap
-    runs = cpu = longest = 0.0
-    for p, point in enumerate(plan.grid.points):
-        planned = plan.decisions[p].n  # the seeds its rounds so far give it
-        idx = [p * cap + j for j in range(planned)]
-        done = [i for i in idx if plan.outcomes.get(i) is not None]
-        values = [float(plan.outcomes[i]) for i in done]
-        classes = [plan.classes.get(i) or () for i in done]
-        more = expected_seeds(plan.spec, values, classes, cap, planned) - planned
-        if more > 0:
-            label = point_label(point)
-            seconds = basis.cost(point, label, model_seconds(point.numerics))[0]
-            runs += more
-            cpu += more * seconds
-            longest = max(longest, seconds)
-    at_most = plan.run_bound() - plan.n_runs
-    rounds = rounds_bound(plan.spec, cap) - 1 - plan.current.number
-    if at_most <= 0 or rounds <= 0:
-        return None
-    return LaterRounds(
-        rounds,
-        int(runs),
-        cpu,
-        cpu / workers + rounds * longest if runs else 0.0,
-        forecast=True,
-        at_most=at_most,
     )

@@ -23,17 +23,31 @@ class Costed:
 
 
 @dataclass
+class Expected:
+    """What the later rounds are expected to cost, where there are data for it
+    (:mod:`sweep.cost.later`): ``basis`` says what it stands on; ``unknown_points`` points
+    without data are left out of it (their ``unknown_runs`` are in the bound only)."""
+
+    runs: int
+    cpu: float
+    wall: float
+    basis: str
+    unknown_points: int = 0
+    unknown_runs: int = 0
+
+
+@dataclass
 class LaterRounds:
-    """The rounds after the current one: for an adaptive campaign a bound; with seeds by
-    precision (``forecast``) the runs each point is expected to need, and the bound as
-    ``at_most`` runs."""
+    """The rounds after the current one (seeds by precision, refinement): the bound (at most
+    ``rounds`` more rounds, ``runs`` more runs, their ``cpu`` and ``wall`` seconds) and the
+    :class:`Expected` value where there are data, else ``None`` with the reason in ``note``."""
 
     rounds: int
     runs: int
     cpu: float
     wall: float
-    forecast: bool = False
-    at_most: int = 0
+    expected: Expected | None = None
+    note: str = ""
 
 
 @dataclass
@@ -164,20 +178,32 @@ def lines(e: Estimate, *, brief: bool = False) -> list[str]:
                     e.local_overhead,
                 )
             )
-    if e.later is not None and e.later.forecast:
-        out.append(
-            f"later rounds: about {e.later.runs} more runs expected (each point's "
-            "seeds so far projected to its rule), about "
-            f"{fmt_hours(e.later.cpu)} ({fmt_seconds(e.later.cpu)}) and "
-            f"{fmt_seconds(e.later.wall)} wall on {e.workers} worker(s); at most "
-            f"{e.later.at_most} more runs (every point to the cap) in at most "
-            f"{e.later.rounds} more round(s)"
+    if e.later is not None:
+        out.extend(later_lines(e.later, e.workers))
+    return out
+
+
+def later_lines(later: LaterRounds, workers: int) -> list[str]:
+    """The later rounds as lines: the bound, then the expected value and its basis (or why
+    there is none)."""
+    out = [
+        f"later rounds: at most {later.runs} more runs in at most {later.rounds} more "
+        f"round(s) (the bound: every run the rules allow), at most {fmt_hours(later.cpu)} "
+        f"({fmt_seconds(later.cpu)}) and {fmt_seconds(later.wall)} wall on {workers} "
+        "worker(s)"
+    ]
+    e = later.expected
+    if e is not None:
+        unknown = (
+            f"; {e.unknown_points} point(s) without data are in the bound only (up to "
+            f"{e.unknown_runs} runs)"
+            if e.unknown_points
+            else ""
         )
-    elif e.later is not None:
         out.append(
-            f"later rounds: at most {e.later.rounds} more, at most {e.later.runs} more "
-            f"runs (the run bound), about {fmt_hours(e.later.cpu)} "
-            f"({fmt_seconds(e.later.cpu)}) and at most {fmt_seconds(e.later.wall)} "
-            f"wall on {e.workers} worker(s)"
+            f"  expected: about {e.runs} more runs, {fmt_hours(e.cpu)} ({fmt_seconds(e.cpu)}) "
+            f"and {fmt_seconds(e.wall)} wall ({e.basis}{unknown})"
         )
+    if later.note:
+        out.append(f"  {later.note}")
     return out

@@ -24,6 +24,7 @@ The schema (documented for users in ``docs/campaigns.md``)::
       cluster: {kind: slurm, jobs: 10, cores: 8, memory: 16GB, walltime: "02:00:00"}
     refine: {axis: alpha_minus_B, observable: sigma2_S, rounds: 3}   # adaptive (sweep.refine)
     precision: {observable: lambda_peak, width: 0.1}   # seeds by precision (sweep.precision)
+    prior: ../docs/results/fig2/phase.nc   # a finished run's seeds: the later rounds' cost
 
 Every mistake is collected as a :class:`~sweep.errors.Problem` naming the file and line, the
 key path, the value and what is allowed (with the closest valid name for unknown keys), and
@@ -56,6 +57,7 @@ from .execution import read_execution
 from .initial import READING, InitialRequest, parent_error, read_initial, resolve_initial
 from .points import check_points
 from .precision import read_precision
+from .prior import read_prior
 from .protocol import read_protocol
 from .refine import read_refine
 from .sections import (
@@ -92,6 +94,7 @@ TOP_KEYS = (
     "verify",
     "initial",
     "chain",
+    "prior",
 )
 
 
@@ -126,6 +129,7 @@ SECTIONS: tuple[Section, ...] = (
     Section("verify", "verify", read_verify),
     Section("initial", "initial", read_initial),
     Section("chain", "chain", read_chain),
+    Section("prior", "prior", read_prior),
 )
 
 

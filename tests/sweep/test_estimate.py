@@ -9,7 +9,9 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
+import xarray as xr
 from typer.testing import CliRunner
 
 from model.parameters import Numerics
@@ -19,6 +21,7 @@ from sweep.cost import model as cost_model
 from sweep.cost.estimate import driver_overhead, estimate, makespan
 from sweep.cost.model import MODEL_SPREAD, curve_steps, model_seconds, model_steps
 from sweep.cost.result import lines
+from sweep.errors import CampaignError
 from sweep.expand import expand
 from sweep.files import file_stamp
 from sweep.refine.plan import first_round, run_bound
@@ -296,6 +299,8 @@ def test_adaptive_campaign_round_and_bound(tmp_path):
     assert e.later.rounds == 3
     one = model_seconds(Numerics.from_dict({"resolution": 32, "t_final": 10}))
     assert e.later.cpu == pytest.approx(e.later.runs * one)
+    assert e.later.expected is None  # a refinement is not forecast without a prior
+    assert "no expected value: a refinement's rounds are not forecast" in flat(" ".join(lines(e)))
     assert "adaptive: round 0 (the grid)" in lines(e)[0]
     # round 0 done (patterned above 0.4): round 1 splits the cell 0.4-0.8 at 0.6
     ref = replay(campaign, store)
@@ -335,8 +340,12 @@ def test_seeds_by_precision_current_round_and_forecast(tmp_path):
     assert (e.total, e.to_do) == (12, 12)
     assert "seeds by precision: round 0" in lines(e)[0]
     assert e.later is not None
-    assert e.later.forecast
-    assert e.later.runs == e.later.at_most == 60 - 12
+    assert e.later.runs == 60 - 12  # the bound: every point to the cap
+    assert e.later.expected is None  # no data: no expected value, and the text says so
+    text = flat(" ".join(lines(e)))
+    assert "expected: about" not in text
+    assert "at most 48 more runs" in text
+    assert "no expected value: no point has finished seeds yet" in text
     # round 0 done: 0.1 relaxed (unanimous at 8), 0.2 precise already, 0.3 mixed (the cap)
     values = {
         0.1: [1e-12, 3e-12, 2e-13, 5e-12],
@@ -359,10 +368,53 @@ def test_seeds_by_precision_current_round_and_forecast(tmp_path):
     assert e.to_do == 8  # 0.1 and 0.3 get seeds 4-7
     assert e.cpu[0] == pytest.approx(4 * 2.0 + 4 * 5.0)
     assert e.later is not None
-    assert e.later.runs == 12  # 0.3 on to 20 seeds; 0.1 stops at 8
-    assert e.later.cpu == pytest.approx(12 * 5.0)
-    assert e.later.at_most == 60 - 20
-    assert "about 12 more runs expected" in flat(" ".join(lines(e)))
+    assert e.later.expected is not None
+    assert e.later.expected.runs == 12  # 0.3 on to 20 seeds; 0.1 stops at 8
+    assert e.later.expected.cpu == pytest.approx(12 * 5.0)
+    assert e.later.runs == 60 - 20
+    text = flat(" ".join(lines(e)))
+    assert "expected: about 12 more runs" in text
+    assert "forecast from the finished seeds of 3 point(s)" in text
+
+
+def write_prior(path, seeds_run):
+    """A phase.nc of campaign PRECISE whose points ran ``seeds_run`` seeds."""
+    status = np.zeros((3, 20), dtype=np.int8)
+    for k, n in enumerate(seeds_run):
+        status[k, :n] = 1
+    xr.Dataset(
+        {"status": (("alpha_minus_B", "seed"), status)},
+        coords={"alpha_minus_B": [0.1, 0.2, 0.3], "seed": np.arange(20)},
+        attrs={"campaign": "p", "run_git_commits": "abc1234"},
+    ).to_netcdf(path)
+
+
+def test_a_prior_gives_the_expected_value_before_any_run(tmp_path):
+    write_prior(tmp_path / "phase.nc", [8, 4, 20])
+    path = tmp_path / "p.yaml"
+    path.write_text(PRECISE + "prior: phase.nc\n")
+    campaign = load_campaign(path)
+    e = estimate(campaign, CampaignStore(tmp_path / "results", "p"), load_cores=QUIET)
+    assert e.later is not None
+    assert e.later.expected is not None
+    assert e.later.expected.runs == 4 + 0 + 16  # the prior's seeds beyond round 0's 4
+    assert e.later.runs == 60 - 12
+    text = flat(" ".join(lines(e)))
+    assert "prior: the 32 runs of campaign p in" in text
+    assert "3 point(s) from the prior" in text
+
+
+def test_a_missing_or_unreadable_prior_is_said_and_gives_no_expected_value(tmp_path):
+    with pytest.raises(CampaignError) as err:
+        parse_campaign(PRECISE + "prior: nowhere.nc\n", source=str(tmp_path / "p.yaml"))
+    assert "prior: no file" in str(err.value)
+    (tmp_path / "bad.nc").write_bytes(b"not netcdf")
+    path = tmp_path / "p.yaml"
+    path.write_text(PRECISE + "prior: bad.nc\n")
+    e = estimate(load_campaign(path), CampaignStore(tmp_path / "r", "p"), load_cores=QUIET)
+    assert e.later is not None
+    assert e.later.expected is None
+    assert "the prior is not used: cannot read" in flat(" ".join(lines(e)))
 
 
 # --------------------------------------------------------------------------- the commands
@@ -501,3 +553,24 @@ def test_workers_of_a_batch_cluster_and_of_a_scheduler(tmp_path):
     )
     e = estimate(parse_campaign(text), CampaignStore(tmp_path / "results", "c"), load_cores=QUIET)
     assert "its workers are not known here" in e.where
+
+
+def test_a_refinement_expects_the_priors_run_count(tmp_path):
+    campaign_text = REFINED
+    status = np.zeros((9, 4), dtype=np.int8)
+    status[:, :2] = 1  # 18 runs in all
+    xr.Dataset(
+        {"status": (("alpha_minus_B", "seed"), status)},
+        coords={"alpha_minus_B": np.linspace(0, 0.8, 9), "seed": np.arange(4)},
+        attrs={"campaign": "r"},
+    ).to_netcdf(tmp_path / "phase.nc")
+    path = tmp_path / "r.yaml"
+    path.write_text(campaign_text + "prior: phase.nc\n")
+    campaign = load_campaign(path)
+    e = estimate(campaign, CampaignStore(tmp_path / "results", "r"), load_cores=QUIET)
+    n0 = len(first_round(campaign).runs)
+    assert e.later is not None
+    assert e.later.expected is not None
+    assert e.later.expected.runs == 18 - n0
+    assert e.later.runs == run_bound(campaign) - n0  # the bound is unchanged
+    assert f"18 runs in all, {n0} planned so far" in flat(" ".join(lines(e)))

@@ -1,0 +1,200 @@
+"""The cost of the rounds after the current one, for a campaign with seeds by precision or
+refinement: the **bound** (every run its rules allow: every point to the cap, every cell
+split to the smallest spacing) always, and an **expected** value only where it has data,
+labelled with what it stands on:
+
+- seeds by precision: each point with finished seeds is forecast from them
+  (:func:`sweep.precision.forecast.expected_seeds`); a point without any takes its seeds
+  from the campaign's ``prior:`` (the phase.nc of a finished run of the same campaign) when
+  there is one; a point with neither is *unknown*: it is in the bound, not in the expected
+  value, and the line says how many there are;
+- refinement: the rounds' runs cannot be forecast from the grid's outcomes; with a
+  ``prior:`` the expected total is the prior's run count (the later rounds: what it holds
+  beyond the runs planned so far), without one there is no expected value.
+
+The run times are the estimate's own (:class:`sweep.cost.estimate.Basis`: the campaign's
+finished runs, scaled, or the cost model). After each round the estimate is made again
+from the runs finished by then.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..campaign import Campaign
+from .result import Expected, LaterRounds
+
+
+@dataclass(frozen=True)
+class Prior:
+    """The runs of a finished campaign: seeds run per grid point (by its coordinates) and in
+    all; ``label``: where they come from, for the estimate's text."""
+
+    seeds: dict[tuple[tuple[str, str], ...], int]
+    total: int
+    label: str
+
+
+def point_key(coords: dict[str, Any]) -> tuple[tuple[str, str], ...]:
+    """A grid point's coordinates as a key that a phase.nc's values match (numbers to ten
+    significant digits)."""
+
+    def text(v: Any) -> str:
+        if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool):
+            return f"{float(v):.10g}"
+        return str(v)
+
+    return tuple(sorted((str(k), text(v)) for k, v in coords.items()))
+
+
+def load_prior(path: str) -> Prior | str:
+    """The :class:`Prior` in the phase.nc at ``path``, or why it cannot be read."""
+    import xarray as xr
+
+    try:
+        with xr.open_dataset(path) as ds:
+            if "status" not in ds or "seed" not in ds["status"].dims:
+                return f"{path} is not a campaign's phase.nc (no status over seeds)"
+            status = ds["status"].load()
+            dims = [d for d in status.dims if d != "seed"]
+            status = status.transpose(*dims, "seed")
+            axes = {
+                str(c): str(ds[c].dims[0])
+                for c in ds.coords
+                if ds[c].ndim == 1 and ds[c].dims[0] in dims
+            }
+            values = {c: ds[c].values for c in axes}
+            ran = (status.values != 0).sum(axis=-1)
+            seeds = {}
+            for index in np.ndindex(*ran.shape):
+                at = dict(zip(dims, index, strict=True))
+                coords = {c: values[c][at[d]] for c, d in axes.items()}
+                seeds[point_key(coords)] = int(ran[index])
+            name = ds.attrs.get("campaign", "?")
+            commits = ", ".join(  # short hashes, as git log --oneline shows them
+                c.strip()[:7] + ("+dirty" if c.strip().endswith("+dirty") else "")
+                for c in str(ds.attrs.get("run_git_commits", "")).split(",")
+                if c.strip()
+            )
+    except (OSError, ValueError, KeyError) as e:
+        return f"cannot read {path}: {e}"
+    total = int(ran.sum())
+    where = Path(path)
+    label = f"prior: the {total} runs of campaign {name} in {where.parent.name}/{where.name}" + (
+        f" (commits {commits})" if commits else ""
+    )
+    return Prior(seeds, total, label)
+
+
+def _prior(campaign: Campaign) -> tuple[Prior | None, str]:
+    if campaign.prior is None:
+        return None, ""
+    got = load_prior(campaign.prior)
+    return (got, "") if isinstance(got, Prior) else (None, f"the prior is not used: {got}")
+
+
+def refine_rounds(
+    campaign: Campaign, current: int, planned: int, per_run: Sequence[float], workers: int
+) -> LaterRounds | None:
+    """An adaptive campaign's rounds after ``current`` (with seeds by precision, the rounds
+    that only add seeds too): the bound is every run :func:`~sweep.refine.plan.run_bound`
+    allows beyond the ``planned`` ones; the expected value the prior's runs beyond them. Each
+    run at the mean cost of ``per_run``; each round ends when its longest run does."""
+    from ..refine.plan import run_bound
+
+    assert campaign.refine is not None
+    last = campaign.refine.rounds
+    if campaign.precision is not None:  # rounds that only add seeds follow
+        from ..precision.decide import rounds_bound
+
+        last += rounds_bound(campaign.precision, len(campaign.seeds)) - 1
+    rounds = last - current
+    runs = max(0, run_bound(campaign) - planned)
+    if rounds <= 0 or runs == 0 or not per_run:
+        return None
+    mean, longest = float(np.mean(per_run)), max(per_run)
+    cpu = runs * mean
+    later = LaterRounds(rounds, runs, cpu, cpu / workers + rounds * longest)
+    prior, note = _prior(campaign)
+    if prior is not None:
+        more = max(0, prior.total - planned)
+        later.expected = Expected(
+            more,
+            more * mean,
+            more * mean / workers + (rounds * longest if more else 0.0),
+            f"{prior.label}: {prior.total} runs in all, {planned} planned so far",
+        )
+    later.note = note or (
+        ""
+        if prior is not None
+        else "no expected value: a refinement's rounds are not "
+        "forecast from the grid; a prior: (a finished run's phase.nc) gives one"
+    )
+    return later
+
+
+def precision_rounds(campaign: Campaign, plan: Any, cost: Any, workers: int) -> LaterRounds | None:
+    """The rounds of seeds by precision after the current one: per point, the seeds its
+    finished ones forecast, else the prior's, else unknown (see the module docstring); the
+    bound every point at the cap. ``cost(point) -> seconds`` of one run."""
+    from ..precision.decide import rounds_bound
+    from ..precision.forecast import expected_seeds
+
+    cap = plan.cap
+    prior, note = _prior(campaign)
+    runs = cpu = bound_cpu = longest = 0.0
+    forecast = from_prior = unknown = unknown_runs = 0
+    for p, point in enumerate(plan.grid.points):
+        planned = plan.decisions[p].n  # the seeds its rounds so far give it
+        seconds = cost(point)
+        bound_cpu += (cap - planned) * seconds
+        idx = [p * cap + j for j in range(planned)]
+        done = [i for i in idx if plan.outcomes.get(i) is not None]
+        if done:
+            values = [float(plan.outcomes[i]) for i in done]
+            classes = [plan.classes.get(i) or () for i in done]
+            more = expected_seeds(plan.spec, values, classes, cap, planned) - planned
+            forecast += 1
+        elif prior is not None and point_key(point.coords) in prior.seeds:
+            more = max(0, min(cap, prior.seeds[point_key(point.coords)]) - planned)
+            from_prior += 1
+        else:
+            unknown += 1
+            unknown_runs += cap - planned
+            continue
+        if more > 0:
+            runs += more
+            cpu += more * seconds
+            longest = max(longest, seconds)
+    at_most = plan.run_bound() - plan.n_runs
+    rounds = rounds_bound(plan.spec, cap) - 1 - plan.current.number
+    if at_most <= 0 or rounds <= 0:
+        return None
+    biggest = max((cost(point) for point in plan.grid.points), default=0.0)
+    later = LaterRounds(rounds, at_most, bound_cpu, bound_cpu / workers + rounds * biggest)
+    if forecast or from_prior:
+        parts = []
+        if forecast:
+            parts.append(f"forecast from the finished seeds of {forecast} point(s)")
+        if from_prior:
+            parts.append(f"{from_prior} point(s) from the {prior.label if prior else ''}")
+        later.expected = Expected(
+            int(runs),
+            cpu,
+            cpu / workers + rounds * longest if runs else 0.0,
+            "; ".join(parts),
+            unknown,
+            unknown_runs,
+        )
+    later.note = note or (
+        ""
+        if later.expected is not None
+        else "no expected value: no point has finished seeds yet and there is no prior: "
+        "(it is made from the first round's runs)"
+    )
+    return later

@@ -1,0 +1,121 @@
+"""The convergence table behind ``resolution: auto`` (docs/model.md, "Resolution from the
+physics"), from the phase.nc of campaigns/resolution_study.yaml (K x chi x resolution x
+seeds): for each (K, chi) and grid N, the seed means of lambda(t_final) and sigma2_S(t_final),
+their relative change on the next doubling (N -> 2N; the largest change of a single seed in
+brackets), the cells per Frank length sqrt(K / A0) at N, and the coarsest grid whose changes
+on doubling are all below the threshold (5 %).
+
+    .venv/bin/python scripts/resolution_table.py results/resolution_study/phase.nc
+    .venv/bin/python scripts/resolution_table.py PHASE --threshold 0.05 --json table.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+import numpy as np
+import xarray as xr
+
+OBSERVABLES = ("lambda", "sigma2_S")
+
+
+def change(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Relative change of the seed mean from a to b, and the largest of a single seed."""
+    ok = np.isfinite(a) & np.isfinite(b)
+    if not ok.any():
+        return math.nan, math.nan
+    mean = abs(b[ok].mean() - a[ok].mean()) / abs(a[ok].mean())
+    single = float(np.max(np.abs(b[ok] - a[ok]) / np.abs(a[ok])))
+    return float(mean), single
+
+
+def table(phase: xr.Dataset, threshold: float) -> list[dict]:
+    A0 = float(phase.attrs.get("param_A0", 0.1))
+    grids = [int(n) for n in phase["resolution"].values]
+    rows = []
+    for K in phase["K"].values:
+        for chi in phase["chi"].values:
+            at = phase.sel(K=K, chi=chi)
+            frank = math.sqrt(float(K) / A0)
+            row: dict = {"K": float(K), "chi": float(chi), "frank_length": frank, "grids": []}
+            patterned = bool((at["sigma2_S"].values > 1e-6).all())
+            for i, n in enumerate(grids):
+                entry = {
+                    "N": n,
+                    "cells_per_frank": n * frank,
+                    **{
+                        f"{m}_mean": float(np.nanmean(at[m].sel(resolution=n).values))
+                        for m in OBSERVABLES
+                    },
+                }
+                if i + 1 < len(grids):
+                    for m in OBSERVABLES:
+                        mean, single = change(
+                            at[m].sel(resolution=n).values, at[m].sel(resolution=grids[i + 1]).values
+                        )
+                        entry[f"{m}_change"] = mean
+                        entry[f"{m}_change_max_seed"] = single
+                row["grids"].append(entry)
+            row["patterned"] = patterned
+            converged = None
+            for entry in row["grids"][:-1]:
+                changes = [entry[f"{m}_change"] for m in OBSERVABLES]
+                if all(math.isfinite(c) and c < threshold for c in changes):
+                    converged = entry
+                    break
+            row["converged_N"] = None if converged is None else converged["N"]
+            row["converged_cells_per_frank"] = (
+                None if converged is None else converged["cells_per_frank"]
+            )
+            rows.append(row)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("phase", help="phase.nc of campaigns/resolution_study.yaml")
+    ap.add_argument("--threshold", type=float, default=0.05)
+    ap.add_argument("--json", help="also write the table as JSON here")
+    args = ap.parse_args(argv)
+    with xr.open_dataset(args.phase) as phase:
+        rows = table(phase.load(), args.threshold)
+    pct = lambda x: "-" if not math.isfinite(x) else f"{100 * x:.1f} %"  # noqa: E731
+    print(
+        "| K | chi | l_F (L) | N | cells per l_F | lambda (mean) | sigma2_S (mean) | "
+        "lambda on 2N (max seed) | sigma2_S on 2N (max seed) |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for row in rows:
+        for e in row["grids"]:
+            dl = (
+                f"{pct(e['lambda_change'])} ({pct(e['lambda_change_max_seed'])})"
+                if "lambda_change" in e
+                else ""
+            )
+            ds = (
+                f"{pct(e['sigma2_S_change'])} ({pct(e['sigma2_S_change_max_seed'])})"
+                if "sigma2_S_change" in e
+                else ""
+            )
+            print(
+                f"| {row['K']:.3g} | {row['chi']:g} | {row['frank_length']:.2g} | {e['N']} | "
+                f"{e['cells_per_frank']:.2f} | {e['lambda_mean']:.4g} | "
+                f"{e['sigma2_S_mean']:.4g} | {dl} | {ds} |"
+            )
+    print()
+    print(f"coarsest grid with both changes on doubling < {100 * args.threshold:g} %:")
+    for row in rows:
+        n, c = row["converged_N"], row["converged_cells_per_frank"]
+        what = f"{n} ({c:.2f} cells per Frank length)" if n else "none of the grids run"
+        print(f"  K = {row['K']:.3g}, chi = {row['chi']:g}: {what}")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(rows, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -54,7 +54,8 @@ def table(phase: xr.Dataset, threshold: float) -> list[dict]:
                 if i + 1 < len(grids):
                     for m in OBSERVABLES:
                         mean, single = change(
-                            at[m].sel(resolution=n).values, at[m].sel(resolution=grids[i + 1]).values
+                            at[m].sel(resolution=n).values,
+                            at[m].sel(resolution=grids[i + 1]).values,
                         )
                         entry[f"{m}_change"] = mean
                         entry[f"{m}_change_max_seed"] = single

@@ -48,7 +48,7 @@ nb_execution_show_tb = True
 # --- API reference ---
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
-autodoc_default_options = {"members": True, "show-inheritance": False}
+autodoc_default_options = {"members": True}
 napoleon_google_docstring = True
 napoleon_numpy_docstring = False
 napoleon_use_ivar = True
@@ -62,28 +62,19 @@ html_static_path: list[str] = []
 
 
 def _cli_page() -> None:
-    """docs/_generated/cli.md from the typer application: the same texts as ``nematic --help``."""
+    """docs/_generated/cli.md, written by typer from the ``nematic`` application
+    (:data:`sweep.cli.app`): the texts of ``nematic --help`` and ``nematic COMMAND --help``."""
     out = DOCS / "_generated" / "cli.md"
     out.parent.mkdir(exist_ok=True)
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "typer",
-            "sweep.cli",
-            "utils",
-            "docs",
-            "--name",
-            "nematic",
-            "--title",
-            "Command reference: nematic",
-            "--output",
-            str(out),
-        ],
-        check=True,
+    command = [sys.executable, "-m", "typer", "--app", "app", "sweep.cli", "utils", "docs"]
+    done = subprocess.run(
+        [*command, "--name", "nematic", "--output", str(out)],
         cwd=ROOT,
         capture_output=True,
+        text=True,
     )
+    if done.returncode != 0:
+        raise RuntimeError(f"the command reference could not be generated:\n{done.stderr}")
 
 
 _cli_page()

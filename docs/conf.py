@@ -48,7 +48,7 @@ nb_execution_show_tb = True
 # --- API reference ---
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
-autodoc_default_options = {"members": True}
+autodoc_default_options: dict[str, bool] = {}
 napoleon_google_docstring = True
 napoleon_numpy_docstring = False
 napoleon_use_ivar = True

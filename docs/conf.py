@@ -35,6 +35,9 @@ extensions = [
 exclude_patterns = ["_build", "_generated", "**.ipynb_checkpoints"]
 source_suffix = {".md": "myst-nb", ".ipynb": "myst-nb", ".rst": "restructuredtext"}
 
+# text as written: "--set" stays two hyphens (the command reference), quotes stay straight
+smartquotes = False
+
 # --- Markdown ---
 myst_enable_extensions = ["dollarmath", "amsmath"]
 myst_heading_anchors = 4

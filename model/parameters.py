@@ -54,7 +54,7 @@ class Parameters:
     """Dimensionless constants of paper Eqs. (1)-(5). Lengths in units of L, stresses in
     units of the shear modulus G, time in units of tau (so ``tau = 1`` by default).
 
-    Attributes (paper symbol):
+    Attributes:
         S0: initial (homogeneous) nematic order parameter S.
         A0: A_0, the Landau-de Gennes quadratic coefficient without activity.
         B: nemato-elastic deviatoric coupling.

@@ -1,0 +1,83 @@
+"""Sphinx configuration of the documentation site (build: scripts/build_docs.sh).
+
+The site is built offline: the Markdown pages are read by myst-parser, the API reference is
+generated from the docstrings (autodoc + napoleon), the command-line reference from the typer
+application (``typer ... utils docs``, the source of ``nematic --help``) and the notebook is
+executed by myst-nb at every build.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parent
+ROOT = DOCS.parent
+sys.path.insert(0, str(ROOT))
+# the notebook's kernel imports the checkout too, and draws without a display
+os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+project = "Active nematic solids"
+author = "the active-nematic-solids developers"
+copyright = "the active-nematic-solids developers"
+
+extensions = [
+    "myst_nb",  # Markdown (myst-parser) and notebooks
+    "sphinx.ext.autodoc",
+    "sphinx.ext.napoleon",
+    "sphinx.ext.mathjax",
+    "sphinx-mathjax-offline",  # MathJax 3 copied into the site (no CDN)
+]
+
+exclude_patterns = ["_build", "_generated", "**.ipynb_checkpoints"]
+source_suffix = {".md": "myst-nb", ".ipynb": "myst-nb", ".rst": "restructuredtext"}
+
+# text as written: "--set" stays two hyphens (the command reference), quotes stay straight
+smartquotes = False
+
+# --- Markdown ---
+myst_enable_extensions = ["dollarmath", "amsmath"]
+myst_heading_anchors = 4
+
+# --- notebooks: executed at every build; an error fails the build ---
+nb_execution_mode = "force"
+nb_execution_raise_on_error = True
+nb_execution_timeout = 600
+nb_execution_show_tb = True
+
+# --- API reference ---
+autodoc_member_order = "bysource"
+autodoc_typehints = "description"
+autodoc_default_options: dict[str, bool] = {}
+napoleon_google_docstring = True
+napoleon_numpy_docstring = False
+napoleon_use_ivar = True
+
+# --- HTML ---
+html_theme = "furo"
+html_title = project
+# no footer links to the theme's and Sphinx's sites: the pages reference nothing outside the site
+html_show_sphinx = False
+html_static_path: list[str] = []
+
+
+def _cli_page() -> None:
+    """docs/_generated/cli.md, written by typer from the ``nematic`` application
+    (:data:`sweep.cli.app`): the texts of ``nematic --help`` and ``nematic COMMAND --help``."""
+    out = DOCS / "_generated" / "cli.md"
+    out.parent.mkdir(exist_ok=True)
+    command = [sys.executable, "-m", "typer", "--app", "app", "sweep.cli", "utils", "docs"]
+    done = subprocess.run(
+        [*command, "--name", "nematic", "--output", str(out)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"the command reference could not be generated:\n{done.stderr}")
+
+
+_cli_page()

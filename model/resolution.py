@@ -17,7 +17,7 @@ the coarsest grid of the ladder :math:`N_{\min}, 2 N_{\min}, 4 N_{\min}, \dots` 
 physics"): the grid at which lambda and sigma2_S move by less than 5 % on the next doubling.
 
 A rule is written ``"auto"`` (the defaults below) or as a mapping of its three numbers
-(``{"cells_per_frank": 1.0, "floor": 128, "cap": 1024}``, each optional); :func:`read_rule`
+(``{"cells_per_frank": 1.3, "floor": 128, "cap": 1024}``, each optional); :func:`read_rule`
 reads either and :meth:`ResolutionRule.grid` gives a run's N. A run's identity holds the N
 (the rule is how it was chosen, not what was run), so a point the rule puts on 128^2 is the
 same run as one asked for at 128^2.
@@ -49,15 +49,18 @@ class ResolutionRule:
     ``floor * 2**j``, at most ``cap``.
 
     Attributes:
-        cells_per_frank: c, cells per Frank length (docs/model.md: from the convergence
-            study, the smallest c at which lambda and sigma2_S move by < 5 % on doubling).
+        cells_per_frank: c, cells per Frank length. 1.3 from the convergence study
+            (docs/model.md, "Resolution from the physics"): 128^2 at K = 1e-5 (1.28 cells)
+            moves lambda(100) by 10.6 % on doubling, every grid with 1.44 cells or more by
+            less than 5 %. At K = 1e-6 it asks for 512^2 where 256^2 (0.81 cells) already
+            moves lambda by less than 5 %: conservative by one doubling there.
         floor: the coarsest grid (the paper's 128^2: every published point with a Frank
             length of c cells or more keeps its grid, and its run).
         cap: the finest grid (memory and time: a 1024^2 finite-strain run to t = 100 costs
             about 4x a 512^2 one).
     """
 
-    cells_per_frank: float = 0.8
+    cells_per_frank: float = 1.3
     floor: int = 128
     cap: int = 1024
 
@@ -92,7 +95,7 @@ class ResolutionRule:
         return self.grid(K, A0) < self.wanted(K, A0)
 
     def describe(self) -> str:
-        """``auto (0.8 cells per Frank length, 128 to 1024)``."""
+        """``auto (1.3 cells per Frank length, 128 to 1024)``."""
         return f"auto ({self.cells_per_frank:g} cells per Frank length, {self.floor} to {self.cap})"
 
     def to_dict(self) -> dict[str, Any]:

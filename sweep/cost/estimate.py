@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from model.resolution import is_rule
+from model.resolution import is_rule, read_rule
 
 from ..campaign import Campaign, ExecutionSpec, local_worker_count
 from ..expand import Expansion, GridPoint, continued_runs, expand
@@ -275,7 +275,8 @@ def estimate(
     # a run that continues a finished shorter run of its trajectory (t_final grew) does only
     # the rest of its time: priced at that fraction of a whole run's cost
     continuing = continued_runs(expansion, todo, records)
-    by_rule = is_rule(campaign.numerics.get("resolution"))  # each point's grid in its line
+    setting = campaign.numerics.get("resolution")
+    rule = read_rule(setting) if is_rule(setting) else None  # resolution: auto
     for i in todo:
         point = expansion.run(i).point
         if id(point) not in per_point:
@@ -287,7 +288,10 @@ def estimate(
             est, lo, hi = est * rest, lo * rest, hi * rest
             why = f"{why}; the rest of a run from t = {continuing[i][1]:g}"
         runs.append((est, lo, hi, why.startswith("cost model")))
-        shown = f"{label}, {point.numerics.resolution}^2" if by_rule else label
+        shown = label
+        if rule is not None:  # each point's grid, and whether the cap holds it below the rule
+            held = rule.capped(point.parameters.K, point.parameters.A0)
+            shown += f", {point.numerics.resolution}^2" + (" (held at the cap)" if held else "")
         entry = costs.setdefault(label, Costed(shown, 0, est, lo, hi, why))
         entry.runs += 1
     workers, where = concurrency(campaign.execution)

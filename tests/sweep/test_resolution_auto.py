@@ -17,8 +17,8 @@ from sweep.errors import CampaignError
 from sweep.expand import expand
 from sweep.spec import parse_campaign
 
-#: 1 cell per Frank length from 32^2 to 64^2: K = 1e-4 (l_F = 0.032) on 32^2, K = 2e-5
-#: (l_F = 0.014) on 64^2, K = 1e-7 (l_F = 1e-3) held at the cap 64^2.
+#: 1 cell per Frank length from 32^2 to 64^2: K = 1e-4 (l_F = 0.032) on 32^2, K = 5e-5
+#: (l_F = 0.022) on 64^2, K = 1e-7 (l_F = 1e-3) held at the cap 64^2.
 RULE = "{cells_per_frank: 1.0, floor: 32, cap: 64}"
 AUTO = f"""\
 name: auto
@@ -26,7 +26,7 @@ parameters: {{noise_modes: 8, alpha_minus_B: 1.0}}
 numerics: {{resolution: {RULE}, t_final: 1.0, save_every: 0.5}}
 sweep:
   axes:
-    K: [1.0e-4, 2.0e-5, 1.0e-7]
+    K: [1.0e-4, 5.0e-5, 1.0e-7]
 seeds: 2
 execution: {{workers: 2}}
 """
@@ -35,7 +35,7 @@ execution: {{workers: 2}}
 def explicit(n: int, K: float) -> str:
     return (
         AUTO.replace(f"resolution: {RULE}", f"resolution: {n}")
-        .replace("[1.0e-4, 2.0e-5, 1.0e-7]", f"[{K!r}]")
+        .replace("[1.0e-4, 5.0e-5, 1.0e-7]", f"[{K!r}]")
         .replace("name: auto", "name: plain")
     )
 
@@ -44,8 +44,8 @@ def test_each_point_gets_the_rules_grid_and_the_run_id_of_that_grid():
     expansion = expand(parse_campaign(AUTO))
     rule = ResolutionRule(cells_per_frank=1.0, floor=32, cap=64)
     grids = [p.numerics.resolution for p in expansion.points]
-    assert grids == [rule.grid(K, 0.1) for K in (1e-4, 2e-5, 1e-7)] == [32, 64, 64]
-    for i, K in enumerate((1e-4, 2e-5, 1e-7)):
+    assert grids == [rule.grid(K, 0.1) for K in (1e-4, 5e-5, 1e-7)] == [32, 64, 64]
+    for i, K in enumerate((1e-4, 5e-5, 1e-7)):
         plain = expand(parse_campaign(explicit(grids[i], K)))
         assert expansion.run_ids[2 * i : 2 * i + 2] == plain.run_ids  # the grid is the identity
 
@@ -57,7 +57,8 @@ def test_a_campaign_on_several_grids_is_one_phase_diagram(tmp_path):
     dry = CliRunner().invoke(app, ["run", str(path), "--results", str(results), "--dry-run"])
     assert dry.exit_code == 0, dry.output
     assert "K=0.0001, 32^2: 2 to do" in dry.output
-    assert "K=2e-05, 64^2: 2 to do" in dry.output
+    assert "K=5e-05, 64^2: 2 to do" in dry.output
+    assert "K=1e-07, 64^2 (held at the cap): 2 to do" in dry.output
     result = CliRunner().invoke(app, ["run", str(path), "--results", str(results)])
     assert result.exit_code == 0, result.output
     phase = xr.open_dataset(results / "auto" / "phase.nc")
@@ -68,7 +69,7 @@ def test_a_campaign_on_several_grids_is_one_phase_diagram(tmp_path):
     # the runs on different grids are the model's runs on their grids: their sigma2_S differ
     # between K values and match a plain campaign at that grid
     plain = tmp_path / "plain.yaml"
-    plain.write_text(explicit(64, 2e-5))
+    plain.write_text(explicit(64, 5e-5))
     again = CliRunner().invoke(app, ["run", str(plain), "--results", str(results)])
     assert again.exit_code == 0, again.output
     other = xr.open_dataset(results / "plain" / "phase.nc")

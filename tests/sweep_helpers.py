@@ -100,6 +100,14 @@ def group_alive(pgid: int) -> bool:
     return True
 
 
+def wait_group_gone(pgid: int, timeout: float = 60.0) -> None:
+    """Wait until every process of the process group ``pgid`` (a driver started by
+    :func:`start_driver` and its local dask workers) has exited. A killed driver's workers
+    outlive it briefly and may still write a run's files; a test reads the run folder only
+    after this, so that what it reads is the folder's final state, not a moment of it."""
+    wait_for(lambda: not group_alive(pgid), timeout, f"the processes of group {pgid} to exit")
+
+
 def kill_group(proc: subprocess.Popen) -> None:
     """Clean-up: SIGKILL whatever is left of a driver's session (its own processes only)."""
     with contextlib.suppress(ProcessLookupError):

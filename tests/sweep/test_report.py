@@ -49,6 +49,9 @@ execution: {workers: 2}
 """
 
 
+ROOT = Path(__file__).resolve().parents[2]
+
+
 def invoke(*args: object):
     return CliRunner().invoke(app, [str(a) for a in args])
 
@@ -116,6 +119,13 @@ def test_the_report_references_nothing_outside_itself(adaptive):
     html = (results / "rep" / "report.html").read_text()
     assert "Bokeh" in html  # bokeh's code is in the page: its strings are not references
     assert outside_references(html) == []
+
+
+def test_the_committed_result_pages_reference_nothing_outside_themselves():
+    pages = sorted((ROOT / "docs" / "results").glob("*/report.html"))
+    assert pages
+    for page in pages:
+        assert outside_references(page.read_text()) == [], page
 
 
 def test_the_offline_check_finds_what_a_page_would_fetch():

@@ -5,6 +5,9 @@ credentials made for this campaign (``distributed.Security.temporary()``; a batc
 the worker's copy from files that only the campaign's owner can read, in ``<campaign>/tls``),
 unless ``execution.security`` opts out with a stated reason, and serves its dashboard on
 127.0.0.1 only. The cluster is then watched by :class:`~sweep.run.workers.Supervisor`.
+As a local cluster closes, its workers drop one known message of distributed's, a heartbeat
+that met the closing scheduler (:func:`quiet_heartbeats`), so that a campaign that succeeded
+prints no traceback.
 """
 
 from __future__ import annotations

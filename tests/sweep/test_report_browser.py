@@ -1,10 +1,14 @@
 """The report in a real browser (headless Chromium driven by selenium through the system
-chromedriver: Debian's ``chromium`` and ``chromium-driver``, which .ci/run installs): the
-phase diagram renders its points without a severe console error and without loading
-anything from the network, and clicking a point shows that point's run (its snapshot image
-and sigma2_S(t)). Saves a screenshot of the page in the test's temporary folder; with
-``NEMATIC_UPDATE_SCREENSHOT=1`` in the environment it replaces docs/figures/report_screenshot.png
-(the README shows it) instead, so a plain test run leaves the checkout unchanged.
+chromedriver: Debian's ``chromium`` and ``chromium-driver``, which .ci/run installs), on
+the quickstart's own page (campaigns/quickstart.yaml scaled down) with the network blocked:
+no request leaves the file (Chrome's log of every request it sent; a page that does fetch
+is seen to), the phase diagram and the figures render without a severe console error, the
+labels are the plain text intended, and clicking a point shows that point's run (its
+snapshot image and sigma2_S(t)); a TeX label renders offline with bokeh's own MathJax
+(:func:`sweep.report.page.inline_resources`). Saves a screenshot of the page in the test's
+temporary folder; with ``NEMATIC_UPDATE_SCREENSHOT=1`` in the environment it replaces
+docs/figures/report_screenshot.png (the README shows it) instead, so a plain test run leaves
+the checkout unchanged.
 
 Marked ``browser`` (run with ``pytest -m browser``; CI does); skipped, with the reason, where
 Chromium, its driver or selenium is missing."""

@@ -7,7 +7,7 @@ SLURM jobs) does not race.
 Without node ids it repeats the default suite's process-level tests (:data:`PROCESS_TESTS`);
 ``-m slurm`` node ids need the one-node SLURM of scripts/slurm_local.sh (the tests start it).
 Prints one line per test (passes of runs, the median seconds, the failures' last lines) and,
-with ``--json``, writes the counts.
+with ``--json``, writes the counts and the failures' last lines (:data:`KEPT_LINES`).
 """
 
 from __future__ import annotations
@@ -30,11 +30,16 @@ PROCESS_TESTS = (
     "tests/sweep/test_continuation.py::test_sigkill_of_the_driver_and_its_workers_then_resume",
     "tests/sweep/test_detach.py::test_a_detached_driver_outlives_its_shell_and_completes",
     "tests/sweep/test_detach.py::test_stop_ends_the_driver_and_leaves_no_run_half_written",
+    "tests/sweep/test_quiet_shutdown.py::test_a_campaign_that_succeeds_under_load_prints_no_traceback",
 )
 
 
+#: Lines of a failed run's output kept in ``--json`` (enough for its traceback).
+KEPT_LINES = 80
+
+
 def run_once(node: str, marker: str) -> tuple[bool, float, str]:
-    """One pytest process for ``node``: (passed, seconds, its last lines)."""
+    """One pytest process for ``node``: (passed, seconds, its last :data:`KEPT_LINES` lines)."""
     t0 = time.monotonic()
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "-m", marker, node],
@@ -42,7 +47,7 @@ def run_once(node: str, marker: str) -> tuple[bool, float, str]:
         capture_output=True,
         text=True,
     )
-    tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-3:])
+    tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-KEPT_LINES:])
     return proc.returncode == 0, time.monotonic() - t0, tail
 
 
@@ -65,7 +70,8 @@ def main() -> int:
         failed_any |= bool(failures)
         print(f"{passed}/{args.n} passed, median {seconds:.0f} s: {node}", flush=True)
         for tail in failures[:3]:
-            print("    " + tail.replace("\n", "\n    "), flush=True)
+            last = "\n".join(tail.splitlines()[-3:])
+            print("    " + last.replace("\n", "\n    "), flush=True)
         out[node] = {
             "runs": args.n,
             "passed": passed,

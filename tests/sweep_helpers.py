@@ -5,10 +5,12 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
+from html.parser import HTMLParser
 from pathlib import Path
 
 from sweep.expand import expand
@@ -100,6 +102,14 @@ def group_alive(pgid: int) -> bool:
     return True
 
 
+def wait_group_gone(pgid: int, timeout: float = 60.0) -> None:
+    """Wait until every process of the process group ``pgid`` (a driver started by
+    :func:`start_driver` and its local dask workers) has exited. A killed driver's workers
+    outlive it briefly and may still write a run's files; a test reads the run folder only
+    after this, so that what it reads is the folder's final state, not a moment of it."""
+    wait_for(lambda: not group_alive(pgid), timeout, f"the processes of group {pgid} to exit")
+
+
 def kill_group(proc: subprocess.Popen) -> None:
     """Clean-up: SIGKILL whatever is left of a driver's session (its own processes only)."""
     with contextlib.suppress(ProcessLookupError):
@@ -129,3 +139,73 @@ def cli_modules(*args: object) -> tuple[set[str], str]:
     output, _, modules = done.stdout.rpartition("MODULES ")
     assert modules, done.stderr
     return set(json.loads(modules)), output + done.stderr
+
+
+# ------------------------------------------------------------------- pages that work offline
+#: A reference to something outside the page's own folder: an absolute URL of a network
+#: scheme, or a protocol-relative one (``//host/...``).
+_OUTSIDE = re.compile(r"^\s*(?:(?:https?|wss?|ftp):|//)", re.I)
+#: Attributes that make a browser fetch or navigate to their value.
+_URL_ATTRIBUTES = frozenset(
+    {"src", "href", "srcset", "action", "formaction", "poster", "data", "background", "xlink:href"}
+)
+#: ES module imports and CSS imports/urls naming an absolute URL in literal text.
+_SCRIPT_IMPORT = re.compile(
+    r"""\bimport\s*\(\s*["'`]([^"'`]+)|\bimport\s+(?:[\w*{}\s,]+\s+from\s+)?["']([^"']+)"""
+)
+_CSS_URL = re.compile(r"""@import\s+["']([^"']+)|url\(\s*["']?([^"')\s]+)""", re.I)
+
+
+class _References(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__(convert_charrefs=True)
+        self.found: list[str] = []
+        self._in: str | None = None
+        self._module = False
+
+    def _check(self, where: str, url: str) -> None:
+        if _OUTSIDE.match(url):
+            self.found.append(f"{where}: {url}")
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        for name, value in attrs:
+            if value is None:
+                continue
+            if name in _URL_ATTRIBUTES:
+                for url in value.split(",") if name == "srcset" else [value]:
+                    self._check(f"<{tag} {name}>", url.strip().split(" ")[0])
+            elif name == "style":
+                for m in _CSS_URL.finditer(value):
+                    self._check(f"<{tag} style>", m.group(1) or m.group(2))
+            elif tag == "meta" and name == "content" and "url=" in value.lower():
+                self._check("<meta refresh>", value.lower().split("url=", 1)[1])
+        self._in = tag if tag in ("script", "style") else None
+        self._module = tag == "script" and dict(attrs).get("type") == "module"
+
+    def handle_endtag(self, tag: str) -> None:
+        self._in = None
+
+    def handle_data(self, data: str) -> None:
+        if self._in == "style":
+            for m in _CSS_URL.finditer(data):
+                self._check("<style>", m.group(1) or m.group(2))
+        elif self._in == "script":
+            # imports of a module by its URL; a URL that is only a string in the code (as
+            # in bokeh's bundle: the MathJax CDN address of a provider it does not use) is
+            # no reference of the page
+            for m in _SCRIPT_IMPORT.finditer(data):
+                url = m.group(1) or m.group(2)
+                if m.group(1) or self._module:
+                    self._check("<script> import", url)
+
+
+def outside_references(html: str) -> list[str]:
+    """Everything the page ``html`` would fetch or link to outside its own folder: the
+    network URLs (and ``//host`` ones) in its tags' src/href/srcset/action/... attributes,
+    ``<link>`` and ``<base>`` included, in CSS ``url()`` and ``@import``, in a meta refresh,
+    and in the ES module imports of its scripts (``import("...")``; ``import ... from "..."``
+    in a module script). Empty for a page that works offline."""
+    parser = _References()
+    parser.feed(html)
+    parser.close()
+    return parser.found

@@ -1,13 +1,14 @@
 """The report page: :func:`build_report` renders a campaign's results as one self-contained
 HTML text (bokeh's JavaScript inlined from ``bokeh.resources.INLINE``, every image a data
-URI: it opens from the file, without a server or a network), through a Jinja2 template
-(autoescaped); :func:`write_report` writes it to ``results/<name>/report.html`` atomically."""
+URI: it opens from the file, without a server or a network, and references nothing outside
+itself), through a Jinja2 template (autoescaped); :func:`write_report` writes it to
+``results/<name>/report.html`` atomically."""
 
 from __future__ import annotations
 
 import datetime as _dt
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..files import atomic_write_text
 
@@ -118,12 +119,24 @@ median {{ "%.3g" | format(c.cost.median) }} s, from {{ "%.3g" | format(c.cost.mi
 """
 
 
+def inline_resources(layout: Any) -> str:
+    """The CSS and JavaScript of the bokeh bundles ``layout`` uses, inlined from
+    ``bokeh.resources.INLINE`` (no server, no CDN): bokeh itself, its widgets if used, and
+    its MathJax bundle (``bokeh-mathjax``) if a label holds TeX (``$$...$$``), so that such
+    math renders offline too. Nothing the page runs fetches anything: bokeh's own code holds
+    the address of MathJax on a CDN (``.../npm/mathjax@3/es5/tex-svg.js``) as a string, for a
+    provider it does not use (its default is the bundled one)."""
+    from bokeh.embed.bundle import bundle_for_objs_and_resources
+    from bokeh.resources import INLINE
+
+    js, css = bundle_for_objs_and_resources([layout], INLINE)
+    return str(css) + str(js)
+
+
 def build_report(opened: CampaignResults) -> str:
     """The report of the campaign ``opened`` (:func:`sweep.open_campaign`) as HTML text."""
     import jinja2
     from bokeh.embed import components
-    from bokeh.embed.bundle import bundle_for_objs_and_resources
-    from bokeh.resources import INLINE
 
     from ..outputs.aggregate import phase_dataset
     from ..outputs.status import campaign_status
@@ -140,9 +153,7 @@ def build_report(opened: CampaignResults) -> str:
     script, div, resources = "", "", ""
     if layout is not None:
         script, div = components(layout)
-        # the JavaScript of the bokeh bundles this layout uses, inlined (no server, no CDN)
-        js, css = bundle_for_objs_and_resources([layout], INLINE)
-        resources = css + js
+        resources = inline_resources(layout)
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
     created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     return env.from_string(TEMPLATE).render(

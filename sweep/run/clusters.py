@@ -5,6 +5,9 @@ credentials made for this campaign (``distributed.Security.temporary()``; a batc
 the worker's copy from files that only the campaign's owner can read, in ``<campaign>/tls``),
 unless ``execution.security`` opts out with a stated reason, and serves its dashboard on
 127.0.0.1 only. The cluster is then watched by :class:`~sweep.run.workers.Supervisor`.
+As a local cluster closes, its workers drop one known message of distributed's, a heartbeat
+that met the closing scheduler (:func:`quiet_heartbeats`), so that a campaign that succeeded
+prints no traceback.
 """
 
 from __future__ import annotations
@@ -175,7 +178,40 @@ def open_cluster(
             **kwargs,
         )
     with cluster, Client(cluster) as client:
-        yield ClusterLink(client, "the local dask cluster")
+        try:
+            yield ClusterLink(client, "the local dask cluster")
+        finally:
+            quiet_heartbeats(client)
+
+
+#: What a worker's heartbeat logs, with a traceback, when it cannot reach the scheduler
+#: (``distributed.worker``, level ERROR): at the local cluster's shutdown, under load, a
+#: worker's last heartbeat can meet the scheduler closing; the campaign is over by then.
+HEARTBEAT_FAILURE = "Failed to communicate with scheduler during heartbeat"
+
+
+class _HeartbeatAtShutdown(logging.Filter):
+    """Drops :data:`HEARTBEAT_FAILURE` (that message only) in a worker process whose cluster
+    is closing."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(HEARTBEAT_FAILURE)
+
+
+def _drop_heartbeat_failures() -> None:
+    """Run in each local worker process as its cluster closes (:func:`quiet_heartbeats`)."""
+    worker_log = logging.getLogger("distributed.worker")
+    if not any(isinstance(f, _HeartbeatAtShutdown) for f in worker_log.filters):
+        worker_log.addFilter(_HeartbeatAtShutdown())
+
+
+def quiet_heartbeats(client: Any) -> None:
+    """Before the local cluster closes: its workers stop reporting a heartbeat that fails
+    because the scheduler is closing (:data:`HEARTBEAT_FAILURE`, a traceback on the
+    campaign's stderr otherwise); every other message of theirs stays. Best effort: a worker
+    that does not answer is closed anyway."""
+    with contextlib.suppress(Exception):
+        client.run(_drop_heartbeat_failures, on_error="return")
 
 
 @contextlib.contextmanager

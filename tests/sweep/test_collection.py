@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 import typer
+from sweep_helpers import outside_references
 from typer.testing import CliRunner
 
 from sweep.cli import app
@@ -140,6 +141,10 @@ def test_a_collection_runs_its_campaigns_in_order_and_resumes(folder):
     index = (results / "both" / "index.html").read_text()
     assert '<a href="../one/report.html">' in index
     assert '<a href="../two/report.html">' in index
+    # every page written works offline: it links its own folder's files only
+    assert outside_references(index) == []
+    for name in ("one", "two"):
+        assert outside_references((results / name / "report.html").read_text()) == []
     again = invoke("run", folder / "both.yaml", "--results", results, "--no-dashboard")
     assert again.exit_code == 0, again.output
     assert "total now: 0 runs" in flat(again.output)

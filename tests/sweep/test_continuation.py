@@ -20,7 +20,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from sweep_helpers import file_stamps, kill_group, records, start_driver, wait_for
+from sweep_helpers import (
+    file_stamps,
+    kill_group,
+    records,
+    start_driver,
+    wait_for,
+    wait_group_gone,
+)
 from typer.testing import CliRunner
 
 from model.checkpoint import RunState, Schedule, load
@@ -165,6 +172,8 @@ def test_sigkill_of_the_driver_and_its_workers_then_resume(tmp_path):
         time.sleep(0.3)
     finally:
         kill_group(proc)  # SIGKILL: the driver and its local workers at once
+    # a killed process ends the system call it is in (a checkpoint's rename): read after
+    wait_group_gone(proc.pid)
     in_progress = {p.stem: load(p).t for p in checkpoints.glob("*.nc")}
     assert in_progress
     status = json.loads(invoke("status", path, "--results", results, "--json").output)

@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sweep_helpers import group_alive, records, run_ids, wait_for, write_campaign
+from sweep_helpers import group_alive, records, run_ids, wait_for, wait_group_gone, write_campaign
 from typer.testing import CliRunner
 
 from sweep.cli import app
@@ -117,6 +117,8 @@ def test_stop_ends_the_driver_and_leaves_no_run_half_written(tmp_path):
     finally:
         if read_lock_holder(folder / ".lock") is not None:
             os.killpg(pid, signal.SIGKILL)
+    # the driver closed its workers as it stopped; the folder is read once they are gone
+    wait_group_gone(pid)
     text = " ".join(result.output.split())
     assert result.exit_code == 0, text
     assert f"stopped the driver of stopped (pid {pid}" in text, text

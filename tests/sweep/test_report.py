@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from sweep_helpers import cli_modules
+from sweep_helpers import cli_modules, outside_references
 from typer.testing import CliRunner
 
 from sweep.cli import app
@@ -47,6 +47,9 @@ verify:
     - tolerance: /10
 execution: {workers: 2}
 """
+
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def invoke(*args: object):
@@ -109,6 +112,61 @@ def test_the_report_is_self_contained(adaptive):
     assert '<img alt="run time histogram" src="data:image/svg+xml;base64,' in html
     assert '<h2 id="refine">' in html
     assert "(seed mean)" in html
+
+
+def test_the_report_references_nothing_outside_itself(adaptive):
+    _, results, _ = adaptive
+    html = (results / "rep" / "report.html").read_text()
+    assert "Bokeh" in html  # bokeh's code is in the page: its strings are not references
+    assert outside_references(html) == []
+
+
+def test_the_committed_result_pages_reference_nothing_outside_themselves():
+    pages = sorted((ROOT / "docs" / "results").glob("*/report.html"))
+    assert pages
+    for page in pages:
+        assert outside_references(page.read_text()) == [], page
+
+
+def test_the_offline_check_finds_what_a_page_would_fetch():
+    from bokeh.embed import file_html
+    from bokeh.plotting import figure
+    from bokeh.resources import CDN
+
+    fig = figure()
+    fig.scatter([1, 2], [3, 4])
+    # bokeh's page with its JavaScript from its CDN: the check must see those
+    found = outside_references(file_html(fig, CDN))
+    assert found
+    assert all("cdn.bokeh.org" in f for f in found)
+    for snippet in (
+        '<link rel="stylesheet" href="https://example.org/a.css">',
+        '<script src="http://example.org/a.js"></script>',
+        "<img src=//example.org/a.png>",
+        '<script>import("https://example.org/m.js")</script>',
+        '<script type="module">import {a} from "https://example.org/m.js"</script>',
+        '<style>@import "https://example.org/a.css";</style>',
+        '<div style="background: url(https://example.org/a.png)"></div>',
+        '<meta http-equiv="refresh" content="0; url=https://example.org/">',
+    ):
+        assert outside_references(snippet), snippet
+    local = '<a href="../one/report.html"><img src="figures/fig2.png"></a><img src="data:,">'
+    assert outside_references(local) == []
+
+
+def test_a_tex_label_brings_bokehs_own_mathjax_into_the_page():
+    """A label with TeX would need MathJax: bokeh's bundle of it (bokeh-mathjax) is inlined
+    with the rest, no CDN (it renders offline: tests/sweep/test_report_browser.py)."""
+    from bokeh.plotting import figure
+
+    from sweep.report.page import inline_resources
+
+    plain, tex = figure(x_axis_label="alpha - B"), figure(x_axis_label=r"$$\alpha - B$$")
+    for fig in (plain, tex):
+        fig.scatter([1, 2], [3, 4])
+    without, with_math = inline_resources(plain), inline_resources(tex)
+    assert len(with_math) > len(without) + 10**6  # MathJax's ~1.8 MB
+    assert outside_references(f"<html><head>{with_math}</head></html>") == []
 
 
 def test_nematic_report_from_the_name_and_to_an_output(adaptive, tmp_path):

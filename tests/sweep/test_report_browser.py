@@ -1,22 +1,28 @@
 """The report in a real browser (headless Chromium driven by selenium through the system
-chromedriver: Debian's ``chromium`` and ``chromium-driver``, which .ci/run installs): the
-phase diagram renders its points without a severe console error and without loading
-anything from the network, and clicking a point shows that point's run (its snapshot image
-and sigma2_S(t)). Saves a screenshot of the page in the test's temporary folder; with
-``NEMATIC_UPDATE_SCREENSHOT=1`` in the environment it replaces docs/figures/report_screenshot.png
-(the README shows it) instead, so a plain test run leaves the checkout unchanged.
+chromedriver: Debian's ``chromium`` and ``chromium-driver``, which .ci/run installs), on
+the quickstart's own page (campaigns/quickstart.yaml scaled down) with the network blocked:
+no request leaves the file (Chrome's log of every request it sent; a page that does fetch
+is seen to), the phase diagram and the figures render without a severe console error, the
+labels are the plain text intended, and clicking a point shows that point's run (its
+snapshot image and sigma2_S(t)); a TeX label renders offline with bokeh's own MathJax
+(:func:`sweep.report.page.inline_resources`). Saves a screenshot of the page in the test's
+temporary folder; with ``NEMATIC_UPDATE_SCREENSHOT=1`` in the environment it replaces
+docs/figures/report_screenshot.png (the README shows it) instead, so a plain test run leaves
+the checkout unchanged.
 
 Marked ``browser`` (run with ``pytest -m browser``; CI does); skipped, with the reason, where
 Chromium, its driver or selenium is missing."""
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import time
 from pathlib import Path
 
 import pytest
+import yaml
 from typer.testing import CliRunner
 
 from sweep.cli import app
@@ -30,19 +36,18 @@ UPDATE_SCREENSHOT = "NEMATIC_UPDATE_SCREENSHOT"
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMEDRIVER = shutil.which("chromedriver")
 
-#: 4 x 2 tiny linear runs across the Fig. 2 transition (the quickstart at 32^2, to t = 4).
-CAMPAIGN = """\
-name: browser
-description: Fig. 2 parameters at 32^2 up to t/tau = 4, sigma2_S vs alpha - B, 2 seeds each
-parameters: {noise_modes: 8}
-numerics: {resolution: 32, t_final: 4, save_every: 0.5, mechanics: linear}
-sweep:
-  axes:
-    alpha_minus_B: [0.1, 0.3, 0.5, 0.7]
-seeds: 2
-fits: [transition]
-execution: {workers: 2}
-"""
+#: The quickstart (campaigns/quickstart.yaml) scaled down, its figures, axes and seeds kept:
+#: 4 x 2 linear runs across the Fig. 2 transition at 32^2 to t = 4 (seconds, not minutes).
+QUICKSTART = ROOT / "campaigns" / "quickstart.yaml"
+SCALED = {"resolution": 32, "t_final": 4, "save_every": 0.5, "mechanics": "linear"}
+
+
+def scaled_quickstart() -> str:
+    spec = yaml.safe_load(QUICKSTART.read_text())
+    spec["numerics"] = {**spec.get("numerics", {}), **SCALED}
+    spec["parameters"] = {**spec.get("parameters", {}), "noise_modes": 8}
+    return yaml.safe_dump(spec, sort_keys=False)
+
 
 #: Finds a model's view by walking down from the document's root views (bokeh's own view
 #: index holds only the roots); returns the clicked figure's points in page coordinates.
@@ -89,6 +94,32 @@ REQUESTS = """
 return performance.getEntriesByType("resource").map(e => e.name)
   .filter(n => !n.startsWith("data:") && !n.startsWith("file:") && !n.startsWith("blob:"));
 """
+#: The page's figures (PNG data URIs: the math of their labels is drawn by matplotlib).
+FIGURES = """
+return [...document.querySelectorAll(".figure img")]
+  .map(i => [i.alt, i.complete ? i.naturalWidth : 0]);
+"""
+#: The axis labels of every plot of the page, and for a TeX one whether MathJax drew it.
+LABELS = (
+    FIND
+    + """
+const out = [];
+const queue = [...roots];
+while (queue.length) {
+  const v = queue.shift();
+  for (const c of (v.child_views ?? [])) { queue.push(c); }
+  for (const r of (v.renderer_views?.values() ?? [])) { queue.push(r); }  // a plot's axes
+  if (v.model.axis_label === undefined) { continue; }
+  const label = v.model.axis_label;
+  const shown = v._axis_label_view;
+  out.push({text: String(label?.text ?? label), tex: shown?.provider !== undefined,
+            mathjax: shown?.provider?.status ?? null, drawn: shown?.svg_image != null});
+}
+return out;
+"""
+)
+#: What the browser is told to block: every request of a network scheme.
+BLOCKED = ["http://*", "https://*", "ws://*", "wss://*", "ftp://*"]
 
 
 @pytest.fixture(scope="module")
@@ -111,11 +142,17 @@ def browser():
         "--disable-gpu",
         "--disable-dev-shm-usage",
         "--window-size=1300,1050",
+        # no network: a proxy that is not there, for any host but this machine
+        "--proxy-server=http://127.0.0.1:9",
+        "--proxy-bypass-list=<-loopback>",
     ):
         options.add_argument(arg)
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    # the performance log holds every request the browser sends (Chrome's DevTools events)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL", "performance": "ALL"})
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
     try:
+        driver.execute_cdp_cmd("Network.enable", {})
+        driver.execute_cdp_cmd("Network.setBlockedURLs", {"urls": BLOCKED})
         yield driver
     finally:
         driver.quit()
@@ -124,15 +161,29 @@ def browser():
 @pytest.fixture(scope="module")
 def report(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("browser")
-    path = folder / "browser.yaml"
-    path.write_text(CAMPAIGN)
+    path = folder / "quickstart.yaml"
+    path.write_text(scaled_quickstart())
     result = CliRunner().invoke(
         app, ["run", str(path), "--results", str(folder / "results"), "--no-dashboard"]
     )
     assert result.exit_code == 0, result.output
-    page = folder / "results" / "browser" / "report.html"
+    page = folder / "results" / "quickstart" / "report.html"
     assert page.is_file(), result.output
     return page
+
+
+def sent_requests(driver) -> list[str]:
+    """The URLs of every request the browser sent since the last call (blocked or not)."""
+    urls = []
+    for entry in driver.get_log("performance"):
+        message = json.loads(entry["message"])["message"]
+        if message["method"] == "Network.requestWillBeSent":
+            urls.append(message["params"]["request"]["url"])
+    return urls
+
+
+def outside(urls: list[str]) -> list[str]:
+    return [u for u in urls if not u.startswith(("file:", "data:", "blob:"))]
 
 
 def _wait(driver, script: str, ready, timeout: float = 30.0):
@@ -198,3 +249,74 @@ def test_the_phase_diagram_renders_and_a_click_shows_the_points_run(browser, rep
     target = screenshot_path(tmp_path)
     target.parent.mkdir(parents=True, exist_ok=True)
     assert browser.save_screenshot(str(target))
+
+
+def test_the_quickstart_page_works_offline(browser, report):
+    """The quickstart's own page with the network blocked: it renders, sends no request
+    outside its file, its figures (whose math matplotlib drew) decode, and its plots' axis
+    labels are the plain text intended (no TeX: nothing that needs MathJax)."""
+    sent_requests(browser)  # the log so far, dropped
+    browser.get(report.as_uri())
+    points = _wait(browser, POINTS, lambda v: len(v["sx"]) == 4)
+    assert points is not None, "the phase diagram did not render"
+    figures = _wait(browser, FIGURES, lambda v: bool(v) and all(w > 0 for _, w in v))
+    assert [name for name, _ in figures] == ["fig2"]
+    assert all(width > 100 for _, width in figures)
+    labels = browser.execute_script(LABELS)
+    texts = {label["text"] for label in labels}
+    assert {"alpha_minus_B", "sigma2_S (seed mean)", "t / tau", "sigma2_S"} <= texts
+    assert not any(label["tex"] for label in labels)
+    urls = sent_requests(browser)
+    assert report.as_uri() in urls  # the log sees the page's requests
+    assert outside(urls) == []
+    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert severe == []
+
+
+def test_a_request_to_the_network_would_be_seen(browser, tmp_path):
+    """The check above can fail: a page that fetches from the network shows its requests
+    (blocked) in the log."""
+    page = tmp_path / "online.html"
+    page.write_text(
+        '<!DOCTYPE html><html><head><script src="https://example.org/a.js"></script></head>'
+        '<body><img src="http://example.org/a.png" alt="a"></body></html>'
+    )
+    sent_requests(browser)
+    browser.get(page.as_uri())
+    _wait(browser, "return document.readyState", lambda v: v == "complete")
+    wanted = {"https://example.org/a.js", "http://example.org/a.png"}
+    seen: set[str] = set()
+    deadline = time.monotonic() + 10
+    while not wanted <= seen and time.monotonic() < deadline:
+        seen |= set(outside(sent_requests(browser)))
+        time.sleep(0.2)
+    assert wanted <= seen
+    browser.get_log("browser")  # its console errors (the blocked requests) are not ours
+
+
+def test_tex_in_a_label_renders_offline_with_bokehs_own_mathjax(browser, tmp_path):
+    """Were a label of the page TeX (``$$...$$``), :func:`sweep.report.page.inline_resources`
+    inlines bokeh's MathJax bundle, and the math is drawn without a network."""
+    from bokeh.embed import components
+    from bokeh.plotting import figure
+
+    from sweep.report.page import inline_resources
+
+    fig = figure(x_axis_label=r"$$\alpha - B$$", y_axis_label="sigma2_S", width=400, height=300)
+    fig.scatter([0.1, 0.3, 0.5], [1e-8, 1e-6, 1e-2])
+    script, div = components(fig)
+    page = tmp_path / "tex.html"
+    page.write_text(
+        f"<!DOCTYPE html><html><head>{inline_resources(fig)}</head>"
+        f"<body>{div}{script}</body></html>"
+    )
+    sent_requests(browser)
+    browser.get(page.as_uri())
+    labels = _wait(browser, LABELS, lambda v: any(label["drawn"] for label in v), timeout=60)
+    tex = [label for label in labels if label["tex"]]
+    assert [label["text"] for label in tex] == [r"$$\alpha - B$$"]
+    assert tex[0]["mathjax"] == "loaded"
+    assert tex[0]["drawn"]  # MathJax's SVG of the label
+    assert outside(sent_requests(browser)) == []
+    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert severe == []

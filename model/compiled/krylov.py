@@ -233,14 +233,14 @@ def gmres(op, b, x0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - compiled
     nop = 0
     zero_start = not np.any(x)  # then r = b and L x = 0: no operator application
     while True:
-        if zero_start:
-            Ax[...] = 0.0
+        if zero_start:  # r = b - 0 is b, bitwise (-0.0 - 0.0 is -0.0): no pass over it
             Lx[...] = 0.0
+            r = b
             zero_start = False
         else:
             apply_operator(op, x, Ax, Lx)
             nop += 1
-        r = b - Ax
+            r = b - Ax
         beta = np.sqrt(weighted_inner(r, r, w))
         if beta <= rtol * bnorm:
             return x, Lx, total, True, nop

@@ -85,6 +85,7 @@ print("RESULT " + json.dumps({
 
 def commit(code: Path) -> str:
     """The checkout's commit, with "+dirty" where its model/ differs from it."""
+
     def git(*args: str) -> str:
         return subprocess.run(
             ["git", "-C", str(code), *args], capture_output=True, text=True
@@ -173,7 +174,8 @@ def main() -> None:
     table: dict[str, list[dict]] = {k: [] for k in codes}
     print(
         f"{'code':6s} {'mech':6s} {'N':>4s} {'t':>4s} {'steps':>6s} {'transforms':>10s} "
-        f"{'fft us':>7s} {'floor s':>8s} {'wall s':>7s} {'ratio':>6s} {'cpu r':>6s} {'ms/step':>8s} "
+        f"{'fft us':>7s} {'floor s':>8s} {'wall s':>7s} {'ratio':>6s} {'cpu r':>6s} "
+        f"{'ms/step':>8s} "
         f"{'sigma2_S':>10s}"
     )
     pairs = []
@@ -192,7 +194,8 @@ def main() -> None:
                 print(
                     f"{label:6s} {mech:6s} {m['N']:4d} {m['t_final']:4.0f} {m['steps']:6d} "
                     f"{m['transforms']:10d} {1e6 * m['fft_s']:7.1f} {m['floor_s']:8.2f} "
-                    f"{m['wall_s']:7.2f} {m['ratio']:6.2f} {m['cpu_ratio']:6.2f} {m['ms_per_step']:8.2f} "
+                    f"{m['wall_s']:7.2f} {m['ratio']:6.2f} {m['cpu_ratio']:6.2f} "
+                    f"{m['ms_per_step']:8.2f} "
                     f"{m['sigma2_S']:10.6g}",
                     flush=True,
                 )
@@ -200,7 +203,9 @@ def main() -> None:
                 zipped = list(zip(got["after"], got["before"], strict=True))
                 ratios = [a["wall_s"] / b["wall_s"] for a, b in zipped]
                 cpu = [a["cpu_s"] / b["cpu_s"] for a, b in zipped]
-                pairs.append({**cfg, "wall_after_over_before": ratios, "cpu_after_over_before": cpu})
+                pairs.append(
+                    {**cfg, "wall_after_over_before": ratios, "cpu_after_over_before": cpu}
+                )
                 print(
                     f"       after / before, pairwise: wall {[round(r, 3) for r in ratios]}, "
                     f"cpu {[round(r, 3) for r in cpu]}"

@@ -418,9 +418,13 @@ def test_etdrk4_activity_weights_row_by_row_equal_point_by_point(rng):
             f1, f2, f3 = etd._phi123_from(z, em1_half * (e_half + 1.0))
             g1, g2, _ = etd._phi123_from(0.5 * z, em1_half)
             assert L[x, y] == lam
-            assert W[0, x, y] == e_half * e_half and W[1, x, y] == e_half
-            assert W[2, x, y] == 0.5 * g1 and W[4, x, y] == g2
+            assert W[0, x, y] == e_half * e_half
+            assert W[1, x, y] == e_half
+            assert W[2, x, y] == 0.5 * g1
+            assert W[4, x, y] == g2
             assert W[3, x, y] == 0.5 * g1 - g2
-            assert W[5, x, y] == f1 - 2.0 * f2 and W[6, x, y] == 2.0 * f2
+            assert W[5, x, y] == f1 - 2.0 * f2
+            assert W[6, x, y] == 2.0 * f2
             assert W[7, x, y] == f1 - 3.0 * f2 + 4.0 * f3
-            assert W[8, x, y] == 2.0 * f2 - 4.0 * f3 and W[9, x, y] == 4.0 * f3 - f2
+            assert W[8, x, y] == 2.0 * f2 - 4.0 * f3
+            assert W[9, x, y] == 4.0 * f3 - f2

@@ -151,8 +151,7 @@ def compare_fingerprints(a: str, b: str) -> dict:
 
 
 def median_row(rows: list[dict]) -> dict:
-    keys = ("wall_s", "cpu_s", "fft_s", "fft_cpu_s", "floor_s", "ratio", "cpu_ratio")
-    keys += ("ms_per_step",)
+    keys = ("wall_s", "cpu_s", "fft_s", "fft_cpu_s", "floor_s", "ratio", "cpu_ratio", "ms_per_step")
     out = {k: statistics.median(r[k] for r in rows) for k in keys}
     out.update({k: rows[0][k] for k in ("N", "t_final", "mechanics", "steps", "transforms")})
     out.update({k: rows[0][k] for k in ("sigma2_S", "lambda", "status")})

@@ -61,32 +61,77 @@ def activity_exponential(A, h, zeta, s, tau):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _taylor_row(z, c0, out):  # pragma: no cover - compiled
+    r"""``out[p]`` = :math:`\sum_{j=0}^{18} z_p^j / (j + c_0)!` for a row ``z`` by Horner,
+    the loop over the points innermost: the same operations per point as
+    :func:`_phi123_from`'s Taylor branch (no FMA contraction), which LLVM vectorises and
+    whose dependent multiply-adds of neighbouring points overlap (the point-by-point
+    Horner waited on each multiply-add: the latency, not the arithmetic, was the cost)."""
+    for p in range(z.size):
+        out[p] = 0.0
+    for j in range(18, -1, -1):
+        c = _RECIP_FACT[j + c0]
+        for p in range(z.size):
+            out[p] = out[p] * z[p] + c
+
+
+@njit(cache=True)
 def activity_krogstad(A, h, zeta, s, tau):  # pragma: no cover - compiled
     r"""For the ETDRK4 step of the activity: :math:`L_A = -(\zeta + 3 s A^2)/\tau` and,
     point by point, Krogstad's weights (:meth:`model.solver.ETDRK4Solver._weights_from`) from
     :math:`f_k = \varphi_k(z)`, :math:`g_k = \varphi_k(z/2)` at :math:`z = h L_A`:
     ``W[0:2]`` = :math:`e^{z}, e^{z/2}`; ``W[2]`` = g1/2 (stage a); ``W[3:5]`` = g1/2 - g2, g2
     (stage b); ``W[5:7]`` = f1 - 2 f2, 2 f2 (stage c); ``W[7:10]`` = f1 - 3 f2 + 4 f3,
-    2 f2 - 4 f3, 4 f3 - f2 (the update). Returns ``(L_A, W)``; one pass, no temporaries."""
+    2 f2 - 4 f3, 4 f3 - f2 (the update). Returns ``(L_A, W)``.
+
+    Row by row: the Taylor series of :func:`_phi123_from` (|z| < 1) by :func:`_taylor_row`
+    for the whole row, then point by point the recursion where |z| >= 1 and the weights:
+    bitwise the values of evaluating :func:`_phi123_from` point by point (the same
+    operations on each point), 3-4x faster at 128^2 (measured)."""
     nx, ny = A.shape
     L = np.empty((nx, ny))
     W = np.empty((10, nx, ny))
+    z = np.empty(ny)
+    zh = np.empty(ny)
+    t1 = np.empty(ny)
+    t2 = np.empty(ny)
+    t3 = np.empty(ny)
+    u1 = np.empty(ny)
+    u2 = np.empty(ny)
     for x in range(nx):
         for y in range(ny):
             a = A[x, y]
             lam = -(zeta + 3.0 * s * a * a) / tau
             L[x, y] = lam
-            z = lam * h
+            z[y] = lam * h
+            zh[y] = 0.5 * z[y]
+        _taylor_row(z, 1, t1)
+        _taylor_row(z, 2, t2)
+        _taylor_row(z, 3, t3)
+        _taylor_row(zh, 1, u1)
+        _taylor_row(zh, 2, u2)
+        for y in range(ny):
+            zz = z[y]
+            hz = zh[y]
             # one transcendental per point: e^z - 1 = (e^{z/2} - 1)(e^{z/2} + 1), with
             # e^{z/2} from exp where it is small (1 + expm1 would lose its relative accuracy)
-            if z < -1.0:
-                e_half = np.exp(0.5 * z)
+            if zz < -1.0:
+                e_half = np.exp(hz)
                 em1_half = e_half - 1.0
             else:
-                em1_half = np.expm1(0.5 * z)
+                em1_half = np.expm1(hz)
                 e_half = 1.0 + em1_half
-            f1, f2, f3 = _phi123_from(z, em1_half * (e_half + 1.0))
-            g1, g2, _ = _phi123_from(0.5 * z, em1_half)
+            if abs(zz) < 1.0:
+                f1, f2, f3 = t1[y], t2[y], t3[y]
+            else:
+                f1 = em1_half * (e_half + 1.0) / zz
+                f2 = (f1 - 1.0) / zz
+                f3 = (f2 - 0.5) / zz
+            if abs(hz) < 1.0:
+                g1, g2 = u1[y], u2[y]
+            else:
+                g1 = em1_half / hz
+                g2 = (g1 - 1.0) / hz
             W[0, x, y] = e_half * e_half
             W[1, x, y] = e_half
             W[2, x, y] = 0.5 * g1

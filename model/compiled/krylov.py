@@ -196,6 +196,13 @@ def apply_operator(op, x, out, aux):  # pragma: no cover - compiled through its 
     raise NotImplementedError("apply_operator runs compiled, through its overloads")
 
 
+def apply_operator_given_aux(op, x, aux, out):  # pragma: no cover - compiled overloads
+    """``out = A x`` for an ``x`` whose auxiliary output ``aux = L x`` is known (the rest of
+    :func:`apply_operator` after L x: for the finite-strain rate operator, whose L is the
+    real-space gradient, the stress and its divergence without the four inverse transforms)."""
+    raise NotImplementedError("apply_operator_given_aux runs compiled, through its overloads")
+
+
 def precondition(op, v, out):  # pragma: no cover - compiled through its overloads
     """``out = M v``, the right preconditioner of ``op`` (a no-op where ``out`` is ``v``: the
     unpreconditioned operators pass the Krylov basis as its own preconditioned basis)."""
@@ -203,13 +210,16 @@ def precondition(op, v, out):  # pragma: no cover - compiled through its overloa
 
 
 @njit(cache=True)
-def gmres(op, b, x0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - compiled
+def gmres(op, b, x0, Lx0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - compiled
     """Right-preconditioned restarted GMRES (Saad Alg. 9.5) for the operator ``op`` from
     ``x0``, with the Parseval-weighted inner product ``w``: the same algorithm, step for step,
     as :func:`model.krylov._gmres` (its numpy twin). Returns ``(x, L x, iterations,
-    converged, operator applications)``.
+    converged, operator applications, applications given L x)``.
 
     A zero ``x0`` costs no operator application (its residual is ``b``, its ``L x`` zero).
+    A non-empty ``Lx0`` is the known auxiliary output ``L x0`` of the start: its residual
+    is then :func:`apply_operator_given_aux` (counted apart: it costs the operator's
+    application less L).
     The auxiliary output ``L x`` is accumulated from the ``L z`` of the basis, so a converged
     cycle needs no extra application. Work arrays, caller-owned (megabytes are not allocated
     on every call): ``V`` the Krylov basis (restart + 1 spectra), ``Z`` its preconditioned
@@ -231,21 +241,29 @@ def gmres(op, b, x0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - compiled
         bnorm = 1.0
     total = 0
     nop = 0
+    naux = 0
     zero_start = not np.any(x)  # then r = b and L x = 0: no operator application
+    known_aux = Lx0.size > 0 and not zero_start
     while True:
-        if zero_start:
-            Ax[...] = 0.0
+        if zero_start:  # r = b - 0 is b, bitwise (-0.0 - 0.0 is -0.0): no pass over it
             Lx[...] = 0.0
+            r = b
             zero_start = False
+        elif known_aux:  # L x0 given: A x0 from it (the first residual only)
+            Lx[...] = Lx0
+            apply_operator_given_aux(op, x, Lx, Ax)
+            naux += 1
+            known_aux = False
+            r = b - Ax
         else:
             apply_operator(op, x, Ax, Lx)
             nop += 1
-        r = b - Ax
+            r = b - Ax
         beta = np.sqrt(weighted_inner(r, r, w))
         if beta <= rtol * bnorm:
-            return x, Lx, total, True, nop
+            return x, Lx, total, True, nop, naux
         if total >= maxiter:
-            return x, Lx, total, False, nop
+            return x, Lx, total, False, nop, naux
         scaled(V[0], r, beta)
         H[:, :] = 0.0
         g[:] = 0.0
@@ -266,7 +284,7 @@ def gmres(op, b, x0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - compiled
         axpy_sum(x, y, Z, m)  # one pass each, bitwise m axpys
         axpy_sum(Lx, y, LZ, m)
         if abs(g[m]) <= rtol * bnorm or h_next <= 1e-14 * beta:
-            return x, Lx, total, True, nop
+            return x, Lx, total, True, nop, naux
 
 
 @njit(cache=True)

@@ -33,7 +33,7 @@ from numba.extending import overload
 
 from . import fftw as fx
 from .arith import rmul
-from .krylov import apply_operator, gmres, precondition
+from .krylov import apply_operator, apply_operator_given_aux, gmres, precondition
 from .rates import activity_rate, bulk_terms
 
 Array = np.ndarray
@@ -89,6 +89,21 @@ def _apply_spin(op, x, out, aux):  # pragma: no cover - compiled
     return None
 
 
+@overload(apply_operator_given_aux)
+def _apply_spin_given_jaumann(op, x, aux, out):  # pragma: no cover - compiled
+    if getattr(op, "instance_class", None) is SpinOperator:  # the named tuple type
+
+        def impl(op, x, aux, out):  # aux: the Jaumann spectra of x (the last pass above)
+            for i in range(x.shape[0]):
+                for j in range(x.shape[1]):
+                    out[i, j] = x[i, j] - (
+                        rmul(op.m1[i, j], aux[0, i, j]) + rmul(op.m2[i, j], aux[1, i, j])
+                    )
+
+        return impl
+    return None
+
+
 @overload(precondition)
 def _precondition_spin(op, v, out):  # pragma: no cover - compiled
     if getattr(op, "instance_class", None) is SpinOperator:  # the named tuple type
@@ -111,7 +126,9 @@ def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragm
     op = SpinOperator(
         q1, q2, m1, m2, pf, pi, np.empty((n, n)), np.empty((2, n, n)), fx.aligned_half(n)
     )
-    return gmres(op, b, x0, w, rtol, maxiter, V, V, LZ)
+    no_aux = np.empty((0, 1, 1), dtype=np.complex128)  # the start's Jaumann rate: unknown
+    x, jx, its, ok, nop, _ = gmres(op, b, x0, no_aux, w, rtol, maxiter, V, V, LZ)
+    return x, jx, its, ok, nop
 
 
 def workspace(n: int, restart: int = 30) -> tuple[Array, Array]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -395,3 +397,34 @@ def test_numba_strain_measures_and_divergence_match_numpy_references(rng):
     np.testing.assert_allclose(
         div_hat_kernel(T_hat, g.kx, g.ky), g.div_hat(T_hat), rtol=1e-14, atol=1e-14
     )
+
+
+def test_etdrk4_activity_weights_row_by_row_equal_point_by_point(rng):
+    """The compiled weights (the Taylor series a row at a time) are bitwise those of
+    evaluating the phi functions point by point (model.compiled.etd._phi123_from)."""
+    from model.compiled import etd
+
+    A = rng.uniform(-0.6, 0.6, (6, 16))
+    zeta, s, tau, h = 1.0, 10.0, 1.0, 0.3  # z from -0.3 to -3.5: both branches, for h and h/2
+    L, W = etd.activity_krogstad(A, h, zeta, s, tau)
+    for x in range(A.shape[0]):
+        for y in range(A.shape[1]):
+            a = A[x, y]
+            lam = -(zeta + 3.0 * s * a * a) / tau
+            z = lam * h
+            # libm's exp and expm1, as compiled code calls them (numpy's own may differ)
+            e_half = math.exp(0.5 * z) if z < -1.0 else 1.0 + math.expm1(0.5 * z)
+            em1_half = e_half - 1.0 if z < -1.0 else math.expm1(0.5 * z)
+            f1, f2, f3 = etd._phi123_from(z, em1_half * (e_half + 1.0))
+            g1, g2, _ = etd._phi123_from(0.5 * z, em1_half)
+            assert L[x, y] == lam
+            assert W[0, x, y] == e_half * e_half
+            assert W[1, x, y] == e_half
+            assert W[2, x, y] == 0.5 * g1
+            assert W[4, x, y] == g2
+            assert W[3, x, y] == 0.5 * g1 - g2
+            assert W[5, x, y] == f1 - 2.0 * f2
+            assert W[6, x, y] == 2.0 * f2
+            assert W[7, x, y] == f1 - 3.0 * f2 + 4.0 * f3
+            assert W[8, x, y] == 2.0 * f2 - 4.0 * f3
+            assert W[9, x, y] == 4.0 * f3 - f2

@@ -7,8 +7,8 @@ labels are the plain text intended, and clicking a point shows that point's run 
 snapshot image and sigma2_S(t)); a TeX label renders offline with bokeh's own MathJax
 (:func:`sweep.report.page.inline_resources`). Saves a screenshot of the page in the test's
 temporary folder; with ``NEMATIC_UPDATE_SCREENSHOT=1`` in the environment it replaces
-docs/figures/report_screenshot.png (a report with a point clicked) instead, so a plain test run leaves
-the checkout unchanged.
+docs/figures/report_screenshot.png (a report with a point clicked) instead, so a plain test
+run leaves the checkout unchanged.
 
 Marked ``browser`` (run with ``pytest -m browser``; CI does); skipped, with the reason, where
 Chromium, its driver or selenium is missing."""

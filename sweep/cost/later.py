@@ -147,12 +147,13 @@ def precision_rounds(campaign: Campaign, plan: Any, cost: Any, workers: int) -> 
 
     cap = plan.cap
     prior, note = _prior(campaign)
-    runs = cpu = bound_cpu = longest = 0.0
+    runs = cpu = bound_cpu = longest = biggest = 0.0
     forecast = from_prior = unknown = unknown_runs = 0
     for p, point in enumerate(plan.grid.points):
         planned = plan.decisions[p].n  # the seeds its rounds so far give it
         seconds = cost(point)
         bound_cpu += (cap - planned) * seconds
+        biggest = max(biggest, seconds)
         idx = [p * cap + j for j in range(planned)]
         done = [i for i in idx if plan.outcomes.get(i) is not None]
         if done:
@@ -175,7 +176,6 @@ def precision_rounds(campaign: Campaign, plan: Any, cost: Any, workers: int) -> 
     rounds = rounds_bound(plan.spec, cap) - 1 - plan.current.number
     if at_most <= 0 or rounds <= 0:
         return None
-    biggest = max((cost(point) for point in plan.grid.points), default=0.0)
     later = LaterRounds(rounds, at_most, bound_cpu, bound_cpu / workers + rounds * biggest)
     if forecast or from_prior:
         parts = []

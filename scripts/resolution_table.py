@@ -1,11 +1,13 @@
 """The convergence table behind ``resolution: auto`` (docs/model.md, "Resolution from the
 physics"), from the phase.nc of campaigns/resolution_study.yaml (K x chi x resolution x
-seeds): for each (K, chi) and grid N, the seed means of lambda(t_final) and sigma2_S(t_final),
+seeds; several files, e.g. with campaigns/resolution_study_large_K.yaml, give one table): for
+each (K, chi) and grid N, the seed means of lambda(t_final) and sigma2_S(t_final),
 their relative change on the next doubling (N -> 2N; the largest change of a single seed in
 brackets), the cells per Frank length sqrt(K / A0) at N, and the coarsest grid whose changes
 on doubling are all below the threshold (5 %).
 
-    .venv/bin/python scripts/resolution_table.py results/resolution_study/phase.nc
+    .venv/bin/python scripts/resolution_table.py results/resolution_study/phase.nc \
+        results/resolution_study_large_K/phase.nc
     .venv/bin/python scripts/resolution_table.py PHASE --threshold 0.05 --json table.json
 """
 
@@ -77,12 +79,22 @@ def table(phase: xr.Dataset, threshold: float) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("phase", help="phase.nc of campaigns/resolution_study.yaml")
+    ap.add_argument(
+        "phase",
+        nargs="+",
+        help="phase.nc of campaigns/resolution_study.yaml (and of resolution_study_large_K.yaml)",
+    )
     ap.add_argument("--threshold", type=float, default=0.05)
     ap.add_argument("--json", help="also write the table as JSON here")
     args = ap.parse_args(argv)
-    with xr.open_dataset(args.phase) as phase:
-        rows = table(phase.load(), args.threshold)
+    rows = []
+    for path in args.phase:
+        try:
+            with xr.open_dataset(path) as phase:
+                rows += table(phase.load(), args.threshold)
+        except (OSError, ValueError) as e:
+            print(f"error: cannot read {path}: {e}", file=sys.stderr)
+            return 2
     pct = lambda x: "-" if not math.isfinite(x) else f"{100 * x:.1f} %"  # noqa: E731
     print(
         "| K | chi | l_F (L) | N | cells per l_F | lambda (mean) | sigma2_S (mean) | "

@@ -22,6 +22,8 @@ import numpy as np
 import xarray as xr
 
 OBSERVABLES = ("lambda", "sigma2_S")
+#: sigma2_S above this: a patterned run (a relaxed one sits at round-off, ~1e-14)
+PATTERNED = 1e-6
 
 
 def change(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
@@ -43,7 +45,9 @@ def table(phase: xr.Dataset, threshold: float) -> list[dict]:
             at = phase.sel(K=K, chi=chi)
             frank = math.sqrt(float(K) / A0)
             row: dict = {"K": float(K), "chi": float(chi), "frank_length": frank, "grids": []}
-            patterned = bool((at["sigma2_S"].values > 1e-6).all())
+            above = at["sigma2_S"].values > PATTERNED
+            patterned = bool(above.all())
+            row["no_pattern"] = not bool(above.any())
             for i, n in enumerate(grids):
                 entry = {
                     "N": n,
@@ -92,8 +96,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             with xr.open_dataset(path) as phase:
                 rows += table(phase.load(), args.threshold)
-        except (OSError, ValueError) as e:
-            print(f"error: cannot read {path}: {e}", file=sys.stderr)
+        except (OSError, ValueError) as err:
+            print(f"error: cannot read {path}: {err}", file=sys.stderr)
             return 2
     pct = lambda x: "-" if not math.isfinite(x) else f"{100 * x:.1f} %"  # noqa: E731
     print(
@@ -122,7 +126,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f"coarsest grid with both changes on doubling < {100 * args.threshold:g} %:")
     for row in rows:
         n, c = row["converged_N"], row["converged_cells_per_frank"]
-        what = f"{n} ({c:.2f} cells per Frank length)" if n else "none of the grids run"
+        if row["no_pattern"]:
+            what = "no pattern on any grid (sigma2_S at round-off: nothing to converge)"
+        elif n:
+            what = f"{n} ({c:.2f} cells per Frank length)"
+        elif not row["patterned"]:
+            what = "the pattern class changes between grids or seeds"
+        else:
+            what = "no grid passes (the finest one run has none to compare with)"
         print(f"  K = {row['K']:.3g}, chi = {row['chi']:g}: {what}")
     if args.json:
         with open(args.json, "w") as f:

@@ -302,6 +302,15 @@ def run(
                             dashboard=dashboard,
                             limit=limit,
                             say=lambda line: say.print(line, markup=False),
+                            on_round=lambda number: print_estimate(
+                                say,
+                                c,
+                                results,
+                                brief=True,
+                                indent="  ",
+                                header=f"cost re-estimated for round {number} and later "
+                                "from the runs so far:",
+                            ),
                         )
                 finally:
                     events.close()

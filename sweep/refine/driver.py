@@ -57,13 +57,16 @@ def drive_rounds(
     dashboard: bool = False,
     say: Callable[[str], None] = print,
     limit: FailureLimit | None = None,
+    on_round: Callable[[int], None] | None = None,
 ) -> tuple[Plan, RunSummary | None, Expansion]:
     """Run a refined campaign to its end (or to an interruption) while holding its lock.
 
     Returns the plan of what was on disk when it started (for the failures found there), the
     summary of the runs done by this call (``None`` if none was to do) and the union grid of
     the rounds for ``phase.nc``. ``say`` prints each round's plan; ``limit``
-    (``--max-failures``) counts the failures over every round of the session."""
+    (``--max-failures``) counts the failures over every round of the session; ``on_round``
+    is called with the number of each round planned from this call's results, before it
+    runs (the command line prints the cost re-estimated from the runs so far)."""
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
     store.save_campaign_text(campaign.text, campaign.overrides)
@@ -84,6 +87,8 @@ def drive_rounds(
                     for number in range(announced + 1, ref.current.number + 1):
                         for line in announce(ref, number):
                             say(line)
+                    if announced >= 0 and on_round is not None and not ref.finished:
+                        on_round(ref.current.number)
                     announced = ref.current.number
                 if ref.finished:
                     say(

@@ -343,6 +343,16 @@ def test_a_real_campaign_decides_every_point_and_resumes_to_the_same_decisions(t
 
     first = invoke("run", path, "--results", results, "--no-dashboard")
     assert "round 1: 2 runs: 1 undecided point(s)" in first.output, first.output
+    # before each later round the cost is estimated again from the runs so far: the round's
+    # runs, and while rounds may follow, the bound and the forecast from the finished seeds
+    re1 = first.output.split("cost re-estimated for round 1 and later from the runs so far:")[1]
+    re1 = re1.split("cost re-estimated for round 2 and later from the runs so far:")[0]
+    assert "2 failed (not redone), 2 to do; seeds by precision: round 1" in re1, re1
+    assert "basis: from 4 finished runs of this campaign" in re1, re1
+    assert "later rounds: at most 10 more runs in at most 1 more round(s) (the bound" in re1, re1
+    assert "expected: about 2 more runs" in re1, re1
+    assert "(forecast from the finished seeds of 3 point(s))" in re1, re1
+    assert "cost re-estimated for round 2 and later" in first.output, first.output
     assert "seeds by precision finished after round 2" in first.output, first.output
     ds = xr.open_dataset(results / "prec" / "phase.nc")
     # 0.1: two seeds, not precise (their interval is wider than 0.6 x the mean) but both

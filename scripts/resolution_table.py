@@ -14,6 +14,7 @@ on doubling are all below the threshold (5 %).
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import sys
@@ -39,45 +40,55 @@ def change(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 def table(phase: xr.Dataset, threshold: float) -> list[dict]:
     A0 = float(phase.attrs.get("param_A0", 0.1))
     grids = [int(n) for n in phase["resolution"].values]
+    # the study's other swept axes (eps in the strained study): a row for each of their values
+    other = [str(d) for d in phase["sigma2_S"].dims if d not in ("K", "chi", "resolution", "seed")]
     rows = []
-    for K in phase["K"].values:
-        for chi in phase["chi"].values:
-            at = phase.sel(K=K, chi=chi)
-            frank = math.sqrt(float(K) / A0)
-            row: dict = {"K": float(K), "chi": float(chi), "frank_length": frank, "grids": []}
-            above = at["sigma2_S"].values > PATTERNED
-            patterned = bool(above.all())
-            row["no_pattern"] = not bool(above.any())
-            for i, n in enumerate(grids):
-                entry = {
-                    "N": n,
-                    "cells_per_frank": n * frank,
-                    **{
-                        f"{m}_mean": float(np.nanmean(at[m].sel(resolution=n).values))
-                        for m in OBSERVABLES
-                    },
-                }
-                if i + 1 < len(grids):
-                    for m in OBSERVABLES:
-                        mean, single = change(
-                            at[m].sel(resolution=n).values,
-                            at[m].sel(resolution=grids[i + 1]).values,
-                        )
-                        entry[f"{m}_change"] = mean
-                        entry[f"{m}_change_max_seed"] = single
-                row["grids"].append(entry)
-            row["patterned"] = patterned
-            converged = None
-            for entry in row["grids"][:-1]:
-                changes = [entry[f"{m}_change"] for m in OBSERVABLES]
-                if all(math.isfinite(c) and c < threshold for c in changes):
-                    converged = entry
-                    break
-            row["converged_N"] = None if converged is None else converged["N"]
-            row["converged_cells_per_frank"] = (
-                None if converged is None else converged["cells_per_frank"]
-            )
-            rows.append(row)
+    for K, chi, *values in itertools.product(
+        phase["K"].values, phase["chi"].values, *(phase[d].values for d in other)
+    ):
+        where = {d: float(v) for d, v in zip(other, values, strict=True)}
+        at = phase.sel({"K": K, "chi": chi, **where})
+        frank = math.sqrt(float(K) / A0)
+        row: dict = {
+            "K": float(K),
+            "chi": float(chi),
+            "other": where,
+            "frank_length": frank,
+            "grids": [],
+        }
+        above = at["sigma2_S"].values > PATTERNED
+        patterned = bool(above.all())
+        row["no_pattern"] = not bool(above.any())
+        for i, n in enumerate(grids):
+            entry = {
+                "N": n,
+                "cells_per_frank": n * frank,
+                **{
+                    f"{m}_mean": float(np.nanmean(at[m].sel(resolution=n).values))
+                    for m in OBSERVABLES
+                },
+            }
+            if i + 1 < len(grids):
+                for m in OBSERVABLES:
+                    mean, single = change(
+                        at[m].sel(resolution=n).values,
+                        at[m].sel(resolution=grids[i + 1]).values,
+                    )
+                    entry[f"{m}_change"] = mean
+                    entry[f"{m}_change_max_seed"] = single
+            row["grids"].append(entry)
+        row["patterned"] = patterned
+        converged = None
+        for entry in row["grids"][:-1]:
+            changes = [entry[f"{m}_change"] for m in OBSERVABLES]
+            if all(math.isfinite(c) and c < threshold for c in changes):
+                converged = entry
+                break
+        row["converged_N"] = None if converged is None else converged["N"]
+        row["converged_cells_per_frank"] = (
+            None if converged is None else converged["cells_per_frank"]
+        )
+        rows.append(row)
     return rows
 
 
@@ -100,12 +111,16 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: cannot read {path}: {err}", file=sys.stderr)
             return 2
     pct = lambda x: "-" if not math.isfinite(x) else f"{100 * x:.1f} %"  # noqa: E731
+    other = list(rows[0]["other"]) if rows else []
     print(
-        "| K | chi | l_F (L) | N | cells per l_F | lambda (mean) | sigma2_S (mean) | "
+        "| K | chi | "
+        + "".join(f"{d} | " for d in other)
+        + "l_F (L) | N | cells per l_F | lambda (mean) | sigma2_S (mean) | "
         "lambda on 2N (max seed) | sigma2_S on 2N (max seed) |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|" + "---|" * len(other) + "---|---|---|---|---|---|---|")
     for row in rows:
+        at = "".join(f"{v:g} | " for v in row["other"].values())
         for e in row["grids"]:
             dl = (
                 f"{pct(e['lambda_change'])} ({pct(e['lambda_change_max_seed'])})"
@@ -118,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
                 else ""
             )
             print(
-                f"| {row['K']:.3g} | {row['chi']:g} | {row['frank_length']:.2g} | {e['N']} | "
+                f"| {row['K']:.3g} | {row['chi']:g} | {at}{row['frank_length']:.2g} | {e['N']} | "
                 f"{e['cells_per_frank']:.2f} | {e['lambda_mean']:.4g} | "
                 f"{e['sigma2_S_mean']:.4g} | {dl} | {ds} |"
             )
@@ -134,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
             what = "the pattern class changes between grids or seeds"
         else:
             what = "no grid passes (the finest one run has none to compare with)"
-        print(f"  K = {row['K']:.3g}, chi = {row['chi']:g}: {what}")
+        at = "".join(f", {d} = {v:g}" for d, v in row["other"].items())
+        print(f"  K = {row['K']:.3g}, chi = {row['chi']:g}{at}: {what}")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(rows, f, indent=1)

@@ -14,14 +14,19 @@ import xarray as xr
 from sweep_helpers import records
 from typer.testing import CliRunner
 
-import sweep
-from sweep.cli import app
-from sweep.errors import ExportError, StoreError
-from sweep.expand import expand
-from sweep.outputs.aggregate import build_phase
-from sweep.outputs.tables import open_campaign, parquet_engine, runs_table, write_table
-from sweep.spec import parse_campaign
-from sweep.store import Record
+from nematic_solids import sweep
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import ExportError, StoreError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.outputs.aggregate import build_phase
+from nematic_solids.sweep.outputs.tables import (
+    open_campaign,
+    parquet_engine,
+    runs_table,
+    write_table,
+)
+from nematic_solids.sweep.spec import parse_campaign
+from nematic_solids.sweep.store import Record
 
 
 def invoke(*args: object):
@@ -178,8 +183,8 @@ def test_the_readme_notebook_snippet_runs(small):
 
 
 def test_open_by_name_reads_the_campaign_copy_with_its_overrides(tmp_path):
-    from sweep.spec import Overrides
-    from sweep.store import CampaignStore
+    from nematic_solids.sweep.spec import Overrides
+    from nematic_solids.sweep.store import CampaignStore
 
     overrides = Overrides(
         settings={"resolution": 48, "initial": "per_node", "C": 2.5}, seeds=[3, 5], name="reduced"

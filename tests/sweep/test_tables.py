@@ -164,20 +164,21 @@ def test_a_zip_group_gives_a_column_per_axis():
         assert row.sigma2_S == float(i)
 
 
-def test_the_readme_notebook_snippet_runs(small):
+def test_the_guide_notebook_snippet_runs(small):
+    """The ``py`` snippet of docs/guide/first_campaign.md, on a small campaign's results."""
     import re
     from pathlib import Path
 
     import matplotlib
 
     matplotlib.use("Agg")
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    (snippet,) = re.findall(r"```py\n(.*?)```", readme, flags=re.S)
+    page = Path(__file__).resolve().parents[2] / "docs" / "guide" / "first_campaign.md"
+    (snippet,) = re.findall(r"```py\n(.*?)```", page.read_text(), flags=re.S)
     opening = 'sweep.open_campaign("quickstart")'
     assert opening in snippet
     code = snippet.replace(opening, f'sweep.open_campaign("small", results={str(small.results)!r})')
     namespace: dict = {}
-    exec(compile(code, "README.md notebook snippet", "exec"), namespace)
+    exec(compile(code, "first_campaign.md notebook snippet", "exec"), namespace)
     assert len(namespace["runs"]) == 6
     assert namespace["phase"]["sigma2_S"].dims == ("alpha_minus_B", "seed")
 

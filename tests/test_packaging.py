@@ -31,8 +31,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PARENT = "nematic_solids"
 
-#: A user's own files that once shadowed the code: ``import sweep`` then failed with "No module
-#: named 'model.parameters'; 'model' is not a package".
+#: A user's own files, which shadowed the code when it installed as the top-level packages
+#: model and sweep (importing sweep failed beside a model.py: "'model' is not a package").
 USER_MODEL_PY = "raise ImportError('the user model.py was imported')\n"
 USER_SWEEP_INIT = "raise ImportError('the user sweep package was imported')\n"
 
@@ -57,7 +57,11 @@ def test_every_package_folder_is_listed() -> None:
         for init in (ROOT / top).rglob("__init__.py")
         if "__pycache__" not in init.parts
     }
-    assert set(config["packages"]) == folders
+    listed = set(config["packages"])
+    assert listed == folders, (
+        f"add to pyproject.toml's [tool.setuptools] packages: {sorted(folders - listed)}; "
+        f"remove: {sorted(listed - folders)}"
+    )
 
 
 def test_imports_beside_a_user_model_py(tmp_path: Path) -> None:
@@ -227,19 +231,27 @@ def test_wheel_in_a_fresh_venv_runs_a_campaign(scratch: Path) -> None:
         "MPLBACKEND": "Agg",
         "LANG": "C.UTF-8",
     }
+
+    def as_user(*cmd: str) -> list[str]:
+        """``cmd`` as the test's user, in ``env`` (runuser would set HOME to nobody's own,
+        /nonexistent: a user without a writable home sets NUMBA_CACHE_DIR, docs/guide)."""
+        if not prefix:
+            return list(cmd)
+        return [*prefix, "env", "-i", *(f"{k}={v}" for k, v in env.items()), *cmd]
+
     probe = (
         "import os, nematic_solids.sweep as s, nematic_solids.model.compiled as c; "
         "print(s.__file__); print(c.cache_dir()); "
         "print(os.access(os.path.dirname(c.__file__), os.W_OK))"
     )
-    where = _run([*prefix, str(python), "-c", probe], cwd=work, env=env).stdout.split()
+    where = _run(as_user(str(python), "-c", probe), cwd=work, env=env).stdout.split()
     assert Path(where[0]).is_relative_to(installed)  # the wheel's code, not the source tree
     cache = Path(where[1])
     assert cache.is_relative_to(home / ".cache" / "nematic"), where  # read-only: home instead
     assert where[2] == "False"  # the package folder is read-only for this user
 
     nematic = str(venv / "bin" / "nematic")
-    _run([*prefix, nematic, "run", "wheel.yaml", "--no-dashboard"], cwd=work, env=env, timeout=3600)
+    _run(as_user(nematic, "run", "wheel.yaml", "--no-dashboard"), cwd=work, env=env, timeout=3600)
     assert (work / "results" / "wheel" / "phase.nc").is_file()
     assert len(list((work / "results" / "wheel" / "runs").glob("*.nc"))) == 2
     # the kernels were compiled into the user's cache, and nothing was written into the package
@@ -247,5 +259,5 @@ def test_wheel_in_a_fresh_venv_runs_a_campaign(scratch: Path) -> None:
     assert list(cache.rglob("*.nbc"))
     assert not [p for p in installed.rglob("numba-*") if p.parent.name == "__pycache__"]
     # python -m works from the same folder
-    version = _run([*prefix, str(python), "-m", f"{PARENT}.sweep", "--version"], cwd=work, env=env)
+    version = _run(as_user(str(python), "-m", f"{PARENT}.sweep", "--version"), cwd=work, env=env)
     assert version.stdout.strip()

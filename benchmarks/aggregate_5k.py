@@ -4,12 +4,12 @@ memory? (a benchmark, not a test)
 Builds a synthetic results folder shaped like campaigns/fig4.yaml with 50 seeds: 4 chi x 5 K
 x 5 eps x 50 seeds = 5,000 finished runs (2 % failed), in the real formats. One run is real:
 the campaign's first run, simulated and written by the worker's own code
-(:func:`sweep.run.task.execute_run`: 128^2, finite strain, t/tau = 100, the campaign's snapshot
-fields in float32). Every other run file is a copy of it with its own identity (run_id,
-seed, parameters, status) and its own scalars and sigma2_S(t), patched in place with
-netCDF4, and its record is the real run's record with those values and the file's own size,
-mtime and SHA-256 (as the worker writes it). Then, each as a fresh process (wall, CPU and
-peak RSS from the operating system, ``os.wait4``):
+(:func:`nematic_solids.sweep.run.task.execute_run`: 128^2, finite strain, t/tau = 100, the
+campaign's snapshot fields in float32). Every other run file is a copy of it with its own identity
+(run_id, seed, parameters, status) and its own scalars and sigma2_S(t), patched in place with
+netCDF4, and its record is the real run's record with those values and the file's own size, mtime
+and SHA-256 (as the worker writes it). Then, each as a fresh process (wall, CPU and peak RSS from
+the operating system, ``os.wait4``):
 
 - ``nematic status`` cold (no manifest: every record is read) and warm;
 - ``nematic aggregate`` (phase.nc from the records) over 1,000 of the runs (``--seeds 10``)
@@ -69,7 +69,7 @@ FAILED_FRACTION = 0.02
 
 def real_run(campaign: Any, expansion: Any, store: Any) -> Any:
     """The campaign's first run, simulated and stored by the worker's code."""
-    from sweep.run.task import RunTask, execute_run
+    from nematic_solids.sweep.run.task import RunTask, execute_run
 
     task = RunTask.from_spec(expansion.run(0), store, campaign.name, campaign.store)
     record = execute_run(task)
@@ -102,10 +102,10 @@ def synthetic_values(
 def build(folder: Path, seeds: int) -> tuple[Path, int, dict[str, float]]:
     import netCDF4
 
-    from sweep.expand import expand
-    from sweep.files import dumps, file_stamp
-    from sweep.spec import load_campaign
-    from sweep.store import CampaignStore
+    from nematic_solids.sweep.expand import expand
+    from nematic_solids.sweep.files import dumps, file_stamp
+    from nematic_solids.sweep.spec import load_campaign
+    from nematic_solids.sweep.store import CampaignStore
 
     path = folder / "fig4big.yaml"
     path.write_text(CAMPAIGN.format(seeds=seeds))
@@ -229,10 +229,11 @@ def main() -> None:
             f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB"
         )
         print(f"{'step (a fresh process each)':<34}{'wall s':>8}{'cpu s':>8}{'peak MiB':>10}")
-        py = [sys.executable, "-m", "sweep"]
+        py = [sys.executable, "-m", "nematic_solids.sweep"]
         common = [str(path), "--results", str(results)]
         fits = (
-            "from pathlib import Path; from sweep.analysis.fits_file import write_fits; "
+            "from pathlib import Path; "
+            "from nematic_solids.sweep.analysis.fits_file import write_fits; "
             f"write_fits(Path({str(root)!r}), [('anisotropy', {{}})])"
         )
         rows = {

@@ -119,8 +119,8 @@ def configs() -> list[dict[str, Any]]:
 def measure(cfg: dict[str, Any], repeats: int) -> dict[str, Any]:
     """One row: the run's CPU time (the least of ``repeats`` runs: other work on the machine
     only ever adds to it), its accepted steps (the step curve) and saves."""
-    from model.parameters import Numerics, Parameters
-    from model.simulate import run
+    from nematic_solids.model.parameters import Numerics, Parameters
+    from nematic_solids.model.simulate import run
 
     p = Parameters.from_dict(cfg["parameters"])
     n = Numerics.from_dict(cfg["numerics"])
@@ -231,7 +231,7 @@ def main() -> None:
         help="runs of each size and variant row (the least CPU time is kept)",
     )
     args = ap.parse_args()
-    from model.warmup import warm_up
+    from nematic_solids.model.warmup import warm_up
 
     warm_up()
     rows = []

@@ -31,8 +31,8 @@ HERE = Path(__file__).resolve().parent
 CHILD = r"""
 import json, sys, time
 cfg = json.loads(sys.argv[1])
-from model.parameters import Parameters, Numerics
-from model.simulate import run
+from nematic_solids.model.parameters import Parameters, Numerics
+from nematic_solids.model.simulate import run
 # a fixed workload (texture band 16, zeta = 1, kappa = 10), so its figures stay comparable when
 # the model's defaults change; band 16 also runs at 64^2
 params = Parameters.from_dict({"alpha_minus_B": cfg["amb"], "noise_modes": 16, "zeta": 1.0,

@@ -40,9 +40,9 @@ import json, sys, time
 import numpy as np
 cfg = json.loads(sys.argv[1])
 sys.path.insert(0, cfg["code"])
-from model.compiled import fftw as fx
-from model.parameters import Numerics, Parameters
-from model.simulate import run
+from nematic_solids.model.compiled import fftw as fx
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run
 params = Parameters.from_dict({"alpha_minus_B": 1.0})
 num = Numerics(resolution=cfg["N"], t_final=cfg["t_final"], mechanics=cfg["mechanics"])
 run(params, num.replace(t_final=1.0, save_every=1.0), 0)  # the kernels loaded, the plans made

@@ -28,9 +28,9 @@ import json, resource, sys, time
 import numpy as np
 cfg = json.loads(sys.argv[1])
 t_import = time.perf_counter()
-from model.parameters import Parameters, Numerics
-from model.simulate import run
-from model.fourier import SpectralGrid
+from nematic_solids.model.parameters import Parameters, Numerics
+from nematic_solids.model.simulate import run
+from nematic_solids.model.fourier import SpectralGrid
 t_import = time.perf_counter() - t_import
 # a fixed workload (texture band 16, zeta = 1, kappa = 10), so its figures stay comparable when
 # the model's defaults change; band 16 also runs at 64^2
@@ -39,9 +39,9 @@ num = Numerics(resolution=cfg["N"], t_final=cfg["t_final"], mechanics=cfg["mecha
                save_every=cfg["t_final"])
 out = {"import_s": t_import}
 if cfg.get("pypde"):
-    from model.pde import ActiveNematicPDE, make_state
-    from model.initial import initial_fields
-    from model.observables import order_parameter
+    from nematic_solids.model.pde import ActiveNematicPDE, make_state
+    from nematic_solids.model.initial import initial_fields
+    from nematic_solids.model.observables import order_parameter
     eq = ActiveNematicPDE(params, num)
     state = make_state(*initial_fields(params, cfg["N"], 0))
     t0 = time.perf_counter()

@@ -21,12 +21,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from sweep.expand import expand
-from sweep.run.driver import dask_client, run_campaign
-from sweep.run.todo import plan_runs
-from sweep.spec import Overrides, load_campaign
-from sweep.spec.yaml_input import parse_assignments
-from sweep.store import CampaignStore
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.run.driver import dask_client, run_campaign
+from nematic_solids.sweep.run.todo import plan_runs
+from nematic_solids.sweep.spec import Overrides, load_campaign
+from nematic_solids.sweep.spec.yaml_input import parse_assignments
+from nematic_solids.sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -1,9 +1,9 @@
 """What do checkpoints cost a 128^2 finite-strain run? (a benchmark, not a test)
 
 One run (128^2, finite strain, alpha - B = 1, seed 0, save_every 2) through the worker's own
-code (:func:`sweep.run.task.execute_run`: the simulation, the rolling checkpoints, the run file
-with its end state and the record), in three settings, alternated A B C A B C ... in one
-process so that the machine's drift falls on all three alike:
+code (:func:`nematic_solids.sweep.run.task.execute_run`: the simulation, the rolling checkpoints,
+the run file with its end state and the record), in three settings, alternated A B C A B C ... in
+one process so that the machine's drift falls on all three alike:
 
 - ``off``: ``checkpoint_every: false``, ``end_state: false`` (the run file alone);
 - ``default``: the defaults (a checkpoint every 10 minutes of wall time, the end state kept);
@@ -34,12 +34,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from model.warmup import warm_up  # noqa: E402
-from sweep.campaign import DEFAULT_CHECKPOINT_WALL, StoreSpec  # noqa: E402
-from sweep.expand import expand  # noqa: E402
-from sweep.run.task import RunTask, execute_run  # noqa: E402
-from sweep.spec import parse_campaign  # noqa: E402
-from sweep.store import CampaignStore  # noqa: E402
+from nematic_solids.model.warmup import warm_up  # noqa: E402
+from nematic_solids.sweep.campaign import DEFAULT_CHECKPOINT_WALL, StoreSpec  # noqa: E402
+from nematic_solids.sweep.expand import expand  # noqa: E402
+from nematic_solids.sweep.run.task import RunTask, execute_run  # noqa: E402
+from nematic_solids.sweep.spec import parse_campaign  # noqa: E402
+from nematic_solids.sweep.store import CampaignStore  # noqa: E402
 
 CAMPAIGN = """\
 name: ckpt
@@ -59,7 +59,7 @@ def settings(dense: float) -> dict[str, StoreSpec]:
 
 def one(task: RunTask, store: CampaignStore) -> dict[str, float]:
     """One run through the worker's code; the checkpoints' own time measured around each."""
-    from sweep.run import continuation
+    from nematic_solids.sweep.run import continuation
 
     written: list[tuple[int, float]] = []
     original = continuation.Checkpointer.__call__
@@ -96,10 +96,10 @@ def one(task: RunTask, store: CampaignStore) -> dict[str, float]:
 def end_state_write(task: RunTask, store: CampaignStore, repeat: int = 5) -> tuple[float, float]:
     """Median seconds to write the run file without and with its end state (the worker's
     own atomic write, fsync included)."""
-    from model.simulate import run as simulate
-    from sweep.files import atomic_to_netcdf
-    from sweep.run.continuation import STATE_GROUP
-    from sweep.run.task import prepare_dataset
+    from nematic_solids.model.simulate import run as simulate
+    from nematic_solids.sweep.files import atomic_to_netcdf
+    from nematic_solids.sweep.run.continuation import STATE_GROUP
+    from nematic_solids.sweep.run.task import prepare_dataset
 
     params, numerics = expansion_model(task)
     ds, end = simulate(params, numerics, task.seed, keep_state=True)
@@ -117,7 +117,7 @@ def end_state_write(task: RunTask, store: CampaignStore, repeat: int = 5) -> tup
 
 
 def expansion_model(task: RunTask):  # type: ignore[no-untyped-def]
-    from model.parameters import Numerics, Parameters
+    from nematic_solids.model.parameters import Numerics, Parameters
 
     return Parameters.from_dict(task.parameters), Numerics.from_dict(task.numerics)
 

@@ -1,19 +1,18 @@
-"""Kernel compilation on a fresh clone: ``python -m model.warmup`` (bootstrap's compile step)
-at a base commit and at a new one, alternating (a benchmark).
+"""Kernel compilation on a fresh clone: ``python -m nematic_solids.model.warmup`` (bootstrap's
+compile step) at a base commit and at a new one, alternating (a benchmark).
 
     .venv/bin/python benchmarks/compile_time.py [--base 289d2d7] [--new HEAD] [--repeats 3]
 
 Clones this repository twice into a temporary folder (``git clone``, then the commit), and
-in each runs ``python -m model.warmup`` with this interpreter (its venv: only the compilation
-is measured, not the install), the clone on ``PYTHONPATH``, ``NUMBA_CACHE_DIR`` unset (so the
-cache is the clone's own ``model/compiled/__pycache__``), extra arguments from ``--args``.
+in each runs ``python -m nematic_solids.model.warmup`` with this interpreter (its venv: only the
+compilation is measured, not the install), the clone on ``PYTHONPATH``, ``NUMBA_CACHE_DIR`` unset
+(so the cache is the clone's own ``model/compiled/__pycache__``), extra arguments from ``--args``.
 Each repeat runs base then new (new then base in odd repeats), each with an empty cache (its
-``__pycache__`` removed: "cold") and again right after ("warm", the idempotent second call).
-Reports each run's wall time, CPU time (user + sys of the process and every process it
-waited for: the compiling processes included), their ratio (the cores it kept busy on
-average), the load average before it and the kernel signatures compiled (the work, from the
-command's own report); then medians and the base/new ratio of each pair. The machine's speed
-and load drift, so only the pairs compare.
+``__pycache__`` removed: "cold") and again right after ("warm", the idempotent second call). Reports
+each run's wall time, CPU time (user + sys of the process and every process it waited for: the
+compiling processes included), their ratio (the cores it kept busy on average), the load average
+before it and the kernel signatures compiled (the work, from the command's own report); then medians
+and the base/new ratio of each pair. The machine's speed and load drift, so only the pairs compare.
 
 Prints a table and writes benchmarks/compile_time.json.
 """
@@ -51,19 +50,20 @@ def clone(commit: str, dst: Path) -> str:
 
 
 def compiled_count(stdout: str) -> int:
-    """Kernel signatures compiled, from ``python -m model.warmup``'s report: those of the
-    compiling processes ("N signatures compiled") and of its own process ("N compiled")."""
+    """Kernel signatures compiled, from ``python -m nematic_solids.model.warmup``'s report: those of
+    the compiling processes ("N signatures compiled") and of its own process ("N compiled")."""
     return sum(int(n) for n in re.findall(r"\((\d+) (?:signatures )?compiled", stdout))
 
 
 def warmup(folder: Path, python: str, extra: list[str]) -> dict[str, Any]:
-    """Run ``python -m model.warmup`` in ``folder``; its wall and CPU time and report."""
+    """Run ``python -m nematic_solids.model.warmup`` in ``folder``; its wall and CPU time and
+    report."""
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env["PYTHONPATH"] = str(folder)
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
     proc = subprocess.Popen(
-        [python, "-m", "model.warmup", *extra],
+        [python, "-m", "nematic_solids.model.warmup", *extra],
         cwd=folder,
         env=env,
         stdout=subprocess.PIPE,
@@ -76,7 +76,7 @@ def warmup(folder: Path, python: str, extra: list[str]) -> dict[str, Any]:
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode:
-        raise RuntimeError(f"python -m model.warmup failed in {folder}:\n{out}")
+        raise RuntimeError(f"python -m nematic_solids.model.warmup failed in {folder}:\n{out}")
     cpu = usage.ru_utime + usage.ru_stime
     return {
         "wall_s": round(wall, 2),
@@ -97,7 +97,8 @@ def main() -> None:
     parser.add_argument(
         "--args",
         default="",
-        help="extra arguments for the new commit's python -m model.warmup, e.g. '--jobs 4'",
+        help="extra arguments for the new commit's python -m nematic_solids.model.warmup, "
+        "e.g. '--jobs 4'",
     )
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "compile_time.json")
     args = parser.parse_args()
@@ -157,7 +158,8 @@ def main() -> None:
         )
     print(f"cold wall base/new per pair: {summary['wall_ratio_base_over_new_cold']}")
     result = {
-        "benchmark": "python -m model.warmup on a fresh clone (empty kernel cache), base vs new",
+        "benchmark": "python -m nematic_solids.model.warmup on a fresh clone (empty kernel "
+        "cache), base vs new",
         "command": " ".join([Path(args.python).name, "benchmarks/compile_time.py", *sys.argv[1:]]),
         "commits": commits,
         "new_args": extra["new"],

@@ -27,9 +27,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sweep.cost.estimate import estimate
-from sweep.spec import Overrides, load_campaign
-from sweep.store import CampaignStore
+from nematic_solids.sweep.cost.estimate import estimate
+from nematic_solids.sweep.spec import Overrides, load_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parent.parent
 QUICKSTART = ROOT / "campaigns" / "quickstart.yaml"
@@ -39,7 +39,9 @@ def nematic(*args: str) -> float:
     """Run ``nematic ARGS``; return its wall time (seconds)."""
     t0 = time.perf_counter()
     subprocess.run(
-        [sys.executable, "-m", "sweep", *args, "--no-dashboard", "-q"], check=True, cwd=ROOT
+        [sys.executable, "-m", "nematic_solids.sweep", *args, "--no-dashboard", "-q"],
+        check=True,
+        cwd=ROOT,
     )
     return time.perf_counter() - t0
 

@@ -1,13 +1,12 @@
 """How long does ``nematic report quickstart`` take as a fresh process? (a benchmark, not a
 test)
 
-Times N fresh processes of ``python -m sweep report CAMPAIGN`` (wall, CPU = user + system,
-peak RSS: the operating system's accounting of each child, ``os.wait4``), and of
-``nematic --help`` and ``nematic status`` beside it; then one run under ``-X importtime``
-gives the import time by top-level package and which heavy libraries the report imports. It
-needs a results folder with the campaign in it (make one with ``nematic run
-campaigns/quickstart.yaml --results DIR``; that run's report fills the report's cache of run
-views, as a user's run does).
+Times N fresh processes of ``python -m nematic_solids.sweep report CAMPAIGN`` (wall, CPU = user +
+system, peak RSS: the operating system's accounting of each child, ``os.wait4``), and of ``nematic
+--help`` and ``nematic status`` beside it; then one run under ``-X importtime`` gives the import
+time by top-level package and which heavy libraries the report imports. It needs a results folder
+with the campaign in it (make one with ``nematic run campaigns/quickstart.yaml --results DIR``; that
+run's report fills the report's cache of run views, as a user's run does).
 
 The machine's speed drifts (up to 2x on a shared machine): quote medians, look at the load
 average printed with them, and compare two versions side by side with ``--compare`` (another
@@ -35,7 +34,14 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Libraries whose import the report's fast path avoids (checked in tests/sweep/test_report.py).
-HEAVY = ("numba", "distributed", "dask.array", "matplotlib", "model.compiled", "scipy")
+HEAVY = (
+    "numba",
+    "distributed",
+    "dask.array",
+    "matplotlib",
+    "nematic_solids.model.compiled",
+    "scipy",
+)
 
 
 def timed(argv: list[str], checkout: Path) -> dict[str, float]:
@@ -115,7 +121,7 @@ def main() -> None:
     report = [
         python,
         "-m",
-        "sweep",
+        "nematic_solids.sweep",
         "report",
         args.campaign,
         "--results",
@@ -126,8 +132,16 @@ def main() -> None:
     yaml = results / args.campaign / "campaign.yaml"
     commands = {
         "report": report,
-        "--help": [python, "-m", "sweep", "--help"],
-        "status": [python, "-m", "sweep", "status", str(yaml), "--results", str(results)],
+        "--help": [python, "-m", "nematic_solids.sweep", "--help"],
+        "status": [
+            python,
+            "-m",
+            "nematic_solids.sweep",
+            "status",
+            str(yaml),
+            "--results",
+            str(results),
+        ],
     }
     checkouts = {"this": ROOT} | ({"compare": args.compare.resolve()} if args.compare else {})
     load_before = os.getloadavg()

@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sweep.expand import expand
-from sweep.files import dumps
-from sweep.outputs.status import campaign_status
-from sweep.spec import load_campaign
-from sweep.store import CampaignStore
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.files import dumps
+from nematic_solids.sweep.outputs.status import campaign_status
+from nematic_solids.sweep.spec import load_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 CAMPAIGN = """\
 name: big
@@ -111,7 +111,7 @@ def main() -> None:
             [
                 sys.executable,
                 "-m",
-                "sweep",
+                "nematic_solids.sweep",
                 "status",
                 str(path),
                 "--results",

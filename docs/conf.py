@@ -15,9 +15,8 @@ from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
-sys.path.insert(0, str(ROOT))
-# the notebook's kernel imports the checkout too, and draws without a display
-os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+# the package (nematic_solids) comes from the environment's install (scripts/build_docs.sh
+# installs the checkout, editable); the notebook's kernel draws without a display
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 project = "Active nematic solids"
@@ -66,10 +65,20 @@ html_static_path: list[str] = []
 
 def _cli_page() -> None:
     """docs/_generated/cli.md, written by typer from the ``nematic`` application
-    (:data:`sweep.cli.app`): the texts of ``nematic --help`` and ``nematic COMMAND --help``."""
+    (:data:`nematic_solids.sweep.cli.app`): the texts of ``nematic --help`` and ``nematic COMMAND
+    --help``."""
     out = DOCS / "_generated" / "cli.md"
     out.parent.mkdir(exist_ok=True)
-    command = [sys.executable, "-m", "typer", "--app", "app", "sweep.cli", "utils", "docs"]
+    command = [
+        sys.executable,
+        "-m",
+        "typer",
+        "--app",
+        "app",
+        "nematic_solids.sweep.cli",
+        "utils",
+        "docs",
+    ]
     done = subprocess.run(
         [*command, "--name", "nematic", "--output", str(out)],
         cwd=ROOT,

@@ -1,6 +1,6 @@
 r"""The kernels a run executes: ``Numerics.backend`` "compiled" (numba,
-:mod:`model.compiled.kernels`) or "numpy" (their readable twins,
-:mod:`model.reference_kernels`).
+:mod:`nematic_solids.model.compiled.kernels`) or "numpy" (their readable twins,
+:mod:`nematic_solids.model.reference_kernels`).
 
 :class:`Kernels` is the kernel set's interface: every pointwise and spectral kernel the
 mechanics, the PDE, the split right-hand side and the solver call (through ``self.k`` or
@@ -8,7 +8,7 @@ mechanics, the PDE, the split right-hand side and the solver call (through ``sel
 as a :class:`Kernels`, so the type checker compares the numpy twins' signatures with it (the
 numba dispatchers are untyped to it; ``tests/model/test_constitutive.py`` checks that the
 compiled functions take the same parameters). The FFTs and Krylov solves follow the same
-choice (:mod:`model.fourier`, :class:`model.mechanics.Mechanics`).
+choice (:mod:`nematic_solids.model.fourier`, :class:`nematic_solids.model.mechanics.Mechanics`).
 """
 
 from __future__ import annotations
@@ -69,7 +69,8 @@ class Kernels(Protocol):
     def balance_residual_kernel(
         self, P: Array, P_hat: Array, khx: Array, khy: Array, weights: Array
     ) -> float:
-        """The force-balance residual (:meth:`model.mechanics.Mechanics.residual`)."""
+        """The force-balance residual
+        (:meth:`nematic_solids.model.mechanics.Mechanics.residual`)."""
 
     def neg_div_hat_kernel(self, T: Array, kx: Array, ky: Array) -> Array:
         """:math:`-i k_j \\hat T_{ij}`."""
@@ -160,7 +161,8 @@ class Kernels(Protocol):
         self, K: Array, E: Array, cos_t: Array, sin_t: Array, scale: float
     ) -> tuple[float, int, int]:
         """The sampled minimum of the rate problem's symbol determinant / ``scale``, its flat
-        point index and angle index (:func:`model.wellposedness.finite_margin_samples`)."""
+        point index and angle index
+        (:func:`nematic_solids.model.wellposedness.finite_margin_samples`)."""
 
 
 def kernels(backend: str) -> Kernels:

@@ -1,6 +1,6 @@
 """A run's complete state at a save time, :class:`RunState`, from which
-:func:`model.simulate.run` continues exactly: a run continued from the state it had at time t
-takes the same accepted steps and ends with bitwise the same arrays as the run that never
+:func:`nematic_solids.model.simulate.run` continues exactly: a run continued from the state it had
+at time t takes the same accepted steps and ends with bitwise the same arrays as the run that never
 stopped.
 
 Complete means everything the next step reads: the fields q1, q2, A; the spectra of q1, q2 as
@@ -10,7 +10,7 @@ the integrated displacement or Newton's warm start), its rate and the rate's gra
 the run has recorded so far (the time series, the snapshots, the counters, the smallest
 well-posedness margin, the wall time). Caches that are pure functions of these (the phi
 functions, the last solve's stress) are rebuilt. The FFT plans are deterministic
-(:mod:`model.fourier`), so a state continues bitwise in another process.
+(:mod:`nematic_solids.model.fourier`), so a state continues bitwise in another process.
 
 A state is taken right after a save (the observables at a save time): the run resumes with
 the step that followed that save. It continues the run with the same parameters, seed and
@@ -22,7 +22,7 @@ says why a state does not continue a given run.
 On disk a state is a netCDF file (:meth:`RunState.to_dataset`, :func:`load`) with a SHA-256 of
 its arrays and settings: a truncated, altered or foreign file is refused with
 :class:`CheckpointError` naming the cause. Writing it (atomically) is the caller's:
-:mod:`sweep` writes rolling checkpoints and end states with its atomic writes.
+:mod:`nematic_solids.sweep` writes rolling checkpoints and end states with its atomic writes.
 """
 
 from __future__ import annotations
@@ -54,9 +54,9 @@ MAY_DIFFER = ("t_final", "snapshot_times")
 
 @dataclass(frozen=True)
 class Schedule:
-    """When a run hands out its state (:func:`model.simulate.run`'s ``checkpoint``): after
-    the first save at least ``tau`` (simulated time) or ``wall`` (seconds of wall time)
-    after the last state handed out (or the run's start). Both infinite (the default): never."""
+    """When a run hands out its state (:func:`nematic_solids.model.simulate.run`'s ``checkpoint``):
+    after the first save at least ``tau`` (simulated time) or ``wall`` (seconds of wall time) after
+    the last state handed out (or the run's start). Both infinite (the default): never."""
 
     tau: float = math.inf
     wall: float = math.inf
@@ -110,11 +110,11 @@ class CheckpointError(NematicError):
 
 @dataclass
 class RunState:
-    """Everything :func:`model.simulate.run` needs to continue a run from time ``t`` (see the
-    module docstring). ``rows`` are the saved observables (one dict per save time, with
-    ``time`` and ``steps``), ``snaps`` the stored snapshots ``(time, fields)``, ``counters``
-    the work counted so far (transforms by part, spin and CG iterations), ``stopped`` the time
-    an early-stopped run ended (NaN otherwise), ``wall`` the wall time spent."""
+    """Everything :func:`nematic_solids.model.simulate.run` needs to continue a run from time ``t``
+    (see the module docstring). ``rows`` are the saved observables (one dict per save time, with
+    ``time`` and ``steps``), ``snaps`` the stored snapshots ``(time, fields)``, ``counters`` the
+    work counted so far (transforms by part, spin and CG iterations), ``stopped`` the time an
+    early-stopped run ended (NaN otherwise), ``wall`` the wall time spent."""
 
     t: float
     fields: Array
@@ -201,7 +201,7 @@ class RunState:
         for name, value in self.mechanics.items():
             data[f"mech_{name}"] = _pair(value, name)
         attrs = {
-            "title": "active nematic solid: run state (model.checkpoint)",
+            "title": "active nematic solid: run state (nematic_solids.model.checkpoint)",
             "checkpoint_format": FORMAT,
             "t": float(self.t),
             "h": float(self.solver.h),

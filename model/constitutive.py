@@ -37,7 +37,8 @@ Array = np.ndarray
 
 @dataclass(frozen=True)
 class Moduli:
-    """The constants of the stress: a subset of :class:`model.parameters.Parameters`."""
+    """The constants of the stress: a subset of
+    :class:`nematic_solids.model.parameters.Parameters`."""
 
     kappa: float
     B: float

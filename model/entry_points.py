@@ -5,9 +5,10 @@ An entry point (:class:`EntryPoint`) is a kernel's module and name, its numba ar
 as text (:func:`type_text`, read back by :func:`read_types`: numba's cache keys a compiled
 signature by these types) and what compiling it took when the list was made.
 ``scripts/kernel_entry_points.py`` makes the list from a tiny finite and a tiny linear run
-(:func:`model.warmup.warm_up`); ``python -m model.warmup`` reads it
+(:func:`nematic_solids.model.warmup.warm_up`); ``python -m nematic_solids.model.warmup`` reads it
 (:func:`read_entry_points`) and compiles it in parallel processes
-(:func:`model.warmup.compile_in_parallel`, each entry by :func:`compile_entry_point`).
+(:func:`nematic_solids.model.warmup.compile_in_parallel`, each entry by
+:func:`compile_entry_point`).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-#: The kernels' entry points, compiled in parallel by ``python -m model.warmup``.
+#: The kernels' entry points, compiled in parallel by ``python -m nematic_solids.model.warmup``.
 ENTRY_POINTS_FILE = Path(__file__).with_name("compiled") / "entry_points.txt"
 
 

@@ -22,13 +22,13 @@ log = logging.getLogger(__name__)
 
 Array = np.ndarray
 
-#: FFTW through :mod:`model.compiled.fftw` (2.5-3x faster than numpy's FFT at 128^2 here, and
-#: callable from compiled code); scipy.fft where the FFTW library cannot be loaded.
-#: FFTW_MEASURE at run time would time candidate algorithms and may pick a different one in
-#: another process (seen: a campaign's local and dask-cluster runs differed in the last digits),
-#: so results would not be bitwise reproducible across processes. The plans therefore come from
-#: wisdom shipped with the code (FFTW_PATIENT, made once) or, for sizes it does not hold, from
-#: FFTW_ESTIMATE: both deterministic (:mod:`model.compiled.fftw`).
+#: FFTW through :mod:`nematic_solids.model.compiled.fftw` (2.5-3x faster than numpy's FFT at 128^2
+#: here, and callable from compiled code); scipy.fft where the FFTW library cannot be loaded.
+#: FFTW_MEASURE at run time would time candidate algorithms and may pick a different one in another
+#: process (seen: a campaign's local and dask-cluster runs differed in the last digits), so results
+#: would not be bitwise reproducible across processes. The plans therefore come from wisdom shipped
+#: with the code (FFTW_PATIENT, made once) or, for sizes it does not hold, from FFTW_ESTIMATE: both
+#: deterministic (:mod:`nematic_solids.model.compiled.fftw`).
 HAVE_FFTW = fftw.AVAILABLE
 
 

@@ -4,8 +4,8 @@ reads and writes (:func:`lock_cache_files`).
 
 numba's cache index (one file per function) is read, changed and rewritten without a lock, so
 two processes that save two signatures of one function at once could lose one or give both
-the same data file: the processes that ``python -m model.warmup`` starts to compile in
-parallel (:func:`model.warmup.compile_in_parallel`) hold the lock.
+the same data file: the processes that ``python -m nematic_solids.model.warmup`` starts to compile
+in parallel (:func:`nematic_solids.model.warmup.compile_in_parallel`) hold the lock.
 """
 
 from __future__ import annotations
@@ -17,16 +17,16 @@ from typing import Any
 
 #: Modules holding the compiled kernels.
 KERNEL_MODULES = (
-    "model.compiled.arith",
-    "model.compiled.constitutive",
-    "model.compiled.spectral",
-    "model.compiled.etd",
-    "model.compiled.rates",
-    "model.compiled.wellposedness",
-    "model.compiled.krylov",
-    "model.compiled.linear_rhs",
-    "model.compiled.finite_krylov",
-    "model.compiled.fftw",
+    "nematic_solids.model.compiled.arith",
+    "nematic_solids.model.compiled.constitutive",
+    "nematic_solids.model.compiled.spectral",
+    "nematic_solids.model.compiled.etd",
+    "nematic_solids.model.compiled.rates",
+    "nematic_solids.model.compiled.wellposedness",
+    "nematic_solids.model.compiled.krylov",
+    "nematic_solids.model.compiled.linear_rhs",
+    "nematic_solids.model.compiled.finite_krylov",
+    "nematic_solids.model.compiled.fftw",
 )
 
 

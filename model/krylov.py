@@ -82,7 +82,7 @@ def gmres_aux(
     operator computes anyway need not be recomputed). ``Lx0``, if given, is ``L x0`` of the
     start, and ``op_given_aux(v, L v)`` is then ``A v`` from it: the start's residual uses
     them (for the finite-strain rate operator, whose L is the real-space gradient, four
-    transforms fewer; compiled twin: :func:`model.compiled.krylov.gmres`)."""
+    transforms fewer; compiled twin: :func:`nematic_solids.model.compiled.krylov.gmres`)."""
     x, it, status, Lx = _gmres(
         op,
         b,
@@ -175,7 +175,8 @@ def _gmres(
 def givens_column(H: Array, g: Array, cs: Array, sn: Array, k: int) -> None:
     """Apply the previous rotations to column ``k`` of the Hessenberg matrix ``H``, then the
     new rotation that zeroes ``H[k + 1, k]``, updating the residual vector ``g`` (Saad
-    Alg. 6.9's Givens QR; compiled twin: :func:`model.compiled.krylov.givens_column`)."""
+    Alg. 6.9's Givens QR; compiled twin:
+    :func:`nematic_solids.model.compiled.krylov.givens_column`)."""
     for i in range(k):
         t = cs[i] * H[i, k] + sn[i] * H[i + 1, k]
         H[i + 1, k] = -sn[i] * H[i, k] + cs[i] * H[i + 1, k]

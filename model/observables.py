@@ -16,11 +16,11 @@ Definitions (unit domain, :math:`\langle\cdot\rangle` = area mean):
   / \sum_k |\widehat{\delta S}(k)|^2` over all nonzero modes (the spectrum-weighted mean
   wavenumber, :func:`pattern_size_mean`); both NaN when :math:`\sigma^2_S = 0`;
 * ``rate_margin`` the well-posedness margin of the rate problem
-  (:mod:`model.wellposedness`, 1 passive, 0 at the loss of well-posedness);
+  (:mod:`nematic_solids.model.wellposedness`, 1 passive, 0 at the loss of well-posedness);
 * ``mean_I1bar`` :math:`\langle \mathrm{tr}\, C / J \rangle`, ``min_J`` :math:`\min J`,
   ``mean_A`` :math:`\langle A \rangle`;
 * ``free_energy`` :math:`\int \Psi` of paper Eq. (1) (small-strain elastic energy in linear
-  mechanics), ``residual`` the force-balance residual of :mod:`model.mechanics`.
+  mechanics), ``residual`` the force-balance residual of :mod:`nematic_solids.model.mechanics`.
 """
 
 from __future__ import annotations

@@ -83,7 +83,8 @@ class Parameters:
         coupling: the stress of Eq. (5)'s f = chi tr(.): "trP" (the first Piola stress, the
             paper's Eq. 5) or "trS" (the second Piola stress S = F^-1 P, which the paper's text
             says it also tried); equal at small strain (linear mechanics uses tr sigma).
-        protocol: alpha - B, chi and eps as functions of time (:mod:`model.protocol`; empty:
+        protocol: alpha - B, chi and eps as functions of time (:mod:`nematic_solids.model.protocol`;
+        empty:
             constant). Where it makes one time dependent, the plain field holds its value at
             t = 0 and :meth:`at` gives the constants at a time.
     """
@@ -114,7 +115,9 @@ class Parameters:
             value = getattr(self, f.name)
             if f.name == "protocol":
                 if not isinstance(value, Protocol):
-                    raise ParameterError("protocol", value, "a model.protocol.Protocol")
+                    raise ParameterError(
+                        "protocol", value, "a nematic_solids.model.protocol.Protocol"
+                    )
             elif f.type in ("str", str):
                 if value not in CHOICES[f.name]:
                     raise ParameterError(f.name, value, " or ".join(CHOICES[f.name]))
@@ -187,7 +190,8 @@ class Parameters:
 
     def at(self, t: float, after: float | None = None) -> Parameters:
         """The constants at time ``t`` (on the protocol's pieces that hold ``after``:
-        :meth:`model.protocol.Protocol.values`), without the protocol; ``self`` without one."""
+        :meth:`nematic_solids.model.protocol.Protocol.values`), without the protocol; ``self``
+        without one."""
         if not self.protocol:
             return self
         base = self.to_dict()
@@ -199,7 +203,7 @@ class Parameters:
 
     def to_dict(self) -> dict[str, Any]:
         """Every field; ``protocol`` only where there is one, in its canonical form
-        (:meth:`model.protocol.Protocol.to_dict`)."""
+        (:meth:`nematic_solids.model.protocol.Protocol.to_dict`)."""
         out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "protocol"}
         if self.protocol:
             out["protocol"] = self.protocol.to_dict()

@@ -2,8 +2,8 @@ r"""The py-pde PDE class: paper Eqs. (3)-(5) with a readable numpy ``evolution_r
 
 State: a :class:`pde.FieldCollection` of three scalar fields ``q1, q2, A`` on the periodic
 unit square. The displacement is slaved to Q by quasi-static force balance (Eq. 3), solved on
-every evaluation of :meth:`ActiveNematicPDE.evolution_rate` by :mod:`model.mechanics` (the
-time stepper may instead integrate it with the state: :meth:`ActiveNematicPDE.rates` with a
+every evaluation of :meth:`ActiveNematicPDE.evolution_rate` by :mod:`nematic_solids.model.mechanics`
+(the time stepper may instead integrate it with the state: :meth:`ActiveNematicPDE.rates` with a
 given displacement; docs/model.md, section 4).
 
 Equations (tensor conventions: docs/model.md):
@@ -19,7 +19,7 @@ In components, with :math:`W = \omega\,[[0, -1], [1, 0]]`:
 :math:`\dot q_1 = H_{11}/\gamma - 2 \omega q_2`, :math:`\dot q_2 = H_{12}/\gamma + 2 \omega q_1`,
 where :math:`\omega = \tfrac12 \operatorname{curl} \dot u` depends linearly on :math:`\dot Q`
 (the displacement rate solves the rate form of Eq. 3), so :math:`\omega` and :math:`\dot Q`
-are found together by one linear solve (GMRES, :mod:`model.mechanics`).
+are found together by one linear solve (GMRES, :mod:`nematic_solids.model.mechanics`).
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ class ActiveNematicPDE(PDEBase):
 
     def __init__(self, params: Parameters | None = None, numerics: Numerics | None = None):
         super().__init__()
-        #: the run's parameters, with their protocol (model.protocol)
+        #: the run's parameters, with their protocol (nematic_solids.model.protocol)
         self.base_params = params or Parameters()
         self.protocol = self.base_params.protocol
         #: the constants at the current time (:meth:`at_time`; all of them without a protocol)
@@ -78,8 +78,8 @@ class ActiveNematicPDE(PDEBase):
 
     def at_time(self, t: float, after: float | None = None) -> None:
         """Set the constants (and the mechanics') to the protocol's values at ``t`` on the
-        pieces that hold ``after`` (:meth:`model.protocol.Protocol.values`; default: ``t``,
-        right-continuous), with their rates; nothing without a protocol."""
+        pieces that hold ``after`` (:meth:`nematic_solids.model.protocol.Protocol.values`; default:
+        ``t``, right-continuous), with their rates; nothing without a protocol."""
         if not self.protocol:
             return
         values = self.protocol.values(t, after)
@@ -132,7 +132,8 @@ class ActiveNematicPDE(PDEBase):
         self, q1: Array, q2: Array, H: Array, mech: MechanicalState, t: float | None = None
     ) -> tuple[Array, Array]:
         r"""``(Qdot components, omega)``: :math:`\dot Q = H/\gamma + W Q - Q W` with the spin
-        slaved to :math:`\dot Q` through the displacement rate (see :mod:`model.mechanics`)."""
+        slaved to :math:`\dot Q` through the displacement rate (see
+        :mod:`nematic_solids.model.mechanics`)."""
         return self.mechanics.corotational(mech, q1, q2, H / self.params.gamma, t)
 
     def activity_rate(self, A: Array, mech: MechanicalState) -> Array:

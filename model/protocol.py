@@ -17,11 +17,11 @@ The input forms of :func:`profile_from` add named shapes whose numbers can be sw
 function has one canonical :meth:`Protocol.to_dict` (and one run identity).
 
 **Switch times.** The times where a function or its derivative jumps (:meth:`Protocol.breaks`)
-are landed on exactly by the integrator (:mod:`model.solver_base`); no step crosses one. Inside
-a step from :math:`t_0` every stage uses the piece that holds :math:`t_0`
-(:meth:`Protocol.values` with ``after = t_0``): a stage at the end of a step that ends on a
-switch time sees the value before the switch. Anywhere else the value is right-continuous: a
-save at a switch time (its observables and its force balance) sees the value after it.
+are landed on exactly by the integrator (:mod:`nematic_solids.model.solver_base`); no step crosses
+one. Inside a step from :math:`t_0` every stage uses the piece that holds :math:`t_0`
+(:meth:`Protocol.values` with ``after = t_0``): a stage at the end of a step that ends on a switch
+time sees the value before the switch. Anywhere else the value is right-continuous: a save at a
+switch time (its observables and its force balance) sees the value after it.
 
 A constant function is no protocol (:func:`profile_from` returns its value), so a constant
 protocol is the same run as the plain parameter.
@@ -192,7 +192,7 @@ def _window(name: str, start: float, duration: float) -> None:
 def profile_from(name: str, raw: Any) -> Profile | float:
     """The function of time of the input ``raw`` (see the module docstring): a list of
     points (steps) or a mapping with one of :data:`FORMS`; a constant function is returned as
-    its value. ``name`` labels errors (:class:`model.errors.ParameterError`)."""
+    its value. ``name`` labels errors (:class:`nematic_solids.model.errors.ParameterError`)."""
     if isinstance(raw, (Piecewise, Sine)):
         return raw.extremes()[0] if raw.constant() else raw
     if not isinstance(raw, Mapping):

@@ -64,12 +64,12 @@ def library_versions() -> dict[str, str]:
 @functools.lru_cache(maxsize=1)
 def _fftw_version() -> str:
     """The native FFTW library's own version string (``fftw-3.3.5-sse2-avx``): of the library
-    :mod:`model.compiled.fftw` loaded, or, where that module is not imported, of the one it
-    would load, read with ctypes alone (importing the compiled package imports numba, a
+    :mod:`nematic_solids.model.compiled.fftw` loaded, or, where that module is not imported, of the
+    one it would load, read with ctypes alone (importing the compiled package imports numba, a
     quarter of a second that the report and aggregation do not need)."""
     import sys
 
-    compiled = sys.modules.get("model.compiled.fftw")
+    compiled = sys.modules.get("nematic_solids.model.compiled.fftw")
     lib = getattr(compiled, "_LIB", None) if compiled is not None else _fftw_library()
     if lib is None:
         return ""
@@ -82,9 +82,9 @@ def _fftw_version() -> str:
 
 
 def fftw_candidates() -> Iterator[str]:
-    """Where FFTW's double-precision library may be, in :mod:`model.compiled.fftw`'s order
-    (its ``_candidates``, repeated here without importing pyfftw; a test holds the two
-    equal): inside the pyFFTW wheel first, then the system (looked up only when asked for)."""
+    """Where FFTW's double-precision library may be, in :mod:`nematic_solids.model.compiled.fftw`'s
+    order (its ``_candidates``, repeated here without importing pyfftw; a test holds the two equal):
+    inside the pyFFTW wheel first, then the system (looked up only when asked for)."""
     import ctypes.util
     import glob
     import importlib.util
@@ -107,7 +107,7 @@ def fftw_candidates() -> Iterator[str]:
 
 def _fftw_library() -> ctypes.CDLL | None:
     """The first FFTW library of :func:`fftw_candidates` that loads with the transforms the
-    model calls (as :mod:`model.compiled.fftw` chooses it), or None."""
+    model calls (as :mod:`nematic_solids.model.compiled.fftw` chooses it), or None."""
     for path in fftw_candidates():
         try:
             lib = ctypes.CDLL(path)

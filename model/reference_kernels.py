@@ -1,9 +1,10 @@
 r"""The numpy twins of the compiled kernels: the same names and signatures as
-:mod:`model.compiled.kernels` (the interface :class:`model.backend.Kernels`, which the type
-checker compares this module with), written as array expressions over the readable references
-(:mod:`model.constitutive`, :mod:`model.wellposedness`, :func:`phi_functions`).
-``Numerics.backend = "numpy"`` runs these (:func:`model.backend.kernels`); the tests check that
-each pair agrees (``tests/model/test_constitutive.py``).
+:mod:`nematic_solids.model.compiled.kernels` (the interface
+:class:`nematic_solids.model.backend.Kernels`, which the type checker compares this module with),
+written as array expressions over the readable references (:mod:`nematic_solids.model.constitutive`,
+:mod:`nematic_solids.model.wellposedness`, :func:`phi_functions`). ``Numerics.backend = "numpy"``
+runs these (:func:`nematic_solids.model.backend.kernels`); the tests check that each pair agrees
+(``tests/model/test_constitutive.py``).
 """
 
 from __future__ import annotations
@@ -50,20 +51,22 @@ def _moduli(kappa: float, B: float, Bp: float, alpha: float) -> cl.Moduli:
     return cl.Moduli(kappa=kappa, B=B, B_prime=Bp, alpha=alpha)
 
 
-# --- finite-strain stress (twins of model.compiled.constitutive) ---------------------------
+# --- finite-strain stress (twins of nematic_solids.model.compiled.constitutive)
+# ---------------------------
 
 
 def tangent_kernel(
     F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float, alpha: float
 ) -> Array:
-    """:func:`model.constitutive.tangent`, packed (:func:`model.tensors.pack_symmetric`)."""
+    """:func:`nematic_solids.model.constitutive.tangent`, packed
+    (:func:`nematic_solids.model.tensors.pack_symmetric`)."""
     return tensors.pack_symmetric(
         cl.tangent(F, tensors.nematic(q1, q2), _moduli(kappa, B, Bp, alpha))
     )
 
 
 def apply_tangent_kernel(K: Array, dF: Array) -> Array:
-    """:func:`model.constitutive.apply_tangent` of the packed tangent ``K``."""
+    """:func:`nematic_solids.model.constitutive.apply_tangent` of the packed tangent ``K``."""
     return cl.apply_tangent(tensors.unpack_symmetric(K), dF)
 
 
@@ -76,14 +79,14 @@ def apply_tangent_spin_kernel(K: Array, G: Array, E: Array) -> Array:
 def first_piola_kernel(
     F: Array, q1: Array, q2: Array, kappa: float, B: float, Bp: float, alpha: float
 ) -> Array:
-    """:func:`model.constitutive.first_piola`."""
+    """:func:`nematic_solids.model.constitutive.first_piola`."""
     return cl.first_piola(F, tensors.nematic(q1, q2), _moduli(kappa, B, Bp, alpha))
 
 
 def q_increment_kernel(
     F: Array, q1: Array, q2: Array, d1: Array, d2: Array, B: float, Bp: float, alpha: float
 ) -> Array:
-    """:func:`model.constitutive.first_piola_q_increment` (kappa does not enter)."""
+    """:func:`nematic_solids.model.constitutive.first_piola_q_increment` (kappa does not enter)."""
     return cl.first_piola_q_increment(
         F, tensors.nematic(q1, q2), tensors.nematic(d1, d2), _moduli(0.0, B, Bp, alpha)
     )
@@ -98,7 +101,8 @@ def strain_measures_kernel(F: Array, P: Array) -> tuple[Array, Array, Array]:
     return Ebar_dev, J - 1.0, tensors.trace(P)
 
 
-# --- spectral operators (twins of model.compiled.spectral) ---------------------------------
+# --- spectral operators (twins of nematic_solids.model.compiled.spectral)
+# ---------------------------------
 
 
 def grad_hat_kernel(v: Array, kx: Array, ky: Array) -> Array:
@@ -173,7 +177,8 @@ def linear_response(
     return dev, tr_e, tr_s
 
 
-# --- rates of Eqs. (4)-(5) (twins of model.compiled.rates) ----------------------------------
+# --- rates of Eqs. (4)-(5) (twins of nematic_solids.model.compiled.rates)
+# ----------------------------------
 
 
 def bulk_terms(q1: Array, q2: Array, A: Array, tr_e: Array, C: float, two_Bp: float) -> Array:
@@ -218,7 +223,8 @@ def jaumann_products(omega: Array, q1: Array, q2: Array) -> Array:
     return np.stack([-2.0 * omega * q2, 2.0 * omega * q1])
 
 
-# --- the exponential integrators' pointwise pieces (twins of model.compiled.etd) -----------
+# --- the exponential integrators' pointwise pieces (twins of nematic_solids.model.compiled.etd)
+# -----------
 
 
 def phi_functions(z: Array, kmax: int = 2) -> tuple[Array, ...]:
@@ -254,7 +260,7 @@ def activity_exponential(
 
 def activity_krogstad(A: Array, h: float, zeta: float, s: float, tau: float) -> tuple[Array, Array]:
     """``(L_A, W)`` with Krogstad's ten pointwise weights (order as
-    :func:`model.compiled.etd.activity_krogstad`)."""
+    :func:`nematic_solids.model.compiled.etd.activity_krogstad`)."""
     L = -(zeta + 3.0 * s * A * A) / tau
     E, f1, f2, f3 = phi_functions(L * h, 3)
     E2, g1, g2 = phi_functions(0.5 * L * h, 2)
@@ -292,6 +298,7 @@ def rk4_update(x0: Array, c: float, v0: Array, v1: Array, v2: Array, v3: Array) 
     return x0 + c * (v0 + 2.0 * v1 + 2.0 * v2 + v3)
 
 
-# --- well-posedness (twin of model.compiled.wellposedness) ----------------------------------
+# --- well-posedness (twin of nematic_solids.model.compiled.wellposedness)
+# ----------------------------------
 
 finite_margin_kernel = finite_margin_samples

@@ -109,7 +109,7 @@ def is_rule(value: Any) -> bool:
 
 def read_rule(value: Any) -> ResolutionRule:
     """The rule of a resolution setting ``"auto"`` or ``{cells_per_frank, floor, cap}``;
-    :class:`~model.errors.ParameterError` for anything else."""
+    :class:`~nematic_solids.model.errors.ParameterError` for anything else."""
     if value == AUTO:
         return ResolutionRule()
     if not isinstance(value, Mapping) or not value or set(value) - set(KEYS):

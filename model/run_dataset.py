@@ -1,5 +1,6 @@
 """The Dataset of one run (and its run file): the CF-1.11 layout that
-:func:`model.simulate.run` returns, built from what the run recorded (:func:`to_dataset`).
+:func:`nematic_solids.model.simulate.run` returns, built from what the run recorded
+(:func:`to_dataset`).
 
 Dims ``t`` (the time series of every observable), ``snapshot_time, x, y`` (the fields at the
 snapshot times); per-run scalars; every parameter (``param_<name>``) and numerics field
@@ -132,7 +133,9 @@ def _attr(value: Any) -> Any:
         return int(value)
     if isinstance(value, (list, tuple)):
         return json.dumps(list(value))
-    if isinstance(value, dict):  # a protocol (model.protocol): its canonical form as JSON
+    if isinstance(
+        value, dict
+    ):  # a protocol (nematic_solids.model.protocol): its canonical form as JSON
         return json.dumps(value, sort_keys=True)
     return value
 
@@ -216,8 +219,8 @@ def to_dataset(
     attrs: dict[str, Any] = {
         "Conventions": "CF-1.11",
         "title": "active nematic solid simulation (Yang, Guo, Mahadevan, Eqs. 1-5)",
-        "source": f"active-nematic-solids {__version__} model.simulate.run",
-        "history": f"{created}: simulated by model.simulate.run (seed {int(seed)})",
+        "source": f"active-nematic-solids {__version__} nematic_solids.model.simulate.run",
+        "history": f"{created}: simulated by nematic_solids.model.simulate.run (seed {int(seed)})",
         "library_versions": library_versions_text(),
         "status": status,
         "reason": reason,

@@ -1,5 +1,5 @@
 r"""The homogeneous steady state under the applied pure shear: the base state of the linear
-stability analysis (:mod:`model.stability`).
+stability analysis (:mod:`nematic_solids.model.stability`).
 
 Linear mechanics on the periodic unit square under
 :math:`\bar{\boldsymbol\varepsilon} = \varepsilon\,\mathrm{diag}(1,-1)`, with

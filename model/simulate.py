@@ -1,19 +1,18 @@
 """One simulation: ``run(params, numerics, seed) -> xarray.Dataset``, the one entry that
-:mod:`sweep` calls.
+:mod:`nematic_solids.sweep` calls.
 
-The Dataset (:mod:`model.run_dataset`) is self-describing: time series of every observable
-(dim ``t``), snapshots of the fields (dims ``snapshot_time, x, y``), per-run scalars (values
-at ``t_final``, time and pattern size at the first peak of sigma2_S by the growth-peak rule
-and by the paper's literal rule, the smallest well-posedness margin, wall time) and, as
-attributes, every parameter (``param_<name>``), every numerics field (``num_<name>``), the
-seed, the code version, the git commit and the status. A run that fails (J <= 0, no
-convergence, NaN, ...) does not raise: it returns what it computed up to the failure with
-``status = "failed"`` and the ``reason``.
+The Dataset (:mod:`nematic_solids.model.run_dataset`) is self-describing: time series of every
+observable (dim ``t``), snapshots of the fields (dims ``snapshot_time, x, y``), per-run scalars
+(values at ``t_final``, time and pattern size at the first peak of sigma2_S by the growth-peak rule
+and by the paper's literal rule, the smallest well-posedness margin, wall time) and, as attributes,
+every parameter (``param_<name>``), every numerics field (``num_<name>``), the seed, the code
+version, the git commit and the status. A run that fails (J <= 0, no convergence, NaN, ...) does not
+raise: it returns what it computed up to the failure with ``status = "failed"`` and the ``reason``.
 
 A run continues exactly from a saved state of itself (``start``), hands out its state on a
-schedule (``checkpoint``) and returns its end state (``keep_state``): :mod:`model.checkpoint`.
-A new run can begin from another run's fields (``initial``, an
-:class:`model.checkpoint.InitialState`) instead of the seeded texture.
+schedule (``checkpoint``) and returns its end state (``keep_state``):
+:mod:`nematic_solids.model.checkpoint`. A new run can begin from another run's fields (``initial``,
+an :class:`nematic_solids.model.checkpoint.InitialState`) instead of the seeded texture.
 
 Early stop (numerics ``steady_tol > 0``; off by default): the run ends at the first save time
 where the observables are steady (:func:`steady`); it is ok, its series and snapshots end
@@ -135,14 +134,16 @@ def run(
     keep_state: bool = False,
 ) -> xr.Dataset | tuple[xr.Dataset, RunState | None]:
     """Simulate paper Eqs. (1)-(5) from the seeded initial condition, or continue the run
-    from ``start`` (a :class:`model.checkpoint.RunState` of this run, whose ``t_final`` may be
-    shorter: the result equals the run that never stopped); see the module docstring.
+    from ``start`` (a :class:`nematic_solids.model.checkpoint.RunState` of this run, whose
+    ``t_final`` may be shorter: the result equals the run that never stopped); see the module
+    docstring.
 
     ``checkpoint`` is called with the run's state after the saves that ``schedule`` says are
     due (never at the end); ``keep_state`` returns ``(Dataset, end state)``, the end state
     (None for a failed run) being what a longer run continues from. ``initial`` begins the
-    run at t = 0 from given fields (another run's: :class:`model.checkpoint.InitialState`)
-    instead of the seeded texture; the seed then changes nothing."""
+    run at t = 0 from given fields (another run's:
+    :class:`nematic_solids.model.checkpoint.InitialState`) instead of the seeded texture; the seed
+    then changes nothing."""
     check_compatible(params, numerics)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError("seed", seed, "an integer >= 0")
@@ -303,7 +304,7 @@ def _counters(eq: ActiveNematicPDE) -> dict[str, Any]:
 def _resume(start: RunState, u: np.ndarray, solver: ETDSolver, eq: ActiveNematicPDE) -> None:
     """Put the solver and the mechanics in the state ``start`` holds (``u``: its fields)."""
     solver.resume(start.solver, u)
-    eq.at_time(start.t)  # the constants the state was saved under (model.protocol)
+    eq.at_time(start.t)  # the constants the state was saved under (nematic_solids.model.protocol)
     eq.mechanics.resume(start.mechanics, u[0], u[1])
     c = start.counters
     eq.spectral.fft.count = int(c["fft_count"])

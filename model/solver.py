@@ -37,20 +37,21 @@ fourth-order value (local extrapolation). Measured orders 3.8-4.1 (tests).
 
 with the difference ``u_{n+1} - a`` (O(h^2)) as the error estimate.
 
-**Step control** (both; :mod:`model.solver_base`, with the shared machinery of
+**Step control** (both; :mod:`nematic_solids.model.solver_base`, with the shared machinery of
 :class:`ETDSolver`): the error estimate against ``numerics.tolerance``, the next step scaled by
 :math:`(\mathrm{tol}/\mathrm{err})^{1/p}` and rounded onto a ladder of sizes, a failed stage
 retried with h/4; ``adaptive = False`` gives the fixed-step schemes (orders tested).
 
 In linear mechanics the Jaumann spin is computed with the spectral symbol of
-:meth:`model.mechanics.LinearMechanics.spin_multiplier`, reusing the transforms the step needs
-anyway, and the whole right-hand side runs as one compiled function
-(:mod:`model.compiled.linear_rhs`) where native FFTW is available and ``Numerics.backend`` is
-"compiled" (its numpy reference otherwise: :mod:`model.split`); the stage algebra is one pass per
-stage (the backend's ``etd_combination``); finite mechanics uses the generic
-:meth:`ActiveNematicPDE.rates` path with the displacement-rate solve (its Krylov solves compiled,
-:mod:`model.compiled.finite_krylov`), with the displacement integrated with the state or Newton
-warm-started from the last stage's displacement plus its rate times the time offset.
+:meth:`nematic_solids.model.mechanics.LinearMechanics.spin_multiplier`, reusing the transforms the
+step needs anyway, and the whole right-hand side runs as one compiled function
+(:mod:`nematic_solids.model.compiled.linear_rhs`) where native FFTW is available and
+``Numerics.backend`` is "compiled" (its numpy reference otherwise:
+:mod:`nematic_solids.model.split`); the stage algebra is one pass per stage (the backend's
+``etd_combination``); finite mechanics uses the generic :meth:`ActiveNematicPDE.rates` path with the
+displacement-rate solve (its Krylov solves compiled,
+:mod:`nematic_solids.model.compiled.finite_krylov`), with the displacement integrated with the state
+or Newton warm-started from the last stage's displacement plus its rate times the time offset.
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ import numpy as np
 
 from .pde import ActiveNematicPDE
 
-# ETDSolver is imported from here too (model.simulate)
+# ETDSolver is imported from here too (nematic_solids.model.simulate)
 from .solver_base import Array, ETDSolver
 
 

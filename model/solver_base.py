@@ -1,12 +1,14 @@
-r"""The machinery that both exponential integrators of :mod:`model.solver` share:
+r"""The machinery that both exponential integrators of :mod:`nematic_solids.model.solver` share:
 :class:`ETDSolver`.
 
-It holds what does not depend on the scheme: the split right-hand side (:mod:`model.split`),
-the phi functions of :math:`L_q = -(A_0 + K k^2)/\gamma` cached per step size, the spectra
-reused between steps, the well-posedness monitor (:mod:`model.wellposedness`), the
-integrated displacement's projection onto force balance (Eq. (3)) once per accepted step, and
-py-pde's stepper with the step control below. The schemes (:class:`model.solver.ETDRK2Solver`,
-:class:`model.solver.ETDRK4Solver`) define the step and the order of its error estimate.
+It holds what does not depend on the scheme: the split right-hand side
+(:mod:`nematic_solids.model.split`), the phi functions of :math:`L_q = -(A_0 + K k^2)/\gamma` cached
+per step size, the spectra reused between steps, the well-posedness monitor
+(:mod:`nematic_solids.model.wellposedness`), the integrated displacement's projection onto force
+balance (Eq. (3)) once per accepted step, and py-pde's stepper with the step control below. The
+schemes (:class:`nematic_solids.model.solver.ETDRK2Solver`,
+:class:`nematic_solids.model.solver.ETDRK4Solver`) define the step and the order of its error
+estimate.
 
 **Step control** (both): the error is the largest pointwise error (``error_norm = "max"``,
 default; ``"rms"``: the RMS over the grid), maximum over the three fields; a step is accepted
@@ -18,8 +20,8 @@ or Newton solve that fails: a too-large step can throw a stage out of the well-p
 retried with h/4; if it still fails at ``h <= 1e-3 dt_max`` the failure is the run's.
 ``adaptive = False`` gives the fixed-step schemes (orders tested).
 
-**Protocols** (:mod:`model.protocol`): a step never crosses a switch time of the parameters'
-functions of time; one that would is shortened to end on it, and the next starts exactly
+**Protocols** (:mod:`nematic_solids.model.protocol`): a step never crosses a switch time of the
+parameters' functions of time; one that would is shortened to end on it, and the next starts exactly
 there. Every stage of a step sets the constants at its time on the pieces that hold the step's
 start; the projection and the saves at the step's end use the values after it.
 """
@@ -40,17 +42,17 @@ from .pde import ActiveNematicPDE
 from .reference_kernels import phi_functions
 from .split import make_split
 
-#: the solvers' logger (model.solver: the name under which they have always logged)
-log = logging.getLogger("model.solver")
+#: the solvers' logger (nematic_solids.model.solver: the name under which they have always logged)
+log = logging.getLogger("nematic_solids.model.solver")
 Array = np.ndarray
 
 
 @dataclass
 class SolverState:
-    """The solver's part of a continued run's state (:mod:`model.checkpoint`): the step size
-    the next step tries, the spectra of q1, q2 as the last step produced them (a forward
-    transform of the fields differs from them by rounding; None before the first step), the
-    counters and the smallest well-posedness margin so far."""
+    """The solver's part of a continued run's state (:mod:`nematic_solids.model.checkpoint`): the
+    step size the next step tries, the spectra of q1, q2 as the last step produced them (a forward
+    transform of the fields differs from them by rounding; None before the first step), the counters
+    and the smallest well-posedness margin so far."""
 
     h: float
     q_hat: Array | None
@@ -88,13 +90,13 @@ class ETDSolver(SolverBase):
         self.error_norm = num.error_norm
         p, g = pde.params, pde.spectral
         self.Lq = -(p.A0 + p.K * g.k2) / p.gamma  # the q1, q2 symbol (Fourier space)
-        #: the pointwise kernels of the backend (model.backend)
+        #: the pointwise kernels of the backend (nematic_solids.model.backend)
         self.k = kernels(num.backend)
         self._known: list[tuple[Array, Array]] = []
         self._phi_cache: dict[tuple[float, int], tuple[Array, ...]] = {}
         self.on_step: Callable[[float, float], None] | None = None
-        #: the split right-hand side (model.split: spectral for linear mechanics, compiled
-        #: where the mechanics is)
+        #: the split right-hand side (nematic_solids.model.split: spectral for linear mechanics,
+        #: compiled where the mechanics is)
         self._split = make_split(pde.mechanics, pde, self.Lq)
         #: whether the mechanics' warm start was checkpointed in the current step (after its
         #: first right-hand side)
@@ -113,7 +115,8 @@ class ETDSolver(SolverBase):
         #: the mechanical state of the last force-balance right-hand side (its tangent and E
         #: serve the well-posedness check of the step's start)
         self._last_mech: MechanicalState | None = None
-        #: smallest well-posedness margin over the accepted states (model.wellposedness)
+        #: smallest well-posedness margin over the accepted states
+        #: (nematic_solids.model.wellposedness)
         self.margin_min = float("inf")
         self._checked_at = float("nan")
         #: the step size the next step tries (the step control's state between segments)
@@ -121,7 +124,7 @@ class ETDSolver(SolverBase):
         #: the step size a continued run starts with (:meth:`resume`)
         self._resume_h: float | None = None
         #: the start of the step being taken: its stages use the protocol's pieces that
-        #: hold it (model.protocol; None outside a step: right-continuous)
+        #: hold it (nematic_solids.model.protocol; None outside a step: right-continuous)
         self._after: float | None = None
         #: the integrated displacement carries its deformation gradient through the stages
         #: (in real space) unless a protocol moves the applied shear F bar: then each stage
@@ -133,7 +136,7 @@ class ETDSolver(SolverBase):
         self, u: Array, q_hat: Array, t: float, disp: Array | None = None, F: Array | None = None
     ) -> tuple[Array, Array]:
         """Return ``(N_q hat, Adot)`` for the state ``u = [q1, q2, A]`` with ``q_hat`` the
-        spectra of q1, q2 (:mod:`model.split`). Where the mechanics integrates the
+        spectra of q1, q2 (:mod:`nematic_solids.model.split`). Where the mechanics integrates the
         displacement: at the displacement spectrum ``disp`` with deformation gradient ``F`` (its
         rate is then the mechanics' ``udot_hat``, with gradient ``udot_grad``)."""
         self.stats["rhs"] += 1
@@ -177,7 +180,8 @@ class ETDSolver(SolverBase):
     def check_wellposed(self, u: Array, t: float) -> float:
         """The well-posedness margin of the state ``u`` (an accepted state: every step checks
         its start after the first right-hand side, reusing that evaluation's tangent); raises
-        :class:`model.errors.IllPosed` when it is <= 0, naming the value and the place."""
+        :class:`nematic_solids.model.errors.IllPosed` when it is <= 0, naming the value and the
+        place."""
         if t == self._checked_at:  # a rejected step retried from the same state
             return self.margin_min
         self._checked_at = t
@@ -256,7 +260,9 @@ class ETDSolver(SolverBase):
         disp, self._pending_disp = self._pending_disp, None
         if disp is None:
             return
-        self.pde.at_time(t)  # the step's end belongs to the next piece (model.protocol)
+        self.pde.at_time(
+            t
+        )  # the step's end belongs to the next piece (nematic_solids.model.protocol)
         state = self.pde.mechanics.solve(new[0], new[1], u_guess=disp[0], t=t, F_guess=disp[1])
         self.stats["newton"] += state.iterations
         self.stats["projections"] += 1
@@ -286,7 +292,8 @@ class ETDSolver(SolverBase):
         j = np.ceil(-8.0 * np.log2(h / self.dt_max) - 1e-9)
         return float(self.dt_max * 2.0 ** (-max(j, 0.0) / 8.0))
 
-    # --- continuation (model.checkpoint) ---------------------------------------------
+    # --- continuation (nematic_solids.model.checkpoint)
+    # ---------------------------------------------
     def saved_state(self, u: Array) -> SolverState:
         """What a run continued from the accepted state ``u`` needs of the solver."""
         q_hat = next((hat.copy() for real, hat in self._known if np.array_equal(real, u[:2])), None)
@@ -319,7 +326,7 @@ class ETDSolver(SolverBase):
             h = self._dt
             while t < t_end - 1e-12 * max(1.0, abs(t_end)):
                 # land exactly on t_end (the next save time) and on the protocol's switch
-                # times (no step crosses one: model.protocol)
+                # times (no step crosses one: nematic_solids.model.protocol)
                 switch = protocol.next_break(t)
                 target = min(t_end, switch)
                 h_try = min(h, self.dt_max, target - t) if self.adaptive else min(h, target - t)

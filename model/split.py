@@ -1,4 +1,4 @@
-r"""The split right-hand side of the exponential integrators (:mod:`model.solver`).
+r"""The split right-hand side of the exponential integrators (:mod:`nematic_solids.model.solver`).
 
 For the state ``u = [q1, q2, A]`` with ``q_hat`` the spectra of q1, q2, a split returns
 :math:`\hat N_q = \widehat{\dot q} - L_q \hat q` (Fourier space, :math:`L_q = -(A_0 + K k^2)/
@@ -6,12 +6,13 @@ For the state ``u = [q1, q2, A]`` with ``q_hat`` the spectra of q1, q2, a split 
 state it used (or None):
 
 * :class:`ForceBalanceSplit`, for any mechanics: the PDE's readable
-  :meth:`model.pde.ActiveNematicPDE.rates` (force balance solved, or, where the mechanics
-  integrates the displacement, the state at the given displacement), transformed.
-* :class:`SpectralSplit`, for :class:`model.mechanics.LinearMechanics`: every linear map of q
-  stays in Fourier space (the small-strain response as Fourier symbols); one compiled function,
-  :func:`model.compiled.linear_rhs.linear_split`, where the mechanics is compiled, and its numpy
-  reference otherwise (tested to agree with each other and with ``evolution_rate``).
+  :meth:`nematic_solids.model.pde.ActiveNematicPDE.rates` (force balance solved, or, where the
+  mechanics integrates the displacement, the state at the given displacement), transformed.
+* :class:`SpectralSplit`, for :class:`nematic_solids.model.mechanics.LinearMechanics`: every linear
+  map of q stays in Fourier space (the small-strain response as Fourier symbols); one compiled
+  function, :func:`nematic_solids.model.compiled.linear_rhs.linear_split`, where the mechanics is
+  compiled, and its numpy reference otherwise (tested to agree with each other and with
+  ``evolution_rate``).
 
 :func:`make_split` chooses by the mechanics' type (``functools.singledispatch``).
 """
@@ -31,7 +32,7 @@ Array = np.ndarray
 
 
 class ForceBalanceSplit:
-    """The split from :meth:`model.pde.ActiveNematicPDE.rates` (any mechanics)."""
+    """The split from :meth:`nematic_solids.model.pde.ActiveNematicPDE.rates` (any mechanics)."""
 
     def __init__(self, pde: ActiveNematicPDE, Lq: Array):
         self.pde = pde
@@ -106,8 +107,9 @@ class SpectralSplit:
     def __call__(
         self, u: Array, q_hat: Array, t: float, disp: Array | None = None, F: Array | None = None
     ) -> tuple[Array, Array, MechanicalState | None]:
-        """``(N_q hat, Adot, None)``; by :func:`model.compiled.linear_rhs.linear_split` where the
-        mechanics is compiled, else by :meth:`reference`."""
+        """``(N_q hat, Adot, None)``; by
+        :func:`nematic_solids.model.compiled.linear_rhs.linear_split` where the mechanics is
+        compiled, else by :meth:`reference`."""
         if disp is not None:
             raise ValueError("a given displacement needs finite mechanics")
         if self._version != self.mech.parameter_version:
@@ -123,7 +125,7 @@ class SpectralSplit:
         return Nq, Adot, None
 
     def reference(self, u: Array, q_hat: Array, t: float) -> tuple[Array, Array]:
-        """numpy reference of :func:`model.compiled.linear_rhs.linear_split`."""
+        """numpy reference of :func:`nematic_solids.model.compiled.linear_rhs.linear_split`."""
         eq, mech = self.pde, self.mech
         p, g = eq.params, eq.spectral
         q1, q2, A = u

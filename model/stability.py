@@ -37,8 +37,9 @@ which for :math:`B' = 0` is a quadratic in :math:`q_b`; its smallest root gives
 :math:`\varepsilon_c = A_0 (A_0 + K k^2)\,\zeta / (2 B \chi (\alpha - B))`, half the paper's
 Eq. (6) (the paper counts the 2-D trace of :math:`-p\mathbf I` as :math:`-p`; see the docs).
 
-Only numpy, scipy and :mod:`model.parameters` (with :mod:`model.errors` and the base
-state's :mod:`model.sheared_state`) are imported.
+Only numpy, scipy and :mod:`nematic_solids.model.parameters` (with
+:mod:`nematic_solids.model.errors` and the base state's :mod:`nematic_solids.model.sheared_state`)
+are imported.
 """
 
 from __future__ import annotations

@@ -2,23 +2,23 @@
 
 The kernels are compiled on first use and cached on disk (``cache=True``: ``*.nbi`` /
 ``*.nbc`` files in a folder named by the hash of the compiled sources,
-:func:`model.compiled.cache_dir`), so only the first run on a machine (or after a change to
-the compiled code) pays the compilation. Without a warm-up, every worker of a campaign's first
-run compiles the same kernels at the same time. :func:`warm_up` runs a tiny simulation (16^2,
-to t = 0.5) of each kind a campaign uses, in one process; afterwards every other process loads
-the compiled code from the cache. A campaign's warm-up (:func:`sweep.run.task.warm_worker`) is
-this, on one worker of each host.
+:func:`nematic_solids.model.compiled.cache_dir`), so only the first run on a machine (or after a
+change to the compiled code) pays the compilation. Without a warm-up, every worker of a campaign's
+first run compiles the same kernels at the same time. :func:`warm_up` runs a tiny simulation (16^2,
+to t = 0.5) of each kind a campaign uses, in one process; afterwards every other process loads the
+compiled code from the cache. A campaign's warm-up
+(:func:`nematic_solids.sweep.run.task.warm_worker`) is this, on one worker of each host.
 
-``python -m model.warmup`` (run by ``scripts/bootstrap.sh``) first compiles the kernels' entry
-points in parallel processes (:func:`compile_in_parallel`, ``--jobs``; numba compiles in one
-thread per process): the signatures with which the tiny finite and linear runs call compiled
+``python -m nematic_solids.model.warmup`` (run by ``scripts/bootstrap.sh``) first compiles the
+kernels' entry points in parallel processes (:func:`compile_in_parallel`, ``--jobs``; numba compiles
+in one thread per process): the signatures with which the tiny finite and linear runs call compiled
 code from Python, listed in ``model/compiled/entry_points.txt`` (made by
 ``scripts/kernel_entry_points.py``), one task per module, each after the modules it imports
-(:func:`entry_groups`). Each process writes the disk cache, and loads from it the callees
-another process has saved already; then :func:`warm_up` runs in the calling process and loads
-everything from it, compiling only what the list missed (reported). The list's format is
-:mod:`model.entry_points`; the compiling processes hold a file lock around numba's cache reads
-and writes (:func:`model.kernel_cache.lock_cache_files`).
+(:func:`entry_groups`). Each process writes the disk cache, and loads from it the callees another
+process has saved already; then :func:`warm_up` runs in the calling process and loads everything
+from it, compiling only what the list missed (reported). The list's format is
+:mod:`nematic_solids.model.entry_points`; the compiling processes hold a file lock around numba's
+cache reads and writes (:func:`nematic_solids.model.kernel_cache.lock_cache_files`).
 """
 
 from __future__ import annotations
@@ -216,7 +216,7 @@ def compile_in_parallel(
     if lost:
         errors.append(
             f"a compiling process died ({lost} of {len(entries)} entry points not "
-            f"compiled); python -m model.warmup --jobs 1 compiles them in one "
+            f"compiled); python -m nematic_solids.model.warmup --jobs 1 compiles them in one "
             f"process"
         )
     return {
@@ -251,8 +251,9 @@ def _ready_stamp(entry_points: Path) -> dict[str, str]:
 
 def _ready_file() -> Path:
     """``nematic-ready.json`` in numba's cache folder: written after a complete warm-up, so
-    that the next ``python -m model.warmup`` goes straight to loading (no compiling processes
-    to start). If it is wrong (cache files deleted), :func:`warm_up` compiles what is missing."""
+    that the next ``python -m nematic_solids.model.warmup`` goes straight to loading (no compiling
+    processes to start). If it is wrong (cache files deleted), :func:`warm_up` compiles what is
+    missing."""
     import numba
 
     from . import compiled  # noqa: F401 - points numba's cache at the compiled sources' folder
@@ -262,7 +263,7 @@ def _ready_file() -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m model.warmup",
+        prog="python -m nematic_solids.model.warmup",
         description="Compile the model's numba kernels into the disk cache (a few seconds "
         "when they are there already).",
     )

@@ -2,7 +2,7 @@ r"""Well-posedness of the rate problem: the margin that every step checks.
 
 The Jaumann derivative of Eq. (4) needs the spin of the displacement rate, and the displacement
 rate solves the linearised force balance with the spin fed back through the active stress
-(:meth:`model.mechanics.FiniteMechanics.corotational`):
+(:meth:`nematic_solids.model.mechanics.FiniteMechanics.corotational`):
 
 .. math::
     -\mathrm{Div}\big(\mathbb K : \nabla \dot u + E\, \omega(\dot u)\big)
@@ -37,7 +37,8 @@ Small strain has no geometric stiffness and its symbol depends on Q alone, so it
 exactly :math:`1 - (\alpha - B) \max S` (compressible; with the incompressible projection the
 same factor multiplies the shear symbol). Finite strain uses the tangent and E of the current
 deformation, point by point (:func:`finite_margin`; its sampling compiled in
-:mod:`model.compiled.wellposedness`, with :func:`finite_margin_samples` the numpy twin).
+:mod:`nematic_solids.model.compiled.wellposedness`, with :func:`finite_margin_samples` the numpy
+twin).
 """
 
 from __future__ import annotations
@@ -58,7 +59,8 @@ N_ANGLES = 48
 def finite_symbol(K: Array, E: Array, phi: float) -> Array:
     """:math:`M_{ik}(\\hat k(\\phi))` at every point, shape (2, 2, nx, ny): numpy reference of
     :func:`finite_margin` (``K`` the tangent dP/dF packed as the backends' ``tangent_kernel``
-    returns it, (10, nx, ny): :func:`model.tensors.pack_symmetric`; ``E`` (2, 2, nx, ny))."""
+    returns it, (10, nx, ny): :func:`nematic_solids.model.tensors.pack_symmetric`; ``E`` (2, 2, nx,
+    ny))."""
     k = np.array([np.cos(phi), np.sin(phi)])
     t = np.array([-np.sin(phi), np.cos(phi)])
     KK = np.einsum("iJkL...,J,L->ik...", tensors.unpack_symmetric(K), k, k)
@@ -77,8 +79,8 @@ def finite_margin_samples(
 ) -> tuple[float, int, int]:
     """(min over points and the sampled directions of det M / scale, flat index, angle
     index), the first in (x, y, angle) order among equal minima: every point sampled (numpy
-    twin of :func:`model.compiled.wellposedness.finite_margin_kernel`, which skips the points
-    that cannot beat the minimum)."""
+    twin of :func:`nematic_solids.model.compiled.wellposedness.finite_margin_kernel`, which skips
+    the points that cannot beat the minimum)."""
     angles = np.arctan2(sin_t, cos_t)
     D = np.stack([finite_symbol_det(K, E, float(p)) for p in angles], axis=-1) / scale
     flat = int(np.argmin(D))  # (x, y, angle) order

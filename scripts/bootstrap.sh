@@ -13,5 +13,5 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[test]'
-.venv/bin/python -m model.warmup "$@"
+.venv/bin/python -m nematic_solids.model.warmup "$@"
 echo "ready: .venv/bin/nematic (or 'source .venv/bin/activate' to put nematic on your PATH)"

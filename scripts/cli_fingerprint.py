@@ -6,15 +6,14 @@ must not alter it (a refactoring):
     python scripts/cli_fingerprint.py --out /tmp/after.json
     diff /tmp/before.json /tmp/after.json
 
-It runs ``python -m sweep`` as a user would: every command's ``--help``; ``validate`` of the
-shipped campaign files; a small campaign (the quickstart at 32^2 with 8 noise modes, t = 5,
+It runs ``python -m nematic_solids.sweep`` as a user would: every command's ``--help``; ``validate``
+of the shipped campaign files; a small campaign (the quickstart at 32^2 with 8 noise modes, t = 5,
 one seed: 4 runs) through ``run --dry-run``, ``run``, ``status`` (text and ``--json``),
-``aggregate``, ``export`` and ``report``; then it hashes what the campaign wrote: every run
-file's data and attributes, ``phase.nc`` and ``fits.nc``, the campaign copy and the
-folder's file names.
-What differs between two runs of the same code is masked: wall and CPU times, dates, process
-ids, ports, load averages, the temporary folder and the provenance of the code itself
-(commit, code hash).
+``aggregate``, ``export`` and ``report``; then it hashes what the campaign wrote: every run file's
+data and attributes, ``phase.nc`` and ``fits.nc``, the campaign copy and the folder's file names.
+What differs between two runs of the same code is masked: wall and CPU times, dates, process ids,
+ports, load averages, the temporary folder and the provenance of the code itself (commit, code
+hash).
 """
 
 from __future__ import annotations
@@ -103,7 +102,7 @@ def mask(text: str, tmp: str) -> str:
 def nematic(args: list[str], tmp: str) -> dict[str, Any]:
     env = dict(os.environ, COLUMNS="120", NO_COLOR="1", TERM="dumb")
     proc = subprocess.run(
-        [sys.executable, "-m", "sweep", *args],
+        [sys.executable, "-m", "nematic_solids.sweep", *args],
         cwd=ROOT,
         env=env,
         capture_output=True,

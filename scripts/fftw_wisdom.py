@@ -17,7 +17,7 @@ import sys
 import tempfile
 import time
 
-from model.compiled import fftw as fftw_native
+from nematic_solids.model.compiled import fftw as fftw_native
 
 SIZES = [16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512]
 

@@ -1,7 +1,8 @@
-"""Print the model's fingerprint: six short, deterministic runs of :func:`model.simulate.run`
-that cover its main paths, each reduced to exact hashes of its arrays and the full-precision
-values of its scalars and counters, as JSON. A change meant to keep the behaviour (a
-refactoring) leaves the output byte-identical; compare the output before and after it.
+"""Print the model's fingerprint: six short, deterministic runs of
+:func:`nematic_solids.model.simulate.run` that cover its main paths, each reduced to exact hashes of
+its arrays and the full-precision values of its scalars and counters, as JSON. A change meant to
+keep the behaviour (a refactoring) leaves the output byte-identical; compare the output before and
+after it.
 
     .venv/bin/python scripts/fingerprint.py                       # JSON on stdout
     .venv/bin/python scripts/fingerprint.py --output before.json  # also written to a file
@@ -39,8 +40,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from model.parameters import Numerics, Parameters
-from model.simulate import run
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run
 
 #: the workload's constants (the tests' small workload: resolved at 32^2, quick to pattern)
 BASE = Parameters(noise_modes=6, K=1e-3, S0=0.2, zeta=1.0, kappa=10.0)

@@ -1,14 +1,14 @@
 """Remake the list of the kernels' entry points (``model/compiled/entry_points.txt``) that
-``python -m model.warmup`` compiles in parallel processes.
+``python -m nematic_solids.model.warmup`` compiles in parallel processes.
 
     .venv/bin/python scripts/kernel_entry_points.py     # ~1.5 min: compiles every kernel once
 
-Runs :func:`model.warmup.warm_up` (a tiny finite and a tiny linear run) in this process with
-an empty numba cache (a temporary ``NUMBA_CACHE_DIR``, removed afterwards) and lists every
-signature with which Python called a compiled function (numba's "numba:compile" events that
-no other compilation encloses) with its compile time, the longest first. Run it after a change
-to the kernels' signatures or to the code that calls them (``python -m model.warmup`` says so
-when the list misses something; tests/model/test_warmup.py checks it).
+Runs :func:`nematic_solids.model.warmup.warm_up` (a tiny finite and a tiny linear run) in this
+process with an empty numba cache (a temporary ``NUMBA_CACHE_DIR``, removed afterwards) and lists
+every signature with which Python called a compiled function (numba's "numba:compile" events that no
+other compilation encloses) with its compile time, the longest first. Run it after a change to the
+kernels' signatures or to the code that calls them (``python -m nematic_solids.model.warmup`` says
+so when the list misses something; tests/model/test_warmup.py checks it).
 """
 
 from __future__ import annotations
@@ -22,9 +22,10 @@ from pathlib import Path
 
 HEADER = """\
 # The signatures with which Python calls the model's compiled kernels in a tiny finite and a
-# tiny linear run (model.warmup.warm_up), with their compile times in seconds when listed:
-# python -m model.warmup compiles them in parallel processes, the longest first.
-# Made by scripts/kernel_entry_points.py; columns: seconds, function, numba types (tab-separated).
+# tiny linear run (nematic_solids.model.warmup.warm_up), with their compile times in seconds when
+# listed: python -m nematic_solids.model.warmup compiles them in parallel processes, the longest
+# first. Made by scripts/kernel_entry_points.py; columns: seconds, function, numba types
+# (tab-separated).
 """
 
 
@@ -34,7 +35,7 @@ def main() -> int:
     try:
         from numba.core import event
 
-        from model.warmup import ENTRY_POINTS_FILE, EntryPoint, type_text, warm_up
+        from nematic_solids.model.warmup import ENTRY_POINTS_FILE, EntryPoint, type_text, warm_up
 
         t0 = time.perf_counter()
         with event.install_recorder("numba:compile") as recorder:

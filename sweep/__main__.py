@@ -1,4 +1,4 @@
-"""``python -m sweep ...`` is the ``nematic`` program."""
+"""``python -m nematic_solids.sweep ...`` is the ``nematic`` program."""
 
 from .cli import app
 

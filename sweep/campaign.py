@@ -2,8 +2,8 @@
 and constants they are checked against (the model's parameter and numerics fields, the
 largest seed, the significant digits of swept values).
 
-:mod:`sweep.spec` builds a :class:`Campaign` from YAML; everything else reads it. This module
-imports nothing of the parsers.
+:mod:`nematic_solids.sweep.spec` builds a :class:`Campaign` from YAML; everything else reads it.
+This module imports nothing of the parsers.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from model.parameters import Numerics, Parameters
+from nematic_solids.model.parameters import Numerics, Parameters
 
 from .limits import DEFAULT_MAX_RUNS
 
@@ -115,7 +115,7 @@ class StoreSpec:
     model writes) in ``snapshot_dtype``; a rolling checkpoint of a run in progress every
     ``checkpoint_tau`` (simulated time) or ``checkpoint_wall`` (seconds), whichever comes
     first (both infinite: none); and, with ``end_state``, the run's end state, from which a
-    longer run continues (:mod:`sweep.run.continuation`)."""
+    longer run continues (:mod:`nematic_solids.sweep.run.continuation`)."""
 
     snapshot_fields: tuple[str, ...] | None = None
     snapshot_dtype: str = "float64"
@@ -180,7 +180,7 @@ class LimitsSpec:
 
 #: The run scalar of sigma2_S, the pattern class's measure (``patterned_above``).
 PATTERN_SOURCE = "sigma2_S_final"
-#: Defaults of the ``refine:`` section (an adaptive campaign, :mod:`sweep.refine`).
+#: Defaults of the ``refine:`` section (an adaptive campaign, :mod:`nematic_solids.sweep.refine`).
 DEFAULT_ROUNDS = 4
 DEFAULT_FRACTION = (0.1, 0.9)
 DEFAULT_JUMP = 10.0
@@ -211,7 +211,7 @@ class Threshold:
 
 @dataclass(frozen=True)
 class RefineSpec:
-    """A validated ``refine:`` section (:mod:`sweep.spec.refine`).
+    """A validated ``refine:`` section (:mod:`nematic_solids.sweep.spec.refine`).
 
     ``axes`` are the refined axes in the campaign's order of dims. ``source`` is the run
     scalar ``observable`` is read from (``sigma2_S_final`` for ``sigma2_S``), or ``growth``;
@@ -295,7 +295,8 @@ class RefineSpec:
 
 @dataclass(frozen=True)
 class PrecisionSpec:
-    """A validated ``precision:`` section (:mod:`sweep.precision`): seeds by precision.
+    """A validated ``precision:`` section (:mod:`nematic_solids.sweep.precision`): seeds by
+    precision.
 
     Every point gets the campaign's first ``initial`` seeds, then the next ``add`` per round
     until its decision is taken: ``precise`` (the ``confidence`` Student-t interval of the
@@ -364,8 +365,8 @@ class Variant:
 
 @dataclass(frozen=True)
 class VerifySpec:
-    """A validated ``verify:`` section (:mod:`sweep.spec.verify`). ``points`` is ``None``
-    for the default sample (both sides of each fitted transition and the grid's corners),
+    """A validated ``verify:`` section (:mod:`nematic_solids.sweep.spec.verify`). ``points`` is
+    ``None`` for the default sample (both sides of each fitted transition and the grid's corners),
     else the selections given (axis -> value; an axis left out takes every value)."""
 
     variants: tuple[Variant, ...]
@@ -390,7 +391,8 @@ class VerifySpec:
         }
 
 
-#: the name of the grid dimension of a chain's branches (``chain:``, :mod:`sweep.chains`)
+#: the name of the grid dimension of a chain's branches (``chain:``,
+#: :mod:`nematic_solids.sweep.chains`)
 BRANCH = "branch"
 #: the branches a chain may have: along its axis in increasing or decreasing order
 BRANCHES = ("up", "down")
@@ -398,10 +400,10 @@ BRANCHES = ("up", "down")
 
 @dataclass(frozen=True)
 class ChainSpec:
-    """``chain:`` (:mod:`sweep.chains`): the sweep axis that is walked in order, each point's
-    runs starting from the previous point's end state (same seed, same other values), on
-    each of ``branches`` ("up": increasing values, "down": decreasing); the grid gains the
-    dimension :data:`BRANCH`."""
+    """``chain:`` (:mod:`nematic_solids.sweep.chains`): the sweep axis that is walked in order, each
+    point's runs starting from the previous point's end state (same seed, same other values), on
+    each of ``branches`` ("up": increasing values, "down": decreasing); the grid gains the dimension
+    :data:`BRANCH`."""
 
     axis: str
     branches: tuple[str, ...] = BRANCHES

@@ -2,14 +2,14 @@
 state of the previous point's run with the same seed and the same other values: the
 quasi-static sweep that finds hysteresis.
 
-The grid gains a first dimension :data:`~sweep.campaign.BRANCH` with the branches ("up":
-the axis' values in increasing order, "down": decreasing). On each branch the first value's
-runs begin from the seeded texture (they are the plain runs of that point); every later run
-begins from its predecessor's end state at t = 0 under its own parameters, and its run id
-includes the predecessor's id (:func:`sweep.identity.hash_canonical`'s ``start``), so a
-chain's ids follow its whole history. The runs of a chain run one after the other (the
-driver submits a run with its predecessor's task as a dependency, or after its record),
-the chains in parallel; a chain stopped half-way resumes at its first run not done.
+The grid gains a first dimension :data:`~nematic_solids.sweep.campaign.BRANCH` with the branches
+("up": the axis' values in increasing order, "down": decreasing). On each branch the first value's
+runs begin from the seeded texture (they are the plain runs of that point); every later run begins
+from its predecessor's end state at t = 0 under its own parameters, and its run id includes the
+predecessor's id (:func:`nematic_solids.sweep.identity.hash_canonical`'s ``start``), so a chain's
+ids follow its whole history. The runs of a chain run one after the other (the driver submits a run
+with its predecessor's task as a dependency, or after its record), the chains in parallel; a chain
+stopped half-way resumes at its first run not done.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The campaign manager's exceptions. They extend the model's hierarchy
-(:class:`model.errors.NematicError`), so a caller can catch everything this project raises
-on purpose with one class. Every message names the bad value, what is allowed and the fix.
+(:class:`nematic_solids.model.errors.NematicError`), so a caller can catch everything this project
+raises on purpose with one class. Every message names the bad value, what is allowed and the fix.
 
 - :class:`CampaignError` an invalid campaign file or command-line override
 - :class:`CampaignLocked` another driver runs the campaign
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from model.errors import NematicError
+from nematic_solids.model.errors import NematicError
 
 
 @dataclass(frozen=True)

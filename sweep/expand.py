@@ -14,8 +14,8 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from model.parameters import Numerics, Parameters, check_compatible
-from model.resolution import resolve
+from nematic_solids.model.parameters import Numerics, Parameters, check_compatible
+from nematic_solids.model.resolution import resolve
 
 from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec, same_value
 from .chains import chain_parents, in_chain_order
@@ -91,8 +91,8 @@ class Parents:
     campaign with ``initial.from``: the parent campaign's grid point whose swept values are
     the ones ``point`` pins, the others the child's own values of the same name, and the seed
     ``seed`` (``same``: the child's own). The child's run id includes the parent run's id and
-    the time (:func:`sweep.identity.hash_canonical`'s ``start``), so a child of another parent,
-    or of another time, is another run."""
+    the time (:func:`nematic_solids.sweep.identity.hash_canonical`'s ``start``), so a child of
+    another parent, or of another time, is another run."""
 
     def __init__(self, spec: InitialSpec, parent: Expansion):
         self.spec, self.parent = spec, parent
@@ -159,7 +159,7 @@ class Expansion:
         self.points: list[GridPoint] = []
         self.run_ids: list[str] = []
         self.starts = None
-        #: each run's predecessor in its chain (``chain:``, sweep.chains), else None
+        #: each run's predecessor in its chain (``chain:``, nematic_solids.sweep.chains), else None
         self.chain_parents: list[int | None] = chain_parents(campaign)
         parents = None
         if campaign.chain is not None:

@@ -3,10 +3,10 @@ identity schema version (after signac's ``calc_id``).
 
 Canonical form (:func:`canonical_json`): the *complete* parameter and numerics dicts (the
 model's defaults filled in, ``alpha_minus_B`` resolved into ``alpha``), each value normalised
-(floats to :data:`~sweep.campaign.SIGNIFICANT_DIGITS` significant digits and written as strings, so
-``0.3`` and ``0.30000000000000004``, ``1e-5`` and ``0.00001``, ``1`` and ``1.0`` are one value;
-``-0.0`` is ``0``), keys sorted, compact JSON. The id is the first :data:`ID_LENGTH` hex digits
-of its SHA-256.
+(floats to :data:`~nematic_solids.sweep.campaign.SIGNIFICANT_DIGITS` significant digits and written
+as strings, so ``0.3`` and ``0.30000000000000004``, ``1e-5`` and ``0.00001``, ``1`` and ``1.0`` are
+one value; ``-0.0`` is ``0``), keys sorted, compact JSON. The id is the first :data:`ID_LENGTH` hex
+digits of its SHA-256.
 
 Anything that changes a run's result or its file changes the id, so an id names one file's
 content; the code version and the backend (:data:`EXECUTION_ONLY`: compiled or numpy, equal
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from model.parameters import Numerics, Parameters
+from nematic_solids.model.parameters import Numerics, Parameters
 
 from .campaign import SIGNIFICANT_DIGITS
 
@@ -112,7 +112,7 @@ def canonical_json(
     """The canonical text that is hashed. The mappings are taken as given: pass complete
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`. ``start`` names the state
     a run begins from (``{"run": parent run id, "time": "end" or the time}``,
-    :class:`sweep.expand.Parents`); absent for a run from the seeded texture."""
+    :class:`nematic_solids.sweep.expand.Parents`); absent for a run from the seeded texture."""
     payload: dict[str, Any] = {
         "numerics": canonical_value(identity_numerics(numerics)),
         "parameters": canonical_value(identity_parameters(parameters)),
@@ -145,8 +145,8 @@ def run_id_for(
     return hash_canonical(p.to_dict(), n.to_dict(), seed)
 
 
-#: The numerics a run can be continued past (model.checkpoint.MAY_DIFFER): left out of its
-#: trajectory's id.
+#: The numerics a run can be continued past (nematic_solids.model.checkpoint.MAY_DIFFER): left out
+#: of its trajectory's id.
 CONTINUABLE = ("t_final", "snapshot_times")
 
 
@@ -159,8 +159,8 @@ def trajectory_id(
     """The id of a run's trajectory: the hash of its canonical text without ``t_final`` and
     ``snapshot_times``, shared by the runs of one (parameters, numerics, seed) to different
     ends, so a longer run finds
-    the shorter ones it continues (:mod:`sweep.run.continuation`). Complete dicts, as for
-    :func:`hash_canonical`; never a run_id (a run's canonical numerics always holds
+    the shorter ones it continues (:mod:`nematic_solids.sweep.run.continuation`). Complete dicts, as
+    for :func:`hash_canonical`; never a run_id (a run's canonical numerics always holds
     ``t_final``)."""
     return hash_canonical(
         parameters, {k: v for k, v in numerics.items() if k not in CONTINUABLE}, seed, start

@@ -3,12 +3,12 @@ have, how much memory one run needs, how many workers a machine can take.
 
 A run's memory is estimated from its resolution N: the interpreter with the model imported
 (:data:`BASE_BYTES`) plus a number of N x N float64 arrays that depends on the mechanics
-(:data:`ARRAYS_PER_POINT`). Measured peak RSS of ``model.simulate.run`` (t_final = 0.2): the
-bare interpreter with the model imported 230 MB; linear mechanics 281 / 293 / 341 MB and
-finite 286 / 306 / 372 MB at N = 64 / 128 / 256, i.e. about 124 (linear) and 172 (finite)
-float64 arrays of N x N above 280 MB; the constants add a margin. The estimate only has to
-be right within a factor of about two: it exists to refuse N = 100000 (75 GiB per array) in
-a second instead of letting the allocation fail after minutes, or the machine swap.
+(:data:`ARRAYS_PER_POINT`). Measured peak RSS of ``nematic_solids.model.simulate.run`` (t_final =
+0.2): the bare interpreter with the model imported 230 MB; linear mechanics 281 / 293 / 341 MB and
+finite 286 / 306 / 372 MB at N = 64 / 128 / 256, i.e. about 124 (linear) and 172 (finite) float64
+arrays of N x N above 280 MB; the constants add a margin. The estimate only has to be right within a
+factor of about two: it exists to refuse N = 100000 (75 GiB per array) in a second instead of
+letting the allocation fail after minutes, or the machine swap.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import os
 import resource
 from typing import Any
 
-from model.errors import ParameterError
+from nematic_solids.model.errors import ParameterError
 
 #: Default ceiling on the runs of one campaign (``limits.max_runs`` changes it).
 DEFAULT_MAX_RUNS = 1_000_000

@@ -1,12 +1,13 @@
-"""A campaign's ``protocol:`` (model.protocol) and the sweep axes made of its numbers.
+"""A campaign's ``protocol:`` (nematic_solids.model.protocol) and the sweep axes made of its
+numbers.
 
-The section maps a parameter of :data:`model.protocol.PROTOCOL_PARAMETERS` to its function of
-time, in any form :func:`model.protocol.profile_from` reads. Every number of a named form
-(``pulse``: base, level, start, duration; the named ``ramp``: from, to, start, duration;
-``sine``: mean, amplitude, period, start) can be a sweep axis named ``<parameter>_<number>``,
-e.g. ``alpha_minus_B_level`` or ``eps_period``: at each grid point the axis value replaces (or
-supplies) that number. The campaign's parameters then carry the protocol of the point
-(``parameters["protocol"]``), which the model validates and the run's identity covers.
+The section maps a parameter of :data:`nematic_solids.model.protocol.PROTOCOL_PARAMETERS` to its
+function of time, in any form :func:`nematic_solids.model.protocol.profile_from` reads. Every number
+of a named form (``pulse``: base, level, start, duration; the named ``ramp``: from, to, start,
+duration; ``sine``: mean, amplitude, period, start) can be a sweep axis named
+``<parameter>_<number>``, e.g. ``alpha_minus_B_level`` or ``eps_period``: at each grid point the
+axis value replaces (or supplies) that number. The campaign's parameters then carry the protocol of
+the point (``parameters["protocol"]``), which the model validates and the run's identity covers.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import copy
 from collections.abc import Mapping
 from typing import Any
 
-from model.protocol import PROTOCOL_PARAMETERS, PULSE_KEYS, RAMP_KEYS, SINE_KEYS
+from nematic_solids.model.protocol import PROTOCOL_PARAMETERS, PULSE_KEYS, RAMP_KEYS, SINE_KEYS
 
 #: the key of the campaign's parameters that holds the protocol (Parameters.protocol)
 PROTOCOL = "protocol"

@@ -6,8 +6,8 @@ import logging
 import platform
 from typing import Any
 
-import model
-from model.provenance import git_commit, library_versions, library_versions_text
+from nematic_solids import model
+from nematic_solids.model.provenance import git_commit, library_versions, library_versions_text
 
 log = logging.getLogger(__name__)
 

@@ -34,8 +34,8 @@ import sys
 from collections.abc import Iterator
 from typing import Any
 
-#: True in the command line's own process (set by ``sweep.cli.app``), which ends with its
-#: command.
+#: True in the command line's own process (set by ``nematic_solids.sweep.cli.app``), which ends with
+#: its command.
 FRESH_PROCESS = {"on": False}
 
 

@@ -8,7 +8,7 @@
     .lock                   held (flock) by the one driver running the campaign
 
 Every file is written to a temporary name in the same folder and renamed into place
-(:mod:`sweep.files`), so a file that exists is complete. A run counts as
+(:mod:`nematic_solids.sweep.files`), so a file that exists is complete. A run counts as
 *done* when its record exists and, for a run that produced a Dataset, its ``.nc`` is the file
 the worker wrote: the size the record states and, when the file's mtime is not the recorded
 one (or on ``--check-files``), the recorded SHA-256 of its content
@@ -54,7 +54,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 RUNS = "runs"
-#: the rolling checkpoints of the runs in progress (sweep.run.continuation)
+#: the rolling checkpoints of the runs in progress (nematic_solids.sweep.run.continuation)
 CHECKPOINTS = "checkpoints"
 MANIFEST = "manifest.json"
 PHASE = "phase.nc"
@@ -91,7 +91,7 @@ RETRYABLE_REASONS = ("write_error", "killed_worker", "parent_failed")
 
 class Record(TypedDict, total=False):
     """A run's record (``runs/<run_id>.json``; the manifest keeps :data:`MANIFEST_KEYS`):
-    written by the worker task (:mod:`sweep.run.task`) or on adopting a run file
+    written by the worker task (:mod:`nematic_solids.sweep.run.task`) or on adopting a run file
     (:func:`record_from_dataset`), read back by every reader of the results folder."""
 
     run_id: str
@@ -128,13 +128,13 @@ class Record(TypedDict, total=False):
     pid: int
     #: the manifest's copy of the run file's stamp (size, mtime), beside the record's own
     stamp: list[int]
-    #: the run's trajectory (:func:`sweep.identity.trajectory_id`: its id without t_final)
+    #: the run's trajectory (its id without t_final: :func:`.identity.trajectory_id`)
     trajectory: str
     #: the time of the end state its file keeps (a longer run continues it), or None
     end_state: float | None
     #: where this execution of the run started (0, or the time of the state it continued),
     #: the run whose end state it continued (or ""), and every state it went through
-    #: ("checkpoint@t", "<run_id>@t"; :mod:`sweep.run.continuation`)
+    #: ("checkpoint@t", "<run_id>@t"; :mod:`nematic_solids.sweep.run.continuation`)
     started_at: float
     continued_from: str
     lineage: list[str]
@@ -229,7 +229,7 @@ class CampaignStore:
         return self.runs_dir / f"{run_id}.json"
 
     def checkpoint_path(self, run_id: str) -> Path:
-        """The rolling checkpoint of a run in progress (:mod:`sweep.run.continuation`)."""
+        """The rolling checkpoint of a run in progress (sweep/run/continuation.py)."""
         return self.checkpoints_dir / f"{run_id}.nc"
 
     def in_progress(self) -> dict[str, dict[str, Any]]:

@@ -38,7 +38,7 @@ def small(tmp_path_factory):
     from sweep_helpers import run_ids, write_campaign
     from typer.testing import CliRunner
 
-    from sweep.cli import app
+    from nematic_solids.sweep.cli import app
 
     folder = tmp_path_factory.mktemp("small")
     path = write_campaign(folder)

@@ -13,8 +13,8 @@ import time
 from html.parser import HTMLParser
 from pathlib import Path
 
-from sweep.expand import expand
-from sweep.spec import load_campaign
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.spec import load_campaign
 
 #: A small real campaign. alpha - B = 20 fails at once (the finite solver loses ellipticity:
 #: (alpha - B) S0 = 2 > G / 2), so the campaign has failures to record.
@@ -72,7 +72,7 @@ def start_driver(args: list[str], log: Path) -> subprocess.Popen:
     env = dict(os.environ, PYTHONUNBUFFERED="1", COLUMNS="200")
     with open(log, "wb") as out:
         return subprocess.Popen(
-            [sys.executable, "-m", "sweep", *args],
+            [sys.executable, "-m", "nematic_solids.sweep", *args],
             stdout=out,
             stderr=subprocess.STDOUT,
             env=env,

@@ -13,13 +13,17 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 MAX_LINES = 500
+#: The import package: the folders model/ and sweep/ are nematic_solids.model and
+#: nematic_solids.sweep (pyproject.toml, [tool.setuptools] package-dir).
+PARENT = "nematic_solids"
 
 
 def module_name(path: Path, root: Path = ROOT) -> str:
+    """The import name of ``path`` (a file under ``root``'s model/ or sweep/)."""
     parts = list(path.relative_to(root).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
-    return ".".join(parts)
+    return ".".join([PARENT, *parts])
 
 
 def imported_modules(path: Path, root: Path = ROOT) -> set[str]:
@@ -103,15 +107,19 @@ MAY_IMPORT: dict[str, set[str]] = {
     "report": {"spec", "outputs", "refine", "precision", "verify", "analysis", "figures"},
     "cli": {"*"},
 }
-#: Where the base may reach out: ``python -m sweep`` is the command line, and
-#: ``sweep.open_campaign`` is imported on first use from sweep.outputs.tables.
-BASE_EXCEPTIONS = {("sweep.__main__", "cli"), ("sweep", "outputs.tables")}
+#: Where the base may reach out: ``python -m nematic_solids.sweep`` is the command line, and
+#: ``sweep.open_campaign`` is imported on first use from nematic_solids.sweep.outputs.tables.
+BASE_EXCEPTIONS = {
+    (f"{PARENT}.sweep.__main__", "cli"),
+    (f"{PARENT}.sweep", "outputs.tables"),
+}
 
 
 def group_of(module: str) -> str:
+    """The group of a module of ``nematic_solids.sweep``: its subpackage, or "base"."""
     parts = module.split(".")
-    if len(parts) >= 2 and (ROOT / "sweep" / parts[1]).is_dir():
-        return parts[1]
+    if len(parts) >= 3 and (ROOT / "sweep" / parts[2]).is_dir():
+        return parts[2]
     return "base"
 
 
@@ -126,7 +134,7 @@ def boundary_violations(graph: dict[str, set[str]]) -> list[str]:
             theirs = group_of(target)
             if theirs in (mine, "base") or "*" in allowed:
                 continue
-            rest = target.split(".", 1)[1]
+            rest = target.split(".", 2)[2]
             if theirs in allowed or any(rest == a or rest.startswith(a + ".") for a in allowed):
                 continue
             if mine == "base" and any(
@@ -140,7 +148,7 @@ def boundary_violations(graph: dict[str, set[str]]) -> list[str]:
 def test_sweep_groups_import_only_what_they_may() -> None:
     """spec (reading a campaign file) never imports run, outputs or the command line; run
     (the driver, the worker task, the cluster) imports only the base; nothing but the command
-    line (and ``python -m sweep``) imports the command line."""
+    line (and ``python -m nematic_solids.sweep``) imports the command line."""
     graph = project_graph("sweep")
     assert set(MAY_IMPORT) >= {group_of(m) for m in graph}, "a group without its row"
     bad = boundary_violations(graph)
@@ -149,13 +157,17 @@ def test_sweep_groups_import_only_what_they_may() -> None:
 
 def test_the_boundary_check_finds_a_crossing() -> None:
     graph = {
-        "sweep.spec.sections": {"sweep.run.driver", "sweep.campaign", "sweep.analysis.registry"},
-        "sweep.run.driver": {"sweep.outputs.status"},
-        "sweep.cli.app": {"sweep.run.task"},
+        "nematic_solids.sweep.spec.sections": {
+            "nematic_solids.sweep.run.driver",
+            "nematic_solids.sweep.campaign",
+            "nematic_solids.sweep.analysis.registry",
+        },
+        "nematic_solids.sweep.run.driver": {"nematic_solids.sweep.outputs.status"},
+        "nematic_solids.sweep.cli.app": {"nematic_solids.sweep.run.task"},
     }
     assert boundary_violations(graph) == [
-        "sweep.run.driver (run) imports sweep.outputs.status (outputs)",
-        "sweep.spec.sections (spec) imports sweep.run.driver (run)",
+        f"{PARENT}.sweep.run.driver (run) imports {PARENT}.sweep.outputs.status (outputs)",
+        f"{PARENT}.sweep.spec.sections (spec) imports {PARENT}.sweep.run.driver (run)",
     ]
 
 
@@ -164,9 +176,25 @@ def test_model_never_imports_sweep() -> None:
         f"{module_name(f)} imports {m}"
         for f in (ROOT / "model").rglob("*.py")
         for m in imported_modules(f)
-        if m == "sweep" or m.startswith("sweep.")
+        if m == f"{PARENT}.sweep" or m.startswith(f"{PARENT}.sweep.")
     }
     assert not bad, sorted(bad)
+
+
+@pytest.mark.parametrize("folder", ["model", "sweep", "tests", "scripts", "benchmarks", "docs"])
+def test_nothing_imports_the_bare_names(folder: str) -> None:
+    """The code is imported as ``nematic_solids.model`` and ``nematic_solids.sweep`` only:
+    importing the bare name ``model`` or ``sweep`` (``from sweep.x import y``) would load the
+    folder as a top-level package of its own (or a user's ``model.py``) beside the installed
+    one."""
+    bad = sorted(
+        f"{f.relative_to(ROOT)} imports {m}"
+        for f in (ROOT / folder).rglob("*.py")
+        if "_build" not in f.parts
+        for m in imported_modules(f)
+        if m.split(".")[0] in {"model", "sweep"}
+    )
+    assert not bad, bad
 
 
 def test_sweep_uses_no_importlib() -> None:
@@ -208,8 +236,12 @@ def test_the_cycle_finder_finds_cycles() -> None:
 @pytest.mark.parametrize(
     ("source", "expected"),
     [
-        ("from .spec import AMB\n", {"sweep.spec", "sweep.spec.AMB"}),
-        ("from . import fits\n", {"sweep", "sweep.fits"}),
+        ("from .spec import AMB\n", {f"{PARENT}.sweep.spec", f"{PARENT}.sweep.spec.AMB"}),
+        ("from . import fits\n", {f"{PARENT}.sweep", f"{PARENT}.sweep.fits"}),
+        (
+            "from nematic_solids.model import errors\n",
+            {f"{PARENT}.model", f"{PARENT}.model.errors"},
+        ),
         ("import importlib\n", {"importlib"}),
     ],
 )

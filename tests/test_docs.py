@@ -53,3 +53,18 @@ def test_every_toctree_entry_is_a_page():
         if entry not in pages()
     }
     assert not missing, f"toctree entries that are no page: {sorted(missing)}"
+
+
+def test_the_api_reference_documents_the_installed_package():
+    """autodoc imports what its directives name: ``nematic_solids.model...`` and
+    ``nematic_solids.sweep...``, never the folders as top-level packages ``model`` and
+    ``sweep`` (which the build's working folder would let it import beside the installed
+    package)."""
+    targets = [
+        (path.name, target)
+        for path in (DOCS / "api").glob("*")
+        for target in re.findall(r"^\.\. auto\w+:: (\S+)", path.read_text(), flags=re.M)
+    ]
+    assert targets
+    bad = [t for t in targets if not t[1].startswith("nematic_solids.")]
+    assert not bad, bad

@@ -1,4 +1,5 @@
-"""The README's Python snippets run as written."""
+"""The README's set-up, and the Python snippets of the user guide's *One simulation* page
+(docs/guide/one_simulation.md), run as written."""
 
 from __future__ import annotations
 
@@ -10,18 +11,25 @@ import matplotlib
 import pytest
 
 README = Path(__file__).resolve().parent.parent / "README.md"
-SNIPPETS = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+PAGE = README.parent / "docs" / "guide" / "one_simulation.md"
+SNIPPETS = re.findall(r"```python\n(.*?)```", PAGE.read_text(), flags=re.S)
 
 
-def test_the_readme_has_python_snippets():
+def test_the_page_has_python_snippets():
     assert len(SNIPPETS) >= 2
+
+
+def test_the_readme_gives_the_two_commands():
+    text = README.read_text()
+    assert "bash scripts/bootstrap.sh && .venv/bin/nematic run campaigns/quickstart.yaml" in text
+    assert "bash scripts/bootstrap.sh && .venv/bin/python -m pytest" in text
 
 
 @pytest.mark.parametrize("index", range(len(SNIPPETS)))
 def test_readme_snippet_runs(index):
     matplotlib.use("Agg")
     namespace: dict = {}
-    exec(compile(SNIPPETS[index], f"README.md python snippet {index + 1}", "exec"), namespace)
+    exec(compile(SNIPPETS[index], f"{PAGE.name} python snippet {index + 1}", "exec"), namespace)
     if "final" in namespace:  # the py-pde snippet: the grid came from the 96^2 state
         assert namespace["final"].data.shape == (3, 96, 96)
         assert namespace["eq"].numerics.resolution == 96

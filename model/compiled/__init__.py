@@ -1,20 +1,20 @@
 """The compiled layer (numba, cached on disk: ``cache=True``), one module per concept, each
-naming its numpy twin:
+naming its numpy twin (a module of :mod:`nematic_solids.model`):
 
 =====================  ===================================================================
 module                 numpy twin
 =====================  ===================================================================
 ``arith``              the plain products ``c * z``, ``1j * c * z``
-``constitutive``       :mod:`model.constitutive` (through :mod:`model.reference_kernels`)
-``spectral``           :mod:`model.reference_kernels` (:class:`model.fourier.SpectralGrid`)
-``etd``                :mod:`model.reference_kernels` (``phi_functions``)
-``rates``              :mod:`model.reference_kernels` (:mod:`model.pde`'s expressions)
-``wellposedness``      :func:`model.wellposedness.finite_margin_samples`
-``krylov``             :mod:`model.krylov`
-``linear_rhs``         :meth:`model.split.SpectralSplit.reference`
-``finite_krylov``      :func:`model.krylov.pcg`, :func:`model.krylov.gmres` on the operators
-                       of :class:`model.mechanics.FiniteMechanics`
-``fftw``               :class:`model.fourier.FFT` with scipy.fft
+``constitutive``       ``constitutive`` (through ``reference_kernels``)
+``spectral``           ``reference_kernels`` (``fourier.SpectralGrid``)
+``etd``                ``reference_kernels`` (``phi_functions``)
+``rates``              ``reference_kernels`` (the expressions of ``pde``)
+``wellposedness``      ``wellposedness.finite_margin_samples``
+``krylov``             ``krylov``
+``linear_rhs``         ``split.SpectralSplit.reference``
+``finite_krylov``      ``krylov.pcg``, ``krylov.gmres`` on the operators of
+                       ``mechanics.FiniteMechanics``
+``fftw``               ``fourier.FFT`` with scipy.fft
 ``kernels``            the kernel set of ``Numerics.backend = "compiled"``
 =====================  ===================================================================
 
@@ -28,7 +28,7 @@ package therefore points numba's cache (``numba.config.CACHE_DIR``) at a folder 
 hash of every source file here, ``model/compiled/__pycache__/numba-<hash>`` (or
 ``~/.cache/nematic/numba-<hash>`` where the package folder is not writable): any change to
 the compiled code starts a fresh cache. A ``NUMBA_CACHE_DIR`` set in the environment is used
-as given. :func:`prune_stale_caches` (run by ``python -m model.warmup``, so by
+as given. :func:`prune_stale_caches` (run by ``python -m nematic_solids.model.warmup``, so by
 ``scripts/bootstrap.sh``) removes the folders of earlier versions.
 """
 

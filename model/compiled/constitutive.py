@@ -1,8 +1,8 @@
 """The finite-strain stress, its tangent and strain measures, point by point (numba).
 
-numpy twin: :mod:`model.constitutive` (the readable formulas of Eqs. 1-2), through the
-signature-compatible wrappers of :mod:`model.reference_kernels`; tested to agree in
-``tests/model/test_constitutive.py``.
+numpy twin: :mod:`nematic_solids.model.constitutive` (the readable formulas of Eqs. 1-2), through
+the signature-compatible wrappers of :mod:`nematic_solids.model.reference_kernels`; tested to agree
+in ``tests/model/test_constitutive.py``.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def _point_kinematics(F, x, y):  # pragma: no cover - compiled
 
 #: the packed tangent: K as the symmetric 4 x 4 matrix K[2 i + J, 2 k + L], its upper
 #: triangle stored row by row in 10 planes; ``PACKED[a, b]`` is the plane of entry (a, b)
-#: (numpy twin: :func:`model.tensors.pack_symmetric`)
+#: (numpy twin: :func:`nematic_solids.model.tensors.pack_symmetric`)
 PACKED = np.array([[0, 1, 2, 3], [1, 4, 5, 6], [2, 5, 7, 8], [3, 6, 8, 9]])
 
 #: points per block of :func:`tangent_kernel` (its 10 output planes are written block by block)
@@ -46,7 +46,8 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
     packed: (10, nx, ny), the upper triangle of the symmetric 4 x 4 matrix
     :math:`K_{[2i+J][2k+L]}` (:data:`PACKED`).
 
-    Differentiating :math:`P = F \mathbf S` (``model.constitutive``) with :math:`dC = dF^T F
+    Differentiating :math:`P = F \mathbf S` (``nematic_solids.model.constitutive``) with :math:`dC =
+    dF^T F
     + F^T dF` and :math:`H = F^{-T}` (so :math:`F C^{-1} = H`, :math:`F C^{-1} F^T = I`) gives
 
     .. math::
@@ -59,11 +60,11 @@ def tangent_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compil
     \beta C^{-1}`. The four terms are major-symmetric (the tangent of a hyperelastic stress
     plus the geometric stiffness of :math:`\alpha Q`), so 10 of the 16 entries determine K:
     the Krylov operators read 10 planes instead of 16 per application. Reference:
-    :func:`model.constitutive.tangent`, the directional derivative
-    :func:`~model.constitutive.first_piola_increment` in the four unit directions, packed
-    (tested to agree to roundoff). The output planes lie 8 N^2 bytes apart, on the same
-    cache sets, so writing them point by point thrashes the L1 cache: a block of points is
-    computed into a small buffer and copied out plane by plane."""
+    :func:`nematic_solids.model.constitutive.tangent`, the directional derivative
+    :func:`~nematic_solids.model.constitutive.first_piola_increment` in the four unit directions,
+    packed (tested to agree to roundoff). The output planes lie 8 N^2 bytes apart, on the same cache
+    sets, so writing them point by point thrashes the L1 cache: a block of points is computed into a
+    small buffer and copied out plane by plane."""
     nx, ny = q1.shape
     n = nx * ny
     K = np.empty((10, nx, ny))
@@ -171,7 +172,7 @@ def apply_tangent_into(K, dF, E, spin, out):  # pragma: no cover - compiled
 @njit(cache=True)
 def apply_tangent_kernel(K, dF):  # pragma: no cover - compiled
     """:math:`dP_{iJ} = K_{iJkL} dF_{kL}` point by point for the packed tangent ``K``
-    (reference: :func:`model.constitutive.apply_tangent` of the unpacked tangent)."""
+    (reference: :func:`nematic_solids.model.constitutive.apply_tangent` of the unpacked tangent)."""
     out = np.empty(dF.shape)
     apply_tangent_into(K, dF, dF, False, out)
     return out
@@ -240,14 +241,14 @@ def _stress_field(F, q1, q2, d1, d2, kappa, B, Bp, alpha, active):  # pragma: no
 @njit(cache=True)
 def first_piola_kernel(F, q1, q2, kappa, B, Bp, alpha):  # pragma: no cover - compiled
     """:math:`P = F \\mathbf S(F, Q)`, paper Eq. (2) (reference:
-    :func:`model.constitutive.first_piola`)."""
+    :func:`nematic_solids.model.constitutive.first_piola`)."""
     return _stress_field(F, q1, q2, q1, q2, kappa, B, Bp, alpha, True)
 
 
 @njit(cache=True)
 def q_increment_kernel(F, q1, q2, d1, d2, B, Bp, alpha):  # pragma: no cover - compiled
     """:math:`\\partial P/\\partial Q : dQ` at fixed F for dQ = nematic(d1, d2) (reference:
-    :func:`model.constitutive.first_piola_q_increment`; kappa does not enter)."""
+    :func:`nematic_solids.model.constitutive.first_piola_q_increment`; kappa does not enter)."""
     return _stress_field(F, q1, q2, d1, d2, 0.0, B, Bp, alpha, False)
 
 
@@ -255,7 +256,7 @@ def q_increment_kernel(F, q1, q2, d1, d2, B, Bp, alpha):  # pragma: no cover - c
 def strain_measures_kernel(F, P):  # pragma: no cover - compiled
     r"""From F and P, point by point: the deviatoric part of :math:`\bar E = \tfrac12 (J^{-1}
     C - I)` as ((E11 - E22)/2, E12), J - 1 and tr P (reference:
-    :func:`model.reference_kernels.strain_measures_kernel`)."""
+    :func:`nematic_solids.model.reference_kernels.strain_measures_kernel`)."""
     nx, ny = F.shape[2], F.shape[3]
     dev = np.empty((2, nx, ny))
     Jm1 = np.empty((nx, ny))

@@ -1,8 +1,8 @@
 """The pointwise pieces of the exponential integrators (numba): phi functions of the
 activity's local Jacobian and the stage combinations.
 
-numpy twin: :mod:`model.reference_kernels` (its ``phi_functions``); tested to agree in
-``tests/model/test_constitutive.py``.
+numpy twin: :mod:`nematic_solids.model.reference_kernels` (its ``phi_functions``); tested to agree
+in ``tests/model/test_constitutive.py``.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ _RECIP_FACT = np.array([1.0 / float(np.prod(np.arange(1, j + 1))) for j in range
 def _phi123_from(z, em1):  # pragma: no cover - compiled
     """:math:`\varphi_{1,2,3}(z)` given :math:`e^z - 1`: Taylor series (Horner, 19 terms:
     truncation < 1e-17) for |z| < 1, the recursion :math:`\varphi_{k+1} = (\varphi_k - 1/k!)/z`
-    otherwise (the same branches as :func:`model.reference_kernels.phi_functions`)."""
+    otherwise (the same branches as
+    :func:`nematic_solids.model.reference_kernels.phi_functions`)."""
     if abs(z) < 1.0:
         p1 = 0.0
         p2 = 0.0
@@ -78,11 +79,12 @@ def _taylor_row(z, c0, out):  # pragma: no cover - compiled
 @njit(cache=True)
 def activity_krogstad(A, h, zeta, s, tau):  # pragma: no cover - compiled
     r"""For the ETDRK4 step of the activity: :math:`L_A = -(\zeta + 3 s A^2)/\tau` and,
-    point by point, Krogstad's weights (:meth:`model.solver.ETDRK4Solver._weights_from`) from
-    :math:`f_k = \varphi_k(z)`, :math:`g_k = \varphi_k(z/2)` at :math:`z = h L_A`:
-    ``W[0:2]`` = :math:`e^{z}, e^{z/2}`; ``W[2]`` = g1/2 (stage a); ``W[3:5]`` = g1/2 - g2, g2
-    (stage b); ``W[5:7]`` = f1 - 2 f2, 2 f2 (stage c); ``W[7:10]`` = f1 - 3 f2 + 4 f3,
-    2 f2 - 4 f3, 4 f3 - f2 (the update). Returns ``(L_A, W)``.
+    point by point, Krogstad's weights
+    (:meth:`nematic_solids.model.solver.ETDRK4Solver._weights_from`) from :math:`f_k =
+    \varphi_k(z)`, :math:`g_k = \varphi_k(z/2)` at :math:`z = h L_A`: ``W[0:2]`` = :math:`e^{z},
+    e^{z/2}`; ``W[2]`` = g1/2 (stage a); ``W[3:5]`` = g1/2 - g2, g2 (stage b); ``W[5:7]`` = f1 - 2
+    f2, 2 f2 (stage c); ``W[7:10]`` = f1 - 3 f2 + 4 f3, 2 f2 - 4 f3, 4 f3 - f2 (the update). Returns
+    ``(L_A, W)``.
 
     Row by row: the Taylor series of :func:`_phi123_from` (|z| < 1) by :func:`_taylor_row`
     for the whole row, then point by point the recursion where |z| >= 1 and the weights:

@@ -5,11 +5,11 @@ ourselves (``fftw_plan_dft_r2c_2d`` / ``c2r_2d``, FFTW_ESTIMATE: chosen from the
 results are bitwise reproducible across processes) and run them with FFTW's new-array execute
 functions, declared to numba as external symbols (``numba.types.ExternalFunction``). So a
 whole right-hand side, Krylov loop included, can run as one compiled function
-(:mod:`model.compiled.linear_rhs`), and compiled kernels are still cached on disk (the symbols are
-resolved by name when the cache is loaded, not baked in as addresses).
+(:mod:`nematic_solids.model.compiled.linear_rhs`), and compiled kernels are still cached on disk
+(the symbols are resolved by name when the cache is loaded, not baked in as addresses).
 
-Conventions as :mod:`model.fourier`: real ``(N, N)`` fields, half spectra ``(N, N//2 + 1)``,
-forward unnormalised, inverse divided by N^2.
+Conventions as :mod:`nematic_solids.model.fourier`: real ``(N, N)`` fields, half spectra ``(N, N//2
++ 1)``, forward unnormalised, inverse divided by N^2.
 
 FFTW's new-array execute needs arrays with the alignment the plan was made with; plans are made
 on arrays that FFTW reports as aligned (``fftw_alignment_of == 0``), and :func:`rfft2` /
@@ -27,8 +27,8 @@ chosen from the size alone, equally deterministic; :func:`plan_source` says whic
 wisdom plan (vectorised row transforms) is 20-30 % faster than ESTIMATE's (scalar ``r2cf_128``),
 measured side by side.
 
-``AVAILABLE`` is False where the library cannot be found or loaded (then :mod:`model.fourier`
-falls back to scipy.fft and the solver to its numpy path).
+``AVAILABLE`` is False where the library cannot be found or loaded (then
+:mod:`nematic_solids.model.fourier` falls back to scipy.fft and the solver to its numpy path).
 """
 
 from __future__ import annotations

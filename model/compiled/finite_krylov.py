@@ -1,6 +1,7 @@
 r"""The finite-strain Krylov solves as compiled functions (numba + native FFTW).
 
-The two linear problems of :class:`model.mechanics.FiniteMechanics` (module docstring there):
+The two linear problems of :class:`nematic_solids.model.mechanics.FiniteMechanics` (module docstring
+there):
 
 * Newton's correction, :math:`-\mathrm{Div}(\mathbb K : \nabla \delta u) = \mathrm{Div}\, P`,
   by preconditioned conjugate gradients (:func:`pcg`, Saad Alg. 9.1);
@@ -10,13 +11,14 @@ The two linear problems of :class:`model.mechanics.FiniteMechanics` (module docs
 
 both preconditioned by the Green operator of the homogeneous isotropic reference medium, with
 the Parseval inner product of half spectra. They are the same algorithms, step for step, as
-:func:`model.krylov.pcg` / :func:`model.krylov.gmres_aux` driven by the numpy operators of
-``FiniteMechanics`` (the readable reference and the fallback, tested to agree); here the whole
-loop, its eight transforms per operator application included, stays in compiled code. The
-rate's GMRES also returns the real-space gradient of its solution, summed from the gradients of
-its operator applications (the auxiliary output of :func:`model.compiled.krylov.gmres`).
+:func:`nematic_solids.model.krylov.pcg` / :func:`nematic_solids.model.krylov.gmres_aux` driven by
+the numpy operators of ``FiniteMechanics`` (the readable reference and the fallback, tested to
+agree); here the whole loop, its eight transforms per operator application included, stays in
+compiled code. The rate's GMRES also returns the real-space gradient of its solution, summed from
+the gradients of its operator applications (the auxiliary output of
+:func:`nematic_solids.model.compiled.krylov.gmres`).
 
-Only used where :data:`model.compiled.fftw.AVAILABLE`.
+Only used where :data:`nematic_solids.model.compiled.fftw.AVAILABLE`.
 """
 
 from __future__ import annotations
@@ -78,8 +80,9 @@ def _operator_of_gradient(G, K, E, spin, kx, ky, pf, work_hat, P, out):  # pragm
 class TangentOperator(NamedTuple):
     """:math:`-\\mathrm{Div}(\\mathbb K : \\nabla v\\, [+ E\\, \\omega(v)])` of
     :func:`_operator` (the E term if ``spin``: the displacement rate; without it Newton's
-    tangent) and its Green preconditioner, for the compiled :func:`model.compiled.krylov.pcg`
-    and :func:`model.compiled.krylov.gmres`."""
+    tangent) and its Green preconditioner, for the compiled
+    :func:`nematic_solids.model.compiled.krylov.pcg` and
+    :func:`nematic_solids.model.compiled.krylov.gmres`."""
 
     K: Array
     E: Array
@@ -163,9 +166,10 @@ def _tangent_operator(K, E, spin, kx, ky, khx, khy, inv_k2, a, pf, pi):  # pragm
 
 @njit(cache=True)
 def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pragma: no cover
-    """Newton's correction by :func:`model.compiled.krylov.pcg`, preconditioned by the Green
-    operator; returns ``(x, iterations, status, operator applications)``, status 0 ok,
-    1 maxiter, 2 indefinite (as :func:`model.krylov.pcg`'s "ok", "maxiter", "indefinite")."""
+    """Newton's correction by :func:`nematic_solids.model.compiled.krylov.pcg`, preconditioned by
+    the Green operator; returns ``(x, iterations, status, operator applications)``, status 0 ok, 1
+    maxiter, 2 indefinite (as :func:`nematic_solids.model.krylov.pcg`'s "ok", "maxiter",
+    "indefinite")."""
     # no spin term, so E is a placeholder of E's type
     op = _tangent_operator(K, np.zeros((2, 2, 1, 1)), False, kx, ky, khx, khy, inv_k2, a, pf, pi)
     return krylov.pcg(op, b, x0, w, rtol, maxiter)
@@ -175,14 +179,14 @@ def pcg(K, b, x0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter):  # pra
 def gmres(
     K, E, b, x0, g0, kx, ky, khx, khy, inv_k2, a, w, pf, pi, rtol, maxiter, V, Z, LZ
 ):  # pragma: no cover
-    """The displacement rate by :func:`model.compiled.krylov.gmres`, right-preconditioned by
-    the Green operator, from ``x0`` whose real-space gradient is ``g0`` (empty: unknown);
-    returns ``(x, grad x, iterations, converged, operator applications, applications from a
-    known gradient)`` with ``grad x`` the real-space gradient (2, 2, N, N) of the solution,
-    accumulated from the gradients every operator application computes anyway (no transform
-    of its own); the start's residual from ``g0`` needs 4 transforms instead of 8. ``V``
-    (restart + 1 spectra), ``Z`` (restart) and ``LZ`` (restart gradients) are caller-owned
-    work arrays (:func:`workspace`)."""
+    """The displacement rate by :func:`nematic_solids.model.compiled.krylov.gmres`,
+    right-preconditioned by the Green operator, from ``x0`` whose real-space gradient is ``g0``
+    (empty: unknown); returns ``(x, grad x, iterations, converged, operator applications,
+    applications from a known gradient)`` with ``grad x`` the real-space gradient (2, 2, N, N) of
+    the solution, accumulated from the gradients every operator application computes anyway (no
+    transform of its own); the start's residual from ``g0`` needs 4 transforms instead of 8. ``V``
+    (restart + 1 spectra), ``Z`` (restart) and ``LZ`` (restart gradients) are caller-owned work
+    arrays (:func:`workspace`)."""
     op = _tangent_operator(K, E, True, kx, ky, khx, khy, inv_k2, a, pf, pi)
     return krylov.gmres(op, b, x0, g0, w, rtol, maxiter, V, Z, LZ)
 

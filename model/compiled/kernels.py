@@ -1,6 +1,6 @@
 """The compiled kernels a ``Numerics.backend = "compiled"`` run uses, under the names of their
-numpy twins in :mod:`model.reference_kernels` (:func:`model.backend.kernels` picks one of the
-two modules)."""
+numpy twins in :mod:`nematic_solids.model.reference_kernels`
+(:func:`nematic_solids.model.backend.kernels` picks one of the two modules)."""
 
 from __future__ import annotations
 

@@ -1,9 +1,10 @@
 """The pieces of the compiled Krylov solvers (numba): Givens rotations, back substitution,
 weighted inner products and the fused Arnoldi step, shared by
-:func:`model.compiled.linear_rhs.spin_gmres` and :mod:`model.compiled.finite_krylov`.
+:func:`nematic_solids.model.compiled.linear_rhs.spin_gmres` and
+:mod:`nematic_solids.model.compiled.finite_krylov`.
 
-numpy twin: :mod:`model.krylov` (the same algorithms on arrays with a caller-supplied inner
-product); tested to agree in ``tests/model/test_krylov.py``.
+numpy twin: :mod:`nematic_solids.model.krylov` (the same algorithms on arrays with a caller-supplied
+inner product); tested to agree in ``tests/model/test_krylov.py``.
 """
 
 from __future__ import annotations
@@ -213,7 +214,7 @@ def precondition(op, v, out):  # pragma: no cover - compiled through its overloa
 def gmres(op, b, x0, Lx0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - compiled
     """Right-preconditioned restarted GMRES (Saad Alg. 9.5) for the operator ``op`` from
     ``x0``, with the Parseval-weighted inner product ``w``: the same algorithm, step for step,
-    as :func:`model.krylov._gmres` (its numpy twin). Returns ``(x, L x, iterations,
+    as :func:`nematic_solids.model.krylov._gmres` (its numpy twin). Returns ``(x, L x, iterations,
     converged, operator applications, applications given L x)``.
 
     A zero ``x0`` costs no operator application (its residual is ``b``, its ``L x`` zero).
@@ -291,10 +292,10 @@ def gmres(op, b, x0, Lx0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - com
 def pcg(op, b, x0, w, rtol, maxiter):  # pragma: no cover - compiled
     """Preconditioned conjugate gradients (Saad Alg. 9.1) for the symmetric positive definite
     operator ``op`` from ``x0``: the same algorithm, step for step, as
-    :func:`model.krylov.pcg` (its numpy twin). Stops when the preconditioned residual norm
-    :math:`\\sqrt{r \\cdot M r}` falls below ``rtol`` times that of ``b``. Returns ``(x,
-    iterations, status, operator applications)``, status 0 ok, 1 maxiter, 2 indefinite (a
-    direction of non-positive curvature)."""
+    :func:`nematic_solids.model.krylov.pcg` (its numpy twin). Stops when the preconditioned residual
+    norm :math:`\\sqrt{r \\cdot M r}` falls below ``rtol`` times that of ``b``. Returns ``(x,
+    iterations, status, operator applications)``, status 0 ok, 1 maxiter, 2 indefinite (a direction
+    of non-positive curvature)."""
     x = x0.copy()
     nop = 0
     no_aux = np.empty(0, dtype=np.complex128)

@@ -1,8 +1,8 @@
 r"""The linear-mechanics right-hand side as one compiled function (numba + native FFTW).
 
-Computes exactly what :meth:`model.split.SpectralSplit.reference` computes (its readable numpy
-path, which stays the reference and the fallback, tested to agree): from the state q1, q2, A
-and the spectra of q1, q2,
+Computes exactly what :meth:`nematic_solids.model.split.SpectralSplit.reference` computes (its
+readable numpy path, which stays the reference and the fallback, tested to agree): from the state
+q1, q2, A and the spectra of q1, q2,
 
 .. math::
     \hat H = \widehat{b(q, A)\, q} + B\, \widehat{\mathrm{dev}\, e}, \quad
@@ -12,15 +12,16 @@ and the spectra of q1, q2,
     \dot A = (-\zeta A - \chi\, \mathrm{tr}\,\sigma - s A^3)/\tau \quad (\text{Eq. 5}),
 
 with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (Eq. 4; A0 and the Frank term are in
-:math:`L_q`), the small-strain response of :func:`model.compiled.spectral.linear_response`
-(as its real Fourier symbols ``S``, :meth:`model.mechanics.LinearMechanics.response_symbols`,
-applied point by point), and the spin equation (the Jaumann term,
-:meth:`model.mechanics.LinearMechanics.corotational_hat`) solved by the same restarted GMRES
-as :func:`model.krylov.gmres_aux` (Saad Alg. 9.5, no preconditioner, started from zero,
-Givens-rotated residual, modified Gram-Schmidt, Parseval inner product), here without leaving
-compiled code: the transforms run through :mod:`model.compiled.fftw`.
+:math:`L_q`), the small-strain response of
+:func:`nematic_solids.model.compiled.spectral.linear_response` (as its real Fourier symbols ``S``,
+:meth:`nematic_solids.model.mechanics.LinearMechanics.response_symbols`, applied point by point),
+and the spin equation (the Jaumann term,
+:meth:`nematic_solids.model.mechanics.LinearMechanics.corotational_hat`) solved by the same
+restarted GMRES as :func:`nematic_solids.model.krylov.gmres_aux` (Saad Alg. 9.5, no preconditioner,
+started from zero, Givens-rotated residual, modified Gram-Schmidt, Parseval inner product), here
+without leaving compiled code: the transforms run through :mod:`nematic_solids.model.compiled.fftw`.
 
-Only built where :data:`model.compiled.fftw.AVAILABLE`.
+Only built where :data:`nematic_solids.model.compiled.fftw.AVAILABLE`.
 """
 
 from __future__ import annotations
@@ -62,8 +63,8 @@ def _spin_operator(x, q1, q2, m1, m2, pf, pi, omega, prod, scratch, out, jout): 
 
 class SpinOperator(NamedTuple):
     """The spin operator :math:`I - M` of :func:`_spin_operator` for the compiled
-    :func:`model.compiled.krylov.gmres` (no preconditioner; the auxiliary output is the
-    Jaumann rate): the state's q1, q2, the spin symbols, the plans and the work arrays."""
+    :func:`nematic_solids.model.compiled.krylov.gmres` (no preconditioner; the auxiliary output is
+    the Jaumann rate): the state's q1, q2, the spin symbols, the plans and the work arrays."""
 
     q1: Array
     q2: Array
@@ -117,11 +118,11 @@ def _precondition_spin(op, v, out):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def spin_gmres(b, x0, q1, q2, m1, m2, w, pf, pi, rtol, maxiter, V, LZ):  # pragma: no cover
-    """Solve :math:`(I - M)\\hat\\omega = b` by :func:`model.compiled.krylov.gmres` from
-    ``x0``; returns ``(omega_hat, j_hat, iterations, converged, operator applications)`` with
-    ``j_hat`` the spectra of :math:`2\\omega J q` at the solution (the auxiliary output). The
-    Krylov basis ``V`` (restart + 1 spectra) and its Jaumann rates ``LZ`` (restart pairs) are
-    caller-owned work arrays."""
+    """Solve :math:`(I - M)\\hat\\omega = b` by :func:`nematic_solids.model.compiled.krylov.gmres`
+    from ``x0``; returns ``(omega_hat, j_hat, iterations, converged, operator applications)`` with
+    ``j_hat`` the spectra of :math:`2\\omega J q` at the solution (the auxiliary output). The Krylov
+    basis ``V`` (restart + 1 spectra) and its Jaumann rates ``LZ`` (restart pairs) are caller-owned
+    work arrays."""
     n = q1.shape[0]
     op = SpinOperator(
         q1, q2, m1, m2, pf, pi, np.empty((n, n)), np.empty((2, n, n)), fx.aligned_half(n)
@@ -147,8 +148,9 @@ class LinearRHS(NamedTuple):
     constants of Eqs. (4)-(5), the spin solve's tolerance and iteration cap, its work
     arrays ``V``, ``LZ`` (:func:`workspace`), and under a protocol the rate of alpha - B
     ``spin_rate`` with the spin symbols per unit alpha - B ``mu1``, ``mu2`` (the spin source
-    :meth:`model.mechanics.LinearMechanics.spin_source`). The constants that a protocol
-    changes are replaced with ``_replace`` (:class:`model.split.SpectralSplit`)."""
+    :meth:`nematic_solids.model.mechanics.LinearMechanics.spin_source`). The constants that a
+    protocol changes are replaced with ``_replace``
+    (:class:`nematic_solids.model.split.SpectralSplit`)."""
 
     Lq: Array
     m1: Array
@@ -182,8 +184,8 @@ def linear_split(q1, q2, A, q_hat, omega_hat, rhs_data):  # pragma: no cover
     ``omega_hat`` is the start of the spin solve (zeros from the solver: no operator
     application for its residual). The small-strain response ``S[r, c]`` (outputs r: dev e
     (2 comps), tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat; the symbols of
-    :meth:`model.mechanics.LinearMechanics.response_symbols`) is applied point by point where
-    it is used, so that no response spectra are stored (the passes over memory, not the
+    :meth:`nematic_solids.model.mechanics.LinearMechanics.response_symbols`) is applied point by
+    point where it is used, so that no response spectra are stored (the passes over memory, not the
     arithmetic, are what this costs); with B' = 0 the Q:Q column and tr e are skipped."""
     (
         Lq,

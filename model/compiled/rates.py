@@ -1,7 +1,7 @@
 """Pointwise terms of the rates of Eqs. (4)-(5) (numba).
 
-numpy twin: :mod:`model.reference_kernels` (the expressions of
-:meth:`model.pde.ActiveNematicPDE.molecular_field` and ``activity_rate``).
+numpy twin: :mod:`nematic_solids.model.reference_kernels` (the expressions of
+:meth:`nematic_solids.model.pde.ActiveNematicPDE.molecular_field` and ``activity_rate``).
 """
 
 from __future__ import annotations

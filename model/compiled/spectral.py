@@ -1,8 +1,9 @@
 """Spectral operators on half spectra (numba): gradient, divergence, the Green operator of
 the isotropic reference medium, the linear mechanics' response and spin symbols.
 
-numpy twin: :mod:`model.reference_kernels` (from :meth:`model.fourier.SpectralGrid.grad_hat`,
-``div_hat`` and :class:`model.mechanics.LinearMechanics`' references); tested to agree in
+numpy twin: :mod:`nematic_solids.model.reference_kernels` (from
+:meth:`nematic_solids.model.fourier.SpectralGrid.grad_hat`, ``div_hat`` and
+:class:`nematic_solids.model.mechanics.LinearMechanics`' references); tested to agree in
 ``tests/model/test_constitutive.py``.
 """
 
@@ -17,7 +18,7 @@ from .arith import imul, rmul
 @njit(cache=True)
 def grad_hat_kernel(v, kx, ky):  # pragma: no cover - compiled
     """:math:`\\widehat{\\partial_j v_i} = i k_j \\hat v_i` (reference:
-    :meth:`model.fourier.SpectralGrid.grad_hat`)."""
+    :meth:`nematic_solids.model.fourier.SpectralGrid.grad_hat`)."""
     nx, ny = kx.shape
     out = np.empty((2, 2, nx, ny), dtype=np.complex128)
     for i in range(2):
@@ -32,7 +33,7 @@ def grad_hat_kernel(v, kx, ky):  # pragma: no cover - compiled
 @njit(cache=True)
 def neg_div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
     """:math:`-i k_j \\hat T_{ij}` (reference: minus
-    :meth:`model.fourier.SpectralGrid.div_hat`)."""
+    :meth:`nematic_solids.model.fourier.SpectralGrid.div_hat`)."""
     nx, ny = kx.shape
     out = np.empty((2, nx, ny), dtype=np.complex128)
     for i in range(2):
@@ -46,7 +47,8 @@ def neg_div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def div_hat_kernel(T, kx, ky):  # pragma: no cover - compiled
-    r""":math:`i k_j \hat T_{ij}` (reference: :meth:`model.fourier.SpectralGrid.div_hat`)."""
+    r""":math:`i k_j \hat T_{ij}` (reference:
+    :meth:`nematic_solids.model.fourier.SpectralGrid.div_hat`)."""
     nx, ny = kx.shape
     out = np.empty((2, nx, ny), dtype=np.complex128)
     for i in range(2):
@@ -74,7 +76,7 @@ def green_into(b, khx, khy, inv_k2, a, out):  # pragma: no cover - compiled
 @njit(cache=True)
 def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
     """Green operator of the isotropic reference medium, :math:`(I - a \\hat k \\hat k)
-    \\hat b / k^2` (numpy twin: :func:`model.reference_kernels.green_kernel`)."""
+    \\hat b / k^2` (numpy twin: :func:`nematic_solids.model.reference_kernels.green_kernel`)."""
     out = np.empty((2,) + khx.shape, dtype=np.complex128)
     green_into(b, khx, khy, inv_k2, a, out)
     return out
@@ -83,9 +85,9 @@ def green_kernel(b, khx, khy, inv_k2, a):  # pragma: no cover - compiled
 @njit(cache=True)
 def balance_residual_kernel(P, P_hat, khx, khy, weights):  # pragma: no cover - compiled
     r"""The force-balance residual :math:`\lVert \hat k_J \hat P_{iJ} \rVert /
-    \max(1, \mathrm{RMS}\, P)` (:meth:`model.mechanics.Mechanics.residual`): the RMS of
-    Div P in the :math:`H^{-1}` norm from the half spectrum ``P_hat`` (Parseval ``weights``)
-    over the RMS stress, floored at the shear modulus 1."""
+    \max(1, \mathrm{RMS}\, P)` (:meth:`nematic_solids.model.mechanics.Mechanics.residual`): the RMS
+    of Div P in the :math:`H^{-1}` norm from the half spectrum ``P_hat`` (Parseval ``weights``) over
+    the RMS stress, floored at the shear modulus 1."""
     nx, ny = khx.shape
     s = 0.0
     for i in range(2):
@@ -119,9 +121,9 @@ def symbol_combination(x, m1, m2, a, b):  # pragma: no cover - compiled
 def linear_response(
     q1h, q2h, isoh, kx, ky, khx, khy, inv_k2, amb, a, kappa, incompressible, mean_dev
 ):  # pragma: no cover - compiled
-    r"""Fused :meth:`model.mechanics.LinearMechanics.spectral_response`: from the spectra of
-    q1, q2 (and of the isotropic eigenstress ``isoh`` = -B' Q:Q hat, zeros if B' = 0) return
-    the spectra ``dev e`` (2 components), ``tr e`` and ``tr sigma`` of the small-strain
+    r"""Fused :meth:`nematic_solids.model.mechanics.LinearMechanics.spectral_response`: from the
+    spectra of q1, q2 (and of the isotropic eigenstress ``isoh`` = -B' Q:Q hat, zeros if B' = 0)
+    return the spectra ``dev e`` (2 components), ``tr e`` and ``tr sigma`` of the small-strain
     solution; ``a`` is the Green operator's kappa / (kappa + 1) (1 if incompressible) and
     ``mean_dev`` the applied eps times N^2 (the mean of dev e in unnormalised spectra)."""
     nx, ny = q1h.shape

@@ -1,8 +1,8 @@
 """The finite-strain well-posedness margin over the grid (numba): the smallest determinant of
 the rate problem's symbol over points and sampled directions.
 
-numpy twin: :func:`model.reference_kernels.finite_margin_kernel` (every point sampled, from
-:func:`model.wellposedness.finite_symbol_det`); tested to agree in
+numpy twin: :func:`nematic_solids.model.reference_kernels.finite_margin_kernel` (every point
+sampled, from :func:`nematic_solids.model.wellposedness.finite_symbol_det`); tested to agree in
 ``tests/model/test_wellposedness.py``.
 """
 
@@ -17,7 +17,8 @@ from .constitutive import PACKED
 @njit(cache=True)
 def finite_margin_kernel(K, E, cos_t, sin_t, scale):  # pragma: no cover - compiled
     r"""(min over points and sampled directions of det M / scale, flat index, angle index),
-    for the packed tangent ``K`` (:func:`model.compiled.constitutive.tangent_kernel`).
+    for the packed tangent ``K``
+    (:func:`nematic_solids.model.compiled.constitutive.tangent_kernel`).
 
     A point is sampled only if it can beat the minimum so far: each entry of M is
     :math:`a + b \cos 2\phi + c \sin 2\phi`, so :math:`\det M = d_0 + d_2 \cdot

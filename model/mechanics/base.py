@@ -11,8 +11,8 @@ displacement gradient is exactly that).
 and the warm start's :meth:`~Mechanics.checkpoint`, :meth:`~Mechanics.restore`,
 :meth:`~Mechanics.predict`, and for a continued run :meth:`~Mechanics.saved_state` and
 :meth:`~Mechanics.resume`); :class:`MechanicalState` is what a solve returns. The two
-mechanics are :class:`model.mechanics.linear.LinearMechanics` and
-:class:`model.mechanics.finite.FiniteMechanics`.
+mechanics are :class:`nematic_solids.model.mechanics.linear.LinearMechanics` and
+:class:`nematic_solids.model.mechanics.finite.FiniteMechanics`.
 
 **Residual.** :math:`r = \lVert \hat k_J \hat P_{iJ} \rVert / \max(1, \lVert P \rVert)`: the RMS
 of :math:`\mathrm{Div}\,P` in the :math:`H^{-1}` norm (so high wavenumbers are not amplified),
@@ -49,7 +49,7 @@ class MechanicalState:
     part of :math:`\\bar E = \\tfrac12 (J^{-1} C - I)` (small strain: of e), ``Jm1`` is
     :math:`J - 1` as it enters :math:`B'` (small strain: tr e), ``trP`` is
     :math:`P_{11} + P_{22}` (Eq. 5). Finite strain also carries what the rate problem reuses:
-    ``tangent``, the packed (:func:`model.tensors.pack_symmetric`) tangent
+    ``tangent``, the packed (:func:`nematic_solids.model.tensors.pack_symmetric`) tangent
     :math:`\\mathbb K = \\partial P / \\partial F` of Newton's last step (at the iterate before
     the solution; None where the guess needed no step, and in the states of
     :meth:`~Mechanics.state_at`), and ``spin_coupling``, :math:`E = \\partial_Q P : (2 J q)`, once
@@ -108,7 +108,7 @@ class Mechanics(ABC):
         self.params = params
         self.grid = grid
         self.spin_tol = spin_tol
-        #: the pointwise and spectral kernels of the backend (model.backend)
+        #: the pointwise and spectral kernels of the backend (nematic_solids.model.backend)
         self.k = kernels(backend)
         #: compiled code runs the Krylov solves (native FFTW available and backend "compiled")
         self.compiled = backend == "compiled" and grid.fft.plans is not None
@@ -134,8 +134,8 @@ class Mechanics(ABC):
         self._khat = kh
 
     def set_parameters(self, params: Parameters, rates: dict[str, float]) -> None:
-        """The constants at the current time of a protocol (:mod:`model.protocol`) and the
-        time derivatives ``rates`` of alpha - B and eps there (they drive the displacement
+        """The constants at the current time of a protocol (:mod:`nematic_solids.model.protocol`)
+        and the time derivatives ``rates`` of alpha - B and eps there (they drive the displacement
         rate: :meth:`corotational`)."""
         self.params = params
         self.moduli = cl.Moduli.from_params(params)
@@ -182,7 +182,7 @@ class Mechanics(ABC):
         self, q1: Array, q2: Array, mech: MechanicalState | None = None
     ) -> tuple[float, int, float]:
         """The well-posedness margin of the rate problem, its flat grid index and the
-        wave-vector angle of the minimum (:mod:`model.wellposedness`)."""
+        wave-vector angle of the minimum (:mod:`nematic_solids.model.wellposedness`)."""
 
     def checkpoint(self) -> None:  # noqa: B027 (no warm start: nothing to do)
         """Remember the warm start (displacement and its rate) at the start of a step."""
@@ -195,7 +195,7 @@ class Mechanics(ABC):
 
     def saved_state(self) -> dict[str, Array]:
         """What a run continued from this moment needs of the mechanics besides the fields
-        (:mod:`model.checkpoint`): nothing here (every solve starts from zero)."""
+        (:mod:`nematic_solids.model.checkpoint`): nothing here (every solve starts from zero)."""
         return {}
 
     def resume(self, arrays: dict[str, Array], q1: Array, q2: Array) -> None:  # noqa: B027

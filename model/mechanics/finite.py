@@ -127,8 +127,8 @@ class FiniteMechanics(Mechanics):
         return A
 
     def _pcg(self, K: Array, b_hat: Array, rtol: float) -> tuple[Array, int, bool]:
-        """Newton's correction from zero: compiled (:func:`model.finite_krylov.pcg`) or the
-        numpy reference (:func:`model.krylov.pcg` on :meth:`_operator`)."""
+        """Newton's correction from zero: compiled (:func:`nematic_solids.model.finite_krylov.pcg`)
+        or the numpy reference (:func:`nematic_solids.model.krylov.pcg` on :meth:`_operator`)."""
         g = self.grid
         x0 = np.zeros_like(b_hat)
         if self.compiled:
@@ -164,9 +164,9 @@ class FiniteMechanics(Mechanics):
     def _udot_gmres(self, K: Array, E: Array, b: Array) -> tuple[Array, Array, int, bool]:
         """The displacement-rate solve, warm-started from the last rate :attr:`udot_hat`:
         ``(udot_hat, its real-space gradient, iterations, converged)``, compiled
-        (:func:`model.compiled.finite_krylov.gmres`) or the numpy reference
-        (:func:`model.krylov.gmres_aux`); the gradient comes with the operator applications
-        (no transform of its own), and the start's residual uses the start's gradient
+        (:func:`nematic_solids.model.compiled.finite_krylov.gmres`) or the numpy reference
+        (:func:`nematic_solids.model.krylov.gmres_aux`); the gradient comes with the operator
+        applications (no transform of its own), and the start's residual uses the start's gradient
         :attr:`udot_grad` (four transforms instead of eight)."""
         g = self.grid
         if self.compiled:
@@ -368,8 +368,8 @@ class FiniteMechanics(Mechanics):
             \quad \omega(\dot u) = \tfrac12 (\partial_1 \dot u_2 - \partial_2 \dot u_1),
 
         by GMRES (Green-preconditioned, warm-started), with the rates of alpha and of the
-        applied shear under a protocol (:mod:`model.protocol`; zero otherwise). Returns
-        ``(Qdot components, omega)``.
+        applied shear under a protocol (:mod:`nematic_solids.model.protocol`; zero otherwise).
+        Returns ``(Qdot components, omega)``.
         """
         g, m = self.grid, self.moduli
         K = mech.tangent
@@ -417,7 +417,7 @@ class FiniteMechanics(Mechanics):
     ) -> tuple[float, int, float]:
         """Well-posedness margin of the rate problem at the deformation of ``mech`` (solved
         here if not given), its flat grid index and the wave-vector angle of the minimum
-        (:func:`model.wellposedness.finite_margin`; reuses the tangent and E of
+        (:func:`nematic_solids.model.wellposedness.finite_margin`; reuses the tangent and E of
         :meth:`corotational` when ``mech`` has them)."""
         m = self.moduli
         if mech is None:

@@ -125,8 +125,9 @@ class LinearMechanics(Mechanics):
         """Fast path of :meth:`solve` for the time stepper, all from the spectra of q1, q2
         (and of Q:Q when B' != 0): returns ``(dev e hat (2 comps), tr e hat, tr sigma hat)``.
 
-        The backend's ``linear_response`` (:mod:`model.compiled.spectral`, or its numpy twin
-        in :mod:`model.reference_kernels`; tested to agree, and with :meth:`solve`).
+        The backend's ``linear_response`` (:mod:`nematic_solids.model.compiled.spectral`, or its
+        numpy twin in :mod:`nematic_solids.model.reference_kernels`; tested to agree, and with
+        :meth:`solve`).
         """
         g, m = self.grid, self.moduli
         iso = -m.B_prime * QQ_hat if QQ_hat is not None else self.zero_hat
@@ -149,9 +150,9 @@ class LinearMechanics(Mechanics):
     def response_symbols(self) -> Array:
         """The real symbols ``S[r, c]`` of :meth:`spectral_response` (outputs r: dev e (2
         components), tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat), for
-        :func:`model.compiled.linear_rhs.linear_split`: the responses to unit spectra; the
-        response is linear and every factor i of a derivative meets another one, so they are
-        real."""
+        :func:`nematic_solids.model.compiled.linear_rhs.linear_split`: the responses to unit
+        spectra; the response is linear and every factor i of a derivative meets another one, so
+        they are real."""
         g, m = self.grid, self.moduli
         one, zero = np.ones(g.k2.shape, dtype=complex), self.zero_hat
         cols = []
@@ -231,7 +232,7 @@ class LinearMechanics(Mechanics):
     def rate_margin(
         self, q1: Array, q2: Array, mech: MechanicalState | None = None
     ) -> tuple[float, int, float]:
-        r"""Well-posedness margin of the rate problem (:mod:`model.wellposedness`):
+        r"""Well-posedness margin of the rate problem (:mod:`nematic_solids.model.wellposedness`):
         :math:`1 - (\alpha - B) \max S`, its flat grid index, and the wave-vector angle of
         the minimum (perpendicular to the director there)."""
         m, idx = wp.linear_margin(q1, q2, self.params.alpha_minus_B)
@@ -241,9 +242,10 @@ class LinearMechanics(Mechanics):
     def accept_spin(
         self, omega_hat: Array, iterations: int, converged: bool, t: float | None
     ) -> None:
-        """Book a spin solve (here or in :func:`model.compiled.linear_rhs.linear_split`): count its
-        iterations, fail the run if it did not converge, keep the spin (``omega_hat``, which
-        :meth:`corotational` returns)."""
+        """Book a spin solve (here or in
+        :func:`nematic_solids.model.compiled.linear_rhs.linear_split`): count its iterations, fail
+        the run if it did not converge, keep the spin (``omega_hat``, which :meth:`corotational`
+        returns)."""
         self.spin_iterations += iterations
         if not converged:
             raise SimulationFailure(

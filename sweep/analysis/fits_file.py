@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from model.errors import NematicError
+from nematic_solids.model.errors import NematicError
 
 from ..errors import FitError
 from ..files import atomic_to_netcdf
@@ -65,10 +65,10 @@ def compute_fits(
         {
             "Conventions": "CF-1.11",
             "title": f"fits of campaign {phase.attrs.get('campaign', '')}",
-            "history": f"{now_iso()}: fitted from phase.nc by sweep.analysis",
+            "history": f"{now_iso()}: fitted from phase.nc by nematic_solids.sweep.analysis",
             "library_versions": library_versions_text(),
             "campaign": str(phase.attrs.get("campaign", "")),
-            "source": "active-nematic-solids fits (sweep.analysis) of phase.nc",
+            "source": "active-nematic-solids fits (nematic_solids.sweep.analysis) of phase.nc",
             "phase_created": str(phase.attrs.get("created", "")),
             "code_version": code_version(),
             "git_commit": git_commit(),

@@ -1,7 +1,7 @@
 r"""The size laws, on arrays: the level that tells patterned from relaxed runs, the critical
 activity :math:`\alpha^{cr}` from the pattern sizes and the exponent of
 :math:`\lambda = c\,[K/(\alpha - B - \alpha^{cr})]^{\beta}` (paper Eq. (7)). The fits on
-phase.nc that use them: :mod:`sweep.analysis.sizes`."""
+phase.nc that use them: :mod:`nematic_solids.sweep.analysis.sizes`."""
 
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from model.errors import NematicError
+from nematic_solids.model.errors import NematicError
 
 from ..campaign import AMB
 from ..errors import FitError
@@ -38,7 +38,7 @@ STABILITY_OPTIONS = (
 def run_growth(path: Path) -> float:
     """log10 sigma2_S(t_final) / sigma2_S(t_final / 2) of a run file (NaN if it cannot be
     read or has fewer than two saved times): the stability fit's criterion (Fig. A1), also
-    the observable ``growth`` of an adaptive campaign (:mod:`sweep.refine`)."""
+    the observable ``growth`` of an adaptive campaign (:mod:`nematic_solids.sweep.refine`)."""
     try:
         with xr.open_dataset(path, engine="netcdf4") as run:
             t = series_time(run).values.astype(float)
@@ -56,9 +56,9 @@ def run_growth(path: Path) -> float:
 
 
 def stability_parameters(phase: xr.Dataset, coords: Mapping[str, float]) -> Any:
-    """:class:`model.parameters.Parameters` of a grid point: the fixed ``param_*`` attributes
-    of phase.nc with the swept values ``coords``."""
-    from model.parameters import Parameters
+    """:class:`nematic_solids.model.parameters.Parameters` of a grid point: the fixed ``param_*``
+    attributes of phase.nc with the swept values ``coords``."""
+    from nematic_solids.model.parameters import Parameters
 
     # each attribute back to its field's type (netCDF stores ints and strings as they are)
     kinds = {
@@ -91,7 +91,7 @@ def stability(
     check_options("stability", options, STABILITY_OPTIONS)
     if root is None:
         raise FitError("stability: needs the campaign folder (run files)")
-    from model.stability import critical_eps_closed_form, paper_eq6
+    from nematic_solids.model.stability import critical_eps_closed_form, paper_eq6
 
     ds = select(phase, options.get("select"))
     act = str(options.get("activity") or ("chi" if is_swept(ds, "chi") else AMB))

@@ -242,10 +242,9 @@ def transition(
 
 
 def _loop_width(result: xr.Dataset, pre: str, attrs: Mapping[str, Any]) -> None:
-    """A chain's two branches (sweep.chains): the width of the hysteresis loop, the up
-    branch's jump minus the down branch's, with the interval of the two jumps' intervals
-    combined (from the lower end of one to the upper end of the other); NaN without both
-    jumps."""
+    """A chain's two branches (nematic_solids.sweep.chains): the width of the hysteresis loop, the
+    up branch's jump minus the down branch's, with the interval of the two jumps' intervals combined
+    (from the lower end of one to the upper end of the other); NaN without both jumps."""
     branches = [str(b) for b in result[BRANCH].values]
     if "up" not in branches or "down" not in branches:
         return

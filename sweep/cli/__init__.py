@@ -1,5 +1,5 @@
-"""The ``nematic`` program (typer; also ``python -m sweep``): parses the command line, calls
-:mod:`sweep` and prints.
+"""The ``nematic`` program (typer; also ``python -m nematic_solids.sweep``): parses the command
+line, calls :mod:`nematic_solids.sweep` and prints.
 
 Exit codes: 0 success; 1 some runs failed (they are listed); 2 bad input (invalid campaign,
 unreachable scheduler) or refused to start (the campaign is locked by another driver);
@@ -7,7 +7,7 @@ unreachable scheduler) or refused to start (the campaign is locked by another dr
 130 interrupted (Ctrl-C / SIGTERM; rerun the same command to resume).
 
 :data:`COMMANDS` is every command, in the order ``nematic --help`` lists them; each is a
-plain function in its group's module, registered on :data:`~sweep.cli.app.app` here.
+plain function in its group's module, registered on :data:`~nematic_solids.sweep.cli.app.app` here.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 command is :func:`guarded`), the common options, logging, loading the campaign.
 
 Exit codes: :data:`EXIT_OK`, :data:`EXIT_FAILED_RUNS`, :data:`EXIT_BAD_INPUT`,
-:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_INTERRUPTED` (:mod:`sweep.cli`).
+:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_INTERRUPTED` (:mod:`nematic_solids.sweep.cli`).
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def guarded(command: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _describe_error(e: Exception) -> tuple[int, str]:
-    from model.errors import NematicError
+    from nematic_solids.model.errors import NematicError
 
     from ..files import storage_cause
 
@@ -85,7 +85,8 @@ def _describe_error(e: Exception) -> tuple[int, str]:
 
 class _App(typer.Typer):
     """A Typer whose commands are :func:`guarded`; called (the ``nematic`` program, ``python
-    -m sweep``), it marks the process as the command line's own (:mod:`sweep.startup`)."""
+    -m nematic_solids.sweep``), it marks the process as the command line's own
+    (:mod:`nematic_solids.sweep.startup`)."""
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         from ..startup import FRESH_PROCESS

@@ -25,10 +25,10 @@ def launch_detached(
     quiet: bool,
 ) -> NoReturn:
     """Run this command line without ``--detach`` in a session of its own, its output in
-    ``log`` (:func:`sweep.run.detach.start_detached`, which waits until it holds the lock at
-    ``lock_path``), then say how to follow and stop it; exits with 0, or with the driver's
-    own code if it ended at once. ``who`` names the driver in the message of an early end
-    ("the driver"), ``title`` in the message that it runs ("driver")."""
+    ``log`` (:func:`nematic_solids.sweep.run.detach.start_detached`, which waits until it holds the
+    lock at ``lock_path``), then say how to follow and stop it; exits with 0, or with the driver's
+    own code if it ended at once. ``who`` names the driver in the message of an early end ("the
+    driver"), ``title`` in the message that it runs ("driver")."""
     from ..run.detach import detached_args, log_tail, start_detached
 
     err = err_console()

@@ -1,6 +1,6 @@
 """The campaign commands ``nematic validate`` and ``aggregate``, and what ``run`` shares with
 them: the cost before launch and what changed in the campaign file (``run``:
-:mod:`sweep.cli.run`; ``status``: :mod:`sweep.cli.status`)."""
+:mod:`nematic_solids.sweep.cli.run`; ``status``: :mod:`nematic_solids.sweep.cli.status`)."""
 
 from __future__ import annotations
 
@@ -59,7 +59,9 @@ def validate(
     console = Console(highlight=False, soft_wrap=True, quiet=quiet)
     setup_logging(err_console(), verbose, quiet)
     coll = collection_or_none(campaign)
-    if coll is not None:  # a collection of campaigns (sweep.spec.collection): each, then the sum
+    if (
+        coll is not None
+    ):  # a collection of campaigns (nematic_solids.sweep.spec.collection): each, then the sum
         refuse_name(name)
         validate_collection(
             coll,
@@ -130,8 +132,8 @@ def print_estimate(
     brief: bool = False,
     header: str | None = None,
 ) -> None:
-    """The cost before launch (:mod:`sweep.cost.estimate`): what changed in the campaign file,
-    the runs to do and their CPU and wall time; ``brief``: the totals only."""
+    """The cost before launch (:mod:`nematic_solids.sweep.cost.estimate`): what changed in the
+    campaign file, the runs to do and their CPU and wall time; ``brief``: the totals only."""
     from ..cost.estimate import estimate
     from ..cost.result import lines
     from ..store import CampaignStore
@@ -150,9 +152,9 @@ def report_changes(
     prune: bool = False,
     hint: str = "",
 ) -> dict[str, Any] | None:
-    """Print what changed since the results were made (:mod:`sweep.outputs.changes`) and, with
-    ``prune``, remove the orphaned runs (the caller holds the lock); return the changes for
-    ``--json``."""
+    """Print what changed since the results were made (:mod:`nematic_solids.sweep.outputs.changes`)
+    and, with ``prune``, remove the orphaned runs (the caller holds the lock); return the changes
+    for ``--json``."""
     from ..outputs.changes import campaign_changes, run_counts
     from ..outputs.changes import prune as prune_runs
 
@@ -188,7 +190,7 @@ def storage_message(store: Any, e: OSError) -> str:
 
 
 # --------------------------------------------------------------------------- aggregate
-@paused_gc()  # a short command: sweep.startup says why
+@paused_gc()  # a short command: nematic_solids.sweep.startup says why
 def aggregate(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),

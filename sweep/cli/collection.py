@@ -1,8 +1,9 @@
-"""A collection of campaigns (:mod:`sweep.spec.collection`, e.g. ``campaigns/paper.yaml``) in the
-commands that take one: ``validate``, ``run`` (``--dry-run``, ``--detach``), ``status`` and
-``stop``. Each member runs as ``nematic run MEMBER`` would, in the collection's order, with
-the same options; the collection adds the cost of the whole before anything runs, a summary
-at the end, and ``results/NAME/index.html`` linking every member's report and figures."""
+"""A collection of campaigns (:mod:`nematic_solids.sweep.spec.collection`, e.g.
+``campaigns/paper.yaml``) in the commands that take one: ``validate``, ``run`` (``--dry-run``,
+``--detach``), ``status`` and ``stop``. Each member runs as ``nematic run MEMBER`` would, in the
+collection's order, with the same options; the collection adds the cost of the whole before anything
+runs, a summary at the end, and ``results/NAME/index.html`` linking every member's report and
+figures."""
 
 from __future__ import annotations
 

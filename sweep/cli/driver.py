@@ -1,5 +1,5 @@
 """A driver in the background: ``nematic run --detach`` (:func:`run_detached`) and
-``nematic stop`` (:mod:`sweep.run.detach`)."""
+``nematic stop`` (:mod:`nematic_solids.sweep.run.detach`)."""
 
 from __future__ import annotations
 

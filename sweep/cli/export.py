@@ -1,5 +1,5 @@
 """``nematic export``: a campaign's runs as one tidy table (CSV or Parquet), for pandas, R
-or a spreadsheet (:mod:`sweep.outputs.tables`)."""
+or a spreadsheet (:mod:`nematic_solids.sweep.outputs.tables`)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """``nematic figures``: fits and figures of a campaign from its results folder.
 
-Only parses and calls :func:`sweep.figures.produce.produce`.
+Only parses and calls :func:`nematic_solids.sweep.figures.produce.produce`.
 Exit codes: 0 every fit and figure was produced, 1 some failed (listed), 2 bad input (invalid
 campaign, unknown figure name, no phase.nc yet).
 """

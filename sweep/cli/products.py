@@ -56,20 +56,21 @@ def repair_products(
 def regenerate_figures(
     campaign: Campaign, results: Path, *, fits: bool = True, draw_figures: bool = True
 ) -> list[Path]:
-    """Fits and figures after a run (:func:`sweep.figures.produce.regenerate`, which logs and
-    never raises for a figure it cannot draw); ``fits`` / ``draw_figures`` false leave either
-    out."""
+    """Fits and figures after a run (:func:`nematic_solids.sweep.figures.produce.regenerate`, which
+    logs and never raises for a figure it cannot draw); ``fits`` / ``draw_figures`` false leave
+    either out."""
     from ..figures.produce import regenerate
 
     return list(regenerate(campaign, results, fits=fits, draw_figures=draw_figures))
 
 
 def regenerate_report(campaign: Campaign, results: Path) -> Path | None:
-    """The report after a run's figures (:func:`sweep.report.write_report`): its path, or
-    ``None`` (logged) when it cannot be written; a report never sinks the run it follows."""
+    """The report after a run's figures (:func:`nematic_solids.sweep.report.write_report`): its
+    path, or ``None`` (logged) when it cannot be written; a report never sinks the run it
+    follows."""
     import logging
 
-    from model.errors import NematicError
+    from nematic_solids.model.errors import NematicError
 
     from ..outputs.tables import CampaignResults
     from ..report import write_report

@@ -1,5 +1,5 @@
 """``nematic report``: a campaign's results as one self-contained HTML page
-(:mod:`sweep.report`)."""
+(:mod:`nematic_solids.sweep.report`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from ..startup import paused_gc
 from .app import CampaignRefArg, QuietOpt, ResultsOpt, VerboseOpt, err_console, setup_logging
 
 
-@paused_gc()  # a short command: sweep.startup says why
+@paused_gc()  # a short command: nematic_solids.sweep.startup says why
 def report(
     campaign: CampaignRefArg,
     results: ResultsOpt = Path("results"),

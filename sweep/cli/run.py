@@ -174,7 +174,9 @@ def run(
     err = err_console()
     setup_logging(err, verbose, quiet, cluster=True)
     coll = collection_or_none(campaign)
-    if coll is not None:  # a collection of campaigns (sweep.spec.collection): one after the other
+    if (
+        coll is not None
+    ):  # a collection of campaigns (nematic_solids.sweep.spec.collection): one after the other
         refuse_name(name)
         run_collection(
             coll,

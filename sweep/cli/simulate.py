@@ -1,6 +1,6 @@
 """``nematic simulate``: one run of the model, with a progress bar, a summary and a picture.
 
-Only parses and calls :func:`model.simulate.run`.
+Only parses and calls :func:`nematic_solids.model.simulate.run`.
 Exit codes: 0 the run succeeded, 1 the run failed (the reason and time are printed), 2 bad input.
 """
 
@@ -14,9 +14,9 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from model.errors import ParameterError
-from model.parameters import Numerics, Parameters, check_compatible, split_settings
-from model.resolution import is_rule, read_rule
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.parameters import Numerics, Parameters, check_compatible, split_settings
+from nematic_solids.model.resolution import is_rule, read_rule
 
 from ..campaign import MAX_SEED
 from ..errors import CampaignError, StoreError
@@ -96,7 +96,7 @@ def simulate(
         pdict, ndict = split_settings(settings)
         params = Parameters.from_dict(pdict)
         rule = read_rule(ndict["resolution"]) if is_rule(ndict.get("resolution")) else None
-        if rule is not None:  # resolution=auto: the grid from K (model.resolution)
+        if rule is not None:  # resolution=auto: the grid from K (nematic_solids.model.resolution)
             ndict["resolution"] = rule.grid(params.K, params.A0)
         numerics = Numerics.from_dict(ndict)
         check_compatible(params, numerics)
@@ -117,7 +117,7 @@ def simulate(
         note = " (held at the cap: coarser than the rule asks)" if held else ""
         grid = f"{numerics.resolution}^2 at K = {params.K:g}"
         err.print(f"resolution {rule.describe()}: {grid}{note}")
-    from model.simulate import run  # heavy import (py-pde) only when needed
+    from nematic_solids.model.simulate import run  # heavy import (py-pde) only when needed
 
     desc = (
         f"alpha-B={params.alpha_minus_B:g} {numerics.mechanics} {numerics.resolution}^2 seed {seed}"

@@ -1,7 +1,7 @@
 """``nematic stability``: the critical strain and the growth rate of the linear-mechanics model.
 
-The command only parses and calls :mod:`model.stability`; the physics and its conventions are
-in ``docs/stability.md``.
+The command only parses and calls :mod:`nematic_solids.model.stability`; the physics and its
+conventions are in ``docs/stability.md``.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from typing import Any
 
 import typer
 
-from model.errors import ParameterError
-from model.parameters import Numerics, Parameters, split_settings
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.parameters import Numerics, Parameters, split_settings
 
 from .app import err_console, error, setup_logging
 
@@ -104,7 +104,7 @@ def stability(
         raise typer.Exit(code=2) from None
 
     inc = numerics.incompressible
-    from model.stability import (  # scipy: imported only when the command runs
+    from nematic_solids.model.stability import (  # scipy: imported only when the command runs
         base_state,
         critical_eps_closed_form,
         critical_eps_numerical,

@@ -29,7 +29,8 @@ from .campaigns import report_changes
 from .collection import collection_or_none, refuse_name, status_collection
 
 
-@paused_gc()  # a short command (10^5 records: millions of objects): sweep.startup says why
+# a short command (10^5 records: millions of objects): nematic_solids.sweep.startup says why
+@paused_gc()
 def status(
     campaign: CampaignArg,
     results: ResultsOpt = Path("results"),
@@ -61,7 +62,9 @@ def status(
     console = Console(highlight=False, soft_wrap=True)
     setup_logging(err_console(), verbose, quiet)
     coll = collection_or_none(campaign)
-    if coll is not None:  # a collection of campaigns (sweep.spec.collection): each in turn
+    if (
+        coll is not None
+    ):  # a collection of campaigns (nematic_solids.sweep.spec.collection): each in turn
         refuse_name(name)
         status_collection(
             coll,

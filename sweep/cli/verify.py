@@ -1,5 +1,6 @@
 """``nematic verify``: the campaign's convergence and sensitivity checks (its ``verify:``
-section, :mod:`sweep.verify`), and the lines ``run`` and ``status`` print about them."""
+section, :mod:`nematic_solids.sweep.verify`), and the lines ``run`` and ``status`` print about
+them."""
 
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ folder). A run to do is costed, in this order of preference:
 - **at a point already run** (the same parameters and numerics, other seeds): the median of
   that point's measured run times (the records' ``wall_time``);
 - **scaled** from the campaign's other finished runs: the cost model's seconds for the run
-  (:mod:`sweep.cost.model`: resolution, length, saves, mechanics) times the median of
+  (:mod:`nematic_solids.sweep.cost.model`: resolution, length, saves, mechanics) times the median of
   measured / model over the finished runs of the same kind and resolution (else of the
   same kind, else all of them);
 - **the cost model** alone when the campaign has no finished run.
@@ -15,17 +15,17 @@ folder). A run to do is costed, in this order of preference:
 The spread is the 10-90 % range of the run times, summed over the runs to do: at measured
 points the seed-to-seed spread of the points with several runs (else the spread of the
 ratios below), for scaled runs the 10 % and 90 % quantiles of measured / model, for the cost
-model its calibration's :data:`~sweep.cost.model.MODEL_SPREAD`. The wall time on W workers is
-the runs dealt in the campaign's order to the first free worker (as the driver's window
-does), whose makespan lies between the CPU time over W and that plus the longest run, plus
-the driver's own time (:data:`DRIVER_OVERHEAD`). On a local cluster the cost model's run
-times (a free core each) and part of the driver's time are stretched by the machine's load
-(:func:`slowdown`: W workers beside a load average L on C cores get C / (L + W) of a core
-each); measured run times already carry the load they ran under. An adaptive campaign is
-costed for the round its results have reached (round 0 without results) plus a bound on the
-later rounds (:func:`sweep.refine.plan.run_bound`); a campaign with seeds by precision for
-its current round plus the seeds each point is expected to need
-(:mod:`sweep.precision.forecast`), each at its point's cost.
+model its calibration's :data:`~nematic_solids.sweep.cost.model.MODEL_SPREAD`. The wall time on W
+workers is the runs dealt in the campaign's order to the first free worker (as the driver's window
+does), whose makespan lies between the CPU time over W and that plus the longest run, plus the
+driver's own time (:data:`DRIVER_OVERHEAD`). On a local cluster the cost model's run times (a free
+core each) and part of the driver's time are stretched by the machine's load (:func:`slowdown`: W
+workers beside a load average L on C cores get C / (L + W) of a core each); measured run times
+already carry the load they ran under. An adaptive campaign is costed for the round its results have
+reached (round 0 without results) plus a bound on the later rounds
+(:func:`nematic_solids.sweep.refine.plan.run_bound`); a campaign with seeds by precision for its
+current round plus the seeds each point is expected to need
+(:mod:`nematic_solids.sweep.precision.forecast`), each at its point's cost.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from model.resolution import is_rule, read_rule
+from nematic_solids.model.resolution import is_rule, read_rule
 
 from ..campaign import Campaign, ExecutionSpec, local_worker_count
 from ..expand import Expansion, GridPoint, continued_runs, expand
@@ -187,8 +187,8 @@ def classify(
     retry_failed: bool = False,
 ) -> tuple[list[int], int, int]:
     """(positions to do, done, failed and not redone), as ``nematic run`` would plan them
-    (:func:`sweep.run.todo.plan_runs`) but without touching the folder: a record whose file is
-    not intact is a run to do."""
+    (:func:`nematic_solids.sweep.run.todo.plan_runs`) but without touching the folder: a record
+    whose file is not intact is a run to do."""
     todo: list[int] = []
     done = failed = 0
     for i, rid in enumerate(expansion.run_ids):

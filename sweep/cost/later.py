@@ -4,16 +4,16 @@ split to the smallest spacing) always, and an **expected** value only where it h
 labelled with what it stands on:
 
 - seeds by precision: each point with finished seeds is forecast from them
-  (:func:`sweep.precision.forecast.expected_seeds`); a point without any takes its seeds
-  from the campaign's ``prior:`` (the phase.nc of a finished run of the same campaign) when
-  there is one; a point with neither is *unknown*: it is in the bound, not in the expected
-  value, and the line says how many there are;
+  (:func:`nematic_solids.sweep.precision.forecast.expected_seeds`); a point without any takes its
+  seeds from the campaign's ``prior:`` (the phase.nc of a finished run of the same campaign) when
+  there is one; a point with neither is *unknown*: it is in the bound, not in the expected value,
+  and the line says how many there are;
 - refinement: the rounds' runs cannot be forecast from the grid's outcomes; with a
   ``prior:`` the expected total is the prior's run count (the later rounds: what it holds
   beyond the runs planned so far), without one there is no expected value.
 
-The run times are the estimate's own (:class:`sweep.cost.estimate.Basis`: the campaign's
-finished runs, scaled, or the cost model). After each round the estimate is made again
+The run times are the estimate's own (:class:`nematic_solids.sweep.cost.estimate.Basis`: the
+campaign's finished runs, scaled, or the cost model). After each round the estimate is made again
 from the runs finished by then.
 """
 
@@ -102,9 +102,10 @@ def refine_rounds(
     campaign: Campaign, current: int, planned: int, per_run: Sequence[float], workers: int
 ) -> LaterRounds | None:
     """An adaptive campaign's rounds after ``current`` (with seeds by precision, the rounds
-    that only add seeds too): the bound is every run :func:`~sweep.refine.plan.run_bound`
-    allows beyond the ``planned`` ones; the expected value the prior's runs beyond them. Each
-    run at the mean cost of ``per_run``; each round ends when its longest run does."""
+    that only add seeds too): the bound is every run
+    :func:`~nematic_solids.sweep.refine.plan.run_bound` allows beyond the ``planned`` ones; the
+    expected value the prior's runs beyond them. Each run at the mean cost of ``per_run``; each
+    round ends when its longest run does."""
     from ..refine.plan import run_bound
 
     assert campaign.refine is not None

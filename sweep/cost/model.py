@@ -1,6 +1,6 @@
 """The calibrated cost of one model run: its CPU seconds from its numerics alone (resolution,
-mechanics, t_final, save interval, scheme, tolerance), for :mod:`sweep.cost.estimate` when a
-campaign has no finished runs of its own, and to carry measured run times over to runs of
+mechanics, t_final, save interval, scheme, tolerance), for :mod:`nematic_solids.sweep.cost.estimate`
+when a campaign has no finished runs of its own, and to carry measured run times over to runs of
 other numerics.
 
 The model, per mechanics, with ``X = N^2 log2 N / (128^2 * 7)`` (1 at 128^2: a step is a
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from model.parameters import Numerics
+    from nematic_solids.model.parameters import Numerics
 
 #: ``X = N^2 log2 N / REFERENCE`` is 1 at the reference resolution 128^2
 REFERENCE = 128**2 * 7

@@ -1,6 +1,7 @@
-"""The cost before launch as data and as text: what :func:`sweep.cost.estimate.estimate`
-returns (:class:`Estimate`, the points' :class:`Costed` runs, the :class:`LaterRounds`) and the
-lines ``nematic run --dry-run`` and ``validate --estimate`` print (:func:`lines`)."""
+"""The cost before launch as data and as text: what
+:func:`nematic_solids.sweep.cost.estimate.estimate` returns (:class:`Estimate`, the points'
+:class:`Costed` runs, the :class:`LaterRounds`) and the lines ``nematic run --dry-run`` and
+``validate --estimate`` print (:func:`lines`)."""
 
 from __future__ import annotations
 
@@ -25,8 +26,8 @@ class Costed:
 @dataclass
 class Expected:
     """What the later rounds are expected to cost, where there are data for it
-    (:mod:`sweep.cost.later`): ``basis`` says what it stands on; ``unknown_points`` points
-    without data are left out of it (their ``unknown_runs`` are in the bound only)."""
+    (:mod:`nematic_solids.sweep.cost.later`): ``basis`` says what it stands on; ``unknown_points``
+    points without data are left out of it (their ``unknown_runs`` are in the bound only)."""
 
     runs: int
     cpu: float
@@ -88,7 +89,8 @@ class Estimate:
     points: list[Costed] = field(default_factory=list)
     later: LaterRounds | None = None
     round_note: str = ""
-    #: what changed since the results were made (:mod:`sweep.outputs.changes`), as lines
+    #: what changed since the results were made (:mod:`nematic_solids.sweep.outputs.changes`), as
+    #: lines
     changes: list[str] = field(default_factory=list)
 
 

@@ -257,8 +257,8 @@ def default_select(
 def safe_snapshot(
     ax: Axes, run: xr.Dataset, index: int = -1, *, colorbar: bool = True, arrows: int = 24
 ) -> None:
-    """:func:`sweep.figures.snapshot.draw_snapshot` (without its title), tolerating a run without
-    I1bar stored (then a plain background), with compact colour bars: S (quivers) on the
+    """:func:`nematic_solids.sweep.figures.snapshot.draw_snapshot` (without its title), tolerating a
+    run without I1bar stored (then a plain background), with compact colour bars: S (quivers) on the
     right, I1bar (background) below."""
     from matplotlib.ticker import MaxNLocator
 

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 import xarray as xr
 
-from model.errors import NematicError
+from nematic_solids.model.errors import NematicError
 
 from ..analysis.fits_file import fit_notes, load_fits, load_phase, write_fits
 from ..campaign import Campaign
@@ -77,7 +77,7 @@ def draw(
 class Outcome:
     """What :func:`produce` did: the figures it set out to draw, files written, fits and
     figures that failed (name -> why), and caveats about the fits written
-    (:func:`sweep.analysis.fits_file.fit_notes`)."""
+    (:func:`nematic_solids.sweep.analysis.fits_file.fit_notes`)."""
 
     paths: list[Path] = field(default_factory=list)
     failures: dict[str, str] = field(default_factory=dict)
@@ -166,7 +166,8 @@ def regenerate(
     ``fits.nc`` (unless ``fits`` is false) and ``figures/*.png|pdf`` (none with
     ``figures: []`` or without ``draw_figures``); returns the figure paths. Never raises for a
     figure that cannot be drawn (it is logged, as are the fits' caveats,
-    :func:`sweep.analysis.fits_file.fit_notes`); returns [] when there is no phase.nc."""
+    :func:`nematic_solids.sweep.analysis.fits_file.fit_notes`); returns [] when there is no
+    phase.nc."""
     try:
         out = produce(campaign, results_dir, fits=fits, draw_figures=draw_figures)
     except FigureError as e:

@@ -1,5 +1,6 @@
 """A run's snapshot drawn like the paper's Fig. 2a: director quivers coloured by S over an
-I1bar = tr C / J background. Reads only a run Dataset (as written by ``model.simulate.run``).
+I1bar = tr C / J background. Reads only a run Dataset (as written by
+``nematic_solids.model.simulate.run``).
 
 The background shows I1bar - 2 (I1bar >= 2 in 2-D, = 2 without shear), scaled by a power of
 ten that the colour bar's label states when it is small (I1bar differs from 2 by ~1e-5 in a

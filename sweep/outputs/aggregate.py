@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from model.resolution import is_rule, read_rule
+from nematic_solids.model.resolution import is_rule, read_rule
 
 from ..campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from ..expand import Expansion
@@ -290,7 +290,8 @@ def phase_dataset(
     expansion: Expansion, store: CampaignStore, records: Mapping[str, Record]
 ) -> xr.Dataset:
     """The phase-diagram Dataset of ``expansion`` (a grid, or an adaptive campaign's union
-    grid, whose expansion builds its own: :class:`sweep.refine.rounds.RefinedExpansion`)."""
+    grid, whose expansion builds its own:
+    :class:`nematic_solids.sweep.refine.rounds.RefinedExpansion`)."""
     own = getattr(expansion, "build_phase", None)
     return own(records, store) if own is not None else build_phase(expansion, records, store)
 

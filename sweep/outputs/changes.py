@@ -1,8 +1,9 @@
 """A campaign file that changed since its results were made: what changed, compared with the
-copy the last ``nematic run`` left in the results folder (:mod:`sweep.outputs.stored`), and what it
-means for the runs: how many of the current plan are new (no record yet) or kept (a record
-from before), and which runs in the folder are *orphaned* (the current campaign does not
-plan them). ``nematic run --prune`` removes the orphaned runs (:func:`prune`).
+copy the last ``nematic run`` left in the results folder
+(:mod:`nematic_solids.sweep.outputs.stored`), and what it means for the runs: how many of the
+current plan are new (no record yet) or kept (a record from before), and which runs in the folder
+are *orphaned* (the current campaign does not plan them). ``nematic run --prune`` removes the
+orphaned runs (:func:`prune`).
 
 An adaptive campaign (``refine:``) plans its runs round by round: a run in the folder is not
 orphaned when the current campaign could plan it in some round, that is when it is a run of

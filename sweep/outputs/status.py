@@ -1,8 +1,8 @@
 """Where a campaign stands: done / failed / pending overall and per sweep value, the failures'
 reasons, an ETA. Reads the manifest, the directory listing and one ``stat`` per run file
 (a file whose size or mtime differs from its record is checksummed: the driver's check,
-:meth:`~sweep.store.CampaignStore.check_run_file`), so it answers in about 3 s for 10^5 runs
-(``benchmarks/status_100k.py``)."""
+:meth:`~nematic_solids.sweep.store.CampaignStore.check_run_file`), so it answers in about 3 s for
+10^5 runs (``benchmarks/status_100k.py``)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The campaign a results folder was made with: ``results/<name>/campaign.yaml``, the text
 of the last ``nematic run`` with its command-line overrides as header comments
-(:meth:`sweep.store.CampaignStore.save_campaign_text`), read back as a
-:class:`~sweep.campaign.Campaign`."""
+(:meth:`nematic_solids.sweep.store.CampaignStore.save_campaign_text`), read back as a
+:class:`~nematic_solids.sweep.campaign.Campaign`."""
 
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def stored_text(store: CampaignStore) -> str | None:
 
 def stored_campaign(store: CampaignStore, text: str | None = None) -> Campaign | None:
     """The campaign of the folder's copy (validated by this code), ``None`` without a copy.
-    Raises :class:`~sweep.errors.CampaignError` when this code does not accept it."""
+    Raises :class:`~nematic_solids.sweep.errors.CampaignError` when this code does not accept it."""
     if text is None:
         text = stored_text(store)
     if text is None:

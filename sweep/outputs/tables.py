@@ -1,8 +1,9 @@
 """A campaign's results where users analyse them (a notebook, pandas, a spreadsheet):
 :func:`open_campaign` gives the phase diagram as an xarray Dataset with a ``seed`` dimension
-(the one ``phase.nc`` holds, built from the run records as :mod:`sweep.outputs.aggregate` builds it)
-and the runs as a tidy pandas table, one row per finished run; :func:`write_table` writes
-that table as CSV or Parquet, atomically (``nematic export``).
+(the one ``phase.nc`` holds, built from the run records as
+:mod:`nematic_solids.sweep.outputs.aggregate` builds it) and the runs as a tidy pandas table, one
+row per finished run; :func:`write_table` writes that table as CSV or Parquet, atomically (``nematic
+export``).
 
 Reading takes no lock and writes nothing into the results folder, so it works while a
 driver runs the campaign (the runs it has finished so far)."""
@@ -84,8 +85,8 @@ def runs_table(ds: xr.Dataset) -> pd.DataFrame:
 def open_campaign(campaign: str | Path, results: str | Path = "results") -> CampaignResults:
     """Open a campaign's results: ``campaign`` is its YAML file, or its name (the folder
     ``results/<name>/``, read with the campaign copy the last ``nematic run`` left there, its
-    command-line overrides included). Raises :class:`~sweep.errors.NematicError` subclasses
-    with what is wrong (no such file or folder, an invalid campaign)."""
+    command-line overrides included). Raises :class:`~nematic_solids.sweep.errors.NematicError`
+    subclasses with what is wrong (no such file or folder, an invalid campaign)."""
     path = Path(campaign)
     if path.is_file():
         return CampaignResults(load_campaign(path), results)

@@ -1,6 +1,6 @@
 """How many seeds each point of a campaign with seeds by precision is expected to need: the
 forecast behind the cost of its later rounds (``nematic run --dry-run``,
-:mod:`sweep.cost.estimate`).
+:mod:`nematic_solids.sweep.cost.estimate`).
 
 From the seeds a point has finished (in the campaign's order), with ``n`` seeds whose
 Student-t interval of the mean is ``w`` wide against the rule's limit ``l``:

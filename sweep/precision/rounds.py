@@ -4,11 +4,11 @@ expansion for ``phase.nc`` and ``nematic status``.
 :func:`replay` rebuilds every round from the run files: round 0 runs the campaign's first
 ``initial`` seeds at every grid point; while every run planned so far has finished (a record
 whose file is intact), each point is decided from its seeds' values
-(:func:`sweep.precision.decide.decide`) and the next round gives every undecided point the
-next ``add`` seeds, in the campaign's order. So a killed driver resumes to the same
-decisions, and the plan file ``precision.json`` (written atomically by the driver) is never
-read back to decide anything. The object :func:`replay` returns is driven by
-:func:`sweep.refine.driver.drive_rounds` like an adaptive campaign's rounds.
+(:func:`nematic_solids.sweep.precision.decide.decide`) and the next round gives every undecided
+point the next ``add`` seeds, in the campaign's order. So a killed driver resumes to the same
+decisions, and the plan file ``precision.json`` (written atomically by the driver) is never read
+back to decide anything. The object :func:`replay` returns is driven by
+:func:`nematic_solids.sweep.refine.driver.drive_rounds` like an adaptive campaign's rounds.
 """
 
 from __future__ import annotations
@@ -346,8 +346,8 @@ class PrecisionExpansion(Expansion):
 def precision_phase(
     expansion: PrecisionExpansion, records: Mapping[str, Record], store: CampaignStore | None = None
 ) -> xr.Dataset:
-    """phase.nc with seeds by precision: :func:`sweep.outputs.aggregate.build_phase` from the
-    planned runs' records (NaN for the seeds not run), with ``seed_count`` (seeds run at
+    """phase.nc with seeds by precision: :func:`nematic_solids.sweep.outputs.aggregate.build_phase`
+    from the planned runs' records (NaN for the seeds not run), with ``seed_count`` (seeds run at
     each point, ok or failed) and ``seed_decision`` (a CF flag variable: pending, precise,
     unanimous, cap) over the sweep dims, and the rule and the state as ``precision_*``
     attributes."""

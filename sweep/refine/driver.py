@@ -1,13 +1,14 @@
 """``nematic run`` of a refined campaign (with seeds by precision or not), or of one with seeds
-by precision on its grid (whose replay :mod:`sweep.precision.rounds` gives): rounds of runs
-on one dask cluster.
+by precision on its grid (whose replay :mod:`nematic_solids.sweep.precision.rounds` gives): rounds
+of runs on one dask cluster.
 
 The loop (:func:`drive_rounds`): replay the rounds from the folder
-(:func:`sweep.refine.rounds.replay`), record the plan (``refine.json``) and print a new
-round's plan; stop when the replay says the campaign is finished; else run the planned runs
-that are not done (:func:`sweep.run.todo.plan_runs` and :func:`~sweep.run.driver.run_campaign`,
-as for a grid) and go round again. Every decision is taken by the replay from the files, so
-an interrupted or killed driver resumes to the same plan.
+(:func:`nematic_solids.sweep.refine.rounds.replay`), record the plan (``refine.json``) and print a
+new round's plan; stop when the replay says the campaign is finished; else run the planned runs that
+are not done (:func:`nematic_solids.sweep.run.todo.plan_runs` and
+:func:`~nematic_solids.sweep.run.driver.run_campaign`, as for a grid) and go round again. Every
+decision is taken by the replay from the files, so an interrupted or killed driver resumes to the
+same plan.
 """
 
 from __future__ import annotations
@@ -159,8 +160,8 @@ def _rounds_of(
 ) -> tuple[Callable[..., Any], Callable[..., None], Callable[[Any, int], list[str]], str, str]:
     """The replay, the plan writer, a round's lines, what the campaign is and what finishes:
     an adaptive campaign's rounds (with seeds by precision or not), or seeds by precision on
-    the grid (:mod:`sweep.precision.rounds`, driven by the same loop: its replay gives an
-    object with the same ``current``, ``finished``, ``stop``, ``n_runs``, ``pending``,
+    the grid (:mod:`nematic_solids.sweep.precision.rounds`, driven by the same loop: its replay
+    gives an object with the same ``current``, ``finished``, ``stop``, ``n_runs``, ``pending``,
     ``run_list`` and ``expansion``)."""
     if campaign.refine is None:
         from ..precision import rounds as precision

@@ -3,20 +3,19 @@
 A *line* is one combination of the dims that are not refined (their indices, in the
 campaign's order); a *point* is ``(line, x)`` with ``x`` its refined values: a float when one
 axis is refined, else a tuple (one value per refined axis, in the campaign's order of dims).
-Round 0 is the campaign's grid with the first seeds (:func:`sweep.refine.seeds.initial_count`).
-Each later round is planned from the outcomes of every run of the rounds before it (all
-finished):
+Round 0 is the campaign's grid with the first seeds
+(:func:`nematic_solids.sweep.refine.seeds.initial_count`). Each later round is planned from the
+outcomes of every run of the rounds before it (all finished):
 
-- **seeds**: a point gets the next seeds by :func:`sweep.refine.seeds.more_seeds` (the
-  ``refine.seeds`` interval rule, or the ``precision:`` section's decision);
+- **seeds**: a point gets the next seeds by :func:`nematic_solids.sweep.refine.seeds.more_seeds`
+  (the ``refine.seeds`` interval rule, or the ``precision:`` section's decision);
 - **points**: along each refined axis, the points of a line that share their other refined
   values, in order (those with a classified seed), form cells. A boundary cell
-  (:func:`sweep.refine.stats.is_boundary`: the classes differ or either point is mixed; or
-  the geometric seed mean jumps) is split at its midpoint, the geometric one on a ``log``
-  axis, normalised to 12 significant digits as grid values are (so a midpoint equal to a
-  grid value is the same run), if both halves are at least the axis's ``min_spacing`` wide
-  (in decades on a log axis). A refined point starts cells along another axis once points
-  beside it on that axis exist.
+  (:func:`nematic_solids.sweep.refine.stats.is_boundary`: the classes differ or either point is
+  mixed; or the geometric seed mean jumps) is split at its midpoint, the geometric one on a ``log``
+  axis, normalised to 12 significant digits as grid values are (so a midpoint equal to a grid value
+  is the same run), if both halves are at least the axis's ``min_spacing`` wide (in decades on a log
+  axis). A refined point starts cells along another axis once points beside it on that axis exist.
 
 Points are split in rounds ``1 .. rounds``; with a ``precision:`` section later rounds only
 add seeds (``split=False``) until every point is decided.

@@ -2,20 +2,20 @@
 
 :func:`replay` rebuilds every round from the files: round 0 is the grid; while every run
 planned so far has finished (a record whose file is intact), the next round is planned from
-their outcomes (:func:`sweep.refine.plan.next_round`). It stops at the first round with
-runs still to do, when a round plans nothing (converged) or when the rounds are used (with a
-``precision:`` section, rounds after the last refinement round only add seeds, until every
-point is decided). So a killed driver resumes to the same plan, and two machines with the
-same run files make the same plan: the plan file ``refine.json`` records it (written
-atomically by the driver) but is never read back to decide anything.
+their outcomes (:func:`nematic_solids.sweep.refine.plan.next_round`). It stops at the first round
+with runs still to do, when a round plans nothing (converged) or when the rounds are used (with a
+``precision:`` section, rounds after the last refinement round only add seeds, until every point is
+decided). So a killed driver resumes to the same plan, and two machines with the same run files make
+the same plan: the plan file ``refine.json`` records it (written atomically by the driver) but is
+never read back to decide anything.
 
-Runs keep the campaign's identity (:mod:`sweep.identity`): a refined point is a grid point
-of a campaign whose refined axes hold it, so a refined value equal to a value of another
+Runs keep the campaign's identity (:mod:`nematic_solids.sweep.identity`): a refined point is a grid
+point of a campaign whose refined axes hold it, so a refined value equal to a value of another
 campaign's grid is the same run (the same file).
 
-The expansions the rest of :mod:`sweep` works on: :class:`RunList` (the planned runs, for
-:func:`sweep.run.driver.run_campaign`) and :class:`RefinedExpansion` (the grid whose refined
-axes are the sorted union of every value run, with a mask of the planned runs, for
+The expansions the rest of :mod:`nematic_solids.sweep` works on: :class:`RunList` (the planned runs,
+for :func:`nematic_solids.sweep.run.driver.run_campaign`) and :class:`RefinedExpansion` (the grid
+whose refined axes are the sorted union of every value run, with a mask of the planned runs, for
 ``phase.nc`` and ``nematic status``).
 """
 
@@ -322,20 +322,19 @@ class RefinedExpansion(Expansion):
         self, records: Mapping[str, Record], store: CampaignStore | None = None
     ) -> xr.Dataset:
         """phase.nc's dataset (:func:`refined_phase`), which
-        :func:`sweep.outputs.aggregate.write_phase` asks the expansion for."""
+        :func:`nematic_solids.sweep.outputs.aggregate.write_phase` asks the expansion for."""
         return refined_phase(self, records, store)
 
 
 def refined_phase(
     expansion: RefinedExpansion, records: Mapping[str, Record], store: CampaignStore | None = None
 ) -> xr.Dataset:
-    """phase.nc of a refined campaign: :func:`sweep.outputs.aggregate.build_phase` on the union grid
-    from the planned runs' records, with ``seed_count`` (seeds run at each point, ok or
-    failed; 0 where the point was not run) and ``refine_round`` (the round that first ran
-    the point; -1 where it was not run) over the sweep dims, and the plan's summary as
-    attributes (``refine_*``). With a ``precision:`` section also ``seed_decision`` (a CF
-    flag variable: not_run, pending, precise, unanimous, cap) and ``precision_*``
-    attributes."""
+    """phase.nc of a refined campaign: :func:`nematic_solids.sweep.outputs.aggregate.build_phase` on
+    the union grid from the planned runs' records, with ``seed_count`` (seeds run at each point, ok
+    or failed; 0 where the point was not run) and ``refine_round`` (the round that first ran the
+    point; -1 where it was not run) over the sweep dims, and the plan's summary as attributes
+    (``refine_*``). With a ``precision:`` section also ``seed_decision`` (a CF flag variable:
+    not_run, pending, precise, unanimous, cap) and ``precision_*`` attributes."""
     import xarray as xr
 
     from ..outputs.aggregate import STATUS_MISSING, build_phase

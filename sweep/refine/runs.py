@@ -58,8 +58,9 @@ class Outcomes:
 
 
 class RunList(Expansion):
-    """The planned runs of a refined campaign as an :class:`~sweep.expand.Expansion` (what
-    :func:`sweep.run.todo.plan_runs` and :func:`~sweep.run.driver.run_campaign` take)."""
+    """The planned runs of a refined campaign as an :class:`~nematic_solids.sweep.expand.Expansion`
+    (what :func:`nematic_solids.sweep.run.todo.plan_runs` and
+    :func:`~nematic_solids.sweep.run.driver.run_campaign` take)."""
 
     def __init__(self, campaign: Campaign, runs: list[RunSpec]):
         self.campaign = campaign

@@ -3,10 +3,12 @@ a round, which a point gets next and why. Pure functions of the outcomes; seeds 
 the campaign's, in its order (0, 1, 2, ...), so a point's runs are its first seeds.
 
 - Without a ``precision:`` section (``refine.seeds``): the first ``initial``; the next ``add``
-  while the point is uncertain (:func:`sweep.refine.stats.is_uncertain`), up to every seed.
+  while the point is uncertain (:func:`nematic_solids.sweep.refine.stats.is_uncertain`), up to every
+  seed.
 - With one: its ``initial``; after each round the point's decision
-  (:func:`sweep.precision.decide.decide`: precise, unanimous, cap or pending) from its seeds'
-  outcomes, and the next ``add`` seeds while it is pending. Grid and refined points alike.
+  (:func:`nematic_solids.sweep.precision.decide.decide`: precise, unanimous, cap or pending) from
+  its seeds' outcomes, and the next ``add`` seeds while it is pending. Grid and refined points
+  alike.
 """
 
 from __future__ import annotations

@@ -378,7 +378,7 @@ def provenance(phase: xr.Dataset, root: Path) -> tuple[list[tuple[str, str]], st
         ("fixed parameters", ", ".join(fixed) or "-"),
         ("fixed numerics", ", ".join(numerics) or "-"),
     ]
-    if a.get("param_protocol"):  # the functions of time (model.protocol), as written
+    if a.get("param_protocol"):  # the functions of time (nematic_solids.model.protocol), as written
         rows.append(("time protocol", str(a["param_protocol"])))
     if a.get("chain_axis"):
         rows.append(

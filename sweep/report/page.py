@@ -134,7 +134,8 @@ def inline_resources(layout: Any) -> str:
 
 
 def build_report(opened: CampaignResults) -> str:
-    """The report of the campaign ``opened`` (:func:`sweep.open_campaign`) as HTML text."""
+    """The report of the campaign ``opened`` (:func:`nematic_solids.sweep.open_campaign`) as HTML
+    text."""
     import jinja2
     from bokeh.embed import components
 

@@ -1,6 +1,6 @@
 """One run as the report's phase diagram shows it when its point is clicked: the run's last
-snapshot (a small PNG drawn with :func:`sweep.figures.common.safe_snapshot`, as a data URI)
-and its sigma2_S(t).
+snapshot (a small PNG drawn with :func:`nematic_solids.sweep.figures.common.safe_snapshot`, as a
+data URI) and its sigma2_S(t).
 
 Drawing a snapshot means importing matplotlib and reading the run file: most of what a
 report costs beyond its imports. So each run's views are kept in ``results/<name>/

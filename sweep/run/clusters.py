@@ -4,10 +4,10 @@ a dask-jobqueue cluster. A scheduler the driver starts itself uses TLS with temp
 credentials made for this campaign (``distributed.Security.temporary()``; a batch job reads
 the worker's copy from files that only the campaign's owner can read, in ``<campaign>/tls``),
 unless ``execution.security`` opts out with a stated reason, and serves its dashboard on
-127.0.0.1 only. The cluster is then watched by :class:`~sweep.run.workers.Supervisor`.
-As a local cluster closes, its workers drop one known message of distributed's, a heartbeat
-that met the closing scheduler (:func:`quiet_heartbeats`), so that a campaign that succeeded
-prints no traceback.
+127.0.0.1 only. The cluster is then watched by
+:class:`~nematic_solids.sweep.run.workers.Supervisor`. As a local cluster closes, its workers drop
+one known message of distributed's, a heartbeat that met the closing scheduler
+(:func:`quiet_heartbeats`), so that a campaign that succeeded prints no traceback.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ log = logging.getLogger(__name__)
 #: or past its walltime, a crash) is run again by the scheduler the driver starts, at most
 #: this many times (dask's ``allowed-failures``); then it stays pending (no record: not a
 #: failure of the run) and the driver says so. A worker that retires (its lifetime,
-#: :mod:`sweep.run.lifetime`) hands its runs back without counting.
+#: :mod:`nematic_solids.sweep.run.lifetime`) hands its runs back without counting.
 WORKER_LOSSES = 3
 
 

@@ -1,11 +1,12 @@
 """Where a run starts from: its own rolling checkpoint (it was interrupted in progress), the
 end state of a shorter finished run of its trajectory (a campaign whose ``t_final`` grew), or
-t = 0. Either way the result equals the run that never stopped (:mod:`model.checkpoint`).
+t = 0. Either way the result equals the run that never stopped
+(:mod:`nematic_solids.model.checkpoint`).
 
 Files:
 
 - ``results/<campaign>/checkpoints/<run_id>.nc``: the rolling checkpoint of a run in
-  progress (:meth:`model.checkpoint.RunState.to_dataset`), written atomically at
+  progress (:meth:`nematic_solids.model.checkpoint.RunState.to_dataset`), written atomically at
   ``store.checkpoint_every``, each one replacing the last, removed once the run's record is
   written. One per run in progress, so the folder stays bounded.
 - the group ``state`` of a finished run's file: its end state (``store.end_state``, on by
@@ -28,21 +29,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from model.parameters import Numerics, Parameters
+from nematic_solids.model.parameters import Numerics, Parameters
 
 from ..errors import StorageError
 from ..files import atomic_to_netcdf
 from ..store import CampaignStore
 
 if TYPE_CHECKING:
-    from model.checkpoint import InitialState, RunState
+    from nematic_solids.model.checkpoint import InitialState, RunState
 
 
 log = logging.getLogger(__name__)
 
 
 class Run(Protocol):
-    """What this module reads of a run to do (a :class:`sweep.run.task.RunTask`)."""
+    """What this module reads of a run to do (a :class:`nematic_solids.sweep.run.task.RunTask`)."""
 
     @property
     def run_id(self) -> str: ...
@@ -96,7 +97,7 @@ def _model_of(task: Run) -> tuple[Parameters, Numerics]:
 def starting_state(task: Run, store: CampaignStore) -> Start:
     """The run's own checkpoint if it holds a state of this run, else the end state of the
     run ``task.parent`` if it continues to this one, else t = 0 (see the module docstring)."""
-    from model.checkpoint import CheckpointError, load
+    from nematic_solids.model.checkpoint import CheckpointError, load
 
     params, numerics = _model_of(task)
     warnings: list[str] = []
@@ -142,7 +143,7 @@ def parent_fields(source: Mapping[str, str]) -> InitialState:
     (``time: end``: exact, from the run file's group ``state`` if it has one, else its last
     snapshot) or its snapshot at the time, with the displacement of that snapshot;
     :class:`CheckpointError` naming the file if it has neither."""
-    from model.checkpoint import CheckpointError, InitialState, RunState, read_netcdf
+    from nematic_solids.model.checkpoint import CheckpointError, InitialState, RunState, read_netcdf
 
     path = Path(source["runs_dir"]) / f"{source['run']}.nc"
     origin = f"{source['campaign']}/{source['run']}@{source['time']}"
@@ -174,11 +175,11 @@ def parent_fields(source: Mapping[str, str]) -> InitialState:
 
 def file_snapshots(main: Any) -> list[tuple[float, Any]]:
     """The snapshots of a run file's Dataset as a run state holds them: ``(time, fields)``,
-    every field of :data:`model.checkpoint.SNAPSHOT_FIELDS` in float64, NaN where the file
-    does not keep it."""
+    every field of :data:`nematic_solids.model.checkpoint.SNAPSHOT_FIELDS` in float64, NaN where the
+    file does not keep it."""
     import numpy as np
 
-    from model.checkpoint import SNAPSHOT_FIELDS
+    from nematic_solids.model.checkpoint import SNAPSHOT_FIELDS
 
     times = main["snapshot_time"].values if "snapshot_time" in main else ()
     n = main.sizes.get("x", 0)
@@ -198,7 +199,12 @@ def read_end_state(path: Path, task: Run) -> RunState:
     snapshot field ``task`` keeps (or keeps it at a lower precision)."""
     import numpy as np
 
-    from model.checkpoint import SNAPSHOT_FIELDS, CheckpointError, RunState, read_netcdf
+    from nematic_solids.model.checkpoint import (
+        SNAPSHOT_FIELDS,
+        CheckpointError,
+        RunState,
+        read_netcdf,
+    )
 
     group, main = read_netcdf(path, STATE_GROUP), read_netcdf(path)
     try:
@@ -216,9 +222,9 @@ def read_end_state(path: Path, task: Run) -> RunState:
 
 
 class Checkpointer:
-    """The callback :func:`model.simulate.run` hands each due state to: writes it as the
-    run's rolling checkpoint, atomically. A checkpoint that cannot be written (a full disk)
-    does not stop the run: it is logged, and the run goes on."""
+    """The callback :func:`nematic_solids.model.simulate.run` hands each due state to: writes it as
+    the run's rolling checkpoint, atomically. A checkpoint that cannot be written (a full disk) does
+    not stop the run: it is logged, and the run goes on."""
 
     def __init__(self, store: CampaignStore, run_id: str):
         self.path = checkpoint_path(store, run_id)

@@ -68,8 +68,8 @@ def start_detached(
     wait: float = START_WAIT,
     clock: Callable[[], float] = time.monotonic,
 ) -> Started:
-    """``python -m sweep ARGS`` in a new session, its output appended to ``log``; returns
-    once it holds the lock at ``lock_path``, has ended, or after ``wait`` seconds."""
+    """``python -m nematic_solids.sweep ARGS`` in a new session, its output appended to ``log``;
+    returns once it holds the lock at ``lock_path``, has ended, or after ``wait`` seconds."""
     log.parent.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, PYTHONUNBUFFERED="1", **{DRIVER_LOG_ENV: str(log)})
     env.setdefault("COLUMNS", "120")
@@ -77,7 +77,7 @@ def start_detached(
         out.write(f"# {now_iso()} on {socket.gethostname()}: nematic {' '.join(args)}\n".encode())
         out.flush()
         proc = subprocess.Popen(
-            [sys.executable, "-m", "sweep", *args],
+            [sys.executable, "-m", "nematic_solids.sweep", *args],
             stdin=subprocess.DEVNULL,
             stdout=out,
             stderr=subprocess.STDOUT,
@@ -166,8 +166,8 @@ def stop_driver(
     lock_path: Path, *, wait: float = STOP_WAIT, clock: Callable[[], float] = time.monotonic
 ) -> Stopped:
     """Signal the driver holding ``lock_path`` and wait (at most ``wait`` seconds) until it
-    has released the lock. Raises :class:`~sweep.errors.ClusterError` when it cannot be
-    signalled from here."""
+    has released the lock. Raises :class:`~nematic_solids.sweep.errors.ClusterError` when it cannot
+    be signalled from here."""
     holder = read_lock_holder(lock_path)
     if holder is None:
         return Stopped(holder=None)

@@ -1,16 +1,16 @@
 """The driver that fans a campaign's runs out over dask.
 
 The driver (:func:`run_campaign`) plans from what is on disk
-(:func:`sweep.run.todo.plan_runs`), submits the remaining runs (the worker task
-:func:`sweep.run.task.execute_run`) through a bounded window, reports each result as it arrives
-and can be interrupted at any point: everything it needs to resume is on disk, nothing is
+(:func:`nematic_solids.sweep.run.todo.plan_runs`), submits the remaining runs (the worker task
+:func:`nematic_solids.sweep.run.task.execute_run`) through a bounded window, reports each result as
+it arrives and can be interrupted at any point: everything it needs to resume is on disk, nothing is
 kept in dask.
 
-Clusters (:mod:`sweep.run.workers`): an embedded ``LocalCluster`` (default), an existing
-scheduler (``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster
-(``execution.cluster``), watched while the runs go (workers checked as they join, lost batch
-jobs replaced, a bounded give-up). The results folder must be visible at the same path from
-every worker (a shared filesystem).
+Clusters (:mod:`nematic_solids.sweep.run.workers`): an embedded ``LocalCluster`` (default), an
+existing scheduler (``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster
+(``execution.cluster``), watched while the runs go (workers checked as they join, lost batch jobs
+replaced, a bounded give-up). The results folder must be visible at the same path from every worker
+(a shared filesystem).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def dask_client(
     campaign_dir: Path | None = None,
 ) -> Iterator[Client]:
     """A dask ``Client`` for the campaign's execution section (closed on exit); see
-    :func:`sweep.run.clusters.open_cluster`."""
+    :func:`nematic_solids.sweep.run.clusters.open_cluster`."""
     with open_cluster(
         execution, timeout=timeout, dashboard=dashboard, campaign_dir=campaign_dir
     ) as link:
@@ -103,7 +103,7 @@ def dashboard_link(client: Client, timeout: float = 5.0) -> str | None:
 
 class RunEvents(Protocol):
     """What the driver reports (the command line prints it and draws the progress bar from
-    it: :class:`sweep.cli.progress.ProgressEvents`)."""
+    it: :class:`nematic_solids.sweep.cli.progress.ProgressEvents`)."""
 
     def dashboard(self, link: str | None) -> None:
         """The dask dashboard's link (``None``: none answers from here)."""
@@ -159,7 +159,7 @@ def _lost_task_record(task: RunTask, exc: BaseException) -> Record:
 
 def _worker_lost(exc: BaseException) -> bool:
     """Whether ``exc`` says the run's worker was lost under it more often than dask retries
-    (:data:`~sweep.run.clusters.WORKER_LOSSES`): not a failure of the run."""
+    (:data:`~nematic_solids.sweep.run.clusters.WORKER_LOSSES`): not a failure of the run."""
     from distributed import KilledWorker
 
     return isinstance(exc, KilledWorker)
@@ -182,9 +182,10 @@ def run_campaign(
     (they stay pending: a record is written whole or not at all) and ``stopped`` says why.
 
     Waits (bounded) for the first worker, checks every worker that joins and sizes the
-    submission window from the accepted workers (:class:`~sweep.run.workers.Supervisor`).
-    Raises :class:`ClusterError` when the workers cannot run the model or none is left for
-    ``execution.give_up_after`` seconds (the runs in flight stay pending)."""
+    submission window from the accepted workers
+    (:class:`~nematic_solids.sweep.run.workers.Supervisor`). Raises :class:`ClusterError` when the
+    workers cannot run the model or none is left for ``execution.give_up_after`` seconds (the runs
+    in flight stay pending)."""
     from distributed import as_completed
 
     campaign = expansion.campaign
@@ -210,7 +211,8 @@ def run_campaign(
         events.started(plan, len(expansion), max(1, watch.threads))
     if limit is not None:
         limit.planned += len(plan.todo)
-    # a chain's runs go after their predecessors (sweep.chains): by depth, then position
+    # a chain's runs go after their predecessors (nematic_solids.sweep.chains): by depth, then
+    # position
     chained = expansion.chain_parents if campaign.chain is not None else None
     queue = list(reversed(plan.todo if chained is None else in_chain_order(plan.todo, chained)))
     tasks: dict[Any, tuple[RunSpec, RunTask, int]] = {}
@@ -399,7 +401,7 @@ def drive(
     """What ``nematic run`` does while holding the campaign's lock: clean up, record the
     campaign text, plan from disk, run what remains on the campaign's dask cluster and
     refresh the manifest. Returns the plan and the summary (``None`` if nothing was to do;
-    ``interrupted`` set on Ctrl-C). Raises :class:`~sweep.errors.ClusterError` if the
+    ``interrupted`` set on Ctrl-C). Raises :class:`~nematic_solids.sweep.errors.ClusterError` if the
     cluster cannot be used."""
     campaign = expansion.campaign
     local = campaign.execution.mode == "local"

@@ -13,13 +13,13 @@ The rule (:func:`worker_lifetime`), for a walltime ``W``:
 
 A worker that retires hands the runs it has in flight back to the scheduler, which runs
 them again on another worker (not a failure, not counted against
-:data:`sweep.run.clusters.WORKER_LOSSES`): a job loses at most one run per worker thread, and a
-run longer than the earliest retirement (``W - 2 S - G``) can never finish in a job.
+:data:`nematic_solids.sweep.run.clusters.WORKER_LOSSES`): a job loses at most one run per worker
+thread, and a run longer than the earliest retirement (``W - 2 S - G``) can never finish in a job.
 
 The driver adds ``--lifetime`` and ``--lifetime-stagger`` to the job's
 ``worker_extra_args``, unless they already name ``--lifetime`` (``[--lifetime, "0"]``
 turns retirement off). The batch jobs that end are replaced by
-:class:`sweep.run.workers.JobWatch`, so the cluster keeps its jobs.
+:class:`nematic_solids.sweep.run.workers.JobWatch`, so the cluster keeps its jobs.
 """
 
 from __future__ import annotations

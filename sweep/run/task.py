@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
-from model.parameters import Numerics, Parameters
+from nematic_solids.model.parameters import Numerics, Parameters
 
 from ..campaign import StoreSpec
 from ..errors import StorageError, StoreError
@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     import xarray as xr
     from distributed import Client
 
-    from model.checkpoint import RunState
+    from nematic_solids.model.checkpoint import RunState
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +62,7 @@ class RunTask:
     #: the earlier failures of a run that is redone (``--retry-failed``), oldest first: its
     #: new record keeps them as ``previous_failures``
     previous_failures: tuple[dict[str, Any], ...] = ()
-    #: the run's trajectory id (:func:`sweep.identity.trajectory_id`)
+    #: the run's trajectory id (:func:`nematic_solids.sweep.identity.trajectory_id`)
     trajectory: str = ""
     #: the finished shorter run of its trajectory whose end state it continues (or None)
     parent: str | None = None
@@ -255,8 +255,8 @@ def execute_run(task: RunTask) -> Record:
     from .workers import import_model
 
     import_model()
-    from model.checkpoint import Schedule
-    from model.simulate import run as simulate
+    from nematic_solids.model.checkpoint import Schedule
+    from nematic_solids.model.simulate import run as simulate
 
     restore_heap_reuse()
     store = CampaignStore(Path(task.runs_dir).parent.parent, Path(task.runs_dir).parent.name)
@@ -341,11 +341,11 @@ def warm_kinds(expansion: Expansion) -> list[tuple[dict[str, Any], dict[str, Any
 def warm_worker(kinds: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str, Any]:
     """Run on one worker per host before the campaign: compiles the model's kernels (or
     loads them from the disk cache) with tiny runs, so that the other workers load them
-    instead of all compiling at once (:mod:`model.warmup`)."""
+    instead of all compiling at once (:mod:`nematic_solids.model.warmup`)."""
     from .workers import import_model
 
     import_model()
-    from model.warmup import warm_up
+    from nematic_solids.model.warmup import warm_up
 
     info = warm_up([(Parameters.from_dict(p), Numerics.from_dict(n)) for p, n in kinds])
     info["host"] = socket.gethostname()

@@ -35,7 +35,7 @@ class Plan:
     #: runs whose record or file was unusable (missing, truncated, corrupt): (run_id, why)
     redone: list[tuple[str, str]] = field(default_factory=list)
     #: failed runs redone (``--retry-failed``): position -> the failures their new record
-    #: keeps as ``previous_failures`` (:func:`sweep.run.failures.previous_failures`)
+    #: keeps as ``previous_failures`` (:func:`nematic_solids.sweep.run.failures.previous_failures`)
     history: dict[int, list[dict[str, Any]]] = field(default_factory=dict)
     #: runs to do that continue the end state of a shorter finished run of their
     #: trajectory (a campaign whose t_final grew): position -> that run's id

@@ -1,11 +1,11 @@
 """The driver's workers: watching the campaign's dask cluster while it runs (the cluster is
-started by :mod:`sweep.run.clusters`).
+started by :mod:`nematic_solids.sweep.run.clusters`).
 
 :class:`Supervisor` is what the driver asks, every couple of seconds, while runs are in
 flight: it checks each worker that joins (it imports the model, its code version is the
 driver's) and refuses the others, sizes the submission window from the accepted workers'
 threads, replaces batch jobs that ended (walltime, ``scancel``, preemption, a crash) and
-gives up with a :class:`~sweep.errors.ClusterError` when no usable worker is left for
+gives up with a :class:`~nematic_solids.sweep.errors.ClusterError` when no usable worker is left for
 ``execution.give_up_after`` seconds, or at once when every batch job dies before its worker
 joins (a broken worker environment), quoting the last error found in the job logs.
 """
@@ -97,8 +97,8 @@ _MODEL_IMPORT = threading.Lock()
 def import_model() -> None:
     """Import the model (py-pde, numba, the kernels' modules) in this process, once."""
     with _MODEL_IMPORT:
-        import model.simulate
-        import model.warmup  # noqa: F401
+        import nematic_solids.model.simulate
+        import nematic_solids.model.warmup  # noqa: F401
 
 
 def worker_environment() -> dict[str, Any]:

@@ -4,8 +4,8 @@ The schema (documented for users in ``docs/campaigns.md``)::
 
     name: fig2                      # results go to results/<name>/ (default: the file's stem)
     description: free text
-    parameters: {B: 0.5, K: 5.0e-5}  # base model parameters (model.parameters.Parameters)
-    numerics: {resolution: 128, t_final: 300}   # base numerics (model.parameters.Numerics)
+    parameters: {B: 0.5, K: 5.0e-5}  # base model parameters (Parameters)
+    numerics: {resolution: 128, t_final: 300}   # base numerics (Numerics)
     sweep:
       axes:                         # product of all axes by default, in this order
         alpha_minus_B: {linspace: [0.1, 1.0, 10]}
@@ -15,24 +15,24 @@ The schema (documented for users in ``docs/campaigns.md``)::
         - [K, eps]
     seeds: 50                       # a count (seeds 0..49), a list, or {count: 50, start: 1000}
     store: {snapshot_times: [100, 300], snapshot_fields: [q1, q2, A], snapshot_dtype: float32}
-    fits: [transition]              # names (or {name: {options}}) from sweep.analysis.registry
-    figures: [fig2]                 # names (or {name: {options}}) from sweep.figures.registry;
+    fits: [transition]              # names (or {name: {options}}) from analysis.registry
+    figures: [fig2]                 # names (or {name: {options}}) from figures.registry;
                                     # [] draws none; absent: every figure that applies
     execution:
       workers: 2                    # local dask LocalCluster (default: one per core)
       scheduler: tcp://host:8786    # or an existing dask scheduler
       cluster: {kind: slurm, jobs: 10, cores: 8, memory: 16GB, walltime: "02:00:00"}
-    refine: {axis: alpha_minus_B, observable: sigma2_S, rounds: 3}   # adaptive (sweep.refine)
-    precision: {observable: lambda_peak, width: 0.1}   # seeds by precision (sweep.precision)
+    refine: {axis: alpha_minus_B, observable: sigma2_S, rounds: 3}   # adaptive rounds
+    precision: {observable: lambda_peak, width: 0.1}   # seeds by precision
     prior: ../docs/results/fig2/phase.nc   # a finished run's seeds: the later rounds' cost
 
-Every mistake is collected as a :class:`~sweep.errors.Problem` naming the file and line, the
-key path, the value and what is allowed (with the closest valid name for unknown keys), and
-raised together as one :class:`~sweep.errors.CampaignError` before anything runs.
+Every mistake is collected as a :class:`~nematic_solids.sweep.errors.Problem` naming the file and
+line, the key path, the value and what is allowed (with the closest valid name for unknown keys),
+and raised together as one :class:`~nematic_solids.sweep.errors.CampaignError` before anything runs.
 
 Each top-level section has one reader (:data:`SECTIONS`, in the order they are read); a new
 section is a reader function, a row of that table, its key in :data:`TOP_KEYS` and a field
-of :class:`~sweep.campaign.Campaign`.
+of :class:`~nematic_solids.sweep.campaign.Campaign`.
 """
 
 from __future__ import annotations
@@ -43,9 +43,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from model.errors import ParameterError
-from model.parameters import Numerics, Parameters
-from model.resolution import is_rule, read_rule
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.resolution import is_rule, read_rule
 
 from ..campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec
 from ..errors import CampaignError, Problem
@@ -212,8 +212,8 @@ def parse_campaign(
     """Validate campaign YAML ``text``; raise :class:`CampaignError` listing every problem.
 
     Every grid point is then checked by the model's own :class:`Parameters` and
-    :class:`Numerics` (see :func:`sweep.expand.check_points`), so impossible values anywhere
-    in the sweep are rejected here too.
+    :class:`Numerics` (see :func:`nematic_solids.sweep.expand.check_points`), so impossible values
+    anywhere in the sweep are rejected here too.
     """
     overrides = overrides or Overrides()
     node, doc, lines, dups = read_document(text, source)
@@ -327,7 +327,7 @@ def run_memory_limit(campaign: Campaign) -> tuple[int | None, str]:
 
 def _check_memory(c: Checker, campaign: Campaign) -> None:
     """Refuse a grid whose largest run needs more memory than a worker has (estimated from
-    the resolution and the mechanics: :func:`sweep.limits.run_memory_bytes`)."""
+    the resolution and the mechanics: :func:`nematic_solids.sweep.limits.run_memory_bytes`)."""
     limit, what = run_memory_limit(campaign)
     if limit is None:
         return

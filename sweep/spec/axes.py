@@ -1,6 +1,6 @@
 """The ``sweep:`` section: axes (lists or linspace / logspace / geomspace ranges, values
 normalised to the declared type of the parameter or numerics field) and zip groups -> the
-grid's :class:`~sweep.campaign.Dim` tuple."""
+grid's :class:`~nematic_solids.sweep.campaign.Dim` tuple."""
 
 from __future__ import annotations
 
@@ -93,7 +93,7 @@ def _check_axis(c: Checker, name: str, raw: Any, path: KeyPath) -> Axis | None:
     if not values:
         c.bad(path, raw, "a non-empty list of values (an empty axis would give no runs)")
         return None
-    kind_t = AXIS_TYPES.get(name, "float")  # a protocol's number (sweep.protocols)
+    kind_t = AXIS_TYPES.get(name, "float")  # a protocol's number (nematic_solids.sweep.protocols)
     out: list[Any] = []
     ok = True
     for v, vpath in zip(values, vpaths, strict=True):

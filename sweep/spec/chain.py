@@ -1,12 +1,12 @@
-"""The ``chain:`` section (sweep.chains): the axis walked in order and the branches, checked
-against the sweep with file:line."""
+"""The ``chain:`` section (nematic_solids.sweep.chains): the axis walked in order and the branches,
+checked against the sweep with file:line."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from model.resolution import is_rule
+from nematic_solids.model.resolution import is_rule
 
 from ..campaign import BRANCH, BRANCHES, ChainSpec
 from .checker import Checker, is_number, suggest

@@ -10,10 +10,10 @@
       - fig3_precision.yaml
 
 ``nematic validate``, ``run`` (with ``--dry-run`` and ``--detach``), ``status`` and ``stop``
-take a collection where they take a campaign file (:mod:`sweep.cli.collection`); every
-campaign keeps its own results folder, lock, runs and products, so a member can also be run,
-inspected or resumed on its own. A collection is not a campaign: it has no other keys, and
-its members are campaign files (a collection does not include collections).
+take a collection where they take a campaign file (:mod:`nematic_solids.sweep.cli.collection`);
+every campaign keeps its own results folder, lock, runs and products, so a member can also be run,
+inspected or resumed on its own. A collection is not a campaign: it has no other keys, and its
+members are campaign files (a collection does not include collections).
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""``initial:`` -> :class:`sweep.campaign.InitialSpec`: the campaign whose runs this one's
-begin from, checked against it here (its file, the point, the seeds, the time, the
+"""``initial:`` -> :class:`nematic_solids.sweep.campaign.InitialSpec`: the campaign whose runs this
+one's begin from, checked against it here (its file, the point, the seeds, the time, the
 resolution), so that a missing parent is an error of this file with its line.
 
 ```yaml
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from model.parameters import Numerics
-from model.resolution import is_rule
+from nematic_solids.model.parameters import Numerics
+from nematic_solids.model.resolution import is_rule
 
 from ..campaign import InitialSpec, same_value
 from ..errors import CampaignError

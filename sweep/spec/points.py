@@ -1,10 +1,10 @@
 """The model's check of every grid point of a campaign: each point's parameters and numerics
-built as :func:`sweep.expand.make_point` builds them, each distinct
-:class:`~model.errors.ParameterError` reported at the key path that caused it."""
+built as :func:`nematic_solids.sweep.expand.make_point` builds them, each distinct
+:class:`~nematic_solids.model.errors.ParameterError` reported at the key path that caused it."""
 
 from __future__ import annotations
 
-from model.errors import ParameterError
+from nematic_solids.model.errors import ParameterError
 
 from ..campaign import AMB, Campaign
 from ..expand import MAX_POINT_PROBLEMS, iter_points, make_point
@@ -15,7 +15,7 @@ from .checker import Checker
 
 def check_points(campaign: Campaign, checker: Checker) -> None:
     """Build the model's objects at every grid point; report each distinct
-    :class:`~model.errors.ParameterError` at the key path that caused it."""
+    :class:`~nematic_solids.model.errors.ParameterError` at the key path that caused it."""
     axis_names = {a.name for a in campaign.axes}
     swept = {k: v for k, v in protocol_axes(campaign.parameters).items() if k in axis_names}
     seen: set[tuple[str, str]] = set()

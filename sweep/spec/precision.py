@@ -16,7 +16,7 @@
       add: 4                    # seeds added per round to an undecided point
 
 ``width`` or ``unanimous`` (or both) must be given. With a ``refine:`` section the same rules
-decide the seeds of every point, grid and refined (:mod:`sweep.refine.seeds`).
+decide the seeds of every point, grid and refined (:mod:`nematic_solids.sweep.refine.seeds`).
 """
 
 from __future__ import annotations
@@ -42,9 +42,9 @@ KEYS = (
 
 
 def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSpec | None:
-    """The reader of the ``precision:`` section (a row of :data:`sweep.spec.SECTIONS`): needs
-    the ``seeds`` section read before it. ``None`` when there is none (or it has problems,
-    which are added to ``c``)."""
+    """The reader of the ``precision:`` section (a row of
+    :data:`nematic_solids.sweep.spec.SECTIONS`): needs the ``seeds`` section read before it.
+    ``None`` when there is none (or it has problems, which are added to ``c``)."""
     if raw is None:
         return None
     path: tuple[str | int, ...] = ("precision",)

@@ -1,13 +1,14 @@
-"""The ``protocol:`` section (sweep.protocols): its structure checked here, with the key path
-of every mistake; the functions' values are checked by the model at every grid point
-(:func:`sweep.spec.points.check_points`), where the sweep axes of its numbers are known."""
+"""The ``protocol:`` section (nematic_solids.sweep.protocols): its structure checked here, with the
+key path of every mistake; the functions' values are checked by the model at every grid point
+(:func:`nematic_solids.sweep.spec.points.check_points`), where the sweep axes of its numbers are
+known."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from model.protocol import FORMS, PROTOCOL_PARAMETERS
+from nematic_solids.model.protocol import FORMS, PROTOCOL_PARAMETERS
 
 from ..campaign import AMB
 from ..protocols import PROTOCOL

@@ -34,9 +34,9 @@ positive, its midpoints are geometric (sqrt(a b), so halving 1e-6 to 1e-4 gives 
 its ``min_spacing`` is in decades. With a ``precision:`` section the seeds of every point,
 grid and refined, are decided by its rules, so ``seeds:`` is refused here.
 
-The checks add their problems to the campaign's checker (:class:`sweep.spec.checker.Checker`), so
-a mistake here is reported with the file, line, key path, value and what is allowed, in the
-same pass as every other problem of the file.
+The checks add their problems to the campaign's checker
+(:class:`nematic_solids.sweep.spec.checker.Checker`), so a mistake here is reported with the file,
+line, key path, value and what is allowed, in the same pass as every other problem of the file.
 """
 
 from __future__ import annotations
@@ -81,8 +81,8 @@ MAX_ROUNDS = 50
 
 
 def read_refine(c: Checker, raw: Any, read: Mapping[str, Any]) -> RefineSpec | None:
-    """The reader of the ``refine:`` section (a row of :data:`sweep.spec.SECTIONS`): needs the
-    ``sweep``, ``seeds`` and ``precision`` sections read before it."""
+    """The reader of the ``refine:`` section (a row of :data:`nematic_solids.sweep.spec.SECTIONS`):
+    needs the ``sweep``, ``seeds`` and ``precision`` sections read before it."""
     return check_refine(
         c, raw, read.get("sweep") or (), read.get("seeds") or (), read.get("precision")
     )

@@ -1,8 +1,8 @@
 """Readers of the campaign's top-level sections (but ``sweep:`` and ``execution:``, which have
-modules of their own): each takes the :class:`~sweep.spec.checker.Checker`, the section's raw
-value and the sections read before it, reports every problem and returns what the
-:class:`~sweep.campaign.Campaign` keeps. Also the check of the fits' and figures' options
-against their registries and the campaign's axes."""
+modules of their own): each takes the :class:`~nematic_solids.sweep.spec.checker.Checker`, the
+section's raw value and the sections read before it, reports every problem and returns what the
+:class:`~nematic_solids.sweep.campaign.Campaign` keeps. Also the check of the fits' and figures'
+options against their registries and the campaign's axes."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ WALL_RE = re.compile(
     r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|sec|seconds?|min|minutes?|h|hours?)\s*$"
 )
 WALL_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0}
-#: Snapshot variables of a run file (model.simulate.run contract).
+#: Snapshot variables of a run file (nematic_solids.model.simulate.run contract).
 SNAPSHOT_FIELDS = ("q1", "q2", "A", "u1", "u2", "I1bar")
 SNAPSHOT_DTYPES = ("float64", "float32")
 NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
@@ -94,7 +94,7 @@ def read_description(c: Checker, raw: Any, read: Mapping[str, Any]) -> str:
 
 def read_parameters(c: Checker, raw: Any, read: Mapping[str, Any]) -> dict[str, Any]:
     """``parameters:``: base values of model parameters (checked at every grid point by the
-    model, :func:`sweep.expand.check_points`)."""
+    model, :func:`nematic_solids.sweep.expand.check_points`)."""
     return _check_settings(c, raw, "parameters", PARAMETER_TYPES, NUMERICS_TYPES, "numerics")
 
 

@@ -22,9 +22,9 @@ A resolution variant of a campaign with the per-node texture also fixes the grid
 texture is drawn on (``texture_resolution``: the point's own resolution), so that it starts
 from the same physical field (model/initial.py); the band texture is that already.
 
-The checks add their problems to the campaign's checker (:class:`sweep.spec.checker.Checker`), so
-a mistake here is reported with the file, line, key path and what is allowed, in the same
-pass as every other problem of the file.
+The checks add their problems to the campaign's checker
+(:class:`nematic_solids.sweep.spec.checker.Checker`), so a mistake here is reported with the file,
+line, key path and what is allowed, in the same pass as every other problem of the file.
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from model.errors import ParameterError
-from model.parameters import Numerics, Parameters, check_compatible
-from model.resolution import is_rule
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.parameters import Numerics, Parameters, check_compatible
+from nematic_solids.model.resolution import is_rule
 
 from ..campaign import (
     AMB,
@@ -114,7 +114,7 @@ def resolve(
     variant: Variant, parameters: Parameters, numerics: Numerics
 ) -> tuple[Parameters, Numerics]:
     """The model's objects of ``variant`` at a point whose own are given. Raises
-    :class:`~model.errors.ParameterError` when the result is not a valid run."""
+    :class:`~nematic_solids.model.errors.ParameterError` when the result is not a valid run."""
     p, n = parameters.to_dict(), numerics.to_dict()
     for key, value in variant.settings.items():
         f = _factor(value)
@@ -144,8 +144,8 @@ def resolve(
 
 
 def read_verify(c: Checker, raw: Any, read: Mapping[str, Any]) -> VerifySpec | None:
-    """The reader of the ``verify:`` section (a row of :data:`sweep.spec.SECTIONS`): needs the
-    ``parameters``, ``numerics``, ``sweep`` and ``seeds`` sections read before it."""
+    """The reader of the ``verify:`` section (a row of :data:`nematic_solids.sweep.spec.SECTIONS`):
+    needs the ``parameters``, ``numerics``, ``sweep`` and ``seeds`` sections read before it."""
     return check_verify(
         c,
         raw,

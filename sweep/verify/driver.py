@@ -1,8 +1,9 @@
 """Running a verification: the sample's base runs (into the campaign's folder) and the
 variants' runs (into ``results/NAME/verify/``) on one dask cluster, then ``verify.nc``.
 
-Both are ordinary runs (:func:`sweep.run.todo.plan_runs`, :func:`sweep.run.driver.run_campaign`):
-resumable, checked, recorded; the caller holds the campaign's lock.
+Both are ordinary runs (:func:`nematic_solids.sweep.run.todo.plan_runs`,
+:func:`nematic_solids.sweep.run.driver.run_campaign`): resumable, checked, recorded; the caller
+holds the campaign's lock.
 """
 
 from __future__ import annotations

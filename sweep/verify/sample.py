@@ -9,8 +9,8 @@ corners and the selections only.
 At each sampled point the campaign's first ``verify.seeds`` seeds are its **base runs**:
 ordinary runs of the campaign (the same run ids as in its grid, stored in its folder, so a
 verification before the grid is a head start on it). Each variant reruns the point with its
-settings (:func:`sweep.spec.verify.resolve`) and the same seeds (or its own): **variant
-runs**, stored apart in ``results/NAME/verify/`` under their own run ids.
+settings (:func:`nematic_solids.sweep.spec.verify.resolve`) and the same seeds (or its own):
+**variant runs**, stored apart in ``results/NAME/verify/`` under their own run ids.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from model.errors import ParameterError
+from nematic_solids.model.errors import ParameterError
 
 from ..campaign import Campaign, Variant, VerifySpec, same_value
 from ..expand import Expansion, GridPoint, RunSpec

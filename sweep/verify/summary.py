@@ -1,7 +1,7 @@
 """What ``verify.nc`` says, read back: the file loaded (:func:`read_verify`), the one-line
 summary of ``run``, ``verify`` and ``status`` (:func:`summary_line`) and the rows of the
 report's and ``status -v``'s tables (:func:`verdict_rows`, :func:`transition_rows`). The file
-is written by :mod:`sweep.verify.measure`."""
+is written by :mod:`nematic_solids.sweep.verify.measure`."""
 
 from __future__ import annotations
 

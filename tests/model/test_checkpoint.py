@@ -1,8 +1,8 @@
-"""Exact continuation (model.checkpoint, model.simulate.run's start / checkpoint / keep_state):
-a run continued from any saved state, in memory or read back from its netCDF file, takes the
-same accepted steps and ends with bitwise the same arrays as the run that never stopped; a
-longer run continued from a shorter run's end equals the straight longer run; a corrupt,
-truncated or foreign state is refused, naming why."""
+"""Exact continuation (nematic_solids.model.checkpoint, nematic_solids.model.simulate.run's start /
+checkpoint / keep_state): a run continued from any saved state, in memory or read back from its
+netCDF file, takes the same accepted steps and ends with bitwise the same arrays as the run that
+never stopped; a longer run continued from a shorter run's end equals the straight longer run; a
+corrupt, truncated or foreign state is refused, naming why."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from model.checkpoint import CheckpointError, InitialState, RunState, Schedule, load
-from model.errors import ParameterError
-from model.parameters import Numerics, Parameters
-from model.simulate import run
+from nematic_solids.model.checkpoint import CheckpointError, InitialState, RunState, Schedule, load
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run
 
 PARAMS = Parameters.from_dict({"noise_modes": 8, "alpha_minus_B": 0.3})
 #: the work counters that equal runs share (the wall time differs, and a continued longer

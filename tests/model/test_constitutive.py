@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from model import constitutive as cl
-from model import tensors as T
+from nematic_solids.model import constitutive as cl
+from nematic_solids.model import tensors as T
 
 M = cl.Moduli(kappa=7.0, B=0.5, B_prime=0.3, alpha=1.3)
 M_PASSIVE = cl.Moduli(kappa=7.0, B=0.5, B_prime=0.3, alpha=0.0)
@@ -58,7 +58,7 @@ def test_tangent_matches_finite_differences_and_is_symmetric(rng):
 
 def test_packed_layout_is_the_same_in_both_backends():
     """The compiled kernels' plane table is the numpy packing's (row-by-row upper triangle)."""
-    from model.compiled.constitutive import PACKED
+    from nematic_solids.model.compiled.constitutive import PACKED
 
     for c, (a, b) in enumerate(T.PACKED_PAIRS):
         assert PACKED[a, b] == PACKED[b, a] == c
@@ -102,14 +102,14 @@ def test_rotation_invariance_of_energy(rng):
 
 
 def test_every_compiled_kernel_has_a_numpy_twin_with_its_signature():
-    """model.backend swaps the two kernel modules: both export the members of the Kernels
-    interface and nothing else, each with the interface's parameters (the type checker
+    """nematic_solids.model.backend swaps the two kernel modules: both export the members of the
+    Kernels interface and nothing else, each with the interface's parameters (the type checker
     compares the numpy twins' types with it; the numba functions it cannot see)."""
     import inspect
 
-    from model import reference_kernels as twin
-    from model.backend import Kernels, kernels
-    from model.compiled import kernels as kern
+    from nematic_solids.model import reference_kernels as twin
+    from nematic_solids.model.backend import Kernels, kernels
+    from nematic_solids.model.compiled import kernels as kern
 
     members = sorted(
         n for n, v in vars(Kernels).items() if inspect.isfunction(v) and not n.startswith("_")
@@ -129,7 +129,7 @@ def test_every_compiled_kernel_has_a_numpy_twin_with_its_signature():
 
 
 def test_numba_tangent_kernel_matches_numpy_reference(rng):
-    from model.compiled.kernels import tangent_kernel
+    from nematic_solids.model.compiled.kernels import tangent_kernel
 
     F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 8, 8))
     q = 0.4 * rng.standard_normal((2, 8, 8))
@@ -140,7 +140,7 @@ def test_numba_tangent_kernel_matches_numpy_reference(rng):
 
 
 def test_numba_apply_tangent_matches_numpy_reference(rng):
-    from model.compiled.kernels import apply_tangent_kernel
+    from nematic_solids.model.compiled.kernels import apply_tangent_kernel
 
     Kp = rng.standard_normal((10, 6, 6))  # packed: the full tangent is its symmetric matrix
     dF = rng.standard_normal((2, 2, 6, 6))
@@ -155,9 +155,9 @@ def test_numba_apply_tangent_matches_numpy_reference(rng):
 @pytest.mark.parametrize("incompressible", [False, True])
 @pytest.mark.parametrize("B_prime", [0.0, 0.2])
 def test_numba_linear_response_matches_numpy_reference(rng, incompressible, B_prime):
-    from model.fourier import SpectralGrid
-    from model.mechanics import LinearMechanics
-    from model.parameters import Parameters
+    from nematic_solids.model.fourier import SpectralGrid
+    from nematic_solids.model.mechanics import LinearMechanics
+    from nematic_solids.model.parameters import Parameters
 
     g = SpectralGrid(16)
     mech = LinearMechanics(
@@ -181,8 +181,8 @@ def test_numba_linear_response_matches_numpy_reference(rng, incompressible, B_pr
 
 
 def test_numba_pointwise_stepper_kernels_match_numpy(rng):
-    from model.compiled import kernels as kern
-    from model.reference_kernels import phi_functions
+    from nematic_solids.model.compiled import kernels as kern
+    from nematic_solids.model.reference_kernels import phi_functions
 
     q1, q2, A, tr = 0.3 * rng.standard_normal((4, 8, 8))
     A[0, 0] = 0.0  # the small-|z| branch
@@ -235,8 +235,8 @@ def test_numba_pointwise_stepper_kernels_match_numpy(rng):
 def test_runge_kutta_stage_kernels_are_the_numpy_expressions(rng, complex_):
     """The integrated displacement's stage and update kernels give numpy's values exactly
     (spectra and real-space gradients alike)."""
-    from model import reference_kernels as ref
-    from model.compiled import kernels as kern
+    from nematic_solids.model import reference_kernels as ref
+    from nematic_solids.model.compiled import kernels as kern
 
     shape = (2, 8, 5) if complex_ else (2, 2, 8, 8)
     x0, v0, v1, v2, v3 = (
@@ -257,9 +257,9 @@ def test_runge_kutta_stage_kernels_are_the_numpy_expressions(rng, complex_):
 def test_balance_residual_kernel_matches_numpy_twin(rng):
     """The force-balance residual (H^-1 norm of Div P over the floored RMS stress): compiled
     and numpy agree, for stresses below and above the floor of 1."""
-    from model import reference_kernels as twin
-    from model.compiled import kernels as kern
-    from model.fourier import SpectralGrid
+    from nematic_solids.model import reference_kernels as twin
+    from nematic_solids.model.compiled import kernels as kern
+    from nematic_solids.model.fourier import SpectralGrid
 
     g = SpectralGrid(16)
     for amp in (0.1, 10.0):
@@ -272,7 +272,7 @@ def test_balance_residual_kernel_matches_numpy_twin(rng):
 
 
 def test_numba_finite_strain_kernels_match_numpy_references(rng):
-    from model.compiled import kernels as kern
+    from nematic_solids.model.compiled import kernels as kern
 
     M = cl.Moduli(kappa=10.0, B=0.5, B_prime=0.2, alpha=1.5)
     F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 6, 6))
@@ -304,9 +304,9 @@ def test_numba_finite_strain_kernels_match_numpy_references(rng):
 
 
 def test_numba_spectral_kernels_match_numpy_references(rng):
-    from model import reference_kernels as twin
-    from model.compiled import kernels as kern
-    from model.fourier import SpectralGrid
+    from nematic_solids.model import reference_kernels as twin
+    from nematic_solids.model.compiled import kernels as kern
+    from nematic_solids.model.fourier import SpectralGrid
 
     g = SpectralGrid(16)
     v = g.forward(rng.standard_normal((2, 16, 16)))
@@ -339,8 +339,8 @@ def test_phi_functions_match_their_integral_definition():
 
     from scipy.integrate import quad
 
-    from model.compiled import etd
-    from model.reference_kernels import phi_functions
+    from nematic_solids.model.compiled import etd
+    from nematic_solids.model.reference_kernels import phi_functions
 
     z = np.array([-60.0, -7.3, -1.0001, -0.9999, -0.3, -1e-9, 0.0, 0.4])
     numpy_phis = phi_functions(z, 3)
@@ -361,10 +361,10 @@ def test_phi_functions_match_their_integral_definition():
 
 
 def test_etdrk4_activity_weights_match_numpy(rng):
-    from model import reference_kernels as twin
-    from model.compiled import kernels as kern
-    from model.reference_kernels import phi_functions
-    from model.solver import ETDRK4Solver
+    from nematic_solids.model import reference_kernels as twin
+    from nematic_solids.model.compiled import kernels as kern
+    from nematic_solids.model.reference_kernels import phi_functions
+    from nematic_solids.model.solver import ETDRK4Solver
 
     A = 0.5 * rng.standard_normal((8, 8))
     A[0, 0] = 0.0
@@ -384,9 +384,11 @@ def test_etdrk4_activity_weights_match_numpy(rng):
 
 
 def test_numba_strain_measures_and_divergence_match_numpy_references(rng):
-    from model.compiled.kernels import div_hat_kernel, strain_measures_kernel
-    from model.fourier import SpectralGrid
-    from model.reference_kernels import strain_measures_kernel as strain_measures_twin
+    from nematic_solids.model.compiled.kernels import div_hat_kernel, strain_measures_kernel
+    from nematic_solids.model.fourier import SpectralGrid
+    from nematic_solids.model.reference_kernels import (
+        strain_measures_kernel as strain_measures_twin,
+    )
 
     F = np.eye(2)[:, :, None, None] + 0.2 * rng.standard_normal((2, 2, 8, 8))
     P = rng.standard_normal((2, 2, 8, 8))
@@ -401,8 +403,8 @@ def test_numba_strain_measures_and_divergence_match_numpy_references(rng):
 
 def test_etdrk4_activity_weights_row_by_row_equal_point_by_point(rng):
     """The compiled weights (the Taylor series a row at a time) are bitwise those of
-    evaluating the phi functions point by point (model.compiled.etd._phi123_from)."""
-    from model.compiled import etd
+    evaluating the phi functions point by point (nematic_solids.model.compiled.etd._phi123_from)."""
+    from nematic_solids.model.compiled import etd
 
     A = rng.uniform(-0.6, 0.6, (6, 16))
     zeta, s, tau, h = 1.0, 10.0, 1.0, 0.3  # z from -0.3 to -3.5: both branches, for h and h/2

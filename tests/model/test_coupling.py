@@ -8,13 +8,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model import constitutive as cl
-from model import tensors as T
-from model.errors import ParameterError
-from model.fourier import SpectralGrid
-from model.mechanics import make_mechanics
-from model.parameters import Numerics, Parameters
-from model.simulate import run
+from nematic_solids.model import constitutive as cl
+from nematic_solids.model import tensors as T
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.fourier import SpectralGrid
+from nematic_solids.model.mechanics import make_mechanics
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run
 
 
 def _uniform(params: Parameters, n: int = 16):

@@ -12,13 +12,13 @@ import pytest
 from pde import FieldCollection
 from pde.solvers import Controller
 
-from model.errors import SimulationFailure
-from model.fourier import HAVE_FFTW
-from model.initial import band_limited_field, band_limited_modes, initial_fields
-from model.parameters import Numerics, Parameters
-from model.pde import ActiveNematicPDE, make_state
-from model.simulate import run
-from model.solver import ETDRK2Solver, ETDRK4Solver
+from nematic_solids.model.errors import SimulationFailure
+from nematic_solids.model.fourier import HAVE_FFTW
+from nematic_solids.model.initial import band_limited_field, band_limited_modes, initial_fields
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.pde import ActiveNematicPDE, make_state
+from nematic_solids.model.simulate import run
+from nematic_solids.model.solver import ETDRK2Solver, ETDRK4Solver
 
 # a fixed small workload for the numerics' tests (its own constants, so the measured errors and
 # orders quoted below do not move with the model's defaults)
@@ -44,8 +44,8 @@ def _final(ds):
 def test_fast_split_rate_equals_numpy_reference(mechanics, incompressible, compiled, B_prime):
     """ETDRK2's L u + N(u) is the PDE's readable ``evolution_rate`` (different code paths):
     both the compiled paths (native FFTW: the whole linear right-hand side,
-    model.compiled.linear_rhs; the finite-strain Krylov solves, model.compiled.finite_krylov)
-    and their numpy references."""
+    nematic_solids.model.compiled.linear_rhs; the finite-strain Krylov solves,
+    nematic_solids.model.compiled.finite_krylov) and their numpy references."""
     if compiled and not HAVE_FFTW:
         pytest.skip("native FFTW not available")
     linear = mechanics == "linear"
@@ -92,9 +92,9 @@ def test_numpy_backend_runs_no_compiled_code():
     mechanics with it calls no numba kernel (none compiled, none loaded from the cache)."""
     code = (
         "import json\n"
-        "from model.parameters import Numerics, Parameters\n"
-        "from model.simulate import run\n"
-        "from model.warmup import compile_counts\n"
+        "from nematic_solids.model.parameters import Numerics, Parameters\n"
+        "from nematic_solids.model.simulate import run\n"
+        "from nematic_solids.model.warmup import compile_counts\n"
         "p = Parameters.from_dict({'noise_modes': 6, 'alpha_minus_B': 1.0, 'eps': 0.02})\n"
         "for mech in ('linear', 'finite'):\n"
         "    ds = run(p, Numerics(resolution=16, t_final=1.0, save_every=0.5, mechanics=mech,\n"
@@ -268,8 +268,8 @@ def test_bitwise_identical_across_processes():
     import sys
 
     code = (
-        "import hashlib; from model.parameters import Parameters, Numerics; "
-        "from model.simulate import run; "
+        "import hashlib; from nematic_solids.model.parameters import Parameters, Numerics; "
+        "from nematic_solids.model.simulate import run; "
         "ds = run(Parameters(noise_modes=6, K=1e-3, S0=0.2), Numerics(resolution=32, "
         "t_final=3, save_every=3), 5); "
         "print(hashlib.sha256(ds['q1'].values.tobytes() + ds['A'].values.tobytes())"

@@ -11,13 +11,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from model.errors import ParameterError
-from model.parameters import Numerics, Parameters
-from model.simulate import STEADY, run
-from sweep.errors import CampaignError
-from sweep.identity import run_id_for
-from sweep.spec import parse_campaign
-from sweep.store import record_from_dataset
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import STEADY, run
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.identity import run_id_for
+from nematic_solids.sweep.spec import parse_campaign
+from nematic_solids.sweep.store import record_from_dataset
 
 PARAMS = Parameters.from_dict({"alpha_minus_B": 1.0, "noise_modes": 8})
 BASE: dict[str, Any] = {
@@ -44,7 +44,7 @@ def test_early_stop_is_off_by_default_and_keeps_the_run_ids():
     assert run_id_for(PARAMS, n, 0) != run_id_for(PARAMS, Numerics(steady_tol=0.01), 0)
     # the golden ids of tests/sweep/test_identity.py are those of runs made before early stop
     # existed; this one is the default parameters and numerics, seed 0
-    from sweep.identity import canonical_json
+    from nematic_solids.sweep.identity import canonical_json
 
     assert "steady" not in canonical_json(PARAMS.to_dict(), n.to_dict(), 0)
 

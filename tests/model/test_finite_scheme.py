@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model.parameters import Numerics, Parameters
-from model.pde import ActiveNematicPDE
-from model.simulate import run
-from model.solver import ETDRK4Solver
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.pde import ActiveNematicPDE
+from nematic_solids.model.simulate import run
+from nematic_solids.model.solver import ETDRK4Solver
 
 OBSERVABLES = ("sigma2_S", "cos2theta", "lambda")
 #: the reference: force balance solved at every stage, every tolerance tight

@@ -1,5 +1,6 @@
-"""Transforms: the native FFTW path (model.compiled.fftw) against scipy.fft, on aligned,
-misaligned and multi-field arrays, and the compiled-kernel symbols against their reference."""
+"""Transforms: the native FFTW path (nematic_solids.model.compiled.fftw) against scipy.fft, on
+aligned, misaligned and multi-field arrays, and the compiled-kernel symbols against their
+reference."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.fft
 
-from model.compiled import fftw as fftw_native
-from model.fourier import FFT, SpectralGrid
+from nematic_solids.model.compiled import fftw as fftw_native
+from nematic_solids.model.fourier import FFT, SpectralGrid
 
 pytestmark = pytest.mark.skipif(not fftw_native.AVAILABLE, reason="native FFTW not available")
 
@@ -53,8 +54,8 @@ def test_fft_class_multi_field_and_count(rng):
 
 
 def test_linear_response_symbols_match_the_direct_kernel(rng):
-    from model.mechanics import LinearMechanics
-    from model.parameters import Parameters
+    from nematic_solids.model.mechanics import LinearMechanics
+    from nematic_solids.model.parameters import Parameters
 
     n = 16
     g = SpectralGrid(n)
@@ -103,7 +104,7 @@ def _run(code: str, env: dict[str, str]) -> str:
 
 _TRANSFORM = """
 import hashlib, numpy as np
-from model.compiled import fftw as fx
+from nematic_solids.model.compiled import fftw as fx
 n = {n}
 f, i = fx.plans(n)
 a = np.random.default_rng(1).standard_normal((n, n))
@@ -119,7 +120,7 @@ def test_shipped_wisdom_plans_are_the_same_in_every_process(tmp_path):
     gets FFTW_ESTIMATE's plan (also deterministic)."""
     wisdom = tmp_path / "wisdom.txt"
     _run(
-        f"from model.compiled import fftw as fx; open({str(wisdom)!r}, 'w').write("
+        f"from nematic_solids.model.compiled import fftw as fx; open({str(wisdom)!r}, 'w').write("
         "fx.patient_wisdom([16]))",
         {"NEMATIC_FFTW_WISDOM": ""},
     )
@@ -134,7 +135,8 @@ def test_shipped_wisdom_plans_are_the_same_in_every_process(tmp_path):
 
 def test_the_shipped_wisdom_holds_the_campaign_sizes():
     """The wisdom file in the package covers the resolutions the campaigns use (when this FFTW
-    build accepts it: elsewhere plans fall back to FFTW_ESTIMATE, see model.compiled.fftw)."""
+    build accepts it: elsewhere plans fall back to FFTW_ESTIMATE, see
+    nematic_solids.model.compiled.fftw)."""
     assert fftw_native.WISDOM_FILE is not None
     text = fftw_native.WISDOM_FILE.read_text()
     assert text.startswith("(fftw-3")

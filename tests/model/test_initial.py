@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from model.errors import ParameterError
-from model.initial import band_limited_field, initial_fields, per_node_field
-from model.parameters import Numerics, Parameters, check_compatible
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.initial import band_limited_field, initial_fields, per_node_field
+from nematic_solids.model.parameters import Numerics, Parameters, check_compatible
 
 
 def _angles(q1, q2):

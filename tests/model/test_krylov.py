@@ -1,15 +1,15 @@
-"""The compiled Krylov pieces shared by the fast solvers (model.compiled.krylov): the weighted inner
-product against its numpy definition, the fused update + inner product and the fused
-Gram-Schmidt step against their plain, unfused sequence (bitwise), the vectorised sums'
-independence of alignment, and the Arnoldi orthogonality they produce."""
+"""The compiled Krylov pieces shared by the fast solvers (nematic_solids.model.compiled.krylov): the
+weighted inner product against its numpy definition, the fused update + inner product and the fused
+Gram-Schmidt step against their plain, unfused sequence (bitwise), the vectorised sums' independence
+of alignment, and the Arnoldi orthogonality they produce."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from model import krylov
-from model.compiled import krylov as ck
+from nematic_solids.model import krylov
+from nematic_solids.model.compiled import krylov as ck
 
 
 def _spectra(rng, shape):
@@ -131,11 +131,11 @@ def test_gmres_from_zero_needs_no_operator_application_for_its_residual(rng):
 
 
 def test_compiled_spin_gmres_from_zero_meets_its_tolerance(rng):
-    from model.compiled import fftw as fftw_native
-    from model.compiled import linear_rhs as fast_linear
-    from model.fourier import SpectralGrid
-    from model.mechanics import LinearMechanics
-    from model.parameters import Parameters
+    from nematic_solids.model.compiled import fftw as fftw_native
+    from nematic_solids.model.compiled import linear_rhs as fast_linear
+    from nematic_solids.model.fourier import SpectralGrid
+    from nematic_solids.model.mechanics import LinearMechanics
+    from nematic_solids.model.parameters import Parameters
 
     if not fftw_native.AVAILABLE:
         pytest.skip("native FFTW not available")
@@ -228,13 +228,13 @@ def test_gmres_warm_start_with_known_aux_takes_its_residual_from_it(rng):
 
 def test_compiled_rate_gmres_from_a_known_gradient_matches_numpy(rng):
     """The finite-strain rate solve warm-started with the start's gradient known: compiled
-    (model.compiled.finite_krylov.gmres, the start's residual from the gradient: 4 transforms
-    fewer) and numpy (model.krylov.gmres_aux) agree, and agree with the solve that transforms
-    the start."""
-    from model.compiled import fftw as fftw_native
-    from model.fourier import SpectralGrid
-    from model.mechanics import FiniteMechanics
-    from model.parameters import Parameters
+    (nematic_solids.model.compiled.finite_krylov.gmres, the start's residual from the gradient: 4
+    transforms fewer) and numpy (nematic_solids.model.krylov.gmres_aux) agree, and agree with the
+    solve that transforms the start."""
+    from nematic_solids.model.compiled import fftw as fftw_native
+    from nematic_solids.model.fourier import SpectralGrid
+    from nematic_solids.model.mechanics import FiniteMechanics
+    from nematic_solids.model.parameters import Parameters
 
     if not fftw_native.AVAILABLE:
         pytest.skip("native FFTW not available")

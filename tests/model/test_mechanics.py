@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model.fourier import SpectralGrid
-from model.mechanics import FiniteMechanics, LinearMechanics
-from model.parameters import Parameters
+from nematic_solids.model.fourier import SpectralGrid
+from nematic_solids.model.mechanics import FiniteMechanics, LinearMechanics
+from nematic_solids.model.parameters import Parameters
 
 N = 32
 
@@ -155,8 +155,8 @@ def test_finite_state_carries_what_the_rate_problem_reuses(grid, rng):
     tangent is the one carried (E is recomputed at the same F)."""
     from dataclasses import replace
 
-    from model import tensors as T
-    from model.constitutive import Moduli, tangent
+    from nematic_solids.model import tensors as T
+    from nematic_solids.model.constitutive import Moduli, tangent
 
     p = Parameters(alpha=1.8, eps=0.03, B_prime=0.1)
     q1, q2 = 0.3 * _band_limited(grid, rng, 1.0)

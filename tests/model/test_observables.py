@@ -8,17 +8,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from model.fourier import SpectralGrid
-from model.observables import (
+from nematic_solids.model.fourier import SpectralGrid
+from nematic_solids.model.observables import (
     first_peak,
     growth_peak,
     pattern_size,
     pattern_size_mean,
     radial_spectrum,
 )
-from model.parameters import Numerics, Parameters
-from model.simulate import run
-from model.stability import max_growth_rate
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run
+from nematic_solids.model.stability import max_growth_rate
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -51,8 +51,8 @@ def test_radial_spectrum_is_parseval():
 
 def test_fig_a1_lambda_reaches_the_fastest_growing_mode():
     """Fig. A1's setting above threshold (chi (alpha - B) = 10, eps = 0.15: growth rate 0.16 /
-    tau, fastest lattice mode 2 pi (0, 1) by model.stability): lambda reaches L / |(0, 1)|
-    (within 5 % by t = 60) while the mean-|k| length stays far below it."""
+    tau, fastest lattice mode 2 pi (0, 1) by nematic_solids.model.stability): lambda reaches L /
+    |(0, 1)| (within 5 % by t = 60) while the mean-|k| length stays far below it."""
     p = Parameters.from_dict(
         dict(
             S0=0.0,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model.parameters import Numerics, Parameters
-from model.simulate import run
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run
 
 FIG2 = Parameters()  # defaults = the Fig. 2 caption's values + docs/model.md's choices
 

@@ -1,23 +1,23 @@
-"""Time protocols (model.protocol): the forms and their canonical text, validation, a constant
-protocol being the plain parameter; the integrator landing on every switch time and the
-stages using the value at their time on the step's piece; the displacement rate under a
-changing alpha or eps being the time derivative of the force balance (both mechanics); the
-compiled and numpy paths agreeing; a protocol run continued exactly from its saved states."""
+"""Time protocols (nematic_solids.model.protocol): the forms and their canonical text, validation, a
+constant protocol being the plain parameter; the integrator landing on every switch time and the
+stages using the value at their time on the step's piece; the displacement rate under a changing
+alpha or eps being the time derivative of the force balance (both mechanics); the compiled and numpy
+paths agreeing; a protocol run continued exactly from its saved states."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from model.checkpoint import RunState, Schedule
-from model.errors import ParameterError
-from model.fourier import SpectralGrid
-from model.mechanics import make_mechanics
-from model.parameters import Numerics, Parameters
-from model.protocol import Protocol, protocol_from
-from model.simulate import run
-from model.solver import ETDRK4Solver
-from model.solver_base import ETDSolver
+from nematic_solids.model.checkpoint import RunState, Schedule
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.fourier import SpectralGrid
+from nematic_solids.model.mechanics import make_mechanics
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.protocol import Protocol, protocol_from
+from nematic_solids.model.simulate import run
+from nematic_solids.model.solver import ETDRK4Solver
+from nematic_solids.model.solver_base import ETDSolver
 
 SWITCH_OFF = {"alpha_minus_B": [[0, 1.0], [7.3, 0.05], [13.1, 1.0]]}
 
@@ -181,7 +181,8 @@ def _state(n: int, rng) -> tuple[np.ndarray, np.ndarray]:
 def test_the_displacement_rate_is_the_time_derivative_of_force_balance(mechanics, rng):
     """Along Q(t) = Q + t Qdot, alpha(t) = alpha + t alpha', eps(t) = eps + t eps', the rate
     solve's displacement rate (finite) or spin (linear) equals the central difference of the
-    force-balance solutions: the rates of alpha and eps drive it (model.mechanics)."""
+    force-balance solutions: the rates of alpha and eps drive it
+    (nematic_solids.model.mechanics)."""
     n = 32
     num = Numerics(
         resolution=n, mechanics=mechanics, newton_tol=1e-12, spin_tol=1e-12, backend="numpy"

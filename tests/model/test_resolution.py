@@ -1,5 +1,5 @@
-"""The resolution rule (model.resolution): the coarsest grid of the ladder with c cells per
-Frank length sqrt(K / A0), floored and capped; every mistake a ParameterError."""
+"""The resolution rule (nematic_solids.model.resolution): the coarsest grid of the ladder with c
+cells per Frank length sqrt(K / A0), floored and capped; every mistake a ParameterError."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from model.errors import ParameterError
-from model.resolution import ResolutionRule, is_rule, read_rule, resolve
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.resolution import ResolutionRule, is_rule, read_rule, resolve
 
 
 def test_the_grid_has_c_cells_per_frank_length_on_the_ladder():

@@ -14,9 +14,9 @@ import typer
 import yaml
 from typer.testing import CliRunner
 
-from model import stability as st
-from model.parameters import Numerics, Parameters
-from sweep.cli.stability import stability
+from nematic_solids.model import stability as st
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.sweep.cli.stability import stability
 
 TWO_PI = 2.0 * math.pi
 ROOT = Path(__file__).resolve().parents[2]
@@ -182,7 +182,7 @@ def test_operator_matches_reference_jacobian(incompressible, mode):
 @pytest.mark.parametrize("mode", MODES)
 def test_operator_matches_model_rates(incompressible, mode):
     """The model's own right-hand side (``ActiveNematicPDE.rates``, linear mechanics)."""
-    from model.pde import ActiveNematicPDE
+    from nematic_solids.model.pde import ActiveNematicPDE
 
     numerics = Numerics(
         resolution=16, mechanics="linear", incompressible=incompressible, spin_tol=1e-14
@@ -369,8 +369,8 @@ def _simulated_rate(
     model's ETDRK2 solver, return log(amplitude ratio) / T."""
     from pde.solvers import Controller
 
-    from model.pde import ActiveNematicPDE, make_state
-    from model.solver import ETDRK2Solver
+    from nematic_solids.model.pde import ActiveNematicPDE, make_state
+    from nematic_solids.model.solver import ETDRK2Solver
 
     eq = ActiveNematicPDE(
         p,
@@ -419,9 +419,9 @@ def test_single_mode_grows_at_predicted_rate(chi, factor, mode, incompressible):
 
 
 def test_onset_in_seeded_simulation_within_5_percent():
-    """model.simulate.run from seeded noise (Fig. A1 values, S0 = 0, small noise): sigma2_S
-    decays at 0.95 eps_c and grows at 1.05 eps_c."""
-    from model.simulate import run
+    """nematic_solids.model.simulate.run from seeded noise (Fig. A1 values, S0 = 0, small noise):
+    sigma2_S decays at 0.95 eps_c and grows at 1.05 eps_c."""
+    from nematic_solids.model.simulate import run
 
     p0 = FIG_A1.replace(noise_amplitude=1e-4, noise_modes=4)
     eps_c = st.critical_eps_closed_form(p0, incompressible=True)

@@ -1,5 +1,5 @@
 """The first run on a machine: the model's kernels are compiled once (by one worker, before
-the campaign's runs start), not by every worker at once (:mod:`model.warmup`)."""
+the campaign's runs start), not by every worker at once (:mod:`nematic_solids.model.warmup`)."""
 
 from __future__ import annotations
 
@@ -14,13 +14,13 @@ from typing import Any
 import pytest
 from sweep_helpers import write_campaign
 
-from model.parameters import Numerics, Parameters
-from sweep.expand import expand
-from sweep.run.driver import RunSummary, dask_client, run_campaign
-from sweep.run.task import warm_kinds
-from sweep.run.todo import plan_runs
-from sweep.spec import load_campaign
-from sweep.store import CampaignStore
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.run.driver import RunSummary, dask_client, run_campaign
+from nematic_solids.sweep.run.task import warm_kinds
+from nematic_solids.sweep.run.todo import plan_runs
+from nematic_solids.sweep.spec import load_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 
 def test_warm_kinds_one_per_kind_of_run(tmp_path):
@@ -42,7 +42,7 @@ def test_warm_kinds_one_per_kind_of_run(tmp_path):
 
 
 def test_warm_up_runs_a_tiny_simulation_and_counts_kernels():
-    from model.warmup import compile_counts, warm_numerics, warm_up
+    from nematic_solids.model.warmup import compile_counts, warm_numerics, warm_up
 
     small = warm_numerics(Numerics(resolution=64, t_final=40, snapshot_times=(10.0,)))
     assert (small.resolution, small.t_final, small.snapshot_times) == (16, 0.5, ())
@@ -59,7 +59,7 @@ def test_the_numba_cache_is_named_by_the_compiled_sources(tmp_path, monkeypatch)
 
     import numba
 
-    import model.compiled as compiled
+    import nematic_solids.model.compiled as compiled
 
     here = compiled.cache_dir()
     assert here.name == f"numba-{compiled.source_digest()}"
@@ -76,7 +76,7 @@ def test_the_numba_cache_is_named_by_the_compiled_sources(tmp_path, monkeypatch)
 
 
 def test_stale_kernel_caches_are_pruned_and_the_current_one_kept(tmp_path):
-    from model.compiled import prune_stale_caches
+    from nematic_solids.model.compiled import prune_stale_caches
 
     current = tmp_path / "numba-current"
     (current / "x").mkdir(parents=True)
@@ -94,7 +94,7 @@ def test_the_second_worker_compiles_nothing(tmp_path, monkeypatch):
     """With an empty numba cache (NUMBA_CACHE_DIR: a fresh folder) a two-worker campaign
     compiles the kernels on one worker (the warm-up); the other loads them all from the
     cache. About a minute of compilation."""
-    from model.warmup import compile_counts
+    from nematic_solids.model.warmup import compile_counts
 
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba-cache"))
     path = write_campaign(tmp_path, values="[0.1, 0.2]", seeds=2, t_final=1.0)
@@ -122,7 +122,7 @@ def test_the_listed_entry_points_read_back_as_numba_types():
     from numba import typeof
     from numba.core import types
 
-    from model.warmup import read_entry_points, read_types, type_text
+    from nematic_solids.model.warmup import read_entry_points, read_types, type_text
 
     entries = read_entry_points()
     assert entries
@@ -147,7 +147,7 @@ def test_the_listed_entry_points_read_back_as_numba_types():
 
 
 def test_entry_points_are_compiled_by_module_after_the_modules_they_import():
-    from model.warmup import entry_groups, read_entry_points
+    from nematic_solids.model.warmup import entry_groups, read_entry_points
 
     entries = read_entry_points()
     groups = entry_groups(entries)
@@ -169,7 +169,7 @@ def test_entry_points_are_compiled_by_module_after_the_modules_they_import():
 def _save_many(path: str, worker: int, count: int) -> None:
     from numba.core.caching import IndexDataCacheFile
 
-    from model.warmup import lock_cache_files
+    from nematic_solids.model.warmup import lock_cache_files
 
     lock_cache_files()
     cache = IndexDataCacheFile(path, "kernel-1.py311", source_stamp="s")
@@ -213,15 +213,15 @@ def _in_fresh_process(tmp_path: Path, *args: str) -> Any:
 
 
 def _warmup(tmp_path: Path, *args: str) -> Any:
-    return _in_fresh_process(tmp_path, "-m", "model.warmup", *args)
+    return _in_fresh_process(tmp_path, "-m", "nematic_solids.model.warmup", *args)
 
 
 def test_a_failure_in_a_compiling_process_is_one_line_and_a_nonzero_exit(tmp_path):
     listed = tmp_path / "entry_points.txt"
     listed.write_text(
         "# two entry points that cannot compile\n"
-        "2.0\tmodel.compiled.spectral.grad_hat_kernel\ttup(int64, int64, int64)\n"
-        "1.0\tmodel.compiled.spectral.no_such_kernel\ttup(int64)\n"
+        "2.0\tnematic_solids.model.compiled.spectral.grad_hat_kernel\ttup(int64, int64, int64)\n"
+        "1.0\tnematic_solids.model.compiled.spectral.no_such_kernel\ttup(int64)\n"
     )
     done = _warmup(tmp_path, "--jobs", "2", "--entry-points", str(listed))
     assert done.returncode == 1, done
@@ -231,18 +231,20 @@ def test_a_failure_in_a_compiling_process_is_one_line_and_a_nonzero_exit(tmp_pat
     by_kernel = {line.split("(")[0]: line for line in lines}
     assert (
         "TypingError: Failed in nopython mode pipeline"
-        in by_kernel["error: compiling model.compiled.spectral.grad_hat_kernel"]
+        in by_kernel["error: compiling nematic_solids.model.compiled.spectral.grad_hat_kernel"]
     )
-    assert "AttributeError" in by_kernel["error: compiling model.compiled.spectral.no_such_kernel"]
+    assert (
+        "AttributeError"
+        in by_kernel["error: compiling nematic_solids.model.compiled.spectral.no_such_kernel"]
+    )
     assert "kernels ready" not in done.stdout  # it stopped there
 
 
 @pytest.mark.slow
 def test_the_parallel_warm_up_leaves_a_cache_a_fresh_process_only_loads(tmp_path):
-    """python -m model.warmup with an empty cache compiles the listed entry points in two
-    processes; the warm-up in its own process then compiles nothing (the list is complete),
-    nor does a fresh process; a second call starts no compiling process. About a minute on
-    2 cores."""
+    """python -m nematic_solids.model.warmup with an empty cache compiles the listed entry points in
+    two processes; the warm-up in its own process then compiles nothing (the list is complete), nor
+    does a fresh process; a second call starts no compiling process. About a minute on 2 cores."""
     first = _warmup(tmp_path, "--jobs", "2")
     assert first.returncode == 0, first
     assert re.search(
@@ -254,7 +256,8 @@ def test_the_parallel_warm_up_leaves_a_cache_a_fresh_process_only_loads(tmp_path
     fresh = _in_fresh_process(
         tmp_path,
         "-c",
-        "import json; from model.warmup import warm_up; print(json.dumps(warm_up()))",
+        "import json; from nematic_solids.model.warmup import warm_up; "
+        "print(json.dumps(warm_up()))",
     )
     assert fresh.returncode == 0, fresh
     info = json.loads(fresh.stdout.strip().splitlines()[-1])

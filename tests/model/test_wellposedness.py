@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from model import wellposedness as wp
-from model.compiled.kernels import q_increment_kernel, tangent_kernel
-from model.fourier import SpectralGrid
-from model.mechanics import LinearMechanics
-from model.parameters import Numerics, Parameters
-from model.simulate import run
+from nematic_solids.model import wellposedness as wp
+from nematic_solids.model.compiled.kernels import q_increment_kernel, tangent_kernel
+from nematic_solids.model.fourier import SpectralGrid
+from nematic_solids.model.mechanics import LinearMechanics
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run
 
 
 def _uniform(

@@ -13,12 +13,12 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from model.errors import ParameterError
-from model.parameters import MAX_SAVES, Numerics
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.limits import run_memory_bytes
-from sweep.spec import parse_campaign
+from nematic_solids.model.errors import ParameterError
+from nematic_solids.model.parameters import MAX_SAVES, Numerics
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.limits import run_memory_bytes
+from nematic_solids.sweep.spec import parse_campaign
 
 
 def _bomb(levels: int = 9, width: int = 9) -> str:
@@ -88,9 +88,11 @@ HOSTILE = {
 PROBE = """
 import json, resource, sys, time
 resource.setrlimit(resource.RLIMIT_AS, (2**30, 2**30))
-from sweep.errors import CampaignError
-from sweep.spec import parse_campaign
-import sweep.analysis.registry, sweep.figures.registry  # imported before the clock starts
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.spec import parse_campaign
+# imported before the clock starts
+import nematic_solids.sweep.analysis.registry
+import nematic_solids.sweep.figures.registry
 cases = json.load(sys.stdin)
 out = {}
 for name, text in cases.items():
@@ -132,7 +134,9 @@ def test_the_ceilings_are_configurable():
 
 def test_memory_estimate_grows_with_the_square_of_the_resolution():
     small, large = run_memory_bytes(256, "finite"), run_memory_bytes(512, "finite")
-    assert 280e6 < small < 1e9  # measured 372 MB at 256^2 (docstring of sweep.limits)
+    assert (
+        280e6 < small < 1e9
+    )  # measured 372 MB at 256^2 (docstring of nematic_solids.sweep.limits)
     assert (large - run_memory_bytes(0)) == 4 * (small - run_memory_bytes(0))
     assert run_memory_bytes(256, "linear") < small
 

@@ -14,15 +14,15 @@ import netCDF4
 import pytest
 from sweep_helpers import write_campaign
 
-from model.fourier import HAVE_FFTW
-from sweep.analysis.fits_file import load_fits, write_fits
-from sweep.expand import expand
-from sweep.outputs.aggregate import write_phase
-from sweep.run.task import RunTask, execute_run
-from sweep.spec import load_campaign, parse_campaign
-from sweep.store import CampaignStore
-from sweep.verify.measure import verify_dataset, write_verify
-from sweep.verify.sample import plan_sample
+from nematic_solids.model.fourier import HAVE_FFTW
+from nematic_solids.sweep.analysis.fits_file import load_fits, write_fits
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.outputs.aggregate import write_phase
+from nematic_solids.sweep.run.task import RunTask, execute_run
+from nematic_solids.sweep.spec import load_campaign, parse_campaign
+from nematic_solids.sweep.store import CampaignStore
+from nematic_solids.sweep.verify.measure import verify_dataset, write_verify
+from nematic_solids.sweep.verify.sample import plan_sample
 
 LIBRARIES = ("numpy", "py-pde", "numba", "xarray", "dask") + (("fftw",) if HAVE_FFTW else ())
 
@@ -62,7 +62,7 @@ def files(tmp_path_factory):
 def chained(tmp_path_factory):
     """A chain's phase.nc and fits.nc (a branch dimension, the loop width; 32^2, to t = 1)
     and a protocol campaign's phase.nc (its numbers as coordinates)."""
-    from sweep.chains import in_chain_order
+    from nematic_solids.sweep.chains import in_chain_order
 
     folder = tmp_path_factory.mktemp("cf_chain")
     out = {}

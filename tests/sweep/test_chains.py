@@ -1,9 +1,9 @@
-"""Chains (sweep.chains): an axis walked in order, each run starting from its predecessor's end
-state. The section checked at file:line; the ids and parents of both branches; a chain
-campaign whose every run begins from its predecessor's fields (equal to the model's run from
-them, bit for bit); a chain stopped half-way (runs lost, or the driver killed) resumes where
-it stopped and ends with the same results; a run whose predecessor failed fails with the
-reason parent_failed and is redone with it."""
+"""Chains (nematic_solids.sweep.chains): an axis walked in order, each run starting from its
+predecessor's end state. The section checked at file:line; the ids and parents of both branches; a
+chain campaign whose every run begins from its predecessor's fields (equal to the model's run from
+them, bit for bit); a chain stopped half-way (runs lost, or the driver killed) resumes where it
+stopped and ends with the same results; a run whose predecessor failed fails with the reason
+parent_failed and is redone with it."""
 
 from __future__ import annotations
 
@@ -16,15 +16,15 @@ import xarray as xr
 from sweep_helpers import kill_group, records, start_driver, wait_for
 from typer.testing import CliRunner
 
-from model.checkpoint import RunState, read_netcdf
-from model.simulate import run as simulate
-from sweep.analysis.fits_file import write_fits
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.expand import expand
-from sweep.figures.produce import draw
-from sweep.run.continuation import STATE_GROUP, parent_fields
-from sweep.spec import parse_campaign
+from nematic_solids.model.checkpoint import RunState, read_netcdf
+from nematic_solids.model.simulate import run as simulate
+from nematic_solids.sweep.analysis.fits_file import write_fits
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.figures.produce import draw
+from nematic_solids.sweep.run.continuation import STATE_GROUP, parent_fields
+from nematic_solids.sweep.spec import parse_campaign
 
 LOOP = """\
 name: {name}

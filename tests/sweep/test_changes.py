@@ -10,11 +10,11 @@ import json
 from sweep_helpers import records
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.outputs.changes import describe_changes, run_counts
-from sweep.refine.rounds import RunNamer, expansion_for
-from sweep.spec import parse_campaign
-from sweep.store import CampaignStore
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.outputs.changes import describe_changes, run_counts
+from nematic_solids.sweep.refine.rounds import RunNamer, expansion_for
+from nematic_solids.sweep.spec import parse_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 
 def invoke(*args: object):

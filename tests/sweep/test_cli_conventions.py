@@ -15,9 +15,9 @@ from rich.console import Console
 from rich.progress import Progress
 from typer.testing import CliRunner
 
-import model
-from sweep.cli import app
-from sweep.cli.progress import ProgressEvents
+from nematic_solids import model
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.cli.progress import ProgressEvents
 
 
 def invoke(*args: object):
@@ -164,7 +164,7 @@ def test_progress_heartbeat_without_completions():
 def test_py_pde_tracker_time_warning_is_not_printed(caplog):
     """py-pde warns when its trackers take longer than the solver; here the tracker computes
     the observables, so the warning is demoted to DEBUG (hidden unless debug logging)."""
-    import model.simulate  # noqa: F401 - installs the filter
+    import nematic_solids.model.simulate  # noqa: F401 - installs the filter
 
     logger = logging.getLogger("pde.solvers.controller")
     with caplog.at_level(logging.INFO):
@@ -180,8 +180,8 @@ def test_py_pde_tracker_time_warning_is_not_printed(caplog):
 
 
 def test_local_dashboard_on_loopback_or_off():
-    from sweep.campaign import ExecutionSpec
-    from sweep.run.driver import dashboard_link, dask_client
+    from nematic_solids.sweep.campaign import ExecutionSpec
+    from nematic_solids.sweep.run.driver import dashboard_link, dask_client
 
     with dask_client(ExecutionSpec(workers=1), dashboard=True) as client:
         link = dashboard_link(client)
@@ -196,8 +196,8 @@ def test_dashboard_link_of_an_external_scheduler():
     its link is found the same way, and none when that scheduler serves no dashboard."""
     from distributed import LocalCluster
 
-    from sweep.campaign import ExecutionSpec
-    from sweep.run.driver import dashboard_link, dask_client
+    from nematic_solids.sweep.campaign import ExecutionSpec
+    from nematic_solids.sweep.run.driver import dashboard_link, dask_client
 
     for served in (True, False):
         with LocalCluster(

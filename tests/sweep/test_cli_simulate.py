@@ -5,7 +5,7 @@ from __future__ import annotations
 import xarray as xr
 from typer.testing import CliRunner
 
-from sweep.cli import app
+from nematic_solids.sweep.cli import app
 
 runner = CliRunner()
 FAST = [

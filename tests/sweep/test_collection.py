@@ -18,12 +18,12 @@ import typer
 from sweep_helpers import outside_references
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.cli.collection import run_collection
-from sweep.errors import CampaignError
-from sweep.lock import read_lock_holder
-from sweep.spec.collection import read_collection
-from sweep.store import CampaignStore
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.cli.collection import run_collection
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.lock import read_lock_holder
+from nematic_solids.sweep.spec.collection import read_collection
+from nematic_solids.sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -226,7 +226,7 @@ def test_a_detached_collection_is_stopped_by_nematic_stop(folder):
         [
             sys.executable,
             "-m",
-            "sweep",
+            "nematic_solids.sweep",
             "run",
             str(folder / "both.yaml"),
             "--results",

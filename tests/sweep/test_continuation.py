@@ -1,7 +1,7 @@
-"""Runs that go on (sweep.run.continuation): a worker or a driver SIGKILLed at random points
-resumes each run from its rolling checkpoint with a result equal, array by array, to the run
-that never stopped; a campaign whose t_final grew continues its finished runs from their end
-states (recomputing nothing); a corrupt or foreign checkpoint is ignored with a warning;
+"""Runs that go on (nematic_solids.sweep.run.continuation): a worker or a driver SIGKILLed at random
+points resumes each run from its rolling checkpoint with a result equal, array by array, to the run
+that never stopped; a campaign whose t_final grew continues its finished runs from their end states
+(recomputing nothing); a corrupt or foreign checkpoint is ignored with a warning;
 ``store.checkpoint_every`` is read and checked."""
 
 from __future__ import annotations
@@ -30,16 +30,16 @@ from sweep_helpers import (
 )
 from typer.testing import CliRunner
 
-from model.checkpoint import RunState, Schedule, load
-from model.parameters import Numerics, Parameters
-from model.simulate import run as simulate
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.expand import expand
-from sweep.run.continuation import STATE_GROUP, checkpoint_path
-from sweep.run.task import RunTask, execute_run
-from sweep.spec import load_campaign
-from sweep.store import CampaignStore
+from nematic_solids.model.checkpoint import RunState, Schedule, load
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run as simulate
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.run.continuation import STATE_GROUP, checkpoint_path
+from nematic_solids.sweep.run.task import RunTask, execute_run
+from nematic_solids.sweep.spec import load_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 CAMPAIGN = """\
 name: {name}
@@ -101,7 +101,7 @@ def tasks_of(path: Path, results: Path) -> tuple[CampaignStore, list[RunTask]]:
 #: a worker process that runs one task (what a dask worker does with it)
 WORKER = (
     "import pickle, sys\n"
-    "from sweep.run.task import execute_run\n"
+    "from nematic_solids.sweep.run.task import execute_run\n"
     "execute_run(pickle.load(open(sys.argv[1], 'rb')))\n"
 )
 

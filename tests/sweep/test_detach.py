@@ -13,9 +13,9 @@ from pathlib import Path
 from sweep_helpers import group_alive, records, run_ids, wait_for, wait_group_gone, write_campaign
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.lock import read_lock_holder
-from sweep.run.detach import detached_args
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.lock import read_lock_holder
+from nematic_solids.sweep.run.detach import detached_args
 
 
 def invoke(*args: object):
@@ -27,7 +27,7 @@ def detach_from_a_shell(path: Path, results: Path, tmp_path: Path) -> tuple[str,
     shell's process group is sent SIGHUP, as a terminal that closes does. Returns the
     shell's output and the detached driver's pid."""
     cmd = (
-        f"{sys.executable} -m sweep run {path} --results {results} --no-figures "
+        f"{sys.executable} -m nematic_solids.sweep run {path} --results {results} --no-figures "
         "--detach; echo exit=$?"
     )
     shell = subprocess.Popen(
@@ -153,7 +153,7 @@ def test_stop_of_an_unknown_campaign_is_one_error_line(tmp_path):
 
 
 def test_detach_on_a_campaign_in_use_is_refused(copy_of_small):
-    from sweep.lock import CampaignLock
+    from nematic_solids.sweep.lock import CampaignLock
 
     lock = CampaignLock(copy_of_small.results / "small" / ".lock")
     lock.acquire(command="nematic run small.yaml")

@@ -14,20 +14,20 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from model.parameters import Numerics
-from sweep.cli import app
-from sweep.cost import estimate as estimate_module
-from sweep.cost import model as cost_model
-from sweep.cost.estimate import driver_overhead, estimate, makespan
-from sweep.cost.model import MODEL_SPREAD, curve_steps, model_seconds, model_steps
-from sweep.cost.result import lines
-from sweep.errors import CampaignError
-from sweep.expand import expand
-from sweep.files import file_stamp
-from sweep.refine.plan import first_round, run_bound
-from sweep.refine.rounds import replay
-from sweep.spec import Overrides, load_campaign, parse_campaign
-from sweep.store import CampaignStore
+from nematic_solids.model.parameters import Numerics
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.cost import estimate as estimate_module
+from nematic_solids.sweep.cost import model as cost_model
+from nematic_solids.sweep.cost.estimate import driver_overhead, estimate, makespan
+from nematic_solids.sweep.cost.model import MODEL_SPREAD, curve_steps, model_seconds, model_steps
+from nematic_solids.sweep.cost.result import lines
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.files import file_stamp
+from nematic_solids.sweep.refine.plan import first_round, run_bound
+from nematic_solids.sweep.refine.rounds import replay
+from nematic_solids.sweep.spec import Overrides, load_campaign, parse_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parents[2]
 #: a machine with nothing else to do: 2 cores, load average 0

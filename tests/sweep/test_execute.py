@@ -27,9 +27,9 @@ from sweep_helpers import (
 )
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.lock import CampaignLock, read_lock_holder
-from sweep.run.task import RunTask, execute_run
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.lock import CampaignLock, read_lock_holder
+from nematic_solids.sweep.run.task import RunTask, execute_run
 
 
 def invoke(*args: object):
@@ -530,9 +530,9 @@ def test_a_worker_killed_mid_campaign(dask_cluster, tmp_path):
 
 
 def test_store_section_keeps_the_chosen_snapshot_fields(tmp_path):
-    from sweep.expand import expand
-    from sweep.spec import parse_campaign
-    from sweep.store import CampaignStore
+    from nematic_solids.sweep.expand import expand
+    from nematic_solids.sweep.spec import parse_campaign
+    from nematic_solids.sweep.store import CampaignStore
 
     campaign = parse_campaign(
         "name: stored\nparameters: {noise_modes: 8, alpha_minus_B: 0.1}\n"
@@ -563,7 +563,7 @@ def test_workers_reuse_freed_heap_memory_despite_the_nannys_trim_setting():
     code = """
 import resource, sys
 import numpy as np
-from sweep.run.task import restore_heap_reuse
+from nematic_solids.sweep.run.task import restore_heap_reuse
 
 def faults():
     before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt

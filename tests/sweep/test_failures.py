@@ -11,9 +11,9 @@ import pytest
 from sweep_helpers import records, write_campaign
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.cli.app import EXIT_TOO_MANY_FAILURES
-from sweep.run.failures import FailureLimit, previous_failures
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.cli.app import EXIT_TOO_MANY_FAILURES
+from nematic_solids.sweep.run.failures import FailureLimit, previous_failures
 
 
 def invoke(*args: object):

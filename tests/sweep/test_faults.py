@@ -19,11 +19,11 @@ import xarray as xr
 from sweep_helpers import records, write_campaign
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.expand import expand
-from sweep.run.todo import plan_runs
-from sweep.spec import load_campaign
-from sweep.store import CampaignStore
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.run.todo import plan_runs
+from nematic_solids.sweep.spec import load_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 
 def invoke(*args: object):
@@ -186,7 +186,7 @@ def nematic(
         if fsize is not None:
             resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
 
-    cmd = [*(wrap or []), sys.executable, "-m", "sweep", *map(str, args)]
+    cmd = [*(wrap or []), sys.executable, "-m", "nematic_solids.sweep", *map(str, args)]
     return subprocess.run(
         cmd,
         capture_output=True,
@@ -307,9 +307,9 @@ def test_a_result_that_cannot_be_written_is_kept_and_moved_in(tmp_path, monkeypa
     """The worker task itself: a results folder that cannot take the file (its runs folder
     is a regular file here) gives a record with status 'unsaved' and no record file; the
     result is in the spool, and the next plan moves it in and adopts it."""
-    import model.simulate
-    from sweep.run.task import RunTask, execute_run, spool_dir
-    from sweep.run.todo import import_spool
+    import nematic_solids.model.simulate
+    from nematic_solids.sweep.run.task import RunTask, execute_run, spool_dir
+    from nematic_solids.sweep.run.todo import import_spool
 
     def fake_run(params, numerics, seed, **kw):  # the storage is under test, not the model
         ds = xr.Dataset(
@@ -319,7 +319,7 @@ def test_a_result_that_cannot_be_written_is_kept_and_moved_in(tmp_path, monkeypa
         )
         return (ds, None) if kw.get("keep_state") else ds
 
-    monkeypatch.setattr(model.simulate, "run", fake_run)
+    monkeypatch.setattr(nematic_solids.model.simulate, "run", fake_run)
     monkeypatch.setenv("NEMATIC_SPOOL", str(tmp_path / "spool"))
     store = CampaignStore(tmp_path / "results", "c")
     store.root.mkdir(parents=True)

@@ -13,17 +13,17 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from sweep.analysis.fits_file import FITS, fit_notes
-from sweep.cli import app
-from sweep.cli.products import regenerate_figures
-from sweep.errors import FigureError
-from sweep.expand import expand
-from sweep.figures.produce import draw, plan, produce, regenerate
-from sweep.figures.registry import option_problems
-from sweep.outputs.aggregate import write_phase
-from sweep.run.task import RunTask, execute_run
-from sweep.spec import load_campaign, parse_campaign
-from sweep.store import CampaignStore
+from nematic_solids.sweep.analysis.fits_file import FITS, fit_notes
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.cli.products import regenerate_figures
+from nematic_solids.sweep.errors import FigureError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.figures.produce import draw, plan, produce, regenerate
+from nematic_solids.sweep.figures.registry import option_problems
+from nematic_solids.sweep.outputs.aggregate import write_phase
+from nematic_solids.sweep.run.task import RunTask, execute_run
+from nematic_solids.sweep.spec import load_campaign, parse_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -115,7 +115,7 @@ def assert_figure(paths: list[Path], name: str, root: Path) -> None:
 
 
 def test_registry_names_match_the_campaign_schema():
-    from sweep.spec.sections import registry
+    from nematic_solids.sweep.spec.sections import registry
 
     assert sorted(registry("figures")) == [
         "fig2",
@@ -186,9 +186,9 @@ def test_fig4_of_a_refined_union_grid_shows_the_points_run(phase4, tmp_path):
     """A refined campaign's phase.nc (each refined axis the union of the values run,
     seed_count 0 where a point was not run): panel (a) holds only the points run, panel (c)
     and the anisotropy fit skip the lines with one strain."""
-    from sweep.analysis.anisotropy import anisotropy
-    from sweep.figures.common import Results
-    from sweep.figures.fig4 import fig4
+    from nematic_solids.sweep.analysis.anisotropy import anisotropy
+    from nematic_solids.sweep.figures.common import Results
+    from nematic_solids.sweep.figures.fig4 import fig4
 
     root = tmp_path / "refined"
     shutil.copytree(phase4.root, root)
@@ -277,8 +277,9 @@ def test_plan_figures_listed_empty_or_default(sizes):
 
 
 def test_empty_figures_list_draws_nothing_after_a_run(sizes, tmp_path):
-    """The hook of `nematic run` (sweep.cli.products.regenerate_figures) with figures: [] writes the
-    campaign's fits and no figure; `nematic figures` says so, and --only still draws."""
+    """The hook of `nematic run` (nematic_solids.sweep.cli.products.regenerate_figures) with
+    figures: [] writes the campaign's fits and no figure; `nematic figures` says so, and --only
+    still draws."""
     path = tmp_path / "campaign.yaml"
     path.write_text(SIZES.replace("figures: [fig2, fig3]", "figures: []"))
     campaign = load_campaign(path)

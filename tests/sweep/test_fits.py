@@ -8,15 +8,19 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from sweep.analysis.anisotropy import anisotropy
-from sweep.analysis.fits_file import compute_fits, fit_notes, load_fits, write_fits
-from sweep.analysis.registry import option_problems, resolve
-from sweep.analysis.size_laws import alpha_cr_from_sizes, patterned_level, size_scaling
-from sweep.analysis.sizes import alpha_cr, peak_not_reached, scaling
-from sweep.analysis.statistics import bootstrap_seed_means
-from sweep.analysis.transition import fit_transition, transition
-from sweep.errors import FitError
-from sweep.files import atomic_to_netcdf
+from nematic_solids.sweep.analysis.anisotropy import anisotropy
+from nematic_solids.sweep.analysis.fits_file import compute_fits, fit_notes, load_fits, write_fits
+from nematic_solids.sweep.analysis.registry import option_problems, resolve
+from nematic_solids.sweep.analysis.size_laws import (
+    alpha_cr_from_sizes,
+    patterned_level,
+    size_scaling,
+)
+from nematic_solids.sweep.analysis.sizes import alpha_cr, peak_not_reached, scaling
+from nematic_solids.sweep.analysis.statistics import bootstrap_seed_means
+from nematic_solids.sweep.analysis.transition import fit_transition, transition
+from nematic_solids.sweep.errors import FitError
+from nematic_solids.sweep.files import atomic_to_netcdf
 
 
 def phase(data: dict[str, np.ndarray], coords: dict[str, np.ndarray], **attrs) -> xr.Dataset:

@@ -7,16 +7,16 @@ import random
 
 import pytest
 
-from model.parameters import Numerics, Parameters
-from sweep.expand import expand
-from sweep.identity import (
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.identity import (
     SCHEMA_VERSION,
     PointHasher,
     canonical_json,
     hash_canonical,
     run_id_for,
 )
-from sweep.spec import parse_campaign
+from nematic_solids.sweep.spec import parse_campaign
 
 # Complete, explicit dicts: the golden hashes must not move when the model's defaults do.
 P = {

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from sweep.run.lifetime import lifetime_rule, walltime_seconds, worker_lifetime
+from nematic_solids.sweep.run.lifetime import lifetime_rule, walltime_seconds, worker_lifetime
 
 
 @pytest.mark.parametrize(
@@ -63,8 +63,8 @@ def test_worker_arguments_from_the_walltime():
 
 
 def test_the_job_script_retires_its_worker_before_the_walltime(tmp_path):
-    from sweep.campaign import ClusterSpec, ExecutionSpec
-    from sweep.run.driver import make_cluster
+    from nematic_solids.sweep.campaign import ClusterSpec, ExecutionSpec
+    from nematic_solids.sweep.run.driver import make_cluster
 
     spec = ClusterSpec(
         kind="slurm",
@@ -77,7 +77,7 @@ def test_the_job_script_retires_its_worker_before_the_walltime(tmp_path):
         assert "--lifetime 84s --lifetime-stagger 6s" in script, script
         assert "#SBATCH -t 00:02:00" in script, script
         # runs lost with their worker go back to the scheduler a bounded number of times
-        from sweep.run.clusters import WORKER_LOSSES
+        from nematic_solids.sweep.run.clusters import WORKER_LOSSES
 
         assert cluster.scheduler.allowed_failures == WORKER_LOSSES
     finally:
@@ -85,6 +85,6 @@ def test_the_job_script_retires_its_worker_before_the_walltime(tmp_path):
 
 
 def test_records_of_runs_lost_with_their_worker_are_pending():
-    from sweep.store import RETRYABLE_REASONS
+    from nematic_solids.sweep.store import RETRYABLE_REASONS
 
     assert "killed_worker" in RETRYABLE_REASONS

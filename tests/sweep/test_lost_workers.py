@@ -1,5 +1,6 @@
 """A run whose worker is lost more often than the scheduler retries it (dask's KilledWorker,
-after ``sweep.run.clusters.WORKER_LOSSES`` losses) stays pending: no record, not a failure."""
+after ``nematic_solids.sweep.run.clusters.WORKER_LOSSES`` losses) stays pending: no record, not a
+failure."""
 
 from __future__ import annotations
 
@@ -7,12 +8,12 @@ from types import SimpleNamespace
 
 from sweep_helpers import write_campaign
 
-import sweep.run.driver as execute
-from sweep.expand import expand
-from sweep.outputs.status import campaign_status
-from sweep.run.todo import plan_runs
-from sweep.spec import load_campaign
-from sweep.store import CampaignStore
+import nematic_solids.sweep.run.driver as execute
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.outputs.status import campaign_status
+from nematic_solids.sweep.run.todo import plan_runs
+from nematic_solids.sweep.spec import load_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 
 def test_a_run_whose_worker_is_lost_too_often_stays_pending(tmp_path, monkeypatch):

@@ -17,14 +17,14 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from sweep.campaign import PrecisionSpec, Threshold
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.precision.decide import decide, interval_width, rounds_bound, t_quantile
-from sweep.precision.forecast import expected_seeds
-from sweep.precision.rounds import read_plan, replay
-from sweep.spec import load_campaign, parse_campaign
-from sweep.store import CampaignStore
+from nematic_solids.sweep.campaign import PrecisionSpec, Threshold
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.precision.decide import decide, interval_width, rounds_bound, t_quantile
+from nematic_solids.sweep.precision.forecast import expected_seeds
+from nematic_solids.sweep.precision.rounds import read_plan, replay
+from nematic_solids.sweep.spec import load_campaign, parse_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 BASE = """\
 name: p

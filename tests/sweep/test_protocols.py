@@ -1,6 +1,6 @@
-"""A campaign's ``protocol:`` (sweep.protocols): its numbers as sweep axes, every mistake at its
-file:line, the identity covering the protocol (a constant one is the plain parameter's run),
-and a campaign whose runs follow their protocols, with the axes in phase.nc."""
+"""A campaign's ``protocol:`` (nematic_solids.sweep.protocols): its numbers as sweep axes, every
+mistake at its file:line, the identity covering the protocol (a constant one is the plain
+parameter's run), and a campaign whose runs follow their protocols, with the axes in phase.nc."""
 
 from __future__ import annotations
 
@@ -11,12 +11,12 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from model.parameters import Parameters
-from model.simulate import run as simulate
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.expand import expand
-from sweep.spec import parse_campaign
+from nematic_solids.model.parameters import Parameters
+from nematic_solids.model.simulate import run as simulate
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.spec import parse_campaign
 
 HEAD = """\
 name: pulses

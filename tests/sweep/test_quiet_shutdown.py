@@ -24,7 +24,15 @@ def test_a_campaign_that_succeeds_under_load_prints_no_traceback(tmp_path):
     spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(LOAD)]
     try:
         proc = subprocess.run(
-            [sys.executable, "-m", "sweep", "run", str(path), "--results", str(results)]
+            [
+                sys.executable,
+                "-m",
+                "nematic_solids.sweep",
+                "run",
+                str(path),
+                "--results",
+                str(results),
+            ]
             + ["--no-figures", "--no-dashboard"],
             capture_output=True,
             text=True,
@@ -47,7 +55,7 @@ def test_a_campaign_that_succeeds_under_load_prints_no_traceback(tmp_path):
 def test_the_closing_workers_drop_the_heartbeat_failure_and_nothing_else(capfd):
     from distributed import Client, LocalCluster
 
-    from sweep.run.clusters import HEARTBEAT_FAILURE, quiet_heartbeats
+    from nematic_solids.sweep.run.clusters import HEARTBEAT_FAILURE, quiet_heartbeats
 
     say = logging.getLogger("distributed.worker").error  # in the worker processes
     cluster = LocalCluster(

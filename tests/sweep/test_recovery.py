@@ -1,7 +1,7 @@
-"""The recovery fit and the switch figure (sweep.analysis.recovery, sweep.figures.switch): the
-memory is the Pearson correlation of two fields; each run's values are read from its series
-and snapshots at the pulse's switch and restore times; a lower level of activity lowers the
-pattern more; the figure is drawn."""
+"""The recovery fit and the switch figure (nematic_solids.sweep.analysis.recovery,
+nematic_solids.sweep.figures.switch): the memory is the Pearson correlation of two fields; each
+run's values are read from its series and snapshots at the pulse's switch and restore times; a lower
+level of activity lowers the pattern more; the figure is drawn."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from sweep.analysis.recovery import memory
-from sweep.cli import app
-from sweep.expand import expand
-from sweep.spec import parse_campaign
+from nematic_solids.sweep.analysis.recovery import memory
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.spec import parse_campaign
 
 PULSES = """\
 name: pulses

@@ -1,8 +1,8 @@
 """Adaptive campaigns (sweep/refine): the refine: section's checks, the pure plan (bisection
 of boundary cells, sequential seeds, order independence, the run bound), run identity of
 refined points, and real campaigns at 32^2 (the Fig. A1 setting): refinement converges to the
-linear-stability boundary of model.stability, phase.nc holds the refined points, status and
-validate show the rounds, a killed driver resumes to the same plan."""
+linear-stability boundary of nematic_solids.model.stability, phase.nc holds the refined points,
+status and validate show the rounds, a killed driver resumes to the same plan."""
 
 from __future__ import annotations
 
@@ -20,16 +20,16 @@ import xarray as xr
 from sweep_helpers import group_alive, kill_group, start_driver, wait_for
 from typer.testing import CliRunner
 
-from model.parameters import Parameters
-from model.stability import critical_eps_closed_form
-from sweep.analysis.stability import stability
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.expand import expand
-from sweep.refine.plan import first_round, next_round, points_of, run_bound, wilson
-from sweep.refine.rounds import read_plan, replay
-from sweep.spec import Overrides, load_campaign, parse_campaign
-from sweep.store import CampaignStore
+from nematic_solids.model.parameters import Parameters
+from nematic_solids.model.stability import critical_eps_closed_form
+from nematic_solids.sweep.analysis.stability import stability
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.refine.plan import first_round, next_round, points_of, run_bound, wilson
+from nematic_solids.sweep.refine.rounds import read_plan, replay
+from nematic_solids.sweep.spec import Overrides, load_campaign, parse_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parents[2]
 FIGA1_ADAPTIVE = ROOT / "campaigns" / "figA1_adaptive.yaml"
@@ -580,7 +580,7 @@ def test_the_fig2_refine_variant_runs_at_small_size(tmp_path):
     """campaigns/fig2_adaptive.yaml at 32^2, linear mechanics, 6 seeds: the jump criterion
     refines alpha - B around the sigma2_S jump; the transition fit reads the refined phase.nc
     and places the jump in a cell of the smallest spacing (0.05)."""
-    from sweep.analysis.transition import transition
+    from nematic_solids.sweep.analysis.transition import transition
 
     results = tmp_path / "results"
     result = invoke(

@@ -21,15 +21,21 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.files import file_stamp
-from sweep.refine.plan import first_round, next_round, points_of, run_bound, values_at
-from sweep.refine.report import validation_lines
-from sweep.refine.rounds import read_plan, replay
-from sweep.refine.seeds import decision
-from sweep.spec import parse_campaign
-from sweep.store import CampaignStore
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.files import file_stamp
+from nematic_solids.sweep.refine.plan import (
+    first_round,
+    next_round,
+    points_of,
+    run_bound,
+    values_at,
+)
+from nematic_solids.sweep.refine.report import validation_lines
+from nematic_solids.sweep.refine.rounds import read_plan, replay
+from nematic_solids.sweep.refine.seeds import decision
+from nematic_solids.sweep.spec import parse_campaign
+from nematic_solids.sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -684,9 +690,9 @@ FIG4_ADAPTIVE = ROOT / "campaigns" / "fig4_adaptive.yaml"
 
 
 def test_the_fig4_adaptive_campaign_validates_and_shares_fig4s_runs():
-    from sweep.expand import expand
-    from sweep.refine.rounds import RunNamer
-    from sweep.spec import load_campaign
+    from nematic_solids.sweep.expand import expand
+    from nematic_solids.sweep.refine.rounds import RunNamer
+    from nematic_solids.sweep.spec import load_campaign
 
     result = invoke("validate", FIG4_ADAPTIVE)
     assert result.exit_code == 0, result.output
@@ -710,8 +716,8 @@ def test_the_fig4_adaptive_campaign_validates_and_shares_fig4s_runs():
 
 
 def test_runs_a_refinement_over_several_axes_can_plan_are_not_orphaned(tmp_path):
-    from sweep.outputs.changes import run_counts
-    from sweep.refine.rounds import RunNamer, expansion_for
+    from nematic_solids.sweep.outputs.changes import run_counts
+    from nematic_solids.sweep.refine.rounds import RunNamer, expansion_for
 
     c = parse_campaign(PRECISE, "p.yaml")
     store = CampaignStore(tmp_path / "results", "precise")

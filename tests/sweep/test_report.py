@@ -15,11 +15,11 @@ import xarray as xr
 from sweep_helpers import cli_modules, outside_references
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.refine.rounds import read_plan
-from sweep.report.content import fit_tables
-from sweep.report.phase_plot import point_columns
-from sweep.store import CampaignStore
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.refine.rounds import read_plan
+from nematic_solids.sweep.report.content import fit_tables
+from nematic_solids.sweep.report.phase_plot import point_columns
+from nematic_solids.sweep.store import CampaignStore
 
 #: 3 x 2 grid points, one seed; alpha - B = 20 fails at once (the finite solver loses
 #: ellipticity: tests/sweep_helpers.py), and one round refines alpha - B between 0.1 and 0.2.
@@ -159,7 +159,7 @@ def test_a_tex_label_brings_bokehs_own_mathjax_into_the_page():
     with the rest, no CDN (it renders offline: tests/sweep/test_report_browser.py)."""
     from bokeh.plotting import figure
 
-    from sweep.report.page import inline_resources
+    from nematic_solids.sweep.report.page import inline_resources
 
     plain, tex = figure(x_axis_label="alpha - B"), figure(x_axis_label=r"$$\alpha - B$$")
     for fig in (plain, tex):
@@ -184,7 +184,7 @@ def test_nematic_report_from_the_name_and_to_an_output(adaptive, tmp_path):
 
 
 def test_the_runs_views_are_cached_by_run_file(adaptive, monkeypatch):
-    from sweep.report import run_views as views
+    from nematic_solids.sweep.report import run_views as views
 
     _, results, _ = adaptive
     cache = results / "rep" / views.CACHE
@@ -227,7 +227,13 @@ def test_report_and_status_import_only_what_they_need(adaptive, tmp_path):
         "report", "rep", "--results", results, "--output", tmp_path / "r.html"
     )
     assert "wrote" in out, out
-    for heavy in ("numba", "model.compiled", "distributed", "dask.array", "matplotlib"):
+    for heavy in (
+        "numba",
+        "nematic_solids.model.compiled",
+        "distributed",
+        "dask.array",
+        "matplotlib",
+    ):
         assert heavy not in modules, heavy
     modules, out = cli_modules("status", path, "--results", results)
     assert "6 done" in out, out
@@ -292,7 +298,7 @@ def test_hover_texts_give_each_seed_and_skip_points_not_run(tmp_path):
 
 
 def test_axes_spanning_a_decade_of_positive_values_are_logarithmic():
-    from sweep.report.phase_plot import Axis
+    from nematic_solids.sweep.report.phase_plot import Axis
 
     phase = xr.Dataset(
         coords={
@@ -329,7 +335,7 @@ def _plots(layout) -> list:
 
 
 def test_one_two_and_more_dims_give_a_line_a_scatter_and_facets(tmp_path):
-    from sweep.report.phase_plot import MAX_FACETS, phase_layout
+    from nematic_solids.sweep.report.phase_plot import MAX_FACETS, phase_layout
 
     layout, embedded, notes = phase_layout(_phase({"alpha_minus_B": [0.1, 0.3, 0.5]}), tmp_path)
     (plot,) = _plots(layout)

@@ -5,10 +5,10 @@ no request leaves the file (Chrome's log of every request it sent; a page that d
 is seen to), the phase diagram and the figures render without a severe console error, the
 labels are the plain text intended, and clicking a point shows that point's run (its
 snapshot image and sigma2_S(t)); a TeX label renders offline with bokeh's own MathJax
-(:func:`sweep.report.page.inline_resources`). Saves a screenshot of the page in the test's
-temporary folder; with ``NEMATIC_UPDATE_SCREENSHOT=1`` in the environment it replaces
-docs/figures/report_screenshot.png (a report with a point clicked) instead, so a plain test
-run leaves the checkout unchanged.
+(:func:`nematic_solids.sweep.report.page.inline_resources`). Saves a screenshot of the page in the
+test's temporary folder; with ``NEMATIC_UPDATE_SCREENSHOT=1`` in the environment it replaces
+docs/figures/report_screenshot.png (a report with a point clicked) instead, so a plain test run
+leaves the checkout unchanged.
 
 Marked ``browser`` (run with ``pytest -m browser``; CI does); skipped, with the reason, where
 Chromium, its driver or selenium is missing."""
@@ -25,7 +25,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from sweep.cli import app
+from nematic_solids.sweep.cli import app
 
 pytestmark = pytest.mark.browser
 
@@ -295,12 +295,13 @@ def test_a_request_to_the_network_would_be_seen(browser, tmp_path):
 
 
 def test_tex_in_a_label_renders_offline_with_bokehs_own_mathjax(browser, tmp_path):
-    """Were a label of the page TeX (``$$...$$``), :func:`sweep.report.page.inline_resources`
-    inlines bokeh's MathJax bundle, and the math is drawn without a network."""
+    """Were a label of the page TeX (``$$...$$``),
+    :func:`nematic_solids.sweep.report.page.inline_resources` inlines bokeh's MathJax bundle, and
+    the math is drawn without a network."""
     from bokeh.embed import components
     from bokeh.plotting import figure
 
-    from sweep.report.page import inline_resources
+    from nematic_solids.sweep.report.page import inline_resources
 
     fig = figure(x_axis_label=r"$$\alpha - B$$", y_axis_label="sigma2_S", width=400, height=300)
     fig.scatter([0.1, 0.3, 0.5], [1e-8, 1e-6, 1e-2])

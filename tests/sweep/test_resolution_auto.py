@@ -1,6 +1,6 @@
-"""``resolution: auto`` in a campaign (model.resolution): each point's grid from its K, the run
-ids of those grids, one phase diagram of runs on several grids with each point's grid in it,
-the grids in the dry run and the report, verify's ``resolution: x2`` on top, and the clear
+"""``resolution: auto`` in a campaign (nematic_solids.model.resolution): each point's grid from its
+K, the run ids of those grids, one phase diagram of runs on several grids with each point's grid in
+it, the grids in the dry run and the report, verify's ``resolution: x2`` on top, and the clear
 refusals (a bad rule at its line, chains along K, initial.from)."""
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from model.resolution import ResolutionRule
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.expand import expand
-from sweep.spec import parse_campaign
+from nematic_solids.model.resolution import ResolutionRule
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.spec import parse_campaign
 
 #: 1 cell per Frank length from 32^2 to 64^2: K = 1e-4 (l_F = 0.032) on 32^2, K = 5e-5
 #: (l_F = 0.022) on 64^2, K = 1e-7 (l_F = 1e-3) held at the cap 64^2.
@@ -82,7 +82,7 @@ def test_a_campaign_on_several_grids_is_one_phase_diagram(tmp_path):
 def test_verify_doubles_each_points_own_grid():
     text = AUTO + "verify:\n  variants:\n    - resolution: x2\n"
     campaign = parse_campaign(text)
-    from sweep.spec.verify import resolve
+    from nematic_solids.sweep.spec.verify import resolve
 
     expansion = expand(campaign)
     assert campaign.verify is not None

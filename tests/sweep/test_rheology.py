@@ -1,8 +1,8 @@
-"""Rheology (model.observables.macroscopic_stress, sweep.analysis.rheology): the macroscopic
-stress of the passive matrix under a pure shear is the neo-Hookean one, exactly; the moduli fit
-gives the passive matrix's G' (the first Fourier coefficient of that stress) and G'' = 0, and
-recovers known moduli, drift and harmonics from a synthetic series; an active campaign's
-moduli are written to fits.nc."""
+"""Rheology (nematic_solids.model.observables.macroscopic_stress,
+nematic_solids.sweep.analysis.rheology): the macroscopic stress of the passive matrix under a pure
+shear is the neo-Hookean one, exactly; the moduli fit gives the passive matrix's G' (the first
+Fourier coefficient of that stress) and G'' = 0, and recovers known moduli, drift and harmonics from
+a synthetic series; an active campaign's moduli are written to fits.nc."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import xarray as xr
 from scipy.integrate import quad
 from typer.testing import CliRunner
 
-from model.parameters import Numerics, Parameters
-from model.simulate import run
-from sweep.analysis.rheology import fit_moduli
-from sweep.cli import app
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run
+from nematic_solids.sweep.analysis.rheology import fit_moduli
+from nematic_solids.sweep.cli import app
 
 PASSIVE = {"noise_modes": 8, "chi": 0.0, "B": 0.0, "alpha": 0.0}
 

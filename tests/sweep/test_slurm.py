@@ -102,7 +102,7 @@ def slurm_campaign(
 def nematic(args: list[object], timeout: float = 300) -> tuple[int, str, float]:
     t0 = time.monotonic()
     proc = subprocess.run(
-        [sys.executable, "-m", "sweep", *map(str, args), "--no-figures"],
+        [sys.executable, "-m", "nematic_solids.sweep", *map(str, args), "--no-figures"],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -420,7 +420,15 @@ def test_runs_longer_than_the_walltime_finish_across_jobs_from_checkpoints(slurm
         deadline = time.monotonic() + 900
         while driver.poll() is None and time.monotonic() < deadline:
             status = subprocess.run(
-                [sys.executable, "-m", "sweep", "status", str(path), "--results", str(results)]
+                [
+                    sys.executable,
+                    "-m",
+                    "nematic_solids.sweep",
+                    "status",
+                    str(path),
+                    "--results",
+                    str(results),
+                ]
                 + ["--json"],
                 capture_output=True,
                 text=True,
@@ -453,8 +461,8 @@ def test_runs_longer_than_the_walltime_finish_across_jobs_from_checkpoints(slurm
 
 def assert_straight(rec: dict, path: Path) -> None:
     """The run file ``path`` holds, array by array, the run of ``rec`` done in one piece."""
-    from model.parameters import Numerics, Parameters
-    from model.simulate import run as simulate
+    from nematic_solids.model.parameters import Numerics, Parameters
+    from nematic_solids.model.simulate import run as simulate
 
     ref = simulate(
         Parameters.from_dict(rec["parameters"]), Numerics.from_dict(rec["numerics"]), rec["seed"]
@@ -521,7 +529,7 @@ def test_the_driver_as_a_batch_job_and_nematic_stop(slurm, tmp_path, monkeypatch
     same script submitted again completes the campaign."""
     from typer.testing import CliRunner
 
-    from sweep.cli import app
+    from nematic_solids.sweep.cli import app
 
     venv = Path(sys.prefix)
     campaign = slurm_campaign(
@@ -562,7 +570,7 @@ def test_the_driver_as_a_batch_job_and_nematic_stop(slurm, tmp_path, monkeypatch
     assert job in queue(), (tmp_path / f"driver-{job}.log").read_text()
     status = CliRunner().invoke(app, ["status", str(campaign), "--results", str(results)])
     assert f"SLURM job {job}" in status.output, status.output
-    monkeypatch.setattr("sweep.run.detach.socket.gethostname", lambda: "login-node")
+    monkeypatch.setattr("nematic_solids.sweep.run.detach.socket.gethostname", lambda: "login-node")
     stop = CliRunner().invoke(app, ["stop", "fig2-slurm", "--results", str(results)])
     text = " ".join(stop.output.split())
     assert stop.exit_code == 0, text

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from sweep.figures.snapshot import background, draw_snapshot, snapshot_figure
+from nematic_solids.sweep.figures.snapshot import background, draw_snapshot, snapshot_figure
 
 
 def run_dataset(i1bar: np.ndarray) -> xr.Dataset:
-    """A run Dataset with one snapshot (what model.simulate.run writes, reduced)."""
+    """A run Dataset with one snapshot (what nematic_solids.model.simulate.run writes, reduced)."""
     n = i1bar.shape[0]
     x = (np.arange(n) + 0.5) / n
     X, Y = np.meshgrid(x, x, indexing="ij")

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.spec import Overrides, load_campaign, parse_campaign
-from sweep.spec.yaml_input import parse_assignments
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.spec import Overrides, load_campaign, parse_campaign
+from nematic_solids.sweep.spec.yaml_input import parse_assignments
 
 GOOD = """
 name: good
@@ -143,7 +143,7 @@ def test_parse_assignments():
 
 
 def test_jobqueue_cluster_section_builds_a_job_script():
-    from sweep.run.driver import make_cluster
+    from nematic_solids.sweep.run.driver import make_cluster
 
     c = parse_campaign("""
         name: slurm-test

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from sweep_helpers import cli_modules
 
-from sweep.startup import FRESH_PROCESS, paused_gc
+from nematic_solids.sweep.startup import FRESH_PROCESS, paused_gc
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -56,7 +56,7 @@ def test_xarray_recognises_dask_arrays_made_after_the_deferral():
     out = python(
         "import sys\n"
         "import numpy as np, xarray as xr\n"
-        "from sweep.startup import defer_dask_array\n"
+        "from nematic_solids.sweep.startup import defer_dask_array\n"
         "assert defer_dask_array()\n"
         "ds = xr.Dataset({'a': ('x', np.arange(3.0))})\n"
         "assert float(ds['a'].sum()) == 3.0\n"
@@ -74,10 +74,10 @@ def test_xarray_recognises_dask_arrays_made_after_the_deferral():
 def test_the_fftw_version_is_read_without_numba():
     out = python(
         "import sys\n"
-        "from model.provenance import _fftw_version, fftw_candidates\n"
+        "from nematic_solids.model.provenance import _fftw_version, fftw_candidates\n"
         "light = _fftw_version()\n"
         "print('numba' in sys.modules)\n"
-        "import model.compiled.fftw as fftw\n"
+        "import nematic_solids.model.compiled.fftw as fftw\n"
         "_fftw_version.cache_clear()\n"
         "print(light == _fftw_version())\n"
         "print(list(fftw_candidates()) == fftw._candidates())\n"

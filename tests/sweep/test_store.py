@@ -13,10 +13,16 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from sweep.errors import CampaignLocked
-from sweep.files import atomic_to_netcdf, atomic_write_text, file_stamp, netcdf_attr, series_time
-from sweep.lock import CampaignLock, read_lock_holder
-from sweep.store import CampaignStore
+from nematic_solids.sweep.errors import CampaignLocked
+from nematic_solids.sweep.files import (
+    atomic_to_netcdf,
+    atomic_write_text,
+    file_stamp,
+    netcdf_attr,
+    series_time,
+)
+from nematic_solids.sweep.lock import CampaignLock, read_lock_holder
+from nematic_solids.sweep.store import CampaignStore
 
 
 def test_series_time_reads_both_run_file_schemas():
@@ -96,7 +102,7 @@ def test_lock_excludes_a_second_holder(tmp_path):
 def test_a_killed_holder_releases_the_lock(tmp_path):
     path = tmp_path / ".lock"
     code = (
-        "import sys, time; from sweep.lock import CampaignLock; "
+        "import sys, time; from nematic_solids.sweep.lock import CampaignLock; "
         f"CampaignLock(__import__('pathlib').Path({str(path)!r})).acquire(); "
         "print('locked', flush=True); time.sleep(60)"
     )
@@ -230,7 +236,7 @@ def test_storage_cause_names_the_fault(tmp_path):
     import errno
     import resource
 
-    from sweep.files import storage_cause
+    from nematic_solids.sweep.files import storage_cause
 
     target = tmp_path / "runs" / "a.nc"
     target.parent.mkdir()

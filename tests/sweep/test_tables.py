@@ -14,14 +14,19 @@ import xarray as xr
 from sweep_helpers import records
 from typer.testing import CliRunner
 
-import sweep
-from sweep.cli import app
-from sweep.errors import ExportError, StoreError
-from sweep.expand import expand
-from sweep.outputs.aggregate import build_phase
-from sweep.outputs.tables import open_campaign, parquet_engine, runs_table, write_table
-from sweep.spec import parse_campaign
-from sweep.store import Record
+from nematic_solids import sweep
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import ExportError, StoreError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.outputs.aggregate import build_phase
+from nematic_solids.sweep.outputs.tables import (
+    open_campaign,
+    parquet_engine,
+    runs_table,
+    write_table,
+)
+from nematic_solids.sweep.spec import parse_campaign
+from nematic_solids.sweep.store import Record
 
 
 def invoke(*args: object):
@@ -159,27 +164,28 @@ def test_a_zip_group_gives_a_column_per_axis():
         assert row.sigma2_S == float(i)
 
 
-def test_the_readme_notebook_snippet_runs(small):
+def test_the_guide_notebook_snippet_runs(small):
+    """The ``py`` snippet of docs/guide/first_campaign.md, on a small campaign's results."""
     import re
     from pathlib import Path
 
     import matplotlib
 
     matplotlib.use("Agg")
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    (snippet,) = re.findall(r"```py\n(.*?)```", readme, flags=re.S)
+    page = Path(__file__).resolve().parents[2] / "docs" / "guide" / "first_campaign.md"
+    (snippet,) = re.findall(r"```py\n(.*?)```", page.read_text(), flags=re.S)
     opening = 'sweep.open_campaign("quickstart")'
     assert opening in snippet
     code = snippet.replace(opening, f'sweep.open_campaign("small", results={str(small.results)!r})')
     namespace: dict = {}
-    exec(compile(code, "README.md notebook snippet", "exec"), namespace)
+    exec(compile(code, "first_campaign.md notebook snippet", "exec"), namespace)
     assert len(namespace["runs"]) == 6
     assert namespace["phase"]["sigma2_S"].dims == ("alpha_minus_B", "seed")
 
 
 def test_open_by_name_reads_the_campaign_copy_with_its_overrides(tmp_path):
-    from sweep.spec import Overrides
-    from sweep.store import CampaignStore
+    from nematic_solids.sweep.spec import Overrides
+    from nematic_solids.sweep.store import CampaignStore
 
     overrides = Overrides(
         settings={"resolution": 48, "initial": "per_node", "C": 2.5}, seeds=[3, 5], name="reduced"

@@ -13,25 +13,25 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
-from model.initial import (
+from nematic_solids.model.initial import (
     band_limited_field,
     initial_fields,
     per_node_field,
     spectral_interpolate,
 )
-from model.parameters import Numerics, Parameters
-from sweep.campaign import Variant
-from sweep.cli import app
-from sweep.errors import CampaignError
-from sweep.expand import expand
-from sweep.identity import PointHasher
-from sweep.spec import parse_campaign
-from sweep.spec.verify import resolve
-from sweep.store import Record
-from sweep.verify import CHANGED, CONVERGED, MISSING, NOT_COMPARED
-from sweep.verify.measure import verify_dataset
-from sweep.verify.sample import plan_sample
-from sweep.verify.summary import summary_line
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.sweep.campaign import Variant
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.identity import PointHasher
+from nematic_solids.sweep.spec import parse_campaign
+from nematic_solids.sweep.spec.verify import resolve
+from nematic_solids.sweep.store import Record
+from nematic_solids.sweep.verify import CHANGED, CONVERGED, MISSING, NOT_COMPARED
+from nematic_solids.sweep.verify.measure import verify_dataset
+from nematic_solids.sweep.verify.sample import plan_sample
+from nematic_solids.sweep.verify.summary import summary_line
 
 BASE = """\
 name: v
@@ -152,7 +152,7 @@ def test_a_per_node_resolution_variant_starts_from_the_same_physical_field():
     f1, _, _ = initial_fields(p2, 64, 4)
     # the fine field's modes up to the coarse Nyquist are the coarse field's (the angle map
     # is applied after the interpolation, so compare the psi fields they come from)
-    from model.initial import texture_field
+    from nematic_solids.model.initial import texture_field
 
     c, f = texture_field(p, 32, 4), texture_field(p2, 64, 4)
     assert np.abs(spectral_interpolate(c, 64) - f).max() < 1e-12
@@ -393,7 +393,7 @@ def test_check_files_keeps_the_former_verify_spelling(verified):
 
 
 def test_an_unreadable_verify_nc_is_one_line_in_status_and_the_report(verified, tmp_path):
-    from sweep.report.content import verification
+    from nematic_solids.sweep.report.content import verification
 
     path, results, _ = verified
     copy = tmp_path / "copy"
@@ -403,7 +403,7 @@ def test_an_unreadable_verify_nc_is_one_line_in_status_and_the_report(verified, 
     assert found is not None
     assert found["summary"].startswith("verify.nc cannot be read")
     assert found["rows"] == []
-    from sweep.cli.verify import verification_lines
+    from nematic_solids.sweep.cli.verify import verification_lines
 
     for detail in (False, True):
         (line,) = verification_lines(copy, detail=detail)

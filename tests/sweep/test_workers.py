@@ -18,10 +18,10 @@ from pathlib import Path
 import pytest
 from sweep_helpers import kill_group, records, run_ids, start_driver, wait_for, write_campaign
 
-from sweep.campaign import ClusterSpec, ExecutionSpec
-from sweep.errors import ClusterError
-from sweep.run.clusters import jobqueue_options, make_jobqueue, open_cluster
-from sweep.run.workers import (
+from nematic_solids.sweep.campaign import ClusterSpec, ExecutionSpec
+from nematic_solids.sweep.errors import ClusterError
+from nematic_solids.sweep.run.clusters import jobqueue_options, make_jobqueue, open_cluster
+from nematic_solids.sweep.run.workers import (
     MIN_INFLIGHT,
     ClusterLink,
     Supervisor,
@@ -98,7 +98,7 @@ def rerun_completes(path: Path, results: Path, folder: Path, done_before: int) -
             [
                 sys.executable,
                 "-m",
-                "sweep",
+                "nematic_solids.sweep",
                 "run",
                 str(path),
                 "--results",
@@ -345,8 +345,8 @@ def test_the_local_scheduler_takes_only_clients_with_the_campaign_credentials():
 
 
 def test_tls_can_be_turned_off_only_with_a_reason(tmp_path):
-    from sweep.errors import CampaignError
-    from sweep.spec import parse_campaign
+    from nematic_solids.sweep.errors import CampaignError
+    from nematic_solids.sweep.spec import parse_campaign
 
     base = "name: x\nsweep: {axes: {chi: [1]}}\nseeds: 1\n"
     with pytest.raises(
@@ -420,7 +420,7 @@ def test_a_tls_scheduler_without_credentials_is_refused(tmp_path):
 def test_the_docs_slurm_example_is_a_valid_campaign(tmp_path):
     from test_slurm import docs_slurm_example
 
-    from sweep.spec import load_campaign
+    from nematic_solids.sweep.spec import load_campaign
 
     path = tmp_path / "fig2-slurm.yaml"
     path.write_text(docs_slurm_example())

@@ -38,8 +38,9 @@ class BatchResult:
     saves after a seed failed), ``fields`` the (B, 3, N, N) fields q1, q2, A at the end (or
     where the seed failed), ``status`` "ok" or "failed" per seed with its ``reason`` and
     ``t_failed``, ``work[name]`` the counters of :data:`WORK` per seed, ``margin_min`` the
-    smallest well-posedness margin per seed; ``wall`` the seconds of the run without
-    ``compile`` (the seconds XLA took to compile it, 0 when its executables were kept)."""
+    smallest well-posedness margin per seed; ``wall`` and ``cpu`` the seconds of the run
+    (wall clock, and CPU of this process's threads) without ``compile``, the seconds of the
+    first calls, which compile (a few milliseconds when JAX has the code already)."""
 
     seeds: tuple[int, ...]
     times: np.ndarray
@@ -52,6 +53,7 @@ class BatchResult:
     margin_min: np.ndarray
     device: str
     wall: float
+    cpu: float
     compile: float
     jax_version: str
 
@@ -135,7 +137,7 @@ def run_batch(
     jax.block_until_ready(look(state.q, state.A, shell_dev))
     compile_s = time.perf_counter() - t0
 
-    t1 = time.perf_counter()
+    t1, cpu1 = time.perf_counter(), time.process_time()
     rows = []
     for t_save in times:
         if t_save > 0.0:
@@ -144,7 +146,7 @@ def run_batch(
         values[np.asarray(state.status) != 0] = np.nan
         rows.append(values)
     jax.block_until_ready(state)
-    wall = time.perf_counter() - t1
+    wall, cpu = time.perf_counter() - t1, time.process_time() - cpu1
 
     status = np.asarray(state.status)
     series = np.stack(rows, axis=-1)  # (B, names, T)
@@ -161,6 +163,7 @@ def run_batch(
         margin_min=np.asarray(state.margin_min),
         device=describe(dev),
         wall=wall,
+        cpu=cpu,
         compile=compile_s,
         jax_version=jax.__version__,
     )

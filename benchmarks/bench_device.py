@@ -166,17 +166,18 @@ def main() -> None:
                 ),
                 flush=True,
             )
-    out = {
-        "benchmark": "bench_device",
-        "jax_version": jax.__version__,
-        "device": describe(dev),
-        "machine": platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "loadavg_at_end": os.getloadavg(),
-        "parameters": params.to_dict(),
-        "rows": rows,
-    }
-    Path(args.out).write_text(json.dumps(out, indent=1, default=str))
+            out = {
+                "benchmark": "bench_device",
+                "jax_version": jax.__version__,
+                "device": describe(dev),
+                "machine": platform.machine(),
+                "cpu_count": os.cpu_count(),
+                "loadavg_at_end": os.getloadavg(),
+                "parameters": params.to_dict(),
+                "rows": rows,
+            }
+            # written after every row: a long benchmark keeps what it measured
+            Path(args.out).write_text(json.dumps(out, indent=1, default=str))
     print(f"wrote {args.out}")
 
 

@@ -79,9 +79,19 @@ def gmres_aux(
     rtol: float,
     maxiter: int,
     restart: int = 30,
+    batch_axis: str | None = None,
 ) -> Solution:
     """Solve ``A x = b`` from ``x = 0`` (module docstring); ``aux_shape`` is the shape of
-    ``L v`` (complex)."""
+    ``L v`` (complex). Under ``jax.vmap(..., axis_name=batch_axis)`` the Arnoldi loop runs
+    while any seed of the batch iterates (its condition is then the same for all seeds, so
+    vmap adds no select of the whole Krylov basis per iteration; the seeds that have stopped
+    are masked here)."""
+
+    def anyone(flag: Array) -> Array:
+        if batch_axis is None:
+            return flag
+        return lax.psum(flag.astype(jnp.int32), batch_axis) > 0
+
     cdtype = b.dtype
     bnorm0 = jnp.sqrt(inner(b, b))
     bnorm = jnp.where(bnorm0 == 0.0, 1.0, bnorm0)
@@ -103,28 +113,41 @@ def gmres_aux(
         sn = jnp.zeros(restart)
 
         def more(c):
-            return ~c[-1]
+            return anyone(~c[-1])
 
         def arnoldi(c):
-            k, V, LZ, H, g, cs, sn, total, h_next, _ = c
+            k, V, LZ, H, g, cs, sn, total, h_next, end = c
+            active = ~end  # (a seed that has ended repeats its last column, masked below)
             w, Lz = op(V[k])
-            LZ = LZ.at[k].set(Lz)
+            LZ = LZ.at[k].set(Lz)  # an ended seed writes the same values again
 
             def gram_schmidt(i, wH):  # modified Gram-Schmidt against V[0..k]
                 w, H = wH
                 hik = inner(V[i], w)
                 return w - hik * V[i], H.at[i, k].set(hik)
 
-            w, H = lax.fori_loop(0, k + 1, gram_schmidt, (w, H))
-            h_next = jnp.sqrt(jnp.maximum(inner(w, w), 0.0))
-            H = H.at[k + 1, k].set(h_next)
-            H, g, cs, sn = _givens(H, g, cs, sn, k)
-            total = total + 1
-            stop = (jnp.abs(g[k + 1]) <= tol) | (total >= maxiter) | (h_next <= 1e-14 * beta)
-            safe_h = jnp.where(h_next > 0.0, h_next, 1.0)
-            V = jnp.where(stop, V, V.at[k + 1].set(w / safe_h))
-            end = stop | (k == restart - 1)
-            return (jnp.where(end, k, k + 1), V, LZ, H, g, cs, sn, total, h_next, end)
+            w, Hn = lax.fori_loop(0, k + 1, gram_schmidt, (w, H))
+            hn = jnp.sqrt(jnp.maximum(inner(w, w), 0.0))
+            Hn = Hn.at[k + 1, k].set(hn)
+            Hn, gn, csn, snn = _givens(Hn, g, cs, sn, k)
+            total = total + active.astype(total.dtype)
+            stop = (jnp.abs(gn[k + 1]) <= tol) | (total >= maxiter) | (hn <= 1e-14 * beta)
+            # V[k + 1] is read only after a step that did not stop: written unconditionally,
+            # so the basis is never copied (a select of the whole basis per iteration)
+            V = V.at[k + 1].set(w / jnp.where(hn > 0.0, hn, 1.0))
+            ends = active & (stop | (k == restart - 1))
+            return (
+                jnp.where(active & ~ends, k + 1, k),
+                V,
+                LZ,
+                jnp.where(active, Hn, H),
+                jnp.where(active, gn, g),
+                jnp.where(active, csn, cs),
+                jnp.where(active, snn, sn),
+                total,
+                jnp.where(active, hn, h_next),
+                end | ends,
+            )
 
         start = (jnp.int32(0), V, LZ, H, g, cs, sn, total, jnp.float64(0.0), met | spent)
         k, V, LZ, H, g, cs, sn, total, h_next, _ = lax.while_loop(more, arnoldi, start)

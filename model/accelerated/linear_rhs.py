@@ -76,6 +76,8 @@ class Constants:
     spin_tol: float
     spin_maxiter: int
     restart: int = 30
+    #: the name of the seeds' axis under ``jax.vmap`` (None: one seed, unbatched)
+    batch_axis: str | None = None
 
 
 def setup(params: Parameters, numerics: Numerics) -> tuple[Symbols, Constants]:
@@ -185,6 +187,7 @@ def linear_split(q: Array, A: Array, q_hat: Array, sym: Symbols, c: Constants) -
         rtol=c.spin_tol,
         maxiter=c.spin_maxiter,
         restart=c.restart,
+        batch_axis=c.batch_axis,
     )
     Nq = R + sol.Lx - sym.Lq * q_hat
     Adot = (-c.zeta * A - c.chi * tr_s - c.s * A * A * A) / c.tau

@@ -11,6 +11,7 @@ control, batch size, device), so a second run of the same shape compiles nothing
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from collections.abc import Sequence
@@ -28,6 +29,8 @@ from .etdrk4 import REASONS, Control, SeedState, advance, initial_state
 from .linear_rhs import Constants, setup, symbols_on
 from .observables import NAMES, ShellData, observe, shell_data
 
+#: the name of the seeds' axis under jax.vmap
+SEEDS = "seeds"
 #: the work counted per seed (:class:`model.accelerated.etdrk4.SeedState`)
 WORK = ("steps", "rejected", "stage_failures", "rhs", "spin_iterations", "transforms")
 
@@ -81,7 +84,10 @@ def _jitted(c: Constants, ctl: Control, nshell: int, dt: float):
     compiled code serves the next run of the same shape): the initial state, the advance to
     a time, the observables."""
     start = jax.jit(jax.vmap(functools.partial(initial_state, dt=dt)))
-    step = jax.jit(jax.vmap(functools.partial(advance, c=c, ctl=ctl), in_axes=(0, None, None)))
+    c = dataclasses.replace(c, batch_axis=SEEDS)
+    step = jax.jit(
+        jax.vmap(functools.partial(advance, c=c, ctl=ctl), in_axes=(0, None, None), axis_name=SEEDS)
+    )
     look = jax.jit(
         jax.vmap(
             functools.partial(observe, nshell=nshell, alpha_minus_B=c.amb),

@@ -34,3 +34,9 @@ class IllPosed(SimulationFailure):
 
     def __init__(self, detail: str, t: float | None = None):
         super().__init__("rate_problem_ill_posed", detail, t)
+
+
+class DeviceUnavailable(NematicError):
+    """The accelerated backend (:mod:`nematic_solids.model.accelerated`) cannot run where it was
+    asked to: its library (JAX) is not installed, or the device named (a GPU) is not there. The
+    message names what was asked, what is available and the fix."""

@@ -706,13 +706,16 @@ def test_the_fig4_adaptive_campaign_validates_and_shares_fig4s_runs():
     assert c.refine is not None
     assert c.precision is not None
     assert c.precision.thresholds == c.refine.thresholds  # one class (a YAML alias)
-    # the first halving of each axis gives campaigns/fig4.yaml's values: the same runs
+    # the first halving of each axis gives campaigns/fig4.yaml's values: the same runs where
+    # the resolution rule keeps fig4.yaml's 128^2 (K >= 3.16e-5), other runs (on 256^2) below
     full = expand(load_campaign(ROOT / "campaigns" / "fig4.yaml"))
     namer = RunNamer(c)
-    for chi, k, eps in ((2.5, 1e-5, 0.025), (0.0, 1e-3, 0.0), (10.0, 1e-6, 0.1)):
+    for chi, k, eps in ((0.0, 1e-3, 0.0), (10.0, 1e-4, 0.025)):
         for seed in (0, 3):
             run = full.run(full.position[namer.run_id((), (chi, k, eps), seed)])
             assert run.coords == {"chi": chi, "K": k, "eps": eps, "seed": seed}
+    for chi, k, eps in ((2.5, 1e-5, 0.025), (10.0, 1e-6, 0.1)):
+        assert namer.run_id((), (chi, k, eps), 0) not in full.position
 
 
 def test_runs_a_refinement_over_several_axes_can_plan_are_not_orphaned(tmp_path):

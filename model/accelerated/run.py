@@ -1,0 +1,175 @@
+"""The seeds of one point in one accelerated run: :func:`run_batch` (small-strain mechanics,
+ETDRK4), from each seed's initial texture (:func:`nematic_solids.model.initial.initial_fields`, as
+:func:`nematic_solids.model.simulate.run`) to ``t_final``, with the observables at the save times of
+:func:`nematic_solids.model.parameters.save_times`.
+
+Each seed has its own step control (:mod:`nematic_solids.model.accelerated.etdrk4`), so seed i of a
+batch follows the trajectory it has when run alone; one seed's failure (its reason tag as in
+:mod:`nematic_solids.model.errors`) stops that seed only. Compiled executables are kept per
+(constants, control, batch size, device), so a second run of the same shape compiles nothing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..errors import ParameterError
+from ..initial import initial_fields
+from ..parameters import Numerics, Parameters, check_compatible, save_times
+from .device import describe, select_device
+from .etdrk4 import REASONS, Control, SeedState, advance, initial_state
+from .linear_rhs import Constants, setup, symbols_on
+from .observables import NAMES, ShellData, observe, shell_data
+
+#: the name of the seeds' axis under jax.vmap
+SEEDS = "seeds"
+#: the work counted per seed (:class:`nematic_solids.model.accelerated.etdrk4.SeedState`)
+WORK = ("steps", "rejected", "stage_failures", "rhs", "spin_iterations", "transforms")
+
+
+@dataclass
+class BatchResult:
+    """What :func:`run_batch` returns. ``series[name]`` is (B, T) over ``times`` (NaN at the
+    saves after a seed failed), ``fields`` the (B, 3, N, N) fields q1, q2, A at the end (or
+    where the seed failed), ``status`` "ok" or "failed" per seed with its ``reason`` and
+    ``t_failed``, ``work[name]`` the counters of :data:`WORK` per seed, ``margin_min`` the
+    smallest well-posedness margin per seed; ``wall`` and ``cpu`` the seconds of the run
+    (wall clock, and CPU of this process's threads) without ``compile``, the seconds of the
+    first calls, which compile (a few milliseconds when JAX has the code already)."""
+
+    seeds: tuple[int, ...]
+    times: np.ndarray
+    series: dict[str, np.ndarray]
+    fields: np.ndarray
+    status: list[str]
+    reason: list[str]
+    t_failed: np.ndarray
+    work: dict[str, np.ndarray]
+    margin_min: np.ndarray
+    device: str
+    wall: float
+    cpu: float
+    compile: float
+    jax_version: str
+
+
+def check_supported(params: Parameters, numerics: Numerics) -> None:
+    """Refuse with :class:`nematic_solids.model.errors.ParameterError` what the accelerated path
+    does not do yet: finite strain, ETDRK2, time protocols, the early stop."""
+    if numerics.mechanics != "linear":
+        raise ParameterError(
+            "mechanics", numerics.mechanics, "linear (finite strain is not accelerated yet)"
+        )
+    if numerics.scheme != "etdrk4":
+        raise ParameterError("scheme", numerics.scheme, "etdrk4 in the accelerated backend")
+    if params.protocol:
+        raise ParameterError(
+            "protocol", params.protocol.to_dict(), "none in the accelerated backend"
+        )
+    if numerics.steady_tol > 0:
+        raise ParameterError("steady_tol", numerics.steady_tol, "0 in the accelerated backend")
+
+
+@functools.lru_cache(maxsize=8)
+def _jitted(c: Constants, ctl: Control, nshell: int, dt: float):
+    """The batched, jitted functions of a run (kept per constants, so that JAX's cache of
+    compiled code serves the next run of the same shape): the initial state, the advance to
+    a time, the observables."""
+    start = jax.jit(jax.vmap(functools.partial(initial_state, dt=dt)))
+    c = dataclasses.replace(c, batch_axis=SEEDS)
+    step = jax.jit(
+        jax.vmap(functools.partial(advance, c=c, ctl=ctl), in_axes=(0, None, None), axis_name=SEEDS)
+    )
+    look = jax.jit(
+        jax.vmap(
+            functools.partial(observe, nshell=nshell, alpha_minus_B=c.amb),
+            in_axes=(0, 0, None),
+        )
+    )
+    return start, step, look
+
+
+def run_batch(
+    params: Parameters,
+    numerics: Numerics,
+    seeds: Sequence[int],
+    *,
+    device: str = "cpu",
+    initial: np.ndarray | None = None,
+) -> BatchResult:
+    """Run the seeds ``seeds`` of the point (``params``, ``numerics``) together on ``device``
+    ("cpu", "gpu", "auto": :func:`nematic_solids.model.accelerated.device.select_device`), from
+    their seeded textures or from the given fields ``initial`` (B, 3, N, N) (q1, q2, A per seed, as
+    :func:`nematic_solids.model.simulate.run`'s ``initial``); see the module docstring."""
+    check_compatible(params, numerics)
+    check_supported(params, numerics)
+    seeds = tuple(seeds)
+    if not seeds or any(
+        isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0 for s in seeds
+    ):
+        raise ParameterError("seeds", seeds, "one or more integers >= 0")
+    dev = select_device(device)
+    n = numerics.resolution
+    symbols, c = setup(params, numerics)
+    ctl = Control(numerics.tolerance, numerics.dt_max, numerics.adaptive, numerics.error_norm)
+    shells, nshell = shell_data(n)
+    start, step, look = _jitted(c, ctl, nshell, float(numerics.dt))
+    if initial is None:
+        fields0 = np.stack([np.stack(initial_fields(params, n, int(s))) for s in seeds])
+    else:
+        fields0 = np.asarray(initial, dtype=np.float64)
+        if fields0.shape != (len(seeds), 3, n, n):
+            raise ParameterError(
+                "initial", fields0.shape, f"fields of shape ({len(seeds)}, 3, {n}, {n})"
+            )
+    sym = symbols_on(symbols, dev)
+    shell_dev = ShellData(*(jax.device_put(a, dev) for a in shells))
+    times = save_times(numerics)
+
+    # the first calls compile (XLA, for this device and batch size; nothing when JAX has the
+    # code already): an advance to t = 0 takes no step
+    t0 = time.perf_counter()
+    q0, A0 = jax.device_put(fields0[:, :2], dev), jax.device_put(fields0[:, 2], dev)
+    state: SeedState = start(q0, A0)
+    state = step(state, jax.device_put(jnp.float64(0.0), dev), sym)
+    jax.block_until_ready(look(state.q, state.A, shell_dev))
+    compile_s = time.perf_counter() - t0
+
+    t1, cpu1 = time.perf_counter(), time.process_time()
+    rows = []
+    for t_save in times:
+        if t_save > 0.0:
+            state = step(state, jax.device_put(jnp.float64(t_save), dev), sym)
+        values = np.array(look(state.q, state.A, shell_dev))
+        values[np.asarray(state.status) != 0] = np.nan
+        rows.append(values)
+    jax.block_until_ready(state)
+    wall, cpu = time.perf_counter() - t1, time.process_time() - cpu1
+
+    status = np.asarray(state.status)
+    series = np.stack(rows, axis=-1)  # (B, names, T)
+    fields = np.concatenate([np.asarray(state.q), np.asarray(state.A)[:, None]], axis=1)
+    return BatchResult(
+        seeds=seeds,
+        times=times,
+        series={name: series[:, i] for i, name in enumerate(NAMES)},
+        fields=fields,
+        status=["ok" if s == 0 else "failed" for s in status],
+        reason=[REASONS[int(s)] for s in status],
+        t_failed=np.asarray(state.t_failed),
+        work={name: np.asarray(getattr(state, name)) for name in WORK},
+        margin_min=np.asarray(state.margin_min),
+        device=describe(dev),
+        wall=wall,
+        cpu=cpu,
+        compile=compile_s,
+        jax_version=jax.__version__,
+    )

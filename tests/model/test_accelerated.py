@@ -1,0 +1,210 @@
+"""The accelerated backend (model/accelerated/, JAX) against the numpy reference and the
+compiled path, on the CPU (the code path a GPU runs): its right-hand side, phi functions,
+step ladder and observables against their numpy twins; whole small-strain runs against
+nematic_solids.model.simulate.run (the same accepted and rejected steps, the observables at every
+save); a batch of seeds against the same seeds run alone; a failing seed that does not stop its
+batch-mates; the device selection's error. Skipped where JAX is not installed (CI installs the accel
+extra before the suite: .ci/run)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("jax", reason="the accelerated backend needs JAX: pip install '.[accel]'")
+
+import jax
+
+from nematic_solids.model.accelerated import run_batch, select_device
+from nematic_solids.model.accelerated.etdrk4 import phi_functions, quantize
+from nematic_solids.model.accelerated.linear_rhs import linear_split, setup, symbols_on
+from nematic_solids.model.accelerated.observables import NAMES, observe, shell_data
+from nematic_solids.model.errors import DeviceUnavailable, ParameterError
+from nematic_solids.model.fourier import SpectralGrid
+from nematic_solids.model.initial import initial_fields
+from nematic_solids.model.observables import anisotropy, pattern_size, pattern_size_mean
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.pde import ActiveNematicPDE
+from nematic_solids.model.reference_kernels import phi_functions as phi_reference
+from nematic_solids.model.simulate import run
+from nematic_solids.model.solver_base import ETDSolver
+from nematic_solids.model.split import make_split
+
+N = 32
+#: a 32^2 small-strain point that patterns by t = 20 (band texture of 8 modes at 32^2)
+PARAMS = Parameters.from_dict({"alpha_minus_B": 1.0, "noise_modes": 8})
+NUMERICS = Numerics(resolution=N, mechanics="linear", t_final=20.0, save_every=5.0)
+SEEDS = (0, 1)
+
+
+def random_state(params: Parameters, rng: np.random.Generator) -> np.ndarray:
+    """q1, q2, A: a seeded texture with white noise on top (|S| < 0.5, well posed at
+    alpha - B = 1) and a random activity."""
+    u = np.stack(initial_fields(params, N, 3))
+    u[:2] = 2.0 * u[:2] + 0.1 * rng.normal(size=(2, N, N))
+    u[2] = 0.3 * rng.normal(size=(N, N))
+    return u
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        {},  # the defaults: B' = 0, eps = 0, the default spin_tol 1e-2
+        {"B_prime": 0.3, "eps": 0.05, "incompressible": True, "spin_tol": 1e-10},
+    ],
+    ids=["defaults", "Bprime-eps-incompressible-tight"],
+)
+def test_rhs_equals_the_numpy_reference(extra, rng):
+    """N_q hat and Adot of the JAX split equal SpectralSplit.reference to 1e-12 of their
+    maximum, with the same number of spin GMRES iterations (the same algorithm)."""
+    settings = {"alpha_minus_B": 1.0, "noise_modes": 8, **extra}
+    num_keys = {"incompressible", "spin_tol"}
+    params = Parameters.from_dict({k: v for k, v in settings.items() if k not in num_keys})
+    numerics = Numerics(
+        resolution=N,
+        mechanics="linear",
+        backend="numpy",
+        **{k: v for k, v in settings.items() if k in num_keys},
+    )
+    eq = ActiveNematicPDE(params, numerics)
+    g = eq.spectral
+    split = make_split(eq.mechanics, eq, -(params.A0 + params.K * g.k2) / params.gamma)
+    u = random_state(params, rng)
+    q_hat = g.forward(u[:2])
+    before = eq.mechanics.spin_iterations
+    Nq, Adot = split.reference(u, q_hat, 0.0)  # type: ignore[union-attr]
+    iterations = eq.mechanics.spin_iterations - before
+
+    symbols, consts = setup(params, numerics)
+    sym = symbols_on(symbols, select_device("cpu"))
+    rate = jax.jit(lambda q, A, qh, s: linear_split(q, A, qh, s, consts))(u[:2], u[2], q_hat, sym)
+    assert bool(rate.converged)
+    assert int(rate.iterations) == iterations > 0
+    assert np.abs(np.asarray(rate.Nq) - Nq).max() <= 1e-12 * np.abs(Nq).max()
+    assert np.abs(np.asarray(rate.Adot) - Adot).max() <= 1e-12 * np.abs(Adot).max()
+
+
+def test_phi_functions_and_the_step_ladder_match_the_reference():
+    """The phi functions (both branches, across |z| = 1) and the rounding onto the ladder
+    dt_max 2^(-j/8) are the solver's."""
+    z = np.concatenate([np.linspace(-40.0, 3.0, 401), [-1.0, -0.999999, 0.0, 1e-9]])
+    z = z.reshape(5, -1)
+    phis = jax.jit(phi_functions, static_argnums=1)(z, 3)
+    for got, want in zip(phis, phi_reference(z, 3), strict=True):
+        np.testing.assert_allclose(np.asarray(got), want, rtol=1e-13, atol=1e-16)
+    solver = SimpleNamespace(dt_max=1.0)
+    for h in (1.0, 0.9, 0.5, 2.0**-0.125, 0.05, 1e-3, 3.3e-7):
+        assert float(quantize(h, 1.0)) == pytest.approx(ETDSolver._quantize(solver, h), rel=1e-15)  # type: ignore[arg-type]
+
+
+def test_observables_match_the_reference(rng):
+    """mean_S, sigma2_S, cos2theta, lambda, lambda_mean, mean_A and the small-strain margin
+    on the device equal nematic_solids.model.observables' on the same fields."""
+    u = random_state(PARAMS, rng)
+    grid = SpectralGrid(N, fft_backend="scipy")
+    shells, nshell = shell_data(N)
+    look = jax.jit(lambda q, A, sh: observe(q, A, sh, nshell=nshell, alpha_minus_B=1.0))
+    got = np.asarray(look(u[:2], u[2], shells))
+    S = np.hypot(u[0], u[1])
+    want = {
+        "mean_S": S.mean(),
+        "sigma2_S": np.mean((S - S.mean()) ** 2),
+        "cos2theta": anisotropy(u[0], u[1]),
+        "lambda": pattern_size(S, grid),
+        "lambda_mean": pattern_size_mean(S, grid),
+        "mean_A": u[2].mean(),
+        "rate_margin": 1.0 - S.max(),
+    }
+    for i, name in enumerate(NAMES):
+        assert got[i] == pytest.approx(want[name], rel=1e-12, abs=1e-15), name
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """The batch of SEEDS, seed 1 alone, and the compiled path's runs of SEEDS."""
+    return SimpleNamespace(
+        batch=run_batch(PARAMS, NUMERICS, SEEDS),
+        alone=run_batch(PARAMS, NUMERICS, (SEEDS[1],)),
+        reference=[run(PARAMS, NUMERICS, seed) for seed in SEEDS],
+    )
+
+
+def test_a_run_agrees_with_the_compiled_path(runs):
+    """Every seed of the batch takes the steps nematic_solids.model.simulate.run takes (accepted and
+    rejected), and its sigma2_S, mean_S, lambda at every save agree to 1e-10 relative
+    (measured: 1e-14)."""
+    batch = runs.batch
+    assert batch.status == ["ok", "ok"]
+    for i, ds in enumerate(runs.reference):
+        assert ds.attrs["status"] == "ok"
+        assert int(batch.work["steps"][i]) == ds.attrs["solver_steps"]
+        assert int(batch.work["rejected"][i]) == ds.attrs["solver_rejected"]
+        np.testing.assert_allclose(batch.times, ds["t"].values)
+        for name in ("sigma2_S", "mean_S", "lambda"):
+            want = ds[name].values
+            got = batch.series[name][i]
+            finite = np.isfinite(want)
+            assert np.array_equal(finite, np.isfinite(got)), name
+            scale = np.abs(want[finite]).max()
+            assert np.abs(got[finite] - want[finite]).max() <= 1e-10 * scale, name
+        assert batch.series["sigma2_S"][i][-1] > 2 * batch.series["sigma2_S"][i][1]  # grows
+
+
+def test_a_batch_equals_its_seeds_run_alone(runs):
+    """Per-seed step control: seed 1 in the batch takes the same steps and reaches the same
+    fields (to 1e-13; bitwise here) as seed 1 run alone, and differs from seed 0."""
+    batch, alone = runs.batch, runs.alone
+    for name, counts in alone.work.items():
+        assert counts[0] == batch.work[name][1], name
+    np.testing.assert_allclose(alone.fields[0], batch.fields[1], rtol=0, atol=1e-13)
+    for name in NAMES:
+        np.testing.assert_allclose(alone.series[name][0], batch.series[name][1], rtol=1e-13)
+    assert np.abs(batch.fields[0] - batch.fields[1]).max() > 1e-2
+
+
+def test_a_failing_seed_does_not_stop_its_batch(runs):
+    """A seed whose start is ill posed ((alpha - B) S = 1.5 > 1) fails at t = 0 with
+    rate_problem_ill_posed; its batch-mate runs on exactly as in the other batch."""
+    fields = np.stack([np.stack(initial_fields(PARAMS, N, SEEDS[0]))] * 2)
+    fields[1, 0] = 1.5
+    fields[1, 1] = 0.0
+    result = run_batch(PARAMS, NUMERICS, SEEDS, initial=fields)
+    assert result.status == ["ok", "failed"]
+    assert result.reason == ["", "rate_problem_ill_posed"]
+    assert result.t_failed[1] == 0.0
+    sigma2 = result.series["sigma2_S"][1]
+    assert sigma2[0] == 0.0  # saved at t = 0, then nothing
+    assert np.isnan(sigma2[1:]).all()
+    np.testing.assert_allclose(result.fields[0], runs.batch.fields[0], rtol=0, atol=1e-13)
+    assert int(result.work["steps"][0]) == int(runs.batch.work["steps"][0])
+
+
+def test_device_selection_fails_clearly():
+    """The CPU is always there; a GPU where JAX sees none is one DeviceUnavailable naming
+    what there is and the install line; so is an unknown device name."""
+    assert select_device("cpu").platform == "cpu"
+    try:
+        gpus = jax.devices("gpu")
+    except RuntimeError:
+        gpus = []
+    if gpus:
+        pytest.skip("this machine has a GPU: the error cannot be provoked here")
+    assert select_device("auto").platform == "cpu"
+    with pytest.raises(DeviceUnavailable, match=r"a GPU was asked for.*jax\[cuda12\]"):
+        select_device("gpu")
+    with pytest.raises(DeviceUnavailable, match="unknown device 'tpu9'"):
+        select_device("tpu9")
+
+
+def test_what_is_not_accelerated_yet_is_refused():
+    """Finite strain, ETDRK2 and the early stop are refused with a ParameterError naming
+    the setting, before anything is compiled."""
+    for numerics, name in (
+        (Numerics(resolution=N), "mechanics"),
+        (NUMERICS.replace(scheme="etdrk2"), "scheme"),
+        (NUMERICS.replace(steady_tol=1e-3, steady_window=10.0), "steady_tol"),
+    ):
+        with pytest.raises(ParameterError, match=name):
+            run_batch(PARAMS, numerics, SEEDS)

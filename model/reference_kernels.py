@@ -10,6 +10,7 @@ runs these (:func:`nematic_solids.model.backend.kernels`); the tests check that 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -262,23 +263,29 @@ def activity_krogstad(A: Array, h: float, zeta: float, s: float, tau: float) -> 
     """``(L_A, W)`` with Krogstad's ten pointwise weights (order as
     :func:`nematic_solids.model.compiled.etd.activity_krogstad`)."""
     L = -(zeta + 3.0 * s * A * A) / tau
-    E, f1, f2, f3 = phi_functions(L * h, 3)
-    E2, g1, g2 = phi_functions(0.5 * L * h, 2)
-    W = np.stack(
-        [
-            E,
-            E2,
-            0.5 * g1,
-            0.5 * g1 - g2,
-            g2,
-            f1 - 2.0 * f2,
-            2.0 * f2,
-            f1 - 3.0 * f2 + 4.0 * f3,
-            2.0 * f2 - 4.0 * f3,
-            4.0 * f3 - f2,
-        ]
-    )
+    W = np.stack(krogstad_from_phi(*phi_functions(L * h, 3), *phi_functions(0.5 * L * h, 2)))
     return L, W
+
+
+def krogstad_from_phi(
+    E: Any, f1: Any, f2: Any, f3: Any, E2: Any, g1: Any, g2: Any
+) -> tuple[Any, ...]:
+    """Krogstad's ten weights ``(E, E2, a, b_u, b_a, c_u, c_b, new_u, new_ab, new_c)`` from
+    the phi functions of the step (``E, f1, f2, f3`` of hL) and of the half step (``E2, g1,
+    g2`` of hL/2): plain arithmetic, for numpy arrays and the accelerated backend's JAX
+    arrays alike."""
+    return (
+        E,
+        E2,
+        0.5 * g1,
+        0.5 * g1 - g2,
+        g2,
+        f1 - 2.0 * f2,
+        2.0 * f2,
+        f1 - 3.0 * f2 + 4.0 * f3,
+        2.0 * f2 - 4.0 * f3,
+        4.0 * f3 - f2,
+    )
 
 
 def etd_combination(

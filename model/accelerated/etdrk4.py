@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from ..reference_kernels import krogstad_from_phi
 from .linear_rhs import Constants, Symbols, forward, inverse, linear_split
 
 Array: TypeAlias = jax.Array
@@ -126,20 +127,7 @@ def krogstad_weights(z: Array) -> tuple[Array, ...]:
     """``(E, E2, a, b_u, b_a, c_u, c_b, new_u, new_ab, new_c)`` for ``z = h L``: the
     exponentials of the step and the half step, the stages' and the update's weights
     (module docstring)."""
-    E, f1, f2, f3 = phi_functions(z, 3)
-    E2, g1, g2 = phi_functions(0.5 * z, 2)
-    return (
-        E,
-        E2,
-        0.5 * g1,
-        0.5 * g1 - g2,
-        g2,
-        f1 - 2.0 * f2,
-        2.0 * f2,
-        f1 - 3.0 * f2 + 4.0 * f3,
-        2.0 * f2 - 4.0 * f3,
-        4.0 * f3 - f2,
-    )
+    return krogstad_from_phi(*phi_functions(z, 3), *phi_functions(0.5 * z, 2))
 
 
 class Step(NamedTuple):

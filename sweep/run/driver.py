@@ -86,10 +86,12 @@ def make_cluster(execution: ExecutionSpec, campaign_dir: Path | None = None) -> 
 
 
 # --------------------------------------------------------------------------- the driver
-def dashboard_link(client: Client, timeout: float = 5.0) -> str | None:
-    """The link of the dask dashboard if it answers from here, else ``None`` (started
-    without it, bokeh not installed where the scheduler runs, or not reachable: the
-    scheduler's HTTP server then answers 404 for the page, or not at all)."""
+def dashboard_link(client: Client, timeout: float = 30.0) -> str | None:
+    """The link of the dask dashboard if it answers from here within ``timeout`` seconds,
+    else ``None`` (started without it, bokeh not installed where the scheduler runs, or not
+    reachable: the scheduler's HTTP server then answers 404 for the page, or not at all). A
+    refused connection answers at once; the first render of the page takes seconds on a
+    loaded machine (more than 5 s measured under a full test suite), hence the long wait."""
     import urllib.error
     import urllib.request
 

@@ -322,6 +322,10 @@ class ETDSolver(SolverBase):
 
         def stepper(state, t_start: float, t_end: float) -> float:
             u = state.data
+            # the steps work on a C-contiguous copy: py-pde's data is a view of an array with
+            # ghost cells (rows strided), on which the compiled kernels take their slower
+            # strided variants; each accepted state is copied into the view
+            cur = np.ascontiguousarray(u)
             t = t_start
             h = self._dt
             while t < t_end - 1e-12 * max(1.0, abs(t_end)):
@@ -332,7 +336,7 @@ class ETDSolver(SolverBase):
                 h_try = min(h, self.dt_max, target - t) if self.adaptive else min(h, target - t)
                 try:
                     self._after = t
-                    new, err = self.step(u, t, h_try)
+                    new, err = self.step(cur, t, h_try)
                     if not np.all(np.isfinite(new)):
                         raise SimulationFailure("nan", "non-finite state after a step", t)
                 except SimulationFailure as exc:
@@ -376,6 +380,7 @@ class ETDSolver(SolverBase):
                         h = max(h, h_try * fac) if fac > 1 else min(h, h_try * fac)
                         h = self._quantize(h)
                 u[...] = new
+                cur = new
                 t = switch if h_try == switch - t else t + h_try
                 self.stats["steps"] += 1
                 self.info["steps"] += 1

@@ -13,6 +13,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -140,6 +141,42 @@ def _attr(value: Any) -> Any:
     return value
 
 
+@dataclass
+class RunWork:
+    """The work a run counted and how it ran, as its file records them (attributes
+    ``solver_*``, ``fft_*``; the scalar ``rate_margin_min`` with the saves' margins):
+    :meth:`of_solver` for :func:`nematic_solids.model.simulate.run`; the accelerated backend
+    fills it per seed (:mod:`nematic_solids.model.accelerated.datasets`). ``backend`` names
+    what integrated the run, ``extra`` holds further attributes (a batch's)."""
+
+    margin_min: float
+    stats: dict[str, int]
+    spin_iterations: int
+    cg_iterations: int
+    fft_count: int
+    fft_parts: dict[str, int]
+    fft_backend: str
+    fft_plans: str
+    backend: str = "compiled"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def of_solver(cls, solver: ETDSolver) -> RunWork:
+        """What ``solver`` (and its PDE's mechanics and grid) counted."""
+        mech, fft = solver.pde.mechanics, solver.pde.spectral.fft
+        return cls(
+            margin_min=solver.margin_min,
+            stats=dict(solver.stats),
+            spin_iterations=int(mech.spin_iterations),
+            cg_iterations=int(mech.cg_iterations),
+            fft_count=int(fft.count),
+            fft_parts=dict(mech.fft_parts),
+            fft_backend=fft.backend,
+            fft_plans=fft.plan_source,
+            backend=solver.pde.numerics.backend,
+        )
+
+
 def to_dataset(
     rows,
     snaps,
@@ -147,7 +184,7 @@ def to_dataset(
     params: Parameters,
     numerics: Numerics,
     seed: int,
-    solver: ETDSolver,
+    work: RunWork,
     *,
     status: str,
     reason: str,
@@ -155,7 +192,11 @@ def to_dataset(
     t_failed: float,
     wall: float,
     t_stopped: float = math.nan,
+    entry: str = "nematic_solids.model.simulate.run",
 ) -> xr.Dataset:
+    """The run's Dataset from its saved ``rows`` (one dict of observables per save time),
+    ``snaps`` ((time, fields) pairs), the grid's coordinates ``x``, its settings, the
+    ``work`` it counted, its outcome, and the function that made it (``entry``)."""
     t = np.array([r["time"] for r in rows], dtype=float)
     data_vars: dict[str, Any] = {}
     for name in (*SERIES, "steps"):
@@ -205,9 +246,7 @@ def to_dataset(
     ip = peaks.get("")
     scalars["lambda_mean_peak"] = float(lam_mean[ip]) if ip is not None else float("nan")
     rates = data_vars["rate_margin"][1]
-    margin = min(
-        solver.margin_min, float(np.nanmin(rates)) if np.any(np.isfinite(rates)) else np.inf
-    )
+    margin = min(work.margin_min, float(np.nanmin(rates)) if np.any(np.isfinite(rates)) else np.inf)
     scalars["rate_margin_min"] = margin if np.isfinite(margin) else float("nan")
     scalars["stopped_early"] = float(math.isfinite(t_stopped))
     scalars["t_stopped"] = t_stopped
@@ -219,8 +258,8 @@ def to_dataset(
     attrs: dict[str, Any] = {
         "Conventions": "CF-1.11",
         "title": "active nematic solid simulation (Yang, Guo, Mahadevan, Eqs. 1-5)",
-        "source": f"active-nematic-solids {__version__} nematic_solids.model.simulate.run",
-        "history": f"{created}: simulated by nematic_solids.model.simulate.run (seed {int(seed)})",
+        "source": f"active-nematic-solids {__version__} {entry}",
+        "history": f"{created}: simulated by {entry} (seed {int(seed)})",
         "library_versions": library_versions_text(),
         "status": status,
         "reason": reason,
@@ -232,13 +271,15 @@ def to_dataset(
         "schema_version": SCHEMA_VERSION,
         "parameters_json": json.dumps(params.to_dict(), sort_keys=True),
         "numerics_json": json.dumps(numerics.to_dict(), sort_keys=True),
-        "fft_backend": solver.pde.spectral.fft.backend,
-        "fft_plans": solver.pde.spectral.fft.plan_source,
-        **{f"solver_{k}": int(v) for k, v in solver.stats.items()},
-        "solver_spin_iterations": int(solver.pde.mechanics.spin_iterations),
-        "solver_cg_iterations": int(solver.pde.mechanics.cg_iterations),
-        "fft_count": int(solver.pde.spectral.fft.count),
-        **{f"fft_{k}": int(v) for k, v in solver.pde.mechanics.fft_parts.items()},
+        "run_backend": work.backend,
+        "fft_backend": work.fft_backend,
+        "fft_plans": work.fft_plans,
+        **{f"solver_{k}": int(v) for k, v in work.stats.items()},
+        "solver_spin_iterations": int(work.spin_iterations),
+        "solver_cg_iterations": int(work.cg_iterations),
+        "fft_count": int(work.fft_count),
+        **{f"fft_{k}": int(v) for k, v in work.fft_parts.items()},
+        **work.extra,
     }
     attrs.update({f"param_{k}": _attr(v) for k, v in params.to_dict().items()})
     attrs["param_alpha_minus_B"] = params.alpha_minus_B

@@ -39,10 +39,11 @@ from . import tensors as T
 from .checkpoint import CheckpointError, InitialState, RunState, Schedule
 from .errors import ParameterError, SimulationFailure
 from .initial import initial_fields
+from .mechanics import MechanicalState
 from .observables import snapshot_observables
 from .parameters import Numerics, Parameters, check_compatible, save_times
 from .pde import ActiveNematicPDE, make_state
-from .run_dataset import LONG_NAMES, SCALARS, SCHEMA_VERSION, SERIES, UNITS, to_dataset
+from .run_dataset import LONG_NAMES, SCALARS, SCHEMA_VERSION, SERIES, UNITS, RunWork, to_dataset
 from .solver import SCHEMES, ETDSolver
 
 log = logging.getLogger(__name__)
@@ -210,26 +211,11 @@ def run(
 
     def record(st, t: float) -> None:
         d = st.data
-        parts, count = dict(eq.mechanics.fft_parts), grid.fft.count
-        eq.at_time(t)  # a save sees a protocol's value after a switch at its time
-        mech = eq.mechanics.solve(d[0], d[1], t=t)
-        residual = mech.residual if not linear else eq.mechanics.residual(mech.P)
-        obs = snapshot_observables(
-            d[0], d[1], d[2], mech.F, residual, eq.params, grid, linear=linear, P=mech.P
-        )
-        obs["rate_margin"] = eq.mechanics.rate_margin(d[0], d[1], mech)[0]
-        obs["time"] = float(t)
-        obs["steps"] = float(solver.stats["steps"])
+        obs, mech = observe_state(eq, d, t, steps=solver.stats["steps"])
         rows.append(obs)
         stop = steady(rows, numerics)
         if stop or float(np.round(t, 12)) in snap_set:  # an early end stores its fields
-            u = grid.inverse(mech.u_hat)
-            C = T.matmul(T.transpose(mech.F), mech.F)
-            I1bar = T.trace(C) / T.det(mech.F)
-            snaps.append((float(t), np.stack([d[0], d[1], d[2], u[0], u[1], I1bar])))
-        # every transform of a save counts as the save's (the parts are disjoint)
-        eq.mechanics.fft_parts.update(parts)
-        eq.mechanics.fft_parts["saves"] += grid.fft.count - count
+            snaps.append((float(t), snapshot_fields(eq, d, mech)))
         final = stop or t >= numerics.t_final - 1e-9 * max(numerics.t_final, 1.0)
         if final and keep_state:
             end[0] = capture(st, t, stop)
@@ -276,7 +262,7 @@ def run(
         params,
         numerics,
         seed,
-        solver,
+        RunWork.of_solver(solver),
         status=status,
         reason=reason,
         detail=detail,
@@ -288,6 +274,42 @@ def run(
     if not keep_state:
         return ds
     return ds, end[0] if status == "ok" else None
+
+
+def observe_state(
+    eq: ActiveNematicPDE, d: np.ndarray, t: float, *, steps: int
+) -> tuple[dict[str, float], MechanicalState]:
+    """One save of a run: the observables of the fields ``d`` (q1, q2, A) at time ``t``
+    (:func:`nematic_solids.model.observables.snapshot_observables`, with the mechanics solved
+    at them and the rate problem's well-posedness margin) as a row of the run's series, with
+    ``time`` and the accepted ``steps`` so far; and the mechanical state. Every transform of a
+    save counts as the save's (``fft_parts["saves"]``: the parts are disjoint)."""
+    grid, linear = eq.spectral, eq.numerics.mechanics == "linear"
+    parts, count = dict(eq.mechanics.fft_parts), grid.fft.count
+    eq.at_time(t)  # a save sees a protocol's value after a switch at its time
+    mech = eq.mechanics.solve(d[0], d[1], t=t)
+    residual = mech.residual if not linear else eq.mechanics.residual(mech.P)
+    obs = snapshot_observables(
+        d[0], d[1], d[2], mech.F, residual, eq.params, grid, linear=linear, P=mech.P
+    )
+    obs["rate_margin"] = eq.mechanics.rate_margin(d[0], d[1], mech)[0]
+    obs["time"] = float(t)
+    obs["steps"] = float(steps)
+    eq.mechanics.fft_parts.update(parts)
+    eq.mechanics.fft_parts["saves"] += grid.fft.count - count
+    return obs, mech
+
+
+def snapshot_fields(eq: ActiveNematicPDE, d: np.ndarray, mech: MechanicalState) -> np.ndarray:
+    """The snapshot of the fields ``d`` (q1, q2, A) with the mechanical state ``mech``:
+    :data:`nematic_solids.model.checkpoint.SNAPSHOT_FIELDS` (q1, q2, A, u1, u2, I1bar)."""
+    parts, count = dict(eq.mechanics.fft_parts), eq.spectral.fft.count
+    u = eq.spectral.inverse(mech.u_hat)
+    eq.mechanics.fft_parts.update(parts)
+    eq.mechanics.fft_parts["saves"] += eq.spectral.fft.count - count
+    C = T.matmul(T.transpose(mech.F), mech.F)
+    I1bar = T.trace(C) / T.det(mech.F)
+    return np.stack([d[0], d[1], d[2], u[0], u[1], I1bar])
 
 
 def _counters(eq: ActiveNematicPDE) -> dict[str, Any]:

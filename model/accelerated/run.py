@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import jax
@@ -104,11 +104,18 @@ def run_batch(
     *,
     device: str = "cpu",
     initial: np.ndarray | None = None,
+    on_save: Callable[[float, np.ndarray, np.ndarray, np.ndarray], None] | None = None,
 ) -> BatchResult:
     """Run the seeds ``seeds`` of the point (``params``, ``numerics``) together on ``device``
     ("cpu", "gpu", "auto": :func:`nematic_solids.model.accelerated.device.select_device`), from
     their seeded textures or from the given fields ``initial`` (B, 3, N, N) (q1, q2, A per seed, as
-    :func:`nematic_solids.model.simulate.run`'s ``initial``); see the module docstring."""
+    :func:`nematic_solids.model.simulate.run`'s ``initial``); see the module docstring.
+
+    ``on_save(t, fields, status, steps)`` is called at every save time with the seeds' fields
+    (B, 3, N, N) copied to the host, their status codes (0: running) and accepted steps (the
+    host computes what the device does not:
+    :func:`nematic_solids.model.accelerated.datasets.batch_datasets`); its time counts in
+    ``wall``."""
     check_compatible(params, numerics)
     check_supported(params, numerics)
     seeds = tuple(seeds)
@@ -149,8 +156,12 @@ def run_batch(
         if t_save > 0.0:
             state = step(state, jax.device_put(jnp.float64(t_save), dev), sym)
         values = np.array(look(state.q, state.A, shell_dev))
-        values[np.asarray(state.status) != 0] = np.nan
+        codes = np.asarray(state.status)
+        values[codes != 0] = np.nan
         rows.append(values)
+        if on_save is not None:
+            host = np.concatenate([np.asarray(state.q), np.asarray(state.A)[:, None]], axis=1)
+            on_save(float(t_save), host, codes, np.asarray(state.steps))
     jax.block_until_ready(state)
     wall, cpu = time.perf_counter() - t1, time.process_time() - cpu1
 

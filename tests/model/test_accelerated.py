@@ -12,12 +12,14 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import xarray as xr
 
 pytest.importorskip("jax", reason="the accelerated backend needs JAX: pip install '.[accel]'")
 
 import jax
 
 from nematic_solids.model.accelerated import run_batch, select_device
+from nematic_solids.model.accelerated.datasets import batch_datasets
 from nematic_solids.model.accelerated.etdrk4 import phi_functions, quantize
 from nematic_solids.model.accelerated.linear_rhs import linear_split, setup, symbols_on
 from nematic_solids.model.accelerated.observables import NAMES, observe, shell_data
@@ -28,6 +30,7 @@ from nematic_solids.model.observables import anisotropy, pattern_size, pattern_s
 from nematic_solids.model.parameters import Numerics, Parameters
 from nematic_solids.model.pde import ActiveNematicPDE
 from nematic_solids.model.reference_kernels import phi_functions as phi_reference
+from nematic_solids.model.run_dataset import SERIES
 from nematic_solids.model.simulate import run
 from nematic_solids.model.solver_base import ETDSolver
 from nematic_solids.model.split import make_split
@@ -179,6 +182,62 @@ def test_a_failing_seed_does_not_stop_its_batch(runs):
     assert np.isnan(sigma2[1:]).all()
     np.testing.assert_allclose(result.fields[0], runs.batch.fields[0], rtol=0, atol=1e-13)
     assert int(result.work["steps"][0]) == int(runs.batch.work["steps"][0])
+
+
+def test_a_batch_writes_each_seed_a_run_file_like_a_compiled_run(runs, tmp_path):
+    """batch_datasets gives each seed the Dataset nematic_solids.model.simulate.run gives it:
+    the same variables, dims, coordinates and attributes (plus the batch's own), every series,
+    snapshot and scalar within 1e-10 of its scale (+ 1e-14: the force-balance residual is
+    rounding), the same steps; it says how it ran; it
+    round-trips through netCDF."""
+    got = batch_datasets(PARAMS, NUMERICS, SEEDS)
+    assert len(got) == len(SEEDS)
+    for seed, ds, ref in zip(SEEDS, got, runs.reference, strict=True):
+        assert set(ds.data_vars) == set(ref.data_vars)
+        assert set(ref.attrs) <= set(ds.attrs)
+        assert ds.attrs["seed"] == seed and ds.attrs["status"] == "ok"
+        assert ds.attrs["run_backend"] == "accelerated" and ref.attrs["run_backend"] == "compiled"
+        assert ds.attrs["batch_size"] == len(SEEDS)
+        assert "batch_datasets" in ds.attrs["history"]
+        assert ds.attrs["solver_steps"] == ref.attrs["solver_steps"]
+        assert ds.attrs["solver_rejected"] == ref.attrs["solver_rejected"]
+        assert ds.attrs["fft_saves"] > 0 and ds.attrs["fft_count"] > ds.attrs["fft_saves"]
+        for name, var in ref.data_vars.items():
+            assert ds[name].dims == var.dims, name
+            want, have = var.values, ds[name].values
+            finite = np.isfinite(want)
+            assert np.array_equal(finite, np.isfinite(have)), name
+            if name == "wall_time" or not finite.any():
+                continue
+            scale = np.abs(want[finite]).max()  # (the residual is rounding: 1e-16, hence abs)
+            assert np.abs(have[finite] - want[finite]).max() <= 1e-10 * scale + 1e-14, name
+        np.testing.assert_array_equal(ds["t"].values, ref["t"].values)
+        np.testing.assert_array_equal(ds["snapshot_time"].values, ref["snapshot_time"].values)
+    assert all(np.isfinite(got[0][name].values[-1]) for name in ("sigma2_S", "lambda"))
+    assert set(SERIES) <= set(got[0].data_vars)
+    got[1].to_netcdf(tmp_path / "seed1.nc")
+    with xr.open_dataset(tmp_path / "seed1.nc") as back:
+        np.testing.assert_array_equal(back["sigma2_S"].values, got[1]["sigma2_S"].values)
+        assert back.attrs["batch_seeds"] == "[0, 1]"
+
+
+def test_a_failed_seed_has_its_own_failed_run_file(runs):
+    """The ill-posed seed of a batch gets a failed Dataset (its reason, t_failed = 0, the one
+    save at t = 0); its batch-mate's Dataset is that of the batch without it."""
+    fields = np.stack([np.stack(initial_fields(PARAMS, N, SEEDS[0]))] * 2)
+    fields[1, 0] = 1.5
+    fields[1, 1] = 0.0
+    good, bad = batch_datasets(PARAMS, NUMERICS, SEEDS, initial=fields)
+    assert bad.attrs["status"] == "failed"
+    assert bad.attrs["reason"] == "rate_problem_ill_posed"
+    assert bad.attrs["t_failed"] == 0.0
+    assert "rate_problem_ill_posed at t = 0" in bad.attrs["detail"]
+    assert bad["t"].values.tolist() == [0.0]
+    assert np.isnan(bad["sigma2_S_final"].values)
+    assert good.attrs["status"] == "ok"
+    np.testing.assert_allclose(  # (at t = 0 sigma2_S is rounding: 1e-30)
+        good["sigma2_S"].values, runs.batch.series["sigma2_S"][0], rtol=1e-12, atol=1e-20
+    )
 
 
 def test_device_selection_fails_clearly():

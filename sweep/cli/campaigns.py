@@ -131,14 +131,22 @@ def print_estimate(
     retry_failed: bool = False,
     brief: bool = False,
     header: str | None = None,
+    started: float | None = None,
 ) -> None:
     """The cost before launch (:mod:`nematic_solids.sweep.cost.estimate`): what changed in the
-    campaign file, the runs to do and their CPU and wall time; ``brief``: the totals only."""
+    campaign file, the runs to do and their CPU and wall time; ``brief``: the totals only;
+    ``started``: the seconds the running driver took to start (a re-estimate mid-campaign:
+    the estimate leaves them out of the driver's own time)."""
     from ..cost.estimate import estimate
     from ..cost.result import lines
     from ..store import CampaignStore
 
-    e = estimate(campaign, CampaignStore(results, campaign.name), retry_failed=retry_failed)
+    e = estimate(
+        campaign,
+        CampaignStore(results, campaign.name),
+        retry_failed=retry_failed,
+        started=started,
+    )
     for line in ([header] if header else []) + ([] if brief else e.changes) + lines(e, brief=brief):
         console.print(f"{indent}{line}", markup=False)
 

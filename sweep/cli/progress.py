@@ -42,6 +42,9 @@ class ProgressEvents:
         self.workers = 1
         self.run_times: list[float] = []
         self.t0 = self.last_log = clock()
+        #: seconds from these events' creation (the command's start) to the first workers
+        #: ready: the driver's start-up, which a re-estimate mid-campaign no longer pays
+        self.startup: float | None = None
         self._stop = threading.Event()
         self._heartbeat: threading.Thread | None = None
         self._lock = threading.Lock()
@@ -102,6 +105,8 @@ class ProgressEvents:
             else "loaded from the cache"
         )
         self.console.print(f"workers ready in {seconds:.0f} s ({what})", soft_wrap=True)
+        if self.startup is None:
+            self.startup = self.clock() - self.t0
 
     def started(self, plan: Any, total: int, workers: int) -> None:
         self.ok = self.failed = 0  # per call: a refined campaign runs one call per round

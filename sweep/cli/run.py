@@ -309,6 +309,7 @@ def run(
                                 c,
                                 results,
                                 brief=True,
+                                started=events.startup,
                                 indent="  ",
                                 header=f"cost re-estimated for round {number} and later "
                                 "from the runs so far:",

@@ -238,9 +238,14 @@ def estimate(
     *,
     retry_failed: bool = False,
     load_cores: tuple[float, int] | None = None,
+    started: float | None = None,
 ) -> Estimate:
     """The estimate of what ``nematic run`` would do now (see the module docstring);
-    ``load_cores``: the machine's load average and cores (default :func:`machine_load`)."""
+    ``load_cores``: the machine's load average and cores (default :func:`machine_load`);
+    ``started``: made by a running driver that took this many seconds to start (its cluster
+    and warm-up are behind it: the driver's own time left is :func:`driver_overhead` less
+    them, at least nothing; and on a local cluster its own workers, which the load average
+    still counts, are not taken as other load)."""
     from ..outputs.changes import campaign_changes
 
     records = store.scan(save=False)
@@ -298,6 +303,8 @@ def estimate(
     local = local_worker_count(campaign.execution.__class__())
     load, cores = machine_load() if load_cores is None else load_cores
     here = campaign.execution.mode == "local"
+    if started is not None and here:  # the load average still counts our own workers
+        load = max(load - workers, 0.0)
     stretch = slowdown(workers if here else 1, load, cores)
     local_stretch = slowdown(local, load, cores)
     modelled = any(r[3] for r in runs)
@@ -351,8 +358,10 @@ def estimate(
         wall=walls(workers, stretch if here else 1.0),
         local_wall=walls(local, local_stretch),
         longest=max((r[0] * (stretch if r[3] and here else 1.0) for r in runs), default=0.0),
-        overhead=driver_overhead(stretch) if todo else 0.0,
-        local_overhead=driver_overhead(local_stretch) if todo else 0.0,
+        overhead=max(driver_overhead(stretch) - (started or 0.0), 0.0) if todo else 0.0,
+        local_overhead=(
+            max(driver_overhead(local_stretch) - (started or 0.0), 0.0) if todo else 0.0
+        ),
         load=load,
         cores=cores,
         stretch=stretch,

@@ -251,6 +251,24 @@ def test_a_busy_machine_stretches_the_cost_model_and_the_driver(tmp_path):
     assert estimate_module.slowdown(2, 0.0, 2) == 1.0
 
 
+def test_a_running_driver_does_not_count_its_start_or_its_workers_again(tmp_path):
+    """Re-estimated mid-campaign (``started``: the seconds the driver took to start): the
+    driver's own time left is its overhead less those seconds (never below zero), and the
+    load average's share of the campaign's own 2 workers is not other load."""
+    path = write(tmp_path, GRID.format(name="c", seeds=2))
+    campaign = load_campaign(path)
+    store = CampaignStore(tmp_path / "results", "c")
+    before = estimate(campaign, store, load_cores=QUIET)
+    again = estimate(campaign, store, load_cores=QUIET, started=5.0)
+    assert again.overhead == pytest.approx(before.overhead - 5.0)
+    assert estimate(campaign, store, load_cores=QUIET, started=1e3).overhead == 0.0
+    busy = estimate(campaign, store, load_cores=(2.0, 2))  # 2 others: each worker half a core
+    assert busy.stretch == 2.0
+    mine = estimate(campaign, store, load_cores=(2.0, 2), started=0.0)  # the 2 are ours
+    assert mine.stretch == 1.0
+    assert mine.overhead == pytest.approx(driver_overhead(1.0))
+
+
 def test_cost_model_without_runs_and_without_a_folder(tmp_path):
     path = write(tmp_path, GRID.format(name="c", seeds=2))
     campaign = load_campaign(path)

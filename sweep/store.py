@@ -487,14 +487,23 @@ class CampaignStore:
             log.info("removed %d temporary file(s) left by an interrupted run", n)
         return n
 
-    def save_campaign_text(self, text: str, overrides: Iterable[str] = ()) -> None:
-        atomic_write_text(self.campaign_copy, campaign_copy_text(text, overrides))
+    def save_campaign_text(
+        self, text: str, overrides: Iterable[str] = (), source: str | None = None
+    ) -> None:
+        atomic_write_text(self.campaign_copy, campaign_copy_text(text, overrides, source))
 
 
 #: The header line of the campaign copy that records one command-line override.
 OVERRIDE_PREFIX = "# override: "
+#: The header line of the campaign copy that records the campaign file it was read from: the
+#: copy's relative paths (``prior:``) are read against that file's folder.
+SOURCE_PREFIX = "# source: "
 
 
-def campaign_copy_text(text: str, overrides: Iterable[str] = ()) -> str:
-    """The content of ``campaign.yaml``: the overrides as comments, then the campaign text."""
-    return "".join(f"{OVERRIDE_PREFIX}{o}\n" for o in overrides) + text
+def campaign_copy_text(text: str, overrides: Iterable[str] = (), source: str | None = None) -> str:
+    """The content of ``campaign.yaml``: the overrides as comments, the campaign file's
+    absolute path (``source``, where it is a file), then the campaign text."""
+    head = "".join(f"{OVERRIDE_PREFIX}{o}\n" for o in overrides)
+    if source is not None and Path(source).is_file():
+        head += f"{SOURCE_PREFIX}{Path(source).resolve()}\n"
+    return head + text

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..campaign import Campaign
 from ..errors import CampaignError
-from ..store import OVERRIDE_PREFIX, CampaignStore, Record, campaign_copy_text
+from ..store import OVERRIDE_PREFIX, SOURCE_PREFIX, CampaignStore, Record, campaign_copy_text
 from .stored import stored_campaign, stored_text
 
 if TYPE_CHECKING:
@@ -230,8 +230,9 @@ def run_counts(
 
 
 def _significant(copy_text: str) -> str:
-    """A campaign copy without the overrides of :data:`WHERE_OVERRIDES`."""
-    where = tuple(OVERRIDE_PREFIX + o for o in WHERE_OVERRIDES)
+    """A campaign copy without the overrides of :data:`WHERE_OVERRIDES` and without the
+    line naming the file it was read from."""
+    where = (*(OVERRIDE_PREFIX + o for o in WHERE_OVERRIDES), SOURCE_PREFIX)
     return "".join(
         line for line in copy_text.splitlines(keepends=True) if not line.startswith(where)
     )

@@ -11,7 +11,7 @@ from typing import Any
 from ..campaign import Campaign
 from ..errors import StoreError
 from ..spec import Overrides, parse_campaign
-from ..store import OVERRIDE_PREFIX, CampaignStore
+from ..store import OVERRIDE_PREFIX, SOURCE_PREFIX, CampaignStore
 
 
 def stored_overrides(text: str) -> Overrides:
@@ -55,5 +55,16 @@ def stored_campaign(store: CampaignStore, text: str | None = None) -> Campaign |
     if text is None:
         return None
     return parse_campaign(
-        text, str(store.campaign_copy), stored_overrides(text), default_name=store.root.name
+        text, stored_source(store, text), stored_overrides(text), default_name=store.root.name
     )
+
+
+def stored_source(store: CampaignStore, text: str) -> str:
+    """The path the copy's relative paths are read against: the campaign file it was read
+    from (its header's :data:`~nematic_solids.sweep.store.SOURCE_PREFIX` line), else the copy."""
+    for line in text.splitlines():
+        if line.startswith(SOURCE_PREFIX):
+            return line[len(SOURCE_PREFIX) :].strip()
+        if not line.startswith("# "):
+            break
+    return str(store.campaign_copy)

@@ -70,7 +70,7 @@ def drive_rounds(
     runs (the command line prints the cost re-estimated from the runs so far)."""
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
-    store.save_campaign_text(campaign.text, campaign.overrides)
+    store.save_campaign_text(campaign.text, campaign.overrides, campaign.source)
     total: RunSummary | None = None
     first: Plan | None = None
     announced = -1

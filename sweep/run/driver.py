@@ -408,7 +408,7 @@ def drive(
     campaign = expansion.campaign
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
-    store.save_campaign_text(campaign.text, campaign.overrides)
+    store.save_campaign_text(campaign.text, campaign.overrides, campaign.source)
     plan = plan_runs(expansion, store, retry_failed=retry_failed, check_files=check_files)
     waiting = parents_not_done(expansion, store.results_root, plan.todo)
     if waiting is not None:  # a campaign whose runs begin from another's that is not done

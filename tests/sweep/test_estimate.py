@@ -422,6 +422,31 @@ def test_a_prior_gives_the_expected_value_before_any_run(tmp_path):
     assert "3 point(s) from the prior" in text
 
 
+def test_the_copy_of_a_campaign_with_a_relative_prior_reads_it_from_the_campaign_folder(tmp_path):
+    """The results folder's copy of a campaign whose ``prior:`` is relative (the paper's
+    campaigns) is read against the campaign file's folder: opened by name, and compared
+    with the file when it changes (what changed is listed, not 'not a valid campaign')."""
+    from nematic_solids.sweep import open_campaign
+    from nematic_solids.sweep.outputs.changes import campaign_changes
+
+    (tmp_path / "docs").mkdir()
+    write_prior(tmp_path / "docs" / "phase.nc", [8, 4, 20])
+    (tmp_path / "campaigns").mkdir()
+    path = tmp_path / "campaigns" / "p.yaml"
+    path.write_text(PRECISE + "prior: ../docs/phase.nc\n")
+    campaign = load_campaign(path)
+    store = CampaignStore(tmp_path / "results", "p")
+    store.root.mkdir(parents=True)
+    store.save_campaign_text(campaign.text, campaign.overrides, campaign.source)  # as `run`
+    opened = open_campaign("p", results=tmp_path / "results")
+    assert opened.campaign.precision == campaign.precision
+    assert campaign_changes(campaign, store) is None  # the same campaign
+    path.write_text(PRECISE.replace("seeds: 20", "seeds: 30") + "prior: ../docs/phase.nc\n")
+    changed = campaign_changes(load_campaign(path), store)
+    assert changed is not None
+    assert not any("not a valid campaign" in line for line in changed.lines())
+
+
 def test_a_missing_or_unreadable_prior_is_said_and_gives_no_expected_value(tmp_path):
     with pytest.raises(CampaignError) as err:
         parse_campaign(PRECISE + "prior: nowhere.nc\n", source=str(tmp_path / "p.yaml"))

@@ -28,7 +28,7 @@ import math
 import os
 import socket
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict, cast
 
@@ -487,23 +487,7 @@ class CampaignStore:
             log.info("removed %d temporary file(s) left by an interrupted run", n)
         return n
 
-    def save_campaign_text(
-        self, text: str, overrides: Iterable[str] = (), source: str | None = None
-    ) -> None:
-        atomic_write_text(self.campaign_copy, campaign_copy_text(text, overrides, source))
-
-
-#: The header line of the campaign copy that records one command-line override.
-OVERRIDE_PREFIX = "# override: "
-#: The header line of the campaign copy that records the campaign file it was read from: the
-#: copy's relative paths (``prior:``) are read against that file's folder.
-SOURCE_PREFIX = "# source: "
-
-
-def campaign_copy_text(text: str, overrides: Iterable[str] = (), source: str | None = None) -> str:
-    """The content of ``campaign.yaml``: the overrides as comments, the campaign file's
-    absolute path (``source``, where it is a file), then the campaign text."""
-    head = "".join(f"{OVERRIDE_PREFIX}{o}\n" for o in overrides)
-    if source is not None and Path(source).is_file():
-        head += f"{SOURCE_PREFIX}{Path(source).resolve()}\n"
-    return head + text
+    def save_campaign_text(self, text: str) -> None:
+        """Write the campaign copy (its content:
+        :func:`nematic_solids.sweep.campaign_copy.campaign_copy_text`)."""
+        atomic_write_text(self.campaign_copy, text)

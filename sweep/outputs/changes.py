@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from ..campaign import Campaign
+from ..campaign_copy import OVERRIDE_PREFIX, SOURCE_PREFIX, campaign_copy_text
 from ..errors import CampaignError
-from ..store import OVERRIDE_PREFIX, SOURCE_PREFIX, CampaignStore, Record, campaign_copy_text
+from ..store import CampaignStore, Record
 from .stored import stored_campaign, stored_text
 
 if TYPE_CHECKING:

@@ -1,7 +1,8 @@
 """The campaign a results folder was made with: ``results/<name>/campaign.yaml``, the text
-of the last ``nematic run`` with its command-line overrides as header comments
-(:meth:`nematic_solids.sweep.store.CampaignStore.save_campaign_text`), read back as a
-:class:`~nematic_solids.sweep.campaign.Campaign`."""
+of the last ``nematic run`` with its command-line overrides and the campaign file's path as
+header comments (written by
+:func:`nematic_solids.sweep.campaign_copy.save_campaign_copy`), read back as a
+:class:`~nematic_solids.sweep.campaign.Campaign` (:func:`stored_campaign`)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,10 @@ import ast
 from typing import Any
 
 from ..campaign import Campaign
+from ..campaign_copy import OVERRIDE_PREFIX, SOURCE_PREFIX
 from ..errors import StoreError
 from ..spec import Overrides, parse_campaign
-from ..store import OVERRIDE_PREFIX, SOURCE_PREFIX, CampaignStore
+from ..store import CampaignStore
 
 
 def stored_overrides(text: str) -> Overrides:

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ..campaign import Campaign
+from ..campaign_copy import save_campaign_copy
 from ..errors import StoreError
 from ..expand import Expansion
 from ..run.clusters import open_cluster
@@ -70,7 +71,7 @@ def drive_rounds(
     runs (the command line prints the cost re-estimated from the runs so far)."""
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
-    store.save_campaign_text(campaign.text, campaign.overrides, campaign.source)
+    save_campaign_copy(store, campaign)
     total: RunSummary | None = None
     first: Plan | None = None
     announced = -1

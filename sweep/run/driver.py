@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from ..campaign import ExecutionSpec
+from ..campaign_copy import save_campaign_copy
 from ..chains import in_chain_order
 from ..errors import ClusterError
 from ..expand import Expansion, RunSpec
@@ -408,7 +409,7 @@ def drive(
     campaign = expansion.campaign
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
-    store.save_campaign_text(campaign.text, campaign.overrides, campaign.source)
+    save_campaign_copy(store, campaign)
     plan = plan_runs(expansion, store, retry_failed=retry_failed, check_files=check_files)
     waiting = parents_not_done(expansion, store.results_root, plan.todo)
     if waiting is not None:  # a campaign whose runs begin from another's that is not done

@@ -427,6 +427,7 @@ def test_the_copy_of_a_campaign_with_a_relative_prior_reads_it_from_the_campaign
     campaigns) is read against the campaign file's folder: opened by name, and compared
     with the file when it changes (what changed is listed, not 'not a valid campaign')."""
     from nematic_solids.sweep import open_campaign
+    from nematic_solids.sweep.campaign_copy import save_campaign_copy
     from nematic_solids.sweep.outputs.changes import campaign_changes
 
     (tmp_path / "docs").mkdir()
@@ -437,7 +438,7 @@ def test_the_copy_of_a_campaign_with_a_relative_prior_reads_it_from_the_campaign
     campaign = load_campaign(path)
     store = CampaignStore(tmp_path / "results", "p")
     store.root.mkdir(parents=True)
-    store.save_campaign_text(campaign.text, campaign.overrides, campaign.source)  # as `run`
+    save_campaign_copy(store, campaign)  # as `run`
     opened = open_campaign("p", results=tmp_path / "results")
     assert opened.campaign.precision == campaign.precision
     assert campaign_changes(campaign, store) is None  # the same campaign

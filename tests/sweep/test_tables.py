@@ -184,6 +184,7 @@ def test_the_guide_notebook_snippet_runs(small):
 
 
 def test_open_by_name_reads_the_campaign_copy_with_its_overrides(tmp_path):
+    from nematic_solids.sweep.campaign_copy import campaign_copy_text
     from nematic_solids.sweep.spec import Overrides
     from nematic_solids.sweep.store import CampaignStore
 
@@ -192,7 +193,7 @@ def test_open_by_name_reads_the_campaign_copy_with_its_overrides(tmp_path):
     )
     store = CampaignStore(tmp_path / "results", "reduced")
     store.root.mkdir(parents=True)
-    store.save_campaign_text(ZIPPED, overrides.describe())  # what `nematic run` leaves there
+    store.save_campaign_text(campaign_copy_text(ZIPPED, overrides.describe()))  # as `run`
     opened = open_campaign("reduced", results=tmp_path / "results")
     expected = parse_campaign(ZIPPED, overrides=overrides)
     assert opened.campaign.name == "reduced"

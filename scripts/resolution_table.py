@@ -1,7 +1,8 @@
 """The convergence table behind ``resolution: auto`` (docs/model.md, "Resolution from the
 physics"), from the phase.nc of campaigns/resolution_study.yaml (K x chi x resolution x
-seeds; several files, e.g. with campaigns/resolution_study_large_K.yaml, give one table): for
-each (K, chi) and grid N, the seed means of lambda(t_final) and sigma2_S(t_final),
+seeds; several files, e.g. with campaigns/resolution_study_large_K.yaml, are merged into one
+table, a parameter a campaign does not sweep read from its attributes): for each (K, chi)
+and grid N that has runs there, the seed means of lambda(t_final) and sigma2_S(t_final),
 their relative change on the next doubling (N -> 2N; the largest change of a single seed in
 brackets), the cells per Frank length sqrt(K / A0) at N, and the coarsest grid whose changes
 on doubling are all below the threshold (5 %).
@@ -37,9 +38,33 @@ def change(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(mean), single
 
 
+def as_axes(phase: xr.Dataset, axes: list[str]) -> xr.Dataset:
+    """The observables of ``phase`` with each of ``axes`` a dimension: a parameter the
+    campaign did not sweep becomes an axis of length one, its value from ``param_<name>``."""
+    out = phase[list(OBSERVABLES)]
+    for name in axes:
+        if name not in out.dims:
+            value = phase.attrs.get(f"param_{name}")
+            if value is None:
+                raise ValueError(f"it has no axis {name} and no attribute param_{name}")
+            out = out.expand_dims({name: [float(value)]})
+    out.attrs["param_A0"] = phase.attrs.get("param_A0", 0.1)
+    return out
+
+
+def merged(phases: list[xr.Dataset]) -> xr.Dataset:
+    """One dataset of the observables over the union of the files' axes (runs missing at a
+    point and grid are NaN there)."""
+    axes = ["K", "chi"] + sorted(
+        {str(d) for p in phases for d in p["sigma2_S"].dims} - {"K", "chi", "resolution", "seed"}
+    )
+    both = xr.merge([as_axes(p, axes) for p in phases], join="outer", compat="no_conflicts")
+    both.attrs["param_A0"] = phases[0].attrs.get("param_A0", 0.1)
+    return both
+
+
 def table(phase: xr.Dataset, threshold: float) -> list[dict]:
     A0 = float(phase.attrs.get("param_A0", 0.1))
-    grids = [int(n) for n in phase["resolution"].values]
     # the study's other swept axes (eps in the strained study): a row for each of their values
     other = [str(d) for d in phase["sigma2_S"].dims if d not in ("K", "chi", "resolution", "seed")]
     rows = []
@@ -56,7 +81,12 @@ def table(phase: xr.Dataset, threshold: float) -> list[dict]:
             "frank_length": frank,
             "grids": [],
         }
-        above = at["sigma2_S"].values > PATTERNED
+        ran = np.isfinite(at["sigma2_S"].values).reshape(len(at["resolution"]), -1).any(axis=1)
+        grids = [int(n) for n, r in zip(at["resolution"].values, ran, strict=True) if r]
+        if not grids:  # a point of one file only, at another's grids: no runs here
+            continue
+        at = at.sel(resolution=grids)
+        above = at["sigma2_S"].values[np.isfinite(at["sigma2_S"].values)] > PATTERNED
         patterned = bool(above.all())
         row["no_pattern"] = not bool(above.any())
         for i, n in enumerate(grids):
@@ -102,14 +132,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threshold", type=float, default=0.05)
     ap.add_argument("--json", help="also write the table as JSON here")
     args = ap.parse_args(argv)
-    rows = []
+    phases = []
     for path in args.phase:
         try:
             with xr.open_dataset(path) as phase:
-                rows += table(phase.load(), args.threshold)
+                phases.append(phase.load())
         except (OSError, ValueError) as err:
             print(f"error: cannot read {path}: {err}", file=sys.stderr)
             return 2
+    try:
+        rows = table(merged(phases), args.threshold)
+    except (KeyError, ValueError) as err:
+        print(f"error: cannot make one table of {', '.join(args.phase)}: {err}", file=sys.stderr)
+        return 2
     pct = lambda x: "-" if not math.isfinite(x) else f"{100 * x:.1f} %"  # noqa: E731
     other = list(rows[0]["other"]) if rows else []
     print(

@@ -10,7 +10,8 @@ step. Not a test: the numbers depend on the machine and its load.
     .venv/bin/python benchmarks/bench_floor.py --before ../main --repeat 2 --fingerprint
     .venv/bin/python benchmarks/bench_floor.py --configs 128:50 --mechanics linear   # quick
 
-Each run is a fresh process (``python -c``, the checkout's folder first on ``sys.path``) that
+Each run is a fresh process (``python -c`` of the checkout's own ``.venv``, whose editable
+install imports that checkout; the checkout's folder first on ``sys.path``) that
 first runs t = 1 (the kernels loaded from numba's cache, the plans made), then the timed run.
 With ``--before PATH`` (another checkout of the project, e.g. the main branch) every
 configuration runs alternately on the two codes, before, after, before, after ... (``--repeat``
@@ -95,11 +96,26 @@ def commit(code: Path) -> str:
     return head + ("+dirty" if git("status", "--porcelain", "model") else "")
 
 
+def python_of(code: Path) -> str:
+    """The Python that imports ``code``'s package: its own ``.venv`` (the package is an editable
+    install whose finder maps ``nematic_solids`` to that checkout, whatever ``sys.path`` says);
+    this process's Python for this checkout."""
+    if code.resolve() == HERE.parent.resolve():
+        return sys.executable
+    venv = code / ".venv" / "bin" / "python"
+    if not venv.exists():
+        sys.exit(
+            f"error: {code} has no .venv of its own (run 'bash scripts/bootstrap.sh' there): "
+            "this environment's nematic_solids is this checkout, not that one"
+        )
+    return str(venv)
+
+
 def child(code: Path, cfg: dict) -> dict:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     env["PYTHONPATH"] = str(code)
     proc = subprocess.run(
-        [sys.executable, "-c", CHILD, json.dumps({**cfg, "code": str(code)})],
+        [python_of(code), "-c", CHILD, json.dumps({**cfg, "code": str(code)})],
         capture_output=True,
         text=True,
         cwd=code,
@@ -120,7 +136,7 @@ def child(code: Path, cfg: dict) -> dict:
 def fingerprint(code: Path) -> str:
     env = {**os.environ, "PYTHONPATH": str(code)}
     return subprocess.run(
-        [sys.executable, str(code / "scripts" / "fingerprint.py")],
+        [python_of(code), str(code / "scripts" / "fingerprint.py")],
         capture_output=True,
         text=True,
         cwd=code,

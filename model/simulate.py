@@ -161,7 +161,7 @@ def run(
     linear = numerics.mechanics == "linear"
     solver = SCHEMES[numerics.scheme](eq)
     times = save_times(numerics)
-    snap_set = {float(t) for t in np.round(list(numerics.snapshot_times) + [numerics.t_final], 12)}
+    snap_set = snapshot_set(numerics)
     rows: list[dict[str, float]] = []
     snaps: list[tuple[float, np.ndarray]] = []
     stopped = [math.nan]  # the time the run ended early
@@ -248,11 +248,7 @@ def run(
         status, reason, detail = "failed", exc.reason, exc.detail
         t_failed = float(exc.t) if exc.t is not None else float("nan")
         log.info("run failed: %s", exc)
-    if (
-        status == "ok"
-        and rows
-        and not all(np.isfinite(rows[-1][k]) for k in ("mean_S", "sigma2_S", "min_J"))
-    ):
+    if status == "ok" and ends_non_finite(rows):
         status, reason, detail = "failed", "nan", "non-finite observables at the end"
     wall = wall_before + time.perf_counter() - wall0
     ds = to_dataset(
@@ -274,6 +270,18 @@ def run(
     if not keep_state:
         return ds
     return ds, end[0] if status == "ok" else None
+
+
+def snapshot_set(numerics: Numerics) -> set[float]:
+    """The times (rounded to 12 decimals) whose fields a run stores: ``snapshot_times`` and
+    ``t_final``."""
+    return {float(t) for t in np.round(list(numerics.snapshot_times) + [numerics.t_final], 12)}
+
+
+def ends_non_finite(rows: list[dict[str, float]]) -> bool:
+    """Whether the last save's mean_S, sigma2_S or min_J is not finite (an ok run that ends so
+    is failed with reason ``nan``)."""
+    return bool(rows) and not all(np.isfinite(rows[-1][k]) for k in ("mean_S", "sigma2_S", "min_J"))
 
 
 def observe_state(
@@ -303,9 +311,8 @@ def observe_state(
 def snapshot_fields(eq: ActiveNematicPDE, d: np.ndarray, mech: MechanicalState) -> np.ndarray:
     """The snapshot of the fields ``d`` (q1, q2, A) with the mechanical state ``mech``:
     :data:`nematic_solids.model.checkpoint.SNAPSHOT_FIELDS` (q1, q2, A, u1, u2, I1bar)."""
-    parts, count = dict(eq.mechanics.fft_parts), eq.spectral.fft.count
+    count = eq.spectral.fft.count
     u = eq.spectral.inverse(mech.u_hat)
-    eq.mechanics.fft_parts.update(parts)
     eq.mechanics.fft_parts["saves"] += eq.spectral.fft.count - count
     C = T.matmul(T.transpose(mech.F), mech.F)
     I1bar = T.trace(C) / T.det(mech.F)

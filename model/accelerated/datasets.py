@@ -33,7 +33,7 @@ import xarray as xr
 from ..parameters import Numerics, Parameters
 from ..pde import ActiveNematicPDE
 from ..run_dataset import RunWork, to_dataset
-from ..simulate import observe_state, snapshot_fields
+from ..simulate import ends_non_finite, observe_state, snapshot_fields, snapshot_set
 from .run import run_batch
 
 #: what made the files (their ``source`` and ``history`` attributes)
@@ -53,7 +53,7 @@ def batch_datasets(
     (see the module docstring)."""
     seeds = tuple(seeds)
     eq = ActiveNematicPDE(params, numerics)  # the host's: the saves' mechanics and transforms
-    snap_set = {float(t) for t in np.round(list(numerics.snapshot_times) + [numerics.t_final], 12)}
+    snap_set = snapshot_set(numerics)
     rows: list[list[dict[str, float]]] = [[] for _ in seeds]
     snaps: list[list[tuple[float, np.ndarray]]] = [[] for _ in seeds]
     save_ffts = [0] * len(seeds)
@@ -105,9 +105,7 @@ def batch_datasets(
         t_failed = float(result.t_failed[b]) if status == "failed" else math.nan
         if status == "failed":
             detail = f"{reason} at t = {t_failed:.6g} (the accelerated backend's reason)"
-        elif rows[b] and not all(
-            np.isfinite(rows[b][-1][k]) for k in ("mean_S", "sigma2_S", "min_J")
-        ):
+        elif ends_non_finite(rows[b]):
             status, reason, detail = "failed", "nan", "non-finite observables at the end"
         ds = to_dataset(
             rows[b],

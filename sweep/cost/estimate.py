@@ -309,6 +309,10 @@ def estimate(
     local_stretch = slowdown(local, load, cores)
     modelled = any(r[3] for r in runs)
 
+    def own_time(slow: float) -> float:
+        """The driver's own wall time still to come (none without runs to do)."""
+        return max(driver_overhead(slow) - (started or 0.0), 0.0) if todo else 0.0
+
     def walls(w: int, slow: float) -> tuple[float, float, float]:
         est, lo, hi = ([r[k] * (slow if r[3] else 1.0) for r in runs] for k in range(3))
         return makespan(est, w), makespan(lo, w), makespan(hi, w)
@@ -358,10 +362,8 @@ def estimate(
         wall=walls(workers, stretch if here else 1.0),
         local_wall=walls(local, local_stretch),
         longest=max((r[0] * (stretch if r[3] and here else 1.0) for r in runs), default=0.0),
-        overhead=max(driver_overhead(stretch) - (started or 0.0), 0.0) if todo else 0.0,
-        local_overhead=(
-            max(driver_overhead(local_stretch) - (started or 0.0), 0.0) if todo else 0.0
-        ),
+        overhead=own_time(stretch),
+        local_overhead=own_time(local_stretch),
         load=load,
         cores=cores,
         stretch=stretch,

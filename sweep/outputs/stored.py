@@ -63,7 +63,8 @@ def stored_campaign(store: CampaignStore, text: str | None = None) -> Campaign |
 
 def stored_source(store: CampaignStore, text: str) -> str:
     """The path the copy's relative paths are read against: the campaign file it was read
-    from (its header's :data:`~nematic_solids.sweep.store.SOURCE_PREFIX` line), else the copy."""
+    from (its header's :data:`~nematic_solids.sweep.campaign_copy.SOURCE_PREFIX` line), else
+    the copy."""
     for line in text.splitlines():
         if line.startswith(SOURCE_PREFIX):
             return line[len(SOURCE_PREFIX) :].strip()

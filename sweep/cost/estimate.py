@@ -338,7 +338,8 @@ def estimate(
             [*(r[0] for r in runs), *(m[3] for m in basis.measured)],
             workers,
         )
-    elif campaign.precision is not None and not seeds.finished:
+    elif campaign.refine is None and campaign.precision is not None and not seeds.finished:
+        # (with refine: too, the refinement's replay holds the seed rounds: forecast above)
         later = precision_rounds(
             campaign,
             seeds,

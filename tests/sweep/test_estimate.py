@@ -335,6 +335,29 @@ def test_adaptive_campaign_round_and_bound(tmp_path):
     assert e.later.cpu == pytest.approx(4.0 * e.later.runs)
 
 
+def test_a_finished_refinement_with_seeds_by_precision_has_nothing_to_do(tmp_path):
+    """A campaign with refine: and precision: (as fig4_adaptive.yaml) run to its end: the estimate
+    says nothing to do (it used to stop on the seeds of a precision-only campaign)."""
+    text = REFINED.replace("  seeds: {initial: 2, add: 2}\n", "") + (
+        "precision: {observable: sigma2_S, width: 0.1, unanimous: 2, patterned_above: 1.0e-6,\n"
+        "            initial: 2, add: 2}\n"
+    )
+    campaign = parse_campaign(text)
+    store = CampaignStore(tmp_path / "results", "r")
+    for _ in range(20):
+        ref = replay(campaign, store)
+        if ref.finished:
+            break
+        for (_, x, _), rid in ref.run_ids.items():
+            if not store.nc_path(rid).exists():
+                fake_run(store, rid, 3.0, scalars={"sigma2_S_final": 0.0})
+    assert replay(campaign, store).finished
+    e = estimate(campaign, store, load_cores=QUIET)
+    assert e.to_do == 0 and e.later is None
+    assert "refinement finished" in lines(e)[0]
+    assert "nothing to do" in lines(e)
+
+
 PRECISE = """\
 name: p
 parameters: {noise_modes: 8}

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import jax
 
+from ..accelerated_support import DEVICES
 from ..errors import DeviceUnavailable
 
-#: the names a run may ask for
-DEVICES = ("cpu", "gpu", "auto")
+__all__ = ["DEVICES", "describe", "select_device"]
 
 
 def _devices(platform: str) -> list[jax.Device]:

@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..accelerated_support import check_supported
 from ..errors import ParameterError
 from ..initial import initial_fields
 from ..parameters import Numerics, Parameters, check_compatible, save_times
@@ -59,23 +60,6 @@ class BatchResult:
     cpu: float
     compile: float
     jax_version: str
-
-
-def check_supported(params: Parameters, numerics: Numerics) -> None:
-    """Refuse with :class:`nematic_solids.model.errors.ParameterError` what the accelerated path
-    does not do yet: finite strain, ETDRK2, time protocols, the early stop."""
-    if numerics.mechanics != "linear":
-        raise ParameterError(
-            "mechanics", numerics.mechanics, "linear (finite strain is not accelerated yet)"
-        )
-    if numerics.scheme != "etdrk4":
-        raise ParameterError("scheme", numerics.scheme, "etdrk4 in the accelerated backend")
-    if params.protocol:
-        raise ParameterError(
-            "protocol", params.protocol.to_dict(), "none in the accelerated backend"
-        )
-    if numerics.steady_tol > 0:
-        raise ParameterError("steady_tol", numerics.steady_tol, "0 in the accelerated backend")
 
 
 @functools.lru_cache(maxsize=8)

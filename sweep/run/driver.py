@@ -36,9 +36,10 @@ from ..store import (
     CampaignStore,
     Record,
 )
+from .batch import BatchTask, execute_batch, group_runs
 from .clusters import WORKER_LOSSES, jobqueue_options, make_jobqueue, open_cluster
 from .failures import FailureLimit
-from .task import UNSAVED, RunTask, execute_run, failure_record, warm_workers
+from .task import UNSAVED, RunTask, check_device, execute_run, failure_record, warm_workers
 from .todo import Plan, parents_not_done, plan_runs
 from .workers import CHECK_EVERY, ClusterLink, Supervisor
 
@@ -217,8 +218,13 @@ def run_campaign(
     # a chain's runs go after their predecessors (nematic_solids.sweep.chains): by depth, then
     # position
     chained = expansion.chain_parents if campaign.chain is not None else None
-    queue = list(reversed(plan.todo if chained is None else in_chain_order(plan.todo, chained)))
-    tasks: dict[Any, tuple[RunSpec, RunTask, int]] = {}
+    order = plan.todo if chained is None else in_chain_order(plan.todo, chained)
+    # the accelerated backend: up to execution.batch seeds of one point per task
+    batched = campaign.execution.backend == "accelerated" and chained is None
+    size = campaign.execution.batch if batched else 1
+    units = group_runs(order, lambda i: expansion.run(i).point, size)
+    queue = list(reversed(units))  # the runs of each task, the next task last
+    tasks: dict[Any, list[tuple[RunSpec, RunTask, int]]] = {}
     attempts: dict[int, int] = {}
     ac = as_completed()
     last_manifest = clock()
@@ -228,9 +234,10 @@ def run_campaign(
         last whose predecessor is neither queued nor in flight (it has its record)."""
         if chained is None:
             return len(queue) - 1
-        busy = set(queue) | {i for _, _, i in tasks.values()}
+        busy = {i for unit in queue for i in unit}
+        busy |= {i for held in tasks.values() for _, _, i in held}
         return next(
-            (k for k in range(len(queue) - 1, -1, -1) if chained[queue[k]] not in busy), None
+            (k for k in range(len(queue) - 1, -1, -1) if chained[queue[k][0]] not in busy), None
         )
 
     def submit_more() -> None:
@@ -243,87 +250,114 @@ def run_campaign(
                         "campaign to go on",
                         len(queue),
                     )
-                    summary.lost.extend(expansion.run(i) for i in queue)
+                    summary.lost.extend(expansion.run(i) for unit in queue for i in unit)
                     queue.clear()
                 return
-            i = queue.pop(k)
-            run = expansion.run(i)
-            task = RunTask.from_spec(
-                run, store, campaign.name, campaign.store, plan.history.get(i), plan.parents.get(i)
-            )
+            held = []
+            for i in queue.pop(k):
+                run = expansion.run(i)
+                task = RunTask.from_spec(
+                    run,
+                    store,
+                    campaign.name,
+                    campaign.store,
+                    plan.history.get(i),
+                    plan.parents.get(i),
+                )
+                held.append((run, task, i))
             # a run that goes again (its result was lost) gets a new key: the old one may
             # still be being released
-            again = attempts[i] = attempts.get(i, -1) + 1
-            key = f"nematic-run-{run.run_id}" + (f"-{again}" if again else "")
-            fut = client.submit(execute_run, task, key=key, pure=False)
-            tasks[fut.key] = (run, task, i)
+            for _, _, i in held:
+                attempts[i] = attempts.get(i, -1) + 1
+            again = attempts[held[0][2]]
+            key = f"nematic-run-{held[0][0].run_id}" + (f"-{again}" if again else "")
+            if batched:  # one task for the seeds held
+                one = BatchTask(tuple(t for _, t, _ in held), campaign.execution.device)
+                fut: Any = client.submit(execute_batch, one, key=f"{key}-b{len(held)}", pure=False)
+            else:
+                fut = client.submit(execute_run, held[0][1], key=key, pure=False)
+            tasks[fut.key] = held
             ac.add(fut)
-            summary.submitted += 1
+            summary.submitted += len(held)
 
     def handle(fut: Any) -> bool:
-        """Take one finished future; ``False`` to stop the campaign."""
-        run, task, i = tasks.pop(fut.key)
+        """Take one finished future (one run, or a batch's runs); ``False`` to stop the
+        campaign."""
+        held = tasks.pop(fut.key)
         try:
-            record = fut.result(timeout=RESULT_WAIT)
+            result = fut.result(timeout=RESULT_WAIT)
         except OSError as e:
             # Finished, but its result did not arrive: it went with its worker (a batch job
             # ended; dask would recompute it), or the connection to the scheduler broke
-            # (TimeoutError, CommClosedError). Not the run's fault: the record on disk says
-            # what happened, else the run goes again (or stays pending).
+            # (TimeoutError, CommClosedError). Not the runs' fault: the records on disk say
+            # what happened, else the runs go again (or stay pending).
             with contextlib.suppress(Exception):
                 fut.cancel()
-            record = store.read_record(run.run_id)
-            if record is None:
+            found = [(run, store.read_record(run.run_id)) for run, _, _ in held]
+            missing = [i for (run, rec), (_, _, i) in zip(found, held, strict=True) if rec is None]
+            if missing:
+                i0 = missing[0]
+                what = f"{len(missing)} run(s) from {expansion.run(i0).run_id}"
                 if client.status != "running":
-                    summary.lost.append(run)
-                elif attempts.get(i, 0) < WORKER_LOSSES:
+                    summary.lost.extend(expansion.run(i) for i in missing)
+                elif attempts.get(i0, 0) < WORKER_LOSSES:
                     log.warning(
-                        "the result of run %s was lost with its worker (%s); it runs again",
-                        run.run_id,
+                        "the result of %s was lost with its worker (%s); it runs again",
+                        what,
                         type(e).__name__,
                     )
-                    queue.append(i)
+                    queue.append(missing)
                 else:
                     log.warning(
-                        "the result of run %s was lost with its worker %d times; it stays pending",
-                        run.run_id,
-                        attempts.get(i, 0) + 1,
+                        "the result of %s was lost with its worker %d times; it stays pending",
+                        what,
+                        attempts.get(i0, 0) + 1,
                     )
-                    summary.worker_lost.append(run)
-                return True
+                    summary.worker_lost.extend(expansion.run(i) for i in missing)
+            results = [(run, rec) for run, rec in found if rec is not None]
         except CancelledError as e:  # the cluster went away under the run: not its fault
             (log.debug if summary.lost else log.warning)(
                 "run %s was cancelled by dask (%s); rerun to redo it",
-                run.run_id,
+                held[0][0].run_id,
                 " ".join(str(e).split()),
             )
-            summary.lost.append(run)
+            summary.lost.extend(run for run, _, _ in held)
             if client.status != "running":  # the futures are gone with the connection
                 if queue or tasks:
                     log.warning(
                         "the connection to %s is lost (client %s): the %d run(s) left stay pending",
                         link.where,
                         client.status,
-                        len(queue) + len(tasks) + 1,
+                        sum(map(len, queue)) + sum(map(len, tasks.values())) + len(held),
                     )
                 queue.clear()  # nothing more can be submitted
             return True
         except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
-            if _worker_lost(e):  # not the run's failure: it stays pending (no record)
+            if _worker_lost(e):  # not the runs' failure: they stay pending (no record)
                 log.warning(
                     "run %s lost its worker %d times (batch jobs cancelled, "
                     "preempted or past their walltime, or the run kills its worker: "
                     "memory?); it stays pending",
-                    run.run_id,
+                    held[0][0].run_id,
                     WORKER_LOSSES + 1,
                 )
-                summary.worker_lost.append(run)
+                summary.worker_lost.extend(run for run, _, _ in held)
                 fut.release()
                 return True
-            record = _lost_task_record(task, e)
-            record.update(cast(Record, task.identity()))
-            store.write_record(record)
+            results = []
+            for run, task, _ in held:
+                record = _lost_task_record(task, e)
+                record.update(cast(Record, task.identity()))
+                store.write_record(record)
+                results.append((run, record))
+        else:
+            records = result if isinstance(result, list) else [result]
+            results = [(run, rec) for (run, _, _), rec in zip(held, records, strict=True)]
         fut.release()
+        return all(take(run, record) for run, record in results)
+
+    def take(run: RunSpec, record: Record) -> bool:
+        """Count and report one run's record; ``False`` to stop the campaign."""
         if record.get("status") == UNSAVED:
             # The results folder cannot take results: stop instead of burning every run.
             # The runs in flight are cancelled: they stay pending, as this one does.
@@ -417,6 +451,8 @@ def drive(
     if events:
         events.planned(plan, expansion)
     summary = None
+    if plan.todo and local and campaign.execution.backend == "accelerated":
+        check_device(campaign.execution.device)  # one message before any worker starts
     if plan.todo:
         try:
             with open_cluster(

@@ -286,32 +286,57 @@ def execute_run(task: RunTask) -> Record:
             time.perf_counter() - t0,
         )
     else:
-        encoding: dict[str, Any] = {}
-        try:
-            ds, encoding = prepare_dataset(ds, task)
-            ds.attrs.update(continuation.run_attrs(start))
-            path = store.nc_path(task.run_id)
-            groups = (
-                {continuation.STATE_GROUP: end_state.to_dataset(snapshots=False)}
-                if task.end_state and end_state is not None
-                else {}
-            )
-            atomic_to_netcdf(ds, path, encoding, groups)
-            stamp = file_stamp(path)
-            record = record_from_dataset(ds, task.run_id, stamp["nc_bytes"], stamp)
-            if record.get("wall_time") is None:
-                record["wall_time"] = time.perf_counter() - t0
-            record["end_state"] = end_state.t if groups and end_state is not None else None
-        except StorageError as e:
-            return _unsaved(task, e, ds, encoding, time.perf_counter() - t0)
-        except Exception as e:  # noqa: BLE001 - a bug, not the storage: recorded as failed
-            record = failure_record(
-                task,
-                "write_error",
-                f"{type(e).__name__}: {e}",
-                traceback.format_exc(),
-                time.perf_counter() - t0,
-            )
+        return save_result(task, store, ds, end_state, start, t0)
+    return finish_record(task, store, record, start, t0)
+
+
+def save_result(
+    task: RunTask,
+    store: CampaignStore,
+    ds: xr.Dataset,
+    end_state: RunState | None,
+    start: continuation.Start,
+    t0: float,
+) -> Record:
+    """Write the run's Dataset (with its end state ``end_state`` when the task keeps it) as
+    ``<run_id>.nc``, then its record (:func:`finish_record`); the result of one run, whatever
+    computed it (:func:`execute_run`, :func:`nematic_solids.sweep.run.batch.execute_batch`).
+    ``t0``: the run's start (``time.perf_counter``)."""
+    encoding: dict[str, Any] = {}
+    try:
+        ds, encoding = prepare_dataset(ds, task)
+        ds.attrs.update(continuation.run_attrs(start))
+        path = store.nc_path(task.run_id)
+        groups = (
+            {continuation.STATE_GROUP: end_state.to_dataset(snapshots=False)}
+            if task.end_state and end_state is not None
+            else {}
+        )
+        atomic_to_netcdf(ds, path, encoding, groups)
+        stamp = file_stamp(path)
+        record = record_from_dataset(ds, task.run_id, stamp["nc_bytes"], stamp)
+        if record.get("wall_time") is None:
+            record["wall_time"] = time.perf_counter() - t0
+        record["end_state"] = end_state.t if groups and end_state is not None else None
+    except StorageError as e:
+        return _unsaved(task, e, ds, encoding, time.perf_counter() - t0)
+    except Exception as e:  # noqa: BLE001 - a bug, not the storage: recorded as failed
+        record = failure_record(
+            task,
+            "write_error",
+            f"{type(e).__name__}: {e}",
+            traceback.format_exc(),
+            time.perf_counter() - t0,
+        )
+    return finish_record(task, store, record, start, t0)
+
+
+def finish_record(
+    task: RunTask, store: CampaignStore, record: Record, start: continuation.Start, t0: float
+) -> Record:
+    """Complete the run's record (its identity, process, trajectory, start) and write it, the
+    run's last act: then its rolling checkpoint goes. A record that cannot be written leaves
+    the run pending (:data:`UNSAVED`)."""
     record.update(cast(Record, task.identity()))
     record["pid"] = os.getpid()
     record["trajectory"] = task.trajectory
@@ -338,35 +363,59 @@ def warm_kinds(expansion: Expansion) -> list[tuple[dict[str, Any], dict[str, Any
     return list(kinds.values())
 
 
-def warm_worker(kinds: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str, Any]:
+def check_device(device: str) -> str:
+    """The device ``device`` names here, described (``platform:kind``); raises
+    :class:`nematic_solids.model.errors.DeviceUnavailable` (one message: JAX missing, or no
+    GPU where one is asked for) before any run is given to it."""
+    from nematic_solids.model.accelerated import select_device
+    from nematic_solids.model.accelerated.device import describe
+
+    return describe(select_device(device))
+
+
+def warm_worker(
+    kinds: list[tuple[dict[str, Any], dict[str, Any]]], device: str | None = None
+) -> dict[str, Any]:
     """Run on one worker per host before the campaign: compiles the model's kernels (or
     loads them from the disk cache) with tiny runs, so that the other workers load them
-    instead of all compiling at once (:mod:`nematic_solids.model.warmup`)."""
+    instead of all compiling at once (:mod:`nematic_solids.model.warmup`); with ``device``
+    (the accelerated backend's), also finds that device there (``device``, or why not:
+    ``device_error``)."""
     from .workers import import_model
 
     import_model()
+    from nematic_solids.model.errors import DeviceUnavailable
     from nematic_solids.model.warmup import warm_up
 
     info = warm_up([(Parameters.from_dict(p), Numerics.from_dict(n)) for p, n in kinds])
     info["host"] = socket.gethostname()
+    if device is not None:
+        try:
+            info["device"] = check_device(device)
+        except DeviceUnavailable as e:
+            info["device_error"] = str(e)
     return info
 
 
 def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
     """:func:`warm_worker` on one worker of each host (in parallel across hosts); returns
-    what each reported. A worker that cannot run it is left to fail in the environment
-    check that follows."""
+    what each reported, or raises :class:`nematic_solids.model.errors.DeviceUnavailable` where
+    a host lacks the accelerated backend's device. A worker that cannot run it is left to
+    fail in the environment check that follows."""
     hosts: dict[str, str] = {}
     from .workers import scheduler_workers
 
     for addr, info in scheduler_workers(client).items():
         hosts.setdefault(str(info.get("host", addr)), addr)
     kinds = warm_kinds(expansion)
+    execution = expansion.campaign.execution
+    device = execution.device if execution.backend == "accelerated" else None
     token = uuid.uuid4().hex[:12]  # a shared scheduler may warm several campaigns at once
     futures = [
         client.submit(
             warm_worker,
             kinds,
+            device,
             workers=[addr],
             pure=False,
             allow_other_workers=False,
@@ -380,4 +429,9 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
             out.append(fut.result())
         except Exception as e:  # noqa: BLE001 - reported by the environment check
             log.warning("warm-up failed on a worker: %s: %s", type(e).__name__, e)
+    for info in out:  # a host without the device asked for: one message, nothing run
+        if "device_error" in info:
+            from nematic_solids.model.errors import DeviceUnavailable
+
+            raise DeviceUnavailable(f"on the worker host {info['host']}: {info['device_error']}")
     return out

@@ -1,6 +1,7 @@
 """The ``execution:`` section: a local dask cluster (workers, threads, memory), an existing
 scheduler, or a dask-jobqueue cluster (kind, jobs or adapt bounds, the class's own options),
-the waits, and TLS (on unless turned off with a stated reason)."""
+the waits, TLS (on unless turned off with a stated reason), and the backend that computes the
+runs (compiled, or accelerated with seeds in batches on a device)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,14 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
+from nematic_solids.model.accelerated_support import DEVICES, INSTALL, jax_installed
+
 from ..campaign import (
     CLUSTER_KINDS,
     DEFAULT_GIVE_UP,
     DEFAULT_WORKER_WAIT,
+    EXECUTION_BACKENDS,
+    MAX_BATCH,
     ClusterSpec,
     ExecutionSpec,
 )
@@ -30,6 +35,9 @@ EXECUTION_KEYS = (
     "wait_for_workers",
     "give_up_after",
     "security",
+    "backend",
+    "batch",
+    "device",
 )
 SECURITY_KEYS = ("tls", "reason")
 #: Most batch jobs of a dask-jobqueue cluster.
@@ -131,7 +139,11 @@ def read_execution(c: Checker, raw: Any, read: Mapping[str, Any]) -> ExecutionSp
             "encrypted: the scheduler uses TLS ('tls://') unless execution.security says "
             "{tls: false, reason: ...}",
         )
+    backend, batch, device = _check_backend(c, ex, local=not scheduler and cluster is None)
     return ExecutionSpec(
+        backend=backend,
+        batch=batch,
+        device=device,
         workers=workers,
         threads_per_worker=int(tpw),
         memory_limit=None if memory is None else str(memory),
@@ -142,6 +154,36 @@ def read_execution(c: Checker, raw: Any, read: Mapping[str, Any]) -> ExecutionSp
         tls=tls,
         insecure_reason=reason,
     )
+
+
+def _check_backend(c: Checker, ex: Mapping[str, Any], *, local: bool) -> tuple[str, int, str]:
+    """``execution.backend``, ``batch`` and ``device``: batches and devices are the accelerated
+    backend's; on a local cluster JAX must be importable here (elsewhere the workers' warm-up
+    checks it, with the device)."""
+    backend = ex.get("backend", "compiled")
+    if backend not in EXECUTION_BACKENDS:
+        c.bad(("execution", "backend"), backend, " or ".join(EXECUTION_BACKENDS))
+        backend = "compiled"
+    batch, device = ex.get("batch", 1), ex.get("device", "auto")
+    if not is_int(batch) or not 1 <= batch <= MAX_BATCH:
+        c.bad(("execution", "batch"), batch, f"an integer from 1 to {MAX_BATCH} (seeds per task)")
+        batch = 1
+    if device not in DEVICES:
+        c.bad(("execution", "device"), device, ", ".join(DEVICES))
+        device = "auto"
+    if backend != "accelerated":
+        for key in ("batch", "device"):
+            if key in ex:
+                c.add(
+                    ("execution", key),
+                    f"'{key}' is the accelerated backend's; give backend: accelerated with it",
+                )
+    elif local and not jax_installed():
+        c.add(
+            ("execution", "backend"),
+            f"the accelerated backend needs JAX, which is not installed here: {INSTALL}",
+        )
+    return str(backend), int(batch), str(device)
 
 
 def _check_security(c: Checker, raw: Any) -> tuple[bool, str | None]:

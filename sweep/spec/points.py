@@ -4,6 +4,7 @@ built as :func:`nematic_solids.sweep.expand.make_point` builds them, each distin
 
 from __future__ import annotations
 
+from nematic_solids.model.accelerated_support import check_supported
 from nematic_solids.model.errors import ParameterError
 
 from ..campaign import AMB, Campaign
@@ -27,34 +28,63 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
             if plain and _same_run(checker, point, coords, runs):
                 return
         except ParameterError as e:
-            name = e.name
-            if name == "alpha" and AMB in axis_names:
-                name = AMB
-            timed = error_path(name, swept)
-            if timed is not None and timed[0] == "sweep":
-                path: tuple[str | int, ...] = timed
-                at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
-                msg = f"got {e.value!r}; allowed: {e.allowed} (at the grid point {at})"
-            elif timed is not None:
-                path, msg = timed, f"got {e.value!r}; allowed: {e.allowed}"
-            elif name in axis_names:
-                path = ("sweep", "axes", name)
-                at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
-                msg = f"got {e.value!r}; allowed: {e.allowed} (at the grid point {at})"
-            elif name in campaign.numerics:
-                path, msg = ("numerics", name), f"got {e.value!r}; allowed: {e.allowed}"
-            elif name in campaign.parameters:
-                path, msg = ("parameters", name), f"got {e.value!r}; allowed: {e.allowed}"
-            else:
-                path, msg = (name,), f"got {e.value!r}; allowed: {e.allowed}"
-            key = (repr(path), e.allowed)
-            if key in seen:
-                continue
-            seen.add(key)
-            checker.add(path, msg)
-            if len(seen) >= MAX_POINT_PROBLEMS:
-                checker.add((), "further grid problems not shown")
+            if _report(checker, campaign, e, coords, axis_names, swept, seen):
                 return
+            continue
+        if campaign.execution.backend == "accelerated":
+            try:
+                check_supported(point.parameters, point.numerics)
+            except ParameterError as e:
+                key = ("execution.backend", e.name)
+                if key not in seen:
+                    seen.add(key)
+                    checker.add(
+                        ("execution", "backend"),
+                        f"the accelerated backend cannot run {e.name} = {e.value!r}; allowed: "
+                        f"{e.allowed} (or backend: compiled)",
+                    )
+
+
+def _report(
+    checker: Checker,
+    campaign: Campaign,
+    e: ParameterError,
+    coords: dict,
+    axis_names: set[str],
+    swept: dict,
+    seen: set[tuple[str, str]],
+) -> bool:
+    """Report the model's error at the key path that caused it (once per path and cause);
+    ``True`` when enough problems are reported."""
+    name = e.name
+    if name == "alpha" and AMB in axis_names:
+        name = AMB
+    timed = error_path(name, swept)
+    if timed is not None and timed[0] == "sweep":
+        path: tuple[str | int, ...] = timed
+        at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
+        msg = f"got {e.value!r}; allowed: {e.allowed} (at the grid point {at})"
+    elif timed is not None:
+        path, msg = timed, f"got {e.value!r}; allowed: {e.allowed}"
+    elif name in axis_names:
+        path = ("sweep", "axes", name)
+        at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
+        msg = f"got {e.value!r}; allowed: {e.allowed} (at the grid point {at})"
+    elif name in campaign.numerics:
+        path, msg = ("numerics", name), f"got {e.value!r}; allowed: {e.allowed}"
+    elif name in campaign.parameters:
+        path, msg = ("parameters", name), f"got {e.value!r}; allowed: {e.allowed}"
+    else:
+        path, msg = (name,), f"got {e.value!r}; allowed: {e.allowed}"
+    key = (repr(path), e.allowed)
+    if key in seen:
+        return False
+    seen.add(key)
+    checker.add(path, msg)
+    if len(seen) >= MAX_POINT_PROBLEMS:
+        checker.add((), "further grid problems not shown")
+        return True
+    return False
 
 
 def _same_run(checker: Checker, point, coords: dict, runs: dict[str, dict]) -> bool:

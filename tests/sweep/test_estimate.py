@@ -348,12 +348,13 @@ def test_a_finished_refinement_with_seeds_by_precision_has_nothing_to_do(tmp_pat
         ref = replay(campaign, store)
         if ref.finished:
             break
-        for (_, x, _), rid in ref.run_ids.items():
+        for (_, _x, _), rid in ref.run_ids.items():
             if not store.nc_path(rid).exists():
                 fake_run(store, rid, 3.0, scalars={"sigma2_S_final": 0.0})
     assert replay(campaign, store).finished
     e = estimate(campaign, store, load_cores=QUIET)
-    assert e.to_do == 0 and e.later is None
+    assert e.to_do == 0
+    assert e.later is None
     assert "refinement finished" in lines(e)[0]
     assert "nothing to do" in lines(e)
 

@@ -1,0 +1,39 @@
+"""What the accelerated backend (:mod:`nematic_solids.model.accelerated`) runs, checked without
+importing JAX: a campaign validates its points with it on a machine where JAX may be absent (the
+driver of a cluster whose workers have it), and :func:`nematic_solids.model.accelerated.run_batch`
+refuses the rest with the same errors."""
+
+from __future__ import annotations
+
+import importlib.util
+
+from .errors import ParameterError
+from .parameters import Numerics, Parameters
+
+#: the devices a run may ask for (:func:`nematic_solids.model.accelerated.select_device`): the
+#: CPU, the first GPU JAX sees, or a GPU if there is one and else the CPU
+DEVICES = ("cpu", "gpu", "auto")
+#: how to install the backend's library
+INSTALL = "pip install '.[accel]' (and 'jax[cuda12]' for an NVIDIA GPU)"
+
+
+def jax_installed() -> bool:
+    """Whether JAX can be imported here (found, not imported)."""
+    return importlib.util.find_spec("jax") is not None
+
+
+def check_supported(params: Parameters, numerics: Numerics) -> None:
+    """Refuse with :class:`nematic_solids.model.errors.ParameterError` what the accelerated path
+    does not do yet: finite strain, ETDRK2, time protocols, the early stop."""
+    if numerics.mechanics != "linear":
+        raise ParameterError(
+            "mechanics", numerics.mechanics, "linear (finite strain is not accelerated yet)"
+        )
+    if numerics.scheme != "etdrk4":
+        raise ParameterError("scheme", numerics.scheme, "etdrk4 in the accelerated backend")
+    if params.protocol:
+        raise ParameterError(
+            "protocol", params.protocol.to_dict(), "none in the accelerated backend"
+        )
+    if numerics.steady_tol > 0:
+        raise ParameterError("steady_tol", numerics.steady_tol, "0 in the accelerated backend")

@@ -1,0 +1,135 @@
+"""The worker task of the accelerated backend (``execution: {backend: accelerated, batch: N}``):
+several seeds of one grid point in one task, advanced together on a device by
+:func:`nematic_solids.model.accelerated.datasets.batch_datasets`, each seed written as its own run
+(its run file and record, by :func:`nematic_solids.sweep.run.task.save_result`, exactly as a
+compiled run's), so that identity, aggregation, resumption and the failure rules stay per run.
+
+:func:`group_runs` forms the batches (the driver's queue order kept, only runs of one point
+together); :func:`execute_batch` runs one. A seed that fails (its own reason and time, from the
+device) fails alone: its batch-mates' files are those they have when the batch has no failing
+seed. A seed whose run starts from a state (its own rolling checkpoint, or the end of a finished
+shorter run of its trajectory) is run by the compiled path inside the task, as
+:func:`nematic_solids.sweep.run.task.execute_run` runs it (the accelerated path begins at t = 0);
+its record says ``run_backend: compiled``. A batch's runs write no rolling checkpoint and keep no
+end state (a batch is lost whole, or stored whole seed by seed).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nematic_solids.model.parameters import Numerics, Parameters
+
+from ..store import CampaignStore, Record
+from . import continuation
+from .task import RunTask, execute_run, failure_record, finish_record, save_result
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class BatchTask:
+    """Seeds of one point (plain data, cheap to pickle): their run tasks, the device."""
+
+    tasks: tuple[RunTask, ...]
+    device: str = "auto"
+
+
+def group_runs(
+    queue: Sequence[int], point_of: Callable[[int], object], size: int
+) -> list[list[int]]:
+    """The runs ``queue`` in batches of at most ``size`` runs of one point each (the point of a
+    run: ``point_of(i)``, compared by identity), in the order of each batch's first run."""
+    open_batches: dict[int, list[int]] = {}
+    out: list[list[int]] = []
+    for i in queue:
+        key = id(point_of(i))
+        batch = open_batches.get(key)
+        if batch is None or len(batch) >= size:
+            batch = open_batches[key] = []
+            out.append(batch)
+        batch.append(i)
+    return out
+
+
+def _store_of(task: RunTask) -> CampaignStore:
+    runs = Path(task.runs_dir)
+    return CampaignStore(runs.parent.parent, runs.parent.name)
+
+
+def execute_batch(batch: BatchTask) -> list[Record]:
+    """Run a batch on a worker; return the records of its runs in the order of
+    ``batch.tasks`` (see the module docstring). A batch that raises (the device, a bug) gives
+    every seed it held a failure record with the traceback; a result that cannot be stored
+    gives that seed the :data:`nematic_solids.sweep.run.task.UNSAVED` record, as
+    :func:`execute_run` does."""
+    from .workers import import_model
+
+    import_model()
+    t0 = time.perf_counter()
+    records: dict[int, Record] = {}
+    fresh: list[tuple[int, RunTask, continuation.Start]] = []
+    for k, task in enumerate(batch.tasks):
+        try:
+            start = continuation.starting_state(task, _store_of(task))
+        except Exception:  # noqa: BLE001 - its parent failed, or a bad file: execute_run says
+            records[k] = execute_run(task)
+            continue
+        if start.state is not None:
+            log.info("run %s starts from a state: run by the compiled path", task.run_id)
+            records[k] = execute_run(task)
+        else:
+            fresh.append((k, task, start))
+    if fresh:
+        records.update(_run_together(fresh, batch.device, t0))
+    return [records[k] for k in range(len(batch.tasks))]
+
+
+def _run_together(
+    fresh: list[tuple[int, RunTask, continuation.Start]], device: str, t0: float
+) -> dict[int, Record]:
+    """The seeds ``fresh`` (from their seeded textures, or the fields of another campaign's
+    run) advanced as one batch, each stored as its own run."""
+    from nematic_solids.model.accelerated.datasets import batch_datasets
+    from nematic_solids.model.initial import initial_fields
+
+    first = fresh[0][1]
+    params = Parameters.from_dict(first.parameters)
+    numerics = Numerics.from_dict(first.numerics)
+    seeds = [task.seed for _, task, _ in fresh]
+    initial = None
+    if any(start.initial is not None for _, _, start in fresh):
+        n = numerics.resolution
+        initial = np.stack(
+            [
+                start.initial.fields
+                if start.initial is not None
+                else np.stack(initial_fields(params, n, task.seed))
+                for _, task, start in fresh
+            ]
+        )
+    try:
+        datasets = batch_datasets(params, numerics, seeds, device=device, initial=initial)
+    except Exception as e:  # noqa: BLE001 - the batch's crash fails each of its seeds
+        detail, tb = f"{type(e).__name__}: {e}", traceback.format_exc()
+        return {
+            k: finish_record(
+                task,
+                _store_of(task),
+                failure_record(task, "exception", detail, tb, time.perf_counter() - t0),
+                start,
+                t0,
+            )
+            for k, task, start in fresh
+        }
+    return {
+        k: save_result(task, _store_of(task), ds, None, start, t0)
+        for (k, task, start), ds in zip(fresh, datasets, strict=True)
+    }

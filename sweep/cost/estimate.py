@@ -43,7 +43,7 @@ from nematic_solids.model.resolution import is_rule, read_rule
 from ..campaign import Campaign, ExecutionSpec, local_worker_count
 from ..expand import Expansion, GridPoint, continued_runs, expand
 from ..store import RETRYABLE_REASONS, CampaignStore, Record
-from .later import precision_rounds, refine_rounds
+from .later import Prior, campaign_prior, point_key, precision_rounds, refine_rounds
 from .model import MODEL_SPREAD, kind, model_seconds
 from .result import Costed, Estimate, fmt_seconds
 
@@ -132,9 +132,16 @@ def concurrency(execution: ExecutionSpec) -> tuple[int, str]:
 class Basis:
     """The campaign's measured runs and how a run to do is costed from them."""
 
-    def __init__(self, measured: list[tuple[str, tuple[Any, ...], int, float, float]]):
+    def __init__(
+        self,
+        measured: list[tuple[str, tuple[Any, ...], int, float, float]],
+        prior: Prior | None = None,
+    ):
         #: (point label, kind, resolution, seconds, model seconds) of every measured run
         self.measured = measured
+        #: the campaign's prior: its measured run times at the points this campaign has
+        #: not measured yet
+        self.prior = prior
         self.by_point: dict[str, list[float]] = {}
         for label, _, _, seconds, _ in measured:
             self.by_point.setdefault(label, []).append(seconds)
@@ -160,6 +167,10 @@ class Basis:
             lo, hi = self.seed_spread or self.ratio_spread(point)
             n = len(times)
             return est, est * lo, est * hi, f"its {n} finished run{'s' if n > 1 else ''}"
+        known = self.prior.point_seconds(point.coords) if self.prior is not None else None
+        if known is not None:
+            lo, hi = self.seed_spread or MODEL_SPREAD
+            return known, known * lo, known * hi, "the prior's measured runs there"
         ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
         if ratios:
             med = float(np.median(ratios))
@@ -204,8 +215,11 @@ def classify(
     return todo, done, failed
 
 
-def measurements(expansion: Expansion, records: Mapping[str, Record]) -> Basis:
-    """Every successful run of ``expansion`` with a recorded run time."""
+def measurements(
+    expansion: Expansion, records: Mapping[str, Record], prior: Prior | None = None
+) -> Basis:
+    """Every successful run of ``expansion`` with a recorded run time (and the campaign's
+    ``prior``, for the points it has not measured)."""
     measured = []
     models: dict[tuple[int, float], float] = {}
     for i, rid in enumerate(expansion.run_ids):
@@ -229,7 +243,7 @@ def measurements(expansion: Expansion, records: Mapping[str, Record]) -> Basis:
                 models[key],
             )
         )
-    return Basis(measured)
+    return Basis(measured, prior)
 
 
 def estimate(
@@ -273,7 +287,7 @@ def estimate(
             f"; finished ({seeds.stop})" if seeds.finished else ""
         )
     todo, done, failed = classify(expansion, store, records, retry_failed=retry_failed)
-    basis = measurements(expansion, records)
+    basis = measurements(expansion, records, campaign_prior(campaign)[0])
     costs: dict[str, Costed] = {}
     runs: list[tuple[float, float, float, bool]] = []  # (seconds, low, high, cost model?)
     per_point: dict[int, tuple[str, float, float, float, str]] = {}
@@ -318,6 +332,7 @@ def estimate(
         return makespan(est, w), makespan(lo, w), makespan(hi, w)
 
     n = len(basis.measured)
+    text = "no finished runs"
     if n:
         seconds = [m[3] for m in basis.measured]
         text = (
@@ -325,11 +340,20 @@ def estimate(
             f"{fmt_seconds(min(seconds))} to {fmt_seconds(max(seconds))}, median "
             f"{fmt_seconds(float(np.median(seconds)))})"
         )
-    else:
-        text = (
-            "cost model, no finished runs (sweep/cost/model.py, calibrated on a 2-core "
-            "VM: benchmarks/cost_model.json)"
+    model_text = (
+        "cost model (sweep/cost/model.py, calibrated on a 2-core VM: benchmarks/cost_model.json)"
+    )
+    from_prior = sum(1 for c in costs.values() if c.basis.startswith("the prior"))
+    if from_prior and basis.prior is not None:
+        text += (
+            "; "
+            f"{from_prior} point(s) at the measured run times of the {basis.prior.label} "
+            "(on the machine that ran it)"
         )
+        if not n and any(c.basis == "cost model" for c in costs.values()):
+            text += f"; the other points by the {model_text}"
+    elif not n:
+        text = model_text.replace("cost model", "cost model, no finished runs", 1)
     if campaign.refine is not None and not ref.finished:
         later = refine_rounds(
             campaign,
@@ -337,6 +361,7 @@ def estimate(
             ref.n_runs,
             [*(r[0] for r in runs), *(m[3] for m in basis.measured)],
             workers,
+            {(point_key(run.point.coords), run.seed) for run in expansion},
         )
     elif campaign.refine is None and campaign.precision is not None and not seeds.finished:
         # (with refine: too, the refinement's replay holds the seed rounds: forecast above)

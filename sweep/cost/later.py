@@ -6,21 +6,24 @@ labelled with what it stands on:
 - seeds by precision: each point with finished seeds is forecast from them
   (:func:`nematic_solids.sweep.precision.forecast.expected_seeds`); a point without any takes its
   seeds from the campaign's ``prior:`` (the phase.nc of a finished run of the same campaign) when
-  there is one; a point with neither is *unknown*: it is in the bound, not in the expected value,
-  and the line says how many there are;
+  there is one, at the prior's measured run time there (phase.nc's ``run_time``); a point with
+  neither is *unknown*: it is in the bound, not in the expected value, and the line says how many
+  there are;
 - refinement: the rounds' runs cannot be forecast from the grid's outcomes; with a
-  ``prior:`` the expected total is the prior's run count (the later rounds: what it holds
-  beyond the runs planned so far), without one there is no expected value.
+  ``prior:`` the expected value is the prior's runs beyond the runs planned so far, at their
+  measured run times (a prior without them: its run count at the mean cost of a run), without
+  one there is no expected value.
 
-The run times are the estimate's own (:class:`nematic_solids.sweep.cost.estimate.Basis`: the
-campaign's finished runs, scaled, or the cost model). After each round the estimate is made again
-from the runs finished by then.
+Otherwise the run times are the estimate's own (:class:`nematic_solids.sweep.cost.estimate.Basis`:
+the campaign's finished runs, scaled, or the cost model). After each round the estimate is made
+again from the runs finished by then.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +41,20 @@ class Prior:
     seeds: dict[tuple[tuple[str, str], ...], int]
     total: int
     label: str
+    #: each run's measured wall time in seconds, by (point key, seed) (phase.nc's
+    #: ``run_time``; empty for a phase.nc written before it had one)
+    run_time: dict[tuple[tuple[tuple[str, str], ...], int], float] = field(default_factory=dict)
+
+    @functools.cached_property
+    def _point_times(self) -> dict[tuple[tuple[str, str], ...], float]:
+        times: dict[tuple[tuple[str, str], ...], list[float]] = {}
+        for (key, _), t in self.run_time.items():
+            times.setdefault(key, []).append(t)
+        return {key: float(np.mean(v)) for key, v in times.items()}
+
+    def point_seconds(self, coords: dict[str, Any]) -> float | None:
+        """The mean run time of the prior's runs at a point, if it has any."""
+        return self._point_times.get(point_key(coords))
 
 
 def point_key(coords: dict[str, Any]) -> tuple[tuple[str, str], ...]:
@@ -70,11 +87,20 @@ def load_prior(path: str) -> Prior | str:
             }
             values = {c: ds[c].values for c in axes}
             ran = (status.values != 0).sum(axis=-1)
-            seeds = {}
+            times = (
+                ds["run_time"].load().transpose(*dims, "seed").values if "run_time" in ds else None
+            )
+            seed_values = [int(v) for v in ds["seed"].values]
+            seeds, run_time = {}, {}
             for index in np.ndindex(*ran.shape):
                 at = dict(zip(dims, index, strict=True))
                 coords = {c: values[c][at[d]] for c, d in axes.items()}
-                seeds[point_key(coords)] = int(ran[index])
+                key = point_key(coords)
+                seeds[key] = int(ran[index])
+                if times is not None:
+                    for j, seed in enumerate(seed_values):
+                        if np.isfinite(times[(*index, j)]):
+                            run_time[(key, seed)] = float(times[(*index, j)])
             name = ds.attrs.get("campaign", "?")
             commits = ", ".join(  # short hashes, as git log --oneline shows them
                 c.strip()[:7] + ("+dirty" if c.strip().endswith("+dirty") else "")
@@ -88,10 +114,11 @@ def load_prior(path: str) -> Prior | str:
     label = f"prior: the {total} runs of campaign {name} in {where.parent.name}/{where.name}" + (
         f" (commits {commits})" if commits else ""
     )
-    return Prior(seeds, total, label)
+    return Prior(seeds, total, label, run_time)
 
 
-def _prior(campaign: Campaign) -> tuple[Prior | None, str]:
+def campaign_prior(campaign: Campaign) -> tuple[Prior | None, str]:
+    """The campaign's ``prior:`` read, or ``None`` and why it is not used."""
     if campaign.prior is None:
         return None, ""
     got = load_prior(campaign.prior)
@@ -99,13 +126,21 @@ def _prior(campaign: Campaign) -> tuple[Prior | None, str]:
 
 
 def refine_rounds(
-    campaign: Campaign, current: int, planned: int, per_run: Sequence[float], workers: int
+    campaign: Campaign,
+    current: int,
+    planned: int,
+    per_run: Sequence[float],
+    workers: int,
+    planned_runs: set[tuple[tuple[tuple[str, str], ...], int]] | None = None,
 ) -> LaterRounds | None:
     """An adaptive campaign's rounds after ``current`` (with seeds by precision, the rounds
     that only add seeds too): the bound is every run
-    :func:`~nematic_solids.sweep.refine.plan.run_bound` allows beyond the ``planned`` ones; the
-    expected value the prior's runs beyond them. Each run at the mean cost of ``per_run``; each
-    round ends when its longest run does."""
+    :func:`~nematic_solids.sweep.refine.plan.run_bound` allows beyond the ``planned`` ones, each
+    at the mean cost of ``per_run``; each round ends when its longest run does. The expected
+    value is the prior's runs beyond them: with the prior's measured run times, the runs it
+    holds that are not among ``planned_runs`` ((point key, seed)), at their own times (the
+    later rounds' points are the expensive ones near the boundaries: a mean of the first
+    round's underprices them); without, the prior's run count at the mean cost."""
     from ..refine.plan import run_bound
 
     assert campaign.refine is not None
@@ -121,8 +156,18 @@ def refine_rounds(
     mean, longest = float(np.mean(per_run)), max(per_run)
     cpu = runs * mean
     later = LaterRounds(rounds, runs, cpu, cpu / workers + rounds * longest)
-    prior, note = _prior(campaign)
-    if prior is not None:
+    prior, note = campaign_prior(campaign)
+    if prior is not None and prior.run_time and planned_runs is not None:
+        beyond = [t for key, t in prior.run_time.items() if key not in planned_runs]
+        seconds = float(sum(beyond))
+        later.expected = Expected(
+            len(beyond),
+            seconds,
+            seconds / workers + (rounds * max(beyond) if beyond else 0.0),
+            f"{prior.label}: {prior.total} runs in all, {len(beyond)} of them beyond the "
+            f"runs planned so far, at their measured run times",
+        )
+    elif prior is not None:
         more = max(0, prior.total - planned)
         later.expected = Expected(
             more,
@@ -147,7 +192,7 @@ def precision_rounds(campaign: Campaign, plan: Any, cost: Any, workers: int) -> 
     from ..precision.forecast import expected_seeds
 
     cap = plan.cap
-    prior, note = _prior(campaign)
+    prior, note = campaign_prior(campaign)
     runs = cpu = bound_cpu = longest = biggest = 0.0
     forecast = from_prior = unknown = unknown_runs = 0
     for p, point in enumerate(plan.grid.points):
@@ -165,6 +210,7 @@ def precision_rounds(campaign: Campaign, plan: Any, cost: Any, workers: int) -> 
         elif prior is not None and point_key(point.coords) in prior.seeds:
             more = max(0, min(cap, prior.seeds[point_key(point.coords)]) - planned)
             from_prior += 1
+            seconds = prior.point_seconds(point.coords) or seconds  # its measured times
         else:
             unknown += 1
             unknown_runs += cap - planned

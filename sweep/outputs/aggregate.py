@@ -8,7 +8,8 @@ by the paper's literal rule; lambda_mean; rate_margin_min; plus any other scalar
 writes) the file holds ``X`` over (dims..., seed), NaN where a run is missing or failed,
 and ``X_mean``, ``X_std`` (sample standard deviation, ddof = 1, NaN below two seeds) and
 ``X_count`` over the seeds that succeeded. ``status`` (0 missing, 1 ok, 2 failed, CF flags),
-``reason`` and ``run_id`` (the run file is ``runs/<run_id>.nc``) locate every run.
+``reason`` and ``run_id`` (the run file is ``runs/<run_id>.nc``) locate every run;
+``run_time`` is each run's wall time in seconds (ok and failed runs).
 
 The values come from the per-run records (the scalars the worker copied from each run file),
 so aggregation opens no run file; the records are checked against the files' presence.
@@ -112,6 +113,7 @@ def build_phase(
     reason = np.full(n, "", dtype=object)
     observables = _observable_names(records)
     data = {name: np.full(n, np.nan) for name in observables}
+    run_time = np.full(n, np.nan)
     versions: set[str] = set()
     commits: set[str] = set()
     for i, rid in enumerate(expansion.run_ids):
@@ -120,6 +122,9 @@ def build_phase(
             continue  # missing (or unreadable: the driver redoes it)
         if rec.get("status") != "ok" and rec.get("reason") in RETRYABLE_REASONS:
             continue  # not stored: missing, not failed
+        wall = rec.get("wall_time")
+        if isinstance(wall, (int, float)) and not isinstance(wall, bool):
+            run_time[i] = float(wall)
         if rec.get("status") != "ok":
             status[i] = STATUS_FAILED
             reason[i] = str(rec.get("reason") or "unknown")
@@ -181,6 +186,15 @@ def build_phase(
         dims,
         np.asarray(expansion.run_ids, dtype=str).reshape(shape),
         {"long_name": "run identifier: the run's file is runs/<run_id>.nc"},
+    )
+    ds["run_time"] = xr.Variable(
+        dims,
+        run_time.reshape(shape),
+        {
+            "long_name": "wall time of the run on its worker (an accelerated batch's time "
+            "divided by its seeds); what a prior: of this campaign prices later rounds with",
+            "units": "s",
+        },
     )
     for name, (src, long_name) in observables.items():
         values = data[name].reshape(shape)

@@ -623,6 +623,44 @@ def test_workers_of_a_batch_cluster_and_of_a_scheduler(tmp_path):
     assert "its workers are not known here" in e.where
 
 
+def test_a_prior_with_run_times_prices_the_planned_and_the_later_runs(tmp_path):
+    """A prior whose phase.nc has each run's time: the runs planned now cost the prior's mean
+    time at their point (this campaign has measured none), and the later rounds' expected value
+    is the prior's runs beyond those planned, at their own times (not a mean of round 0's)."""
+    grid = np.linspace(0, 0.8, 9)
+    status = np.zeros((9, 4), dtype=np.int8)
+    status[:, :2] = 1  # 18 runs in all
+    times = np.where(status == 1, 1.0, np.nan)
+    times[grid > 0.3, :2] = 50.0  # the refined points near the boundary are the slow ones
+    times[np.isclose(grid, 0.4), :2] = [10.0, 30.0]  # a grid point: mean 20 s
+    xr.Dataset(
+        {
+            "status": (("alpha_minus_B", "seed"), status),
+            "run_time": (("alpha_minus_B", "seed"), times, {"units": "s"}),
+        },
+        coords={"alpha_minus_B": grid, "seed": np.arange(4)},
+        attrs={"campaign": "r"},
+    ).to_netcdf(tmp_path / "phase.nc")
+    path = tmp_path / "r.yaml"
+    path.write_text(REFINED + "prior: phase.nc\n")
+    campaign = load_campaign(path)
+    e = estimate(campaign, CampaignStore(tmp_path / "results", "r"), load_cores=QUIET)
+    # round 0: 0.0, 0.4, 0.8 with 2 seeds each, at 1 s, 20 s and 50 s
+    assert e.to_do == 6
+    assert e.cpu[0] == pytest.approx(2 * (1.0 + 20.0 + 50.0))
+    assert "3 point(s) at the measured run times of the prior" in flat(" ".join(lines(e)))
+    assert "cost model" not in lines(e)[-1]
+    planned = {0.0: 1.0 * 2, 0.4: 40.0, 0.8: 100.0}
+    total = float(np.nansum(times))
+    assert e.later is not None
+    assert e.later.expected is not None
+    assert e.later.expected.runs == 18 - 6
+    assert e.later.expected.cpu == pytest.approx(total - sum(planned.values()))
+    assert "12 of them beyond the runs planned so far, at their measured run times" in flat(
+        " ".join(lines(e))
+    )
+
+
 def test_a_refinement_expects_the_priors_run_count(tmp_path):
     campaign_text = REFINED
     status = np.zeros((9, 4), dtype=np.int8)

@@ -66,6 +66,8 @@ def test_the_runs_table_has_one_row_per_run_with_every_axis_and_scalar(small):
         assert row.alpha_minus_B == rec["coords"]["alpha_minus_B"]
         assert row.seed == rec["seed"]
         assert row.status == rec["status"]
+        assert row.run_time == rec["wall_time"]  # ok and failed runs: the seconds it took
+        assert row.run_time > 0
         if rec["status"] == "ok":
             assert row.sigma2_S == rec["scalars"]["sigma2_S_final"]
             assert row.t_peak == rec["scalars"]["t_peak"]

@@ -25,19 +25,54 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
+from typing import Literal, overload
 
 import numpy as np
 import xarray as xr
 
+from ..checkpoint import RunState, Schedule
 from ..parameters import Numerics, Parameters
 from ..pde import ActiveNematicPDE
 from ..run_dataset import RunWork, to_dataset
 from ..simulate import ends_non_finite, observe_state, snapshot_fields, snapshot_set
+from ..solver_base import SolverState
+from .etdrk4 import SeedState
 from .run import run_batch
 
 #: what made the files (their ``source`` and ``history`` attributes)
 ENTRY = "nematic_solids.model.accelerated.datasets.batch_datasets"
+
+
+@overload
+def batch_datasets(
+    params: Parameters,
+    numerics: Numerics,
+    seeds: Sequence[int],
+    *,
+    device: str = ...,
+    initial: np.ndarray | None = ...,
+    start: Sequence[RunState] | None = ...,
+    checkpoint: Callable[[int, RunState], None] | None = ...,
+    schedule: Schedule = ...,
+    keep_state: Literal[False] = ...,
+) -> list[xr.Dataset]: ...
+
+
+@overload
+def batch_datasets(
+    params: Parameters,
+    numerics: Numerics,
+    seeds: Sequence[int],
+    *,
+    device: str = ...,
+    initial: np.ndarray | None = ...,
+    start: Sequence[RunState] | None = ...,
+    checkpoint: Callable[[int, RunState], None] | None = ...,
+    schedule: Schedule = ...,
+    keep_state: Literal[True],
+) -> list[tuple[xr.Dataset, RunState | None]]: ...
 
 
 def batch_datasets(
@@ -47,18 +82,82 @@ def batch_datasets(
     *,
     device: str = "cpu",
     initial: np.ndarray | None = None,
-) -> list[xr.Dataset]:
+    start: Sequence[RunState] | None = None,
+    checkpoint: Callable[[int, RunState], None] | None = None,
+    schedule: Schedule = Schedule(),
+    keep_state: bool = False,
+) -> list[xr.Dataset] | list[tuple[xr.Dataset, RunState | None]]:
     """Run the seeds ``seeds`` of one point together on ``device`` (:func:`run_batch`, whose
     checks and errors it shares) and return one Dataset per seed, in the order of ``seeds``
-    (see the module docstring)."""
+    (see the module docstring).
+
+    As :func:`nematic_solids.model.simulate.run` does for one run: ``start`` continues the seeds
+    from their states (one :class:`~nematic_solids.model.checkpoint.RunState` each, at one time;
+    their rows, snapshots, counters and wall time carried on); ``checkpoint(b, state)`` is handed
+    seed ``b``'s state at the saves ``schedule`` makes due (never at the end); with
+    ``keep_state`` each item is ``(Dataset, end state)``, the state None for a failed seed."""
     seeds = tuple(seeds)
     eq = ActiveNematicPDE(params, numerics)  # the host's: the saves' mechanics and transforms
     snap_set = snapshot_set(numerics)
     rows: list[list[dict[str, float]]] = [[] for _ in seeds]
     snaps: list[list[tuple[float, np.ndarray]]] = [[] for _ in seeds]
     save_ffts = [0] * len(seeds)
+    walls = [0.0] * len(seeds)
+    origin = [""] * len(seeds)
+    lineage: list[list[str]] = [[] for _ in seeds]
+    t_start = 0.0
+    if start is not None:
+        for b, state in enumerate(start):
+            rows[b] = [dict(r) for r in state.rows]
+            snaps[b] = [s for s in state.snaps if float(np.round(s[0], 12)) in snap_set]
+            save_ffts[b] = int(state.counters["fft_parts"].get("saves", 0))
+            walls[b], origin[b], lineage[b] = state.wall, state.initial_from, list(state.lineage)
+            t_start = state.t
+    last = [[t_start, time.perf_counter()] for _ in seeds]  # of the last state handed out
+    ends: list[RunState | None] = [None] * len(seeds)
+    clock0 = time.perf_counter()
 
-    def on_save(t: float, fields: np.ndarray, codes: np.ndarray, steps: np.ndarray) -> None:
+    def capture(b: int, t: float, fields: np.ndarray, state: SeedState, share: float) -> RunState:
+        def at(name: str) -> int:
+            return int(np.asarray(getattr(state, name))[b])
+
+        return RunState(
+            t=float(t),
+            fields=fields[b].copy(),
+            solver=SolverState(
+                float(np.asarray(state.h)[b]),
+                np.asarray(state.q_hat[b]).copy(),
+                {
+                    "steps": at("steps"),
+                    "rejected": at("rejected"),
+                    "stage_failures": at("stage_failures"),
+                    "rhs": at("rhs"),
+                    "newton": 0,
+                    "projections": 0,
+                },
+                float(np.asarray(state.margin_min)[b]),
+            ),
+            mechanics={},
+            counters={
+                "fft_count": at("transforms") + save_ffts[b],
+                "fft_parts": {"saves": save_ffts[b]},
+                "spin_iterations": at("spin_iterations"),
+                "cg_iterations": 0,
+            },
+            rows=[dict(r) for r in rows[b]],
+            snaps=list(snaps[b]),
+            parameters=params.to_dict(),
+            numerics=numerics.to_dict(),
+            seed=int(seeds[b]),
+            wall=walls[b] + share,
+            lineage=list(lineage[b]),
+            initial_from=origin[b],
+        )
+
+    def on_save(t: float, fields: np.ndarray, state: SeedState) -> None:
+        codes, steps = np.asarray(state.status), np.asarray(state.steps)
+        final = t >= numerics.t_final - 1e-9 * max(numerics.t_final, 1.0)
+        share = (time.perf_counter() - clock0) / len(seeds)
         for b in range(len(fields)):
             if codes[b] != 0:  # failed before this save: its series ends at the last one
                 continue
@@ -68,8 +167,17 @@ def batch_datasets(
             if float(np.round(t, 12)) in snap_set:
                 snaps[b].append((t, snapshot_fields(eq, fields[b], mech)))
             save_ffts[b] += eq.spectral.fft.count - count
+            if final and keep_state:
+                ends[b] = capture(b, t, fields, state, share)
+            elif not final and checkpoint is not None:
+                now = time.perf_counter()
+                if schedule.due(t - last[b][0], now - last[b][1]):
+                    checkpoint(b, capture(b, t, fields, state, share))
+                    last[b] = [t, time.perf_counter()]
 
-    result = run_batch(params, numerics, seeds, device=device, initial=initial, on_save=on_save)
+    result = run_batch(
+        params, numerics, seeds, device=device, initial=initial, start=start, on_save=on_save
+    )
     share = (result.wall + result.compile) / len(seeds)
     extra = {
         "batch_size": len(seeds),
@@ -119,9 +227,11 @@ def batch_datasets(
             reason=reason,
             detail=detail,
             t_failed=t_failed,
-            wall=share,
+            wall=walls[b] + share,
             entry=ENTRY,
         )
-        ds.attrs["initial_from"] = ""
+        ds.attrs["initial_from"] = origin[b]
         out.append(ds)
+    if keep_state:
+        return [(ds, ends[b] if ds.attrs["status"] == "ok" else None) for b, ds in enumerate(out)]
     return out

@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..accelerated_support import check_supported
+from ..checkpoint import CheckpointError, RunState
 from ..errors import ParameterError
 from ..initial import initial_fields
 from ..parameters import Numerics, Parameters, check_compatible, save_times
@@ -62,6 +63,58 @@ class BatchResult:
     jax_version: str
 
 
+def _check_start(
+    start: Sequence[RunState], params: Parameters, numerics: Numerics, seeds: tuple[int, ...]
+) -> float:
+    """The one time of the states ``start``, each of which must continue its seed's run;
+    else :class:`nematic_solids.model.checkpoint.CheckpointError` or a ``ParameterError``."""
+    if len(start) != len(seeds):
+        raise ParameterError("start", len(start), f"one state per seed ({len(seeds)})")
+    for state, seed in zip(start, seeds, strict=True):
+        why = state.problem(params, numerics, seed)
+        if why is not None:
+            raise CheckpointError(f"the state at t = {state.t:g} does not continue this run: {why}")
+    t = {float(state.t) for state in start}
+    if len(t) != 1:
+        raise ParameterError("start", sorted(t), "states at one time")
+    return t.pop()
+
+
+def _resumed(start: Sequence[RunState], dev: jax.Device) -> SeedState:
+    """The batch's device state from the seeds' saved states (the spectra transformed anew
+    where a state has none: a state saved before its run's first step)."""
+
+    def one(state: RunState) -> tuple:
+        q = np.asarray(state.fields[:2], dtype=np.float64)
+        q_hat = state.solver.q_hat if state.solver.q_hat is not None else np.fft.rfft2(q)
+        stats, c = state.solver.stats, state.counters
+        on_host = int(c["fft_parts"].get("saves", 0))
+        return (
+            q,
+            np.asarray(q_hat, dtype=np.complex128),
+            np.asarray(state.fields[2], dtype=np.float64),
+            state.t,
+            state.solver.h,
+            0,
+            np.nan,
+            state.solver.margin_min,
+            stats["steps"],
+            stats["rejected"],
+            stats["stage_failures"],
+            stats["rhs"],
+            c["spin_iterations"],
+            int(c["fft_count"]) - on_host,
+        )
+
+    rows = [one(state) for state in start]
+    types = [np.float64, np.complex128, np.float64, np.float64, np.float64, np.int32]
+    types += [np.float64, np.float64] + [np.int32] * 6
+    columns: list[np.ndarray] = [
+        np.stack([np.asarray(r[k], dtype=t) for r in rows]) for k, t in enumerate(types)
+    ]
+    return SeedState(*(jax.device_put(a, dev) for a in columns))
+
+
 @functools.lru_cache(maxsize=8)
 def _jitted(c: Constants, ctl: Control, nshell: int, dt: float):
     """The batched, jitted functions of a run (kept per constants, so that JAX's cache of
@@ -88,16 +141,23 @@ def run_batch(
     *,
     device: str = "cpu",
     initial: np.ndarray | None = None,
-    on_save: Callable[[float, np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+    start: Sequence[RunState] | None = None,
+    on_save: Callable[[float, np.ndarray, SeedState], None] | None = None,
 ) -> BatchResult:
     """Run the seeds ``seeds`` of the point (``params``, ``numerics``) together on ``device``
     ("cpu", "gpu", "auto": :func:`nematic_solids.model.accelerated.device.select_device`), from
     their seeded textures or from the given fields ``initial`` (B, 3, N, N) (q1, q2, A per seed, as
     :func:`nematic_solids.model.simulate.run`'s ``initial``); see the module docstring.
 
-    ``on_save(t, fields, status, steps)`` is called at every save time with the seeds' fields
-    (B, 3, N, N) copied to the host, their status codes (0: running) and accepted steps (the
-    host computes what the device does not:
+    ``start``: one :class:`nematic_solids.model.checkpoint.RunState` per seed, all at one time
+    t (a rolling checkpoint or a shorter run's end, of this backend or the compiled one): the
+    seeds continue from their fields, spectra, next step size, counters and smallest margin, and
+    ``times`` and ``series`` hold the saves after t only. From a state of this backend, a batch
+    of the same seeds continues exactly as the batch that never stopped (tested bitwise).
+
+    ``on_save(t, fields, state)`` is called at every save time with the seeds' fields
+    (B, 3, N, N) copied to the host and their :class:`SeedState` on the device (status codes,
+    steps, step size: the host computes what the device does not and takes states:
     :func:`nematic_solids.model.accelerated.datasets.batch_datasets`); its time counts in
     ``wall``."""
     check_compatible(params, numerics)
@@ -112,7 +172,9 @@ def run_batch(
     symbols, c = setup(params, numerics)
     ctl = Control(numerics.tolerance, numerics.dt_max, numerics.adaptive, numerics.error_norm)
     shells, nshell = shell_data(n)
-    start, step, look = _jitted(c, ctl, nshell, float(numerics.dt))
+    begin, step, look = _jitted(c, ctl, nshell, float(numerics.dt))
+    if start is not None and initial is not None:
+        raise ParameterError("initial", "fields", "none with start (states)")
     if initial is None:
         fields0 = np.stack([np.stack(initial_fields(params, n, int(s))) for s in seeds])
     else:
@@ -124,12 +186,15 @@ def run_batch(
     sym = symbols_on(symbols, dev)
     shell_dev = ShellData(*(jax.device_put(a, dev) for a in shells))
     times = save_times(numerics)
+    if start is not None:
+        t_start = _check_start(start, params, numerics, seeds)
+        times = times[times > t_start + 1e-12 * max(1.0, t_start)]
 
     # the first calls compile (XLA, for this device and batch size; nothing when JAX has the
     # code already): an advance to t = 0 takes no step
     t0 = time.perf_counter()
     q0, A0 = jax.device_put(fields0[:, :2], dev), jax.device_put(fields0[:, 2], dev)
-    state: SeedState = start(q0, A0)
+    state: SeedState = begin(q0, A0) if start is None else _resumed(start, dev)
     state = step(state, jax.device_put(jnp.float64(0.0), dev), sym)
     jax.block_until_ready(look(state.q, state.A, shell_dev))
     compile_s = time.perf_counter() - t0
@@ -145,7 +210,7 @@ def run_batch(
         rows.append(values)
         if on_save is not None:
             host = np.concatenate([np.asarray(state.q), np.asarray(state.A)[:, None]], axis=1)
-            on_save(float(t_save), host, codes, np.asarray(state.steps))
+            on_save(float(t_save), host, state)
     jax.block_until_ready(state)
     wall, cpu = time.perf_counter() - t1, time.process_time() - cpu1
 

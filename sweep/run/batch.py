@@ -7,11 +7,12 @@ compiled run's), so that identity, aggregation, resumption and the failure rules
 :func:`group_runs` forms the batches (the driver's queue order kept, only runs of one point
 together); :func:`execute_batch` runs one. A seed that fails (its own reason and time, from the
 device) fails alone: its batch-mates' files are those they have when the batch has no failing
-seed. A seed whose run starts from a state (its own rolling checkpoint, or the end of a finished
-shorter run of its trajectory) is run by the compiled path inside the task, as
-:func:`nematic_solids.sweep.run.task.execute_run` runs it (the accelerated path begins at t = 0);
-its record says ``run_backend: compiled``. A batch's runs write no rolling checkpoint and keep no
-end state (a batch is lost whole, or stored whole seed by seed).
+seed. Checkpoints and continuation are a compiled run's: each seed hands its state to its own
+rolling checkpoint at the times ``store.checkpoint_every`` makes due and keeps its end state in
+its run file (``store.end_state``); seeds that start from states (their checkpoints, or the end
+states of finished shorter runs of their trajectories: of either backend) continue from them,
+those at one time in one batch (a batch advances to common save times), the others from t = 0.
+A batch continued from its own states ends bitwise as the batch that never stopped.
 """
 
 from __future__ import annotations
@@ -75,48 +76,59 @@ def execute_batch(batch: BatchTask) -> list[Record]:
     import_model()
     t0 = time.perf_counter()
     records: dict[int, Record] = {}
-    fresh: list[tuple[int, RunTask, continuation.Start]] = []
+    groups: dict[float | None, list[tuple[int, RunTask, continuation.Start]]] = {}
     for k, task in enumerate(batch.tasks):
         try:
             start = continuation.starting_state(task, _store_of(task))
         except Exception:  # noqa: BLE001 - its parent failed, or a bad file: execute_run says
             records[k] = execute_run(task)
             continue
-        if start.state is not None:
-            log.info("run %s starts from a state: run by the compiled path", task.run_id)
-            records[k] = execute_run(task)
-        else:
-            fresh.append((k, task, start))
-    if fresh:
-        records.update(_run_together(fresh, batch.device, t0))
+        at = None if start.state is None else float(start.state.t)
+        groups.setdefault(at, []).append((k, task, start))
+    for held in groups.values():
+        records.update(_run_together(held, batch.device, t0))
     return [records[k] for k in range(len(batch.tasks))]
 
 
 def _run_together(
-    fresh: list[tuple[int, RunTask, continuation.Start]], device: str, t0: float
+    held: list[tuple[int, RunTask, continuation.Start]], device: str, t0: float
 ) -> dict[int, Record]:
-    """The seeds ``fresh`` (from their seeded textures, or the fields of another campaign's
-    run) advanced as one batch, each stored as its own run."""
+    """The seeds ``held`` (all from t = 0: their seeded textures or another campaign's fields;
+    or all from states at one time) advanced as one batch, each stored as its own run, with
+    its rolling checkpoints on the way and its end state."""
     from nematic_solids.model.accelerated.datasets import batch_datasets
+    from nematic_solids.model.checkpoint import Schedule
     from nematic_solids.model.initial import initial_fields
 
-    first = fresh[0][1]
+    first = held[0][1]
     params = Parameters.from_dict(first.parameters)
     numerics = Numerics.from_dict(first.numerics)
-    seeds = [task.seed for _, task, _ in fresh]
+    seeds = [task.seed for _, task, _ in held]
+    states = [start.state for _, _, start in held if start.state is not None]
     initial = None
-    if any(start.initial is not None for _, _, start in fresh):
+    if not states and any(start.initial is not None for _, _, start in held):
         n = numerics.resolution
         initial = np.stack(
             [
                 start.initial.fields
                 if start.initial is not None
                 else np.stack(initial_fields(params, n, task.seed))
-                for _, task, start in fresh
+                for _, task, start in held
             ]
         )
+    writers = [continuation.Checkpointer(_store_of(task), task.run_id) for _, task, _ in held]
     try:
-        datasets = batch_datasets(params, numerics, seeds, device=device, initial=initial)
+        out = batch_datasets(
+            params,
+            numerics,
+            seeds,
+            device=device,
+            initial=initial,
+            start=states or None,
+            checkpoint=lambda b, state: writers[b](state),
+            schedule=Schedule(first.checkpoint_tau, first.checkpoint_wall),
+            keep_state=True,
+        )
     except Exception as e:  # noqa: BLE001 - the batch's crash fails each of its seeds
         detail, tb = f"{type(e).__name__}: {e}", traceback.format_exc()
         return {
@@ -127,9 +139,9 @@ def _run_together(
                 start,
                 t0,
             )
-            for k, task, start in fresh
+            for k, task, start in held
         }
     return {
-        k: save_result(task, _store_of(task), ds, None, start, t0)
-        for (k, task, start), ds in zip(fresh, datasets, strict=True)
+        k: save_result(task, _store_of(task), ds, end, start, t0)
+        for (k, task, start), (ds, end) in zip(held, out, strict=True)
     }

@@ -8,6 +8,7 @@ extra before the suite: .ci/run)."""
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
@@ -270,3 +271,83 @@ def test_what_is_not_accelerated_yet_is_refused():
     ):
         with pytest.raises(ParameterError, match=name):
             run_batch(PARAMS, numerics, SEEDS)
+
+
+def _same_files(a: xr.Dataset, b: xr.Dataset, *, transforms: bool = True) -> None:
+    """Every variable of two run Datasets bitwise equal (the wall times aside), and the work
+    counted (``transforms=False``: but the transforms, which count a shorter run's snapshot
+    at its end)."""
+    assert set(a.data_vars) == set(b.data_vars)
+    for name in a.data_vars:
+        if name != "wall_time":
+            np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=str(name))
+    keys = ["solver_steps", "solver_rejected", "solver_spin_iterations", "status"]
+    for key in [*keys, "fft_count"] if transforms else keys:
+        assert a.attrs[key] == b.attrs[key], key
+
+
+def test_a_batch_continued_from_its_checkpoints_equals_the_batch_that_never_stopped(tmp_path):
+    """States handed out at t = 10 (written to netCDF and read back, as a campaign's rolling
+    checkpoints are) continue the same batch to t = 20 bitwise: every series, snapshot,
+    scalar and counter of each seed's file; the end states too. A longer run continues a
+    finished shorter one's end state the same way."""
+    from nematic_solids.model.checkpoint import RunState, Schedule, load
+
+    states: dict[int, RunState] = {}
+
+    def keep(b, state):
+        path = tmp_path / f"seed{b}.nc"
+        state.to_dataset().to_netcdf(path)
+        states[b] = load(path)
+
+    whole = batch_datasets(
+        PARAMS, NUMERICS, SEEDS, checkpoint=keep, schedule=Schedule(tau=10.0), keep_state=True
+    )
+    assert sorted(states) == [0, 1]
+    assert all(s.t == 10.0 for s in states.values())
+    again = batch_datasets(PARAMS, NUMERICS, SEEDS, start=[states[0], states[1]], keep_state=True)
+    for (ds, end), (ref, ref_end) in zip(again, whole, strict=True):
+        _same_files(ds, ref)
+        assert end is not None
+        assert ref_end is not None
+        np.testing.assert_array_equal(end.fields, ref_end.fields)
+        np.testing.assert_array_equal(end.solver.q_hat, ref_end.solver.q_hat)
+        assert end.solver.h == ref_end.solver.h
+    # t_final 10 -> 20: the shorter batch's end states continue to the longer one's end
+    short = dataclasses.replace(NUMERICS, t_final=10.0)
+    ends = [end for _, end in batch_datasets(PARAMS, short, SEEDS, keep_state=True) if end]
+    assert len(ends) == len(SEEDS)
+    longer = batch_datasets(PARAMS, NUMERICS, SEEDS, start=ends)
+    for ds, (ref, _) in zip(longer, whole, strict=True):
+        _same_files(ds, ref, transforms=False)
+        assert ds.attrs["fft_count"] > ref.attrs["fft_count"]  # the short run's end snapshot
+
+
+def test_a_batch_continues_a_compiled_runs_state_within_the_tolerance(runs):
+    """A state of the compiled path (simulate.run's checkpoint at t = 10) continued by the
+    accelerated path ends within the backends' tolerance of the compiled run to t = 20."""
+    from nematic_solids.model.checkpoint import RunState, Schedule
+
+    states: list[RunState] = []
+    run(PARAMS, NUMERICS, SEEDS[0], checkpoint=states.append, schedule=Schedule(tau=10.0))
+    assert [s.t for s in states] == [10.0]
+    (ds,) = batch_datasets(PARAMS, NUMERICS, SEEDS[:1], start=states)
+    ref = runs.reference[0]
+    assert ds.attrs["solver_steps"] == ref.attrs["solver_steps"]
+    for name in ("sigma2_S", "mean_S", "lambda"):
+        want, have = ref[name].values, ds[name].values
+        finite = np.isfinite(want)
+        assert np.array_equal(finite, np.isfinite(have)), name
+        scale = np.abs(want[finite]).max()
+        assert np.abs(have[finite] - want[finite]).max() <= 1e-10 * scale, name
+
+
+def test_a_state_that_does_not_continue_the_run_is_refused(runs):
+    from nematic_solids.model.checkpoint import CheckpointError, RunState, Schedule
+
+    states: list[RunState] = []
+    run(PARAMS, NUMERICS, SEEDS[0], checkpoint=states.append, schedule=Schedule(tau=10.0))
+    with pytest.raises(CheckpointError, match="seed 0's state, not seed 1's"):
+        run_batch(PARAMS, NUMERICS, (1,), start=states)
+    with pytest.raises(ParameterError, match="one state per seed"):
+        run_batch(PARAMS, NUMERICS, SEEDS, start=states)

@@ -184,22 +184,84 @@ def test_a_failing_seed_fails_alone(tmp_path, monkeypatch):
         np.testing.assert_allclose(ds["sigma2_S"].values, together, rtol=1e-12, atol=0)
 
 
-def test_a_run_that_continues_a_state_is_run_by_the_compiled_path(tmp_path):
-    """t_final grows 5 -> 10 in a campaign whose runs were compiled with their end states: the
-    batch task continues each from its end state on the compiled path (the accelerated path
-    begins at t = 0), and the result equals a compiled campaign run to 10 at once."""
-    first = write(tmp_path, "grow", execution="", t_final=5.0)
-    run_in_process(first, tmp_path / "results")
-    store, summary = run_in_process(write(tmp_path, "grow", t_final=10.0), tmp_path / "results")
+def test_a_longer_batched_campaign_continues_its_runs_end_states(tmp_path):
+    """t_final grows 5 -> 10: each batch continues its seeds from the end states their runs to
+    5 keep, on the device, and ends bitwise as the batched campaign run to 10 at once (the
+    same batches); from the compiled runs' end states, within the backends' tolerance."""
+    run_in_process(write(tmp_path, "grow", t_final=5.0), tmp_path / "results")
+    store, summary = run_in_process(write(tmp_path, "grow"), tmp_path / "results")
     assert summary.ok == 6
-    whole, _ = run_in_process(write(tmp_path, "whole", execution=""), tmp_path / "results")
+    whole, _ = run_in_process(write(tmp_path, "whole"), tmp_path / "results")
     ids = [p.stem for p in whole.runs_dir.glob("*.nc")]
     assert len(ids) == 6
     for rid in ids:  # the runs to 10 (the folder also holds the runs to 5 they continue)
         with xr.open_dataset(store.nc_path(rid)) as ds, xr.open_dataset(whole.nc_path(rid)) as ref:
-            assert ds.attrs["run_backend"] == "compiled"
+            assert ds.attrs["run_backend"] == "accelerated"
             assert ds.attrs["continued_from"] != ""
-            np.testing.assert_array_equal(ds["sigma2_S"].values, ref["sigma2_S"].values)
+            assert ds.attrs["started_at"] == 5.0
+            for name in ("sigma2_S", "lambda", "mean_S", "q1"):
+                np.testing.assert_array_equal(ds[name].values, ref[name].values)
+    run_in_process(write(tmp_path, "mixed", execution="", t_final=5.0), tmp_path / "results")
+    mixed, _ = run_in_process(write(tmp_path, "mixed"), tmp_path / "results")
+    for rid in ids:  # from the compiled path's end states
+        with xr.open_dataset(mixed.nc_path(rid)) as ds, xr.open_dataset(whole.nc_path(rid)) as ref:
+            assert ds.attrs["run_backend"] == "accelerated"
+            assert ds.attrs["started_at"] == 5.0
+            want, have = ref["sigma2_S"].values, ds["sigma2_S"].values
+            assert np.abs(have - want).max() <= 1e-10 * np.abs(want).max()
+
+
+def test_a_batch_goes_on_from_its_seeds_rolling_checkpoints(tmp_path):
+    """A batch lost after its checkpoints at t = 5 (their files are left, no run file, no
+    record) goes on from them when it runs again: the seeds' files are bitwise those of the
+    batch that never stopped, and say so (started_at, lineage); the checkpoints are removed."""
+    from nematic_solids.model.accelerated.datasets import batch_datasets
+    from nematic_solids.model.checkpoint import Schedule
+    from nematic_solids.model.parameters import Numerics, Parameters
+    from nematic_solids.sweep.run.continuation import Checkpointer, checkpoint_path
+
+    path = write(tmp_path, "ck")
+    expansion = expand(load_campaign(path))
+    campaign = expansion.campaign
+    store = CampaignStore(tmp_path / "results", "ck")
+    store.ensure()
+    runs = [expansion.run(i) for i in range(len(expansion))]
+    held = [r for r in runs if r.coords["alpha_minus_B"] == 1.0 and r.seed in (0, 1)]
+    tasks = tuple(RunTask.from_spec(r, store, campaign.name, campaign.store) for r in held)
+    (ref, _), (ref1, _) = execute_batch_reference(tasks)
+    writers = [Checkpointer(store, t.run_id) for t in tasks]
+    batch_datasets(  # the lost batch: its checkpoints at t = 5 written, then it is gone
+        Parameters.from_dict(tasks[0].parameters),
+        Numerics.from_dict(tasks[0].numerics),
+        [t.seed for t in tasks],
+        device="cpu",
+        checkpoint=lambda b, state: writers[b](state) if state.t == 5.0 else None,
+        schedule=Schedule(tau=5.0),
+    )
+    assert all(checkpoint_path(store, t.run_id).exists() for t in tasks)
+    records = execute_batch(BatchTask(tasks, "cpu"))
+    assert [r["status"] for r in records] == ["ok", "ok"]
+    for task, want in zip(tasks, (ref, ref1), strict=True):
+        assert not checkpoint_path(store, task.run_id).exists()
+        with xr.open_dataset(store.nc_path(task.run_id)) as ds:
+            assert ds.attrs["started_at"] == 5.0
+            assert "checkpoint@5" in str(ds.attrs["lineage"])
+            for name in ("sigma2_S", "lambda", "A"):
+                np.testing.assert_array_equal(ds[name].values, want[name].values)
+
+
+def execute_batch_reference(tasks: tuple[RunTask, ...]):
+    """The batch of ``tasks`` run whole, without a campaign (the reference Datasets)."""
+    from nematic_solids.model.accelerated.datasets import batch_datasets
+    from nematic_solids.model.parameters import Numerics, Parameters
+
+    return batch_datasets(
+        Parameters.from_dict(tasks[0].parameters),
+        Numerics.from_dict(tasks[0].numerics),
+        [t.seed for t in tasks],
+        device="cpu",
+        keep_state=True,
+    )
 
 
 def test_a_lost_batch_result_runs_its_seeds_again(tmp_path, monkeypatch):

@@ -30,6 +30,7 @@ current round plus the seeds each point is expected to need
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import math
 import os
@@ -168,9 +169,15 @@ class Basis:
             n = len(times)
             return est, est * lo, est * hi, f"its {n} finished run{'s' if n > 1 else ''}"
         known = self.prior.point_seconds(point.coords) if self.prior is not None else None
-        if known is not None:
+        if known is not None and self.prior is not None:
             lo, hi = self.seed_spread or MODEL_SPREAD
-            return known, known * lo, known * hi, "the prior's measured runs there"
+            why = "the prior's measured runs there"
+            grid = self.prior.resolution.get(point_key(point.coords))
+            n = point.numerics.resolution
+            if grid is not None and grid != n:  # measured on another grid: scaled
+                known *= model / model_seconds(dataclasses.replace(point.numerics, resolution=grid))
+                why += f" on {grid}^2, scaled to {n}^2 by the cost model"
+            return known, known * lo, known * hi, why
         ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
         if ratios:
             med = float(np.median(ratios))

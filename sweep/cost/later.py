@@ -44,6 +44,8 @@ class Prior:
     #: each run's measured wall time in seconds, by (point key, seed) (phase.nc's
     #: ``run_time``; empty for a phase.nc written before it had one)
     run_time: dict[tuple[tuple[tuple[str, str], ...], int], float] = field(default_factory=dict)
+    #: each point's grid (phase.nc's ``resolution`` variable, or its ``num_resolution``)
+    resolution: dict[tuple[tuple[str, str], ...], int] = field(default_factory=dict)
 
     @functools.cached_property
     def _point_times(self) -> dict[tuple[tuple[str, str], ...], float]:
@@ -91,12 +93,18 @@ def load_prior(path: str) -> Prior | str:
                 ds["run_time"].load().transpose(*dims, "seed").values if "run_time" in ds else None
             )
             seed_values = [int(v) for v in ds["seed"].values]
-            seeds, run_time = {}, {}
+            grids = ds["resolution"].load().transpose(*dims).values if "resolution" in ds else None
+            fixed = ds.attrs.get("num_resolution")
+            seeds, run_time, resolution = {}, {}, {}
             for index in np.ndindex(*ran.shape):
                 at = dict(zip(dims, index, strict=True))
                 coords = {c: values[c][at[d]] for c, d in axes.items()}
                 key = point_key(coords)
                 seeds[key] = int(ran[index])
+                if grids is not None:
+                    resolution[key] = int(grids[index])
+                elif isinstance(fixed, (int, np.integer)):
+                    resolution[key] = int(fixed)
                 if times is not None:
                     for j, seed in enumerate(seed_values):
                         if np.isfinite(times[(*index, j)]):
@@ -114,7 +122,7 @@ def load_prior(path: str) -> Prior | str:
     label = f"prior: the {total} runs of campaign {name} in {where.parent.name}/{where.name}" + (
         f" (commits {commits})" if commits else ""
     )
-    return Prior(seeds, total, label, run_time)
+    return Prior(seeds, total, label, run_time, resolution)
 
 
 def campaign_prior(campaign: Campaign) -> tuple[Prior | None, str]:

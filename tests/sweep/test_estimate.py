@@ -661,6 +661,31 @@ def test_a_prior_with_run_times_prices_the_planned_and_the_later_runs(tmp_path):
     )
 
 
+def test_a_prior_measured_on_another_grid_is_scaled_by_the_cost_model(tmp_path):
+    """The prior ran on 16^2 (its num_resolution), the campaign runs on 32^2: a planned run
+    costs the prior's time there times the cost model's ratio of the two grids."""
+    grid = np.linspace(0, 0.8, 9)
+    status = np.zeros((9, 4), dtype=np.int8)
+    status[:, :2] = 1
+    xr.Dataset(
+        {
+            "status": (("alpha_minus_B", "seed"), status),
+            "run_time": (("alpha_minus_B", "seed"), np.where(status == 1, 3.0, np.nan)),
+        },
+        coords={"alpha_minus_B": grid, "seed": np.arange(4)},
+        attrs={"campaign": "r", "num_resolution": 16},
+    ).to_netcdf(tmp_path / "phase.nc")
+    path = tmp_path / "r.yaml"
+    path.write_text(REFINED + "prior: phase.nc\n")
+    e = estimate(load_campaign(path), CampaignStore(tmp_path / "results", "r"), load_cores=QUIET)
+    ratio = model_seconds(Numerics.from_dict({"resolution": 32, "t_final": 10})) / model_seconds(
+        Numerics.from_dict({"resolution": 16, "t_final": 10})
+    )
+    assert ratio > 1.1  # (small grids: per-step overheads dominate the cost model)
+    assert e.cpu[0] == pytest.approx(6 * 3.0 * ratio)
+    assert "on 16^2, scaled to 32^2 by the cost model" in flat(" ".join(lines(e)))
+
+
 def test_a_refinement_expects_the_priors_run_count(tmp_path):
     campaign_text = REFINED
     status = np.zeros((9, 4), dtype=np.int8)

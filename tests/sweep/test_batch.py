@@ -133,6 +133,8 @@ def test_a_batched_campaign_equals_the_per_seed_campaign(tmp_path):
         assert set(a.data_vars) == set(b.data_vars)
         compared = 0
         for name in a.data_vars:
+            if name == "run_time":  # the runs' wall times
+                continue
             x, y = a[name].values, b[name].values
             assert x.shape == y.shape, name
             if x.dtype.kind != "f":

@@ -65,12 +65,37 @@ def transform_seconds(n: int, batch: int, device: str) -> float:
     return float(np.median(times)) / (2 * batch * 2)
 
 
+def fftw_transform_seconds(n: int) -> float:
+    """Seconds of one real 2-D transform of an n x n field on the compiled path: the mean of a
+    forward and an inverse (FFTW's new-array execute on aligned arrays, as the compiled code
+    runs them; benchmarks/bench_floor.py's measurement), median of 7 batches."""
+    from nematic_solids.model.compiled import fftw as fx
+
+    pf, pi = fx.plans(n)
+    a = fx.aligned_empty((n, n), np.float64)
+    a[...] = np.random.default_rng(0).standard_normal((n, n))
+    b = fx.aligned_empty((n, n // 2 + 1), np.complex128)
+    half = fx.aligned_half(n)
+    reps = max(5, int(2e6 / n**2))
+    times = []
+    for _ in range(7):
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fx.rfft2(pf, a, b)
+            fx.irfft2_via(pi, b, a, half)
+        times.append((time.perf_counter() - t0) / (2 * reps))
+    return float(np.median(times))
+
+
 def compiled_runs(params: Parameters, numerics: Numerics, seeds: range) -> dict:
-    """The compiled path: each seed a nematic_solids.model.simulate.run, one after another."""
+    """The compiled path: each seed a nematic_solids.model.simulate.run, one after another; its
+    transform floor: every transform counted (the saves' too) x one FFTW transform's time."""
     run(params, numerics.replace(t_final=1.0, save_every=1.0), 0)  # kernels loaded, plans made
     wall0, cpu0 = time.perf_counter(), time.process_time()
     datasets = [run(params, numerics, seed) for seed in seeds]
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    per_transform = fftw_transform_seconds(numerics.resolution)
+    every = sum(int(ds.attrs["fft_count"]) for ds in datasets)
     steps = [int(ds.attrs["solver_steps"]) for ds in datasets]
     ffts = [int(ds.attrs["fft_count"]) - int(ds.attrs["fft_saves"]) for ds in datasets]
     return {
@@ -84,6 +109,8 @@ def compiled_runs(params: Parameters, numerics: Numerics, seeds: range) -> dict:
             "transforms_per_step": float(np.sum(ffts) / np.sum(steps)),
             "runs_per_hour": len(seeds) * 3600.0 / wall,
             "runs_per_cpu_hour": len(seeds) * 3600.0 / cpu,
+            "transform_s": per_transform,
+            "wall_over_floor": wall / (every * per_transform),
         },
     }
 
@@ -109,17 +136,48 @@ def main() -> None:
     ap.add_argument("--t-final", type=float, default=30.0)
     ap.add_argument("--amb", type=float, default=1.0, help="alpha - B")
     ap.add_argument("--no-compiled", action="store_true", help="skip today's compiled path")
+    ap.add_argument(
+        "--no-accelerated",
+        action="store_true",
+        help="skip the accelerated path (to time the compiled one as a process of its own)",
+    )
     ap.add_argument("--out", default=str(HERE / "bench_device.json"))
     args = ap.parse_args()
     import jax
 
     dev = select_device(args.device)  # DeviceUnavailable here, before any run
     params = Parameters.from_dict({"alpha_minus_B": args.amb, "noise_modes": 16})
-    rows = []
+    rows: list[dict] = []
+
+    def write(rows: list[dict]) -> None:
+        """The JSON, after every row: a long benchmark keeps what it measured."""
+        out = {
+            "benchmark": "bench_device",
+            "jax_version": jax.__version__,
+            "device": describe(dev),
+            "machine": platform.machine(),
+            "cpu_count": os.cpu_count(),
+            "loadavg_at_end": os.getloadavg(),
+            "parameters": params.to_dict(),
+            "rows": rows,
+        }
+        Path(args.out).write_text(json.dumps(out, indent=1, default=str))
+
     for n in (int(s) for s in args.sizes.split(",")):
         numerics = Numerics(resolution=n, mechanics="linear", t_final=args.t_final)
         for batch in (int(b) for b in args.batch.split(",")):
             seeds = range(batch)
+            if args.no_accelerated:
+                compiled = compiled_runs(params, numerics, seeds)
+                rows.append({"N": n, "B": batch, "t_final": args.t_final, **compiled["row"]})
+                c = compiled["row"]
+                print(
+                    f"N={n:4d} B={batch:3d} compiled: {c['wall_s']:7.2f} s, "
+                    f"{c['runs_per_hour']:9.0f} runs/h, wall/floor {c['wall_over_floor']:.1f}",
+                    flush=True,
+                )
+                write(rows)
+                continue
             result = run_batch(params, numerics, seeds, device=args.device)
             steps = result.work["steps"]
             per_transform = transform_seconds(n, batch, args.device)
@@ -161,24 +219,14 @@ def main() -> None:
                     f" | compiled: {c['wall_s']:7.2f} s (cpu {c['cpu_s']:.2f} s) "
                     f"{c['runs_per_hour']:9.0f} runs/h, {c['runs_per_cpu_hour']:9.0f} runs/cpu-h, "
                     f"{c['steps_per_seed']:.0f} steps, {c['transforms_per_step']:.1f} "
-                    f"transforms/step | agreement {row['agreement_with_cpu']:.1e}"
+                    f"transforms/step, wall/floor {c['wall_over_floor']:.1f} | agreement "
+                    f"{row['agreement_with_cpu']:.1e}"
                     if c
                     else ""
                 ),
                 flush=True,
             )
-            out = {
-                "benchmark": "bench_device",
-                "jax_version": jax.__version__,
-                "device": describe(dev),
-                "machine": platform.machine(),
-                "cpu_count": os.cpu_count(),
-                "loadavg_at_end": os.getloadavg(),
-                "parameters": params.to_dict(),
-                "rows": rows,
-            }
-            # written after every row: a long benchmark keeps what it measured
-            Path(args.out).write_text(json.dumps(out, indent=1, default=str))
+            write(rows)
     print(f"wrote {args.out}")
 
 

@@ -17,22 +17,17 @@ A batch continued from its own states ends bitwise as the batch that never stopp
 
 from __future__ import annotations
 
-import logging
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from nematic_solids.model.parameters import Numerics, Parameters
 
-from ..store import CampaignStore, Record
+from ..store import Record
 from . import continuation
-from .task import RunTask, execute_run, failure_record, finish_record, save_result
-
-log = logging.getLogger(__name__)
+from .task import RunTask, crash_record, execute_run, finish_record, save_result, task_store
 
 
 @dataclass(frozen=True)
@@ -60,11 +55,6 @@ def group_runs(
     return out
 
 
-def _store_of(task: RunTask) -> CampaignStore:
-    runs = Path(task.runs_dir)
-    return CampaignStore(runs.parent.parent, runs.parent.name)
-
-
 def execute_batch(batch: BatchTask) -> list[Record]:
     """Run a batch on a worker; return the records of its runs in the order of
     ``batch.tasks`` (see the module docstring). A batch that raises (the device, a bug) gives
@@ -79,7 +69,7 @@ def execute_batch(batch: BatchTask) -> list[Record]:
     groups: dict[float | None, list[tuple[int, RunTask, continuation.Start]]] = {}
     for k, task in enumerate(batch.tasks):
         try:
-            start = continuation.starting_state(task, _store_of(task))
+            start = continuation.starting_state(task, task_store(task))
         except Exception:  # noqa: BLE001 - its parent failed, or a bad file: execute_run says
             records[k] = execute_run(task)
             continue
@@ -116,7 +106,7 @@ def _run_together(
                 for _, task, start in held
             ]
         )
-    writers = [continuation.Checkpointer(_store_of(task), task.run_id) for _, task, _ in held]
+    writers = [continuation.Checkpointer(task_store(task), task.run_id) for _, task, _ in held]
     try:
         out = batch_datasets(
             params,
@@ -130,18 +120,13 @@ def _run_together(
             keep_state=True,
         )
     except Exception as e:  # noqa: BLE001 - the batch's crash fails each of its seeds
-        detail, tb = f"{type(e).__name__}: {e}", traceback.format_exc()
         return {
             k: finish_record(
-                task,
-                _store_of(task),
-                failure_record(task, "exception", detail, tb, time.perf_counter() - t0),
-                start,
-                t0,
+                task, task_store(task), crash_record(task, "exception", e, t0), start, t0
             )
             for k, task, start in held
         }
     return {
-        k: save_result(task, _store_of(task), ds, end, start, t0)
+        k: save_result(task, task_store(task), ds, end, start, t0)
         for (k, task, start), (ds, end) in zip(held, out, strict=True)
     }

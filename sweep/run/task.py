@@ -165,6 +165,19 @@ def failure_record(task: RunTask, reason: str, detail: str, tb: str, wall: float
     }
 
 
+def crash_record(task: RunTask, reason: str, error: Exception, t0: float) -> Record:
+    """The failure record of ``error``, being handled (its traceback), for a run started at
+    ``t0`` (``time.perf_counter``)."""
+    detail = f"{type(error).__name__}: {error}"
+    return failure_record(task, reason, detail, traceback.format_exc(), time.perf_counter() - t0)
+
+
+def task_store(task: RunTask) -> CampaignStore:
+    """The results folder a task writes into (its ``runs_dir`` is ``<results>/<name>/runs``)."""
+    runs = Path(task.runs_dir)
+    return CampaignStore(runs.parent.parent, runs.parent.name)
+
+
 #: ``status`` of the record :func:`execute_run` returns (and does not write) when the
 #: result could not be stored: the run is not a failure, it stays pending.
 UNSAVED = "unsaved"
@@ -259,7 +272,7 @@ def execute_run(task: RunTask) -> Record:
     from nematic_solids.model.simulate import run as simulate
 
     restore_heap_reuse()
-    store = CampaignStore(Path(task.runs_dir).parent.parent, Path(task.runs_dir).parent.name)
+    store = task_store(task)
     t0 = time.perf_counter()
     start = continuation.Start()
     end_state: RunState | None = None
@@ -278,13 +291,7 @@ def execute_run(task: RunTask) -> Record:
     except continuation.ParentFailed as e:  # redone with its parent (RETRYABLE_REASONS)
         record = failure_record(task, "parent_failed", str(e), "", time.perf_counter() - t0)
     except Exception as e:  # noqa: BLE001 - any crash is recorded, the campaign goes on
-        record = failure_record(
-            task,
-            "exception",
-            f"{type(e).__name__}: {e}",
-            traceback.format_exc(),
-            time.perf_counter() - t0,
-        )
+        record = crash_record(task, "exception", e, t0)
     else:
         return save_result(task, store, ds, end_state, start, t0)
     return finish_record(task, store, record, start, t0)
@@ -321,13 +328,7 @@ def save_result(
     except StorageError as e:
         return _unsaved(task, e, ds, encoding, time.perf_counter() - t0)
     except Exception as e:  # noqa: BLE001 - a bug, not the storage: recorded as failed
-        record = failure_record(
-            task,
-            "write_error",
-            f"{type(e).__name__}: {e}",
-            traceback.format_exc(),
-            time.perf_counter() - t0,
-        )
+        record = crash_record(task, "write_error", e, t0)
     return finish_record(task, store, record, start, t0)
 
 

@@ -4,10 +4,10 @@ lines of ``model/compiled/entry_points.txt`` and back.
 An entry point (:class:`EntryPoint`) is a kernel's module and name, its numba argument types
 as text (:func:`type_text`, read back by :func:`read_types`: numba's cache keys a compiled
 signature by these types) and what compiling it took when the list was made.
-``scripts/kernel_entry_points.py`` makes the list from a tiny finite and a tiny linear run
-(:func:`nematic_solids.model.warmup.warm_up`); ``python -m nematic_solids.model.warmup`` reads it
-(:func:`read_entry_points`) and compiles it in parallel processes
-(:func:`nematic_solids.model.warmup.compile_in_parallel`, each entry by
+``scripts/kernel_entry_points.py`` makes the list from a tiny finite and two tiny linear runs
+(one under a protocol; :func:`nematic_solids.model.warmup.warm_up`);
+``python -m nematic_solids.model.warmup`` reads it (:func:`read_entry_points`) and compiles it
+in parallel processes (:func:`nematic_solids.model.warmup.compile_in_parallel`, each entry by
 :func:`compile_entry_point`).
 """
 

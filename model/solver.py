@@ -58,10 +58,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from .compiled import linear_step
 from .pde import ActiveNematicPDE
 
 # ETDSolver is imported from here too (nematic_solids.model.simulate)
 from .solver_base import Array, ETDSolver
+from .split import SpectralSplit
 
 
 class ETDRK2Solver(ETDSolver):
@@ -127,9 +129,22 @@ class ETDRK4Solver(ETDSolver):
     def __init__(self, pde: ActiveNematicPDE, **kwargs):
         super().__init__(pde, **kwargs)
         self._weight_cache: dict[float, tuple[Array, Array, dict[str, tuple[Array, ...]]]] = {}
+        #: the split where the whole step runs compiled
+        #: (:mod:`nematic_solids.model.compiled.linear_step`: linear mechanics compiled, no
+        #: protocol, whose constants would change between the stages); else None
+        split = self._split
+        self._compiled_split = (
+            split
+            if isinstance(split, SpectralSplit)
+            and split.compiled_data is not None
+            and not pde.protocol
+            else None
+        )
 
     def step(self, u: Array, t: float, h: float) -> tuple[Array, float]:
         """One Krogstad ETDRK4 step; returns (new state, error estimate)."""
+        if self._compiled_split is not None:
+            return self._compiled_step(u, t, h, self._compiled_split)
         g = self.pde.spectral
         p = self.pde.params
         self._checkpointed = False
@@ -237,6 +252,34 @@ class ETDRK4Solver(ETDSolver):
         return self._finish(
             u, q_hat, new_q_hat, new_A, err_q, err_A, (new_d, new_F), (h / 3.0) * (G[2] - G[1])
         )
+
+    def _compiled_step(
+        self, u: Array, t: float, h: float, split: SpectralSplit
+    ) -> tuple[Array, float]:
+        """:meth:`step` by its compiled twin
+        (:func:`nematic_solids.model.compiled.linear_step.krogstad_linear_step`: the same
+        kernels in the same order, so the same bits); the well-posedness check of the start
+        comes first, the spin solves are booked in the order of the stages."""
+        p, mech = self.pde.params, split.mech
+        self._checkpointed = False
+        u = np.ascontiguousarray(u)
+        q_hat = np.ascontiguousarray(self._spectrum(u[:2]))
+        E, E2, wq = self._krogstad_weights(h)
+        self.check_wellposed(u, t)
+        new, new_q_hat, Nq_a, Nq_b, NA_a, NA_b, w_ab, its, ok, omega, nfft = (
+            linear_step.krogstad_linear_step(
+                u, q_hat, h, E, E2, wq["a"], wq["b"], wq["c"], wq["new"],
+                p.zeta, p.s, p.tau, mech.zero_hat, split.compiled_data,
+            )
+        )  # fmt: skip
+        self.pde.spectral.fft.count += nfft
+        self.stats["rhs"] += 4
+        for i, offset in enumerate((0.0, 0.5 * h, 0.5 * h, h)):
+            mech.accept_spin(omega, int(its[i]), bool(ok[i]), t + offset)
+        self._checkpoint()
+        err_q = h * wq["new"][1] * (Nq_b - Nq_a)  # as in step
+        err_A = h * w_ab * (NA_b - NA_a)
+        return self._finish(u, q_hat, new_q_hat, new[2], err_q, err_A, new=new)
 
     @staticmethod
     def _weights_from(

@@ -228,6 +228,7 @@ class ETDSolver(SolverBase):
         err_A: Array,
         new_disp: tuple[Array, Array | None] | None = None,
         err_grad: Array | None = None,
+        new: Array | None = None,
     ) -> tuple[Array, float]:
         """The new state, its spectra remembered for the next step, and the error estimate
         of ``err_q`` (spectra) and ``err_A`` (real space): the largest pointwise error
@@ -235,9 +236,11 @@ class ETDSolver(SolverBase):
         over the three fields. With the integrated displacement, ``new_disp`` (spectrum and
         deformation gradient) is kept for the projection of an accepted step, and the
         displacement's error counts by its strain ``err_grad`` (real space), each component of
-        :math:`\\nabla e_u` like a field."""
+        :math:`\\nabla e_u` like a field. ``new``: the new state if the caller has it (then
+        ``new_A`` is its last field)."""
         g = self.pde.spectral
-        new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
+        if new is None:
+            new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
         self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
         if self.error_norm == "max":
             err = max(float(np.abs(g.inverse(err_q)).max()), float(np.abs(err_A).max()))

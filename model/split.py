@@ -89,6 +89,12 @@ class SpectralSplit:
         #: the mechanics' parameter version the compiled data holds (a protocol changes it)
         self._version = mech.parameter_version
 
+    @property
+    def compiled_data(self) -> linear_rhs.LinearRHS | None:
+        """The compiled right-hand side's fixed data (None where the mechanics runs the numpy
+        reference): what :mod:`nematic_solids.model.compiled.linear_step` takes."""
+        return self._rhs_data
+
     def _update(self) -> None:
         """Put a protocol's current constants into the compiled data."""
         mech, p = self.mech, self.pde.params

@@ -67,13 +67,20 @@ def warm_numerics(numerics: Numerics) -> Numerics:
 
 def warm_up(kinds: Iterable[tuple[Parameters, Numerics]] | None = None) -> dict[str, Any]:
     """Run a tiny simulation for each ``(parameters, numerics)`` (default: the model's
-    defaults with finite and with linear mechanics) so that every kernel they use is
-    compiled (or loaded from the cache). Returns the wall time and :func:`compile_counts`.
-    Never raises for a failed tiny run (the real run reports its own failure)."""
+    defaults with finite and with linear mechanics, and linear mechanics under a protocol,
+    whose ETDRK4 step calls the right-hand side stage by stage instead of the compiled whole
+    step) so that every kernel they use is compiled (or loaded from the cache). Returns the
+    wall time and :func:`compile_counts`. Never raises for a failed tiny run (the real run
+    reports its own failure)."""
     from .simulate import run
 
     if kinds is None:
-        kinds = [(Parameters(), Numerics(mechanics=m)) for m in ("finite", "linear")]
+        ramp = {"chi": {"ramp": {"start": 0.0, "duration": 1.0, "from": 10.0, "to": 5.0}}}
+        kinds = [
+            (Parameters(), Numerics(mechanics="finite")),
+            (Parameters(), Numerics(mechanics="linear")),
+            (Parameters.from_dict({"protocol": ramp}), Numerics(mechanics="linear")),
+        ]
     t0 = time.perf_counter()
     errors = []
     for params, numerics in kinds:

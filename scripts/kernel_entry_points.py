@@ -3,10 +3,11 @@
 
     .venv/bin/python scripts/kernel_entry_points.py     # ~1.5 min: compiles every kernel once
 
-Runs :func:`nematic_solids.model.warmup.warm_up` (a tiny finite and a tiny linear run) in this
-process with an empty numba cache (a temporary ``NUMBA_CACHE_DIR``, removed afterwards) and lists
-every signature with which Python called a compiled function (numba's "numba:compile" events that no
-other compilation encloses) with its compile time, the longest first. Run it after a change to the
+Runs :func:`nematic_solids.model.warmup.warm_up` (a tiny finite and two tiny linear runs, one under
+a protocol) in this process with an empty numba cache (a temporary ``NUMBA_CACHE_DIR``, removed
+afterwards) and lists every signature with which Python called a compiled function (numba's
+"numba:compile" events that no other compilation encloses) with its compile time, the longest
+first. Run it after a change to the
 kernels' signatures or to the code that calls them (``python -m nematic_solids.model.warmup`` says
 so when the list misses something; tests/model/test_warmup.py checks it).
 """
@@ -21,11 +22,11 @@ import time
 from pathlib import Path
 
 HEADER = """\
-# The signatures with which Python calls the model's compiled kernels in a tiny finite and a
-# tiny linear run (nematic_solids.model.warmup.warm_up), with their compile times in seconds when
-# listed: python -m nematic_solids.model.warmup compiles them in parallel processes, the longest
-# first. Made by scripts/kernel_entry_points.py; columns: seconds, function, numba types
-# (tab-separated).
+# The signatures with which Python calls the model's compiled kernels in a tiny finite and two
+# tiny linear runs, one under a protocol (nematic_solids.model.warmup.warm_up), with their
+# compile times in seconds when listed: python -m nematic_solids.model.warmup compiles them in
+# parallel processes, the longest first. Made by scripts/kernel_entry_points.py; columns:
+# seconds, function, numba types (tab-separated).
 """
 
 

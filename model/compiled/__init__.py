@@ -12,6 +12,7 @@ module                 numpy twin
 ``wellposedness``      ``wellposedness.finite_margin_samples``
 ``krylov``             ``krylov``
 ``linear_rhs``         ``split.SpectralSplit.reference``
+``linear_step``        ``solver.ETDRK4Solver.step`` (its stages in Python, the same kernels)
 ``finite_krylov``      ``krylov.pcg``, ``krylov.gmres`` on the operators of
                        ``mechanics.FiniteMechanics``
 ``fftw``               ``fourier.FFT`` with scipy.fft

@@ -149,6 +149,19 @@ def arnoldi_column(V, wv, H, g, cs, sn, k, w):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def any_nonzero(x):  # pragma: no cover - compiled
+    """Whether any component of the C-contiguous array ``x`` (real or complex) is nonzero
+    (``np.any(x)``, for which numba tests complex elements one at a time: 7x slower at
+    128^2, measured); one branch-free pass over its real components, which LLVM vectorises."""
+    xf = x.reshape(-1)
+    acc = False
+    for i in range(xf.size):
+        v = xf[i]
+        acc |= (v.real != 0.0) | (v.imag != 0.0)
+    return acc
+
+
+@njit(cache=True)
 def axpy(y, alpha, x):  # pragma: no cover - compiled
     """``y += alpha * x`` in place (C-contiguous arrays of one shape; no temporary)."""
     yf = y.reshape(-1)
@@ -243,7 +256,7 @@ def gmres(op, b, x0, Lx0, w, rtol, maxiter, V, Z, LZ):  # pragma: no cover - com
     total = 0
     nop = 0
     naux = 0
-    zero_start = not np.any(x)  # then r = b and L x = 0: no operator application
+    zero_start = not any_nonzero(x)  # then r = b and L x = 0: no operator application
     known_aux = Lx0.size > 0 and not zero_start
     while True:
         if zero_start:  # r = b - 0 is b, bitwise (-0.0 - 0.0 is -0.0): no pass over it
@@ -299,7 +312,7 @@ def pcg(op, b, x0, w, rtol, maxiter):  # pragma: no cover - compiled
     x = x0.copy()
     nop = 0
     no_aux = np.empty(0, dtype=np.complex128)
-    if np.any(x != 0):
+    if any_nonzero(x):
         Ax = np.empty_like(b)
         apply_operator(op, x, Ax, no_aux)
         nop += 1

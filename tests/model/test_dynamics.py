@@ -72,6 +72,62 @@ def test_fast_split_rate_equals_numpy_reference(mechanics, incompressible, compi
 
 
 @pytest.mark.parametrize(
+    ("B_prime", "eps", "incompressible"), [(0.0, 0.0, False), (0.1, 0.03, False), (0.1, 0.0, True)]
+)
+def test_compiled_linear_step_is_bitwise_the_python_step(B_prime, eps, incompressible):
+    """Linear mechanics' ETDRK4 step as one compiled function
+    (nematic_solids.model.compiled.linear_step) gives the bits of the Python step that calls
+    the same kernels stage by stage (new state, error estimate, transforms, spin iterations),
+    step after step."""
+    if not HAVE_FFTW:
+        pytest.skip("native FFTW not available: no compiled right-hand side")
+    p = SMALL.replace(alpha_minus_B=1.5, B_prime=B_prime, eps=eps)
+    num = Numerics(resolution=32, mechanics="linear", incompressible=incompressible)
+    state = make_state(*initial_fields(p, 32, seed=4))
+    u = np.ascontiguousarray(state.data)
+    u[:2] *= 2.0  # a strong Jaumann feedback: several spin iterations per stage
+    u[2] = 0.3 * np.cos(2 * np.pi * (np.arange(32) + 0.5) / 32)[:, None]
+    whole, staged = ETDRK4Solver(ActiveNematicPDE(p, num)), ETDRK4Solver(ActiveNematicPDE(p, num))
+    assert whole._compiled_split is not None
+    staged._compiled_split = None  # the Python step
+    a, b, t = u.copy(), u.copy(), 0.0
+    for h in (0.05, 0.1, 0.1, 0.025):
+        (a, err_a), (b, err_b) = whole.step(a, t, h), staged.step(b, t, h)
+        t += h
+        assert a.tobytes() == b.tobytes()
+        assert err_a == err_b
+    for solver in (whole, staged):
+        assert solver.stats["rhs"] == 16
+    spins = [s.pde.mechanics.spin_iterations for s in (whole, staged)]
+    assert spins[0] == spins[1] >= 48
+    ffts = [s.pde.spectral.fft.count for s in (whole, staged)]
+    assert ffts[0] == ffts[1]
+    np.testing.assert_array_equal(whole.pde.mechanics.omega_hat, staged.pde.mechanics.omega_hat)
+
+
+def test_compiled_linear_step_fails_a_spin_solve_like_the_python_step():
+    """A spin solve that does not converge in a stage of the compiled step fails the step
+    with spin_diverged, as the Python step does (the step is then retried smaller)."""
+    if not HAVE_FFTW:
+        pytest.skip("native FFTW not available: no compiled right-hand side")
+    p = SMALL.replace(alpha_minus_B=1.5)
+    num = Numerics(resolution=32, mechanics="linear", spin_tol=1e-14)
+    state = make_state(*initial_fields(p, 32, seed=4))
+    u = np.ascontiguousarray(state.data)
+    u[:2] *= 2.0
+    for compiled in (True, False):
+        solver = ETDRK4Solver(ActiveNematicPDE(p, num))
+        split = solver._split  # its compiled data hold the iteration cap
+        split._rhs_data = split._rhs_data._replace(maxiter=1)
+        if compiled:
+            solver._compiled_split = split
+        else:
+            solver._compiled_split = None
+        with pytest.raises(SimulationFailure, match="did not converge in 1 iterations"):
+            solver.step(u, 0.0, 0.1)
+
+
+@pytest.mark.parametrize(
     ("mechanics", "scheme"), [("linear", "etdrk4"), ("finite", "etdrk4"), ("finite", "etdrk2")]
 )
 def test_numpy_backend_runs_the_same_trajectory(mechanics, scheme):

@@ -160,7 +160,7 @@ def test_entry_points_are_compiled_by_module_after_the_modules_they_import():
     order = {m.rpartition(".")[2]: i for i, m in enumerate(modules)}
     for caller, callees in (
         ("finite_krylov", ("fftw", "constitutive", "spectral")),
-        ("linear_rhs", ("fftw", "rates")),
+        ("linear_step", ("fftw", "etd", "rates")),
         ("wellposedness", ("constitutive",)),
     ):
         assert all(order[c] < order[caller] for c in callees), modules

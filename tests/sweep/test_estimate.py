@@ -663,7 +663,8 @@ def test_a_prior_with_run_times_prices_the_planned_and_the_later_runs(tmp_path):
 
 def test_a_prior_measured_on_another_grid_is_scaled_by_the_cost_model(tmp_path):
     """The prior ran on 16^2 (its num_resolution), the campaign runs on 32^2: a planned run
-    costs the prior's time there times the cost model's ratio of the two grids."""
+    costs the prior's time there times the cost model's ratio of the two grids, and so does
+    each of the prior's runs that prices the later rounds."""
     grid = np.linspace(0, 0.8, 9)
     status = np.zeros((9, 4), dtype=np.int8)
     status[:, :2] = 1
@@ -684,6 +685,12 @@ def test_a_prior_measured_on_another_grid_is_scaled_by_the_cost_model(tmp_path):
     assert ratio > 1.1  # (small grids: per-step overheads dominate the cost model)
     assert e.cpu[0] == pytest.approx(6 * 3.0 * ratio)
     assert "on 16^2, scaled to 32^2 by the cost model" in flat(" ".join(lines(e)))
+    # the later rounds: the prior's 12 runs beyond the planned ones, each scaled alike
+    assert e.later is not None
+    assert e.later.expected is not None
+    assert e.later.expected.runs == 12
+    assert e.later.expected.cpu == pytest.approx(12 * 3.0 * ratio)
+    assert "at 9 point(s) on another grid than this campaign's there" in flat(" ".join(lines(e)))
 
 
 def test_a_refinement_expects_the_priors_run_count(tmp_path):

@@ -14,6 +14,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.run.detach import child_command
 from nematic_solids.sweep.spec import load_campaign
 
 #: A small real campaign. alpha - B = 20 fails at once (the finite solver loses ellipticity:
@@ -72,17 +73,12 @@ def start_driver(args: list[str], log: Path) -> subprocess.Popen:
     env = dict(os.environ, PYTHONUNBUFFERED="1", COLUMNS="200")
     with open(log, "wb") as out:
         return subprocess.Popen(
-            [sys.executable, "-m", "nematic_solids.sweep", *args],
+            [*child_command("signal.signal(signal.SIGINT, signal.default_int_handler)"), *args],
             stdout=out,
             stderr=subprocess.STDOUT,
             env=env,
             start_new_session=True,
-            preexec_fn=_default_sigint,
         )
-
-
-def _default_sigint() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def wait_for(predicate, timeout: float, what: str, interval: float = 0.2) -> None:

@@ -48,11 +48,30 @@ class Started:
     holds_lock: bool = False
 
 
-def _detached_child() -> None:  # pragma: no cover - runs in the child before exec
-    signal.signal(signal.SIGHUP, signal.SIG_IGN)
-    # Ctrl-C's signal at its default (a shell's background job inherits it ignored), so
-    # that ``kill -INT`` stops the driver as Ctrl-C does
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+def child_command(*dispositions: str) -> list[str]:
+    """``python -m nematic_solids.sweep`` (the arguments to follow) that first runs the
+    statements ``dispositions`` (e.g. ``signal.signal(...)``, ``resource.setrlimit(...)``;
+    ``signal`` and ``resource`` are imported) in the child itself: a ``preexec_fn`` would do
+    it between fork and exec, which the subprocess documentation calls unsafe in a process
+    with threads (dask's, JAX's: a lock held at the fork deadlocks the child)."""
+    start = "; ".join(
+        [
+            "import resource, runpy, signal",
+            *dispositions,
+            "runpy.run_module('nematic_solids.sweep', run_name='__main__', alter_sys=True)",
+        ]
+    )
+    return [sys.executable, "-c", start]
+
+
+#: the detached driver: SIGHUP ignored (closing the terminal or logging out does not end it),
+#: Ctrl-C's signal raising KeyboardInterrupt as in any Python program (a shell's background job
+#: inherits it ignored, and Python then leaves it so), so that ``kill -INT`` stops the driver
+#: as Ctrl-C does
+DETACHED = (
+    "signal.signal(signal.SIGHUP, signal.SIG_IGN)",
+    "signal.signal(signal.SIGINT, signal.default_int_handler)",
+)
 
 
 def detached_args(argv: list[str]) -> list[str]:
@@ -68,7 +87,8 @@ def start_detached(
     wait: float = START_WAIT,
     clock: Callable[[], float] = time.monotonic,
 ) -> Started:
-    """``python -m nematic_solids.sweep ARGS`` in a new session, its output appended to ``log``;
+    """``python -m nematic_solids.sweep ARGS`` (:func:`child_command` with :data:`DETACHED`)
+    in a new session, its output appended to ``log``;
     returns once it holds the lock at ``lock_path``, has ended, or after ``wait`` seconds."""
     log.parent.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, PYTHONUNBUFFERED="1", **{DRIVER_LOG_ENV: str(log)})
@@ -77,13 +97,12 @@ def start_detached(
         out.write(f"# {now_iso()} on {socket.gethostname()}: nematic {' '.join(args)}\n".encode())
         out.flush()
         proc = subprocess.Popen(
-            [sys.executable, "-m", "nematic_solids.sweep", *args],
+            [*child_command(*DETACHED), *args],
             stdin=subprocess.DEVNULL,
             stdout=out,
             stderr=subprocess.STDOUT,
             env=env,
             start_new_session=True,
-            preexec_fn=_detached_child,
         )
     started = Started(pid=proc.pid, log=log)
     deadline = clock() + wait

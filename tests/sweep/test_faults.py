@@ -7,9 +7,7 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import shutil
-import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -21,6 +19,7 @@ from typer.testing import CliRunner
 
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.run.detach import child_command
 from nematic_solids.sweep.run.todo import plan_runs
 from nematic_solids.sweep.spec import load_campaign
 from nematic_solids.sweep.store import CampaignStore
@@ -181,18 +180,15 @@ def nematic(
     """``nematic ARGS`` in a subprocess, optionally under a file-size limit (SIGXFSZ ignored,
     as Python does: writes past the limit fail with EFBIG) or inside ``wrap`` (unshare)."""
 
-    def limit() -> None:
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        if fsize is not None:
-            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
-
-    cmd = [*(wrap or []), sys.executable, "-m", "nematic_solids.sweep", *map(str, args)]
+    limit = ["signal.signal(signal.SIGXFSZ, signal.SIG_IGN)"]
+    if fsize is not None:
+        limit.append(f"resource.setrlimit(resource.RLIMIT_FSIZE, ({fsize}, {fsize}))")
+    cmd = [*(wrap or []), *child_command(*limit), *map(str, args)]
     return subprocess.run(
         cmd,
         capture_output=True,
         text=True,
         timeout=timeout,
-        preexec_fn=limit,
         env={**os.environ, "COLUMNS": "200", **(env or {})},
     )
 

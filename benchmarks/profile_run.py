@@ -12,7 +12,7 @@ code keeps its symbol table); after a short run (t = 1) it lists the address of 
 of every compiled kernel's library, then this script samples the timed run with ``perf record
 -p``. A sample in compiled code counts for the function whose entry is the nearest below it
 (a kernel inlined into its caller counts for the caller). Prints the shares and writes
-``benchmarks/profile_run.json`` (``--out``).
+``benchmarks/profile_MECHANICS_N.json`` (``--out``).
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def main() -> int:
     ap.add_argument("--t-final", type=float, default=300.0)
     ap.add_argument("--mechanics", default="linear")
     ap.add_argument("--top", type=int, default=20, help="compiled functions listed")
-    ap.add_argument("--out", default=str(HERE / "profile_run.json"))
+    ap.add_argument("--out", help="JSON file (default benchmarks/profile_MECHANICS_N.json)")
     a = ap.parse_args()
     if shutil.which("perf") is None:
         print("error: Linux perf is not installed (apt install linux-perf)", file=sys.stderr)
@@ -157,8 +157,9 @@ def main() -> int:
         "parts": {k: n / total for k, n in parts.most_common()},
         "compiled": {k: n / total for k, n in kernels.most_common()},
     }
-    Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
-    print(f"wrote {a.out}")
+    out = Path(a.out or HERE / f"profile_{a.mechanics}_{a.resolution}.json")
+    out.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"wrote {out}")
     return 0
 
 

@@ -51,6 +51,24 @@ def _stage(q_s, A_s, LA, zero_hat, rhs_data, pi, scratch):  # pragma: no cover -
 
 
 @njit(cache=True)
+def _next(
+    q_hat, A, h, E, EA, wq, wA, Nq, NA, LA, zero_hat, rhs_data, scratch
+):  # pragma: no cover - compiled
+    """:func:`_stage` of the stage :math:`E \\hat q_n + h \\sum_k w_k N_k` (and its A
+    alike, the terms ``NA`` with a leading axis of one): the solver's ``rhs(combo_q(...),
+    combo_A(...))``."""
+    return _stage(
+        etd_combination(E, q_hat, h, wq, Nq),
+        etd_combination(EA, _lead(A), h, wA, NA)[0],
+        LA,
+        zero_hat,
+        rhs_data,
+        rhs_data.pi,
+        scratch,
+    )
+
+
+@njit(cache=True)
 def _lead(a):  # pragma: no cover - compiled
     """The (N, N) field ``a`` with a leading axis of one (the solver's ``x[None]``)."""
     return a.reshape((1,) + a.shape)
@@ -81,42 +99,22 @@ def krogstad_linear_step(
     for x in range(n):
         for y in range(n):
             NA_u[x, y] = Adot_u[x, y] - LA[x, y] * A[x, y]
-    # stage a (t + h/2)
-    Nq_a, NA_a, omega, it, conv, k = _stage(
-        etd_combination(E2, q_hat, h, wa, (Nq_u,)),
-        etd_combination(W[1], _lead(A), h, (W[2],), (_lead(NA_u),))[0],
-        LA,
-        zero_hat,
-        rhs_data,
-        pi,
-        scratch,
+    # stage a (t + h/2), b (t + h/2), c (t + h): e^{L h/2} or e^{L h} (q, then A), the
+    # weights of the N terms for q and for A, the terms
+    Nq_a, NA_a, omega, it, conv, k = _next(
+        q_hat, A, h, E2, W[1], wa, (W[2],), (Nq_u,), (_lead(NA_u),), LA, zero_hat, rhs_data, scratch
     )
-    nfft += k
-    its[1], ok[1] = it, conv
-    # stage b (t + h/2)
-    Nq_b, NA_b, omega, it, conv, k = _stage(
-        etd_combination(E2, q_hat, h, wb, (Nq_u, Nq_a)),
-        etd_combination(W[1], _lead(A), h, (W[3], W[4]), (_lead(NA_u), _lead(NA_a)))[0],
-        LA,
-        zero_hat,
-        rhs_data,
-        pi,
-        scratch,
-    )
-    nfft += k
-    its[2], ok[2] = it, conv
-    # stage c (t + h)
-    Nq_c, NA_c, omega, it, conv, k = _stage(
-        etd_combination(E, q_hat, h, wc, (Nq_u, Nq_b)),
-        etd_combination(W[0], _lead(A), h, (W[5], W[6]), (_lead(NA_u), _lead(NA_b)))[0],
-        LA,
-        zero_hat,
-        rhs_data,
-        pi,
-        scratch,
-    )
-    nfft += k
-    its[3], ok[3] = it, conv
+    its[1], ok[1], nfft = it, conv, nfft + k
+    Nq_b, NA_b, omega, it, conv, k = _next(
+        q_hat, A, h, E2, W[1], wb, (W[3], W[4]), (Nq_u, Nq_a), (_lead(NA_u), _lead(NA_a)),
+        LA, zero_hat, rhs_data, scratch,
+    )  # fmt: skip
+    its[2], ok[2], nfft = it, conv, nfft + k
+    Nq_c, NA_c, omega, it, conv, k = _next(
+        q_hat, A, h, E, W[0], wc, (W[5], W[6]), (Nq_u, Nq_b), (_lead(NA_u), _lead(NA_b)),
+        LA, zero_hat, rhs_data, scratch,
+    )  # fmt: skip
+    its[3], ok[3], nfft = it, conv, nfft + k
     new_q_hat = etd_combination(E, q_hat, h, wnew, (Nq_u, Nq_a, Nq_b, Nq_c))
     new = np.empty((3, n, n))
     new[2] = etd_combination(
@@ -126,6 +124,6 @@ def krogstad_linear_step(
         (W[7], W[8], W[8], W[9]),
         (_lead(NA_u), _lead(NA_a), _lead(NA_b), _lead(NA_c)),
     )[0]
-    for c in range(2):
-        fx.irfft2_via(pi, new_q_hat[c], new[c], scratch)
+    for j in range(2):
+        fx.irfft2_via(pi, new_q_hat[j], new[j], scratch)
     return new, new_q_hat, Nq_a, Nq_b, NA_a, NA_b, W[8], its, ok, omega, nfft + 2

@@ -94,7 +94,8 @@ def main() -> int:
             text=True,
             env=env,
         )
-        assert child.stdin is not None and child.stdout is not None
+        assert child.stdin is not None
+        assert child.stdout is not None
         if child.stdout.readline().strip() != "READY":
             print("error: the run did not start", file=sys.stderr)
             return 1

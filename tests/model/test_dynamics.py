@@ -19,6 +19,7 @@ from nematic_solids.model.parameters import Numerics, Parameters
 from nematic_solids.model.pde import ActiveNematicPDE, make_state
 from nematic_solids.model.simulate import run
 from nematic_solids.model.solver import ETDRK2Solver, ETDRK4Solver
+from nematic_solids.model.split import SpectralSplit
 
 # a fixed small workload for the numerics' tests (its own constants, so the measured errors and
 # orders quoted below do not move with the model's defaults)
@@ -84,7 +85,7 @@ def test_compiled_linear_step_is_bitwise_the_python_step(B_prime, eps, incompres
     p = SMALL.replace(alpha_minus_B=1.5, B_prime=B_prime, eps=eps)
     num = Numerics(resolution=32, mechanics="linear", incompressible=incompressible)
     state = make_state(*initial_fields(p, 32, seed=4))
-    u = np.ascontiguousarray(state.data)
+    u = np.ascontiguousarray(state.data, dtype=float)
     u[:2] *= 2.0  # a strong Jaumann feedback: several spin iterations per stage
     u[2] = 0.3 * np.cos(2 * np.pi * (np.arange(32) + 0.5) / 32)[:, None]
     whole, staged = ETDRK4Solver(ActiveNematicPDE(p, num)), ETDRK4Solver(ActiveNematicPDE(p, num))
@@ -113,11 +114,13 @@ def test_compiled_linear_step_fails_a_spin_solve_like_the_python_step():
     p = SMALL.replace(alpha_minus_B=1.5)
     num = Numerics(resolution=32, mechanics="linear", spin_tol=1e-14)
     state = make_state(*initial_fields(p, 32, seed=4))
-    u = np.ascontiguousarray(state.data)
+    u = np.ascontiguousarray(state.data, dtype=float)
     u[:2] *= 2.0
     for compiled in (True, False):
         solver = ETDRK4Solver(ActiveNematicPDE(p, num))
         split = solver._split  # its compiled data hold the iteration cap
+        assert isinstance(split, SpectralSplit)
+        assert split._rhs_data is not None
         split._rhs_data = split._rhs_data._replace(maxiter=1)
         if compiled:
             solver._compiled_split = split

@@ -212,6 +212,9 @@ def fig4(res: Results, options: Mapping[str, Any]) -> Figure:
             sub.set_yticks([])
         else:
             safe_snapshot(sub, run, -1, colorbar=False, arrows=20)
+            grid = run.attrs.get("num_resolution")
+            if grid is not None:  # the run's own grid (resolution: auto gives each its own)
+                title += f", {int(grid)}$^2$"
         sub.set_title(f"({n}) {title}", fontsize=8)
         if key not in seen:
             seen.append(key)

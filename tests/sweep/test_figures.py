@@ -177,6 +177,25 @@ def test_fig4_renders_in_3d_with_the_caption_snapshots(phase4):
         assert f["anisotropy_slope"].dims == ("chi", "K")
 
 
+def test_fig4_snapshots_name_their_runs_grid(phase4, monkeypatch):
+    """Each snapshot's title carries its run's grid (with ``resolution: auto`` the points of
+    one figure have different grids)."""
+    import matplotlib.figure
+
+    titles: list[str] = []
+    save = matplotlib.figure.Figure.savefig
+
+    def record(self, *args, **kwargs):
+        titles.extend(ax.get_title() for ax in self.axes)
+        return save(self, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", record)
+    draw("fig4", phase4.root, {})
+    snapshots = [t for t in titles if t.startswith("(")]
+    assert len(set(snapshots)) == 4  # (the figure is saved as png and pdf)
+    assert all(t.endswith(", 32$^2$") for t in snapshots), snapshots
+
+
 def test_fig4_in_2d_when_one_axis_is_fixed(phase4):
     paths = draw("fig4", phase4.root, {"select": {"K": 1e-4}})
     assert_figure(paths, "fig4", phase4.root)

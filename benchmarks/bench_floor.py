@@ -18,7 +18,9 @@ configuration runs alternately on the two codes, before, after, before, after ..
 pairs), so that the machine's drift falls on both alike; the table gives the medians and the
 median of the pairwise wall ratios after / before. ``--fingerprint`` also runs
 ``scripts/fingerprint.py`` on both codes and says whether the outputs are byte-identical (else
-the largest relative difference of its scalars). Writes ``benchmarks/bench_floor.json``
+the largest relative difference of its scalars). ``--perf`` (Linux perf, ``apt install
+linux-perf``) also samples each timed run and gives the share of its time spent in FFTW: its
+inverse is wall / floor measured inside the run, with no transform timed apart (``perf_ratio``). Writes ``benchmarks/bench_floor.json``
 (``--out``): the rows of each code with its git commit.
 """
 
@@ -28,9 +30,11 @@ import argparse
 import json
 import os
 import platform
+import signal
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -69,9 +73,15 @@ def transform_time():
     return wall, cpu
 
 fft, fft_cpu = transform_time()
+if cfg.get("perf"):  # the parent attaches perf to the run alone
+    print("READY", flush=True)
+    sys.stdin.readline()
 c0, t0 = time.process_time(), time.perf_counter()
 ds = run(params, num, 0)
 wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+if cfg.get("perf"):
+    print("RUN_DONE", flush=True)
+    sys.stdin.readline()
 w, c = transform_time()
 fft, fft_cpu = fft + w, fft_cpu + c
 a = ds.attrs
@@ -111,26 +121,70 @@ def python_of(code: Path) -> str:
     return str(venv)
 
 
-def child(code: Path, cfg: dict) -> dict:
+def child(code: Path, cfg: dict, perf: bool = False) -> dict:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     env["PYTHONPATH"] = str(code)
-    proc = subprocess.run(
-        [python_of(code), "-c", CHILD, json.dumps({**cfg, "code": str(code)})],
-        capture_output=True,
-        text=True,
-        cwd=code,
-        env=env,
-    )
-    for line in proc.stdout.splitlines():
+    args = [python_of(code), "-c", CHILD, json.dumps({**cfg, "code": str(code), "perf": perf})]
+    if perf:
+        stdout, stderr, share = sampled(args, code, env)
+    else:
+        proc = subprocess.run(args, capture_output=True, text=True, cwd=code, env=env)
+        stdout, stderr, share = proc.stdout, proc.stderr, None
+    for line in stdout.splitlines():
         if line.startswith("RESULT "):
             r = {**cfg, **json.loads(line[7:])}
+            if share is not None:
+                # the run's own time in FFTW (perf's samples): wall / floor without the
+                # transform timed apart, so without the drift between that timing and the run
+                r["fftw_share"] = share
+                r["perf_ratio"] = 1.0 / share if share > 0 else float("nan")
             r["floor_s"] = r["transforms"] * r["fft_s"]
             r["ratio"] = r["wall_s"] / r["floor_s"]
             # the same in CPU time (this process's own: less sensitive to other load)
             r["cpu_ratio"] = r["cpu_s"] / (r["transforms"] * r["fft_cpu_s"])
             r["ms_per_step"] = 1e3 * r["wall_s"] / max(r["steps"], 1)
             return r
-    raise RuntimeError(f"benchmark child failed:\n{proc.stdout}\n{proc.stderr}")
+    raise RuntimeError(f"benchmark child failed:\n{stdout}\n{stderr}")
+
+
+def sampled(args: list[str], code: Path, env: dict) -> tuple[str, str, float]:
+    """Run the child under ``perf record`` (attached for its timed run only); returns its
+    output and the share of the run's samples that fall in FFTW."""
+    with tempfile.TemporaryDirectory() as tmp:
+        data = os.path.join(tmp, "perf.data")
+        proc = subprocess.Popen(
+            args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=code, env=env
+        )
+        assert proc.stdin is not None
+        assert proc.stdout is not None
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            if line.strip() == "READY":
+                break
+        rec = subprocess.Popen(
+            ["perf", "record", "-F", "2000", "-p", str(proc.pid), "-o", data, "-q"],
+            stderr=subprocess.DEVNULL,
+        )
+        time.sleep(1.0)  # perf attached
+        proc.stdin.write("\n")
+        proc.stdin.flush()
+        for line in proc.stdout:
+            lines.append(line)
+            if line.strip() == "RUN_DONE":
+                break
+        rec.send_signal(signal.SIGINT)
+        rec.wait()
+        proc.stdin.write("\n")
+        proc.stdin.flush()
+        lines += proc.stdout.readlines()
+        proc.wait()
+        samples = subprocess.run(
+            ["perf", "script", "-i", data, "-F", "ip,dso"], capture_output=True, text=True
+        ).stdout.splitlines()  # "address (library)" per sample
+    samples = [line for line in samples if line.strip()]
+    share = sum("fftw" in line for line in samples) / max(len(samples), 1)
+    return "".join(lines), "", share
 
 
 def fingerprint(code: Path) -> str:
@@ -171,6 +225,8 @@ def median_row(rows: list[dict]) -> dict:
     out = {k: statistics.median(r[k] for r in rows) for k in keys}
     out.update({k: rows[0][k] for k in ("N", "t_final", "mechanics", "steps", "transforms")})
     out.update({k: rows[0][k] for k in ("sigma2_S", "lambda", "status")})
+    if all("perf_ratio" in r for r in rows):
+        out["perf_ratio"] = statistics.median(r["perf_ratio"] for r in rows)
     return out
 
 
@@ -181,6 +237,9 @@ def main() -> None:
     ap.add_argument("--before", type=Path, help="another checkout to run alternately")
     ap.add_argument("--repeat", type=int, default=1, help="runs (pairs) per configuration")
     ap.add_argument("--fingerprint", action="store_true", help="compare scripts/fingerprint.py")
+    ap.add_argument(
+        "--perf", action="store_true", help="also the run's own share of time in FFTW (Linux perf)"
+    )
     ap.add_argument("--out", default=str(HERE / "bench_floor.json"))
     args = ap.parse_args()
     after = HERE.parent
@@ -201,7 +260,7 @@ def main() -> None:
             got: dict[str, list[dict]] = {k: [] for k in codes}
             for _ in range(args.repeat):
                 for label, code in codes.items():
-                    got[label].append(child(code, cfg))
+                    got[label].append(child(code, cfg, args.perf))
             for label in codes:
                 rows[label] += got[label]
                 m = median_row(got[label])
@@ -211,7 +270,12 @@ def main() -> None:
                     f"{m['transforms']:10d} {1e6 * m['fft_s']:7.1f} {m['floor_s']:8.2f} "
                     f"{m['wall_s']:7.2f} {m['ratio']:6.2f} {m['cpu_ratio']:6.2f} "
                     f"{m['ms_per_step']:8.2f} "
-                    f"{m['sigma2_S']:10.6g}",
+                    f"{m['sigma2_S']:10.6g}"
+                    + (
+                        f"  in-run FFTW: wall / transforms {m['perf_ratio']:.2f}"
+                        if args.perf
+                        else ""
+                    ),
                     flush=True,
                 )
             if "before" in codes:

@@ -20,8 +20,9 @@ median of the pairwise wall ratios after / before. ``--fingerprint`` also runs
 ``scripts/fingerprint.py`` on both codes and says whether the outputs are byte-identical (else
 the largest relative difference of its scalars). ``--perf`` (Linux perf, ``apt install
 linux-perf``) also samples each timed run and gives the share of its time spent in FFTW: its
-inverse is wall / floor measured inside the run, with no transform timed apart (``perf_ratio``). Writes ``benchmarks/bench_floor.json``
-(``--out``): the rows of each code with its git commit.
+inverse is wall / floor measured inside the run, with no transform timed apart
+(``perf_ratio``). Writes ``benchmarks/bench_floor.json`` (``--out``): the rows of each code with
+its git commit.
 """
 
 from __future__ import annotations

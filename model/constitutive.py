@@ -1,4 +1,5 @@
 r"""Constitutive law: (F, Q) -> first Piola stress P and its tangent. Knows nothing about FFTs.
+Takes numpy or JAX arrays alike (:func:`nematic_solids.model.tensors.namespace`).
 
 Finite strain (paper Eqs. 1-3). With :math:`C = F^T F`, :math:`J = \det F`,
 :math:`I_1 = \operatorname{tr} C`, :math:`q = Q:Q = 2 S^2` and the 2-D isochoric invariant
@@ -71,7 +72,7 @@ def energy_density(F: Array, Q: Array, m: Moduli) -> Array:
 def second_piola(F: Array, Q: Array, m: Moduli) -> Array:
     """:math:`\\mathbf S = 2 \\partial W / \\partial C + \\alpha Q` (paper Eq. 2, exact)."""
     C, J, I1, Ci = _kinematics(F)
-    eye = T.identity(J.shape)
+    eye = T.identity(J.shape, like=J)
     q = T.ddot(Q, Q)
     CQ = T.ddot(C, Q)
     return (
@@ -97,7 +98,7 @@ def first_piola_increment(F: Array, Q: Array, dF: Array, m: Moduli) -> Array:
         \quad dJ = \tfrac12 J c .
     """
     C, J, I1, Ci = _kinematics(F)
-    eye = T.identity(J.shape)
+    eye = T.identity(J.shape, like=J)
     q = T.ddot(Q, Q)
     CQ = T.ddot(C, Q)
     dC = T.matmul(T.transpose(dF), F) + T.matmul(T.transpose(F), dF)
@@ -119,10 +120,12 @@ def tangent(F: Array, Q: Array, m: Moduli) -> Array:
     Assembled column by column from :func:`first_piola_increment` (exact).
     """
     shape = F.shape[2:]
-    dF = np.zeros((2, 2, 2, 2, *shape))  # [i, j, k, L]: the unit direction e_k e_L
+    unit = np.zeros((2, 2, 2, 2) + (1,) * len(shape))  # [i, j, k, L]: the direction e_k e_L
     for k in range(2):
         for L in range(2):
-            dF[k, L, k, L] = 1.0
+            unit[k, L, k, L] = 1.0
+    xp = T.namespace(F, Q)
+    dF = xp.broadcast_to(xp.asarray(unit), (2, 2, 2, 2, *shape))
     # all four directions at once, broadcasting F and Q over the direction axes (k, L)
     dP = first_piola_increment(F[:, :, None, None], Q[:, :, None, None], dF, m)
     return dP
@@ -158,7 +161,7 @@ def small_strain_stress(grad_u: Array, Q: Array, m: Moduli) -> Array:
     """
     e = 0.5 * (grad_u + T.transpose(grad_u))
     tr = T.trace(e)
-    eye = T.identity(tr.shape)
+    eye = T.identity(tr.shape, like=tr)
     return (
         2.0 * (e - 0.5 * tr * eye)
         + m.kappa * tr * eye
@@ -172,7 +175,7 @@ def small_strain_energy_density(grad_u: Array, Q: Array, m: Moduli) -> Array:
     (up to the B' term, which is kept at its leading order ``-B' tr(e) Q:Q``)."""
     e = 0.5 * (grad_u + T.transpose(grad_u))
     tr = T.trace(e)
-    dev = e - 0.5 * tr * T.identity(tr.shape)
+    dev = e - 0.5 * tr * T.identity(tr.shape, like=tr)
     return (
         T.ddot(dev, dev)
         + 0.5 * m.kappa * tr**2

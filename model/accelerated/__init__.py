@@ -24,9 +24,12 @@ masked), so a seed's trajectory is the one it has when run alone. Modules:
   to ``t_final``.
 
 Finite-strain mechanics is not here yet: :func:`run_batch` refuses it with a
-:class:`nematic_solids.model.errors.ParameterError`. Importing this package enables JAX's float64
-(``jax_enable_x64``) for the process; without JAX installed it raises
-:class:`nematic_solids.model.errors.DeviceUnavailable` with the install line.
+:class:`nematic_solids.model.errors.ParameterError`. Its constitutive law is ready for it: the
+reference's :mod:`nematic_solids.model.constitutive` takes JAX arrays (the formulas of
+:mod:`nematic_solids.model.tensors` pick the arrays' library), tested to agree under
+``jax.jit``. Importing this package enables JAX's float64 (``jax_enable_x64``) for the process;
+without JAX installed it raises :class:`nematic_solids.model.errors.DeviceUnavailable` with the
+install line.
 """
 
 from __future__ import annotations

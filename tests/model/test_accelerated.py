@@ -351,3 +351,37 @@ def test_a_state_that_does_not_continue_the_run_is_refused(runs):
         run_batch(PARAMS, NUMERICS, (1,), start=states)
     with pytest.raises(ParameterError, match="one state per seed"):
         run_batch(PARAMS, NUMERICS, SEEDS, start=states)
+
+
+def test_the_finite_strain_constitutive_law_is_one_code_for_numpy_and_jax():
+    """The reference's stress, its Q increment, the tangent and the energy (paper Eqs. 1-3,
+    nematic_solids.model.constitutive) evaluated on JAX arrays under jit, batched over seeds,
+    give the numpy values to rounding: the accelerated backend's finite strain reuses the
+    formulas instead of restating them."""
+    import jax.numpy as jnp
+
+    from nematic_solids.model import constitutive as C
+    from nematic_solids.model import tensors as T
+
+    rng = np.random.default_rng(7)
+    shape = (3, 8, 8)  # (seed, x, y): the batch axis rides along the grid axes
+    F = np.eye(2)[:, :, None, None, None] + 0.2 * rng.standard_normal((2, 2, *shape))
+    Q = T.nematic(*(0.3 * rng.standard_normal((2, *shape))))
+    dQ = T.nematic(*(0.1 * rng.standard_normal((2, *shape))))
+    m = C.Moduli(kappa=20.0, B=0.5, B_prime=0.1, alpha=1.5)
+
+    def all_of(F, Q, dQ):
+        return (
+            C.first_piola(F, Q, m),
+            C.first_piola_q_increment(F, Q, dQ, m),
+            C.tangent(F, Q, m),
+            C.energy_density(F, Q, m),
+            C.small_strain_stress(F - T.identity(F.shape[2:], like=F), Q, m),
+        )
+
+    ref = all_of(F, Q, dQ)
+    got = jax.jit(all_of)(jnp.asarray(F), jnp.asarray(Q), jnp.asarray(dQ))
+    assert T.namespace(got[0]) is jnp
+    for r, g in zip(ref, got, strict=True):
+        assert isinstance(g, jax.Array)
+        np.testing.assert_allclose(np.asarray(g), r, rtol=0, atol=1e-13 * np.abs(r).max())

@@ -48,10 +48,11 @@ step needs anyway, and the whole right-hand side runs as one compiled function
 (:mod:`nematic_solids.model.compiled.linear_rhs`) where native FFTW is available and
 ``Numerics.backend`` is "compiled" (its numpy reference otherwise:
 :mod:`nematic_solids.model.split`); the stage algebra is one pass per stage (the backend's
-``etd_combination``); finite mechanics uses the generic :meth:`ActiveNematicPDE.rates` path with the
-displacement-rate solve (its Krylov solves compiled,
-:mod:`nematic_solids.model.compiled.finite_krylov`), with the displacement integrated with the state
-or Newton warm-started from the last stage's displacement plus its rate times the time offset.
+``etd_combination``), and without a protocol the whole ETDRK4 step of linear mechanics is one
+compiled call (:mod:`nematic_solids.model.compiled.linear_step`, bitwise this Python step);
+finite mechanics uses the generic :meth:`ActiveNematicPDE.rates` path with the displacement-rate
+solve (its Krylov solves compiled, :mod:`nematic_solids.model.compiled.finite_krylov`), with the
+displacement integrated with the state or Newton warm-started from the last stage's displacement plus its rate times the time offset.
 """
 
 from __future__ import annotations

@@ -52,7 +52,8 @@ step needs anyway, and the whole right-hand side runs as one compiled function
 compiled call (:mod:`nematic_solids.model.compiled.linear_step`, bitwise this Python step);
 finite mechanics uses the generic :meth:`ActiveNematicPDE.rates` path with the displacement-rate
 solve (its Krylov solves compiled, :mod:`nematic_solids.model.compiled.finite_krylov`), with the
-displacement integrated with the state or Newton warm-started from the last stage's displacement plus its rate times the time offset.
+displacement integrated with the state or Newton warm-started from the last stage's displacement
+plus its rate times the time offset.
 """
 
 from __future__ import annotations

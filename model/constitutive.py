@@ -33,7 +33,8 @@ import numpy as np
 
 from . import tensors as T
 
-Array = np.ndarray
+#: a numpy array or a JAX array (:func:`nematic_solids.model.tensors.namespace`)
+Array = T.Array
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-Array = np.ndarray
+#: a numpy array or a JAX array (the formulas take either: :func:`namespace`)
+Array = Any
 
 
 def namespace(*arrays: Any) -> Any:

@@ -1,15 +1,21 @@
-r"""Restarted GMRES in JAX for one right-hand side (``jax.vmap`` batches it), with an
-auxiliary linear output: the algorithm of :func:`nematic_solids.model.krylov.gmres_aux` started from
-zero (Saad, *Iterative Methods for Sparse Linear Systems*, Alg. 9.5 without a preconditioner,
-modified Gram-Schmidt, Givens-rotated residual), step for step.
+r"""Krylov solves in JAX for one right-hand side (``jax.vmap`` batches them): restarted GMRES
+with an auxiliary linear output, the algorithm of :func:`nematic_solids.model.krylov.gmres_aux`
+(Saad, *Iterative Methods for Sparse Linear Systems*, Alg. 9.5, right-preconditioned where a
+preconditioner is given, modified Gram-Schmidt, Givens-rotated residual), and preconditioned
+conjugate gradients from zero, the algorithm of :func:`nematic_solids.model.krylov.pcg` (Alg.
+9.1), step for step.
 
-The operator returns ``(A v, L v)``; the solution's ``L x`` is accumulated from the basis'
+GMRES's operator returns ``(A v, L v)``; the solution's ``L x`` is accumulated from the basis'
 ``L v`` (so a converged cycle needs no extra application). The zero start's residual is the
-right-hand side itself (no application); a restart takes the true residual. The stopping
-rules are the reference's: :math:`|g_{k+1}| \le \mathrm{rtol}\, \lVert b \rVert` (the
-rotated residual estimate), ``maxiter`` iterations, or a happy breakdown
-:math:`h_{k+1,k} \le 10^{-14} \beta`. Loops are ``lax.while_loop``; the sizes are fixed by
-``restart`` (the Krylov basis is a ``(restart + 1, ...)`` array, the unused rows masked).
+right-hand side itself (no application); a warm start brings its residual (and ``L x0``); a
+restart takes the true residual. The stopping rules are the reference's: :math:`|g_{k+1}|
+\le \mathrm{rtol}\, \lVert b \rVert` (the rotated residual estimate), ``maxiter``
+iterations, or a happy breakdown :math:`h_{k+1,k} \le 10^{-14} \beta`. Right
+preconditioning solves :math:`A M y = r` and updates :math:`x \mathrel{+}= M (\sum_i y_i
+v_i)`, one application of the linear M per cycle instead of keeping every :math:`M v_i`
+(the same sum, in another order of rounding). Loops are ``lax.while_loop``; the sizes are
+fixed by ``restart`` (the Krylov basis is a ``(restart + 1, ...)`` array, the unused rows
+masked).
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from jax import lax
 Array: TypeAlias = jax.Array
 Operator = Callable[[Array], tuple[Array, Array]]
 Inner = Callable[[Array, Array], Array]
+Preconditioner = Callable[[Array], Array]
 
 
 class Solution(NamedTuple):
@@ -80,12 +87,16 @@ def gmres_aux(
     maxiter: int,
     restart: int = 30,
     batch_axis: str | None = None,
+    precondition: Preconditioner | None = None,
+    start: tuple[Array, Array, Array] | None = None,
+    aux_dtype: jnp.dtype | None = None,
 ) -> Solution:
-    """Solve ``A x = b`` from ``x = 0`` (module docstring); ``aux_shape`` is the shape of
-    ``L v`` (complex). Under ``jax.vmap(..., axis_name=batch_axis)`` the Arnoldi loop runs
-    while any seed of the batch iterates (its condition is then the same for all seeds, so
-    vmap adds no select of the whole Krylov basis per iteration; the seeds that have stopped
-    are masked here)."""
+    """Solve ``A x = b`` (module docstring) from ``x = 0``, or from ``start = (x0, L x0,
+    b - A x0)``; ``aux_shape`` is the shape of ``L v``, of ``aux_dtype`` (default: ``b``'s);
+    ``precondition`` the right preconditioner M (linear). Under ``jax.vmap(...,
+    axis_name=batch_axis)`` the Arnoldi loop runs while any seed of the batch iterates (its
+    condition is then the same for all seeds, so vmap adds no select of the whole Krylov
+    basis per iteration; the seeds that have stopped are masked here)."""
 
     def anyone(flag: Array) -> Array:
         if batch_axis is None:
@@ -93,6 +104,11 @@ def gmres_aux(
         return lax.psum(flag.astype(jnp.int32), batch_axis) > 0
 
     cdtype = b.dtype
+    adtype = cdtype if aux_dtype is None else aux_dtype
+
+    def M(v: Array) -> Array:
+        return v if precondition is None else precondition(v)
+
     bnorm0 = jnp.sqrt(inner(b, b))
     bnorm = jnp.where(bnorm0 == 0.0, 1.0, bnorm0)
     tol = rtol * bnorm
@@ -106,7 +122,7 @@ def gmres_aux(
         spent = total >= maxiter
         safe_beta = jnp.where(beta > 0.0, beta, 1.0)
         V = jnp.zeros((restart + 1,) + b.shape, cdtype).at[0].set(r / safe_beta)
-        LZ = jnp.zeros((restart,) + aux_shape, cdtype)
+        LZ = jnp.zeros((restart,) + aux_shape, adtype)
         H = jnp.zeros((restart + 1, restart))
         g = jnp.zeros(restart + 1).at[0].set(beta)
         cs = jnp.zeros(restart)
@@ -118,7 +134,7 @@ def gmres_aux(
         def arnoldi(c):
             k, V, LZ, H, g, cs, sn, total, h_next, end = c
             active = ~end  # (a seed that has ended repeats its last column, masked below)
-            w, Lz = op(V[k])
+            w, Lz = op(M(V[k]))
             LZ = LZ.at[k].set(Lz)  # an ended seed writes the same values again
 
             def gram_schmidt(i, wH):  # modified Gram-Schmidt against V[0..k]
@@ -152,17 +168,19 @@ def gmres_aux(
         start = (jnp.int32(0), V, LZ, H, g, cs, sn, total, jnp.float64(0.0), met | spent)
         k, V, LZ, H, g, cs, sn, total, h_next, _ = lax.while_loop(more, arnoldi, start)
         m = k + 1
-        y = _back_substitution(H, g, m).astype(cdtype)
+        y = _back_substitution(H, g, m)
         skip = met | spent
-        x = jnp.where(skip, x, x + jnp.tensordot(y, V[:restart], axes=1))
-        Lx = jnp.where(skip, Lx, Lx + jnp.tensordot(y, LZ, axes=1))
+        x = jnp.where(skip, x, x + M(jnp.tensordot(y.astype(cdtype), V[:restart], axes=1)))
+        Lx = jnp.where(skip, Lx, Lx + jnp.tensordot(y.astype(adtype), LZ, axes=1))
         converged = jnp.where(skip, met, (jnp.abs(g[m]) <= tol) | (h_next <= 1e-14 * beta))
         done = converged | spent  # out of budget: one more true residual decides, as there
         return x, Lx, total, done, converged
 
-    x0 = jnp.zeros_like(b)
-    Lx0 = jnp.zeros(aux_shape, cdtype)
-    x, Lx, total, done, converged = cycle(x0, Lx0, b, jnp.int32(0))
+    if start is None:
+        x0, Lx0, r0 = jnp.zeros_like(b), jnp.zeros(aux_shape, adtype), b
+    else:
+        x0, Lx0, r0 = start
+    x, Lx, total, done, converged = cycle(x0, Lx0, r0, jnp.int32(0))
 
     def restarting(c):
         return ~c[3]
@@ -177,3 +195,67 @@ def gmres_aux(
         restarting, restart_cycle, (x, Lx, total, done, converged, jnp.int32(0))
     )
     return Solution(x, Lx, total, converged, total + restarts)
+
+
+class CGSolution(NamedTuple):
+    """A conjugate-gradient solve: ``x``, the iterations, and its outcome (0 converged,
+    :data:`INDEFINITE`, :data:`MAXITER`)."""
+
+    x: Array
+    iterations: Array
+    status: Array
+
+
+#: :class:`CGSolution` outcomes besides 0 (converged)
+INDEFINITE, MAXITER = 1, 2
+
+
+def pcg(
+    op: Callable[[Array], Array],
+    b: Array,
+    precondition: Preconditioner,
+    inner: Inner,
+    *,
+    rtol: Array | float,
+    maxiter: int,
+) -> CGSolution:
+    r"""Preconditioned conjugate gradients from ``x = 0`` for a symmetric positive definite
+    ``op`` (:func:`nematic_solids.model.krylov.pcg`): stops when the preconditioned residual
+    norm :math:`\sqrt{r \cdot M r}` is at most ``rtol`` times that of ``b``, after
+    ``maxiter`` iterations, or at a direction of non-positive curvature (the operator is
+    not positive definite: :data:`INDEFINITE`)."""
+    z = precondition(b)
+    rz = inner(b, z)
+    ref0 = jnp.sqrt(jnp.abs(rz))
+    ref = jnp.where(ref0 == 0.0, 1.0, ref0)
+
+    def going(c):
+        _, _, _, rz, it, status = c
+        return (status < 0) & ~(jnp.sqrt(jnp.abs(rz)) <= rtol * ref)
+
+    def iterate(c):
+        x, r, p, rz, it, status = c
+        at_cap = it >= maxiter
+        Ap = op(p)
+        pAp = inner(p, Ap)
+        indefinite = ~at_cap & (pAp <= 0.0)
+        step = rz / jnp.where(pAp == 0.0, 1.0, pAp)
+        x_new = x + step * p
+        r_new = r - step * Ap
+        z = precondition(r_new)
+        rz_new = inner(r_new, z)
+        p_new = z + (rz_new / jnp.where(rz == 0.0, 1.0, rz)) * p
+        move = ~at_cap & ~indefinite
+        status = jnp.where(at_cap, MAXITER, jnp.where(indefinite, INDEFINITE, status))
+        return (
+            jnp.where(move, x_new, x),
+            jnp.where(move, r_new, r),
+            jnp.where(move, p_new, p),
+            jnp.where(move, rz_new, rz),
+            jnp.where(move, it + 1, it),
+            status,
+        )
+
+    start = (jnp.zeros_like(b), b, z, rz, jnp.int32(0), jnp.int32(-1))
+    x, _, _, rz, it, status = lax.while_loop(going, iterate, start)
+    return CGSolution(x, it, jnp.where(status < 0, 0, status))

@@ -385,3 +385,89 @@ def test_the_finite_strain_constitutive_law_is_one_code_for_numpy_and_jax():
     for r, g in zip(ref, got, strict=True):
         assert isinstance(g, jax.Array)
         np.testing.assert_allclose(np.asarray(g), r, rtol=0, atol=1e-13 * np.abs(r).max())
+
+
+#: a 32^2 finite-strain point with every coupling on: B' > 0, an applied shear
+FINITE = Parameters(noise_modes=6, K=1e-3, S0=0.2, zeta=1.0, kappa=10.0).replace(
+    B_prime=0.1, eps=0.03, alpha_minus_B=1.0
+)
+
+
+def finite_reference(params: Parameters, numerics: Numerics, seed: int):
+    """The numpy reference's PDE (numpy backend) and a seeded state with a banded activity."""
+    pde = ActiveNematicPDE(params, numerics.replace(backend="numpy"))
+    u = np.ascontiguousarray(np.stack(initial_fields(params, N, seed)))
+    u[2] = 0.3 * np.cos(2 * np.pi * (np.arange(N) + 0.5) / N)[:, None]
+    return pde, u
+
+
+def test_finite_force_balance_agrees_with_the_reference():
+    """Newton-Krylov for Div P = 0 (paper Eq. 3) in JAX, from the homogeneous state, takes
+    the reference's Newton steps to its displacement (to rounding), and a batch of two
+    seeds under jax.vmap gives each seed's solve alone."""
+    import jax.numpy as jnp
+
+    from nematic_solids.model.accelerated import finite as AF
+
+    num = Numerics(resolution=N, mechanics="finite", newton_tol=1e-10)
+    sym, c = AF.setup(FINITE, num)
+    solve = jax.jit(AF.force_balance, static_argnums=4)
+    zero = jnp.zeros((2, N, N // 2 + 1), complex)
+    F0 = AF.deformation(zero, sym, c)
+    alone = []
+    for seed in (3, 4):
+        pde, u = finite_reference(FINITE, num, seed)
+        ref = pde.mechanics.solve(u[0], u[1])
+        got = solve(jnp.asarray(u[:2]), zero, F0, sym, c)
+        assert int(got.status) == 0
+        assert int(got.iterations) == ref.iterations >= 3
+        assert float(got.residual) <= 1e-10
+        scale = np.abs(ref.u_hat).max()
+        np.testing.assert_allclose(np.asarray(got.u_hat), ref.u_hat, rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(np.asarray(got.P), ref.P, rtol=0, atol=1e-12)
+        alone.append((u[:2], got))
+    q = jnp.asarray(np.stack([a[0] for a in alone]))
+    both = jax.jit(jax.vmap(AF.force_balance, (0, None, None, None, None)), static_argnums=4)(
+        q, zero, F0, sym, c
+    )
+    for i, (_, got) in enumerate(alone):
+        assert int(both.iterations[i]) == int(got.iterations)
+        np.testing.assert_allclose(np.asarray(both.u_hat[i]), np.asarray(got.u_hat), atol=1e-14)
+
+
+@pytest.mark.parametrize("coupling", ["trP", "trS"])
+def test_finite_stage_rates_agree_with_the_reference(coupling):
+    """A stage's split right-hand side at a displacement off force balance (the integrated
+    scheme's), in JAX: N_q, A-dot, the displacement rate and its gradient agree with the
+    numpy reference's (nematic_solids.model.split.ForceBalanceSplit) to rounding, with the
+    same GMRES iterations, from a zero start and warm-started from the last rate."""
+    import jax.numpy as jnp
+
+    from nematic_solids.model.accelerated import finite as AF
+    from nematic_solids.model.split import ForceBalanceSplit
+
+    params = FINITE.replace(coupling=coupling)
+    num = Numerics(resolution=N, mechanics="finite", spin_tol=1e-10)
+    pde, u = finite_reference(params, num, 3)
+    mech, g = pde.mechanics, pde.spectral
+    mech.solve(u[0], u[1])
+    sym, c = AF.setup(params, num)
+    split = ForceBalanceSplit(pde, np.asarray(sym.Lq))
+    rates = jax.jit(AF.finite_split, static_argnums=7)
+    q_hat = g.forward(u[:2])
+    udot, grad = jnp.zeros((2, N, N // 2 + 1), complex), jnp.zeros((2, 2, N, N))
+    for factor in (1.05, 1.06):  # two stages: the second warm-started
+        d = mech.u_hat * factor
+        F = mech.deformation(d)
+        before = mech.spin_iterations
+        Nq, Adot, _ = split(u, q_hat, 0.0, d, F)
+        got = rates(*map(jnp.asarray, (u[:2], u[2], q_hat, F)), udot, grad, sym, c)
+        assert bool(got.converged)
+        assert not bool(got.folded)
+        assert int(got.iterations) == mech.spin_iterations - before >= 5
+        for a, b in ((got.Nq, Nq), (got.Adot, Adot), (got.udot_hat, mech.udot_hat)):
+            np.testing.assert_allclose(np.asarray(a), b, rtol=0, atol=1e-12 * np.abs(b).max())
+        np.testing.assert_allclose(
+            np.asarray(got.udot_grad), mech.udot_grad, atol=1e-12 * np.abs(mech.udot_grad).max()
+        )
+        udot, grad = got.udot_hat, got.udot_grad

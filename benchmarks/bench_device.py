@@ -1,10 +1,12 @@
 """The accelerated backend (model/accelerated/, JAX) on a device, side by side with today's
-compiled path: B seeds of one small-strain point (Fig. 2's parameters at alpha - B = 1, band
-texture of 16 modes, default numerics but ``t_final``) at each grid size, as one batched run
+compiled path: B seeds of one point (Fig. 2's parameters at alpha - B = 1, band texture of 16
+modes, default numerics but ``t_final``; small-strain mechanics, or finite strain with
+``--mechanics finite``) at each grid size, as one batched run
 on the device and as B runs of ``nematic_solids.model.simulate.run`` one after another on one CPU
 core.
 
-Prints a table and writes ``benchmarks/bench_device.json`` (``--out``): per grid and batch
+Prints a table and writes ``benchmarks/bench_device.json`` (finite strain:
+``benchmarks/bench_device_finite.json``; ``--out``): per grid and batch
 size the device, the seconds (wall and CPU of this process; the batched run's compile apart),
 the steps and transforms per seed (the stepping's, without the saves'), the runs per hour
 (wall) and per CPU hour (this process's CPU time, all its threads: the figure a loaded machine
@@ -18,6 +20,7 @@ test: the numbers depend on the machine and its load (``os.getloadavg`` is recor
     .venv/bin/python benchmarks/bench_device.py      # CPU, 64^2 and 128^2, B = 1, 8
     .venv/bin/python benchmarks/bench_device.py --device gpu --sizes 128,256,512 --batch 1,8,50 \\
         --t-final 300                                 # on a CUDA machine
+    .venv/bin/python benchmarks/bench_device.py --mechanics finite ...   # finite strain
 
 On a GPU machine install the extra first: ``pip install '.[accel]' 'jax[cuda12]'``. ``--device
 gpu`` fails at once with the model's ``DeviceUnavailable`` where JAX sees no GPU.
@@ -141,8 +144,12 @@ def main() -> None:
         action="store_true",
         help="skip the accelerated path (to time the compiled one as a process of its own)",
     )
-    ap.add_argument("--out", default=str(HERE / "bench_device.json"))
+    ap.add_argument("--mechanics", default="linear", choices=("linear", "finite"))
+    ap.add_argument("--out", default=None, help="the JSON (default: by --mechanics, above)")
     args = ap.parse_args()
+    if args.out is None:
+        name = "bench_device.json" if args.mechanics == "linear" else "bench_device_finite.json"
+        args.out = str(HERE / name)
     import jax
 
     dev = select_device(args.device)  # DeviceUnavailable here, before any run
@@ -159,12 +166,13 @@ def main() -> None:
             "cpu_count": os.cpu_count(),
             "loadavg_at_end": os.getloadavg(),
             "parameters": params.to_dict(),
+            "mechanics": args.mechanics,
             "rows": rows,
         }
         Path(args.out).write_text(json.dumps(out, indent=1, default=str))
 
     for n in (int(s) for s in args.sizes.split(",")):
-        numerics = Numerics(resolution=n, mechanics="linear", t_final=args.t_final)
+        numerics = Numerics(resolution=n, mechanics=args.mechanics, t_final=args.t_final)
         for batch in (int(b) for b in args.batch.split(",")):
             seeds = range(batch)
             if args.no_accelerated:

@@ -1,9 +1,10 @@
 r"""The model in JAX: B seeds of one point advance together, on a CPU or a GPU, through one code
 path (``jax.jit``; XLA compiles it for the device the arrays live on).
 
-The same equations as the numpy reference (paper Eqs. (3)-(5) in small-strain mechanics,
-:meth:`nematic_solids.model.split.SpectralSplit.reference`), the same parameters
-(:class:`nematic_solids.model.parameters.Parameters`,
+The same equations as the numpy reference (paper Eqs. (3)-(5); small-strain mechanics as
+:meth:`nematic_solids.model.split.SpectralSplit.reference`, finite strain as
+:class:`nematic_solids.model.mechanics.FiniteMechanics` with the integrated displacement), the same
+parameters (:class:`nematic_solids.model.parameters.Parameters`,
 :class:`nematic_solids.model.parameters.Numerics`), Krogstad's ETDRK4 with the same embedded error
 estimate and step controller as :mod:`nematic_solids.model.solver`, in float64. Every array carries
 a leading batch axis (one seed per row); each seed has its own step size and its own accept / reject
@@ -14,22 +15,25 @@ masked), so a seed's trajectory is the one it has when run alone. Modules:
 * :mod:`nematic_solids.model.accelerated.device`: the device a run asks for (``"cpu"``, ``"gpu"``,
   ``"auto"``), or :class:`nematic_solids.model.errors.DeviceUnavailable`;
 * :mod:`nematic_solids.model.accelerated.krylov`: restarted GMRES with an auxiliary output (the
-  algorithm of :func:`nematic_solids.model.krylov.gmres_aux`, from zero);
+  algorithm of :func:`nematic_solids.model.krylov.gmres_aux`) and preconditioned CG;
 * :mod:`nematic_solids.model.accelerated.linear_rhs`: the small-strain split right-hand side with
   its spin solve, and its constant symbols (made by the numpy reference's own code);
+* :mod:`nematic_solids.model.accelerated.finite`: finite strain's force balance (Newton-Krylov)
+  and a stage's split right-hand side at a given displacement, on the reference's constitutive
+  formulas (:mod:`nematic_solids.model.constitutive` takes JAX arrays);
 * :mod:`nematic_solids.model.accelerated.etdrk4`: the phi functions, one Krogstad step with its
   error estimate, and the adaptive loop to a save time;
+* :mod:`nematic_solids.model.accelerated.finite_step`: finite strain's Krogstad step, the
+  displacement carried through the stages and projected per accepted step;
 * :mod:`nematic_solids.model.accelerated.observables`: the per-save observables on the device;
 * :mod:`nematic_solids.model.accelerated.run`: :func:`run_batch`, the seeds of one point from t = 0
   to ``t_final``.
 
-Finite-strain mechanics is not here yet: :func:`run_batch` refuses it with a
-:class:`nematic_solids.model.errors.ParameterError`. Its constitutive law is ready for it: the
-reference's :mod:`nematic_solids.model.constitutive` takes JAX arrays (the formulas of
-:mod:`nematic_solids.model.tensors` pick the arrays' library), tested to agree under
-``jax.jit``. Importing this package enables JAX's float64 (``jax_enable_x64``) for the process;
-without JAX installed it raises :class:`nematic_solids.model.errors.DeviceUnavailable` with the
-install line.
+ETDRK2, finite strain with the displacement solved at every stage (``displacement:
+equilibrium``), time protocols and the early stop are not here: :func:`run_batch` refuses them with
+a :class:`nematic_solids.model.errors.ParameterError`. Importing this package enables JAX's float64
+(``jax_enable_x64``) for the process; without JAX installed it raises
+:class:`nematic_solids.model.errors.DeviceUnavailable` with the install line.
 """
 
 from __future__ import annotations

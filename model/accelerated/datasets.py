@@ -117,9 +117,23 @@ def batch_datasets(
     ends: list[RunState | None] = [None] * len(seeds)
     clock0 = time.perf_counter()
 
+    finite = numerics.mechanics == "finite"
+
+    def mechanics_of(b: int, state: SeedState) -> dict[str, np.ndarray]:
+        """Seed ``b``'s mechanics as a state saves them
+        (:meth:`nematic_solids.model.mechanics.FiniteMechanics.saved_state`; none in small
+        strain)."""
+        if not finite:
+            return {}
+        m = state.mech
+        return {k: np.asarray(getattr(m, k)[b]).copy() for k in ("u_hat", "udot_hat", "udot_grad")}
+
     def capture(b: int, t: float, fields: np.ndarray, state: SeedState, share: float) -> RunState:
         def at(name: str) -> int:
             return int(np.asarray(getattr(state, name))[b])
+
+        def mech_at(name: str) -> int:
+            return int(np.asarray(getattr(state.mech, name))[b]) if finite else 0
 
         return RunState(
             t=float(t),
@@ -132,17 +146,17 @@ def batch_datasets(
                     "rejected": at("rejected"),
                     "stage_failures": at("stage_failures"),
                     "rhs": at("rhs"),
-                    "newton": 0,
-                    "projections": 0,
+                    "newton": mech_at("newton"),
+                    "projections": at("steps") if finite else 0,
                 },
                 float(np.asarray(state.margin_min)[b]),
             ),
-            mechanics={},
+            mechanics=mechanics_of(b, state),
             counters={
                 "fft_count": at("transforms") + save_ffts[b],
                 "fft_parts": {"saves": save_ffts[b]},
                 "spin_iterations": at("spin_iterations"),
-                "cg_iterations": 0,
+                "cg_iterations": mech_at("cg_iterations"),
             },
             rows=[dict(r) for r in rows[b]],
             snaps=list(snaps[b]),
@@ -162,6 +176,11 @@ def batch_datasets(
             if codes[b] != 0:  # failed before this save: its series ends at the last one
                 continue
             count = eq.spectral.fft.count
+            if finite:
+                # the save's force balance starts from the seed's, already balanced; the
+                # first save of a run solves from the homogeneous state, as the reference's
+                u = np.asarray(state.mech.u_hat[b])
+                eq.mechanics.u_hat = u if t > t_start else np.zeros_like(u)
             obs, mech = observe_state(eq, fields[b], t, steps=int(steps[b]))
             rows[b].append(obs)
             if float(np.round(t, 12)) in snap_set:
@@ -197,11 +216,11 @@ def batch_datasets(
                 "rejected": w["rejected"],
                 "stage_failures": w["stage_failures"],
                 "rhs": w["rhs"],
-                "newton": 0,
-                "projections": 0,
+                "newton": w.get("newton", 0),
+                "projections": w["steps"] if finite else 0,
             },
             spin_iterations=w["spin_iterations"],
-            cg_iterations=0,
+            cg_iterations=w.get("cg_iterations", 0),
             fft_count=w["transforms"] + save_ffts[b],
             fft_parts={"saves": save_ffts[b]},
             fft_backend=f"jax (XLA) on {result.device}",

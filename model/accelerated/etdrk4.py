@@ -32,8 +32,9 @@ well-posedness margin :math:`1 - \max (\alpha - B) S` is <= 0 fails it at once
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple, TypeAlias
+from typing import Any, NamedTuple, TypeAlias
 
 import jax
 import jax.numpy as jnp
@@ -44,9 +45,19 @@ from .linear_rhs import Constants, Symbols, forward, inverse, linear_split
 
 Array: TypeAlias = jax.Array
 
-#: a seed's status: 0 running or done, else the index of its failure's reason tag
-REASONS = ("", "spin_diverged", "nan", "rate_problem_ill_posed", "step_size_collapsed")
-SPIN, NAN, ILL_POSED, COLLAPSED = 1, 2, 3, 4
+#: a seed's status: 0 running or done, else the index of its failure's reason tag (the
+#: last three: finite strain's, :mod:`nematic_solids.model.accelerated.finite_step`)
+REASONS = (
+    "",
+    "spin_diverged",
+    "nan",
+    "rate_problem_ill_posed",
+    "step_size_collapsed",
+    "J<=0",
+    "newton_diverged",
+    "ellipticity_lost",
+)
+SPIN, NAN, ILL_POSED, COLLAPSED, FOLDED, NEWTON, ELLIPTICITY = 1, 2, 3, 4, 5, 6, 7
 
 
 @dataclass(frozen=True)
@@ -82,6 +93,9 @@ class SeedState(NamedTuple):
     rhs: Array
     spin_iterations: Array
     transforms: Array
+    #: the mechanics carried between steps (finite strain's
+    #: :class:`nematic_solids.model.accelerated.finite_step.Mechanics`; none in small strain)
+    mech: Any = ()
 
 
 def initial_state(q: Array, A: Array, *, dt: float) -> SeedState:
@@ -133,7 +147,11 @@ def krogstad_weights(z: Array) -> tuple[Array, ...]:
 class Step(NamedTuple):
     """One step's outcome: the new fields, the error estimate, whether the first right-hand
     side and the other stages succeeded (and whether every spin solve converged), the start's
-    well-posedness margin, and the work."""
+    well-posedness margin, and the work. A step that carries mechanics (finite strain) also
+    gives the ``reason`` of a failed stage (else: a spin solve or a non-finite state), the
+    mechanics to keep where the step is accepted (``mech``) or not (``kept``), and whether
+    the accepted state's projection onto force balance succeeded (``projected``; else why:
+    ``projection_reason``)."""
 
     q: Array
     q_hat: Array
@@ -145,6 +163,15 @@ class Step(NamedTuple):
     margin: Array
     iterations: Array
     transforms: Array
+    reason: Any = None
+    mech: Any = ()
+    kept: Any = ()
+    projected: Any = True
+    projection_reason: Any = 0
+
+
+#: a step function: (state, step size, symbols, constants, error norm) -> its Step
+StepFunction = Callable[[SeedState, Array, Any, Any, str], Step]
 
 
 def krogstad_step(
@@ -240,9 +267,23 @@ def quantize(h: Array, dt_max: float) -> Array:
     return dt_max * 2.0 ** (-jnp.maximum(j, 0.0) / 8.0)
 
 
-def advance(s: SeedState, t_end: Array, sym: Symbols, c: Constants, ctl: Control) -> SeedState:
+def linear_step(s: SeedState, h: Array, sym: Symbols, c: Constants, error_norm: str) -> Step:
+    """:func:`krogstad_step` from the seed's state (small strain: no mechanics carried)."""
+    return krogstad_step(s.q, s.q_hat, s.A, h, sym, c, error_norm)
+
+
+def advance(
+    s: SeedState,
+    t_end: Array,
+    sym: Any,
+    c: Any,
+    ctl: Control,
+    step: StepFunction = linear_step,
+) -> SeedState:
     """Step one seed from its time to ``t_end`` (landing on it exactly), with the step
-    control of the module docstring; a failed seed stays where it failed."""
+    control of the module docstring; a failed seed stays where it failed. ``step`` takes
+    one step (:func:`linear_step`, or finite strain's with its mechanics: then a projection
+    that fails after an accepted step is retried with h/4 like a failed stage)."""
     dt_max = ctl.dt_max
     slack = 1e-12 * jnp.maximum(1.0, jnp.abs(t_end))
 
@@ -256,11 +297,13 @@ def advance(s: SeedState, t_end: Array, sym: Symbols, c: Constants, ctl: Control
             if ctl.adaptive
             else (jnp.minimum(h, t_end - s.t))
         )
-        r = krogstad_step(s.q, s.q_hat, s.A, h_try, sym, c, ctl.error_norm)
+        r = step(s, h_try, sym, c, ctl.error_norm)
         ill = r.first_ok & (r.margin <= 0.0)
         failed = ~r.first_ok | (r.first_ok & ~ill & ~r.stages_ok)
-        fail_reason = jnp.where(~r.first_ok | ~r.spins_ok, SPIN, NAN)
-        final_fail = failed & ((not ctl.adaptive) | (h_try <= ctl.retry_floor * dt_max))
+        if r.reason is None:
+            fail_reason = jnp.where(~r.first_ok | ~r.spins_ok, SPIN, NAN)
+        else:
+            fail_reason = r.reason
         ok = ~failed & ~ill
         err = r.error
         safe_err = jnp.where(err > 0.0, err, 1.0)
@@ -272,7 +315,12 @@ def advance(s: SeedState, t_end: Array, sym: Symbols, c: Constants, ctl: Control
         reject = ok & ctl.adaptive & (err > ctl.tolerance)
         h_reject = quantize(h_try * jnp.minimum(fac, 0.5), dt_max)
         collapsed = reject & (h_reject < ctl.dt_min)
-        accept = ok & ~reject
+        # an accepted state whose projection onto force balance fails: a failed step
+        unprojected = ok & ~reject & ~jnp.asarray(r.projected)
+        failed = failed | unprojected
+        fail_reason = jnp.where(unprojected, r.projection_reason, fail_reason)
+        final_fail = failed & ((not ctl.adaptive) | (h_try <= ctl.retry_floor * dt_max))
+        accept = ok & ~reject & ~unprojected
         if ctl.adaptive:
             scaled = jnp.where(fac > 1.0, jnp.maximum(h, h_try * fac), jnp.minimum(h, h_try * fac))
             h_accept = jnp.where(
@@ -306,6 +354,7 @@ def advance(s: SeedState, t_end: Array, sym: Symbols, c: Constants, ctl: Control
             s.rhs + 4,
             s.spin_iterations + r.iterations,
             s.transforms + r.transforms,
+            jax.tree.map(lambda new, old: jnp.where(accept, new, old), r.mech, r.kept),
         )
 
     return lax.while_loop(running, attempt, s)

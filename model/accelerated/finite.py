@@ -27,9 +27,8 @@ The stress and its derivatives are the reference's own formulas
   - s A^3` (Eq. 5; ``tr S`` with ``coupling = "trS"``), returned as :math:`\hat N_q =
   \widehat{\dot q} - L_q \hat q` and :math:`\dot A`.
 
-The time stepper that carries the displacement through Krogstad's stages and projects it
-once per accepted step is the next piece; :func:`nematic_solids.model.accelerated.run_batch`
-refuses finite strain until it lands.
+The time step that carries the displacement through Krogstad's stages and projects it once
+per accepted step is :mod:`nematic_solids.model.accelerated.finite_step`.
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
-"""The seeds of one point in one accelerated run: :func:`run_batch` (small-strain mechanics,
-ETDRK4), from each seed's initial texture (:func:`nematic_solids.model.initial.initial_fields`, as
+"""The seeds of one point in one accelerated run: :func:`run_batch` (small-strain or
+finite-strain mechanics, ETDRK4), from each seed's initial texture
+(:func:`nematic_solids.model.initial.initial_fields`, as
 :func:`nematic_solids.model.simulate.run`) to ``t_final``, with the observables at the save times of
 :func:`nematic_solids.model.parameters.save_times`.
 
@@ -16,6 +17,7 @@ import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -26,6 +28,7 @@ from ..checkpoint import CheckpointError, RunState
 from ..errors import ParameterError
 from ..initial import initial_fields
 from ..parameters import Numerics, Parameters, check_compatible, save_times
+from . import finite, finite_step
 from .device import describe, select_device
 from .etdrk4 import REASONS, Control, SeedState, advance, initial_state
 from .linear_rhs import Constants, setup, symbols_on
@@ -63,6 +66,16 @@ class BatchResult:
     jax_version: str
 
 
+def _work(state: SeedState) -> dict[str, np.ndarray]:
+    """The work counted per seed: :data:`WORK`, and finite strain's Newton iterations of the
+    projections (``newton``) and CG iterations of every force balance (``cg_iterations``)."""
+    work = {name: np.asarray(getattr(state, name)) for name in WORK}
+    if isinstance(state.mech, finite_step.Mechanics):
+        work["newton"] = np.asarray(state.mech.newton)
+        work["cg_iterations"] = np.asarray(state.mech.cg_iterations)
+    return work
+
+
 def _check_start(
     start: Sequence[RunState], params: Parameters, numerics: Numerics, seeds: tuple[int, ...]
 ) -> float:
@@ -80,9 +93,11 @@ def _check_start(
     return t.pop()
 
 
-def _resumed(start: Sequence[RunState], dev: jax.Device) -> SeedState:
+def _resumed(start: Sequence[RunState], dev: jax.Device, fin: tuple | None = None) -> SeedState:
     """The batch's device state from the seeds' saved states (the spectra transformed anew
-    where a state has none: a state saved before its run's first step)."""
+    where a state has none: a state saved before its run's first step); with finite
+    strain's ``fin`` = (symbols on the device, constants) their mechanics too
+    (:func:`nematic_solids.model.accelerated.finite_step.resumed_mechanics`)."""
 
     def one(state: RunState) -> tuple:
         q = np.asarray(state.fields[:2], dtype=np.float64)
@@ -112,25 +127,59 @@ def _resumed(start: Sequence[RunState], dev: jax.Device) -> SeedState:
     columns: list[np.ndarray] = [
         np.stack([np.asarray(r[k], dtype=t) for r in rows]) for k, t in enumerate(types)
     ]
-    return SeedState(*(jax.device_put(a, dev) for a in columns))
+    state = SeedState(*(jax.device_put(a, dev) for a in columns))
+    if fin is None:
+        return state
+    sym, c = fin
+    saved = [
+        jax.device_put(np.stack([np.asarray(st.mechanics[k]) for st in start]), dev)
+        for k in ("u_hat", "udot_hat", "udot_grad")
+    ]
+    mech = jax.jit(
+        jax.vmap(finite_step.resumed_mechanics, in_axes=(0, 0, 0, 0, None, None)),
+        static_argnums=5,
+    )(*saved, state.q, sym, c)
+    cg = np.array([int(st.counters["cg_iterations"]) for st in start], dtype=np.int32)
+    newton = np.array([int(st.solver.stats["newton"]) for st in start], dtype=np.int32)
+    return state._replace(
+        mech=mech._replace(
+            newton=jax.device_put(newton, dev), cg_iterations=jax.device_put(cg, dev)
+        )
+    )
 
 
 @functools.lru_cache(maxsize=8)
-def _jitted(c: Constants, ctl: Control, nshell: int, dt: float):
+def _jitted(c: Constants | finite.FiniteConstants, ctl: Control, nshell: int, dt: float):
     """The batched, jitted functions of a run (kept per constants, so that JAX's cache of
-    compiled code serves the next run of the same shape): the initial state, the advance to
-    a time, the observables."""
-    start = jax.jit(jax.vmap(functools.partial(initial_state, dt=dt)))
-    c = dataclasses.replace(c, batch_axis=SEEDS)
-    step = jax.jit(
-        jax.vmap(functools.partial(advance, c=c, ctl=ctl), in_axes=(0, None, None), axis_name=SEEDS)
-    )
-    look = jax.jit(
-        jax.vmap(
-            functools.partial(observe, nshell=nshell, alpha_minus_B=c.amb),
-            in_axes=(0, 0, None),
+    compiled code serves the next run of the same shape): the initial state ``(q, A,
+    symbols)``, the advance to a time, the observables ``(state, shells)``."""
+    if isinstance(c, Constants):
+        start = jax.jit(
+            jax.vmap(lambda q, A, sym: initial_state(q, A, dt=dt), in_axes=(0, 0, None))
         )
+    else:
+        start = jax.jit(
+            jax.vmap(
+                functools.partial(finite_step.initial_finite_state, c=c, dt=dt),
+                in_axes=(0, 0, None),
+            )
+        )
+    c = dataclasses.replace(c, batch_axis=SEEDS)
+    linear = isinstance(c, Constants)
+    stepper = advance if linear else functools.partial(advance, step=finite_step.finite_step)
+    step = jax.jit(
+        jax.vmap(functools.partial(stepper, c=c, ctl=ctl), in_axes=(0, None, None), axis_name=SEEDS)
     )
+    amb = c.amb if isinstance(c, Constants) else c.alpha - c.B
+
+    def observables(state: SeedState, shells: ShellData) -> jax.Array:
+        values = observe(state.q, state.A, shells, nshell=nshell, alpha_minus_B=amb)
+        if isinstance(c, Constants):
+            return values
+        # finite strain's margin: at the state's force balance (the tangent and E there)
+        return values.at[-1].set(finite_step.save_margin(state.q, state.mech, c))
+
+    look = jax.jit(jax.vmap(observables, in_axes=(0, None)))
     return start, step, look
 
 
@@ -169,7 +218,10 @@ def run_batch(
         raise ParameterError("seeds", seeds, "one or more integers >= 0")
     dev = select_device(device)
     n = numerics.resolution
-    symbols, c = setup(params, numerics)
+    linear = numerics.mechanics == "linear"
+    symbols: Any
+    c: Constants | finite.FiniteConstants
+    symbols, c = setup(params, numerics) if linear else finite.setup(params, numerics)
     ctl = Control(numerics.tolerance, numerics.dt_max, numerics.adaptive, numerics.error_norm)
     shells, nshell = shell_data(n)
     begin, step, look = _jitted(c, ctl, nshell, float(numerics.dt))
@@ -183,7 +235,7 @@ def run_batch(
             raise ParameterError(
                 "initial", fields0.shape, f"fields of shape ({len(seeds)}, 3, {n}, {n})"
             )
-    sym = symbols_on(symbols, dev)
+    sym = symbols_on(symbols, dev) if linear else finite.symbols_on(symbols, dev)
     shell_dev = ShellData(*(jax.device_put(a, dev) for a in shells))
     times = save_times(numerics)
     if start is not None:
@@ -194,9 +246,12 @@ def run_batch(
     # code already): an advance to t = 0 takes no step
     t0 = time.perf_counter()
     q0, A0 = jax.device_put(fields0[:, :2], dev), jax.device_put(fields0[:, 2], dev)
-    state: SeedState = begin(q0, A0) if start is None else _resumed(start, dev)
+    if start is None:
+        state: SeedState = begin(q0, A0, sym)
+    else:
+        state = _resumed(start, dev, None if linear else (sym, c))
     state = step(state, jax.device_put(jnp.float64(0.0), dev), sym)
-    jax.block_until_ready(look(state.q, state.A, shell_dev))
+    jax.block_until_ready(look(state, shell_dev))
     compile_s = time.perf_counter() - t0
 
     t1, cpu1 = time.perf_counter(), time.process_time()
@@ -204,7 +259,7 @@ def run_batch(
     for t_save in times:
         if t_save > 0.0:
             state = step(state, jax.device_put(jnp.float64(t_save), dev), sym)
-        values = np.array(look(state.q, state.A, shell_dev))
+        values = np.array(look(state, shell_dev))
         codes = np.asarray(state.status)
         values[codes != 0] = np.nan
         rows.append(values)
@@ -225,7 +280,7 @@ def run_batch(
         status=["ok" if s == 0 else "failed" for s in status],
         reason=[REASONS[int(s)] for s in status],
         t_failed=np.asarray(state.t_failed),
-        work={name: np.asarray(getattr(state, name)) for name in WORK},
+        work=_work(state),
         margin_min=np.asarray(state.margin_min),
         device=describe(dev),
         wall=wall,

@@ -31,7 +31,7 @@ from nematic_solids.sweep.store import CampaignStore
 CAMPAIGN = """\
 name: {name}
 parameters: {{noise_modes: 8}}
-numerics: {{resolution: 32, t_final: {t_final}, save_every: 5.0, mechanics: linear,
+numerics: {{resolution: 32, t_final: {t_final}, save_every: 5.0, mechanics: {mechanics},
            snapshot_times: [5]}}
 sweep:
   axes:
@@ -42,11 +42,23 @@ execution: {{workers: 1{execution}}}
 BATCHED = ", backend: accelerated, batch: 2, device: cpu"
 
 
-def write(folder: Path, name: str, execution: str = BATCHED, t_final: float = 10.0) -> Path:
+def write(
+    folder: Path,
+    name: str,
+    execution: str = BATCHED,
+    t_final: float = 10.0,
+    mechanics: str = "linear",
+) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.yaml"
-    path.write_text(CAMPAIGN.format(name=name, execution=execution, t_final=t_final))
+    text = CAMPAIGN.format(name=name, execution=execution, t_final=t_final, mechanics=mechanics)
+    path.write_text(text)
     return path
+
+
+def campaign_text(execution: str) -> str:
+    """The campaign's text as a file named "c" (32^2 small strain to t = 10)."""
+    return CAMPAIGN.format(name="c", execution=execution, t_final=10, mechanics="linear")
 
 
 def run_in_process(path: Path, results: Path) -> tuple[CampaignStore, driver.RunSummary]:
@@ -75,15 +87,17 @@ def problems(text: str) -> str:
 
 
 def test_the_execution_section_checks_backend_batch_and_device():
-    good = CAMPAIGN.format(name="c", execution=BATCHED, t_final=10)
+    good = campaign_text(BATCHED)
     ex = parse_campaign(good).execution
     assert (ex.backend, ex.batch, ex.device) == ("accelerated", 2, "cpu")
-    plain = parse_campaign(CAMPAIGN.format(name="c", execution="", t_final=10)).execution
+    plain = parse_campaign(campaign_text("")).execution
     assert (plain.backend, plain.batch, plain.device) == ("compiled", 1, "auto")
     finite = good.replace("mechanics: linear", "mechanics: finite")
-    assert "the accelerated backend cannot run mechanics = 'finite'" in problems(finite)
-    assert "execution.backend" in problems(finite)
-    text = problems(CAMPAIGN.format(name="c", execution=", batch: 4", t_final=10))
+    assert parse_campaign(finite).execution.backend == "accelerated"
+    solved = finite.replace("mechanics: finite", "mechanics: finite, displacement: equilibrium")
+    assert "the accelerated backend cannot run displacement = 'equilibrium'" in problems(solved)
+    assert "execution.backend" in problems(solved)
+    text = problems(campaign_text(", batch: 4"))
     assert "'batch' is the accelerated backend's" in text
     text = problems(good.replace("device: cpu", "device: tpu"))
     assert "execution.device" in text
@@ -99,7 +113,7 @@ def test_the_accelerated_backend_needs_jax_on_a_local_cluster(monkeypatch):
     monkeypatch.setattr(
         importlib.util, "find_spec", lambda name, *a: None if name == "jax" else real(name, *a)
     )
-    text = problems(CAMPAIGN.format(name="c", execution=BATCHED, t_final=10))
+    text = problems(campaign_text(BATCHED))
     assert "needs JAX, which is not installed here: pip install '.[accel]'" in text
 
 
@@ -111,12 +125,17 @@ def test_batches_hold_runs_of_one_point_in_queue_order():
     assert group_runs([4, 2], lambda i: objects[points[i]], 1) == [[4], [2]]
 
 
-def test_a_batched_campaign_equals_the_per_seed_campaign(tmp_path):
+@pytest.mark.parametrize("mechanics", ["linear", pytest.param("finite", marks=pytest.mark.slow)])
+def test_a_batched_campaign_equals_the_per_seed_campaign(tmp_path, mechanics):
     """Same run ids (the backend is not identity), one file per seed with the batch it ran in,
-    and phase.nc equal within the backends' tolerance (1e-10 of each variable's scale)."""
-    acc, summary = run_in_process(write(tmp_path, "acc"), tmp_path / "results")
+    and phase.nc equal within the backends' tolerance (1e-10 of each variable's scale), in
+    small-strain and finite-strain mechanics (slow: finite strain's batch compiles for two
+    batch sizes, about a minute)."""
+    acc, summary = run_in_process(write(tmp_path, "acc", mechanics=mechanics), tmp_path / "results")
     assert (summary.ok, len(summary.failed), summary.submitted) == (6, 0, 6)
-    cmp_store, _ = run_in_process(write(tmp_path, "cmp", execution=""), tmp_path / "results")
+    cmp_store, _ = run_in_process(
+        write(tmp_path, "cmp", execution="", mechanics=mechanics), tmp_path / "results"
+    )
     ids = sorted(p.stem for p in acc.runs_dir.glob("*.nc"))
     assert ids == sorted(p.stem for p in cmp_store.runs_dir.glob("*.nc"))
     assert len(ids) == 6

@@ -144,6 +144,43 @@ def krogstad_weights(z: Array) -> tuple[Array, ...]:
     return krogstad_from_phi(*phi_functions(z, 3), *phi_functions(0.5 * z, 2))
 
 
+Stage = Callable[[Array, Array], tuple[Array, Array, Array]]
+
+
+def krogstad_stages(
+    q: Array,
+    q_hat: Array,
+    A: Array,
+    h: Array,
+    wq: tuple[Array, ...],
+    wA: tuple[Array, ...],
+    n: int,
+) -> tuple[Stage, Stage, Stage, Stage]:
+    """The four stages u, a, b, c of Krogstad's step from (q, q hat, A) with the weights
+    ``wq``, ``wA`` of :func:`krogstad_weights` (q's and A's): each a function of the N terms
+    so far (``Nq``, ``NA``, stacked u, a, b, c) returning the stage's (q, q hat, A) (module
+    docstring)."""
+    Eq, E2q, aq, bq_u, bq_a, cq_u, cq_b = wq[:7]
+    EA, E2A, aA, bA_u, bA_a, cA_u, cA_b = wA[:7]
+
+    def stage_u(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
+        return q, q_hat, A
+
+    def stage_a(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
+        qa = E2q * q_hat + h * (aq * Nq[0])
+        return inverse(qa, n), qa, E2A * A + h * (aA * NA[0])
+
+    def stage_b(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
+        qb = E2q * q_hat + h * (bq_u * Nq[0] + bq_a * Nq[1])
+        return inverse(qb, n), qb, E2A * A + h * (bA_u * NA[0] + bA_a * NA[1])
+
+    def stage_c(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
+        qc = Eq * q_hat + h * (cq_u * Nq[0] + cq_b * Nq[2])
+        return inverse(qc, n), qc, EA * A + h * (cA_u * NA[0] + cA_b * NA[2])
+
+    return stage_u, stage_a, stage_b, stage_c
+
+
 class Step(NamedTuple):
     """One step's outcome: the new fields, the error estimate, whether the first right-hand
     side and the other stages succeeded (and whether every spin solve converged), the start's
@@ -179,9 +216,11 @@ def krogstad_step(
 ) -> Step:
     """One Krogstad ETDRK4 step of size ``h`` from (q, q hat, A) (module docstring)."""
     n = c.n
-    Eq, E2q, aq, bq_u, bq_a, cq_u, cq_b, nq_u, nq_ab, nq_c = krogstad_weights(sym.Lq * h)
+    wq = krogstad_weights(sym.Lq * h)
+    Eq, nq_u, nq_ab, nq_c = wq[0], wq[7], wq[8], wq[9]
     LA = -(c.zeta + 3.0 * c.s * A * A) / c.tau
-    EA, E2A, aA, bA_u, bA_a, cA_u, cA_b, nA_u, nA_ab, nA_c = krogstad_weights(LA * h)
+    wA = krogstad_weights(LA * h)
+    EA, nA_u, nA_ab, nA_c = wA[0], wA[7], wA[8], wA[9]
 
     S = jnp.sqrt(q[0] ** 2 + q[1] ** 2)
     margin = 1.0 - jnp.max(c.amb * S)
@@ -189,24 +228,11 @@ def krogstad_step(
     # the four right-hand sides (u, a, b, c) as one loop over the stages, so that the split
     # and its GMRES are compiled once; the stage index is not batched, so lax.switch picks
     # one branch (under jax.vmap too)
-    def stage_u(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
-        return q, q_hat, A
-
-    def stage_a(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
-        qa = E2q * q_hat + h * (aq * Nq[0])
-        return inverse(qa, n), qa, E2A * A + h * (aA * NA[0])
-
-    def stage_b(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
-        qb = E2q * q_hat + h * (bq_u * Nq[0] + bq_a * Nq[1])
-        return inverse(qb, n), qb, E2A * A + h * (bA_u * NA[0] + bA_a * NA[1])
-
-    def stage_c(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
-        qc = Eq * q_hat + h * (cq_u * Nq[0] + cq_b * Nq[2])
-        return inverse(qc, n), qc, EA * A + h * (cA_u * NA[0] + cA_b * NA[2])
+    stages = krogstad_stages(q, q_hat, A, h, wq, wA, n)
 
     def evaluate(i, carry):
         Nq, NA, converged, iterations, transforms = carry
-        q_s, qh_s, A_s = lax.switch(i, (stage_u, stage_a, stage_b, stage_c), Nq, NA)
+        q_s, qh_s, A_s = lax.switch(i, stages, Nq, NA)
         r = linear_split(q_s, A_s, qh_s, sym, c)
         return (
             Nq.at[i].set(r.Nq),

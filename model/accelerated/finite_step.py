@@ -48,6 +48,7 @@ from .etdrk4 import (
     SeedState,
     Step,
     initial_state,
+    krogstad_stages,
     krogstad_weights,
 )
 from .finite import FiniteConstants, FiniteSymbols, deformation, finite_split, force_balance
@@ -137,31 +138,19 @@ def finite_step(
     n = c.n
     q, q_hat, A, m = s.q, s.q_hat, s.A, s.mech
     Lq = jnp.asarray(sym.Lq)
-    Eq, E2q, aq, bq_u, bq_a, cq_u, cq_b, nq_u, nq_ab, nq_c = krogstad_weights(Lq * h)
+    wq = krogstad_weights(Lq * h)
+    Eq, nq_u, nq_ab, nq_c = wq[0], wq[7], wq[8], wq[9]
     LA = -(c.zeta + 3.0 * c.s * A * A) / c.tau
-    EA, E2A, aA, bA_u, bA_a, cA_u, cA_b, nA_u, nA_ab, nA_c = krogstad_weights(LA * h)
+    wA = krogstad_weights(LA * h)
+    EA, nA_u, nA_ab, nA_c = wA[0], wA[7], wA[8], wA[9]
     offsets = jnp.stack([0.0 * h, 0.5 * h, 0.5 * h, h])
     rk4 = jnp.array([1.0, 2.0, 2.0, 1.0])  # the classical RK4 weights of the displacement
     errw = jnp.array([0.0, -1.0, 1.0, 0.0])  # G_b - G_a
-
-    def stage_u(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
-        return q, q_hat, A
-
-    def stage_a(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
-        qa = E2q * q_hat + h * (aq * Nq[0])
-        return inverse(qa, n), qa, E2A * A + h * (aA * NA[0])
-
-    def stage_b(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
-        qb = E2q * q_hat + h * (bq_u * Nq[0] + bq_a * Nq[1])
-        return inverse(qb, n), qb, E2A * A + h * (bA_u * NA[0] + bA_a * NA[1])
-
-    def stage_c(Nq: Array, NA: Array) -> tuple[Array, Array, Array]:
-        qc = Eq * q_hat + h * (cq_u * Nq[0] + cq_b * Nq[2])
-        return inverse(qc, n), qc, EA * A + h * (cA_u * NA[0] + cA_b * NA[2])
+    stages = krogstad_stages(q, q_hat, A, h, wq, wA, n)
 
     def evaluate(i, carry):
         Nq, NA, V, G, accV, accG, errG, V0, G0, K0, E0, codes, its, nfft = carry
-        q_s, qh_s, A_s = lax.switch(i, (stage_u, stage_a, stage_b, stage_c), Nq, NA)
+        q_s, qh_s, A_s = lax.switch(i, stages, Nq, NA)
         F_s = m.F + offsets[i] * G  # F at the stage (at the start: the solution's)
         r = finite_split(q_s, A_s, qh_s, F_s, V, G, sym, c)
         finite = jnp.all(jnp.isfinite(r.Nq)) & jnp.all(jnp.isfinite(r.Adot))

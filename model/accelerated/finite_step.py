@@ -105,26 +105,34 @@ def _balance_reason(status: Array) -> Array:
 
 
 def finite_margin(K: Array, E: Array, kappa: float) -> Array:
-    """The well-posedness margin of the rate problem (module docstring;
-    :func:`nematic_solids.model.wellposedness.finite_margin`)."""
+    r"""The well-posedness margin of the rate problem (module docstring;
+    :func:`nematic_solids.model.wellposedness.finite_margin`). With :math:`\hat k = (\cos
+    \phi, \sin \phi)` the symbol is :math:`M = K_{i0k0} c^2 + (K_{i0k1} + K_{i1k0}) c s +
+    K_{i1k1} s^2 + \tfrac12 (E_{i0} c + E_{i1} s) \hat t_k`: three 2 x 2 fields and two
+    vectors per point, evaluated at every sampled angle."""
     angles = np.arange(N_ANGLES) * (np.pi / N_ANGLES)
+    K0, K1, K2 = K[:, 0, :, 0], K[:, 0, :, 1] + K[:, 1, :, 0], K[:, 1, :, 1]
+    E0, E1 = E[:, 0], E[:, 1]
 
-    def det_at(phi: Array, K: Array, E: Array) -> Array:
-        k = jnp.stack([jnp.cos(phi), jnp.sin(phi)])
-        t = jnp.stack([-jnp.sin(phi), jnp.cos(phi)])
-        KK = jnp.einsum("iJkL...,J,L->ik...", K, k, k)
-        Ek = jnp.einsum("iJ...,J->i...", E, k)
-        M = KK + 0.5 * Ek[:, None] * t.reshape((1, 2) + (1,) * (Ek.ndim - 1))
-        return (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]) / (kappa + 1.0)
+    def det_at(phi: Array, K0: Array, K1: Array, K2: Array, E0: Array, E1: Array) -> Array:
+        """det M / (kappa + 1) at the angles ``phi`` (a leading axis) and every point."""
+        c = jnp.cos(phi).reshape(phi.shape + (1,) * (K0.ndim - 2))
+        s = jnp.sin(phi).reshape(c.shape)
+        t = (-s, c)
+        Ek = [0.5 * (E0[i] * c + E1[i] * s) for i in range(2)]
 
-    D = jax.vmap(det_at, in_axes=(0, None, None))(jnp.asarray(angles), K, E)  # (angle, x, y)
+        def M(i: int, k: int) -> Array:
+            return K0[i, k] * (c * c) + K1[i, k] * (c * s) + K2[i, k] * (s * s) + Ek[i] * t[k]
+
+        return (M(0, 0) * M(1, 1) - M(0, 1) * M(1, 0)) / (kappa + 1.0)
+
+    D = det_at(jnp.asarray(angles), K0, K1, K2, E0, E1)  # (angle, x, y)
     flat = jnp.argmin(D)
     ia, x, y = jnp.unravel_index(flat, D.shape)
     m = D[ia, x, y]
     dphi = np.pi / N_ANGLES
     phis = jnp.asarray(angles)[ia] + dphi * jnp.array([-1.0, 0.0, 1.0])
-    Kp, Ep = K[..., x, y], E[..., x, y]
-    d = jax.vmap(det_at, in_axes=(0, None, None))(phis, Kp, Ep)
+    d = det_at(phis, *(a[..., x, y] for a in (K0, K1, K2, E0, E1)))
     curv = d[0] - 2.0 * d[1] + d[2]
     refined = d[1] - 0.125 * (d[2] - d[0]) ** 2 / jnp.where(curv > 0, curv, 1.0)
     return jnp.where(curv > 0, jnp.minimum(m, refined), m)
@@ -264,7 +272,9 @@ def initial_finite_state(
     s = initial_state(q, A, dt=dt)
     return s._replace(
         status=code,
-        t_failed=jnp.where(code != 0, 0.0, jnp.nan),
+        # (float64 arrays, not Python scalars: a weakly typed leaf would make the second
+        # advance compile again)
+        t_failed=jnp.where(code != 0, jnp.float64(0.0), jnp.float64(jnp.nan)),
         transforms=s.transforms + nfft,
         mech=mech,
     )

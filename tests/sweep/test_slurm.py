@@ -361,26 +361,28 @@ def test_a_job_cancelled_mid_run_has_its_run_redone_not_failed(slurm, tmp_path):
 
 
 def test_workers_retire_before_a_walltime_shorter_than_the_campaign(slurm, tmp_path):
-    """A 30-second walltime (SLURM enforces it as one minute): the workers retire after
-    about 21 s (sweep/run/lifetime.py), before SLURM would kill them; their jobs are replaced
-    and a campaign several times longer completes with every run ok. (So short a walltime
-    that the campaign outlasts several worker lifetimes however fast the machine is.)"""
+    """A 20-second walltime (SLURM enforces it as one minute): the workers retire after
+    about 14 s (sweep/run/lifetime.py: 20 s less a 1 s stagger and a 5 s grace), before SLURM
+    would kill them; their jobs are replaced and a campaign several times longer completes
+    with every run ok. (200 runs to t = 16: about a minute of one worker's time here, four
+    lifetimes and more, so that a fast machine too sees workers retire: a campaign done
+    within the first lifetime would leave nothing to check.)"""
     path = slurm_campaign(
         tmp_path,
         "short-walltime",
         values="{linspace: [0.1, 0.5, 40]}",
         seeds=5,
-        t_final=4.0,
+        t_final=16.0,
         scale="jobs: 1",
         give_up=180,
         extra=LOW_PRIORITY,
     )
-    path.write_text(path.read_text().replace('walltime: "00:10:00"', 'walltime: "00:00:30"'))
+    path.write_text(path.read_text().replace('walltime: "00:10:00"', 'walltime: "00:00:20"'))
     results = tmp_path / "results"
     rc, out, took = nematic(["run", path, "--results", results], timeout=900)
     folder = results / "short-walltime"
     logs = sorted((folder / "jobs").glob("*.err"))
-    print(f"200 runs under a 30-second walltime in {took:.0f} s, {len(logs)} job(s)")
+    print(f"200 runs under a 20-second walltime in {took:.0f} s, {len(logs)} job(s)")
     assert rc == 0, out[-3000:]
     recs = records(folder / "runs")
     assert sorted(recs) == sorted(run_ids(path))

@@ -154,6 +154,13 @@ def first_piola_q_increment(F: Array, Q: Array, dQ: Array, m: Moduli) -> Array:
     return T.matmul(F, dS)
 
 
+def second_piola_trace(F: Array, P: Array) -> Array:
+    r""":math:`\mathrm{tr}\, \mathbf S = \mathrm{tr}(F^{-1} P)`, :math:`F^{-1} = \mathrm{adj}\,
+    F / J` (the ``coupling = "trS"`` of Eq. 5)."""
+    adj = F[1, 1] * P[0, 0] - F[0, 1] * P[1, 0] - F[1, 0] * P[0, 1] + F[0, 0] * P[1, 1]
+    return adj / T.det(F)
+
+
 def small_strain_stress(grad_u: Array, Q: Array, m: Moduli) -> Array:
     r"""Linear ("small strain") stress, the linearisation of :func:`first_piola`:
 

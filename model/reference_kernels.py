@@ -2,7 +2,10 @@ r"""The numpy twins of the compiled kernels: the same names and signatures as
 :mod:`nematic_solids.model.compiled.kernels` (the interface
 :class:`nematic_solids.model.backend.Kernels`, which the type checker compares this module with),
 written as array expressions over the readable references (:mod:`nematic_solids.model.constitutive`,
-:mod:`nematic_solids.model.wellposedness`, :func:`phi_functions`). ``Numerics.backend = "numpy"``
+:mod:`nematic_solids.model.wellposedness`, :func:`phi_functions`). The finite-strain and rate
+kernels that the accelerated backend shares (the gradient, divergence and Green operator of
+half spectra, the strain measures, the molecular field, the rates of Eqs. 4-5) take JAX arrays
+too (:func:`nematic_solids.model.tensors.namespace`). ``Numerics.backend = "numpy"``
 runs these (:func:`nematic_solids.model.backend.kernels`); the tests check that each pair agrees
 (``tests/model/test_constitutive.py``).
 """
@@ -98,7 +101,8 @@ def strain_measures_kernel(F: Array, P: Array) -> tuple[Array, Array, Array]:
     J - 1, tr P)."""
     J = tensors.det(F)
     C = tensors.matmul(tensors.transpose(F), F)
-    Ebar_dev = np.stack([0.25 * (C[0, 0] - C[1, 1]) / J, 0.5 * C[0, 1] / J])
+    xp = tensors.namespace(F)
+    Ebar_dev = xp.stack([0.25 * (C[0, 0] - C[1, 1]) / J, 0.5 * C[0, 1] / J])
     return Ebar_dev, J - 1.0, tensors.trace(P)
 
 
@@ -108,7 +112,8 @@ def strain_measures_kernel(F: Array, P: Array) -> tuple[Array, Array, Array]:
 
 def grad_hat_kernel(v: Array, kx: Array, ky: Array) -> Array:
     r""":math:`\widehat{\partial_j v_i} = i k_j \hat v_i`."""
-    return 1j * np.stack([np.stack([kx * v[i], ky * v[i]]) for i in range(2)])
+    xp = tensors.namespace(v)
+    return 1j * xp.stack([xp.stack([kx * v[i], ky * v[i]]) for i in range(2)])
 
 
 def div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:
@@ -134,7 +139,8 @@ def neg_div_hat_kernel(T: Array, kx: Array, ky: Array) -> Array:
 def green_kernel(b: Array, khx: Array, khy: Array, inv_k2: Array, a: float) -> Array:
     r""":math:`(I - a \hat k \hat k)\, \hat b / k^2`."""
     kb = a * (khx * b[0] + khy * b[1])
-    return np.stack([(b[0] - khx * kb) * inv_k2, (b[1] - khy * kb) * inv_k2])
+    xp = tensors.namespace(b)
+    return xp.stack([(b[0] - khx * kb) * inv_k2, (b[1] - khy * kb) * inv_k2])
 
 
 def symbol_combination(x: Array, m1: Array, m2: Array, a: Array, b: Array) -> Array:
@@ -204,7 +210,8 @@ def molecular_field_kernel(
     r"""H of Eq. (4): :math:`-(A + A_0 + C\, Q:Q - 2 B' (J - 1)) q + B\, \mathrm{dev}\, \bar E
     + K \nabla^2 q`."""
     bulk = A + A0 + C * 2.0 * (q1**2 + q2**2) - two_Bp * Jm1
-    return np.stack([-bulk * q1, -bulk * q2]) + B * Ebar_dev + K * lap
+    xp = tensors.namespace(q1)
+    return xp.stack([-bulk * q1, -bulk * q2]) + B * Ebar_dev + K * lap
 
 
 def activity_rate(A: Array, trP: Array, zeta: float, chi: float, s: float, tau: float) -> Array:
@@ -221,7 +228,8 @@ def corotational_rate(R: Array, grad_v: Array, q1: Array, q2: Array) -> tuple[Ar
 
 def jaumann_products(omega: Array, q1: Array, q2: Array) -> Array:
     r""":math:`2 \omega J q = [-2 \omega q_2, 2 \omega q_1]`."""
-    return np.stack([-2.0 * omega * q2, 2.0 * omega * q1])
+    xp = tensors.namespace(omega)
+    return xp.stack([-2.0 * omega * q2, 2.0 * omega * q1])
 
 
 # --- the exponential integrators' pointwise pieces (twins of nematic_solids.model.compiled.etd)

@@ -34,7 +34,7 @@ per accepted step is :mod:`nematic_solids.model.accelerated.finite_step`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple, TypeAlias
+from typing import Any, NamedTuple, TypeAlias
 
 import jax
 import jax.numpy as jnp
@@ -42,6 +42,7 @@ import numpy as np
 from jax import lax
 
 from .. import constitutive as cl
+from .. import reference_kernels
 from .. import tensors as T
 from ..parameters import Numerics, Parameters
 from ..pde import ActiveNematicPDE
@@ -49,6 +50,9 @@ from .krylov import gmres_aux, pcg
 from .linear_rhs import Constant, forward, inverse, weighted_inner
 
 Array: TypeAlias = jax.Array
+#: the numpy reference's kernels, which take JAX arrays too (``tensors.namespace``); typed for
+#: numpy there, hence untyped here
+rk: Any = reference_kernels
 
 #: a force-balance solve's outcome: 0 converged, else the index of its reason tag (as the
 #: reference's :class:`nematic_solids.model.errors.SimulationFailure` reasons)
@@ -160,24 +164,21 @@ def symbols_on(sym: FiniteSymbols, device: jax.Device) -> FiniteSymbols:
     return FiniteSymbols(*(jax.device_put(np.asarray(a, dtype=np.float64), device) for a in sym))
 
 
-# --- spectral calculus and the Green operator ----------------------------------------
+# --- the displacement's deformation and the force-balance residual -----------------------
 def grad_hat(v: Array, sym: FiniteSymbols) -> Array:
-    """:math:`\\widehat{\\partial_j v_i} = i k_j \\hat v_i`, shape (2, 2, N, N // 2 + 1)."""
-    return 1j * jnp.stack([jnp.stack([sym.kx * v[i], sym.ky * v[i]]) for i in range(2)])
+    """:math:`\\widehat{\\partial_j v_i} = i k_j \\hat v_i` (the reference's kernel)."""
+    return rk.grad_hat_kernel(v, sym.kx, sym.ky)
 
 
 def div_hat(T_hat: Array, sym: FiniteSymbols) -> Array:
-    """:math:`i k_j \\hat T_{ij}`."""
-    return 1j * (sym.kx * T_hat[:, 0] + sym.ky * T_hat[:, 1])
+    """:math:`i k_j \\hat T_{ij}` (the reference's kernel)."""
+    return rk.div_hat_kernel(T_hat, sym.kx, sym.ky)
 
 
 def green(r: Array, sym: FiniteSymbols, c: FiniteConstants) -> Array:
-    """:math:`(I - a \\hat k \\hat k)\\, \\hat r / k^2`, the reference medium's Green operator
-    (the preconditioner of both solves)."""
-    kr = sym.khx * r[0] + sym.khy * r[1]
-    return jnp.stack(
-        [sym.inv_k2 * (r[0] - c.a * sym.khx * kr), sym.inv_k2 * (r[1] - c.a * sym.khy * kr)]
-    )
+    """The reference medium's Green operator (the reference's kernel): the preconditioner of
+    both solves."""
+    return rk.green_kernel(r, sym.khx, sym.khy, sym.inv_k2, c.a)
 
 
 def deformation(u_hat: Array, sym: FiniteSymbols, c: FiniteConstants) -> Array:
@@ -329,18 +330,10 @@ def finite_split(
     m = c.moduli
     if P is None:
         P = cl.first_piola(F, Q, m)
-    J = T.det(F)
-    folded = ~jnp.all(J - 1.0 > -1.0)
-    C = T.matmul(T.transpose(F), F)
-    dev = jnp.stack([0.25 * (C[0, 0] - C[1, 1]) / J, 0.5 * C[0, 1] / J])
+    Ebar_dev, Jm1, trP = rk.strain_measures_kernel(F, P)
+    folded = ~jnp.all(Jm1 > -1.0)
     lap = inverse(-sym.k2 * q_hat, n)
-    bulk = A + c.A0 + c.C * 2.0 * (q1 * q1 + q2 * q2) - 2.0 * c.Bp * (J - 1.0)
-    H = jnp.stack(
-        [
-            -bulk * q1 + c.B * dev[0] + c.K * lap[0],
-            -bulk * q2 + c.B * dev[1] + c.K * lap[1],
-        ]
-    )
+    H = rk.molecular_field_kernel(q1, q2, A, Jm1, Ebar_dev, lap, c.A0, c.C, 2.0 * c.Bp, c.B, c.K)
     R = H / c.gamma
     K = cl.tangent(F, Q, m)
     E = cl.first_piola_q_increment(F, Q, T.nematic(-2.0 * q2, 2.0 * q1), m)
@@ -369,13 +362,9 @@ def finite_split(
         start=(udot0, grad0, b - of_gradient(grad0)),
         aux_dtype=jnp.float64,
     )
-    omega = 0.5 * (sol.Lx[1, 0] - sol.Lx[0, 1])
-    qdot = jnp.stack([R[0] - 2.0 * omega * q2, R[1] + 2.0 * omega * q1])
-    if c.trS:  # tr(F^-1 P), F^-1 = adj F / J
-        tr = (F[1, 1] * P[0, 0] - F[0, 1] * P[1, 0] - F[1, 0] * P[0, 1] + F[0, 0] * P[1, 1]) / J
-    else:
-        tr = P[0, 0] + P[1, 1]
-    Adot = (-c.zeta * A - c.chi * tr - c.s * A * A * A) / c.tau
+    qdot, _ = rk.corotational_rate(R, sol.Lx, q1, q2)
+    tr = cl.second_piola_trace(F, P) if c.trS else trP
+    Adot = rk.activity_rate(A, tr, c.zeta, c.chi, c.s, c.tau)
     Nq = forward(qdot) - sym.Lq * q_hat
     # transforms: the Laplacian 2, dP 4, a warm start's residual 4 (none from zero), 8 per
     # operator application, the rate's spectra 2

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import constitutive as cl
 from .. import krylov
 from .. import tensors as T
 from .. import wellposedness as wp
@@ -309,9 +310,8 @@ class FiniteMechanics(Mechanics):
             np.ascontiguousarray(F), np.ascontiguousarray(P)
         )
         trS = None
-        if self.params.coupling == "trS":  # tr(F^-1 P), F^-1 = adj F / J
-            adj = F[1, 1] * P[0, 0] - F[0, 1] * P[1, 0] - F[1, 0] * P[0, 1] + F[0, 0] * P[1, 1]
-            trS = adj / T.det(F)
+        if self.params.coupling == "trS":
+            trS = cl.second_piola_trace(F, P)
         return MechanicalState(
             F=F,
             P=P,

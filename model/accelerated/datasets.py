@@ -38,6 +38,7 @@ from ..pde import ActiveNematicPDE
 from ..run_dataset import RunWork, to_dataset
 from ..simulate import ends_non_finite, observe_state, snapshot_fields, snapshot_set
 from ..solver_base import SolverState
+from . import finite_step
 from .etdrk4 import SeedState
 from .run import run_batch
 
@@ -126,7 +127,7 @@ def batch_datasets(
         if not finite:
             return {}
         m = state.mech
-        return {k: np.asarray(getattr(m, k)[b]).copy() for k in ("u_hat", "udot_hat", "udot_grad")}
+        return {k: np.asarray(getattr(m, k)[b]).copy() for k in finite_step.SAVED}
 
     def capture(b: int, t: float, fields: np.ndarray, state: SeedState, share: float) -> RunState:
         def at(name: str) -> int:

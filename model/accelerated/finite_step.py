@@ -57,6 +57,12 @@ from .linear_rhs import inverse
 Array: TypeAlias = jax.Array
 
 
+#: what a finite-strain state saves of the mechanics (the keys of
+#: :meth:`nematic_solids.model.mechanics.FiniteMechanics.saved_state`, fields of
+#: :class:`Mechanics`)
+SAVED = ("u_hat", "udot_hat", "udot_grad")
+
+
 class Mechanics(NamedTuple):
     """What a finite-strain seed carries between steps: the displacement spectrum in force
     balance, its deformation gradient and stress, the displacement rate and its real-space

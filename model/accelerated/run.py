@@ -133,7 +133,7 @@ def _resumed(start: Sequence[RunState], dev: jax.Device, fin: tuple | None = Non
     sym, c = fin
     saved = [
         jax.device_put(np.stack([np.asarray(st.mechanics[k]) for st in start]), dev)
-        for k in ("u_hat", "udot_hat", "udot_grad")
+        for k in finite_step.SAVED
     ]
     mech = jax.jit(
         jax.vmap(finite_step.resumed_mechanics, in_axes=(0, 0, 0, 0, None, None)),
@@ -153,7 +153,8 @@ def _jitted(c: Constants | finite.FiniteConstants, ctl: Control, nshell: int, dt
     """The batched, jitted functions of a run (kept per constants, so that JAX's cache of
     compiled code serves the next run of the same shape): the initial state ``(q, A,
     symbols)``, the advance to a time, the observables ``(state, shells)``."""
-    if isinstance(c, Constants):
+    linear = isinstance(c, Constants)
+    if isinstance(c, Constants):  # (the type checker narrows c by isinstance, not by linear)
         start = jax.jit(
             jax.vmap(lambda q, A, sym: initial_state(q, A, dt=dt), in_axes=(0, 0, None))
         )
@@ -165,7 +166,6 @@ def _jitted(c: Constants | finite.FiniteConstants, ctl: Control, nshell: int, dt
             )
         )
     c = dataclasses.replace(c, batch_axis=SEEDS)
-    linear = isinstance(c, Constants)
     stepper = advance if linear else functools.partial(advance, step=finite_step.finite_step)
     step = jax.jit(
         jax.vmap(functools.partial(stepper, c=c, ctl=ctl), in_axes=(0, None, None), axis_name=SEEDS)

@@ -6,9 +6,9 @@ The background shows I1bar - 2 (I1bar >= 2 in 2-D, = 2 without shear), scaled by
 ten that the colour bar's label states when it is small (I1bar differs from 2 by ~1e-5 in a
 weakly strained pattern): the tick labels stay short, without an offset or a multiplier. A
 background whose spread is below :data:`UNIFORM` of its scale (the largest |I1bar - 2|) is
-structure of rounding, not of the run (a uniformly sheared matrix, stored in float32): its
-colour range is floored to that fraction around its mean, so it is drawn uniform, and the
-colour bar's label says so.
+structure of rounding, not of the run (a uniformly sheared matrix, stored in float32): it is
+drawn as its mean, one grey, in a colour range floored to that fraction around the mean, and
+the colour bar's label says so.
 """
 
 from __future__ import annotations
@@ -88,7 +88,8 @@ def draw_snapshot(ax, ds: xr.Dataset, index: int = -1, *, arrows: int = 32, colo
     n = len(x)
     values, label = background(i1)
     vmin, vmax, floored = background_range(values)
-    if floored:
+    if floored:  # rounding, not structure: one grey, the mean
+        values = np.where(np.isfinite(values), 0.5 * (vmin + vmax), values)
         label += f": uniform (spread < {UNIFORM:g} of its scale)"
     bg = ax.imshow(
         values.T,

@@ -83,8 +83,8 @@ def test_snapshot_figure_writes_a_png(tmp_path):
 
 def test_a_background_uniform_to_rounding_is_drawn_uniform():
     """Fig. 4's panel (4): I1bar - 2 between 0.0100250 and 0.0100252 (uniform shear, float32):
-    the colour range is floored to 1e-3 of the scale and the label says uniform; a pattern's
-    background keeps its own range."""
+    drawn as one grey (its mean) in a colour range floored to 1e-3 of the scale, and the label
+    says uniform; a pattern's background keeps its own values and range."""
     from matplotlib.figure import Figure
 
     rng = np.random.default_rng(0)
@@ -96,9 +96,15 @@ def test_a_background_uniform_to_rounding_is_drawn_uniform():
         image = ax.images[0]
         lo, hi = image.get_clim()
         values, _ = background(field.astype(np.float32))
+        drawn = np.asarray(image.get_array())
         if uniform:
             assert hi - lo == pytest.approx(1e-3 * np.abs(values).max(), rel=1e-6)
             assert "uniform" in str(image.get_label())
+            assert np.ptp(drawn) == 0.0  # one grey: no disc of rounding
+            assert drawn.flat[0] == pytest.approx(0.5 * (values.min() + values.max()), rel=1e-6)
+            rgba = image.to_rgba(drawn)
+            assert np.ptp(rgba, axis=(0, 1)).max() == 0.0
         else:
             assert (lo, hi) == pytest.approx((values.min(), values.max()), rel=1e-6)
             assert "uniform" not in str(image.get_label())
+            assert np.ptp(drawn) > 0.5 * (values.max() - values.min())

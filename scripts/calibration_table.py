@@ -17,6 +17,7 @@ only where some alpha - B has most of its seeds patterned.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -254,17 +255,18 @@ def tradeoff_figure(rows: list[dict[str, Any]], path: Path, chosen: str | None =
 
 
 def main(argv: list[str]) -> int:
-    out_json = out_fig = chosen = None
-    while argv[:1] in (["--json"], ["--figure"], ["--chosen"]):
-        if argv[0] == "--json":
-            out_json = Path(argv[1])
-        elif argv[0] == "--figure":
-            out_fig = Path(argv[1])
-        else:
-            chosen = argv[1]
-        argv = argv[2:]
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("folders", nargs="+", type=Path, help="calibration campaigns' folders")
+    parser.add_argument("--json", type=Path, help="also write the table as JSON here")
+    parser.add_argument("--figure", type=Path, help="also draw the trade-off figure here")
+    parser.add_argument("--chosen", help="the setting to mark in the figure")
+    args = parser.parse_args(argv)
+    out_json, out_fig, chosen = args.json, args.figure, args.chosen
+    folders: list[Path] = args.folders
     rows = []
-    for folder in map(Path, argv):
+    for folder in folders:
         if not (folder / "fits.nc").exists() or not (folder / "phase.nc").exists():
             print(f"{folder}: not run (no fits.nc / phase.nc)", file=sys.stderr)
             continue

@@ -12,6 +12,7 @@ Sizes not in the file get FFTW_ESTIMATE plans (deterministic as well, slower at 
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import tempfile
@@ -23,7 +24,11 @@ SIZES = [16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512]
 
 
 def main(argv: list[str]) -> int:
-    sizes = [int(a) for a in argv] or SIZES
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("sizes", nargs="*", type=int, metavar="N", help="grid sizes N (N x N)")
+    sizes = parser.parse_args(argv).sizes or SIZES
     if not fftw_native.AVAILABLE:
         print("the native FFTW library is not available: nothing to do", file=sys.stderr)
         return 1

@@ -14,6 +14,7 @@ so when the list misses something; tests/model/test_warmup.py checks it).
 
 from __future__ import annotations
 
+import argparse
 import os
 import shutil
 import sys
@@ -81,4 +82,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
+    argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    ).parse_args()  # no options: --help prints the above and exits
     sys.exit(main())

@@ -153,11 +153,11 @@ def _jitted(c: Constants | finite.FiniteConstants, ctl: Control, nshell: int, dt
     """The batched, jitted functions of a run (kept per constants, so that JAX's cache of
     compiled code serves the next run of the same shape): the initial state ``(q, A,
     symbols)``, the advance to a time, the observables ``(state, shells)``."""
-    linear = isinstance(c, Constants)
-    if isinstance(c, Constants):  # (the type checker narrows c by isinstance, not by linear)
+    if isinstance(c, Constants):
         start = jax.jit(
             jax.vmap(lambda q, A, sym: initial_state(q, A, dt=dt), in_axes=(0, 0, None))
         )
+        stepper = advance
     else:
         start = jax.jit(
             jax.vmap(
@@ -165,8 +165,8 @@ def _jitted(c: Constants | finite.FiniteConstants, ctl: Control, nshell: int, dt
                 in_axes=(0, 0, None),
             )
         )
+        stepper = functools.partial(advance, step=finite_step.finite_step)
     c = dataclasses.replace(c, batch_axis=SEEDS)
-    stepper = advance if linear else functools.partial(advance, step=finite_step.finite_step)
     step = jax.jit(
         jax.vmap(functools.partial(stepper, c=c, ctl=ctl), in_axes=(0, None, None), axis_name=SEEDS)
     )

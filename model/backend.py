@@ -164,6 +164,10 @@ class Kernels(Protocol):
         point index and angle index
         (:func:`nematic_solids.model.wellposedness.finite_margin_samples`)."""
 
+    def linear_margin_kernel(self, q1: Array, q2: Array, alpha_minus_B: float) -> tuple[float, int]:
+        """The small-strain margin and the flat index of its minimum
+        (:func:`nematic_solids.model.wellposedness.linear_margin`)."""
+
 
 def kernels(backend: str) -> Kernels:
     """The kernel module of ``backend`` ("compiled" or "numpy")."""

@@ -19,7 +19,7 @@ import numpy as np
 
 from . import constitutive as cl
 from . import tensors
-from .wellposedness import finite_margin_samples
+from .wellposedness import finite_margin_samples, linear_margin
 
 Array = np.ndarray
 
@@ -35,6 +35,7 @@ __all__ = [
     "div_hat_kernel",
     "etd_combination",
     "finite_margin_kernel",
+    "linear_margin_kernel",
     "first_piola_kernel",
     "grad_hat_kernel",
     "green_kernel",
@@ -242,18 +243,20 @@ def phi_functions(z: Array, kmax: int = 2) -> tuple[Array, ...]:
     recursion :math:`\\varphi_{k+1} = (\\varphi_k - 1/k!)/z` otherwise."""
     z = np.asarray(z, dtype=float)
     small = np.abs(z) < 1.0
-    zt = np.where(small, z, 0.0)
     zr = np.where(small, 1.0, z)
     out = [np.exp(z)]
     prev = np.expm1(zr)  # phi_0 - 1 on the recursion branch
+    zs = z[small]  # the series is summed where it is used (elementwise: the same values)
     for k in range(1, kmax + 1):
         rec = prev / zr if k == 1 else (prev - 1.0 / math.factorial(k - 1)) / zr
-        taylor = np.zeros_like(z)
-        term = np.ones_like(z)
+        taylor = np.zeros_like(zs)
+        term = np.ones_like(zs)
         for j in range(20):
             taylor += term / math.prod(range(j + 1, j + k + 1))
-            term = term * zt / (j + 1)
-        out.append(np.where(small, taylor, rec))
+            term = term * zs / (j + 1)
+        phi = np.array(rec)  # a new array (0-d for a scalar z, as np.where gives)
+        phi[small] = taylor
+        out.append(phi)
         prev = rec
     return tuple(out)
 
@@ -317,3 +320,4 @@ def rk4_update(x0: Array, c: float, v0: Array, v1: Array, v2: Array, v3: Array) 
 # ----------------------------------
 
 finite_margin_kernel = finite_margin_samples
+linear_margin_kernel = linear_margin

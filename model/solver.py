@@ -64,7 +64,8 @@ from .compiled import linear_step
 from .pde import ActiveNematicPDE
 
 # ETDSolver is imported from here too (nematic_solids.model.simulate)
-from .solver_base import Array, ETDSolver
+from .reference_kernels import phi_functions
+from .solver_base import Array, ETDSolver, _cached
 from .split import SpectralSplit
 
 
@@ -268,10 +269,11 @@ class ETDRK4Solver(ETDSolver):
         q_hat = np.ascontiguousarray(self._spectrum(u[:2]))
         E, E2, wq = self._krogstad_weights(h)
         self.check_wellposed(u, t)
-        new, new_q_hat, Nq_a, Nq_b, NA_a, NA_b, w_ab, its, ok, omega, nfft = (
+        max_norm = self.error_norm == "max"
+        new, new_q_hat, Nq_a, Nq_b, NA_a, NA_b, w_ab, its, ok, omega, err, nfft = (
             linear_step.krogstad_linear_step(
                 u, q_hat, h, E, E2, wq["a"], wq["b"], wq["c"], wq["new"],
-                p.zeta, p.s, p.tau, mech.zero_hat, split.compiled_data,
+                p.zeta, p.s, p.tau, mech.zero_hat, split.compiled_data, max_norm,
             )
         )  # fmt: skip
         self.pde.spectral.fft.count += nfft
@@ -279,6 +281,8 @@ class ETDRK4Solver(ETDSolver):
         for i, offset in enumerate((0.0, 0.5 * h, 0.5 * h, h)):
             mech.accept_spin(omega, int(its[i]), bool(ok[i]), t + offset)
         self._checkpoint()
+        if max_norm:  # formed in the compiled step: the value _finish would give
+            return self._finish(u, q_hat, new_q_hat, new[2], None, None, new=new, err=err)
         err_q = h * wq["new"][1] * (Nq_b - Nq_a)  # as in step
         err_A = h * w_ab * (NA_b - NA_a)
         return self._finish(u, q_hat, new_q_hat, new[2], err_q, err_A, new=new)
@@ -300,16 +304,16 @@ class ETDRK4Solver(ETDSolver):
         }
 
     def _krogstad_weights(self, h: float) -> tuple[Array, Array, dict[str, tuple[Array, ...]]]:
-        """``(e^{L_q h}, e^{L_q h/2}, weights)`` for the q spectra, cached per step size."""
-        cached = self._weight_cache.get(h)
-        if cached is None:
-            E, f1, f2, f3 = self._phis(h, 3)
-            E2, g1, g2 = self._phis(0.5 * h, 2)
-            cached = (E, E2, self._weights_from(f1, f2, f3, g1, g2))
-            if len(self._weight_cache) > 64:
-                self._weight_cache.clear()
-            self._weight_cache[h] = cached
-        return cached
+        """``(e^{L_q h}, e^{L_q h/2}, weights)`` for the q spectra, cached per step size
+        (:func:`nematic_solids.model.solver_base._cached`; the phi functions themselves are not
+        kept)."""
+
+        def make() -> tuple[Array, Array, dict[str, tuple[Array, ...]]]:
+            E, f1, f2, f3 = phi_functions(self.Lq * h, 3)
+            E2, g1, g2 = phi_functions(self.Lq * (0.5 * h), 2)
+            return E, E2, self._weights_from(f1, f2, f3, g1, g2)
+
+        return _cached(self._weight_cache, h, make)
 
 
 #: the schemes ``numerics.scheme`` may name

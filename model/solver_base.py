@@ -29,6 +29,7 @@ start; the projection and the saves at the step's end use the values after it.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -58,6 +59,24 @@ class SolverState:
     q_hat: Array | None
     stats: dict[str, int]
     margin_min: float
+
+
+#: step sizes whose symbols a solver keeps (:func:`_cached`)
+CACHE_SIZE = 64
+
+
+def _cached(cache: dict, key, make: Callable):  # type: ignore[type-arg]
+    """``cache[key]``, made by ``make()`` if absent; the cache keeps the :data:`CACHE_SIZE` most
+    recently used entries (a dict in order of use). The step sizes of the ladder recur all run
+    long; a step shortened to land on a save time is used once: it pushes out the entry
+    unused the longest, not the whole cache."""
+    value = cache.pop(key, None)
+    if value is None:
+        value = make()
+        if len(cache) >= CACHE_SIZE:
+            del cache[next(iter(cache))]
+    cache[key] = value  # the most recently used last
+    return value
 
 
 class ETDSolver(SolverBase):
@@ -156,14 +175,9 @@ class ETDSolver(SolverBase):
 
     # --- one step ----------------------------------------------------------------------
     def _phis(self, h: float, kmax: int = 2) -> tuple[Array, ...]:
-        """exp(L_q h), phi_1..phi_kmax(L_q h), cached per step size (q1, q2 share them)."""
-        cached = self._phi_cache.get((h, kmax))
-        if cached is None:
-            cached = phi_functions(self.Lq * h, kmax)
-            if len(self._phi_cache) > 64:
-                self._phi_cache.clear()
-            self._phi_cache[(h, kmax)] = cached
-        return cached
+        """exp(L_q h), phi_1..phi_kmax(L_q h), cached per step size (q1, q2 share them;
+        :func:`_cached`)."""
+        return _cached(self._phi_cache, (h, kmax), lambda: phi_functions(self.Lq * h, kmax))
 
     def _spectrum(self, q: Array) -> Array:
         """The spectra of q1, q2, reused when ``q`` is the state the last step started from
@@ -224,11 +238,12 @@ class ETDSolver(SolverBase):
         q_hat: Array,
         new_q_hat: Array,
         new_A: Array,
-        err_q: Array,
-        err_A: Array,
+        err_q: Array | None,
+        err_A: Array | None,
         new_disp: tuple[Array, Array | None] | None = None,
         err_grad: Array | None = None,
         new: Array | None = None,
+        err: float | None = None,
     ) -> tuple[Array, float]:
         """The new state, its spectra remembered for the next step, and the error estimate
         of ``err_q`` (spectra) and ``err_A`` (real space): the largest pointwise error
@@ -237,15 +252,21 @@ class ETDSolver(SolverBase):
         deformation gradient) is kept for the projection of an accepted step, and the
         displacement's error counts by its strain ``err_grad`` (real space), each component of
         :math:`\\nabla e_u` like a field. ``new``: the new state if the caller has it (then
-        ``new_A`` is its last field)."""
+        ``new_A`` is its last field). ``err``: the error estimate of ``err_q`` and ``err_A``
+        if the caller has formed it (then they are None)."""
         g = self.pde.spectral
         if new is None:
             new = np.concatenate([g.inverse(new_q_hat), new_A[None]])
         self._known = [(u[:2].copy(), q_hat), (new[:2], new_q_hat)]
-        if self.error_norm == "max":
-            err = max(float(np.abs(g.inverse(err_q)).max()), float(np.abs(err_A).max()))
-        else:
-            err = max(g.rms_hat(err_q[0]), g.rms_hat(err_q[1]), float(np.sqrt(np.mean(err_A**2))))
+        if err is None:
+            if err_q is None or err_A is None:
+                raise ValueError("the error estimate or its parts (err_q, err_A) must be given")
+            if self.error_norm == "max":
+                err = max(float(np.abs(g.inverse(err_q)).max()), float(np.abs(err_A).max()))
+            else:
+                err = max(
+                    g.rms_hat(err_q[0]), g.rms_hat(err_q[1]), float(np.sqrt(np.mean(err_A**2)))
+                )
         self._pending_disp = new_disp
         if err_grad is not None:
             err = max(
@@ -292,8 +313,8 @@ class ETDSolver(SolverBase):
     def _quantize(self, h: float) -> float:
         """Round a proposed step down onto the ladder dt_max * 2^(-j/8), so that only a few
         distinct step sizes occur and their phi functions are reused."""
-        j = np.ceil(-8.0 * np.log2(h / self.dt_max) - 1e-9)
-        return float(self.dt_max * 2.0 ** (-max(j, 0.0) / 8.0))
+        j = math.ceil(-8.0 * math.log2(h / self.dt_max) - 1e-9)
+        return float(self.dt_max * 2.0 ** (-max(j, 0) / 8.0))
 
     # --- continuation (nematic_solids.model.checkpoint)
     # ---------------------------------------------
@@ -327,7 +348,8 @@ class ETDSolver(SolverBase):
             u = state.data
             # the steps work on a C-contiguous copy: py-pde's data is a view of an array with
             # ghost cells (rows strided), on which the compiled kernels take their slower
-            # strided variants; each accepted state is copied into the view
+            # strided variants; the last accepted state is copied into the view when the
+            # stepper returns (nothing reads it in between; a failure ends the run)
             cur = np.ascontiguousarray(u)
             t = t_start
             h = self._dt
@@ -351,10 +373,9 @@ class ETDSolver(SolverBase):
                     fac = (
                         2.0
                         if err == 0
-                        else float(
-                            np.clip(
-                                0.9 * (self.tolerance / err) ** (1.0 / self.error_order), 0.2, 2.0
-                            )
+                        else min(
+                            max(0.9 * (self.tolerance / err) ** (1.0 / self.error_order), 0.2),
+                            2.0,
                         )
                     )
                     if err > self.tolerance:
@@ -382,13 +403,14 @@ class ETDSolver(SolverBase):
                     else:
                         h = max(h, h_try * fac) if fac > 1 else min(h, h_try * fac)
                         h = self._quantize(h)
-                u[...] = new
                 cur = new
                 t = switch if h_try == switch - t else t + h_try
                 self.stats["steps"] += 1
                 self.info["steps"] += 1
                 if self.on_step is not None:
                     self.on_step(t, h_try)
+            if cur is not u:
+                u[...] = cur
             self._dt = h
             self.info["dt_last"] = h
             return t

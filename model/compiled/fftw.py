@@ -212,7 +212,8 @@ _alignment_of = types.ExternalFunction("fftw_alignment_of", types.intc(types.uin
 
 
 @njit(cache=True)
-def _aligned_real(n):  # pragma: no cover - compiled
+def aligned_real(n):  # pragma: no cover - compiled
+    """An uninitialised 64-byte aligned (N, N) real array (in compiled code)."""
     raw = np.empty(n * n + 8)
     off = ((-raw.ctypes.data) % 64) // 8
     return raw[off : off + n * n].reshape((n, n))
@@ -239,7 +240,7 @@ def rfft2(plan, src, dst):  # pragma: no cover - compiled
         _r2c(plan, src.ctypes.data, dst.ctypes.data)
         return
     n = src.shape[0]
-    a = _aligned_real(n)
+    a = aligned_real(n)
     a[:, :] = src
     b = aligned_half(n)
     _r2c(plan, a.ctypes.data, b.ctypes.data)
@@ -271,7 +272,7 @@ def unscaled_irfft2_into(plan, src, dst, scratch):  # pragma: no cover - compile
     """:func:`unscaled_irfft2_via` into any ``dst``: directly where it is aligned for the
     plan, else through an aligned copy."""
     if not unscaled_irfft2_via(plan, src, dst, scratch):
-        a = _aligned_real(dst.shape[0])
+        a = aligned_real(dst.shape[0])
         unscaled_irfft2_via(plan, src, a, scratch)
         dst[:, :] = a
 

@@ -35,7 +35,7 @@ from .spectral import (
     neg_div_hat_kernel,
     symbol_combination,
 )
-from .wellposedness import finite_margin_kernel
+from .wellposedness import finite_margin_kernel, linear_margin_kernel
 
 __all__ = [
     "activity_exponential",
@@ -53,6 +53,7 @@ __all__ = [
     "grad_hat_kernel",
     "green_kernel",
     "jaumann_products",
+    "linear_margin_kernel",
     "linear_response",
     "molecular_field_kernel",
     "neg_div_hat_kernel",

@@ -1,8 +1,10 @@
-"""The finite-strain well-posedness margin over the grid (numba): the smallest determinant of
-the rate problem's symbol over points and sampled directions.
+"""The well-posedness margins over the grid (numba): for finite strain the smallest determinant
+of the rate problem's symbol over points and sampled directions, for small strain
+:math:`1 - (\\alpha - B) \\max S`.
 
-numpy twin: :func:`nematic_solids.model.reference_kernels.finite_margin_kernel` (every point
-sampled, from :func:`nematic_solids.model.wellposedness.finite_symbol_det`); tested to agree in
+numpy twins: :func:`nematic_solids.model.reference_kernels.finite_margin_kernel` (every point
+sampled, from :func:`nematic_solids.model.wellposedness.finite_symbol_det`) and
+:func:`nematic_solids.model.wellposedness.linear_margin`; tested to agree in
 ``tests/model/test_wellposedness.py``.
 """
 
@@ -91,3 +93,21 @@ def finite_margin_kernel(K, E, cos_t, sin_t, scale):  # pragma: no cover - compi
                     best_i = x * ny + y
                     best_a = a
     return best, best_i, best_a
+
+
+@njit(cache=True)
+def linear_margin_kernel(q1, q2, alpha_minus_B):  # pragma: no cover - compiled
+    """The small-strain margin :math:`1 - (\\alpha - B) \\max S` and the flat index of the
+    maximum of :math:`(\\alpha - B) S`, :math:`S = \\sqrt{q_1^2 + q_2^2}`, in one pass: the
+    values of :func:`nematic_solids.model.wellposedness.linear_margin` (the same products; the
+    first index of the maximum, as ``numpy.argmax``; a NaN is the maximum, as there)."""
+    nx, ny = q1.shape
+    best = -np.inf
+    best_i = 0
+    for x in range(nx):
+        for y in range(ny):
+            v = alpha_minus_B * np.sqrt(q1[x, y] ** 2 + q2[x, y] ** 2)
+            if v > best or (v != v and best == best):
+                best = v
+                best_i = x * ny + y  # the index in C order, as numpy's
+    return 1.0 - best, best_i

@@ -10,7 +10,6 @@ import numpy as np
 
 from .. import krylov
 from .. import tensors as T
-from .. import wellposedness as wp
 from ..errors import SimulationFailure
 from ..fourier import SpectralGrid
 from ..parameters import Parameters
@@ -235,7 +234,7 @@ class LinearMechanics(Mechanics):
         r"""Well-posedness margin of the rate problem (:mod:`nematic_solids.model.wellposedness`):
         :math:`1 - (\alpha - B) \max S`, its flat grid index, and the wave-vector angle of
         the minimum (perpendicular to the director there)."""
-        m, idx = wp.linear_margin(q1, q2, self.params.alpha_minus_B)
+        m, idx = self.k.linear_margin_kernel(q1, q2, self.params.alpha_minus_B)
         theta = 0.5 * float(np.arctan2(q2.flat[idx], q1.flat[idx]))
         return m, idx, (theta + 0.5 * np.pi) % np.pi
 

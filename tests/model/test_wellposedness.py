@@ -79,6 +79,28 @@ def test_compiled_margin_equals_numpy_reference_on_a_deformed_state(rng):
     assert np.allclose(wp.finite_symbol_det(K, E, 0.3), wp.finite_symbol_det(K, E, 0.3 + np.pi))
 
 
+def test_compiled_linear_margin_is_the_numpy_margin_bitwise(rng):
+    """The compiled small-strain margin gives numpy's values and index exactly: random fields,
+    a strided view (py-pde's state), ties (the first index wins), a negative alpha - B (the
+    minimum of S) and a NaN (the first NaN is the maximum, as numpy.argmax)."""
+    from nematic_solids.model.compiled.kernels import linear_margin_kernel
+
+    q = rng.standard_normal((2, 20, 24))
+    cases = [(q[0], q[1], 1.3), (q[0, 2:-2, ::2], q[1, 2:-2, ::2], 0.7), (q[0], q[1], -0.5)]
+    tie = np.zeros((8, 8))
+    tie[3, 4] = tie[5, 1] = 0.5
+    cases.append((tie, np.zeros((8, 8)), 1.0))
+    nan = q[0].copy()
+    nan[4, 5] = nan[9, 2] = np.nan
+    cases.append((nan, q[1], 1.0))
+    for q1, q2, amb in cases:
+        m, i = linear_margin_kernel(q1, q2, amb)
+        m_ref, i_ref = wp.linear_margin(q1, q2, amb)
+        assert i == i_ref
+        assert m == m_ref or (np.isnan(m) and np.isnan(m_ref))
+    assert linear_margin_kernel(tie, np.zeros((8, 8)), 1.0)[1] == 3 * 8 + 4
+
+
 def test_linear_margin_is_the_spin_amplification_of_the_linear_solver():
     """Small strain: for a uniform Q the compiled/numpy spin solve amplifies the spin of a mode
     at angle phi from the director by 1 / (1 + (alpha - B) S cos 2 phi) (the symbol of

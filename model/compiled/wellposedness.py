@@ -104,9 +104,12 @@ def linear_margin_kernel(q1, q2, alpha_minus_B):  # pragma: no cover - compiled
     nx, ny = q1.shape
     best = -np.inf
     best_i = 0
+    row = np.empty(ny)
     for x in range(nx):
-        for y in range(ny):
-            v = alpha_minus_B * np.sqrt(q1[x, y] ** 2 + q2[x, y] ** 2)
+        for y in range(ny):  # a row of (alpha - B) S: vectorised (the square root too)
+            row[y] = alpha_minus_B * np.sqrt(q1[x, y] ** 2 + q2[x, y] ** 2)
+        for y in range(ny):  # its first maximum: compares only
+            v = row[y]
             if v > best or (v != v and best == best):
                 best = v
                 best_i = x * ny + y  # the index in C order, as numpy's

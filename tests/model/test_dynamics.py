@@ -73,17 +73,26 @@ def test_fast_split_rate_equals_numpy_reference(mechanics, incompressible, compi
 
 
 @pytest.mark.parametrize(
-    ("B_prime", "eps", "incompressible"), [(0.0, 0.0, False), (0.1, 0.03, False), (0.1, 0.0, True)]
+    ("B_prime", "eps", "incompressible", "norm"),
+    [
+        (0.0, 0.0, False, "max"),
+        (0.1, 0.03, False, "max"),
+        (0.1, 0.0, True, "max"),
+        (0.1, 0.03, False, "rms"),
+    ],
 )
-def test_compiled_linear_step_is_bitwise_the_python_step(B_prime, eps, incompressible):
+def test_compiled_linear_step_is_bitwise_the_python_step(B_prime, eps, incompressible, norm):
     """Linear mechanics' ETDRK4 step as one compiled function
     (nematic_solids.model.compiled.linear_step) gives the bits of the Python step that calls
     the same kernels stage by stage (new state, error estimate, transforms, spin iterations),
-    step after step."""
+    step after step; the max-norm error estimate is formed in the compiled step, the RMS one
+    by the caller."""
     if not HAVE_FFTW:
         pytest.skip("native FFTW not available: no compiled right-hand side")
     p = SMALL.replace(alpha_minus_B=1.5, B_prime=B_prime, eps=eps)
-    num = Numerics(resolution=32, mechanics="linear", incompressible=incompressible)
+    num = Numerics(
+        resolution=32, mechanics="linear", incompressible=incompressible, error_norm=norm
+    )
     state = make_state(*initial_fields(p, 32, seed=4))
     u = np.ascontiguousarray(state.data, dtype=float)
     u[:2] *= 2.0  # a strong Jaumann feedback: several spin iterations per stage
@@ -388,3 +397,29 @@ def test_the_pde_takes_its_grid_from_the_state():
     fixed = ActiveNematicPDE(p, Numerics(resolution=64))
     with pytest.raises(ValueError, match="48x48 grid .* resolution 64"):
         fixed.evolution_rate(state)
+
+
+def test_symbol_cache_keeps_the_step_sizes_used_most_recently():
+    """The solver's cache of phi functions and weights (solver_base._cached) holds CACHE_SIZE
+    step sizes; a new one pushes out the one unused the longest, so a step size in use (the
+    ladder's) survives any number of one-off sizes (steps shortened onto save times)."""
+    from nematic_solids.model.solver_base import CACHE_SIZE, _cached
+
+    cache: dict = {}
+    made: list[float] = []
+
+    def get(h: float) -> float:
+        def make() -> float:
+            made.append(h)
+            return 2.0 * h
+
+        return _cached(cache, h, make)
+
+    assert get(0.5) == 1.0
+    for i in range(3 * CACHE_SIZE):
+        get(1e-3 * (i + 1))  # one-off sizes
+        assert get(0.5) == 1.0  # the size in use, made once
+    assert made.count(0.5) == 1
+    assert len(cache) == CACHE_SIZE
+    assert 1e-3 not in cache
+    assert 1e-3 * (3 * CACHE_SIZE) in cache

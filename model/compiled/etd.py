@@ -90,9 +90,9 @@ def _gather_small(z, out, at):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _phi_row(z, em1, c, p1, p2, p3, zs, at, t1, t2, t3, third):  # pragma: no cover - compiled
+def _phi_row(z, em1, p1, p2, p3, zs, at, t1, t2, t3, third):  # pragma: no cover - compiled
     r""":math:`\varphi_{1,2}(z)` (and :math:`\varphi_3` if ``third``) of the row ``z`` into
-    ``p1``, ``p2`` (``p3``), given :math:`e^z - 1` as ``em1 * c``: the recursion of
+    ``p1``, ``p2`` (``p3``), given the row ``em1`` of :math:`e^z - 1`: the recursion of
     :func:`_phi123_from` at every point (branch-free, so LLVM vectorises it; where |z| < 1 it
     divides by 1 instead of z and is overwritten), then the series (:func:`_taylor_row`) at
     the points with |z| < 1, gathered (``zs``, ``at``, ``t1..3`` work rows): each point's
@@ -100,7 +100,7 @@ def _phi_row(z, em1, c, p1, p2, p3, zs, at, t1, t2, t3, third):  # pragma: no co
     for y in range(z.size):
         zz = z[y]
         zr = zz if abs(zz) >= 1.0 else 1.0
-        a = em1[y] * c[y] / zr
+        a = em1[y] / zr
         b = (a - 1.0) / zr
         p1[y] = a
         p2[y] = b
@@ -140,9 +140,8 @@ def activity_krogstad(A, h, zeta, s, tau):  # pragma: no cover - compiled
     z = np.empty(ny)
     zh = np.empty(ny)
     eh = np.empty(ny)  # e^{z/2}
-    em = np.empty(ny)  # e^{z/2} - 1
-    ep = np.empty(ny)  # e^{z/2} + 1
-    one = np.ones(ny)
+    emh = np.empty(ny)  # e^{z/2} - 1
+    em = np.empty(ny)  # e^z - 1 = (e^{z/2} - 1)(e^{z/2} + 1)
     f1 = np.empty(ny)
     f2 = np.empty(ny)
     f3 = np.empty(ny)
@@ -166,14 +165,14 @@ def activity_krogstad(A, h, zeta, s, tau):  # pragma: no cover - compiled
             if z[y] < -1.0:
                 e = np.exp(zh[y])
                 eh[y] = e
-                em[y] = e - 1.0
+                emh[y] = e - 1.0
             else:
                 d = np.expm1(zh[y])
-                em[y] = d
+                emh[y] = d
                 eh[y] = 1.0 + d
-            ep[y] = eh[y] + 1.0
-        _phi_row(z, em, ep, f1, f2, f3, zs, at, t1, t2, t3, True)
-        _phi_row(zh, em, one, g1, g2, g2, zs, at, t1, t2, t3, False)
+            em[y] = emh[y] * (eh[y] + 1.0)
+        _phi_row(z, em, f1, f2, f3, zs, at, t1, t2, t3, True)
+        _phi_row(zh, emh, g1, g2, g2, zs, at, t1, t2, t3, False)
         for y in range(ny):
             e = eh[y]
             a1, a2, a3, b1, b2 = f1[y], f2[y], f3[y], g1[y], g2[y]

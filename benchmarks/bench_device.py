@@ -37,6 +37,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from fftw_timing import fftw_transform_seconds
 
 from nematic_solids.model.accelerated import run_batch, select_device
 from nematic_solids.model.accelerated.device import describe
@@ -66,28 +67,6 @@ def transform_seconds(n: int, batch: int, device: str) -> float:
         jax.block_until_ready(x)
         times.append((time.perf_counter() - t0) / reps)
     return float(np.median(times)) / (2 * batch * 2)
-
-
-def fftw_transform_seconds(n: int) -> float:
-    """Seconds of one real 2-D transform of an n x n field on the compiled path: the mean of a
-    forward and an inverse (FFTW's new-array execute on aligned arrays, as the compiled code
-    runs them; benchmarks/bench_floor.py's measurement), median of 7 batches."""
-    from nematic_solids.model.compiled import fftw as fx
-
-    pf, pi = fx.plans(n)
-    a = fx.aligned_empty((n, n), np.float64)
-    a[...] = np.random.default_rng(0).standard_normal((n, n))
-    b = fx.aligned_empty((n, n // 2 + 1), np.complex128)
-    half = fx.aligned_half(n)
-    reps = max(5, int(2e6 / n**2))
-    times = []
-    for _ in range(7):
-        t0 = time.perf_counter()
-        for _ in range(reps):
-            fx.rfft2(pf, a, b)
-            fx.irfft2_via(pi, b, a, half)
-        times.append((time.perf_counter() - t0) / (2 * reps))
-    return float(np.median(times))
 
 
 def compiled_runs(params: Parameters, numerics: Numerics, seeds: range) -> dict:

@@ -28,11 +28,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from fftw_timing import fftw_transform_seconds
 from numba import njit
 
 from nematic_solids.model.compiled import constitutive as cc
 from nematic_solids.model.compiled import etd, krylov, rates, spectral, wellposedness
-from nematic_solids.model.compiled import fftw as fx
 from nematic_solids.model.parameters import Parameters
 
 HERE = Path(__file__).resolve().parent
@@ -145,21 +145,6 @@ def passes(n: int) -> list[tuple[str, str, Callable[[], object], int]]:
     ]  # fmt: skip
 
 
-def transform_time(n: int) -> float:
-    """Seconds per real transform of N x N (a forward and an inverse, their mean)."""
-    pf, pi = fx.plans(n)
-    a = fx.aligned_empty((n, n), np.float64)
-    a[...] = np.random.default_rng(0).standard_normal((n, n))
-    b = fx.aligned_empty((n, n // 2 + 1), np.complex128)
-    s = fx.aligned_half(n)
-
-    def both() -> None:
-        fx.rfft2(pf, a, b)
-        fx.irfft2_via(pi, b, a, s)
-
-    return timed(both) / 2
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="128,256", help="N,...")
@@ -167,7 +152,7 @@ def main() -> None:
     args = ap.parse_args()
     result: dict = {"machine": platform.processor() or platform.machine(), "sizes": {}}
     for n in (int(s) for s in args.sizes.split(",")):
-        fft = transform_time(n)
+        fft = fftw_transform_seconds(n)
         print(f"\n{n}^2: one real transform {fft * 1e6:.1f} us")
         print(f"  {'kernel':34s} {'us':>8s} {'MB':>6s} {'GB/s':>6s} {'x copy':>7s} {'x fft':>6s}")
         rows = []

@@ -45,11 +45,12 @@ EXIT_TOO_MANY_FAILURES = 3
 DEBUG = {"on": False}
 
 
-def guarded(command: Callable[..., Any]) -> Callable[..., Any]:
+def guarded(command: Callable[..., Any], name: str = "") -> Callable[..., Any]:
     """A command that turns errors into one line on stderr instead of a traceback: bad
     input, files that cannot be read or written and similar errors exit 2 (the file and
     cause named), anything else exits 1 as an internal error. ``--debug`` (or a command's
-    ``--verbose``) lets the exception through, with its traceback."""
+    ``--verbose``) lets the exception through, with its traceback. ``name``: the command's,
+    for the messages that say where it happened (running out of memory)."""
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -66,7 +67,7 @@ def guarded(command: Callable[..., Any]) -> Callable[..., Any]:
         except Exception as e:
             if DEBUG["on"] or kwargs.get("verbose"):
                 raise
-            code, text = _describe_error(e)
+            code, text = _describe_error(e, name or command.__name__)
             err_console().print(
                 f"[bold red]error:[/] {escape(text)} (--debug shows the traceback)",
                 soft_wrap=True,
@@ -78,7 +79,7 @@ def guarded(command: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
-def _describe_error(e: Exception) -> tuple[int, str]:
+def _describe_error(e: Exception, command: str = "") -> tuple[int, str]:
     from nematic_solids.model.errors import NematicError
 
     from ..files import storage_cause
@@ -86,8 +87,11 @@ def _describe_error(e: Exception) -> tuple[int, str]:
     if isinstance(e, NematicError):
         return EXIT_BAD_INPUT, str(e)
     if isinstance(e, MemoryError):
+        where = f" in 'nematic {command}'" if command else ""
+        detail = f": {' '.join(str(e).split())}" if str(e) else ""
         return EXIT_BAD_INPUT, (
-            "not enough memory (lower the resolution, or give the process more memory)"
+            f"not enough memory{where}{detail} (give the process more memory, or make the "
+            "campaign or its runs smaller)"
         )
     if isinstance(e, OSError):
         where = str(e.filename) if e.filename else ""
@@ -113,7 +117,8 @@ class _App(typer.Typer):
         register = super().command(*args, **kwargs)
 
         def decorator(f: Callable[..., Any]) -> Callable[..., Any]:
-            register(guarded(f))
+            name = args[0] if args and isinstance(args[0], str) else kwargs.get("name")
+            register(guarded(f, name or f.__name__))
             return f
 
         return decorator

@@ -195,3 +195,16 @@ def test_a_memory_error_names_the_campaign_file(tmp_path, monkeypatch):
     assert str(path) in said, said
     assert "not enough memory" in said, said
     assert "internal error" not in said
+
+
+def test_a_memory_error_elsewhere_names_the_command(tmp_path, monkeypatch):
+    from nematic_solids.sweep.cli import campaigns
+
+    def exhausted(*args, **kwargs):
+        raise MemoryError("Unable to allocate 7.28 PiB for an array")
+
+    monkeypatch.setattr(campaigns, "collection_or_none", exhausted)
+    res = CliRunner().invoke(app, ["validate", str(tmp_path / "c.yaml")])
+    assert res.exit_code == 2, res.output
+    said = " ".join(res.output.split())
+    assert "not enough memory in 'nematic validate': Unable to allocate 7.28 PiB" in said, said

@@ -165,7 +165,7 @@ def _check(folder: Path, doc: dict[str, Any], max_runs: int) -> None:
         assert data.get("reason") != "exception", (text, data)
 
 
-COMMON = dict(
+COMMON = settings(
     derandomize=True,
     deadline=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
@@ -173,14 +173,14 @@ COMMON = dict(
 )
 
 
-@settings(max_examples=40, **COMMON)
+@settings(COMMON, max_examples=40)
 @given(doc=campaigns())
 def test_a_mutated_campaign_is_refused_with_its_line_or_runs(tmp_path_factory, doc):
     _check(tmp_path_factory.mktemp("prop"), doc, max_runs=1)
 
 
 @pytest.mark.slow
-@settings(max_examples=300, **COMMON)
+@settings(COMMON, max_examples=300)
 @given(doc=campaigns())
 def test_many_mutated_campaigns_are_refused_with_their_line_or_run(tmp_path_factory, doc):
     _check(tmp_path_factory.mktemp("prop"), doc, max_runs=20)

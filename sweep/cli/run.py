@@ -23,6 +23,7 @@ from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
+    EXIT_PRODUCTS_FAILED,
     EXIT_TOO_MANY_FAILURES,
     CampaignArg,
     NameOpt,
@@ -40,7 +41,7 @@ from .app import (
 )
 from .campaigns import print_estimate, report_changes, storage_message
 from .collection import collection_or_none, refuse_name, run_collection
-from .products import regenerate_figures, regenerate_report, repair_products
+from .products import failure_lines, regenerate_figures, regenerate_report, repair_products
 from .progress import ProgressEvents
 
 
@@ -161,7 +162,8 @@ def run(
     differs from the one its results were made with, what changed and the new, kept and
     orphaned runs are printed first. Exit 0 if every run
     succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 3 when
-    stopped by `--max-failures`, 130 when interrupted (rerun to resume). With `--detach`,
+    stopped by `--max-failures`, 4 when every run succeeded but a fit or figure failed
+    (one line each), 130 when interrupted (rerun to resume). With `--detach`,
     0 once the driver runs in the background; with `--dry-run`, 0 after printing the cost.
     """
     from ..expand import expand
@@ -365,6 +367,7 @@ def run(
                 f"{summary.completed} run(s) in {fmt_time(summary.wall_time)} "
                 f"(sum of run times {fmt_time(summary.run_time)})"
             )
+        product_failures: list[str] = []
         if aggregate:
             try:
                 write_phase(expansion, store)
@@ -374,13 +377,15 @@ def run(
                     if verification:  # the fits pick its sample; the figures show it
                         from .verify import verify_step
 
-                        regenerate_figures(c, results, draw_figures=False)
+                        fitted = regenerate_figures(c, results, draw_figures=False)
                         verify_step(c, store, say, before=False)
                         drawn = regenerate_figures(c, results, fits=False)
+                        drawn.failures = {**fitted.failures, **drawn.failures}
                     else:
                         drawn = regenerate_figures(c, results)
-                    for figure in drawn:
+                    for figure in drawn.paths:
                         say.print(f"figure: {escape(str(figure))}")
+                    product_failures = failure_lines(drawn.failures)
                     page = regenerate_report(c, results)
                     if page is not None:
                         say.print(f"report: {escape(str(page))}")
@@ -391,6 +396,8 @@ def run(
                     "aggregate) once the folder can be written",
                 )
                 raise typer.Exit(EXIT_BAD_INPUT) from None
+        for line in product_failures:
+            err.print(f"[red]failed[/]: {escape(line)}", soft_wrap=True, highlight=False)
         failures = [] if summary is None else summary.failed
         n_failed = len(failures) + len(plan.failed)
         if summary is not None and summary.lost:
@@ -421,5 +428,11 @@ def run(
                 )
             err.print(f"details: nematic status {campaign}")
             raise typer.Exit(EXIT_FAILED_RUNS)
+        if product_failures:
+            err.print(
+                f"every run succeeded, but {len(product_failures)} fit(s) or figure(s) failed "
+                f"(above); nematic figures {campaign} redraws them"
+            )
+            raise typer.Exit(EXIT_PRODUCTS_FAILED)
     finally:
         lock.release()

@@ -49,6 +49,29 @@ nb_execution_show_tb = True
 
 # --- API reference ---
 autodoc_member_order = "bysource"
+# names that the modules import for type checking only, as the signatures show them
+autodoc_type_aliases = {
+    "Campaign": "nematic_solids.sweep.campaign.Campaign",
+    "Expansion": "nematic_solids.sweep.expand.Expansion",
+}
+# every cross-reference must resolve (warnings are errors): the project's own types are
+# documented here; other libraries' types (no intersphinx: the site builds offline), module
+# references (docs/architecture.md maps the modules) and the internals the docstrings name
+# stay plain text
+nitpicky = True
+nitpick_ignore_regex = [
+    (
+        r"py:.*",
+        r"(numpy|np|xarray|xr|pandas|pd|pathlib|collections\.abc|typing|jax|jaxlib|pde)\..*",
+    ),
+    (r"py:class", r"Path|Array|ArrayLike|NDArray|PDEBase|optional"),
+    (r"py:meth", r"~?Mechanics\..*"),
+    (r"py:mod", r"nematic_solids\..*"),
+    (
+        r"py:.*",
+        r"nematic_solids\.model\.(observables|split|krylov|initial|mechanics|tensors|accelerated\.etdrk4)\..*",
+    ),
+]
 autodoc_typehints = "description"
 autodoc_default_options: dict[str, bool] = {}
 napoleon_google_docstring = True

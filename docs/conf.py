@@ -8,6 +8,7 @@ executed by myst-nb at every build.
 
 from __future__ import annotations
 
+import logging
 import os
 import subprocess
 import sys
@@ -18,6 +19,16 @@ ROOT = DOCS.parent
 # the package (nematic_solids) comes from the environment's install (scripts/build_docs.sh
 # installs the checkout, editable); the notebook's kernel draws without a display
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the notebook's kernel (ipykernel) logs errors only: its note that it listens on a local TCP
+# port without encryption is not the build's business; an error in a cell fails the build
+_profile = DOCS / "_generated" / "ipython" / "profile_default"
+_profile.mkdir(parents=True, exist_ok=True)
+(_profile / "ipython_kernel_config.py").write_text('c.IPKernelApp.log_level = "ERROR"\n')
+os.environ["IPYTHONDIR"] = str(_profile.parent)
+# the root logger shows warnings and errors of the libraries that log there; configured here,
+# before the theme's accessible-pygments calls logging.basicConfig(level=INFO) on import (which
+# would print nbclient's "Executing notebook" line)
+logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
 
 project = "Active nematic solids"
 author = "the active-nematic-solids developers"

@@ -128,9 +128,9 @@ class RunState:
     seed: int
     stopped: float = math.nan
     wall: float = 0.0
-    #: the history of the state: "run_id@t" entries a campaign adds (free text here)
+    #: the history of the state, the "run_id@t" entries a campaign adds (free text here)
     lineage: list[str] = field(default_factory=list)
-    #: where the run's fields at t = 0 came from (:attr:`InitialState.origin`; "" for the
+    #: where the run's fields at t = 0 came from (``InitialState.origin``; "" for the
     #: seeded texture)
     initial_from: str = ""
     #: the model version that computed it (``model.__version__``): a state of another
@@ -180,7 +180,7 @@ class RunState:
     def to_dataset(self, *, snapshots: bool = True) -> xr.Dataset:
         """The state as a Dataset (complex spectra as (re, im) pairs), with its checksum;
         ``snapshots=False`` leaves the snapshots out (a run file holds them already: the
-        reader puts them back, :attr:`snaps` is then empty)."""
+        reader puts them back, ``snaps`` is then empty)."""
         n = self.fields.shape[-1]
         columns = sorted({k for r in self.rows for k in r})
         table = np.array([[r.get(c, math.nan) for c in columns] for r in self.rows], dtype=float)

@@ -73,7 +73,8 @@ class Parameters:
             Fourier modes 2 pi (n, m), n^2 + m^2 <= noise_modes^2: the same physical field at
             every resolution) or "per_node" (an independent random orientation at every grid
             node, the paper's "initial random orientation": resolution dependent by nature).
-        noise_modes: the band of the "band" texture (unused by "per_node").
+        noise_modes: the band of the "band" texture (unused by "per_node"); the resolution
+            must exceed 2 ``noise_modes``.
         texture_resolution: "per_node" only: the grid the per-node texture is drawn on (0,
             the default: the run's own grid). A run on a finer grid gets that texture by
             spectral interpolation, so that it starts from the same physical field (the
@@ -257,7 +258,8 @@ class Numerics:
     """How the equations are solved (not what they are).
 
     Attributes:
-        resolution: N, grid points per side of the periodic unit square (even, >= 16).
+        resolution: N, grid points per side of the periodic unit square (even, >= 16; with
+            the band texture N > 2 ``noise_modes``, so that its modes fit the grid).
         t_final: end time (units of tau).
         dt: initial (and, with ``adaptive = False``, fixed) time step.
         scheme: time integrator, "etdrk4" (Krogstad's fourth-order exponential Runge-Kutta,

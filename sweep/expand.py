@@ -149,8 +149,8 @@ class Expansion:
     #: for the expansions of adaptive campaigns, which build their runs otherwise
     starts: list[dict[str, str]] | None = None
     parents: Parents | None = None
-    #: where each run of a chain begins: its predecessor's ``run`` id and ``time`` ("end"),
-    #: None for the first run of a branch
+    #: where each run of a chain begins, its predecessor's ``run`` id and ``time`` ("end"),
+    #: or None for the first run of a branch
     chain_starts: list[dict[str, str] | None] = []
 
     def __init__(self, campaign: Campaign):

@@ -97,7 +97,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     "base": set(),
     "spec": {"analysis.registry", "figures.registry"},  # the names of fits and figures
     "run": set(),
-    "outputs": {"spec", "refine", "precision"},
+    "outputs": {"spec", "refine", "precision", "analysis.fits_file"},  # open_campaign's fits
     "cost": {"outputs", "refine", "precision"},
     "analysis": set(),
     "figures": {"analysis", "verify"},

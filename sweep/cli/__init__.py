@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from . import campaigns, driver, export, figures, report, run, simulate, stability, status, verify
-from .app import app
+from .app import RegistryHelpCommand, app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
     "validate": campaigns.validate,
@@ -32,7 +32,10 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "figures": figures.figures,
 }
 
+#: the commands whose help names the registered figures and fits
+NAMING_REGISTRIES = {"figures"}
+
 for _name, _command in COMMANDS.items():
-    app.command(_name)(_command)
+    app.command(_name, cls=RegistryHelpCommand if _name in NAMING_REGISTRIES else None)(_command)
 
 __all__ = ["COMMANDS", "app"]

@@ -21,6 +21,7 @@ import typer
 from rich.console import Console
 from rich.logging import RichHandler
 from rich.markup import escape
+from typer.core import TyperCommand
 
 if TYPE_CHECKING:
     from ..campaign import Campaign
@@ -106,13 +107,44 @@ class _App(typer.Typer):
         return decorator
 
 
+class RegistryHelpCommand(TyperCommand):
+    """A command whose option help names what is registered: ``{figures}`` and ``{fits}`` in
+    an option's help become the names of :data:`nematic_solids.sweep.figures.registry.REGISTRY`
+    and :data:`nematic_solids.sweep.analysis.registry.REGISTRY`, so that the help (and the
+    command reference generated from it) lists every registered name. The registries are
+    imported when the options are first asked for (help, the command reference, the command
+    itself), not when the program starts: they load xarray and matplotlib."""
+
+    _named = False
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        if not self._named:
+            names = registry_names()
+            for param in self.params:
+                text = getattr(param, "help", None)
+                if text:
+                    for key, value in names.items():
+                        text = text.replace("{" + key + "}", value)
+                    param.help = text  # type: ignore[attr-defined]
+            self._named = True
+        return super().get_params(ctx)
+
+
+def registry_names() -> dict[str, str]:
+    """The registered figures and fits, each as a comma-separated list of names."""
+    from ..analysis.registry import REGISTRY as FITS
+    from ..figures.registry import REGISTRY as FIGURES
+
+    return {"figures": ", ".join(FIGURES), "fits": ", ".join(FITS)}
+
+
 app = _App(
     name="nematic",
     help="Active nematic solids: run the model, sweep it, aggregate phase diagrams.",
     no_args_is_help=True,
     add_completion=True,
     pretty_exceptions_enable=False,
-    rich_markup_mode="markdown",
+    rich_markup_mode=None,
 )
 
 

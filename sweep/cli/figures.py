@@ -43,17 +43,16 @@ def figures(
         typer.Option(
             "--only",
             metavar="FIGURE",
-            help="Draw only this figure (repeatable): fig2, fig3, fig4, figA1. Default: the "
-            "campaign's 'figures:' list ('figures: []': none), else every figure that "
-            "applies to its grid.",
+            help="Draw only this figure (repeatable): {figures}. Default: the campaign's "
+            "'figures:' list ('figures: []': none), else every figure that applies to its grid.",
         ),
     ] = None,
     fits: Annotated[
         bool,
         typer.Option(
             "--fits/--no-fits",
-            help="Recompute fits.nc from phase.nc first (default), or draw "
-            "from the fits.nc on disk.",
+            help="Recompute fits.nc from phase.nc first (default), or draw from the fits.nc on "
+            "disk. Fits: {fits}.",
         ),
     ] = True,
     verbose: VerboseOpt = False,

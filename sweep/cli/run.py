@@ -54,8 +54,7 @@ def run(
         str | None,
         typer.Option(
             "--scheduler",
-            help="Use the dask scheduler at this address (tcp://HOST:PORT) instead "
-            "of the campaign's execution section.",
+            help="Use the dask scheduler at tcp://HOST:PORT instead of the execution section.",
         ),
     ] = None,
     workers: Annotated[
@@ -68,8 +67,7 @@ def run(
         bool,
         typer.Option(
             "--retry-failed",
-            help="Also redo runs that failed before (their new record keeps "
-            "the earlier failures under previous_failures).",
+            help="Also redo the runs that failed before.",
         ),
     ] = False,
     max_failures: Annotated[
@@ -77,26 +75,22 @@ def run(
         typer.Option(
             "--max-failures",
             metavar="N",
-            help="Stop the campaign (exit 3) once more runs failed in this session than N: a "
-            "count (0 stops at the first failure) or a fraction of the runs to do (0.1). Runs "
-            "not finished stay pending.",
+            help="Stop (exit 3) once more than N runs failed: a count (0: the first failure) "
+            "or a fraction of the runs to do (0.1).",
         ),
     ] = None,
     prune: Annotated[
         bool,
         typer.Option(
             "--prune",
-            help="First remove the orphaned runs: the records and files in the "
-            "results folder of runs this campaign does not plan (e.g. values since removed from "
-            "an axis); says how many.",
+            help="First remove the runs in the folder that this campaign no longer plans.",
         ),
     ] = False,
     check_files: Annotated[
         bool,
         typer.Option(
             "--check-files",
-            help="Checksum every finished run's file (by default only files "
-            "whose size or mtime changed are), and redo the corrupt ones.",
+            help="Checksum every finished run's file (not only changed ones); redo corrupt ones.",
         ),
     ] = False,
     check_files_alias: Annotated[
@@ -106,8 +100,7 @@ def run(
         bool,
         typer.Option(
             "--verification/--no-verification",
-            help="Run the campaign's verify: section "
-            "(as 'nematic verify' does): after the fits, or first with verify.before.",
+            help="Run the campaign's verify: section, as 'nematic verify' does.",
         ),
     ] = True,
     aggregate: Annotated[
@@ -117,38 +110,29 @@ def run(
         bool,
         typer.Option(
             "--figures/--no-figures",
-            help="After phase.nc, write fits.nc and the figures "
-            "(as 'nematic figures' does), then report.html (as 'nematic report' does).",
+            help="Then write fits.nc, the figures and report.html.",
         ),
     ] = True,
     dashboard: Annotated[
         bool,
         typer.Option(
             "--dashboard/--no-dashboard",
-            help="Serve the dask dashboard (local cluster: on "
-            "127.0.0.1, a free port) and print its link.",
+            help="Serve the dask dashboard and print its link.",
         ),
     ] = True,
     dry_run: Annotated[
         bool,
         typer.Option(
             "--dry-run",
-            help="Run nothing and write nothing (no results folder, no lock): print "
-            "the runs to do, their estimated CPU time and the wall time on the workers at this "
-            "machine's load, from the campaign's own finished runs (per point, scaled by "
-            "resolution, length and mechanics), else from the calibrated cost model; with the "
-            "basis and the 10-90 % range. Takes --workers, --scheduler and --retry-failed into "
-            "account.",
+            help="Run and write nothing: print the runs to do and their estimated cost.",
         ),
     ] = False,
     detach: Annotated[
         bool,
         typer.Option(
             "--detach",
-            help="Run the driver in the background, in a session of its own "
-            "(closing the terminal or logging out does not end it), its output in "
-            "results/NAME/driver.log; prints how to follow it (`tail -f`, `nematic status`) and "
-            "stop it (`nematic stop NAME`).",
+            help="Run the driver in the background (log: results/NAME/driver.log); nematic "
+            "stop NAME ends it.",
         ),
     ] = False,
     verbose: VerboseOpt = False,
@@ -156,13 +140,10 @@ def run(
 ) -> None:
     """Run a campaign on dask, resuming where it stopped.
 
-    Finished runs are skipped, the rest run on a local dask cluster (default), a scheduler or
-    a dask-jobqueue cluster; one netCDF per run, phase.nc at the end. If the campaign
-    differs from the one its results were made with, what changed and the new, kept and
-    orphaned runs are printed first. Exit 0 if every run
-    succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 3 when
-    stopped by `--max-failures`, 130 when interrupted (rerun to resume). With `--detach`,
-    0 once the driver runs in the background; with `--dry-run`, 0 after printing the cost.
+    Finished runs are skipped; one netCDF per run, phase.nc at the end. Exit 0: every run
+    succeeded (--detach: the driver runs; --dry-run: the cost printed), 1: some failed, 2: bad
+    input or a locked campaign, 3: stopped by --max-failures, 130: interrupted (rerun to
+    resume). More: docs/campaigns/execution.md and docs/campaigns/cost.md.
     """
     from ..expand import expand
     from ..outputs.aggregate import write_phase

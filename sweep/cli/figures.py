@@ -11,13 +11,14 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
+from rich.markup import escape
 
 from ..errors import CampaignLocked, FigureError, StoreError
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -76,8 +77,11 @@ def figures(
     problem = probe_write(root) if root.is_dir() else None
     if problem is not None:
         err.print(
-            f"[bold red]error:[/] cannot write the fits and figures in {root}: "
-            f"{storage_cause(root / 'figures', problem)}",
+            "[bold red]error:[/] "
+            + escape(
+                f"cannot write the fits and figures in {root}: "
+                f"{storage_cause(root / 'figures', problem)}"
+            ),
             soft_wrap=True,
             highlight=False,
         )
@@ -91,11 +95,11 @@ def figures(
         error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:
-        console.print(f"fits: {out.fits_path}")
+        console.print(f"fits: {out.fits_path}", markup=False)
     for note in out.notes:
         console.print(f"  note: {note}", markup=False)
     for path in out.paths:
-        console.print(f"figure: {path}")
+        console.print(f"figure: {path}", markup=False)
     if not out.figures:
         why = (
             "the campaign lists none (figures: [])"
@@ -106,5 +110,5 @@ def figures(
     if out.failures:
         err.print(f"[red]{len(out.failures)} failed[/]:")
         for what, why in out.failures.items():
-            err.print(f"  {what}: {why}", soft_wrap=True, highlight=False)
+            err.print(f"  {what}: {why}", markup=False)
         raise typer.Exit(EXIT_FAILED_RUNS)

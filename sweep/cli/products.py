@@ -6,9 +6,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rich.console import Console
+from rich.markup import escape
 
 from ..campaign import Campaign
+from .app import Console
 
 
 def repair_products(
@@ -29,7 +30,8 @@ def repair_products(
         problem = netcdf_problem(store.phase_path, ("status", "run_id"))
         if problem is not None:
             console.print(
-                f"[yellow]{store.phase_path}: {problem}[/]; rebuilding it from the run records",
+                f"[yellow]{escape(f'{store.phase_path}: {problem}')}[/]; rebuilding it from the "
+                "run records",
                 soft_wrap=True,
                 highlight=False,
             )
@@ -44,7 +46,8 @@ def repair_products(
         problem = netcdf_problem(fits_path)
         if problem is not None:
             console.print(
-                f"[yellow]{fits_path}: {problem}[/]; removing it (the fits recompute it)",
+                f"[yellow]{escape(f'{fits_path}: {problem}')}[/]; removing it (the fits "
+                "recompute it)",
                 soft_wrap=True,
                 highlight=False,
             )

@@ -9,11 +9,10 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress, TaskID
 
-from .app import fmt_time
+from .app import Console, fmt_time
 
 if TYPE_CHECKING:
     from ..store import Record

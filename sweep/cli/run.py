@@ -3,12 +3,13 @@ phase.nc, fits, figures, verification and report; ``--dry-run`` and ``--detach``
 
 from __future__ import annotations
 
+import contextlib
+import shutil
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 from rich.progress import (
     BarColumn,
@@ -25,6 +26,7 @@ from .app import (
     EXIT_INTERRUPTED,
     EXIT_TOO_MANY_FAILURES,
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -42,6 +44,9 @@ from .campaigns import print_estimate, report_changes, storage_message
 from .collection import collection_or_none, refuse_name, run_collection
 from .products import regenerate_figures, regenerate_report, repair_products
 from .progress import ProgressEvents
+
+if TYPE_CHECKING:
+    from ..store import CampaignStore
 
 
 def run(
@@ -228,11 +233,16 @@ def run(
     say = Console(stderr=True, highlight=False, soft_wrap=True, quiet=quiet)
     store = CampaignStore(results, c.name)
     lock = store.lock()
+    fresh = not store.root.exists()  # made by this command: removed again if it is refused
     try:
         store.ensure()
         lock.acquire(command=" ".join(sys.argv))
     except (CampaignLocked, StoreError) as e:
         error(err, e)
+        if fresh:  # the folders ensure() made, if still empty (another driver's are not)
+            for folder in (store.runs_dir, store.root):
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
         raise typer.Exit(EXIT_BAD_INPUT) from None
     try:
         expansion = expand(c)
@@ -300,9 +310,13 @@ def run(
                     events.close()
         except (ClusterError, StoreError, CampaignError) as e:
             error(err, e)
+            if fresh:
+                discard_unused(store)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
             error(err, storage_message(store, e))
+            if fresh:
+                discard_unused(store)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:  # before any run was submitted
             err.print("[yellow]interrupted[/]; rerun the same command to resume")
@@ -400,7 +414,17 @@ def run(
                 err.print(
                     f"  ... and {len(plan.failed)} earlier failure(s); --retry-failed redoes them"
                 )
-            err.print(f"details: nematic status {campaign}")
+            err.print(f"details: nematic status {campaign}", markup=False)
             raise typer.Exit(EXIT_FAILED_RUNS)
     finally:
         lock.release()
+
+
+def discard_unused(store: CampaignStore) -> None:
+    """Remove the campaign folder that this command made for a campaign it then refused
+    (e.g. its parent's runs are not done, or its cluster did not start): its lock file and
+    campaign copy, never a run's file (the folder is kept if ``runs/`` holds anything)."""
+    with contextlib.suppress(OSError):
+        if store.runs_dir.is_dir() and any(store.runs_dir.iterdir()):
+            return
+        shutil.rmtree(store.root)

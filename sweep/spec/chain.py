@@ -27,7 +27,7 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
     dims = {d.name: d for d in read.get("sweep") or ()}
     axis = spec.get("axis")
     ok = True
-    if axis not in dims:
+    if not isinstance(axis, str) or axis not in dims:
         names = [a.name for d in dims.values() for a in d.axes]
         hint = f"; the swept axes: {', '.join(names)}" if names else " (nothing is swept)"
         c.bad(("chain", "axis"), axis, f"a swept axis{suggest(str(axis), names)}{hint}")

@@ -99,6 +99,34 @@ def test_a_chain_mistake_is_reported_at_its_line(text, says):
     assert "loop.yaml:" in str(err.value)
 
 
+GRID = (
+    loop()
+    .replace("alpha_minus_B: [0.1, 0.8, 0.4]", "resolution: [32, 64]")
+    .replace("axis: alpha_minus_B", "axis: resolution")
+    .replace("resolution: 32, ", "")
+)
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "says"),
+    [
+        (GRID, 7, "would change the grid between a run and the next"),
+        (loop() + "store: {snapshot_dtype: float32, end_state: false}\n", 10, "exact end state"),
+        (loop() + "store:\n  snapshot_fields: [q1, q2]\n  end_state: false\n", 12, "end_state"),
+        (loop().replace("axis: alpha_minus_B", "axis: [alpha_minus_B, K]"), 7, "one swept axis"),
+    ],
+)
+def test_a_chain_that_could_not_feed_its_runs_is_refused_at_its_line(text, line, says):
+    """A chain along the grid (the successor's fields would be another shape), or whose store
+    keeps no end state (a successor would begin from a snapshot: float32, or without A), is
+    refused before anything runs, at the line that makes it so."""
+    with pytest.raises(CampaignError) as err:
+        parse_campaign(text, source="loop.yaml")
+    (problem,) = err.value.problems
+    assert problem.location == f"loop.yaml:{line}", str(err.value)
+    assert says in problem.message
+
+
 def _assert_chained_runs(results: Path, text: str) -> dict[str, np.ndarray]:
     """Every chained run's file equals the model's run from its predecessor's end state."""
     e = expand(parse_campaign(text))

@@ -8,12 +8,15 @@ parent_failed and is redone with it."""
 from __future__ import annotations
 
 import base64
+import os
+import random
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import xarray as xr
-from sweep_helpers import kill_group, records, start_driver, wait_for
+from sweep_helpers import kill_group, records, start_driver, wait_for, wait_group_gone
 from typer.testing import CliRunner
 
 from nematic_solids.model.checkpoint import RunState, read_netcdf
@@ -205,6 +208,52 @@ def test_a_chain_driver_killed_half_way_resumes(tmp_path):
     result = invoke("run", path, "--results", results)
     assert result.exit_code == 0, result.output
     _assert_chained_runs(results, text)
+
+
+@pytest.mark.slow
+def test_a_chain_driver_killed_at_random_moments_ends_as_an_uninterrupted_one(tmp_path):
+    """SIGKILL of the driver and its workers twice, each at a random moment (after a random
+    number of runs is done, then a random delay: mid-run, mid-checkpoint, mid-write), then a
+    run to the end: every array of every run (the successors begun from their predecessors' end
+    states, some continued from checkpoints) is bit-identical to an uninterrupted campaign's."""
+    rng = random.Random(f"chain-kill-{os.getpid()}")
+    text = loop(t_final=20, seeds=1, values="[0.1, 0.4, 0.8]") + "store: {checkpoint_every: 2}\n"
+    reference = tmp_path / "reference"
+    assert invoke("run", write(reference, text), "--results", reference / "results").exit_code == 0
+    killed = tmp_path / "killed"
+    path = write(killed, text)
+    results = killed / "results"
+    runs = results / "loop" / "runs"
+    for attempt in range(2):
+        done = len(records(runs)) if runs.is_dir() else 0
+        wanted = done + rng.randint(0, 2)
+        log = killed / f"driver{attempt}.log"
+        proc = start_driver(["run", str(path), "--results", str(results), "--no-figures"], log)
+        try:
+            wait_for(
+                lambda wanted=wanted, proc=proc: (
+                    (runs.is_dir() and len(records(runs)) >= wanted) or proc.poll() is not None
+                ),
+                300,
+                f"{wanted} runs done",
+                interval=0.05,
+            )
+            time.sleep(rng.uniform(0.0, 1.5))
+        finally:
+            kill_group(proc)
+        wait_group_gone(proc.pid)
+        if attempt == 0:  # at most two runs and 1.5 s in: the chains are not through
+            assert len(records(runs)) < 6 if runs.is_dir() else True
+    result = invoke("run", path, "--results", results, "--no-figures")
+    assert result.exit_code == 0, result.output
+    _assert_chained_runs(results, text)
+    want_runs = reference / "results" / "loop" / "runs"
+    assert {p.name for p in runs.glob("*.nc")} == {p.name for p in want_runs.glob("*.nc")}
+    for got in runs.glob("*.nc"):
+        with xr.open_dataset(got) as a, xr.open_dataset(want_runs / got.name) as b:
+            for name in a.data_vars:
+                if name != "wall_time":
+                    assert np.array_equal(a[name].values, b[name].values, equal_nan=True), name
 
 
 def test_the_loop_figure_and_the_loop_width(tmp_path):

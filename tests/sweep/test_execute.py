@@ -256,7 +256,8 @@ def test_a_second_driver_is_refused(copy_of_small):
 @pytest.mark.slow
 def test_two_driver_processes_on_one_folder(tmp_path):
     """Two real drivers of one campaign on one results folder, the second started while the
-    first holds the lock: the second is refused (exit 2, naming the holder); the first ends with every run's arrays bit-identical to a campaign run alone."""
+    first holds the lock: the second is refused (exit 2, naming the holder); the first ends
+    with every run's arrays bit-identical to a campaign run alone."""
     alone = write_campaign(tmp_path / "alone", name="two", values="[0.1, 0.2]", t_final=20)
     assert invoke("run", alone, "--results", tmp_path / "alone" / "results").exit_code == 0
     path = write_campaign(tmp_path / "both", name="two", values="[0.1, 0.2]", t_final=20)

@@ -434,7 +434,12 @@ class Numerics:
 def check_compatible(params: Parameters, numerics: Numerics) -> None:
     """Constraints that involve both objects: the grid must resolve a band-limited initial
     texture (resolution > 2 noise_modes, so the same physical field exists at this
-    resolution), and a per-node texture drawn on a grid no finer than the run's."""
+    resolution), a per-node texture drawn on a grid no finer than the run's, and a protocol's
+    time scales resolved (:func:`nematic_solids.model.time_scales.check_time_scales`)."""
+    if params.protocol:
+        from .time_scales import check_time_scales
+
+        check_time_scales(params, numerics)
     if params.texture_resolution > numerics.resolution:
         raise ParameterError(
             "texture_resolution",

@@ -145,6 +145,33 @@ def run_id_for(
     return hash_canonical(p.to_dict(), n.to_dict(), seed)
 
 
+#: the keys of a run's ``start`` that enter its identity: the parent ``run``, the ``time`` ("end"
+#: or the time) and, when it is not the exact end state or an exact snapshot, the ``state``
+START_KEYS = ("run", "time", "state")
+#: what a run begins from when it is not its parent's exact state (:func:`start_state`)
+SNAPSHOT = "snapshot"
+
+
+def start_state(time: str, end_state: bool, dtype: str, fields: tuple[str, ...] | None) -> str:
+    """The ``state`` of a run of ``initial.from`` as its identity names it: "" for the parent's
+    exact end state (``time`` "end", the parent keeps end states) or a float64 snapshot of every
+    field at ``time`` (the exact fields then); else ``"snapshot (<precision>, <fields>)"``: a
+    run begun from it computes other numbers, so it has another id (and its record a
+    warning). Chains always begin from exact end states (their validation asks for them)."""
+    exact_snapshot = dtype == "float64" and fields is None
+    if (time == "end" and end_state) or (time != "end" and exact_snapshot):
+        return ""
+    kept = f"{dtype}, {'all fields' if fields is None else ' '.join(fields)}"
+    return f"{SNAPSHOT} ({kept})"
+
+
+def identity_start(start: Mapping[str, Any] | None) -> dict[str, str] | None:
+    """The part of a run's ``start`` that enters its identity (:data:`START_KEYS`)."""
+    if start is None:
+        return None
+    return {k: str(start[k]) for k in START_KEYS if start.get(k)}
+
+
 #: The numerics a run can be continued past (nematic_solids.model.checkpoint.MAY_DIFFER): left out
 #: of its trajectory's id.
 CONTINUABLE = ("t_final", "snapshot_times")

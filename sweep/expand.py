@@ -189,8 +189,11 @@ class Expansion:
                 self.starts.append(start)
                 self.run_ids.append(hash_canonical(p, n, seed, start))
         self.parents = parents
-        self.position = {rid: i for i, rid in enumerate(self.run_ids)}
-        if len(self.position) != len(self.run_ids):
+        self.position: dict[str, int] = {}  # each run's first position
+        for i, rid in enumerate(self.run_ids):
+            self.position.setdefault(rid, i)
+        twins = campaign.chain is not None and campaign.chain.up == "fresh"  # by design
+        if len(self.position) != len(self.run_ids) and not twins:
             # Two grid points that normalise to the same run (e.g. alpha and alpha_minus_B
             # values that coincide) would share one file: that is a campaign mistake.
             dup = next(r for i, r in enumerate(self.run_ids) if self.position[r] != i)

@@ -2,7 +2,8 @@
 command is :func:`guarded`), the common options, logging, loading the campaign.
 
 Exit codes: :data:`EXIT_OK`, :data:`EXIT_FAILED_RUNS`, :data:`EXIT_BAD_INPUT`,
-:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_INTERRUPTED` (:mod:`nematic_solids.sweep.cli`).
+:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_PRODUCTS_FAILED`, :data:`EXIT_INTERRUPTED`
+(:mod:`nematic_solids.sweep.cli`).
 """
 
 from __future__ import annotations
@@ -42,6 +43,9 @@ class Console(rich.console.Console):
 EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: ``nematic run --max-failures``: the campaign stopped early, too many runs failed
 EXIT_TOO_MANY_FAILURES = 3
+#: every run succeeded (``nematic run``) but a fit or a figure failed, or (``nematic figures``)
+#: a fit or a figure failed; each is listed in one line
+EXIT_PRODUCTS_FAILED = 4
 #: Show Python tracebacks of errors (``nematic --debug ...`` or ``NEMATIC_DEBUG=1``).
 DEBUG = {"on": False}
 

@@ -109,7 +109,7 @@ class ProgressEvents:
 
     def started(self, plan: Any, total: int, workers: int) -> None:
         self.ok = self.failed = 0  # per call: a refined campaign runs one call per round
-        self.skipped = len(plan.done) + len(plan.failed)
+        self.skipped = plan.skipped
         self.total = total
         self.workers = max(1, workers)
         self.t0 = self.last_log = self.clock()

@@ -24,6 +24,7 @@ from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
+    EXIT_PRODUCTS_FAILED,
     EXIT_TOO_MANY_FAILURES,
     CampaignArg,
     Console,
@@ -42,7 +43,7 @@ from .app import (
 )
 from .campaigns import print_estimate, report_changes, storage_message
 from .collection import collection_or_none, refuse_name, run_collection
-from .products import regenerate_figures, regenerate_report, repair_products
+from .products import failure_lines, regenerate_figures, regenerate_report, repair_products
 from .progress import ProgressEvents
 
 if TYPE_CHECKING:
@@ -147,8 +148,9 @@ def run(
 
     Finished runs are skipped; one netCDF per run, phase.nc at the end. Exit 0: every run
     succeeded (--detach: the driver runs; --dry-run: the cost printed), 1: some failed, 2: bad
-    input or a locked campaign, 3: stopped by --max-failures, 130: interrupted (rerun to
-    resume). More: docs/campaigns/execution.md and docs/campaigns/cost.md.
+    input or a locked campaign, 3: stopped by --max-failures, 4: every run succeeded but a fit or
+    figure failed (one line each), 130: interrupted (rerun to resume). More:
+    docs/campaigns/execution.md and docs/campaigns/cost.md.
     """
     from ..expand import expand
     from ..outputs.aggregate import write_phase
@@ -360,6 +362,7 @@ def run(
                 f"{summary.completed} run(s) in {fmt_time(summary.wall_time)} "
                 f"(sum of run times {fmt_time(summary.run_time)})"
             )
+        product_failures: list[str] = []
         if aggregate:
             try:
                 write_phase(expansion, store)
@@ -369,13 +372,15 @@ def run(
                     if verification:  # the fits pick its sample; the figures show it
                         from .verify import verify_step
 
-                        regenerate_figures(c, results, draw_figures=False)
+                        fitted = regenerate_figures(c, results, draw_figures=False)
                         verify_step(c, store, say, before=False)
                         drawn = regenerate_figures(c, results, fits=False)
+                        drawn.failures = {**fitted.failures, **drawn.failures}
                     else:
                         drawn = regenerate_figures(c, results)
-                    for figure in drawn:
+                    for figure in drawn.paths:
                         say.print(f"figure: {escape(str(figure))}")
+                    product_failures = failure_lines(drawn.failures)
                     page = regenerate_report(c, results)
                     if page is not None:
                         say.print(f"report: {escape(str(page))}")
@@ -386,6 +391,8 @@ def run(
                     "aggregate) once the folder can be written",
                 )
                 raise typer.Exit(EXIT_BAD_INPUT) from None
+        for line in product_failures:
+            err.print(f"[red]failed[/]: {escape(line)}", soft_wrap=True, highlight=False)
         failures = [] if summary is None else summary.failed
         n_failed = len(failures) + len(plan.failed)
         if summary is not None and summary.lost:
@@ -416,6 +423,12 @@ def run(
                 )
             err.print(f"details: nematic status {campaign}", markup=False)
             raise typer.Exit(EXIT_FAILED_RUNS)
+        if product_failures:
+            err.print(
+                f"every run succeeded, but {len(product_failures)} fit(s) or figure(s) failed "
+                f"(above); nematic figures {campaign} redraws them"
+            )
+            raise typer.Exit(EXIT_PRODUCTS_FAILED)
     finally:
         lock.release()
 

@@ -198,7 +198,7 @@ def run_campaign(
     t0 = clock()
     summary = RunSummary(
         total=len(expansion),
-        skipped=len(plan.done) + len(plan.failed),
+        skipped=plan.skipped,
         failed_before=len(plan.failed),
     )
     watch = Supervisor(link, campaign.execution, clock=clock)
@@ -464,7 +464,7 @@ def drive(
         except KeyboardInterrupt:  # while the cluster was starting or closing
             summary = RunSummary(
                 total=len(expansion),
-                skipped=len(plan.done) + len(plan.failed),
+                skipped=plan.skipped,
                 failed_before=len(plan.failed),
                 interrupted=True,
             )

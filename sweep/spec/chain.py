@@ -8,16 +8,17 @@ from typing import Any
 
 from nematic_solids.model.resolution import is_rule
 
-from ..campaign import BRANCH, BRANCHES, ChainSpec
+from ..campaign import BRANCH, BRANCHES, CHAIN_STARTS, ChainSpec
 from .checker import Checker, is_number, suggest
 
-CHAIN_KEYS = ("axis", "branches")
+CHAIN_KEYS = ("axis", "branches", "up")
 #: the axes that set the grid of the fields: a run could not begin from its predecessor's
 GRID_AXES = ("resolution",)
 
 
 def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | None:
-    """``chain: {axis, branches}`` (branches: ``up``, ``down`` or both; default both). The
+    """``chain: {axis, branches, up}`` (branches: ``up``, ``down`` or both; default both; up:
+    ``predecessor``, default, or ``fresh``: each run of the up branch from the seeded texture). The
     axis is a swept dimension of its own (not zipped) with two or more numbers; a chain
     begins from the seeded texture, so it has no ``initial``, ``refine``, ``precision`` or
     ``verify`` section. A run begins from its predecessor's fields on the same grid and from its
@@ -82,8 +83,12 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
     ):
         c.bad(("chain", "branches"), spec.get("branches"), "up, down or [up, down]")
         ok = False
+    up = spec.get("up", CHAIN_STARTS[0])
+    if up not in CHAIN_STARTS:
+        c.bad(("chain", "up"), up, " or ".join(CHAIN_STARTS))
+        ok = False
     others = [k for k in ("initial", "refine", "precision", "verify") if read.get(k) is not None]
     if others:
         c.add(("chain",), f"a chain has no {' or '.join(others)} section (it starts from t = 0)")
         ok = False
-    return ChainSpec(str(axis), tuple(branches)) if ok else None
+    return ChainSpec(str(axis), tuple(branches), str(up)) if ok else None

@@ -9,8 +9,9 @@ that saw everything up to ``seq`` N asks for what changed since N (:meth:`Catalo
 
 from __future__ import annotations
 
+import contextlib
 import logging
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -74,15 +75,41 @@ def make_engine(url: str) -> Engine:
     raise CatalogueError(f"the catalogue is SQLite or PostgreSQL, not {backend} ({redacted(url)})")
 
 
+#: the key of PostgreSQL's advisory lock held while migrating (one process at a time)
+ADVISORY_LOCK = 0x6E656D61
+
+
+@contextlib.contextmanager
+def _sqlite_lock(engine: Engine) -> Iterator[None]:
+    """An exclusive lock on ``<file>.lock`` beside an SQLite catalogue: two processes that
+    open a new catalogue at once migrate it one after the other."""
+    import fcntl
+
+    database = engine.url.database
+    if not database or database == ":memory:":
+        yield
+        return
+    with open(f"{database}.lock", "a+b") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 def upgrade(engine: Engine) -> None:
-    """Apply every migration not applied yet (Alembic, programmatic configuration)."""
+    """Apply every migration not applied yet (Alembic, programmatic configuration), one
+    process at a time (a file lock for SQLite, an advisory lock for PostgreSQL)."""
     from alembic import command
     from alembic.config import Config
 
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
-    with engine.begin() as connection:
-        config.attributes["connection"] = connection
+    sqlite = engine.dialect.name == "sqlite"
+    with _sqlite_lock(engine) if sqlite else contextlib.nullcontext(), engine.begin() as conn:
+        if not sqlite:
+            conn.execute(sa.text("SELECT pg_advisory_xact_lock(:k)"), {"k": ADVISORY_LOCK})
+        config.attributes["connection"] = conn
         command.upgrade(config, "head")
 
 
@@ -134,6 +161,15 @@ def next_seqs(conn: Connection, n: int) -> int:
     return int(top) - n + 1
 
 
+#: what SQLite says of a file that is not a database, or a damaged one
+CORRUPT = ("file is not a database", "malformed", "file is encrypted")
+
+
+def is_corrupt(e: BaseException) -> bool:
+    """Whether SQLite's error says the file is damaged (not: locked, missing table, ...)."""
+    return any(text in str(getattr(e, "orig", e)) for text in CORRUPT)
+
+
 class Database:
     """The connection to one catalogue: migrated on construction, written in batches."""
 
@@ -144,7 +180,7 @@ class Database:
             upgrade(self.engine)
         except sa.exc.DatabaseError as e:
             self.engine.dispose()
-            if self.engine.dialect.name == "sqlite":
+            if self.engine.dialect.name == "sqlite" and is_corrupt(e):
                 raise CorruptCatalogue(
                     f"{redacted(url)} is not a readable catalogue: {e.orig}"
                 ) from e

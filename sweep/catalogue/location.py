@@ -23,6 +23,8 @@ from ..errors import CatalogueError
 
 #: the environment variable naming the catalogue (a URL, or a path of an SQLite file)
 ENV = "NEMATIC_CATALOGUE"
+#: the values of :data:`ENV` that turn the catalogue off (nothing recorded, no reuse)
+OFF = ("off", "none", "no", "0")
 #: the SQLite file's name in the results root
 FILENAME = "catalogue.sqlite"
 #: filesystem types (``/proc/self/mountinfo``'s fstype) on which SQLite is refused
@@ -128,6 +130,8 @@ def sqlite_url(path: Path) -> str:
 def catalogue_url(root: Path | None, given: str | None = None) -> str:
     """The catalogue's URL for the results root ``root`` (see the module docstring)."""
     chosen = given or os.environ.get(ENV, "").strip() or None
+    if chosen is not None and chosen.lower() in OFF:
+        raise CatalogueError(f"the catalogue is off ({ENV}={chosen})")
     if chosen is not None:
         return chosen if is_url(chosen) else sqlite_url(Path(chosen).expanduser())
     if root is None:

@@ -166,8 +166,7 @@ def test_the_shipped_results_folders_are_indexed_from_their_phase_files(tmp_path
     after = {
         p: p.stat().st_mtime_ns
         for p in root.rglob("*")
-        if p.is_file()
-        and p.name not in ("catalogue.sqlite", "catalogue.sqlite-wal", "catalogue.sqlite-shm")
+        if p.is_file() and not p.name.startswith("catalogue.sqlite")
     }
     assert after == before  # nothing written into the folders, nothing recomputed
     for name in names:
@@ -233,7 +232,7 @@ def test_a_corrupt_catalogue_is_rebuilt_from_the_files_with_nothing_lost(small, 
     assert got.equals(want)
     cat.close()
     path.unlink()  # deleted: created again, indexed again
-    for extra in ("-wal", "-shm"):
+    for extra in ("-wal", "-shm", ".lock"):
         Path(f"{path}{extra}").unlink(missing_ok=True)
     cat = open_catalogue(root)
     assert cat.state == "created"
@@ -311,4 +310,33 @@ def test_index_root_counts_each_folder(tmp_path):
     again = index_root(cat)  # idempotent
     assert again.total == 110
     assert len(cat.runs()) == 110
+    cat.close()
+
+
+def test_processes_opening_a_new_catalogue_at_once_migrate_it_one_at_a_time(tmp_path):
+    """No opener mistakes another's half-made schema for a corrupt file."""
+    import threading
+
+    states: list[str] = []
+    errors: list[BaseException] = []
+
+    def opener() -> None:
+        try:
+            cat = open_catalogue(tmp_path)
+            states.append(cat.state)
+            cat.record([row(f"r{threading.get_ident()}", "c")])
+            cat.close()
+        except BaseException as e:  # noqa: BLE001 - handed to the test
+            errors.append(e)
+
+    threads = [threading.Thread(target=opener) for _ in range(4)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(60)
+    assert not errors
+    assert "rebuilt" not in states
+    assert not list(tmp_path.glob("*.corrupt-*"))
+    cat = open_catalogue(tmp_path)
+    assert len(cat.runs()) == 4
     cat.close()

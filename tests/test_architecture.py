@@ -99,7 +99,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     "catalogue": set(),
     "run": {"catalogue"},
     "outputs": {"spec", "refine", "precision", "catalogue"},
-    "cost": {"outputs", "refine", "precision"},
+    "cost": {"outputs", "refine", "precision", "catalogue"},
     "analysis": set(),
     "figures": {"analysis", "verify"},
     "refine": {"spec", "run", "outputs", "precision", "analysis"},

@@ -69,6 +69,10 @@ class ProgressEvents:
             )
         if plan.adopted:
             self.console.print(f"recovered {plan.adopted} unindexed run file(s)")
+        if getattr(plan, "reused", None):
+            from ..catalogue.reuse import reuse_line
+
+            self.console.print(reuse_line(plan.reused), soft_wrap=True, markup=False)
         if plan.redone:
             self.console.print(
                 f"[yellow]{len(plan.redone)} run(s) will be redone[/] (their "

@@ -281,6 +281,7 @@ def _run_campaign(
                     campaign.store,
                     plan.history.get(i),
                     plan.parents.get(i),
+                    plan.parent_paths.get(i),
                 )
                 held.append((run, task, i))
             # a run that goes again (its result was lost) gets a new key: the old one may

@@ -60,7 +60,7 @@ MANIFEST = "manifest.json"
 PHASE = "phase.nc"
 LOCK = ".lock"
 CAMPAIGN_COPY = "campaign.yaml"
-MANIFEST_VERSION = 5
+MANIFEST_VERSION = 6
 #: Record keys kept in the manifest (the sidecar also has traceback, parameters, numerics).
 MANIFEST_KEYS = (
     "status",
@@ -78,6 +78,7 @@ MANIFEST_KEYS = (
     "finished",
     "trajectory",
     "end_state",
+    "reused_from",
 )
 #: Variables every run file holds (checked when a file without a checksum is verified; the
 #: time axis is ``t``, or ``time`` in files of schema 1: see :func:`series_time`).
@@ -142,6 +143,9 @@ class Record(TypedDict, total=False):
     lineage: list[str]
     #: why a checkpoint or end state it found was not used (corrupt, another run's, ...)
     start_warning: str
+    #: the campaign whose finished run this one is, taken in place (its file a link to that
+    #: campaign's; :mod:`nematic_solids.sweep.catalogue.reuse`)
+    reused_from: str
 
 
 # --------------------------------------------------------------------------- run records

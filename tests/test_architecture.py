@@ -97,9 +97,10 @@ MAY_IMPORT: dict[str, set[str]] = {
     "base": set(),
     # the names of fits and figures, and the shape of a campaign they need
     "spec": {"analysis.registry", "analysis.shape", "figures.registry"},
-    "run": set(),
-    "outputs": {"spec", "refine", "precision", "analysis.fits_file"},  # open_campaign's fits
-    "cost": {"outputs", "refine", "precision"},
+    "catalogue": set(),
+    "run": {"catalogue"},
+    "outputs": {"spec", "refine", "precision", "catalogue", "analysis.fits_file"},
+    "cost": {"outputs", "refine", "precision", "catalogue"},
     "analysis": set(),
     "figures": {"analysis", "verify"},
     "refine": {"spec", "run", "outputs", "precision", "analysis"},

@@ -15,7 +15,19 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, driver, export, figures, report, run, simulate, stability, status, verify
+from . import (
+    campaigns,
+    catalogue,
+    driver,
+    export,
+    figures,
+    report,
+    run,
+    simulate,
+    stability,
+    status,
+    verify,
+)
 from .app import RegistryHelpCommand, app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
@@ -30,6 +42,7 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "simulate": simulate.simulate,
     "stability": stability.stability,
     "figures": figures.figures,
+    "catalogue": catalogue.catalogue,
 }
 
 #: the commands whose help names the registered figures and fits

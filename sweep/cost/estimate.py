@@ -225,6 +225,25 @@ def classify(
     return todo, done, failed
 
 
+def reused_elsewhere(
+    expansion: Expansion, store: CampaignStore, todo: list[int]
+) -> tuple[list[int], dict[str, int]]:
+    """The runs to do that ``nematic run`` would take from other campaigns of the results
+    root instead of running them (read only: an existing catalogue alone), and how many
+    from which campaign."""
+    from ..catalogue.reuse import open_for_reuse, reusable
+
+    catalogue = open_for_reuse(store.results_root, create=False) if todo else None
+    if catalogue is None:
+        return todo, {}
+    with catalogue:
+        found = reusable(catalogue, store, [expansion.run_ids[i] for i in todo])
+    counts: dict[str, int] = {}
+    for src in found.values():
+        counts[src.campaign] = counts.get(src.campaign, 0) + 1
+    return [i for i in todo if expansion.run_ids[i] not in found], counts
+
+
 def measurements(
     expansion: Expansion, records: Mapping[str, Record], prior: Prior | None = None
 ) -> Basis:
@@ -297,6 +316,8 @@ def estimate(
             f"; finished ({seeds.stop})" if seeds.finished else ""
         )
     todo, done, failed = classify(expansion, store, records, retry_failed=retry_failed)
+    todo, reused = reused_elsewhere(expansion, store, todo)
+    done += sum(reused.values())
     basis = measurements(expansion, records, campaign_prior(campaign)[0])
     costs: dict[str, Costed] = {}
     runs: list[tuple[float, float, float, bool]] = []  # (seconds, low, high, cost model?)
@@ -415,4 +436,5 @@ def estimate(
         later=later,
         round_note=round_note,
         changes=[] if changed is None else changed.lines(),
+        reused=reused,
     )

@@ -58,6 +58,8 @@ class Run(Protocol):
     @property
     def parent(self) -> str | None: ...
     @property
+    def parent_path(self) -> str | None: ...
+    @property
     def snapshot_fields(self) -> tuple[str, ...] | None: ...
     @property
     def snapshot_dtype(self) -> str: ...
@@ -118,7 +120,8 @@ def starting_state(task: Run, store: CampaignStore) -> Start:
             return Start(state, "checkpoint", "; ".join(warnings))
     if task.parent:
         try:
-            state = read_end_state(store.nc_path(task.parent), task)
+            parent_file = Path(task.parent_path) if task.parent_path else None
+            state = read_end_state(parent_file or store.nc_path(task.parent), task)
             why = state.problem(params, numerics, task.seed)
             if why is not None:
                 raise CheckpointError(f"it does not continue to this run: {why}")

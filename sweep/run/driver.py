@@ -21,7 +21,7 @@ import math
 import os
 import time
 import traceback
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,13 +29,11 @@ from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from ..campaign import ExecutionSpec
 from ..campaign_copy import save_campaign_copy
+from ..catalogue.recorder import Recorder
 from ..chains import in_chain_order
 from ..errors import ClusterError
 from ..expand import Expansion, RunSpec
-from ..store import (
-    CampaignStore,
-    Record,
-)
+from ..store import CampaignStore, Record
 from .batch import BatchTask, execute_batch, group_runs
 from .clusters import WORKER_LOSSES, jobqueue_options, make_jobqueue, open_cluster
 from .failures import FailureLimit
@@ -178,6 +176,7 @@ def run_campaign(
     *,
     clock: Callable[[], float] = time.monotonic,
     limit: FailureLimit | None = None,
+    record: bool = True,
 ) -> RunSummary:
     """Run ``plan.todo`` on the cluster; return when all are done or on Ctrl-C
     (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set).
@@ -189,7 +188,26 @@ def run_campaign(
     submission window from the accepted workers
     (:class:`~nematic_solids.sweep.run.workers.Supervisor`). Raises :class:`ClusterError` when the
     workers cannot run the model or none is left for ``execution.give_up_after`` seconds (the runs
-    in flight stay pending)."""
+    in flight stay pending). With ``record``, each record goes into the root's catalogue
+    (:class:`~nematic_solids.sweep.catalogue.recorder.Recorder`; never fails a run)."""
+    recorder = Recorder(store) if record else None
+    try:
+        return _run_campaign(expansion, store, client, plan, events, clock, limit, recorder)
+    finally:
+        if recorder is not None:
+            recorder.close()
+
+
+def _run_campaign(
+    expansion: Expansion,
+    store: CampaignStore,
+    client: Client | ClusterLink,
+    plan: Plan,
+    events: RunEvents | None,
+    clock: Callable[[], float],
+    limit: FailureLimit | None,
+    recorder: Recorder | None,
+) -> RunSummary:
     from distributed import as_completed
 
     campaign = expansion.campaign
@@ -263,6 +281,7 @@ def run_campaign(
                     campaign.store,
                     plan.history.get(i),
                     plan.parents.get(i),
+                    plan.parent_paths.get(i),
                 )
                 held.append((run, task, i))
             # a run that goes again (its result was lost) gets a new key: the old one may
@@ -367,6 +386,8 @@ def run_campaign(
             with contextlib.suppress(Exception):
                 client.cancel(list(ac.futures))
             return False
+        if recorder is not None:
+            recorder.add(record)
         if record.get("status") == "ok":
             summary.ok += 1
         else:
@@ -473,16 +494,3 @@ def drive(
                 store.clean_temporaries()
     store.scan()
     return plan, summary
-
-
-def describe_failure(run: RunSpec, record: Mapping[str, Any]) -> str:
-    """One line: the run, its swept values and seed, why and when it failed."""
-    coords = ", ".join(
-        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in run.coords.items()
-    )
-    when = record.get("t_failed")
-    at = f" at t = {when:.4g}" if isinstance(when, (int, float)) and math.isfinite(when) else ""
-    detail = str(record.get("detail") or "").strip().splitlines()
-    return f"run {run.run_id} ({coords}) failed: {record.get('reason') or 'unknown'}{at}" + (
-        f": {detail[-1]}" if detail else ""
-    )

@@ -64,8 +64,10 @@ class RunTask:
     previous_failures: tuple[dict[str, Any], ...] = ()
     #: the run's trajectory id (:func:`nematic_solids.sweep.identity.trajectory_id`)
     trajectory: str = ""
-    #: the finished shorter run of its trajectory whose end state it continues (or None)
+    #: the finished shorter run of its trajectory whose end state it continues (or None),
+    #: and its file when another campaign made it (None: this campaign's runs folder)
     parent: str | None = None
+    parent_path: str | None = None
     #: the rolling checkpoint's interval: simulated time, wall seconds (store.checkpoint_every)
     checkpoint_tau: float = math.inf
     checkpoint_wall: float = math.inf
@@ -84,6 +86,7 @@ class RunTask:
         store_spec: StoreSpec,
         previous_failures: list[dict[str, Any]] | None = None,
         parent: str | None = None,
+        parent_path: str | None = None,
     ) -> RunTask:
         parameters, numerics = run.point.parameters.to_dict(), run.point.numerics.to_dict()
         initial_from, start = None, None
@@ -104,6 +107,7 @@ class RunTask:
             previous_failures=tuple(previous_failures or ()),
             trajectory=trajectory_id(parameters, numerics, run.seed, start),
             parent=parent,
+            parent_path=parent_path,
             checkpoint_tau=store_spec.checkpoint_tau,
             checkpoint_wall=store_spec.checkpoint_wall,
             end_state=store_spec.end_state,

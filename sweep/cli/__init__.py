@@ -15,7 +15,19 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, driver, export, figures, report, run, simulate, stability, status, verify
+from . import (
+    campaigns,
+    driver,
+    export,
+    figures,
+    report,
+    run,
+    service,
+    simulate,
+    stability,
+    status,
+    verify,
+)
 from .app import app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
@@ -25,6 +37,10 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "aggregate": campaigns.aggregate,
     "verify": verify.verify,
     "stop": driver.stop,
+    "serve": service.serve,
+    "submit": service.submit,
+    "queue": service.queue,
+    "cancel": service.cancel,
     "export": export.export,
     "report": report.report,
     "simulate": simulate.simulate,

@@ -19,6 +19,7 @@ import contextlib
 import logging
 import math
 import os
+import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator, Mapping
@@ -178,12 +179,15 @@ def run_campaign(
     *,
     clock: Callable[[], float] = time.monotonic,
     limit: FailureLimit | None = None,
+    stop: threading.Event | None = None,
 ) -> RunSummary:
     """Run ``plan.todo`` on the cluster; return when all are done or on Ctrl-C
     (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set).
     A run redone after a failure gets its earlier failures (``plan.history``) in its record.
     With ``limit``, once more runs failed than it allows the runs in flight are cancelled
     (they stay pending: a record is written whole or not at all) and ``stopped`` says why.
+    ``stop`` set (from another thread: the service cancelling the campaign, or stopping)
+    stops the campaign as Ctrl-C does.
 
     Waits (bounded) for the first worker, checks every worker that joins and sizes the
     submission window from the accepted workers
@@ -388,6 +392,8 @@ def run_campaign(
         submit_more()
         going = True
         while going and (tasks or queue):
+            if stop is not None and stop.is_set():
+                raise KeyboardInterrupt
             if ac.has_ready():
                 for fut in ac.next_batch(block=False):
                     if not handle(fut):
@@ -434,12 +440,15 @@ def drive(
     events: DriveEvents | None = None,
     dashboard: bool = False,
     limit: FailureLimit | None = None,
+    link: ClusterLink | None = None,
+    stop: threading.Event | None = None,
 ) -> tuple[Plan, RunSummary | None]:
     """What ``nematic run`` does while holding the campaign's lock: clean up, record the
     campaign text, plan from disk, run what remains on the campaign's dask cluster and
     refresh the manifest. Returns the plan and the summary (``None`` if nothing was to do;
-    ``interrupted`` set on Ctrl-C). Raises :class:`~nematic_solids.sweep.errors.ClusterError` if the
-    cluster cannot be used."""
+    ``interrupted`` set on Ctrl-C, or once ``stop`` is set). With ``link`` the runs go to
+    that cluster, which stays open (the service's warm workers), else to the campaign's own.
+    Raises :class:`~nematic_solids.sweep.errors.ClusterError` if the cluster cannot be used."""
     campaign = expansion.campaign
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
@@ -453,14 +462,16 @@ def drive(
     summary = None
     if plan.todo and local and campaign.execution.backend == "accelerated":
         check_device(campaign.execution.device)  # one message before any worker starts
-    if plan.todo:
+    if plan.todo and link is not None:
+        summary = run_campaign(expansion, store, link, plan, events, limit=limit, stop=stop)
+    elif plan.todo:
         try:
             with open_cluster(
                 campaign.execution, dashboard=dashboard, campaign_dir=store.root
-            ) as link:
+            ) as own:
                 if dashboard and events:
-                    events.dashboard(dashboard_link(link.client))
-                summary = run_campaign(expansion, store, link, plan, events, limit=limit)
+                    events.dashboard(dashboard_link(own.client))
+                summary = run_campaign(expansion, store, own, plan, events, limit=limit, stop=stop)
         except KeyboardInterrupt:  # while the cluster was starting or closing
             summary = RunSummary(
                 total=len(expansion),

@@ -182,3 +182,45 @@ def cancel(
         + (f", {entry['message']}" if entry["message"] else ""),
         markup=False,
     )
+
+
+def hand_to_service(
+    campaign: Path,
+    results: Path,
+    settings: list[str] | None,
+    seeds: str | None,
+    name: str | None,
+    options: dict[str, object],
+    quiet: bool,
+) -> None:
+    """``nematic run`` when a service runs for the results root: the campaign is queued with
+    it and the command exits 0 (returns when no service runs). Options the service does not
+    take (``options``: those given) refuse, naming ``--no-service``."""
+    from ..service.client import ServiceClient
+    from ..spec.yaml_input import parse_assignments
+
+    client = ServiceClient.for_root(results)
+    if client is None:
+        return
+    given = [flag for flag, value in options.items() if value]
+    if given:
+        error(
+            err_console(),
+            f"a service runs for {results} ({client.url}) and takes the campaign without "
+            f"{', '.join(given)}: run it here with --no-service, or without "
+            f"{'that option' if len(given) == 1 else 'those options'}",
+        )
+        raise typer.Exit(EXIT_BAD_INPUT)
+    entry = client.submit(
+        campaign,
+        settings=dict(parse_assignments(settings or [])),
+        seeds=_parse_seeds(seeds),
+        name=name,
+    )
+    Console(highlight=False, soft_wrap=True, quiet=quiet).print(
+        f"a service runs for {results}: campaign {entry['name']} handed to it as {entry['id']} "
+        f"(--no-service runs it here instead); watch it at "
+        f"{client.url}/campaigns/{entry['name']}, 'nematic queue' lists the queue",
+        markup=False,
+    )
+    raise typer.Exit(0)

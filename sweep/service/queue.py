@@ -96,9 +96,10 @@ class Entry:
         return out
 
 
-#: The order in which queued campaigns start (see the module's docstring).
+#: The order in which queued campaigns start (see the module's docstring); the campaigns that
+#: ended come after, in the order they were submitted.
 ORDER = (
-    sa.case((queue_table.c.state == RUNNING, 0), else_=1),
+    sa.case((queue_table.c.state == RUNNING, 0), (queue_table.c.state == QUEUED, 1), else_=2),
     queue_table.c.priority.desc(),
     queue_table.c.submitted,
     queue_table.c.id,

@@ -323,6 +323,10 @@ class Runner(threading.Thread):
         events = ServiceEvents(progress, self.changes, on_run)
         try:
             link = self.pool.link_for(campaign.execution)
+            if campaign.verify is not None and campaign.verify.before:
+                progress.phase = "verification (before)"
+                if self._verify(campaign, store, link, stop, before=True):
+                    return self._stopped(None)
             progress.phase = "planning"
             if campaign.refine is None and campaign.precision is None:
                 expansion = expand(campaign)
@@ -343,32 +347,75 @@ class Runner(threading.Thread):
             "run_time": 0.0 if summary is None else summary.run_time,
         }
         if summary is not None and summary.interrupted:
-            if self._stopping.is_set():
-                return None, "the service stopped: resumes at its next start", outcome
-            return CANCELLED, "cancelled while running: its runs not finished stay pending", outcome
+            return self._stopped(outcome)
         if summary is not None and summary.storage_error is not None:
             return FAILED, f"results cannot be written: {summary.storage_error}", outcome
         if summary is not None and (summary.lost or summary.worker_lost):
             n = len(summary.lost) + len(summary.worker_lost)
             self.pool.close()
             return FAILED, f"{n} run(s) lost their workers; resubmit to do them", outcome
-        progress.phase = "writing phase.nc, figures, report"
+        progress.phase = "writing phase.nc, fits, figures, report"
         self.changes.bump()
-        self._products(campaign, expansion, store)
+        if self._products(campaign, expansion, store, link, stop):
+            return self._stopped(outcome)
         failed = outcome["failed"] + outcome["failed_before"]
         return DONE, (f"{failed} run(s) failed" if failed else "all runs ok"), outcome
 
-    def _products(self, campaign: Campaign, expansion: Expansion, store: CampaignStore) -> None:
-        """phase.nc, fits, figures and report.html, as ``nematic run`` writes them after the
-        runs; a figure or report that cannot be drawn is logged, not fatal."""
+    def _stopped(
+        self, outcome: dict[str, Any] | None
+    ) -> tuple[str | None, str, dict[str, Any] | None]:
+        if self._stopping.is_set():
+            return None, "the service stopped: resumes at its next start", outcome
+        return CANCELLED, "cancelled while running: its runs not finished stay pending", outcome
+
+    def _verify(
+        self,
+        campaign: Campaign,
+        store: CampaignStore,
+        link: ClusterLink,
+        stop: threading.Event,
+        *,
+        before: bool,
+    ) -> bool:
+        """The campaign's ``verify:`` runs on the service's cluster and ``verify.nc``, as
+        ``nematic run`` does them; ``True`` when they were interrupted."""
+        from ..verify.driver import run_verification
+
+        try:
+            outcome = run_verification(
+                campaign, store, before=before, say=log.info, link=link, stop=stop
+            )
+        except (ClusterError, StoreError) as e:
+            log.warning("verification of %s not done: %s", campaign.name, e)
+            return False
+        return outcome.interrupted and stop.is_set()
+
+    def _products(
+        self,
+        campaign: Campaign,
+        expansion: Expansion,
+        store: CampaignStore,
+        link: ClusterLink,
+        stop: threading.Event,
+    ) -> bool:
+        """phase.nc, fits, the verification (``verify:``), figures and report.html, as
+        ``nematic run`` writes them after the runs; a figure or report that cannot be drawn is
+        logged, not fatal. ``True`` when the verification was interrupted."""
         from ..figures.produce import regenerate
         from ..outputs.aggregate import write_phase
         from ..outputs.tables import CampaignResults
         from ..report import write_report
 
         write_phase(expansion, store)
-        regenerate(campaign, self.root)
+        if campaign.verify is not None and not campaign.verify.before:
+            regenerate(campaign, self.root, draw_figures=False)  # the fits pick the sample
+            if self._verify(campaign, store, link, stop, before=False):
+                return True
+            regenerate(campaign, self.root, fits=False)
+        else:
+            regenerate(campaign, self.root)
         try:
             write_report(CampaignResults(campaign, self.root))
         except Exception:
             log.warning("report not written for %s", campaign.name, exc_info=True)
+        return False

@@ -263,7 +263,7 @@ def run(
             "--prune": prune,
             "--detach": detach,
             "--check-files": check_files,
-            "--no-verification": not verification and c.verify,
+            "--no-verification": not verification and c.verify is not None,
             "--no-aggregate": not aggregate,
             "--no-figures": not figures,
         }

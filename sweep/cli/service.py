@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated
 
@@ -190,7 +191,7 @@ def hand_to_service(
     settings: list[str] | None,
     seeds: str | None,
     name: str | None,
-    options: dict[str, object],
+    options: Mapping[str, object],
     quiet: bool,
 ) -> None:
     """``nematic run`` when a service runs for the results root: the campaign is queued with

@@ -163,7 +163,7 @@ class ProgressEvents:
             self.console.print(self.progress_line(), highlight=False, markup=False, soft_wrap=True)
 
     def finished_run(self, run: Any, record: Record) -> None:
-        from ..run.driver import describe_failure
+        from ..run.failures import describe_failure
 
         if record.get("status") == "ok":
             self.ok += 1

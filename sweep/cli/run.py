@@ -178,8 +178,8 @@ def run(
     from ..expand import expand
     from ..outputs.aggregate import write_phase
     from ..run.clusters import WORKER_LOSSES
-    from ..run.driver import describe_failure, drive
-    from ..run.failures import FailureLimit
+    from ..run.driver import drive
+    from ..run.failures import FailureLimit, describe_failure
     from ..store import CampaignStore
 
     err = err_console()

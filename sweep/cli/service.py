@@ -63,14 +63,6 @@ def serve(
     keyfile: Annotated[
         Path | None, typer.Option("--keyfile", help="TLS private key (PEM).")
     ] = None,
-    database: Annotated[
-        str | None,
-        typer.Option(
-            "--database",
-            help="The catalogue's database URL (default: ROOT/catalogue.sqlite), e.g. "
-            "postgresql://host/db.",
-        ),
-    ] = None,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -94,7 +86,6 @@ def serve(
         token=not no_token,
         certfile=certfile,
         keyfile=keyfile,
-        database=database,
     )
     run_service(root, options, say=lambda line: say.print(line, markup=False))
 

@@ -18,11 +18,10 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import os
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,15 +29,14 @@ from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from ..campaign import ExecutionSpec
 from ..campaign_copy import save_campaign_copy
+from ..catalogue.recorder import Recorder
 from ..chains import in_chain_order
 from ..errors import ClusterError
 from ..expand import Expansion, RunSpec
-from ..store import (
-    CampaignStore,
-    Record,
-)
+from ..store import CampaignStore, Record
 from .batch import BatchTask, execute_batch, group_runs
-from .clusters import WORKER_LOSSES, jobqueue_options, make_jobqueue, open_cluster
+from .clusters import WORKER_LOSSES, open_cluster
+from .clusters import make_cluster as make_cluster  # where it was first
 from .failures import FailureLimit
 from .task import UNSAVED, RunTask, check_device, execute_run, failure_record, warm_workers
 from .todo import Plan, parents_not_done, plan_runs
@@ -72,20 +70,6 @@ def dask_client(
         execution, timeout=timeout, dashboard=dashboard, campaign_dir=campaign_dir
     ) as link:
         yield link.client
-
-
-def make_cluster(execution: ExecutionSpec, campaign_dir: Path | None = None) -> Any:
-    """The dask-jobqueue cluster of ``execution.cluster`` as ``nematic run`` makes it (TLS,
-    dashboard, job logs; not scaled: no job is submitted), e.g. to inspect ``job_script()``.
-    Without ``campaign_dir`` the TLS credential files go to a private folder of the
-    temporary directory."""
-    import tempfile
-
-    assert execution.cluster is not None
-    if campaign_dir is None:
-        campaign_dir = Path(tempfile.gettempdir()) / f"nematic-jobscript-{os.getuid()}"
-    options, _ = jobqueue_options(execution.cluster, execution, campaign_dir)
-    return make_jobqueue(execution.cluster, options)
 
 
 # --------------------------------------------------------------------------- the driver
@@ -180,6 +164,7 @@ def run_campaign(
     clock: Callable[[], float] = time.monotonic,
     limit: FailureLimit | None = None,
     stop: threading.Event | None = None,
+    record: bool = True,
 ) -> RunSummary:
     """Run ``plan.todo`` on the cluster; return when all are done or on Ctrl-C
     (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set).
@@ -193,7 +178,27 @@ def run_campaign(
     submission window from the accepted workers
     (:class:`~nematic_solids.sweep.run.workers.Supervisor`). Raises :class:`ClusterError` when the
     workers cannot run the model or none is left for ``execution.give_up_after`` seconds (the runs
-    in flight stay pending)."""
+    in flight stay pending). With ``record``, each record goes into the root's catalogue
+    (:class:`~nematic_solids.sweep.catalogue.recorder.Recorder`; never fails a run)."""
+    recorder = Recorder(store) if record else None
+    try:
+        return _run_campaign(expansion, store, client, plan, events, clock, limit, recorder, stop)
+    finally:
+        if recorder is not None:
+            recorder.close()
+
+
+def _run_campaign(
+    expansion: Expansion,
+    store: CampaignStore,
+    client: Client | ClusterLink,
+    plan: Plan,
+    events: RunEvents | None,
+    clock: Callable[[], float],
+    limit: FailureLimit | None,
+    recorder: Recorder | None,
+    stop: threading.Event | None = None,
+) -> RunSummary:
     from distributed import as_completed
 
     campaign = expansion.campaign
@@ -371,6 +376,8 @@ def run_campaign(
             with contextlib.suppress(Exception):
                 client.cancel(list(ac.futures))
             return False
+        if recorder is not None:
+            recorder.add(record)
         if record.get("status") == "ok":
             summary.ok += 1
         else:
@@ -484,16 +491,3 @@ def drive(
                 store.clean_temporaries()
     store.scan()
     return plan, summary
-
-
-def describe_failure(run: RunSpec, record: Mapping[str, Any]) -> str:
-    """One line: the run, its swept values and seed, why and when it failed."""
-    coords = ", ".join(
-        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in run.coords.items()
-    )
-    when = record.get("t_failed")
-    at = f" at t = {when:.4g}" if isinstance(when, (int, float)) and math.isfinite(when) else ""
-    detail = str(record.get("detail") or "").strip().splitlines()
-    return f"run {run.run_id} ({coords}) failed: {record.get('reason') or 'unknown'}{at}" + (
-        f": {detail[-1]}" if detail else ""
-    )

@@ -5,20 +5,22 @@ and the security of :mod:`.security` applied to every request by :class:`Guard`.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
-import threading
-from collections import deque
+import logging
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qsl, urlencode
 
+import anyio
 from fastapi import FastAPI, HTTPException, Request, Response
 from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
 from pydantic import BaseModel, Field
 from sse_starlette.sse import EventSourceResponse
 
+from ..catalogue import Catalogue
 from ..errors import CampaignError
 from ..files import now_iso
 from .dashboard import campaign_page, index_page
@@ -34,53 +36,41 @@ from .security import (
 )
 from .views import NotFound, campaign_detail, campaign_names, campaign_store, run_detail
 
+log = logging.getLogger(__name__)
+
 #: How often the event stream looks for changes (seconds): a finished run reaches the page
 #: within this plus one fetch.
 EVENT_POLL = 0.25
 #: A comment line on an idle event stream (seconds), so proxies keep it open.
 EVENT_PING = 15.0
-#: Finished runs the service remembers for ``/api/changes`` (older clients fetch all again).
-CHANGE_LOG = 100_000
-
-
-@dataclass
-class RunLog:
-    """The runs finished while the service runs, numbered (``seq``) for ``/api/changes``."""
-
-    entries: deque[dict[str, Any]] = field(default_factory=lambda: deque(maxlen=CHANGE_LOG))
-    seq: int = 0
-    lock: threading.Lock = field(default_factory=threading.Lock)
-
-    def add(self, campaign: str, run_id: str, status: str) -> None:
-        with self.lock:
-            self.seq += 1
-            self.entries.append(
-                {"seq": self.seq, "campaign": campaign, "run_id": run_id, "status": status}
-            )
-
-    def since(self, seq: int) -> tuple[int, list[dict[str, Any]], bool]:
-        """(the latest seq, the runs after ``seq``, whether some were forgotten)."""
-        with self.lock:
-            items = [e for e in self.entries if e["seq"] > seq]
-            complete = not self.entries or self.entries[0]["seq"] <= seq + 1
-            return self.seq, items, not complete
+#: Runs ``/api/changes`` returns at most at once (the client asks again from the last seq).
+CHANGES_LIMIT = 10_000
 
 
 @dataclass
 class ServiceContext:
     """What the app serves: the results root, the token (``None``: none, loopback only),
-    where it listens, the queue, the runner (``None`` in tests of the API alone)."""
+    where it listens, the root's catalogue and the queue in it, the runner (``None`` in tests
+    of the API alone)."""
 
     root: Path
     token: str | None
     host: str
     port: int
     tls: bool
+    catalogue: Catalogue
     queue: QueueStore
     changes: Changes = field(default_factory=Changes)
     runner: Runner | None = None
-    runs: RunLog = field(default_factory=RunLog)
     started: str = field(default_factory=now_iso)
+
+    def seq(self) -> int:
+        """The catalogue's latest change (0 where it cannot be read)."""
+        try:
+            return self.catalogue.last_seq()
+        except Exception:
+            log.warning("catalogue not readable", exc_info=True)
+            return 0
 
     @property
     def url(self) -> str:
@@ -204,7 +194,7 @@ def create_app(context: ServiceContext) -> FastAPI:
             "url": ctx.url,
             "cluster": runner.pool.state if runner is not None else {"open": False},
             "running": runner.progress.as_dict() if runner and runner.progress else None,
-            "seq": ctx.runs.seq,
+            "seq": ctx.seq(),
             "queue_version": ctx.queue.version(),
         }
 
@@ -256,22 +246,28 @@ def create_app(context: ServiceContext) -> FastAPI:
     # ---------------------------------------------------------------- campaigns and runs
     @app.get("/api/campaigns")
     def campaigns() -> dict[str, Any]:
-        """Every campaign of the root (its folder) and of the queue, with its latest queue
-        entry and, for the running one, its progress."""
+        """Every campaign of the root (its folder, the catalogue) and of the queue: its runs
+        in the catalogue (ok, failed), its latest queue entry and, for the running one, its
+        progress."""
         latest: dict[str, dict[str, Any]] = {}
         for e in ctx.queue.entries():
             if e.name not in latest or e.id > latest[e.name]["id"]:
                 latest[e.name] = e.public()
+        counts: dict[str, dict[str, int]] = {}
+        with contextlib.suppress(Exception):  # a catalogue problem shows no counts
+            for row in ctx.catalogue.campaigns().to_dict("records"):
+                counts[str(row["name"])] = {k: int(row[k]) for k in ("runs", "ok", "failed")}
         runner = ctx.runner
         progress = runner.progress if runner is not None else None
-        names = sorted(set(campaign_names(ctx.root)) | set(latest))
+        names = sorted(set(campaign_names(ctx.root)) | set(latest) | set(counts))
         return {
-            "seq": ctx.runs.seq,
+            "seq": ctx.seq(),
             "campaigns": [
                 {
                     "name": n,
                     "queue": latest.get(n),
                     "state": (latest.get(n) or {}).get("state", "done"),
+                    "runs": counts.get(n),
                     "progress": progress.as_dict()
                     if progress is not None and progress.name == n
                     else None,
@@ -296,7 +292,7 @@ def create_app(context: ServiceContext) -> FastAPI:
         runner = ctx.runner
         progress = runner.progress if runner is not None else None
         out["progress"] = progress.as_dict() if progress and progress.name == name else None
-        out["seq"] = ctx.runs.seq
+        out["seq"] = ctx.seq()
         return out
 
     @app.get("/api/campaigns/{name}/runs/{run_id}")
@@ -308,33 +304,46 @@ def create_app(context: ServiceContext) -> FastAPI:
             raise _not_found(e) from None
 
     @app.get("/api/changes")
-    def changes(since: int = 0) -> dict[str, Any]:
-        """The runs finished after ``since`` (the ``seq`` of an earlier answer) and the
-        campaigns they belong to; ``complete`` false when the service no longer holds them
-        all (fetch the campaigns again)."""
-        seq, items, forgotten = ctx.runs.since(since)
+    def changes(since: int = 0, limit: int = CHANGES_LIMIT) -> dict[str, Any]:
+        """The runs the catalogue recorded (or changed) after ``since`` (the ``seq`` of an
+        earlier answer; 0: all), at most ``limit`` in ``seq`` order, and the campaigns they
+        belong to; ``complete`` false when more follow (ask again from ``seq``)."""
+        limit = max(1, min(limit, CHANGES_LIMIT))
+        frame = ctx.catalogue.changes(since)
+        rows = frame.head(limit).to_dict("records") if len(frame) else []
+        runs: list[dict[str, Any]] = [
+            {
+                "seq": int(r["seq"]),
+                "run_id": str(r["run_id"]),
+                "status": str(r["status"]),
+                # the catalogue's frame holds them comma-separated
+                "campaigns": [c for c in str(r["campaigns"] or "").split(",") if c],
+            }
+            for r in rows
+        ]
         return {
-            "seq": seq,
-            "runs": items,
-            "campaigns": sorted({e["campaign"] for e in items}),
-            "complete": not forgotten,
+            "seq": int(runs[-1]["seq"]) if runs else max(since, ctx.seq()),
+            "runs": runs,
+            "campaigns": sorted({str(c) for r in runs for c in r["campaigns"]}),
+            "complete": len(frame) <= limit,
             "queue_version": ctx.queue.version(),
         }
 
     @app.get("/api/events")
     async def events(request: Request) -> EventSourceResponse:
-        """Server-sent events: ``change`` with ``{"seq", "queue_version"}`` whenever a run
-        finishes or the queue moves (the page then asks ``/api/changes``)."""
+        """Server-sent events: ``change`` with ``{"seq", "changes"}`` whenever the catalogue
+        records a run (from this service or any driver of the root) or the service's state
+        moves (the queue, a campaign's phase); the page then asks ``/api/changes``."""
 
         async def stream() -> AsyncIterator[dict[str, str]]:
-            last = -1
+            last: tuple[int, int] | None = None
             while not await request.is_disconnected():
-                value = ctx.changes.value
-                if value != last:
-                    last = value
+                now = (ctx.changes.value, await anyio.to_thread.run_sync(ctx.seq))
+                if now != last:
+                    last = now
                     yield {
                         "event": "change",
-                        "data": json.dumps({"seq": ctx.runs.seq, "changes": value}),
+                        "data": json.dumps({"changes": now[0], "seq": now[1]}),
                     }
                 await asyncio.sleep(EVENT_POLL)
 

@@ -1,14 +1,19 @@
-"""Where the service keeps its queue: the root's catalogue database
-(``<root>/catalogue.sqlite``) unless another database URL is given."""
+"""The service's database: the catalogue of its results root
+(:func:`nematic_solids.sweep.catalogue.open_catalogue`: ``<root>/catalogue.sqlite``, or the URL
+of ``NEMATIC_CATALOGUE``, e.g. PostgreSQL), migrated to the latest schema, which holds the
+service's queue (:mod:`.queue`) beside the runs the driver records."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from .queue import QueueStore, queue_engine
+from ..catalogue import Catalogue, open_catalogue
+from .queue import QueueStore
 
-DATABASE = "catalogue.sqlite"
 
-
-def queue_store_for(root: Path, url: str | None = None) -> QueueStore:
-    return QueueStore(queue_engine(url or f"sqlite:///{root / DATABASE}"))
+def open_service_database(root: Path) -> tuple[Catalogue, QueueStore]:
+    """The catalogue of ``root`` and the queue in it. Raises
+    :class:`~nematic_solids.sweep.errors.CatalogueError` where the catalogue cannot be opened
+    (SQLite on a network filesystem, an unreachable server, the catalogue turned off)."""
+    catalogue = open_catalogue(root)
+    return catalogue, QueueStore(catalogue.engine)

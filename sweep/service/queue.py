@@ -1,5 +1,7 @@
 """The service's persistent queue of campaigns: the table ``service_queue`` of the catalogue's
-database (created by the service's Alembic migration), written by the service alone.
+database (created by the Alembic migration ``r0002_service_queue`` of the catalogue's
+``migrations/versions/``; :data:`queue_table` is the same table for SQLAlchemy Core's queries),
+written by the service alone.
 
 A submitted campaign is a row: its YAML text and where it came from (relative paths in it are
 read from there), the command-line overrides, its priority, its state (:data:`STATES`) and
@@ -28,12 +30,12 @@ queue_table = sa.Table(
     "service_queue",
     metadata,
     sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
-    sa.Column("name", sa.String(200), nullable=False, index=True),
+    sa.Column("name", sa.String(200), nullable=False),
     sa.Column("source", sa.Text, nullable=False),
     sa.Column("text", sa.Text, nullable=False),
     sa.Column("overrides", sa.Text, nullable=False, default="{}"),
     sa.Column("priority", sa.Integer, nullable=False, default=0),
-    sa.Column("state", sa.String(16), nullable=False, index=True),
+    sa.Column("state", sa.String(16), nullable=False),
     sa.Column("submitted", sa.String(40), nullable=False),
     sa.Column("started", sa.String(40)),
     sa.Column("finished", sa.String(40)),
@@ -43,7 +45,7 @@ queue_table = sa.Table(
     sa.Column("estimate", sa.Text),
     sa.Column("outcome", sa.Text),
     #: the queue's own change counter: every write of a row gives it the next value
-    sa.Column("version", sa.Integer, nullable=False, default=0, index=True),
+    sa.Column("version", sa.Integer, nullable=False, default=0),
 )
 
 
@@ -212,10 +214,3 @@ class QueueStore:
         else:
             self._update(entry_id, cancel_requested=True, message="cancelling")
         return self.get(entry_id)
-
-
-def queue_engine(url: str) -> sa.Engine:
-    """An engine on the database at ``url`` with the queue's table (created if missing)."""
-    engine = sa.create_engine(url)
-    metadata.create_all(engine)
-    return engine

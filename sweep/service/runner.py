@@ -127,10 +127,8 @@ class Progress:
 class ServiceEvents:
     """What the driver reports, kept as :class:`Progress` and counted in :class:`Changes`."""
 
-    def __init__(
-        self, progress: Progress, changes: Changes, on_run: Callable[[RunSpec, Record], None]
-    ):
-        self.progress, self.changes, self.on_run = progress, changes, on_run
+    def __init__(self, progress: Progress, changes: Changes):
+        self.progress, self.changes = progress, changes
 
     def dashboard(self, link: str | None) -> None:
         pass
@@ -161,7 +159,6 @@ class ServiceEvents:
         else:
             p.failed += 1
         p.finished_this_session += 1
-        self.on_run(run, record)
         self.changes.bump()
 
 
@@ -209,11 +206,9 @@ class Runner(threading.Thread):
         queue: QueueStore,
         pool: ClusterPool,
         changes: Changes,
-        on_run: Callable[[str, RunSpec, Record], None] | None = None,
     ):
         super().__init__(name="nematic-service-runner", daemon=True)
         self.root, self.queue, self.pool, self.changes = root, queue, pool, changes
-        self.on_run = on_run
         self._stopping = threading.Event()
         self._wake = threading.Event()
         self._current: tuple[int, threading.Event] | None = None
@@ -315,12 +310,7 @@ class Runner(threading.Thread):
 
         assert self.progress is not None
         progress = self.progress
-
-        def on_run(run: RunSpec, record: Record) -> None:
-            if self.on_run is not None:
-                self.on_run(campaign.name, run, record)
-
-        events = ServiceEvents(progress, self.changes, on_run)
+        events = ServiceEvents(progress, self.changes)
         try:
             link = self.pool.link_for(campaign.execution)
             if campaign.verify is not None and campaign.verify.before:

@@ -40,8 +40,6 @@ class ServeOptions:
     token: bool = True
     certfile: Path | None = None
     keyfile: Path | None = None
-    #: the database of the queue (default: the root's catalogue)
-    database: str | None = None
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -82,7 +80,7 @@ def serve(root: Path, options: ServeOptions, say: Callable[[str], None] = print)
     address is refused, the port is taken)."""
     import uvicorn
 
-    from .catalogue_link import queue_store_for
+    from .catalogue_link import open_service_database
 
     tls = options.certfile is not None and options.keyfile is not None
     if (options.certfile is None) != (options.keyfile is None):
@@ -103,16 +101,15 @@ def serve(root: Path, options: ServeOptions, say: Callable[[str], None] = print)
             f"{info.get('url', '?')}); 'nematic queue --results {root}' talks to it"
         ) from None
     try:
-        queue = queue_store_for(paths.root, options.database)
+        catalogue, queue = open_service_database(paths.root)
         sock = _bind(options.host, options.port)
         port = sock.getsockname()[1]
         if token is not None:
             paths.write_token(token)
         changes = Changes()
         runner = Runner(paths.root, queue, ClusterPool(paths.folder / "cluster"), changes)
-        ctx = ServiceContext(paths.root, token, options.host, port, tls, queue, changes, runner)
-        runner.on_run = lambda name, run, record: ctx.runs.add(
-            name, run.run_id, str(record.get("status"))
+        ctx = ServiceContext(
+            paths.root, token, options.host, port, tls, catalogue, queue, changes, runner
         )
         paths.write_info(
             {

@@ -129,7 +129,10 @@ def run_verification(
                     if not plan.todo:
                         continue
                     where.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
-                    summary = run_campaign(runs, where, link, plan, events, stop=stop)
+                    # the variants' runs are not the campaign's: not in the catalogue
+                    summary = run_campaign(
+                        runs, where, link, plan, events, record=where is store, stop=stop
+                    )
                     setattr(outcome, attr, summary)
                     if summary.interrupted or summary.storage_error or summary.lost:
                         outcome.interrupted = True

@@ -19,7 +19,7 @@ from fastapi.testclient import TestClient
 
 from nematic_solids.sweep.service import ServiceError
 from nematic_solids.sweep.service.api import ServiceContext, create_app
-from nematic_solids.sweep.service.catalogue_link import queue_store_for
+from nematic_solids.sweep.service.catalogue_link import open_service_database
 from nematic_solids.sweep.service.queue import CANCELLED, RUNNING
 from nematic_solids.sweep.service.security import (
     COOKIE,
@@ -44,7 +44,8 @@ seeds: 1
 
 
 def make_client(root: Path, token: str | None = TOKEN) -> tuple[TestClient, ServiceContext]:
-    ctx = ServiceContext(root, token, "127.0.0.1", 8765, False, queue_store_for(root))
+    catalogue, queue = open_service_database(root)
+    ctx = ServiceContext(root, token, "127.0.0.1", 8765, False, catalogue, queue)
     return TestClient(create_app(ctx), base_url=BASE), ctx
 
 
@@ -285,3 +286,21 @@ def test_a_campaign_shows_its_points_failures_and_runs(copy_of_small):
     assert run["series"]["sigma2_S"][-1] == pytest.approx(recs[ok]["scalars"]["sigma2_S_final"])
     names = [x["name"] for x in c.get("/api/campaigns", headers=AUTH).json()["campaigns"]]
     assert names == ["small"]
+
+
+def test_changes_are_incremental_from_the_catalogue_seq(copy_of_small):
+    c, _ = make_client(copy_of_small.results)
+    every = c.get("/api/changes?since=0", headers=AUTH).json()
+    assert {r["run_id"] for r in every["runs"]} == set(copy_of_small.ids)
+    assert every["campaigns"] == ["small"]
+    assert every["complete"]
+    assert c.get(f"/api/changes?since={every['seq']}", headers=AUTH).json()["runs"] == []
+    # in pages: each answer's seq is where the next one starts, nothing lost or repeated
+    seen, since = [], 0
+    while True:
+        page = c.get(f"/api/changes?since={since}&limit=4", headers=AUTH).json()
+        seen += [r["run_id"] for r in page["runs"]]
+        since = page["seq"]
+        if page["complete"]:
+            break
+    assert sorted(seen) == sorted(copy_of_small.ids)

@@ -24,7 +24,7 @@ from ..catalogue import Catalogue
 from ..errors import CampaignError
 from ..files import now_iso
 from .dashboard import campaign_page, index_page
-from .queue import QueueStore
+from .queue import Entry, QueueStore
 from .runner import Changes, Runner
 from .security import (
     COOKIE,
@@ -34,7 +34,14 @@ from .security import (
     presented_token,
     token_matches,
 )
-from .views import NotFound, campaign_detail, campaign_names, campaign_store, run_detail
+from .views import (
+    NotFound,
+    campaign_detail,
+    campaign_names,
+    campaign_store,
+    not_started,
+    run_detail,
+)
 
 log = logging.getLogger(__name__)
 
@@ -175,12 +182,16 @@ def create_app(context: ServiceContext) -> FastAPI:
     def index() -> str:
         return index_page(csrf)
 
+    def queued(name: str) -> list[Entry]:
+        return [e for e in ctx.queue.entries() if e.name == name]
+
     @app.get("/campaigns/{name}", response_class=HTMLResponse, include_in_schema=False)
     def campaign_html(name: str) -> str:
         try:
             campaign_store(ctx.root, name)
         except NotFound as e:
-            raise _not_found(e) from None
+            if not queued(name):
+                raise _not_found(e) from None
         return campaign_page(name, csrf)
 
     # ---------------------------------------------------------------- the service, the queue
@@ -280,12 +291,13 @@ def create_app(context: ServiceContext) -> FastAPI:
     def campaign(name: str) -> dict[str, Any]:
         """A campaign's page: its points (seed means with intervals), failures with reasons,
         cost so far against the estimate made at launch, rounds and verification."""
+        entries = queued(name)
         try:
-            store = campaign_store(ctx.root, name)
+            out = campaign_detail(campaign_store(ctx.root, name))
         except NotFound as e:
-            raise _not_found(e) from None
-        out = campaign_detail(store)
-        entries = [e for e in ctx.queue.entries() if e.name == name]
+            if not entries:  # nor in the queue
+                raise _not_found(e) from None
+            out = not_started(name)
         last = max(entries, key=lambda e: e.id) if entries else None
         out["queue"] = last.public() if last is not None else None
         out["estimate"] = last.estimate if last is not None else None

@@ -16,6 +16,7 @@ PAGE = """<!doctype html>
 <html lang="en"><head><meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <meta name="nematic-csrf" content="{csrf}">
+<link rel="icon" href="data:,">
 <title>{title}</title>
 <style>{style}</style></head>
 <body data-page="{page}" data-campaign="{campaign}">

@@ -203,11 +203,29 @@ def verification(store: CampaignStore) -> dict[str, Any] | None:
     return {"summary": summary_line(ds), "rows": verdict_rows(ds)}
 
 
+def not_started(name: str) -> dict[str, Any]:
+    """The page of a queued campaign that has no results folder yet."""
+    return {
+        "name": name,
+        "readable": False,
+        "dims": [],
+        "shown": SHOWN,
+        "confidence": CONFIDENCE,
+        "total": 0,
+        "counts": {"ok": 0, "failed": 0, "pending": 0},
+        "points": [],
+        "failures": [],
+        "cost": {"runs": 0, "cpu_seconds": 0.0},
+        "rounds": None,
+        "verification": None,
+    }
+
+
 def campaign_detail(store: CampaignStore) -> dict[str, Any]:
     """Everything the campaign's page shows but the queue's view of it."""
     campaign = load_stored(store)
     if campaign is None:
-        return {"name": store.root.name, "readable": False}
+        return not_started(store.root.name)
     records = store.scan(save=False)
     expansion = expansion_of(campaign, store)
     pts = points(expansion, records)

@@ -16,9 +16,12 @@
 
   const esc = (s) => String(s ?? "").replace(/[&<>"']/g,
     (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c]));
-  const fmt = (x) => (x === null || x === undefined) ? "" :
-    (typeof x === "number" ? (Number.isInteger(x) ? String(x) : x.toPrecision(4)) : String(x));
-  const secs = (s) => s === null || s === undefined ? "?" : s < 120 ? `${s.toFixed(1)} s` :
+  const fmt = (x) => (x === null || x === undefined) ? "" : typeof x !== "number" ? String(x) :
+    Number.isInteger(x) && Math.abs(x) < 1e6 ? String(x) :
+    x !== 0 && (Math.abs(x) < 1e-3 || Math.abs(x) >= 1e5) ? x.toExponential(3) :
+    String(Number(x.toPrecision(4)));
+  const secs = (s) => s === null || s === undefined ? "?" : s < 1 ? `${s.toPrecision(2)} s` :
+    s < 120 ? `${s.toFixed(1)} s` :
     s < 7200 ? `${(s / 60).toFixed(1)} min` : `${(s / 3600).toFixed(2)} h`;
   const where = (coords) => Object.entries(coords).map(([k, v]) => `${k}=${fmt(v)}`).join(", ");
 
@@ -92,12 +95,14 @@
     return e;
   }
   function phaseDiagram(data) {
-    const W = 560, H = 420, L = 70, R = 20, T = 24, B = 46;
+    const W = 580, H = 420, L = 84, R = 20, T = 24, B = 46;
     const svg = el("svg", {width: W, height: H, id: "phase", role: "img"});
     const dims = data.dims;
     const pts = data.points;
     const xdim = dims[0], ydim = dims.length > 1 ? dims[1] : null;
     const xs = scale(pts.map((p) => p.coords[xdim]), L, W - R);
+    const means = pts.map((p) => p.mean).filter(Number.isFinite);
+    const cmin = Math.min(...means), cmax = Math.max(...means);
     let ys, value;
     if (ydim) {
       ys = scale(pts.map((p) => p.coords[ydim]), H - B, T);
@@ -105,8 +110,6 @@
       const vals = pts.flatMap((p) => [p.mean, p.low, p.high]);
       ys = scale(vals, H - B, T);
     }
-    const means = pts.map((p) => p.mean).filter(Number.isFinite);
-    const cmin = Math.min(...means), cmax = Math.max(...means);
     el("line", {x1: L, x2: W - R, y1: H - B, y2: H - B, stroke: "#444"}, svg);
     el("line", {x1: L, x2: L, y1: T, y2: H - B, stroke: "#444"}, svg);
     for (const v of xs.ticks) {
@@ -117,9 +120,10 @@
     const ylabel = ydim ? ydim + (ys.log ? " (log)" : "") : `${data.shown} (seed mean, ${Math.round(100 * data.confidence)} % interval)`;
     el("text", {x: 14, y: (T + H - B) / 2, transform: `rotate(-90 14 ${(T + H - B) / 2})`,
       "text-anchor": "middle"}, svg).textContent = ylabel;
-    if (ydim) { for (const v of ys.ticks) {
+    const yticks = ydim ? ys.ticks : (means.length ? [Math.min(...means), Math.max(...means)] : []);
+    for (const v of yticks) {
       el("text", {x: L - 4, y: ys.f(v) + 4, "text-anchor": "end"}, svg).textContent = fmt(v);
-    } }
+    }
     el("text", {x: L, y: 14}, svg).textContent = ydim ?
       `colour: seed mean of ${data.shown} (${fmt(cmin)} to ${fmt(cmax)}); grey: no run done; red ring: failures` :
       "grey: no run done; red ring: failures";
@@ -148,7 +152,7 @@
   }
 
   function seriesPlot(run) {
-    const W = 420, H = 260, L = 60, R = 12, T = 16, B = 36;
+    const W = 440, H = 260, L = 74, R = 12, T = 16, B = 36;
     const svg = el("svg", {width: W, height: H, id: "series"});
     const y = run.series.sigma2_S || Object.values(run.series)[0] || [];
     const t = run.t;

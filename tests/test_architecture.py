@@ -107,6 +107,20 @@ MAY_IMPORT: dict[str, set[str]] = {
     "precision": {"spec", "run", "outputs", "refine", "analysis"},
     "verify": {"spec", "run", "outputs", "refine", "precision", "analysis"},
     "report": {"spec", "outputs", "refine", "precision", "verify", "analysis", "figures"},
+    # the service: the queue, the runner that drives campaigns, the API and dashboard
+    "service": {
+        "catalogue",
+        "spec",
+        "run",
+        "outputs",
+        "cost",
+        "refine",
+        "precision",
+        "verify",
+        "analysis",
+        "figures",
+        "report",
+    },
     "cli": {"*"},
 }
 #: Where the base may reach out: ``python -m nematic_solids.sweep`` is the command line, and

@@ -141,10 +141,21 @@ def run(
             "stop NAME ends it.",
         ),
     ] = False,
+    no_service: Annotated[
+        bool,
+        typer.Option(
+            "--no-service",
+            help="Run here even when a service (`nematic serve`) runs for the results root "
+            "(by default the campaign is handed to it).",
+        ),
+    ] = False,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
     """Run a campaign on dask, resuming where it stopped.
+
+    When a service (`nematic serve`) runs for the results root, the campaign is handed to it
+    (as `nematic submit` does; exit 0 once queued) unless `--no-service` is given.
 
     Finished runs are skipped; one netCDF per run, phase.nc at the end. Exit 0: every run
     succeeded (--detach: the driver runs; --dry-run: the cost printed), 1: some failed, 2: bad
@@ -186,6 +197,7 @@ def run(
                 dashboard=dashboard,
                 dry_run=dry_run,
                 detach=detach,
+                no_service=no_service,
                 verbose=verbose,
                 quiet=quiet,
             ),
@@ -228,6 +240,22 @@ def run(
                     f"waiting: {waiting.problems[0].message}", markup=False
                 )
         return
+    if not no_service:
+        from .service import hand_to_service
+
+        options = {
+            "--scheduler": scheduler,
+            "--workers": workers,
+            "--retry-failed": retry_failed,
+            "--max-failures": max_failures,
+            "--prune": prune,
+            "--detach": detach,
+            "--check-files": check_files,
+            "--no-verification": not verification and c.verify is not None,
+            "--no-aggregate": not aggregate,
+            "--no-figures": not figures,
+        }
+        hand_to_service(campaign, results, set_, seeds, name, options, quiet)
     if detach:
         from .driver import run_detached
 

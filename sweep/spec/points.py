@@ -31,6 +31,8 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
             if _report(checker, campaign, e, coords, axis_names, swept, seen):
                 return
             continue
+        if point.numerics.precision != "float64":
+            _check_float32(checker, campaign, axis_names, seen)
         if campaign.execution.backend == "accelerated":
             try:
                 check_supported(point.parameters, point.numerics)
@@ -43,6 +45,33 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
                         f"the accelerated backend cannot run {e.name} = {e.value!r}; allowed: "
                         f"{e.allowed} (or backend: compiled)",
                     )
+
+
+def _check_float32(
+    checker: Checker, campaign: Campaign, axis_names: set[str], seen: set[tuple[str, str]]
+) -> None:
+    """Refuse float32 where it does not run: on the compiled backend (float64 only, for now)
+    and in a chain (whose runs go one at a time on the compiled backend); once per cause, at
+    the key that sets the precision."""
+    swept = "precision" in axis_names
+    where = ("sweep", "axes", "precision") if swept else ("numerics", "precision")
+    if campaign.execution.backend != "accelerated":
+        why = (
+            "float32 runs on the accelerated backend only, for now (the compiled and numpy "
+            "backends compute in float64); give execution: {backend: accelerated}, or "
+            "precision: float64"
+        )
+    elif campaign.chain is not None:
+        why = (
+            "a chain's runs go one at a time on the compiled backend, which computes in "
+            "float64 only, for now; give precision: float64"
+        )
+    else:
+        return
+    key = ("precision", why)
+    if key not in seen:
+        seen.add(key)
+        checker.add(where, f"got 'float32'; {why}")
 
 
 def _report(

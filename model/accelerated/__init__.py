@@ -36,8 +36,8 @@ masked), so a seed's trajectory is the one it has when run alone. Modules:
 ETDRK2, finite strain with the displacement solved at every stage (``displacement:
 equilibrium``), time protocols and the early stop are not here: :func:`run_batch` refuses them with
 a :class:`nematic_solids.model.errors.ParameterError`. Importing this package enables JAX's float64
-(``jax_enable_x64``) for the process (a float32 run casts its arrays explicitly); without JAX installed it raises
-:class:`nematic_solids.model.errors.DeviceUnavailable` with the install line.
+(``jax_enable_x64``) for the process (a float32 run casts its arrays explicitly); without JAX
+installed it raises :class:`nematic_solids.model.errors.DeviceUnavailable` with the install line.
 """
 
 from __future__ import annotations

@@ -20,6 +20,7 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
     axis_names = {a.name for a in campaign.axes}
     swept = {k: v for k, v in protocol_axes(campaign.parameters).items() if k in axis_names}
     seen: set[tuple[str, str]] = set()
+    _check_variant_precision(checker, campaign)
     runs: dict[str, dict] = {}  # one grid point's run (seed 0) -> its coordinates
     for index, coords in iter_points(campaign):
         try:
@@ -47,6 +48,27 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
                     )
 
 
+#: why float32 is refused on the compiled backend
+COMPILED_FLOAT64 = (
+    "float32 runs on the accelerated backend only, for now (the compiled and numpy backends "
+    "compute in float64); give execution: {backend: accelerated}, or precision: float64"
+)
+
+
+def _check_variant_precision(checker: Checker, campaign: Campaign) -> None:
+    """A verification variant that asks for float32 runs where the campaign's runs do: on the
+    accelerated backend (``precision: float64``, the variant that checks a float32 campaign,
+    runs anywhere)."""
+    if campaign.verify is None or campaign.execution.backend == "accelerated":
+        return
+    for i, variant in enumerate(campaign.verify.variants):
+        if variant.settings.get("precision", "float64") != "float64":
+            checker.add(
+                ("verify", "variants", i, "precision"),
+                f"got {variant.settings['precision']!r}; {COMPILED_FLOAT64}",
+            )
+
+
 def _check_float32(
     checker: Checker, campaign: Campaign, axis_names: set[str], seen: set[tuple[str, str]]
 ) -> None:
@@ -56,11 +78,7 @@ def _check_float32(
     swept = "precision" in axis_names
     where = ("sweep", "axes", "precision") if swept else ("numerics", "precision")
     if campaign.execution.backend != "accelerated":
-        why = (
-            "float32 runs on the accelerated backend only, for now (the compiled and numpy "
-            "backends compute in float64); give execution: {backend: accelerated}, or "
-            "precision: float64"
-        )
+        why = COMPILED_FLOAT64
     elif campaign.chain is not None:
         why = (
             "a chain's runs go one at a time on the compiled backend, which computes in "

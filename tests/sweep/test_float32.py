@@ -19,6 +19,8 @@ from nematic_solids.sweep.errors import CampaignError
 from nematic_solids.sweep.expand import expand
 from nematic_solids.sweep.identity import run_id_for
 from nematic_solids.sweep.spec import Overrides, load_campaign
+from nematic_solids.sweep.spec.verify import resolve
+from nematic_solids.sweep.verify import CONVERGED
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 #: shipped campaigns whose runs are all grid runs of their stored YAML (refined campaigns add
@@ -141,3 +143,71 @@ def test_float32_on_the_accelerated_backend_is_accepted(tmp_path):
     by_precision = {r.point.numerics.precision for r in e}
     assert by_precision == {"float64", "float32"}
     assert len(set(e.run_ids)) == 4
+
+
+VERIFY = """\
+verify:
+  seeds: 1
+  corners: true
+  variants:
+    - precision: {variant}
+"""
+
+
+def test_a_float32_campaign_verifies_against_a_float64_variant(tmp_path):
+    pytest.importorskip("jax", reason="the accelerated backend needs JAX")
+    path = tmp_path / "f32.yaml"
+    path.write_text(
+        campaign_text(
+            numerics=", precision: float32",
+            execution=", backend: accelerated, batch: 2",
+        )
+        + VERIFY.format(variant="float64")
+    )
+    c = load_campaign(path)
+    assert c.verify is not None
+    (variant,) = c.verify.variants
+    assert variant.name == "precision=float64"
+    point = next(iter(expand(c))).point
+    p64, n64 = resolve(variant, point.parameters, point.numerics)
+    assert (point.numerics.precision, n64.precision) == ("float32", "float64")
+    assert n64 == point.numerics.replace(precision="float64")
+    assert run_id_for(p64, n64, 0) != run_id_for(point.parameters, point.numerics, 0)
+
+
+def test_a_float32_variant_on_the_compiled_backend_is_refused_at_its_line(tmp_path):
+    msg = refusal(tmp_path, campaign_text() + VERIFY.format(variant="float32"))
+    assert "f32.yaml:14: verify.variants[0].precision: got 'float32'" in msg
+    assert "accelerated backend only, for now" in msg
+
+
+@pytest.mark.slow  # (about a minute: the small-strain batch compiles in both precisions)
+def test_a_float32_campaign_runs_and_reports_its_verdict_against_float64(tmp_path):
+    pytest.importorskip("jax", reason="the accelerated backend needs JAX")
+    from typer.testing import CliRunner
+
+    from nematic_solids.sweep.cli import app
+
+    path = tmp_path / "f32.yaml"
+    path.write_text(
+        campaign_text(
+            numerics=", precision: float32, save_every: 0.5",
+            execution=", backend: accelerated, batch: 2",
+        ).replace("t_final: 1.0", "t_final: 2.0")
+        + VERIFY.format(variant="float64")
+    )
+    results = tmp_path / "results"
+    args = ["run", str(path), "--results", str(results), "--no-dashboard", "--no-figures"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    result = CliRunner().invoke(app, ["verify", str(path), "--results", str(results)])
+    assert result.exit_code == 0, result.output
+    base = [xr.open_dataset(p) for p in (results / "f32" / "runs").glob("*.nc")]
+    variant = [xr.open_dataset(p) for p in (results / "f32" / "verify" / "runs").glob("*.nc")]
+    assert {f.attrs["num_precision"] for f in base} == {"float32"}
+    assert {f.attrs["num_precision"] for f in variant} == {"float64"}
+    ds = xr.open_dataset(results / "f32" / "verify.nc")
+    assert list(ds["variant_name"].values) == ["precision=float64"]
+    # float32 agrees with float64 far inside the verification's 5 % threshold
+    assert set(ds["converged"].values.ravel()) == {CONVERGED}
+    assert "sampled points converged" in " ".join(result.output.split())

@@ -21,7 +21,7 @@ traceless). Its exact derivative plus the active stress (paper Eq. 2) is
 At small strain (:math:`F = I + \nabla u`, :math:`e = \operatorname{sym}\nabla u`) this is
 :math:`\sigma = 2\,\mathrm{dev}\, e + \kappa\, \mathrm{tr}\, e\, I + (\alpha - B) Q - B' (Q:Q) I`;
 the paper prints :math:`\bar E` where the exact limit is :math:`2 \bar E \approx 2\,\mathrm{dev}\,e`
-(shear modulus G = 1, see docs/model.md). Because :math:`F \alpha Q = \partial_F (\tfrac12
+(shear modulus G = 1, see docs/model/index.md). Because :math:`F \alpha Q = \partial_F (\tfrac12
 \alpha\, C : Q)` at fixed Q, the tangent :math:`\partial P / \partial F` is symmetric.
 """
 

@@ -2,7 +2,7 @@
 
 The physical constants carry the paper's symbols (Eqs. 1-5). The Fig. 2 caption fixes
 ``S0, A0, gamma/tau, B, K, chi``; every other constant is our choice, documented with its
-reason in ``docs/model.md`` (table "Constants").
+reason in ``docs/model/constants.md`` (table "Constants").
 
 ``alpha_minus_B`` is accepted as an input everywhere a dict of parameters is read
 (``alpha = B + alpha_minus_B``), because the paper sweeps the contractility ``alpha - B``.
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 MECHANICS = ("finite", "linear")
-#: the initial director texture (Parameters.initial; docs/model.md section 5)
+#: the initial director texture (Parameters.initial; docs/model/texture.md)
 INITIAL = ("band", "per_node")
 #: the stress that drives the activity in Eq. (5) (Parameters.coupling)
 COUPLINGS = ("trP", "trS")
@@ -282,7 +282,7 @@ class Numerics:
             integrated state, advanced with the displacement rate the spin solve computes, and
             projected back onto force balance once per accepted step) or "equilibrium"
             (force balance solved by Newton at every stage: the cross-check).
-        newton_tol: force-balance residual tolerance (see docs/model.md, "Residual").
+        newton_tol: force-balance residual tolerance (see docs/model/numerics.md, "Residual").
         max_newton: Newton iterations allowed per solve before failing.
         spin_tol: relative GMRES tolerance of the Jaumann spin solve.
         backend: "compiled" (the Krylov solves and the linear right-hand side as compiled

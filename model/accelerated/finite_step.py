@@ -1,7 +1,7 @@
 r"""Krogstad's ETDRK4 step of finite strain in JAX, for one seed (``jax.vmap`` batches it), with
 the displacement integrated with the state and projected onto force balance once per accepted
 step: the scheme of :meth:`nematic_solids.model.solver.ETDRK4Solver.step` and
-:meth:`nematic_solids.model.solver_base.ETDSolver._project` (docs/model.md, section 4), on the
+:meth:`nematic_solids.model.solver_base.ETDSolver._project` (docs/model/numerics.md), on the
 stage right-hand side and the Newton solve of :mod:`nematic_solids.model.accelerated.finite`.
 
 With the fields' stages of :mod:`nematic_solids.model.accelerated.etdrk4`, the displacement

@@ -12,7 +12,7 @@ spectra :math:`\hat q` of q1, q2,
 
 with :math:`b = A + C\, Q:Q - 2 B' \mathrm{tr}\, e` (Eq. 4: H = -(A + A0 + C Q:Q - 2 B'
 (J - 1)) Q + B dev Ebar + K lap Q, of which A0 and the Frank term are in :math:`L_q = -(A_0 +
-K k^2)/\gamma`), the small-strain response (docs/model.md, section 3: the Green operator
+K k^2)/\gamma`), the small-strain response (docs/model/equations.md: the Green operator
 of the isotropic medium) as the real Fourier symbols ``S[r, c]`` of
 :meth:`nematic_solids.model.mechanics.LinearMechanics.response_symbols` (outputs r: dev e (2
 components), tr e, tr sigma; inputs c: q1 hat, q2 hat, -B' Q:Q hat) plus the applied mean strain

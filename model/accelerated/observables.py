@@ -1,5 +1,5 @@
 r"""The per-save observables of one seed on the device (``jax.vmap`` batches them), with the
-definitions of :mod:`nematic_solids.model.observables` (docs/model.md, section 6): ``mean_S``
+definitions of :mod:`nematic_solids.model.observables` (docs/model/observables.md): ``mean_S``
 :math:`\langle S\rangle`, ``sigma2_S`` :math:`\langle (S - \langle S\rangle)^2\rangle`,
 ``cos2theta`` :math:`\langle q_1/S\rangle` (0 where S < 1e-12), ``lambda`` :math:`L/\bar n`
 from the shell-summed spectrum :math:`E(n)` of :math:`S - \langle S\rangle`,

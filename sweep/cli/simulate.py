@@ -64,8 +64,7 @@ def simulate(
             "--set",
             metavar="NAME=VALUE",
             help=f"A model parameter ({_PARAMETER_NAMES}) or numerics field ({_NUMERICS_NAMES}). "
-            "Repeatable. resolution=auto chooses the grid from K (docs/model.md, 'Resolution "
-            "from the physics').",
+            "Repeatable. resolution=auto chooses the grid from K (docs/model/resolution.md).",
         ),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the random initial director field.")] = 0,

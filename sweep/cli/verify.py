@@ -83,7 +83,7 @@ def verify(
         error(
             err,
             f"{campaign}: the campaign has no verify: section; add one (docs/"
-            'campaigns.md, "Verification"), e.g.\n  verify:\n    variants:\n'
+            "campaigns/verification.md), e.g.\n  verify:\n    variants:\n"
             "      - resolution: x2\n      - tolerance: /10",
         )
         raise typer.Exit(EXIT_BAD_INPUT)

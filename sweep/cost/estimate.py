@@ -54,7 +54,7 @@ QUANTILES = (0.1, 0.9)
 #: start, the cluster's, the kernels' warm-up from the disk cache, the results written (a few
 #: tenths of a second per run), phase.nc, fits, figures and report: a fixed part and a part
 #: stretched by the machine's load like a run (:func:`slowdown`). Measured with
-#: campaigns/quickstart.yaml on the 2-core VM (docs/campaigns.md, *Cost before launch*): the
+#: campaigns/quickstart.yaml on the 2-core VM (docs/campaigns/cost.md, *Cost before launch*): the
 #: command's wall time less the runs' makespan: about 13 s on the quiet machine (the 19.1 s
 #: quickstart of benchmarks/first_run.md, load average 0.5), 23-33 s at load average 3-5
 #: and 40-45 s at 11-14

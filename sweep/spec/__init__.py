@@ -1,6 +1,6 @@
 """Campaign YAML -> a validated, immutable :class:`Campaign`.
 
-The schema (documented for users in ``docs/campaigns.md``)::
+The schema (documented for users in ``docs/campaigns/file.md``)::
 
     name: fig2                      # results go to results/<name>/ (default: the file's stem)
     description: free text

@@ -54,10 +54,7 @@ def floor(n: int, precision: str, amb: float) -> dict:
 
 def main() -> None:
     rows = [
-        floor(n, p, amb)
-        for n in (32, 64)
-        for p in ("float64", "float32")
-        for amb in (0.3, 0.9)
+        floor(n, p, amb) for n in (32, 64) for p in ("float64", "float32") for amb in (0.3, 0.9)
     ]
     for r in rows:
         print(r)

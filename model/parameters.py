@@ -42,6 +42,13 @@ DISPLACEMENT = ("integrated", "equilibrium")
 #: path otherwise) or "numpy" (the readable reference). Results agree to rounding (tested), so
 #: the backend is not part of a run's identity.
 BACKENDS = ("compiled", "numpy")
+#: the precision of a run's fields and passes (Numerics.precision; docs/guide/precision.md)
+PRECISIONS = ("float64", "float32")
+#: what the compiled and numpy backends allow (model.simulate.run)
+FLOAT64_ONLY = (
+    "float64 on the compiled and numpy backends: float32 runs on the accelerated backend only, "
+    "for now (execution: {backend: accelerated})"
+)
 
 
 def _suggest(name: str, valid: list[str]) -> str:
@@ -290,6 +297,9 @@ class Numerics:
             round-off level and stops changing).
         steady_window: the time span of that comparison (units of tau; with steady_tol > 0
             at least save_every and below t_final).
+        precision: "float64" (the default) or "float32": fields, transforms and passes in
+            float32, the sums, the time and the step size in float64
+            (docs/guide/precision.md); on the accelerated backend only, for now. In the id.
     """
 
     resolution: int = 128
@@ -311,6 +321,7 @@ class Numerics:
     backend: str = "compiled"
     steady_tol: float = 0.0
     steady_window: float = 50.0
+    precision: str = "float64"
 
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:
@@ -362,6 +373,8 @@ class Numerics:
             raise ParameterError("displacement", self.displacement, " or ".join(DISPLACEMENT))
         if self.backend not in BACKENDS:
             raise ParameterError("backend", self.backend, " or ".join(BACKENDS))
+        if self.precision not in PRECISIONS:
+            raise ParameterError("precision", self.precision, " or ".join(PRECISIONS))
         for name in ("adaptive", "incompressible"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(name, getattr(self, name), "true or false")

@@ -42,6 +42,10 @@ EARLY_STOP = ("steady_tol", "steady_window")
 #: Numerics fields that choose how a run is executed, not what it computes (the backends
 #: agree to rounding): recorded in the run file, never part of the identity.
 EXECUTION_ONLY = ("backend",)
+#: Numerics fields added later whose default changes nothing: left out of the canonical text
+#: at that default, so earlier runs keep their ids (``precision``: float64, what every run
+#: computed before the field existed; float32 enters the id).
+LATER_NUMERICS_DEFAULTS = {"precision": "float64"}
 #: The parameter that chooses the initial texture: left out of the canonical text at its
 #: original value ("band", the only texture before the field existed), so those runs keep their
 #: ids; with "per_node" the band's ``noise_modes`` changes nothing and is left out instead.
@@ -67,9 +71,13 @@ def identity_parameters(parameters: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def identity_numerics(numerics: Mapping[str, Any]) -> dict[str, Any]:
-    """The numerics as they enter the canonical text: without the execution-only fields, and
-    without the early-stop fields while early stop is off."""
+    """The numerics as they enter the canonical text: without the execution-only fields,
+    without ``precision`` while it is float64, and without the early-stop fields while early
+    stop is off."""
     out = {k: v for k, v in numerics.items() if k not in EXECUTION_ONLY}
+    for name, default in LATER_NUMERICS_DEFAULTS.items():
+        if name in out and out[name] == default:
+            del out[name]
     if not out.get("steady_tol"):
         for name in EARLY_STOP:
             out.pop(name, None)

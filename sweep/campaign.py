@@ -410,8 +410,7 @@ class VerifySpec:
 BRANCH = "branch"
 #: the branches a chain may have, along its axis in increasing or decreasing order
 BRANCHES = ("up", "down")
-#: ``chain: {up: ...}``: where each run of the up branch starts
-CHAIN_STARTS = ("predecessor", "fresh")
+CHAIN_STARTS = ("predecessor", "fresh")  #: ``chain: {up: ...}``: where the up branch starts
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,7 @@ class Plan:
     def skipped(self) -> int:
         """Positions not to run this time: done, failed (kept) or another position's twin."""
         return len(self.done) + len(self.failed) + len(self.twins)
+
     #: the file of such a parent when another campaign made it: position -> its path
     parent_paths: dict[int, str] = field(default_factory=dict)
     #: runs another campaign of the root had finished, taken in place: campaign -> how many

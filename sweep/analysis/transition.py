@@ -1,5 +1,5 @@
 r"""The ``transition`` fit: where the seed mean of an observable jumps along a sweep axis
-(docs/campaigns.md, "Fits")."""
+(docs/campaigns/fits.md, "Fits")."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ TRANSITION_OPTIONS = ("axis", "observable", "log", "min_jump", "mean", "prefix",
 
 @dataclass(frozen=True)
 class TransitionFit:
-    """Result of :func:`fit_transition` (see docs/campaigns.md, "Fits" for the definitions)."""
+    """Result of :func:`fit_transition` (see docs/campaigns/fits.md, "Fits" for the definitions)."""
 
     location: float
     lower: float
@@ -78,7 +78,7 @@ def fit_transition(
     crossing: float | None = None,
 ) -> TransitionFit:
     r"""Locate the jump of the seed mean of ``values`` (shape ``(len(x), n_seeds)``, NaN for
-    missing runs) along ``x``; see docs/campaigns.md, "Fits". With ``log`` the step is measured in
+    missing runs) along ``x``; see docs/campaigns/fits.md. With ``log`` the step is measured in
     decades, else in the observable's units; a step below ``min_jump`` is not a transition
     (location NaN). ``mean``: ``geometric`` (with ``log``, the seed mean of
     :math:`\log_{10}` values) or ``arithmetic`` (log of the seed mean, which one patterned seed
@@ -172,7 +172,7 @@ def no_jump_reason(
 def transition(
     phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
 ) -> xr.Dataset:
-    """The ``transition`` fit (docs/campaigns.md, "Fits"). Options: ``axis``, ``observable``
+    """The ``transition`` fit (docs/campaigns/fits.md, "Fits"). Options: ``axis``, ``observable``
     (default ``sigma2_S``), ``log`` (default true), ``min_jump`` (decades, default 1),
     ``prefix`` (variable prefix, default ``transition``), and the common options."""
     check_options("transition", options, TRANSITION_OPTIONS)

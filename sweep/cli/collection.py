@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import typer
-from rich.console import Console
+from rich.markup import escape
 
 from ..campaign import Campaign
 from ..errors import CampaignError
@@ -29,6 +29,7 @@ from .app import (
     EXIT_OK,
     EXIT_PRODUCTS_FAILED,
     EXIT_TOO_MANY_FAILURES,
+    Console,
     err_console,
     error,
     fmt_time,
@@ -203,7 +204,7 @@ def validate_collection(
     collection's cost with ``--estimate``."""
     campaigns = load_members(coll, options["set_"], options["seeds"])
     console.print(
-        f"[green]valid[/]: collection [bold]{coll.name}[/] ({coll.source}): "
+        f"[green]valid[/]: collection [bold]{escape(coll.name)}[/] ({escape(coll.source)}): "
         f"{len(campaigns)} campaign(s)"
     )
     for member in coll.members:

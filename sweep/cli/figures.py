@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 
 from ..errors import CampaignLocked, FigureError, StoreError
@@ -19,6 +18,7 @@ from .app import (
     EXIT_BAD_INPUT,
     EXIT_PRODUCTS_FAILED,
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -44,17 +44,16 @@ def figures(
         typer.Option(
             "--only",
             metavar="FIGURE",
-            help="Draw only this figure (repeatable): fig2, fig3, fig4, figA1. Default: the "
-            "campaign's 'figures:' list ('figures: []': none), else every figure that "
-            "applies to its grid.",
+            help="Draw only this figure (repeatable): {figures}. Default: the campaign's "
+            "'figures:' list ('figures: []': none), else every figure that applies to its grid.",
         ),
     ] = None,
     fits: Annotated[
         bool,
         typer.Option(
             "--fits/--no-fits",
-            help="Recompute fits.nc from phase.nc first (default), or draw "
-            "from the fits.nc on disk.",
+            help="Recompute fits.nc from phase.nc first (default), or draw from the fits.nc on "
+            "disk. Fits: {fits}.",
         ),
     ] = True,
     verbose: VerboseOpt = False,
@@ -78,8 +77,11 @@ def figures(
     problem = probe_write(root) if root.is_dir() else None
     if problem is not None:
         err.print(
-            f"[bold red]error:[/] cannot write the fits and figures in {root}: "
-            f"{storage_cause(root / 'figures', problem)}",
+            "[bold red]error:[/] "
+            + escape(
+                f"cannot write the fits and figures in {root}: "
+                f"{storage_cause(root / 'figures', problem)}"
+            ),
             soft_wrap=True,
             highlight=False,
         )
@@ -93,11 +95,11 @@ def figures(
         error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:
-        console.print(f"fits: {out.fits_path}")
+        console.print(f"fits: {out.fits_path}", markup=False)
     for note in out.notes:
         console.print(f"  note: {note}", markup=False)
     for path in out.paths:
-        console.print(f"figure: {path}")
+        console.print(f"figure: {path}", markup=False)
     if not out.figures:
         why = (
             "the campaign lists none (figures: [])"

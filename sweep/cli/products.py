@@ -8,9 +8,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rich.console import Console
+from rich.markup import escape
 
 from ..campaign import Campaign
+from .app import Console
 
 if TYPE_CHECKING:
     from ..figures.produce import Outcome
@@ -34,7 +35,8 @@ def repair_products(
         problem = netcdf_problem(store.phase_path, ("status", "run_id"))
         if problem is not None:
             console.print(
-                f"[yellow]{store.phase_path}: {problem}[/]; rebuilding it from the run records",
+                f"[yellow]{escape(f'{store.phase_path}: {problem}')}[/]; rebuilding it from the "
+                "run records",
                 soft_wrap=True,
                 highlight=False,
             )
@@ -49,7 +51,8 @@ def repair_products(
         problem = netcdf_problem(fits_path)
         if problem is not None:
             console.print(
-                f"[yellow]{fits_path}: {problem}[/]; removing it (the fits recompute it)",
+                f"[yellow]{escape(f'{fits_path}: {problem}')}[/]; removing it (the fits "
+                "recompute it)",
                 soft_wrap=True,
                 highlight=False,
             )

@@ -2,7 +2,7 @@ r"""A chain's hysteresis loop (``chain:``, nematic_solids.sweep.chains): (a) the
 t_final against the chain's axis on both branches, every seed and the seed means, with each branch's
 fitted jump and the loop's width; (b) the time each point needed to settle (the early stop's
 ``t_stopped``; a point not steady by t_final is drawn there, open); (c) one seed's chains as one
-history, each point's series after its predecessor's (docs/campaigns.md, "Figures").
+history, each point's series after its predecessor's (docs/campaigns/figures.md, "Figures").
 
 A chain over more swept axes than its own draws one row of the three panels per value of the
 others (every combination, at most :data:`MAX_ROWS`); option ``select`` (``{axis: value}``,

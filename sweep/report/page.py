@@ -45,7 +45,8 @@ td { overflow-wrap: anywhere; }
 {% endfor %}<tr><th>seeds</th><td>{{ c.seeds }}</td></tr>
 <tr><th>runs</th><td>{{ c.counts.runs }}: {{ c.counts.done }} done, {{ c.counts.failed }} failed,
 {{ c.counts.pending }} pending</td></tr>
-</table>
+{% if c.reused %}<tr><th>reused</th><td id="reused">{{ c.reused }}</td></tr>
+{% endif %}</table>
 <p class="note">Written {{ created }} from {{ folder }}.</p>
 
 <h2 id="phase-diagram">Phase diagram</h2>

@@ -12,6 +12,8 @@ from ..campaign import BRANCH, BRANCHES, CHAIN_STARTS, ChainSpec
 from .checker import Checker, is_number, suggest
 
 CHAIN_KEYS = ("axis", "branches", "up")
+#: the axes that set the grid of the fields: a run could not begin from its predecessor's
+GRID_AXES = ("resolution",)
 
 
 def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | None:
@@ -19,7 +21,9 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
     ``predecessor``, default, or ``fresh``: each run of the up branch from the seeded texture). The
     axis is a swept dimension of its own (not zipped) with two or more numbers; a chain
     begins from the seeded texture, so it has no ``initial``, ``refine``, ``precision`` or
-    ``verify`` section. None without it."""
+    ``verify`` section. A run begins from its predecessor's fields on the same grid and from its
+    exact end state: the axis is not one that sets the grid (:data:`GRID_AXES`), and the store
+    keeps end states (``store.end_state``). None without it."""
     if raw is None:
         return None
     spec = c.mapping(("chain",), raw, CHAIN_KEYS)
@@ -28,7 +32,17 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
     dims = {d.name: d for d in read.get("sweep") or ()}
     axis = spec.get("axis")
     ok = True
-    if axis not in dims:
+    if not isinstance(axis, str):
+        c.bad(("chain", "axis"), axis, "the name of one swept axis")
+        ok = False
+    elif axis in GRID_AXES:
+        c.add(
+            ("chain", "axis"),
+            f"a chain along {axis} would change the grid between a run and the next, which "
+            "starts from its fields; sweep it as a plain axis (each chain keeps its grid)",
+        )
+        ok = False
+    elif axis not in dims:
         names = [a.name for d in dims.values() for a in d.axes]
         hint = f"; the swept axes: {', '.join(names)}" if names else " (nothing is swept)"
         c.bad(("chain", "axis"), axis, f"a swept axis{suggest(str(axis), names)}{hint}")
@@ -44,6 +58,15 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
             ("chain", "axis"),
             f"a chain along {axis} with resolution: auto would change the grid between a run "
             "and the next, which starts from its fields; set a resolution (a number)",
+        )
+        ok = False
+    store = read.get("store")
+    if store is not None and not store.end_state:
+        c.add(
+            ("store", "end_state"),
+            "a chain's runs begin from their predecessor's exact end state, which only a store "
+            "with end_state: true keeps (a snapshot is not it: another precision, fields left "
+            "out); keep end_state: true",
         )
         ok = False
     if BRANCH in dims:

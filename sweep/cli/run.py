@@ -154,14 +154,12 @@ def run(
 ) -> None:
     """Run a campaign on dask, resuming where it stopped.
 
-    When a service (`nematic serve`) runs for the results root, the campaign is handed to it
-    (as `nematic submit` does; exit 0 once queued) unless `--no-service` is given.
+    With a service (`nematic serve`) for the results root, the campaign is handed to it
+    (exit 0 once queued) unless --no-service.
 
-    Finished runs are skipped; one netCDF per run, phase.nc at the end. Exit 0: every run
-    succeeded (--detach: the driver runs; --dry-run: the cost printed), 1: some failed, 2: bad
-    input or a locked campaign, 3: stopped by --max-failures, 4: every run succeeded but a fit or
-    figure failed (one line each), 130: interrupted (rerun to resume). More:
-    docs/campaigns/execution.md and docs/campaigns/cost.md.
+    Finished runs are skipped. Exit 0: every run succeeded (--detach: the driver runs;
+    --dry-run: the cost printed), 1: some failed, 2: bad input or locked, 3: stopped by
+    --max-failures, 4: a fit or figure failed, 130: interrupted (docs/campaigns/execution.md).
     """
     from ..expand import expand
     from ..outputs.aggregate import write_phase

@@ -57,8 +57,8 @@ SHAPES: dict[str, tuple[str, float, bool]] = {
     ),
     "oscillatory": (
         "protocol: {eps: {sine: {start: 0.5}}}\n"
-        "sweep: {axes: {alpha_minus_B: [0.1, 1.0], eps_amplitude: [0.01], eps_period: [0.5]}}\n",
-        2.0,
+        "sweep: {axes: {alpha_minus_B: [0.1, 1.0], eps_amplitude: [0.01], eps_period: [2.0]}}\n",
+        5.0,
         False,
     ),
     "switch_off": (

@@ -64,8 +64,9 @@ FAULT_TESTS = (
 KEPT_LINES = 80
 
 
-def run_once(node: str, marker: str) -> tuple[bool, float, str]:
-    """One pytest process for ``node``: (passed, seconds, its last :data:`KEPT_LINES` lines)."""
+def run_once(node: str, marker: str) -> tuple[bool | None, float, str]:
+    """One pytest process for ``node``: (passed, or None when it was skipped; seconds; its
+    last :data:`KEPT_LINES` lines)."""
     t0 = time.monotonic()
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "-m", marker, node],
@@ -73,7 +74,11 @@ def run_once(node: str, marker: str) -> tuple[bool, float, str]:
         capture_output=True,
         text=True,
     )
-    tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-KEPT_LINES:])
+    lines = (proc.stdout + proc.stderr).strip().splitlines()
+    tail = "\n".join(lines[-KEPT_LINES:])
+    summary = lines[-1] if lines else ""
+    if proc.returncode == 0 and "skipped" in summary and "passed" not in summary:
+        return None, time.monotonic() - t0, tail  # not run here: no pass
     return proc.returncode == 0, time.monotonic() - t0, tail
 
 
@@ -109,12 +114,13 @@ def write_table(rows: dict[str, dict[str, object]]) -> None:
         "fresh pytest process; its latest counts, when and where they were taken (the 1-minute",
         "load average at the start, and the cores).",
         "",
-        "| test | passed / runs | median s | date | commit | load / cores |",
-        "|---|---|---|---|---|---|",
+        "| test | passed / runs | skipped | median s | date | commit | load / cores |",
+        "|---|---|---|---|---|---|---|",
     ]
     for node, r in table.items():
         lines.append(
-            f"| `{node}` | {r['passed']} / {r['runs']} | {float(str(r['median_seconds'])):.0f} "
+            f"| `{node}` | {r['passed']} / {r['runs']} | {r.get('skipped', 0)} "
+            f"| {float(str(r['median_seconds'])):.0f} "
             f"| {r['date']} | {r['commit']} | {r['load']} / {r['cores']} |"
         )
     TABLE_MD.write_text("\n".join(lines) + "\n")
@@ -136,17 +142,20 @@ def main() -> int:
     for node in nodes:
         where = machine()
         results = [run_once(node, marker) for _ in range(args.n)]
-        passed = sum(ok for ok, _, _ in results)
+        passed = sum(ok is True for ok, _, _ in results)
+        skipped = sum(ok is None for ok, _, _ in results)
         seconds = statistics.median(s for _, s, _ in results)
-        failures = [tail for ok, _, tail in results if not ok]
+        failures = [tail for ok, _, tail in results if ok is False]
         failed_any |= bool(failures)
-        print(f"{passed}/{args.n} passed, median {seconds:.0f} s: {node}", flush=True)
+        extra = f", {skipped} skipped" if skipped else ""
+        print(f"{passed}/{args.n} passed{extra}, median {seconds:.0f} s: {node}", flush=True)
         for tail in failures[:3]:
             last = "\n".join(tail.splitlines()[-3:])
             print("    " + last.replace("\n", "\n    "), flush=True)
         out[node] = {
             "runs": args.n,
             "passed": passed,
+            "skipped": skipped,
             "median_seconds": seconds,
             "failures": failures,
             **where,

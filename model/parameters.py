@@ -45,7 +45,7 @@ BACKENDS = ("compiled", "numpy")
 #: the precision of a run's fields and passes (Numerics.precision; docs/guide/precision.md)
 PRECISIONS = ("float64", "float32")
 #: what the compiled and numpy backends allow (model.simulate.run)
-FLOAT64_ONLY = "float64 (float32 runs on the accelerated backend only: backend: accelerated)"
+FLOAT64_ONLY = "float64 (float32 runs on the accelerated backend only, for now)"
 
 
 def _suggest(name: str, valid: list[str]) -> str:

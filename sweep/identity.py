@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.protocol import RAMP_STEP_FRACTION, SINE_STEP_FRACTION
 
 from .campaign import SIGNIFICANT_DIGITS
 
@@ -121,15 +122,49 @@ def canonical_json(
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`. ``start`` names the state
     a run begins from (``{"run": parent run id, "time": "end" or the time}``,
     :class:`nematic_solids.sweep.expand.Parents`); absent for a run from the seeded texture."""
+    payload = _point_payload(parameters, numerics)
+    payload["seed"] = canonical_value(int(seed))
+    if start is not None:
+        payload["start"] = canonical_value(dict(start))
+    return _dumps(payload)
+
+
+def _point_payload(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> dict[str, Any]:
+    """What the canonical text holds of a grid point (all its keys sort before ``seed``)."""
     payload: dict[str, Any] = {
         "numerics": canonical_value(identity_numerics(numerics)),
         "parameters": canonical_value(identity_parameters(parameters)),
         "schema": SCHEMA_VERSION,
-        "seed": canonical_value(int(seed)),
     }
-    if start is not None:
-        payload["start"] = canonical_value(dict(start))
-    return _dumps(payload)
+    rule = protocol_step_rule(parameters, numerics)
+    if rule is not None:
+        payload["protocol_steps"] = rule
+    return payload
+
+
+def protocol_step_rule(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> str | None:
+    """The bound on the step that a run's sine or ramp imposes
+    (:data:`~nematic_solids.model.protocol.SINE_STEP_FRACTION` of a period,
+    :data:`~nematic_solids.model.protocol.RAMP_STEP_FRACTION` of a ramp piece) as it enters the
+    canonical text, where it can change the steps, so the numbers: where the shortest such bound
+    is below the largest step the run may take otherwise (``dt_max``, or ``dt`` for fixed
+    steps). Runs made before the bound existed then have other ids. None where no bound is
+    below it (a slow sine, a run with steps and pulses only, which land on their switch
+    times): the id is unchanged."""
+    protocol = parameters.get("protocol") or {}
+    bounds = [math.inf]
+    for spec in protocol.values():
+        if not isinstance(spec, Mapping):
+            continue
+        if "sine" in spec:
+            bounds.append(float(spec["sine"]["period"]) * SINE_STEP_FRACTION)
+        if "ramp" in spec:
+            times = [float(t) for t, _ in spec["ramp"]]
+            bounds += [(b - a) * RAMP_STEP_FRACTION for a, b in zip(times, times[1:], strict=False)]
+    largest = numerics.get("dt_max" if numerics.get("adaptive", True) else "dt", math.inf)
+    if not min(bounds) < float(largest):
+        return None
+    return f"sine {SINE_STEP_FRACTION:.12g}, ramp {RAMP_STEP_FRACTION:.12g}"
 
 
 def hash_canonical(
@@ -210,13 +245,7 @@ class PointHasher:
     """
 
     def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
-        head = _dumps(
-            {
-                "numerics": canonical_value(identity_numerics(numerics)),
-                "parameters": canonical_value(identity_parameters(parameters)),
-                "schema": SCHEMA_VERSION,
-            }
-        )
+        head = _dumps(_point_payload(parameters, numerics))
         self._prefix = hashlib.sha256((head[:-1] + ',"seed":').encode("ascii"))
 
     def __call__(self, seed: int) -> str:

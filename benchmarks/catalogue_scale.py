@@ -84,8 +84,8 @@ def main() -> None:
             figures[name] = seconds
             figures[name[: -len("_s")] + "_rows"] = len(out)
         cat.close()
-    for k, v in figures.items():
-        print(f"{k}: {v:.4g}" if isinstance(v, float) else f"{k}: {v}")
+    for key, v in figures.items():
+        print(f"{key}: {v:.4g}" if isinstance(v, float) else f"{key}: {v}")
     (HERE / "catalogue_scale.json").write_text(json.dumps(figures, indent=2) + "\n")
 
 

@@ -53,6 +53,11 @@ class Condition:
     low: float | None = None
     high: float | None = None
 
+    def __post_init__(self) -> None:
+        space, dot, _ = self.key.rpartition(".")
+        if dot and space not in t.SPACES:
+            raise ValueError(f"{self.key!r}: the space is one of {', '.join(t.SPACES)}")
+
     @classmethod
     def of(cls, key: str, value: Any) -> Condition:
         """From a Python value: a number or word (equal), a ``(low, high)`` pair (either
@@ -128,8 +133,6 @@ def _clause(cond: Condition) -> sa.ColumnElement[bool]:
     space, _, key = cond.key.rpartition(".")
     parts = [v.c.key == key]
     if space:
-        if space not in t.SPACES:
-            raise ValueError(f"{cond.key!r}: the space is one of {', '.join(t.SPACES)}")
         parts.append(v.c.space == space)
     if isinstance(cond.equal, str):
         parts.append(v.c.text_value == cond.equal)

@@ -3,6 +3,7 @@ phase.nc, fits, figures, verification and report; ``--dry-run`` and ``--detach``
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -25,6 +26,7 @@ from .app import (
     EXIT_INTERRUPTED,
     EXIT_TOO_MANY_FAILURES,
     CampaignArg,
+    CatalogueOpt,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -151,6 +153,7 @@ def run(
             "stop it (`nematic stop NAME`).",
         ),
     ] = False,
+    catalogue: CatalogueOpt = None,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -171,6 +174,10 @@ def run(
     from ..run.failures import FailureLimit, describe_failure
     from ..store import CampaignStore
 
+    if catalogue is not None:  # the driver's recorder and the reuse of runs read it
+        from ..catalogue.location import ENV
+
+        os.environ[ENV] = catalogue
     err = err_console()
     setup_logging(err, verbose, quiet, cluster=True)
     coll = collection_or_none(campaign)

@@ -86,8 +86,10 @@ RUN_FILE_VARIABLES = ("sigma2_S",)
 MAX_DETAIL = 500
 #: Reasons of records that say the result could not be stored or the run's worker was lost
 #: (no longer written; old folders may hold some), or that the run it begins from did not
-#: end (its parent, its predecessor in a chain): not that it failed. Redone by default.
-RETRYABLE_REASONS = ("write_error", "killed_worker", "parent_failed")
+#: end (its parent, its predecessor in a chain) or its state could not be used (corrupt: the
+#: parent is redone when its file no longer matches its record): not that it failed. Redone by
+#: default.
+RETRYABLE_REASONS = ("write_error", "killed_worker", "parent_failed", "parent_state")
 
 
 class Record(TypedDict, total=False):

@@ -23,12 +23,13 @@ from . import (
     figures,
     report,
     run,
+    service,
     simulate,
     stability,
     status,
     verify,
 )
-from .app import app
+from .app import RegistryHelpCommand, app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
     "validate": campaigns.validate,
@@ -37,6 +38,10 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "aggregate": campaigns.aggregate,
     "verify": verify.verify,
     "stop": driver.stop,
+    "serve": service.serve,
+    "submit": service.submit,
+    "queue": service.queue,
+    "cancel": service.cancel,
     "export": export.export,
     "report": report.report,
     "simulate": simulate.simulate,
@@ -45,7 +50,10 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "catalogue": catalogue.catalogue,
 }
 
+#: the commands whose help names the registered figures and fits
+NAMING_REGISTRIES = {"figures"}
+
 for _name, _command in COMMANDS.items():
-    app.command(_name)(_command)
+    app.command(_name, cls=RegistryHelpCommand if _name in NAMING_REGISTRIES else None)(_command)
 
 __all__ = ["COMMANDS", "app"]

@@ -9,11 +9,10 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress, TaskID
 
-from .app import fmt_time
+from .app import Console, fmt_time
 
 if TYPE_CHECKING:
     from ..store import Record
@@ -114,7 +113,7 @@ class ProgressEvents:
 
     def started(self, plan: Any, total: int, workers: int) -> None:
         self.ok = self.failed = 0  # per call: a refined campaign runs one call per round
-        self.skipped = len(plan.done) + len(plan.failed)
+        self.skipped = plan.skipped
         self.total = total
         self.workers = max(1, workers)
         self.t0 = self.last_log = self.clock()

@@ -175,7 +175,10 @@ class Basis:
             grid = self.prior.resolution.get(point_key(point.coords))
             n = point.numerics.resolution
             if grid is not None and grid != n:  # measured on another grid: scaled
-                known *= model / model_seconds(dataclasses.replace(point.numerics, resolution=grid))
+                known *= model / model_seconds(
+                    dataclasses.replace(point.numerics, resolution=grid),
+                    protocol=point.parameters.protocol,
+                )
                 why += f" on {grid}^2, scaled to {n}^2 by the cost model"
             return known, known * lo, known * hi, why
         ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
@@ -259,7 +262,7 @@ def measurements(
         length = run_length(point, rec)
         key = (id(point), length)
         if key not in models:
-            models[key] = model_seconds(point.numerics, length)
+            models[key] = model_seconds(point.numerics, length, point.parameters.protocol)
         measured.append(
             (
                 point_label(point),
@@ -328,7 +331,8 @@ def estimate(
         point = expansion.run(i).point
         if id(point) not in per_point:
             label = point_label(point)
-            per_point[id(point)] = (label, *basis.cost(point, label, model_seconds(point.numerics)))
+            model = model_seconds(point.numerics, protocol=point.parameters.protocol)
+            per_point[id(point)] = (label, *basis.cost(point, label, model))
         label, est, lo, hi, why = per_point[id(point)]
         if i in continuing:
             rest = max(0.0, 1.0 - continuing[i][1] / point.numerics.t_final)
@@ -396,7 +400,11 @@ def estimate(
         later = precision_rounds(
             campaign,
             seeds,
-            lambda point: basis.cost(point, point_label(point), model_seconds(point.numerics))[0],
+            lambda point: basis.cost(
+                point,
+                point_label(point),
+                model_seconds(point.numerics, protocol=point.parameters.protocol),
+            )[0],
             workers,
         )
     changed = campaign_changes(campaign, store, dense, records)

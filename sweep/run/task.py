@@ -30,7 +30,7 @@ from ..campaign import StoreSpec
 from ..errors import StorageError, StoreError
 from ..expand import Expansion, RunSpec
 from ..files import atomic_to_netcdf, file_stamp
-from ..identity import SCHEMA_VERSION, trajectory_id
+from ..identity import SCHEMA_VERSION, identity_start, trajectory_id
 from ..store import CampaignStore, Record, now_iso, record_from_dataset
 from . import continuation
 
@@ -91,7 +91,7 @@ class RunTask:
         parameters, numerics = run.point.parameters.to_dict(), run.point.numerics.to_dict()
         initial_from, start = None, None
         if run.start is not None:
-            start = {"run": run.start["run"], "time": run.start["time"]}
+            start = identity_start(run.start)
             runs = CampaignStore(store.results_root, run.start["campaign"]).runs_dir
             initial_from = {**run.start, "runs_dir": str(runs.resolve())}
         return cls(
@@ -294,6 +294,8 @@ def execute_run(task: RunTask) -> Record:
         )
     except continuation.ParentFailed as e:  # redone with its parent (RETRYABLE_REASONS)
         record = failure_record(task, "parent_failed", str(e), "", time.perf_counter() - t0)
+    except continuation.ParentUnusable as e:  # its state is corrupt or not the one named
+        record = failure_record(task, "parent_state", str(e), "", time.perf_counter() - t0)
     except Exception as e:  # noqa: BLE001 - any crash is recorded, the campaign goes on
         record = crash_record(task, "exception", e, t0)
     else:

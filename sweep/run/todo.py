@@ -41,6 +41,15 @@ class Plan:
     #: runs to do that continue the end state of a shorter finished run of their
     #: trajectory (a campaign whose t_final grew): position -> that run's id
     parents: dict[int, str] = field(default_factory=dict)
+    #: positions whose run id an earlier position has (a chain's ``up: fresh`` top run is the
+    #: down branch's first run too): the run is done once, at that earlier position
+    twins: list[int] = field(default_factory=list)
+
+    @property
+    def skipped(self) -> int:
+        """Positions not to run this time: done, failed (kept) or another position's twin."""
+        return len(self.done) + len(self.failed) + len(self.twins)
+
     #: the file of such a parent when another campaign made it: position -> its path
     parent_paths: dict[int, str] = field(default_factory=dict)
     #: runs another campaign of the root had finished, taken in place: campaign -> how many
@@ -73,7 +82,11 @@ def plan_runs(
     unspooled = import_spool(store)
     records = store.scan()
     plan = Plan(todo=[], done=[], failed=[], records=records, unspooled=unspooled)
+    first: dict[str, int] = {}
     for i, rid in enumerate(expansion.run_ids):
+        if first.setdefault(rid, i) != i:
+            plan.twins.append(i)
+            continue
         rec = records.get(rid)
         if rec is None and rid in store.nc_present:
             rec = store.adopt(rid)

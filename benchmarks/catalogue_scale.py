@@ -1,6 +1,8 @@
 """The catalogue at scale: 100,000 synthetic runs in 20 campaigns recorded in batches, then
-the queries a dashboard and a user make, timed (SQLite by default; a URL as the first argument
-for PostgreSQL). Prints the figures and writes ``benchmarks/catalogue_scale.json``.
+the queries a dashboard and a user make, timed (SQLite by default; ``--url`` for PostgreSQL):
+the campaign list, one campaign's runs, a range query across campaigns, the changes since a
+seq (the second call of each: the first imports pandas). Prints the figures, with the
+machine's load average and cores, and writes ``benchmarks/catalogue_scale.json``.
 
     python benchmarks/catalogue_scale.py [--runs 100000] [--url postgresql+psycopg://...]
 """
@@ -9,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -84,6 +87,8 @@ def main() -> None:
             figures[name] = seconds
             figures[name[: -len("_s")] + "_rows"] = len(out)
         cat.close()
+    figures["load_average_1min"] = os.getloadavg()[0]  # this machine is shared: read with it
+    figures["cores"] = os.cpu_count()
     for key, v in figures.items():
         print(f"{key}: {v:.4g}" if isinstance(v, float) else f"{key}: {v}")
     (HERE / "catalogue_scale.json").write_text(json.dumps(figures, indent=2) + "\n")

@@ -107,6 +107,8 @@ def record_rows(store: CampaignStore, run_ids: list[str] | None = None) -> Itera
 
 
 def _cell_value(value: Any) -> Any:
+    if hasattr(value, "tolist") and getattr(value, "size", 1) != 1:
+        return value.tolist()  # an attribute that is a list (a protocol's times, ...)
     if hasattr(value, "item"):
         value = value.item()
     if isinstance(value, bytes):

@@ -58,7 +58,7 @@ class Source:
 
 def open_for_reuse(results_root: Path, *, create: bool = True) -> Catalogue | None:
     """The root's catalogue, or None (turned off, cannot be opened: logged). ``create``:
-    make (and index) it if there is none; else only an existing one is opened (for readers
+    make (and index) it if there is none; else only an existing one, read only (for readers
     that write nothing, e.g. ``run --dry-run``)."""
     from .opening import open_catalogue
     from .recorder import catalogue_off
@@ -68,7 +68,9 @@ def open_for_reuse(results_root: Path, *, create: bool = True) -> Catalogue | No
     if not create and not os.environ.get(ENV) and not (results_root / FILENAME).exists():
         return None
     try:
-        return open_catalogue(results_root, index=create)
+        if not create:
+            return open_catalogue(results_root, readonly=True)
+        return open_catalogue(results_root)
     except Exception as e:  # noqa: BLE001 - no catalogue: the runs are run
         log.warning("catalogue: not used to reuse runs (%s)", str(e).splitlines()[0])
         return None

@@ -201,6 +201,19 @@ NameOpt = Annotated[
     str | None,
     typer.Option("--name", help="Override the campaign name (and so its results folder)."),
 ]
+#: the catalogue of runs (``nematic catalogue``, ``nematic run``): sweep/catalogue/
+CatalogueOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--catalogue",
+        metavar="URL",
+        help="The catalogue: a database URL (postgresql+psycopg://USER@HOST/DB, "
+        "sqlite:///PATH) or an SQLite file; default $NEMATIC_CATALOGUE, else "
+        "ROOT/catalogue.sqlite (the results root's); off: none.",
+        show_default=False,
+    ),
+]
+
 VerboseOpt = Annotated[
     bool,
     typer.Option("--verbose", "-v", help="Also log details (INFO messages, library warnings)."),

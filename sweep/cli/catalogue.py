@@ -13,7 +13,15 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from .app import EXIT_BAD_INPUT, QuietOpt, VerboseOpt, err_console, error, setup_logging
+from .app import (
+    EXIT_BAD_INPUT,
+    CatalogueOpt,
+    QuietOpt,
+    VerboseOpt,
+    err_console,
+    error,
+    setup_logging,
+)
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -21,18 +29,6 @@ if TYPE_CHECKING:
 ACTIONS = ("index", "runs", "campaigns")
 #: the columns ``runs`` shows in a table unless --columns says otherwise
 SHOWN = ("run_id", "status", "reason", "seed", "t_final", "wall_time")
-
-CatalogueOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--catalogue",
-        metavar="URL",
-        help="The catalogue: a database URL (postgresql+psycopg://USER@HOST/DB, "
-        "sqlite:///PATH) or an SQLite file; default $NEMATIC_CATALOGUE, else "
-        "ROOT/catalogue.sqlite.",
-        show_default=False,
-    ),
-]
 
 
 def _open(root: Path, url: str | None, index: bool = True):  # type: ignore[no-untyped-def]

@@ -4,6 +4,7 @@ phase.nc, fits, figures, verification and report; ``--dry-run`` and ``--detach``
 from __future__ import annotations
 
 import contextlib
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -27,6 +28,7 @@ from .app import (
     EXIT_PRODUCTS_FAILED,
     EXIT_TOO_MANY_FAILURES,
     CampaignArg,
+    CatalogueOpt,
     Console,
     NameOpt,
     QuietOpt,
@@ -149,6 +151,7 @@ def run(
             "(by default the campaign is handed to it).",
         ),
     ] = False,
+    catalogue: CatalogueOpt = None,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
@@ -168,6 +171,10 @@ def run(
     from ..run.failures import FailureLimit, describe_failure
     from ..store import CampaignStore
 
+    if catalogue is not None:  # the driver's recorder and the reuse of runs read it
+        from ..catalogue.location import ENV
+
+        os.environ[ENV] = catalogue
     err = err_console()
     setup_logging(err, verbose, quiet, cluster=True)
     coll = collection_or_none(campaign)

@@ -340,3 +340,43 @@ def test_processes_opening_a_new_catalogue_at_once_migrate_it_one_at_a_time(tmp_
     cat = open_catalogue(tmp_path)
     assert len(cat.runs()) == 4
     cat.close()
+
+
+def test_a_read_only_catalogue_writes_nothing_beside_its_file(tmp_path):
+    import sqlalchemy as sa
+
+    cat = open_catalogue(tmp_path)
+    cat.record([row("a", "c", parameters={"K": 1e-5})])
+    cat.close()
+    for extra in ("-wal", "-shm", ".lock"):
+        Path(f"{tmp_path / 'catalogue.sqlite'}{extra}").unlink(missing_ok=True)
+    before = {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()}
+    ro = open_catalogue(tmp_path, readonly=True)
+    assert list(ro.runs(where={"K": 1e-5})["run_id"]) == ["a"]
+    with pytest.raises(sa.exc.OperationalError):
+        ro.record([row("b", "c")])
+    ro.close()
+    assert {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()} == before
+    with pytest.raises(CatalogueError, match="no catalogue"):
+        open_catalogue(tmp_path / "elsewhere", readonly=True)
+
+
+@pytest.mark.slow
+def test_every_shipped_results_folder_is_indexed_whole(tmp_path):
+    """Each of docs/results/*: as many runs as its phase.nc has cells that ran, each with its
+    phase.nc status (protocol campaigns, chains and adaptive grids included)."""
+    root = tmp_path / "results"
+    shutil.copytree(SHIPPED, root)
+    cat = open_catalogue(root, index=False)
+    found = index_root(cat)
+    assert not found.problems
+    assert set(found.runs) == {p.name for p in SHIPPED.iterdir() if (p / "phase.nc").exists()}
+    for name, n in found.runs.items():
+        with xr.open_dataset(root / name / "phase.nc") as ds:
+            ran = int((ds["status"] > 0).sum())
+            failed = int((ds["status"] == 2).sum())
+        assert n == ran, name
+        runs = cat.runs(campaign=name)
+        assert len(runs) == ran, name
+        assert int((runs["status"] == "failed").sum()) == failed, name
+    cat.close()

@@ -9,6 +9,7 @@ cluster."""
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import logging
 import os
 import signal
@@ -134,6 +135,7 @@ def serve(root: Path, options: ServeOptions, say: Callable[[str], None] = print)
             timeout_graceful_shutdown=2,
         )
         server = uvicorn.Server(config)
+        faulthandler.register(signal.SIGUSR1, all_threads=True)  # kill -USR1: the stacks
         runner.start()
         try:
             with sigterm_as_interrupt():

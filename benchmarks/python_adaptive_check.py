@@ -1,5 +1,5 @@
 """Would python-adaptive plan an adaptive campaign deterministically? (the evidence behind
-docs/campaigns.md, "Why not python-adaptive").
+docs/campaigns/refinement.md, "Why not python-adaptive").
 
 Feeds the library the same data in different orders and prints what it asks for next, on a
 step like the Fig. A1 boundary at chi (alpha - B) = 8 (eps_c = 0.1396):

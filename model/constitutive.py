@@ -21,7 +21,7 @@ traceless). Its exact derivative plus the active stress (paper Eq. 2) is
 At small strain (:math:`F = I + \nabla u`, :math:`e = \operatorname{sym}\nabla u`) this is
 :math:`\sigma = 2\,\mathrm{dev}\, e + \kappa\, \mathrm{tr}\, e\, I + (\alpha - B) Q - B' (Q:Q) I`;
 the paper prints :math:`\bar E` where the exact limit is :math:`2 \bar E \approx 2\,\mathrm{dev}\,e`
-(shear modulus G = 1, see docs/model.md). Because :math:`F \alpha Q = \partial_F (\tfrac12
+(shear modulus G = 1, see docs/model/index.md). Because :math:`F \alpha Q = \partial_F (\tfrac12
 \alpha\, C : Q)` at fixed Q, the tangent :math:`\partial P / \partial F` is symmetric.
 """
 
@@ -126,7 +126,7 @@ def tangent(F: Array, Q: Array, m: Moduli) -> Array:
         for L in range(2):
             unit[k, L, k, L] = 1.0
     xp = T.namespace(F, Q)
-    dF = xp.broadcast_to(xp.asarray(unit), (2, 2, 2, 2, *shape))
+    dF = xp.broadcast_to(xp.asarray(unit, dtype=F.dtype), (2, 2, 2, 2, *shape))
     # all four directions at once, broadcasting F and Q over the direction axes (k, L)
     dP = first_piola_increment(F[:, :, None, None], Q[:, :, None, None], dF, m)
     return dP

@@ -123,7 +123,7 @@ def snapshot_observables(
     linear: bool,
     P: Array | None = None,
 ) -> dict[str, float]:
-    """The observables of one saved state (the series of docs/model.md section 6); with the
+    """The observables of one saved state (the series of docs/model/observables.md); with the
     stress ``P`` (first Piola, or the small-strain stress) also the macroscopic stress
     (:func:`macroscopic_stress`)."""
     S = order_parameter(q1, q2)

@@ -4,9 +4,9 @@ State: a :class:`pde.FieldCollection` of three scalar fields ``q1, q2, A`` on th
 unit square. The displacement is slaved to Q by quasi-static force balance (Eq. 3), solved on
 every evaluation of :meth:`ActiveNematicPDE.evolution_rate` by :mod:`nematic_solids.model.mechanics`
 (the time stepper may instead integrate it with the state: :meth:`ActiveNematicPDE.rates` with a
-given displacement; docs/model.md, section 4).
+given displacement; docs/model/numerics.md).
 
-Equations (tensor conventions: docs/model.md):
+Equations (tensor conventions: docs/model/index.md):
 
 .. math::
     H &= -\big(A + A_0 + C\, Q:Q - 2 B' (J - 1)\big) Q + B\, \mathrm{dev}\,\bar E

@@ -165,8 +165,8 @@ def linear_response(
     mean_dev: float,
 ) -> tuple[Array, Array, Array]:
     r"""The small-strain solution's spectra ``dev e`` (2 components), ``tr e``, ``tr sigma``
-    for the eigenstress :math:`\tau = (\alpha - B) Q + \mathrm{iso}\, I` (docs/model.md,
-    section 3): :math:`\hat b = i \hat\tau k`, :math:`\hat u = (I - a \hat k \hat k) \hat b /
+    for the eigenstress :math:`\tau = (\alpha - B) Q + \mathrm{iso}\, I` (docs/model/equations.md):
+    :math:`\hat b = i \hat\tau k`, :math:`\hat u = (I - a \hat k \hat k) \hat b /
     k^2`, :math:`\hat e = \mathrm{sym}(i k \hat u)`; incompressible: the pressure
     :math:`\hat p = \hat k \cdot \hat\tau \cdot \hat k`."""
     t11, t12 = amb * q1h, amb * q2h

@@ -13,8 +13,8 @@ the width of the walls between ordered domains. A grid resolves them when its sp
 
 the coarsest grid of the ladder :math:`N_{\min}, 2 N_{\min}, 4 N_{\min}, \dots` with at least
 :math:`c` cells per Frank length, and at most the cap. The constant :math:`c`
-(``cells_per_frank``) comes from the convergence study in docs/model.md ("Resolution from the
-physics"): the grid at which lambda and sigma2_S move by less than 5 % on the next doubling.
+(``cells_per_frank``) comes from the convergence study in docs/model/resolution.md: the grid at
+which lambda and sigma2_S move by less than 5 % on the next doubling.
 
 A rule is written ``"auto"`` (the defaults below) or as a mapping of its three numbers
 (``{"cells_per_frank": 1.3, "floor": 128, "cap": 1024}``, each optional); :func:`read_rule`
@@ -37,8 +37,8 @@ AUTO = "auto"
 #: The rule's numbers and what each may be.
 KEYS = ("cells_per_frank", "floor", "cap")
 ALLOWED = (
-    "an even integer >= 16, 'auto' (the grid from K: docs/model.md, 'Resolution from the "
-    "physics') or a rule {cells_per_frank: C > 0, floor: N0, cap: N1} (even N0 <= N1, each "
+    "an even integer >= 16, 'auto' (the grid from K: docs/model/resolution.md) or "
+    "a rule {cells_per_frank: C > 0, floor: N0, cap: N1} (even N0 <= N1, each "
     "optional)"
 )
 
@@ -50,7 +50,7 @@ class ResolutionRule:
 
     Attributes:
         cells_per_frank: c, cells per Frank length. 1.3 from the convergence study
-            (docs/model.md, "Resolution from the physics"): 128^2 at K = 1e-5 (1.28 cells)
+            (docs/model/resolution.md): 128^2 at K = 1e-5 (1.28 cells)
             moves lambda(100) by 10.6 % on doubling, every grid with 1.44 cells or more by
             less than 5 %. At K = 1e-6 it asks for 512^2 where 256^2 (0.81 cells) already
             moves lambda by less than 5 %: conservative by one doubling there.

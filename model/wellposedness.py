@@ -22,7 +22,7 @@ every point; the passive medium (shear modulus 1, P-wave modulus :math:`\kappa +
 .. math::
     m = \min_{x} \min_{\phi} \det M(x, \hat k(\phi)) / (\kappa + 1),
 
-1 for the passive medium and 0 where well-posedness is lost (docs/model.md section 7). For a
+1 for the passive medium and 0 where well-posedness is lost (docs/model/wellposedness.md). For a
 uniform Q = S (2 n n - I) at F = I (B' = 0) the symbol gives in closed form
 (:func:`uniform_margin`)
 

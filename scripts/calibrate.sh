@@ -13,7 +13,7 @@ cd "$(dirname "$0")/.."
 NEMATIC=${NEMATIC:-.venv/bin/nematic}
 PY=${PY:-.venv/bin/python}
 BASE="noise_modes=16,zeta=1,kappa=10"
-CHOSEN="noise_modes=32,zeta=0.5,kappa=20"   # the model's defaults (docs/model.md section 8)
+CHOSEN="noise_modes=32,zeta=0.5,kappa=20"   # the model's defaults (docs/model/constants.md)
 if [ "$#" -gt 0 ]; then
   settings=("$@")
 else

@@ -1,4 +1,4 @@
-"""The convergence table behind ``resolution: auto`` (docs/model.md, "Resolution from the
+"""The convergence table behind ``resolution: auto`` (docs/model/resolution.md, "Resolution from the
 physics"), from the phase.nc of campaigns/resolution_study.yaml (K x chi x resolution x
 seeds; several files, e.g. with campaigns/resolution_study_large_K.yaml, are merged into one
 table, a parameter a campaign does not sweep read from its attributes): for each (K, chi)

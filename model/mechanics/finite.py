@@ -330,7 +330,7 @@ class FiniteMechanics(Mechanics):
     ) -> MechanicalState:
         """The mechanical state at the displacement ``u_hat`` as given, without solving the
         force balance (the stages of the integrated-displacement scheme, where u is part of
-        the integrated state: docs/model.md, section 4), with the deformation gradient ``F``
+        the integrated state: docs/model/numerics.md), with the deformation gradient ``F``
         if given (else from ``u_hat``). Its ``residual`` is not computed (NaN). Raises
         ``J<=0`` where the deformation folds. The deformation and stress of the last solve
         are reused when ``u_hat`` is its solution for the same q."""

@@ -10,5 +10,5 @@ Its modules (under :mod:`nematic_solids.sweep.analysis`):
 - ``registry``: the fits by name
 - ``fits_file``: computing and writing ``fits.nc``; reading results back
 
-What each fit computes, and its options, is documented for users in docs/campaigns.md.
+What each fit computes, and its options, is documented for users in docs/campaigns/fits.md.
 """

@@ -1,5 +1,5 @@
 """The ``anisotropy`` fit: the trend of <cos 2 theta> with the applied strain
-(docs/campaigns.md, "Fits")."""
+(docs/campaigns/fits.md, "Fits")."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ ANISOTROPY_OPTIONS = ("axis", "observable")
 def anisotropy(
     phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
 ) -> xr.Dataset:
-    """The ``anisotropy`` fit (docs/campaigns.md, "Fits"). Options: ``axis`` (default ``eps``),
+    """The ``anisotropy`` fit (docs/campaigns/fits.md, "Fits"). Options: ``axis`` (default ``eps``),
     ``observable`` (default ``cos2theta``)."""
     check_options("anisotropy", options, ANISOTROPY_OPTIONS)
     ds = select(phase, options.get("select"))

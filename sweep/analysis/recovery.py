@@ -1,5 +1,5 @@
 r"""The ``recovery`` fit: what a pattern does when activity is switched off and on again
-(a ``pulse`` protocol on alpha - B, nematic_solids.model.protocol; docs/campaigns.md, "Fits").
+(a ``pulse`` protocol on alpha - B, nematic_solids.model.protocol; docs/campaigns/fits.md, "Fits").
 
 For every run, from its series and its snapshots: sigma2_S at the switch time :math:`t_s`
 (the pulse's ``start``), at the restore time :math:`t_r = t_s + D` and at the end; whether the

@@ -1,5 +1,5 @@
 r"""The ``moduli`` fit: storage and loss moduli from an oscillatory shear (a ``sine`` protocol
-of eps, nematic_solids.model.protocol; docs/campaigns.md, "Fits").
+of eps, nematic_solids.model.protocol; docs/campaigns/fits.md, "Fits").
 
 Under :math:`\epsilon(t) = \epsilon_0 \sin\varphi`, :math:`\varphi = 2\pi (t - t_s)/T`, the
 macroscopic deviatoric stress of each run (the series ``stress_shear``,

@@ -1,6 +1,6 @@
 r"""The ``alpha_cr`` and ``scaling`` fits: the critical activity from the pattern sizes and
 the exponent of :math:`\lambda = c\,[K/(\alpha - B - \alpha^{cr})]^{\beta}` (paper Eq. (7);
-docs/campaigns.md, "Fits"). The runs that count: patterned, and past the first peak of
+docs/campaigns/fits.md, "Fits"). The runs that count: patterned, and past the first peak of
 :math:`\sigma^2_S(t)`."""
 
 from __future__ import annotations
@@ -357,21 +357,21 @@ def _size_fit(phase: xr.Dataset, options: Mapping[str, Any], with_scaling: bool)
     if n_K < 2:
         log.warning(
             "scaling: %d value(s) of K with a pattern; the exponent then mostly "
-            "restates the alpha_cr fit (see docs/campaigns.md, Fits)",
+            "restates the alpha_cr fit (see docs/campaigns/fits.md, Fits)",
             n_K,
         )
     return res
 
 
 def alpha_cr(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None) -> xr.Dataset:
-    """The ``alpha_cr`` fit (docs/campaigns.md, "Fits"). Options: ``method`` (linear, nonlinear),
+    """The ``alpha_cr`` fit (docs/campaigns/fits.md). Options: ``method`` (linear, nonlinear),
     ``exponent``, ``observable`` (default ``lambda_peak``), ``min_sigma2``, ``min_gap``."""
     check_options("alpha_cr", options, SIZE_OPTIONS)
     return _size_fit(phase, options, with_scaling=False)
 
 
 def scaling(phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None) -> xr.Dataset:
-    """The ``scaling`` fit (docs/campaigns.md, "Fits"); also writes the ``alpha_cr`` variables.
+    """The ``scaling`` fit (docs/campaigns/fits.md, "Fits"); also writes the ``alpha_cr`` variables.
     Options: those of ``alpha_cr``."""
     check_options("scaling", options, SIZE_OPTIONS)
     return _size_fit(phase, options, with_scaling=True)

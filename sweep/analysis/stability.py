@@ -1,5 +1,5 @@
 """The ``stability`` fit: stable and unstable runs in the (activity, strain) plane against
-the linear-stability boundary, paper Fig. A1 (docs/campaigns.md, "Fits"). Reads the run
+the linear-stability boundary, paper Fig. A1 (docs/campaigns/fits.md, "Fits"). Reads the run
 files as well as phase.nc."""
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def stability_parameters(phase: xr.Dataset, coords: Mapping[str, float]) -> Any:
 def stability(
     phase: xr.Dataset, options: Mapping[str, Any], root: Path | None = None
 ) -> xr.Dataset:
-    """The ``stability`` fit (docs/campaigns.md, "Fits"). Options: ``activity`` (axis,
+    """The ``stability`` fit (docs/campaigns/fits.md, "Fits"). Options: ``activity`` (axis,
     default ``chi`` if swept else ``alpha_minus_B``), ``strain`` (default ``eps``),
     ``unstable_reasons`` (default [spin_diverged]), ``fraction`` (majority threshold,
     default 0.5), ``n_fine`` (points of the theory curve, default 400), ``incompressible``

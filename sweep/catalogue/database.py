@@ -49,13 +49,28 @@ def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
     cursor.close()
 
 
-def make_engine(url: str) -> Engine:
-    """An engine for ``url``; :class:`CatalogueError` for a URL of no known database."""
+def _sqlite_readonly(dbapi_connection: Any, _record: Any) -> None:
+    cursor = dbapi_connection.cursor()
+    cursor.execute("PRAGMA query_only = ON")
+    cursor.close()
+
+
+def make_engine(url: str, *, readonly: bool = False) -> Engine:
+    """An engine for ``url``; :class:`CatalogueError` for a URL of no known database.
+    ``readonly``: an SQLite file is opened immutable (no lock, no WAL or shared-memory file
+    made: nothing written beside it), for readers that must write nothing."""
     try:
         parsed = sa.engine.make_url(url)
     except sa.exc.ArgumentError as e:
         raise CatalogueError(f"not a database URL: {url!r} ({e})") from None
     backend = parsed.get_backend_name()
+    if backend == "sqlite" and readonly:
+        path = Path(parsed.database or "").resolve()
+        engine = sa.create_engine(
+            f"sqlite:///file:{path}?mode=ro&immutable=1&uri=true", poolclass=sa.pool.NullPool
+        )
+        sa.event.listen(engine, "connect", _sqlite_readonly)
+        return engine
     if backend == "sqlite":
         engine = sa.create_engine(
             parsed, connect_args={"timeout": BUSY_TIMEOUT_MS / 1000}, poolclass=sa.pool.NullPool
@@ -139,15 +154,15 @@ def _upsert(
         from sqlalchemy.dialects.postgresql import insert
     else:
         from sqlalchemy.dialects.sqlite import insert  # type: ignore[assignment]
-    for start in range(0, len(rows), CHUNK):
-        stmt = insert(table).values(rows[start : start + CHUNK])
-        if update:
-            stmt = stmt.on_conflict_do_update(
-                index_elements=list(keys), set_={c: stmt.excluded[c] for c in update}
-            )
-        else:
-            stmt = stmt.on_conflict_do_nothing(index_elements=list(keys))
-        conn.execute(stmt)
+    # one statement, executed for many rows (SQLAlchemy batches them: "insertmanyvalues")
+    stmt = insert(table)
+    if update:
+        stmt = stmt.on_conflict_do_update(
+            index_elements=list(keys), set_={c: stmt.excluded[c] for c in update}
+        )
+    else:
+        stmt = stmt.on_conflict_do_nothing(index_elements=list(keys))
+    conn.execute(stmt, rows)
 
 
 def next_seqs(conn: Connection, n: int) -> int:
@@ -171,13 +186,19 @@ def is_corrupt(e: BaseException) -> bool:
 
 
 class Database:
-    """The connection to one catalogue: migrated on construction, written in batches."""
+    """The connection to one catalogue: migrated on construction, written in batches.
+    ``readonly``: not migrated, an SQLite file opened immutable (:func:`make_engine`); a
+    catalogue of another revision than the code's is refused."""
 
-    def __init__(self, url: str):
+    def __init__(self, url: str, *, readonly: bool = False):
         self.url = url
-        self.engine = make_engine(url)
+        self.readonly = readonly
+        self.engine = make_engine(url, readonly=readonly)
         try:
-            upgrade(self.engine)
+            if readonly:
+                self._check_revision()
+            else:
+                upgrade(self.engine)
         except sa.exc.DatabaseError as e:
             self.engine.dispose()
             if self.engine.dialect.name == "sqlite" and is_corrupt(e):
@@ -187,6 +208,15 @@ class Database:
             raise CatalogueError(f"cannot open the catalogue {redacted(url)}: {e.orig}") from e
         except sa.exc.OperationalError as e:  # pragma: no cover - subclass of DatabaseError
             raise CatalogueError(f"cannot open the catalogue {redacted(url)}: {e.orig}") from e
+
+    def _check_revision(self) -> None:
+        with self.engine.connect() as conn:
+            found = conn.execute(sa.text("SELECT version_num FROM alembic_version")).scalar()
+        if found != head_revision():
+            raise CatalogueError(
+                f"the catalogue {redacted(self.url)} is at revision {found}, the code's is "
+                f"{head_revision()}: open it once to migrate it"
+            )
 
     @property
     def dialect(self) -> str:

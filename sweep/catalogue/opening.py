@@ -44,6 +44,7 @@ def open_catalogue(
     *,
     root: str | os.PathLike[str] | None = None,
     index: bool = True,
+    readonly: bool = False,
 ) -> Catalogue:
     """The catalogue of a results root.
 
@@ -54,7 +55,13 @@ def open_catalogue(
     root's files (``index``); a corrupt SQLite file is moved aside
     (``catalogue.sqlite.corrupt-<time>``) and rebuilt from the files. Raises
     :class:`~nematic_solids.sweep.errors.CatalogueError` (one line) where it cannot be opened:
-    SQLite on a network filesystem, an unreachable server, a catalogue of another root."""
+    SQLite on a network filesystem, an unreachable server, a catalogue of another root.
+
+    ``readonly``: only an existing catalogue, neither migrated nor indexed nor rebuilt, and
+    nothing written beside an SQLite file (``run --dry-run``); write through it and the
+    database refuses."""
+    if readonly:
+        return _open_readonly(target, root)
     text = os.fspath(target) if target is not None else None
     if text is not None and is_url(text):
         url, root_path = text, Path(root) if root is not None else None
@@ -104,3 +111,28 @@ def open_catalogue(
 
         index_root(catalogue, root_path)
     return catalogue
+
+
+def _open_readonly(
+    target: str | os.PathLike[str] | None, root: str | os.PathLike[str] | None
+) -> Catalogue:
+    text = os.fspath(target) if target is not None else None
+    if text is not None and is_url(text):
+        url, root_path = text, Path(root) if root is not None else None
+    else:
+        root_path = Path(text if text is not None else (root if root is not None else "results"))
+        url = catalogue_url(root_path)
+    sqlite = _sqlite_file(url)
+    if sqlite is not None and not sqlite.is_file():
+        raise CatalogueError(f"no catalogue {sqlite}")
+    try:
+        database = Database(url, readonly=True)
+    except CorruptCatalogue as e:
+        raise CatalogueError(str(e)) from None
+    if root_path is None:
+        recorded = database.get_meta(ROOT_KEY)
+        if recorded is None:
+            database.close()
+            raise CatalogueError(f"the catalogue {redacted(url)} names no results root")
+        root_path = Path(recorded)
+    return Catalogue(database, root_path)

@@ -53,6 +53,11 @@ class Condition:
     low: float | None = None
     high: float | None = None
 
+    def __post_init__(self) -> None:
+        space, dot, _ = self.key.rpartition(".")
+        if dot and space not in t.SPACES:
+            raise ValueError(f"{self.key!r}: the space is one of {', '.join(t.SPACES)}")
+
     @classmethod
     def of(cls, key: str, value: Any) -> Condition:
         """From a Python value: a number or word (equal), a ``(low, high)`` pair (either
@@ -111,7 +116,7 @@ def _number_clause(column: sa.ColumnElement[Any], cond: Condition) -> sa.ColumnE
     if cond.equal is not None:
         tol = abs(cond.equal) * REL_TOL
         return column.between(cond.equal - tol, cond.equal + tol)
-    parts = [column.is_not(None)]
+    parts: list[sa.ColumnElement[bool]] = [column.is_not(None)]
     if cond.low is not None:
         parts.append(column >= cond.low)
     if cond.high is not None:
@@ -120,22 +125,21 @@ def _number_clause(column: sa.ColumnElement[Any], cond: Condition) -> sa.ColumnE
 
 
 def _clause(cond: Condition) -> sa.ColumnElement[bool]:
-    """The run's own column (:data:`RUN_NUMBERS`), else EXISTS a value row of the run that
-    meets ``cond``."""
+    """The run's own column (:data:`RUN_NUMBERS`), else the run is among those with a value
+    row that meets ``cond``."""
     if cond.key in RUN_NUMBERS:
         return _number_clause(t.runs.c[cond.key], cond)
     v = t.run_values
     space, _, key = cond.key.rpartition(".")
-    parts = [v.c.run_id == t.runs.c.run_id, v.c.key == key]
+    parts = [v.c.key == key]
     if space:
-        if space not in t.SPACES:
-            raise ValueError(f"{cond.key!r}: the space is one of {', '.join(t.SPACES)}")
         parts.append(v.c.space == space)
     if isinstance(cond.equal, str):
         parts.append(v.c.text_value == cond.equal)
     else:
         parts.append(_number_clause(v.c.num_value, cond))
-    return sa.exists(sa.select(1).where(*parts))
+    # the run ids that meet it, through the (key, value) index: one range scan per condition
+    return t.runs.c.run_id.in_(sa.select(v.c.run_id).where(*parts))
 
 
 def conditions(where: Mapping[str, Any] | Sequence[Condition] | None) -> list[Condition]:

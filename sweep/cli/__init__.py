@@ -17,6 +17,7 @@ from typing import Any
 
 from . import (
     campaigns,
+    catalogue,
     driver,
     export,
     figures,
@@ -28,7 +29,7 @@ from . import (
     status,
     verify,
 )
-from .app import app
+from .app import RegistryHelpCommand, app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
     "validate": campaigns.validate,
@@ -46,9 +47,13 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "simulate": simulate.simulate,
     "stability": stability.stability,
     "figures": figures.figures,
+    "catalogue": catalogue.catalogue,
 }
 
+#: the commands whose help names the registered figures and fits
+NAMING_REGISTRIES = {"figures"}
+
 for _name, _command in COMMANDS.items():
-    app.command(_name)(_command)
+    app.command(_name, cls=RegistryHelpCommand if _name in NAMING_REGISTRIES else None)(_command)
 
 __all__ = ["COMMANDS", "app"]

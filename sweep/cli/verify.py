@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 
 from ..errors import CampaignLocked, ClusterError, StoreError
@@ -18,6 +17,7 @@ from .app import (
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -83,7 +83,7 @@ def verify(
         error(
             err,
             f"{campaign}: the campaign has no verify: section; add one (docs/"
-            'campaigns.md, "Verification"), e.g.\n  verify:\n    variants:\n'
+            "campaigns/verification.md), e.g.\n  verify:\n    variants:\n"
             "      - resolution: x2\n      - tolerance: /10",
         )
         raise typer.Exit(EXIT_BAD_INPUT)

@@ -12,5 +12,5 @@ Its modules (under :mod:`nematic_solids.sweep.figures`):
 - ``registry``: the figures by name, the fits each needs, when each applies
 - ``produce``: plan, draw and write them (``nematic figures``, and the end of ``nematic run``)
 
-What each figure shows, and its options, is documented for users in docs/campaigns.md.
+What each figure shows, and its options, is documented for users in docs/campaigns/figures.md.
 """

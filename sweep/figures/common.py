@@ -115,7 +115,8 @@ class Results:
         return self.fits
 
 
-#: How a verification verdict is drawn: a square frame around the point (docs/campaigns.md).
+#: How a verification verdict is drawn: a square frame around the point
+#: (docs/campaigns/verification.md).
 VERDICT_STYLE = {
     1: ("tab:green", "verified: converged"),
     0: ("tab:orange", "verified: changed by a variant"),

@@ -1,6 +1,6 @@
 r"""Paper Fig. 2: (a) a snapshot, (b) sigma2_S(t) for several alpha - B (one seed), (c)
 sigma2_S(t_final) against alpha - B with every seed and the fitted transition
-(docs/campaigns.md, "Figures")."""
+(docs/campaigns/figures.md, "Figures")."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ FIG2_OPTIONS = ("select", "seed", "curves", "snapshot", "yscale")
 
 
 def fig2(res: Results, options: Mapping[str, Any]) -> Figure:
-    """Paper Fig. 2 (docs/campaigns.md)."""
+    """Paper Fig. 2 (docs/campaigns/figures.md)."""
     from matplotlib import colormaps
     from matplotlib.figure import Figure
 

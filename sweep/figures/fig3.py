@@ -1,5 +1,5 @@
 r"""Paper Fig. 3: the pattern size against K / (alpha - B - alpha_cr) on log-log axes with the
-fitted power law; inset alpha_cr(K) (docs/campaigns.md, "Figures")."""
+fitted power law; inset alpha_cr(K) (docs/campaigns/figures.md, "Figures")."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ FIG3_OPTIONS: tuple[str, ...] = ()
 
 
 def fig3(res: Results, options: Mapping[str, Any]) -> Figure:
-    """Paper Fig. 3 (docs/campaigns.md)."""
+    """Paper Fig. 3 (docs/campaigns/figures.md)."""
     from matplotlib import colormaps
     from matplotlib.colors import LogNorm, Normalize
     from matplotlib.figure import Figure

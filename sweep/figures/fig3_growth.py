@@ -1,6 +1,6 @@
 r"""Fig. 3's mechanism: the pattern size lambda(t) and sigma2_S(t) of one seed for several
 alpha - B at one K, the growth peak (where Fig. 3 reads lambda) marked on each curve
-(docs/campaigns.md, "Figures").
+(docs/campaigns/figures.md, "Figures").
 
 lambda(t) of the relaxing texture grows at about the same rate at every alpha - B; what
 activity changes is when the pattern's growth ends, so lambda_peak falls with activity when

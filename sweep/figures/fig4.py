@@ -1,6 +1,6 @@
 r"""Paper Fig. 4: (a) the phase diagram over chi (alpha - B), K and eps, (b) four
 representative snapshots, (c) <cos 2 theta> against eps with the fitted slopes
-(docs/campaigns.md, "Figures")."""
+(docs/campaigns/figures.md, "Figures")."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def _sizes(values: np.ndarray, vmax: float, smin: float = 8.0, smax: float = 260
 
 
 def fig4(res: Results, options: Mapping[str, Any]) -> Figure:
-    """Paper Fig. 4 (docs/campaigns.md)."""
+    """Paper Fig. 4 (docs/campaigns/figures.md)."""
     from matplotlib import colormaps
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure

@@ -1,5 +1,5 @@
 r"""Paper Fig. A1: stable and unstable runs in the (chi (alpha - B), eps) plane with the
-linear-stability boundary (docs/campaigns.md, "Figures")."""
+linear-stability boundary (docs/campaigns/figures.md, "Figures")."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def _ran(phase: xr.Dataset, act: str, strain: str, shape: tuple[int, ...]) -> np
 
 
 def figA1(res: Results, options: Mapping[str, Any]) -> Figure:
-    """Paper Fig. A1 (docs/campaigns.md)."""
+    """Paper Fig. A1 (docs/campaigns/figures.md)."""
     from matplotlib.figure import Figure
 
     check_options("figA1", options, FIGA1_OPTIONS)

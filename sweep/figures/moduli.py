@@ -2,7 +2,7 @@ r"""An oscillatory shear's moduli (a ``sine`` of eps; the ``moduli`` fit): (a) t
 modulus G' and (b) the loss modulus G'' against the sweep's first axis, one line per period and
 amplitude (the passive matrix's G' = 1, G'' = 0 dashed); (c) one seed's stress against the
 strain over the last period at the axis' lowest and highest value, the Lissajous loop whose
-orientation is the sign of G'' (docs/campaigns.md, "Figures")."""
+orientation is the sign of G'' (docs/campaigns/figures.md, "Figures")."""
 
 from __future__ import annotations
 

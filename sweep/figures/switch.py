@@ -3,7 +3,7 @@ r"""Switching activity off and on (a ``pulse`` of alpha - B swept over its ``lev
 every level, the longest duration; (b) how far the pattern fell while activity was low,
 log10 of sigma2_S at the restore time over its value at the switch, with the fraction of seeds
 that recovered; (c) its memory, the correlation of S before the switch and at the end
-(docs/campaigns.md, "Figures")."""
+(docs/campaigns/figures.md, "Figures")."""
 
 from __future__ import annotations
 

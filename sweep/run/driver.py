@@ -207,7 +207,7 @@ def _run_campaign(
     t0 = clock()
     summary = RunSummary(
         total=len(expansion),
-        skipped=len(plan.done) + len(plan.failed),
+        skipped=plan.skipped,
         failed_before=len(plan.failed),
     )
     watch = Supervisor(link, campaign.execution, clock=clock)
@@ -272,6 +272,7 @@ def _run_campaign(
                     campaign.store,
                     plan.history.get(i),
                     plan.parents.get(i),
+                    plan.parent_paths.get(i),
                 )
                 held.append((run, task, i))
             # a run that goes again (its result was lost) gets a new key: the old one may
@@ -482,7 +483,7 @@ def drive(
         except KeyboardInterrupt:  # while the cluster was starting or closing
             summary = RunSummary(
                 total=len(expansion),
-                skipped=len(plan.done) + len(plan.failed),
+                skipped=plan.skipped,
                 failed_before=len(plan.failed),
                 interrupted=True,
             )

@@ -105,7 +105,8 @@ def run_verification(
     vstore.ensure()
     base = RunList(campaign, sample.base_list())
     variants = RunList(campaign, sample.variant_list())
-    plan_b, plan_v = plan_runs(base, store), plan_runs(variants, vstore)
+    # the variants' folder is no campaign of the results root: no catalogue, no reuse there
+    plan_b, plan_v = plan_runs(base, store), plan_runs(variants, vstore, reuse=False)
     say(
         f"verify {campaign.name}: {len(sample.points)} points x {len(sample.seeds)} seeds, "
         f"{len(sample.variants)} variant(s): {len(base)} base runs ({len(plan_b.todo)} to "

@@ -1,5 +1,5 @@
 """Finite strain with the displacement integrated with the state (``Numerics.displacement =
-"integrated"``, docs/model.md section 4): the accuracy contract against a tightly converged
+"integrated"``, docs/model/numerics.md): the accuracy contract against a tightly converged
 run of the scheme that solves force balance at every stage, force balance at the saved
 times, and the displacement's share of the error estimate. (Its order of accuracy:
 ``tests/model/test_dynamics.py::test_time_step_convergence_order``; the passive energy:
@@ -45,7 +45,7 @@ def test_integrated_displacement_agrees_with_a_tight_reference():
 @pytest.mark.parametrize(("n", "t_final"), [(64, 100.0), (128, 60.0)])
 @pytest.mark.parametrize("amb", [0.6, 1.0])
 def test_integrated_displacement_accuracy_contract(n, t_final, amb):
-    """The contract of docs/model.md section 4 at 64^2 and 128^2, alpha - B = 0.6 and 1 (the
+    """The contract of docs/model/numerics.md at 64^2 and 128^2, alpha - B = 0.6 and 1 (the
     band-16 texture, which both grids hold)."""
     _contract(n, t_final, amb, noise_modes=16)
 

@@ -1,4 +1,4 @@
-"""The initial director textures (model/initial.py, docs/model.md section 5): the band-limited
+"""The initial director textures (model/initial.py, docs/model/texture.md): the band-limited
 field and the per-node ("initial random orientation") texture: their statistics, determinism
 and what each does across resolutions."""
 

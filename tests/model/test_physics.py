@@ -8,7 +8,7 @@ import pytest
 from nematic_solids.model.parameters import Numerics, Parameters
 from nematic_solids.model.simulate import run
 
-FIG2 = Parameters()  # defaults = the Fig. 2 caption's values + docs/model.md's choices
+FIG2 = Parameters()  # defaults = the Fig. 2 caption's values + docs/model/index.md's choices
 
 
 def test_fig2_caption_defaults():

@@ -340,3 +340,22 @@ def test_processes_opening_a_new_catalogue_at_once_migrate_it_one_at_a_time(tmp_
     cat = open_catalogue(tmp_path)
     assert len(cat.runs()) == 4
     cat.close()
+
+
+def test_a_read_only_catalogue_writes_nothing_beside_its_file(tmp_path):
+    import sqlalchemy as sa
+
+    cat = open_catalogue(tmp_path)
+    cat.record([row("a", "c", parameters={"K": 1e-5})])
+    cat.close()
+    for extra in ("-wal", "-shm", ".lock"):
+        Path(f"{tmp_path / 'catalogue.sqlite'}{extra}").unlink(missing_ok=True)
+    before = {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()}
+    ro = open_catalogue(tmp_path, readonly=True)
+    assert list(ro.runs(where={"K": 1e-5})["run_id"]) == ["a"]
+    with pytest.raises(sa.exc.OperationalError):
+        ro.record([row("b", "c")])
+    ro.close()
+    assert {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()} == before
+    with pytest.raises(CatalogueError, match="no catalogue"):
+        open_catalogue(tmp_path / "elsewhere", readonly=True)

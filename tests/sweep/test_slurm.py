@@ -276,8 +276,8 @@ def test_a_wrong_python_fails_fast_quoting_the_worker_error(slurm, tmp_path):
 
 
 def docs_slurm_example() -> str:
-    """The SLURM campaign of docs/campaigns.md (the yaml block starting `name: fig2-slurm`)."""
-    text = (ROOT / "docs" / "campaigns.md").read_text()
+    """The SLURM campaign of docs/campaigns/clusters.md (the yaml block `name: fig2-slurm`)."""
+    text = (ROOT / "docs" / "campaigns" / "clusters.md").read_text()
     start = text.index("```yaml\nname: fig2-slurm\n") + len("```yaml\n")
     return text[start : text.index("```", start)]
 
@@ -523,8 +523,8 @@ LONG_T_FINAL = 8000.0
 
 # ----------------------------------------------------------------------------- the driver's job
 def docs_driver_script() -> str:
-    """The driver's batch script of docs/campaigns.md (the sh block starting `#!/bin/bash`)."""
-    text = (ROOT / "docs" / "campaigns.md").read_text()
+    """The driver's batch script of docs/campaigns/clusters.md (the sh block `#!/bin/bash`)."""
+    text = (ROOT / "docs" / "campaigns" / "clusters.md").read_text()
     start = text.index("```sh\n#!/bin/bash\n") + len("```sh\n")
     return text[start : text.index("```", start)]
 

@@ -147,8 +147,8 @@ def run(
         bool,
         typer.Option(
             "--no-service",
-            help="Run here even when a service (`nematic serve`) runs for the results root "
-            "(by default the campaign is handed to it).",
+            help="Run here, not in the `nematic serve` of the results root (which takes "
+            "the campaign when it runs).",
         ),
     ] = False,
     catalogue: CatalogueOpt = None,
@@ -156,9 +156,6 @@ def run(
     quiet: QuietOpt = False,
 ) -> None:
     """Run a campaign on dask, resuming where it stopped.
-
-    When a service (`nematic serve`) runs for the results root, the campaign is handed to it
-    (as `nematic submit` does; exit 0 once queued) unless `--no-service` is given.
 
     Finished runs are skipped; one netCDF per run, phase.nc at the end. Exit 0: every run
     succeeded (--detach: the driver runs; --dry-run: the cost printed), 1: some failed, 2: bad

@@ -102,6 +102,7 @@ def serve(root: Path, options: ServeOptions, say: Callable[[str], None] = print)
             f"{info.get('url', '?')}); 'nematic queue --results {root}' talks to it"
         ) from None
     try:
+        paths.clear_info()  # a killed service's: where this one listens is written below
         catalogue, queue = open_service_database(paths.root)
         sock = _bind(options.host, options.port)
         port = sock.getsockname()[1]

@@ -63,6 +63,7 @@ def wait_state(root: Path, entry_id: int, states: tuple[str, ...], timeout: floa
     return entry_state(root, entry_id)
 
 
+@pytest.mark.slow  # about 40 s: a cluster, a campaign, its phase.nc, fits, figures, report
 def test_serve_submit_watch_stop(tmp_path):
     root = tmp_path / "results"
     path = tmp_path / "tiny.yaml"

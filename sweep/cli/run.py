@@ -147,8 +147,8 @@ def run(
         bool,
         typer.Option(
             "--no-service",
-            help="Run here even when a service (`nematic serve`) runs for the results root "
-            "(by default the campaign is handed to it).",
+            help="Run here, not in the `nematic serve` of the results root (which takes "
+            "the campaign when it runs).",
         ),
     ] = False,
     catalogue: CatalogueOpt = None,

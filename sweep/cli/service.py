@@ -99,6 +99,7 @@ def submit(
     set_: SetOpt = None,
     seeds: SeedsOpt = None,
     name: NameOpt = None,
+    verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
     """Queue a campaign with the service of the results root.
@@ -111,6 +112,7 @@ def submit(
     from ..service.client import require_client
     from ..spec.yaml_input import parse_assignments
 
+    setup_logging(err_console(), verbose, quiet)
     if not campaign.is_file():
         error(err_console(), f"no campaign file {campaign}")
         raise typer.Exit(EXIT_BAD_INPUT)
@@ -136,11 +138,14 @@ def queue(
     all_: Annotated[
         bool, typer.Option("--all", help="Also the campaigns that ended (done, failed, cancelled).")
     ] = False,
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """List the campaigns of the service's queue, in the order they run (exit 2 when no
     service runs for the results root)."""
     from ..service.client import require_client
 
+    setup_logging(err_console(), verbose, quiet)
     entries = require_client(results).queue()["entries"]
     if not all_:
         entries = [e for e in entries if e["state"] in ("queued", "running")]
@@ -162,14 +167,17 @@ def queue(
 def cancel(
     entry_id: Annotated[int, typer.Argument(metavar="ID", help="The campaign's id in the queue.")],
     results: ResultsOpt = Path("results"),
+    verbose: VerboseOpt = False,
+    quiet: QuietOpt = False,
 ) -> None:
     """Cancel a queued campaign, or stop a running one (its runs not finished stay pending: a
     later submission or 'nematic run' resumes them). Exit 2 for an unknown id, one that has
     ended, or when no service runs."""
     from ..service.client import require_client
 
+    setup_logging(err_console(), verbose, quiet)
     entry = require_client(results).cancel(entry_id)
-    Console(highlight=False, soft_wrap=True).print(
+    Console(highlight=False, soft_wrap=True, quiet=quiet).print(
         f"campaign {entry['id']} ({entry['name']}): {entry['state']}"
         + (f", {entry['message']}" if entry["message"] else ""),
         markup=False,

@@ -141,7 +141,9 @@ class QueueStore:
                     version=self._next_version(conn),
                 )
             )
-            new_id = int(result.inserted_primary_key[0])
+            key = result.inserted_primary_key
+            assert key is not None
+            new_id = int(key[0])
         return self.get(new_id)
 
     def get(self, entry_id: int) -> Entry:

@@ -9,6 +9,7 @@ cluster."""
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import logging
 import os
 import signal
@@ -101,6 +102,7 @@ def serve(root: Path, options: ServeOptions, say: Callable[[str], None] = print)
             f"{info.get('url', '?')}); 'nematic queue --results {root}' talks to it"
         ) from None
     try:
+        paths.clear_info()  # a killed service's: where this one listens is written below
         catalogue, queue = open_service_database(paths.root)
         sock = _bind(options.host, options.port)
         port = sock.getsockname()[1]
@@ -134,6 +136,7 @@ def serve(root: Path, options: ServeOptions, say: Callable[[str], None] = print)
             timeout_graceful_shutdown=2,
         )
         server = uvicorn.Server(config)
+        faulthandler.register(signal.SIGUSR1, all_threads=True)  # kill -USR1: the stacks
         runner.start()
         try:
             with sigterm_as_interrupt():

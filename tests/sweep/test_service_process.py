@@ -22,6 +22,7 @@ from nematic_solids.model.checkpoint import load
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.service.client import ServiceClient
 from nematic_solids.sweep.service.paths import ServicePaths
+from nematic_solids.sweep.store import CampaignStore
 
 TINY = """\
 name: {name}
@@ -62,6 +63,7 @@ def wait_state(root: Path, entry_id: int, states: tuple[str, ...], timeout: floa
     return entry_state(root, entry_id)
 
 
+@pytest.mark.slow  # about 40 s: a cluster, a campaign, its phase.nc, fits, figures, report
 def test_serve_submit_watch_stop(tmp_path):
     root = tmp_path / "results"
     path = tmp_path / "tiny.yaml"
@@ -88,22 +90,34 @@ def test_serve_submit_watch_stop(tmp_path):
         assert all(r["status"] == "ok" for r in recs.values())
         assert (root / "tiny" / "phase.nc").exists()
         assert (root / "tiny" / "report.html").exists()
-        # nematic run hands a campaign to the service of its root
+        # nematic run hands a campaign to the service of its root; its folder is held by
+        # another driver (the test), so it waits in the queue, and is cancelled there
         path2 = tmp_path / "tiny2.yaml"
         path2.write_text(TINY.format(name="tiny2"))
-        refused = invoke("run", path2, "--results", root, "--retry-failed")
-        assert refused.exit_code == 2
-        assert "--no-service" in refused.output
-        handed = invoke("run", path2, "--results", root)
-        assert handed.exit_code == 0, handed.output
-        assert "handed to it" in handed.output
-        entry2 = int(handed.output.split(" as ")[1].split()[0])
-        listed = json.loads(invoke("queue", "--results", root, "--json", "--all").output)
-        assert [e["name"] for e in listed] == ["tiny2", "tiny"]  # queued or running first
-        cancelled = invoke("cancel", entry2, "--results", root)
-        assert cancelled.exit_code == 0, cancelled.output
-        assert wait_state(root, entry2, ("cancelled", "done"), 120)["state"] == "cancelled"
-        assert invoke("cancel", entry2, "--results", root).exit_code == 2  # it has ended
+        other = CampaignStore(root, "tiny2").lock()
+        other.acquire(command="another driver")
+        try:
+            refused = invoke("run", path2, "--results", root, "--retry-failed")
+            assert refused.exit_code == 2
+            assert "--no-service" in refused.output
+            handed = invoke("run", path2, "--results", root)
+            assert handed.exit_code == 0, handed.output
+            assert "handed to it" in handed.output
+            entry2 = int(handed.output.split(" as ")[1].split()[0])
+            wait_for(
+                lambda: entry_state(root, entry2)["message"].startswith("waiting"),
+                120,
+                "the campaign to wait for its folder",
+            )
+            assert "another driver" in entry_state(root, entry2)["message"]
+            listed = json.loads(invoke("queue", "--results", root, "--json", "--all").output)
+            assert [e["name"] for e in listed] == ["tiny2", "tiny"]  # queued, then ended
+            cancelled = invoke("cancel", entry2, "--results", root)
+            assert cancelled.exit_code == 0, cancelled.output
+            assert entry_state(root, entry2)["state"] == "cancelled"
+            assert invoke("cancel", entry2, "--results", root).exit_code == 2  # it has ended
+        finally:
+            other.release()
     finally:
         os.kill(proc.pid, signal.SIGTERM)
         try:

@@ -410,6 +410,7 @@ class VerifySpec:
 BRANCH = "branch"
 #: the branches a chain may have, along its axis in increasing or decreasing order
 BRANCHES = ("up", "down")
+CHAIN_STARTS = ("predecessor", "fresh")  #: ``chain: {up: ...}``: where the up branch starts
 
 
 @dataclass(frozen=True)
@@ -421,6 +422,9 @@ class ChainSpec:
 
     axis: str
     branches: tuple[str, ...] = BRANCHES
+    #: where each run of the up branch starts: ``"predecessor"`` (quasi-static) or ``"fresh"``
+    #: (each from the seeded texture, as Fig. 2's runs: the plain runs of its points)
+    up: str = "predecessor"
 
     @property
     def dim(self) -> Dim:

@@ -2,7 +2,8 @@
 command is :func:`guarded`), the common options, logging, loading the campaign.
 
 Exit codes: :data:`EXIT_OK`, :data:`EXIT_FAILED_RUNS`, :data:`EXIT_BAD_INPUT`,
-:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_INTERRUPTED` (:mod:`nematic_solids.sweep.cli`).
+:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_PRODUCTS_FAILED`, :data:`EXIT_INTERRUPTED`
+(:mod:`nematic_solids.sweep.cli`).
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import click
+import rich.console
 import typer
-from rich.console import Console
 from rich.logging import RichHandler
 from rich.markup import escape
 from typer.core import TyperCommand
@@ -26,9 +27,25 @@ from typer.core import TyperCommand
 if TYPE_CHECKING:
     from ..campaign import Campaign
 
+
+class Console(rich.console.Console):
+    """rich's console, printing what it is given as typed: no emoji codes (``:x:`` in a value
+    stays ``:x:``), no highlighting, long lines not broken. Markup (``[bold]``) is on: every
+    value a user wrote goes through :func:`rich.markup.escape` (or ``markup=False``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("emoji", False)
+        kwargs.setdefault("highlight", False)
+        kwargs.setdefault("soft_wrap", True)
+        super().__init__(*args, **kwargs)
+
+
 EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: ``nematic run --max-failures``: the campaign stopped early, too many runs failed
 EXIT_TOO_MANY_FAILURES = 3
+#: every run succeeded (``nematic run``) but a fit or a figure failed, or (``nematic figures``)
+#: a fit or a figure failed; each is listed in one line
+EXIT_PRODUCTS_FAILED = 4
 #: Show Python tracebacks of errors (``nematic --debug ...`` or ``NEMATIC_DEBUG=1``).
 DEBUG = {"on": False}
 

@@ -3,12 +3,13 @@ phase.nc, fits, figures, verification and report; ``--dry-run`` and ``--detach``
 
 from __future__ import annotations
 
+import contextlib
+import shutil
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 from rich.progress import (
     BarColumn,
@@ -23,8 +24,10 @@ from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
+    EXIT_PRODUCTS_FAILED,
     EXIT_TOO_MANY_FAILURES,
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -40,8 +43,11 @@ from .app import (
 )
 from .campaigns import print_estimate, report_changes, storage_message
 from .collection import collection_or_none, refuse_name, run_collection
-from .products import regenerate_figures, regenerate_report, repair_products
+from .products import failure_lines, regenerate_figures, regenerate_report, repair_products
 from .progress import ProgressEvents
+
+if TYPE_CHECKING:
+    from ..store import CampaignStore
 
 
 def run(
@@ -135,21 +141,33 @@ def run(
             "stop NAME ends it.",
         ),
     ] = False,
+    no_service: Annotated[
+        bool,
+        typer.Option(
+            "--no-service",
+            help="Run here even when a service (`nematic serve`) runs for the results root "
+            "(by default the campaign is handed to it).",
+        ),
+    ] = False,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
     """Run a campaign on dask, resuming where it stopped.
 
+    When a service (`nematic serve`) runs for the results root, the campaign is handed to it
+    (as `nematic submit` does; exit 0 once queued) unless `--no-service` is given.
+
     Finished runs are skipped; one netCDF per run, phase.nc at the end. Exit 0: every run
     succeeded (--detach: the driver runs; --dry-run: the cost printed), 1: some failed, 2: bad
-    input or a locked campaign, 3: stopped by --max-failures, 130: interrupted (rerun to
-    resume). More: docs/campaigns/execution.md and docs/campaigns/cost.md.
+    input or a locked campaign, 3: stopped by --max-failures, 4: every run succeeded but a fit or
+    figure failed (one line each), 130: interrupted (rerun to resume). More:
+    docs/campaigns/execution.md and docs/campaigns/cost.md.
     """
     from ..expand import expand
     from ..outputs.aggregate import write_phase
     from ..run.clusters import WORKER_LOSSES
-    from ..run.driver import describe_failure, drive
-    from ..run.failures import FailureLimit
+    from ..run.driver import drive
+    from ..run.failures import FailureLimit, describe_failure
     from ..store import CampaignStore
 
     err = err_console()
@@ -179,6 +197,7 @@ def run(
                 dashboard=dashboard,
                 dry_run=dry_run,
                 detach=detach,
+                no_service=no_service,
                 verbose=verbose,
                 quiet=quiet,
             ),
@@ -221,6 +240,22 @@ def run(
                     f"waiting: {waiting.problems[0].message}", markup=False
                 )
         return
+    if not no_service:
+        from .service import hand_to_service
+
+        options = {
+            "--scheduler": scheduler,
+            "--workers": workers,
+            "--retry-failed": retry_failed,
+            "--max-failures": max_failures,
+            "--prune": prune,
+            "--detach": detach,
+            "--check-files": check_files,
+            "--no-verification": not verification and c.verify is not None,
+            "--no-aggregate": not aggregate,
+            "--no-figures": not figures,
+        }
+        hand_to_service(campaign, results, set_, seeds, name, options, quiet)
     if detach:
         from .driver import run_detached
 
@@ -228,11 +263,16 @@ def run(
     say = Console(stderr=True, highlight=False, soft_wrap=True, quiet=quiet)
     store = CampaignStore(results, c.name)
     lock = store.lock()
+    fresh = not store.root.exists()  # made by this command: removed again if it is refused
     try:
         store.ensure()
         lock.acquire(command=" ".join(sys.argv))
     except (CampaignLocked, StoreError) as e:
         error(err, e)
+        if fresh:  # the folders ensure() made, if still empty (another driver's are not)
+            for folder in (store.runs_dir, store.root):
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
         raise typer.Exit(EXIT_BAD_INPUT) from None
     try:
         expansion = expand(c)
@@ -300,9 +340,13 @@ def run(
                     events.close()
         except (ClusterError, StoreError, CampaignError) as e:
             error(err, e)
+            if fresh:
+                discard_unused(store)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
             error(err, storage_message(store, e))
+            if fresh:
+                discard_unused(store)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:  # before any run was submitted
             err.print("[yellow]interrupted[/]; rerun the same command to resume")
@@ -346,6 +390,7 @@ def run(
                 f"{summary.completed} run(s) in {fmt_time(summary.wall_time)} "
                 f"(sum of run times {fmt_time(summary.run_time)})"
             )
+        product_failures: list[str] = []
         if aggregate:
             try:
                 write_phase(expansion, store)
@@ -355,13 +400,15 @@ def run(
                     if verification:  # the fits pick its sample; the figures show it
                         from .verify import verify_step
 
-                        regenerate_figures(c, results, draw_figures=False)
+                        fitted = regenerate_figures(c, results, draw_figures=False)
                         verify_step(c, store, say, before=False)
                         drawn = regenerate_figures(c, results, fits=False)
+                        drawn.failures = {**fitted.failures, **drawn.failures}
                     else:
                         drawn = regenerate_figures(c, results)
-                    for figure in drawn:
+                    for figure in drawn.paths:
                         say.print(f"figure: {escape(str(figure))}")
+                    product_failures = failure_lines(drawn.failures)
                     page = regenerate_report(c, results)
                     if page is not None:
                         say.print(f"report: {escape(str(page))}")
@@ -372,6 +419,8 @@ def run(
                     "aggregate) once the folder can be written",
                 )
                 raise typer.Exit(EXIT_BAD_INPUT) from None
+        for line in product_failures:
+            err.print(f"[red]failed[/]: {escape(line)}", soft_wrap=True, highlight=False)
         failures = [] if summary is None else summary.failed
         n_failed = len(failures) + len(plan.failed)
         if summary is not None and summary.lost:
@@ -400,7 +449,23 @@ def run(
                 err.print(
                     f"  ... and {len(plan.failed)} earlier failure(s); --retry-failed redoes them"
                 )
-            err.print(f"details: nematic status {campaign}")
+            err.print(f"details: nematic status {campaign}", markup=False)
             raise typer.Exit(EXIT_FAILED_RUNS)
+        if product_failures:
+            err.print(
+                f"every run succeeded, but {len(product_failures)} fit(s) or figure(s) failed "
+                f"(above); nematic figures {campaign} redraws them"
+            )
+            raise typer.Exit(EXIT_PRODUCTS_FAILED)
     finally:
         lock.release()
+
+
+def discard_unused(store: CampaignStore) -> None:
+    """Remove the campaign folder that this command made for a campaign it then refused
+    (e.g. its parent's runs are not done, or its cluster did not start): its lock file and
+    campaign copy, never a run's file (the folder is kept if ``runs/`` holds anything)."""
+    with contextlib.suppress(OSError):
+        if store.runs_dir.is_dir() and any(store.runs_dir.iterdir()):
+            return
+        shutil.rmtree(store.root)

@@ -285,6 +285,7 @@ def build_phase(
                 {
                     "chain_axis": campaign.chain.axis,
                     "chain_branches": ", ".join(campaign.chain.branches),
+                    "chain_up": campaign.chain.up,
                 }
                 if campaign.chain is not None
                 else {}

@@ -48,6 +48,8 @@ class Content:
     axes: list[tuple[str, str]]
     seeds: str
     counts: dict[str, int]
+    #: the line that says which done runs other campaigns made ("" if none)
+    reused: str = ""
     figures: list[tuple[str, str]] = field(default_factory=list)
     fits: list[Table] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
@@ -94,7 +96,16 @@ def summary(opened: CampaignResults, status: StatusReport) -> Content:
             "failed": status.failed,
             "pending": status.pending,
         },
+        reused=_reuse_text(status.reused),
     )
+
+
+def _reuse_text(counts: dict[str, int]) -> str:
+    """``4 of the done runs were made by campaign first (taken in place)``, or ""."""
+    if not counts:
+        return ""
+    parts = ", ".join(f"{n} by {name}" for name, n in sorted(counts.items()))
+    return f"{sum(counts.values())} of the done runs were made by other campaigns: {parts}"
 
 
 def figure_images(root: Path) -> list[tuple[str, str]]:

@@ -43,7 +43,8 @@ pre { background: #f6f6f6; padding: 0.7em; overflow-x: auto; font-size: 0.85em; 
 {% endfor %}<tr><th>seeds</th><td>{{ c.seeds }}</td></tr>
 <tr><th>runs</th><td>{{ c.counts.runs }}: {{ c.counts.done }} done, {{ c.counts.failed }} failed,
 {{ c.counts.pending }} pending</td></tr>
-</table>
+{% if c.reused %}<tr><th>reused</th><td id="reused">{{ c.reused }}</td></tr>
+{% endif %}</table>
 <p class="note">Written {{ created }} from {{ folder }}.</p>
 
 <h2 id="phase-diagram">Phase diagram</h2>

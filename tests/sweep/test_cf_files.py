@@ -1,12 +1,14 @@
 """The netCDF files (run files, phase.nc, fits.nc) follow the CF conventions: checked
 attribute by attribute, by compliance-checker's cf:1.11 suite and by cfchecks (test
-dependencies: the `test` extra; cfchecks also needs the UDUNITS-2 C library) on small real
-files."""
+dependencies: the `test` extra; cfchecks' UDUNITS-2 C library is the one the cf-units wheel
+carries, so no system package is needed) on small real files."""
 
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -211,15 +213,61 @@ CFCHECKS_UNKNOWN_VERSION = "does not appear to contain CF Convention data"
 EMPTY_TABLE = '<?xml version="1.0"?>\n<{0}><version_number>0</version_number><date/></{0}>\n'
 
 
-def _cfchecks(path: Path, tmp_path: Path, version: tuple[int, int]) -> dict[str, list[str]]:
+def _bundled_udunits() -> tuple[str, str] | None:
+    """The UDUNITS-2 C library and its XML database that the cf-units wheel (a dependency of
+    compliance-checker, so of the test extra) carries: ``(library, udunits2.xml)``, or None
+    where this installation of cf-units has none (built against a system library)."""
     try:
-        import compliance_checker
-        from cfchecker.cfchecks import CFChecker, CFVersion
-    except ImportError as e:  # a test dependency: never skip silently
+        import cf_units
+    except ImportError:
+        return None
+    here = Path(cf_units.__file__).parent
+    libraries = sorted((here.parent / "cf_units.libs").glob("libudunits2*.so*"))
+    database = here / "etc" / "share" / "udunits2.xml"
+    if not libraries or not database.is_file():
+        return None
+    return str(libraries[0]), str(database)
+
+
+def _import_cfchecker():
+    """cfchecks' classes. Its units module (cfunits) loads UDUNITS-2 by
+    ``ctypes.util.find_library("udunits2")``, which finds only a system installation; the
+    library the cf-units wheel carries is given to it instead (with its XML database, read
+    through ``UDUNITS2_XML_PATH``), so the test extra needs no system package. Without either,
+    the test fails with the one line that says how to install one."""
+    import ctypes.util
+
+    bundled = _bundled_udunits()
+    if bundled is None and ctypes.util.find_library("udunits2") is None:
         pytest.fail(
-            f"cfchecks cannot be loaded ({e}): pip install -e '.[test]' and the "
-            "UDUNITS-2 library (Debian: apt-get install libudunits2-0)"
+            "cfchecks needs the UDUNITS-2 library: pip install -e '.[test]' (cf-units' wheel "
+            "carries it) or, on Debian, apt-get install libudunits2-0",
+            pytrace=False,
         )
+    find_library = ctypes.util.find_library
+    if bundled is not None:
+        library, database = bundled
+        os.environ.setdefault("UDUNITS2_XML_PATH", database)
+        ctypes.util.find_library = lambda name: (  # type: ignore[assignment]
+            library if name == "udunits2" else find_library(name)
+        )
+    try:
+        from cfchecker.cfchecks import CFChecker, CFVersion
+    except (ImportError, OSError) as e:  # a test dependency: never skip silently
+        pytest.fail(
+            f"cfchecks cannot be loaded ({e}): pip install -e '.[test]' or, on Debian, "
+            "apt-get install libudunits2-0",
+            pytrace=False,
+        )
+    finally:
+        ctypes.util.find_library = find_library
+    return CFChecker, CFVersion
+
+
+def _cfchecks(path: Path, tmp_path: Path, version: tuple[int, int]) -> dict[str, list[str]]:
+    import compliance_checker
+
+    CFChecker, CFVersion = _import_cfchecker()
     names = Path(compliance_checker.__file__).parent / "data" / "cf-standard-name-table.xml"
     tables = {}
     for kind, root in (("area", "area_type_table"), ("region", "standardized_region_list")):
@@ -254,3 +302,19 @@ def test_cfchecks_finds_only_the_newer_cf_version(files, which, tmp_path):
     with netCDF4.Dataset(relabelled, "a") as nc:
         nc.Conventions = "CF-1.8"
     assert _cfchecks(relabelled, tmp_path, (1, 8)) == {"FATAL": [], "ERROR": [], "WARN": []}
+
+
+def test_a_missing_udunits_library_is_one_line_that_says_how_to_install_it(monkeypatch):
+    """Where neither the cf-units wheel nor the system has UDUNITS-2, the cfchecks tests fail
+    with one line naming the install commands, never a traceback."""
+    import ctypes.util
+
+    monkeypatch.setattr(sys.modules[__name__], "_bundled_udunits", lambda: None)
+    monkeypatch.setattr(ctypes.util, "find_library", lambda name: None)
+    with pytest.raises(pytest.fail.Exception) as failed:
+        _import_cfchecker()
+    assert failed.value.pytrace is False
+    message = str(failed.value)
+    assert "\n" not in message
+    assert "pip install -e '.[test]'" in message
+    assert "apt-get install libudunits2-0" in message

@@ -145,8 +145,7 @@ def run(
         bool,
         typer.Option(
             "--no-service",
-            help="Run here even when a service (`nematic serve`) runs for the results root "
-            "(by default the campaign is handed to it).",
+            help="Run here, not in the results root's service (nematic serve).",
         ),
     ] = False,
     verbose: VerboseOpt = False,
@@ -154,13 +153,13 @@ def run(
 ) -> None:
     """Run a campaign on dask, resuming where it stopped.
 
-    When a service (`nematic serve`) runs for the results root, the campaign is handed to it
-    (as `nematic submit` does; exit 0 once queued) unless `--no-service` is given.
+    When a service (nematic serve) runs for the results root, the campaign is handed to it,
+    as nematic submit does (exit 0 once queued); --no-service runs it here.
 
     Finished runs are skipped; one netCDF per run, phase.nc at the end. Exit 0: every run
     succeeded (--detach: the driver runs; --dry-run: the cost printed), 1: some failed, 2: bad
-    input or a locked campaign, 3: stopped by --max-failures, 4: every run succeeded but a fit or
-    figure failed (one line each), 130: interrupted (rerun to resume). More:
+    input or a locked campaign, 3: too many failures (--max-failures), 4: every run succeeded
+    but a fit or figure failed (one line each), 130: interrupted (rerun to resume). More:
     docs/campaigns/execution.md and docs/campaigns/cost.md.
     """
     from ..expand import expand

@@ -78,9 +78,10 @@ nitpick_ignore_regex = [
     (r"py:class", r"Path|Array|ArrayLike|NDArray|PDEBase|optional"),
     (r"py:meth", r"~?Mechanics\..*"),
     (r"py:mod", r"nematic_solids\..*"),
+    (r"py:.*", r"nematic_solids\.sweep\.spec\.yaml_input\..*"),
     (
         r"py:.*",
-        r"nematic_solids\.model\.(observables|split|krylov|initial|mechanics|tensors|accelerated\.etdrk4)\..*",
+        r"nematic_solids\.model\.(observables|split|krylov|initial|mechanics|tensors|time_scales|accelerated\.etdrk4)\..*",
     ),
 ]
 autodoc_typehints = "description"

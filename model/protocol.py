@@ -51,7 +51,7 @@ PROTOCOL_PARAMETERS = ("alpha_minus_B", "chi", "eps")
 FORMS = ("steps", "ramp", "pulse", "sine")
 #: most points of one steps or ramp function
 MAX_POINTS = 10_000
-#: the largest step inside a sine, as a fraction of its period: T/16 (measured: the response of
+#: the largest step inside a sine as a fraction of its period, T/16 (measured, the response of
 #: a sine at T/8 differs from the T/64 one by 1e-4 of its amplitude, at T/16 by 1e-6;
 #: tests/model/test_protocol_resolution.py)
 SINE_STEP_FRACTION = 1.0 / 16.0
@@ -114,7 +114,7 @@ class Piecewise:
         return (self.points[i + 1][0] - self.points[i][0]) * RAMP_STEP_FRACTION
 
     def rate_bound(self) -> float:
-        """The largest |rate| anywhere on the time axis."""
+        """The largest ``|rate|`` anywhere on the time axis."""
         if not self.linear:
             return 0.0
         pairs = zip(self.points, self.points[1:], strict=False)
@@ -159,7 +159,7 @@ class Sine:
         return math.inf if after < self.start else self.period * SINE_STEP_FRACTION
 
     def rate_bound(self) -> float:
-        """The largest |rate|: a 2 pi / T."""
+        """The largest ``|rate|``, a 2 pi / T."""
         return abs(self.amplitude) * (2.0 * math.pi / self.period)
 
     def extremes(self) -> tuple[float, float]:

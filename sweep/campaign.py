@@ -422,7 +422,7 @@ class ChainSpec:
 
     axis: str
     branches: tuple[str, ...] = BRANCHES
-    #: where each run of the up branch starts: ``"predecessor"`` (quasi-static) or ``"fresh"``
+    #: where each run of the up branch starts, ``"predecessor"`` (quasi-static) or ``"fresh"``
     #: (each from the seeded texture, as Fig. 2's runs: the plain runs of its points)
     up: str = "predecessor"
 

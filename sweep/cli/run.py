@@ -147,8 +147,7 @@ def run(
         bool,
         typer.Option(
             "--no-service",
-            help="Run here, not in the `nematic serve` of the results root (which takes "
-            "the campaign when it runs).",
+            help="Run here, not in the results root's service (nematic serve).",
         ),
     ] = False,
     catalogue: CatalogueOpt = None,

@@ -1,6 +1,7 @@
 """What the accelerated backend (:mod:`nematic_solids.model.accelerated`) runs, checked without
 importing JAX: a campaign validates its points with it on a machine where JAX may be absent (the
-driver of a cluster whose workers have it), and :func:`nematic_solids.model.accelerated.run_batch`
+driver of a cluster whose workers have it), and
+:func:`nematic_solids.model.accelerated.run.run_batch`
 refuses the rest with the same errors."""
 
 from __future__ import annotations
@@ -10,8 +11,9 @@ import importlib.util
 from .errors import ParameterError
 from .parameters import Numerics, Parameters
 
-#: the devices a run may ask for (:func:`nematic_solids.model.accelerated.select_device`): the
-#: CPU, the first GPU JAX sees, or a GPU if there is one and else the CPU
+#: the devices a run may ask for
+#: (:func:`nematic_solids.model.accelerated.device.select_device`): the CPU, the first GPU JAX
+#: sees, or a GPU if there is one and else the CPU
 DEVICES = ("cpu", "gpu", "auto")
 #: how to install the backend's library
 INSTALL = "pip install '.[accel]' (and 'jax[cuda12]' for an NVIDIA GPU)"

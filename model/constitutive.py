@@ -126,7 +126,7 @@ def tangent(F: Array, Q: Array, m: Moduli) -> Array:
         for L in range(2):
             unit[k, L, k, L] = 1.0
     xp = T.namespace(F, Q)
-    dF = xp.broadcast_to(xp.asarray(unit), (2, 2, 2, 2, *shape))
+    dF = xp.broadcast_to(xp.asarray(unit, dtype=F.dtype), (2, 2, 2, 2, *shape))
     # all four directions at once, broadcasting F and Q over the direction axes (k, L)
     dP = first_piola_increment(F[:, :, None, None], Q[:, :, None, None], dF, m)
     return dP

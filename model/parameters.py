@@ -42,6 +42,10 @@ DISPLACEMENT = ("integrated", "equilibrium")
 #: path otherwise) or "numpy" (the readable reference). Results agree to rounding (tested), so
 #: the backend is not part of a run's identity.
 BACKENDS = ("compiled", "numpy")
+#: the precision of a run's fields and passes (Numerics.precision; docs/guide/precision.md)
+PRECISIONS = ("float64", "float32")
+#: what the compiled and numpy backends allow (model.simulate.run)
+FLOAT64_ONLY = "float64 (float32 runs on the accelerated backend only, for now)"
 
 
 def _suggest(name: str, valid: list[str]) -> str:
@@ -73,7 +77,7 @@ class Parameters:
             Fourier modes 2 pi (n, m), n^2 + m^2 <= noise_modes^2: the same physical field at
             every resolution) or "per_node" (an independent random orientation at every grid
             node, the paper's "initial random orientation": resolution dependent by nature).
-        noise_modes: the band of the "band" texture (unused by "per_node").
+        noise_modes: the band of the "band" texture (unused by "per_node"); resolution > 2x it.
         texture_resolution: "per_node" only: the grid the per-node texture is drawn on (0,
             the default: the run's own grid). A run on a finer grid gets that texture by
             spectral interpolation, so that it starts from the same physical field (the
@@ -257,7 +261,8 @@ class Numerics:
     """How the equations are solved (not what they are).
 
     Attributes:
-        resolution: N, grid points per side of the periodic unit square (even, >= 16).
+        resolution: N, grid points per side of the periodic unit square (even, >= 16; band
+            texture: N > 2 ``noise_modes``, so that its modes fit the grid).
         t_final: end time (units of tau).
         dt: initial (and, with ``adaptive = False``, fixed) time step.
         scheme: time integrator, "etdrk4" (Krogstad's fourth-order exponential Runge-Kutta,
@@ -288,6 +293,8 @@ class Numerics:
             round-off level and stops changing).
         steady_window: the time span of that comparison (units of tau; with steady_tol > 0
             at least save_every and below t_final).
+        precision: "float64" (default) or "float32": fields, transforms and passes in float32,
+            sums, time and step in float64 (docs/guide/precision.md); accelerated only. In the id.
     """
 
     resolution: int = 128
@@ -309,6 +316,7 @@ class Numerics:
     backend: str = "compiled"
     steady_tol: float = 0.0
     steady_window: float = 50.0
+    precision: str = "float64"
 
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:
@@ -360,6 +368,8 @@ class Numerics:
             raise ParameterError("displacement", self.displacement, " or ".join(DISPLACEMENT))
         if self.backend not in BACKENDS:
             raise ParameterError("backend", self.backend, " or ".join(BACKENDS))
+        if self.precision not in PRECISIONS:
+            raise ParameterError("precision", self.precision, " or ".join(PRECISIONS))
         for name in ("adaptive", "incompressible"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(name, getattr(self, name), "true or false")
@@ -432,7 +442,12 @@ class Numerics:
 def check_compatible(params: Parameters, numerics: Numerics) -> None:
     """Constraints that involve both objects: the grid must resolve a band-limited initial
     texture (resolution > 2 noise_modes, so the same physical field exists at this
-    resolution), and a per-node texture drawn on a grid no finer than the run's."""
+    resolution), a per-node texture drawn on a grid no finer than the run's, and a protocol's
+    time scales resolved (:func:`nematic_solids.model.time_scales.check_time_scales`)."""
+    if params.protocol:
+        from .time_scales import check_time_scales
+
+        check_time_scales(params, numerics)
     if params.texture_resolution > numerics.resolution:
         raise ParameterError(
             "texture_resolution",

@@ -41,7 +41,7 @@ from .errors import ParameterError, SimulationFailure
 from .initial import initial_fields
 from .mechanics import MechanicalState
 from .observables import snapshot_observables
-from .parameters import Numerics, Parameters, check_compatible, save_times
+from .parameters import FLOAT64_ONLY, Numerics, Parameters, check_compatible, save_times
 from .pde import ActiveNematicPDE, make_state
 from .run_dataset import LONG_NAMES, SCALARS, SCHEMA_VERSION, SERIES, UNITS, RunWork, to_dataset
 from .solver import SCHEMES, ETDSolver
@@ -146,6 +146,8 @@ def run(
     :class:`nematic_solids.model.checkpoint.InitialState`) instead of the seeded texture; the seed
     then changes nothing."""
     check_compatible(params, numerics)
+    if numerics.precision != "float64":
+        raise ParameterError("precision", numerics.precision, FLOAT64_ONLY)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError("seed", seed, "an integer >= 0")
     n = numerics.resolution
@@ -168,7 +170,9 @@ def run(
     wall_before, t_start = 0.0, 0.0
     if initial is not None:
         state = make_state(*np.array(initial.fields, dtype=float))
-        if initial.displacement is not None and not linear:  # Newton's first guess at t = 0
+        if initial.displacement_hat is not None and not linear:  # Newton's first guess
+            eq.mechanics.u_hat = np.array(initial.displacement_hat, dtype=complex)
+        elif initial.displacement is not None and not linear:  # at t = 0
             eq.mechanics.u_hat = grid.forward(np.asarray(initial.displacement, dtype=float))
     elif start is None:
         state = make_state(*initial_fields(params, numerics.resolution, seed))

@@ -65,14 +65,16 @@ def trace(T: Array) -> Array:
 
 
 def identity(shape: tuple[int, ...], like: Any = None) -> Array:
-    """The identity tensor on a grid of ``shape`` (in the array library of ``like``)."""
+    """The identity tensor on a grid of ``shape`` (in the array library and, for JAX, the
+    precision of ``like``)."""
     xp = namespace(like)
     if xp is np:
         eye = np.zeros((2, 2, *shape))
         eye[0, 0] = 1.0
         eye[1, 1] = 1.0
         return eye
-    one, zero = xp.ones(shape), xp.zeros(shape)
+    dtype = getattr(like, "dtype", None)
+    one, zero = xp.ones(shape, dtype), xp.zeros(shape, dtype)
     return xp.stack([xp.stack([one, zero]), xp.stack([zero, one])])
 
 

@@ -6,12 +6,16 @@ The same equations as the numpy reference (paper Eqs. (3)-(5); small-strain mech
 :class:`nematic_solids.model.mechanics.FiniteMechanics` with the integrated displacement), the same
 parameters (:class:`nematic_solids.model.parameters.Parameters`,
 :class:`nematic_solids.model.parameters.Numerics`), Krogstad's ETDRK4 with the same embedded error
-estimate and step controller as :mod:`nematic_solids.model.solver`, in float64. Every array carries
+estimate and step controller as :mod:`nematic_solids.model.solver`, in float64 or, with
+``Numerics.precision = "float32"``, in float32 with the sums kept in float64
+(:mod:`nematic_solids.model.accelerated.dtypes`). Every array carries
 a leading batch axis (one seed per row); each seed has its own step size and its own accept / reject
 / retry decisions (per-seed control: ``jax.vmap`` of one seed's adaptive loop, whose
 ``lax.while_loop`` runs while any seed is still short of the save time, the seeds that are done
 masked), so a seed's trajectory is the one it has when run alone. Modules:
 
+* :mod:`nematic_solids.model.accelerated.dtypes`: which arrays a float32 run keeps in float32 and
+  which sums stay float64;
 * :mod:`nematic_solids.model.accelerated.device`: the device a run asks for (``"cpu"``, ``"gpu"``,
   ``"auto"``), or :class:`nematic_solids.model.errors.DeviceUnavailable`;
 * :mod:`nematic_solids.model.accelerated.krylov`: restarted GMRES with an auxiliary output (the
@@ -26,14 +30,16 @@ masked), so a seed's trajectory is the one it has when run alone. Modules:
 * :mod:`nematic_solids.model.accelerated.finite_step`: finite strain's Krogstad step, the
   displacement carried through the stages and projected per accepted step;
 * :mod:`nematic_solids.model.accelerated.observables`: the per-save observables on the device;
-* :mod:`nematic_solids.model.accelerated.run`: :func:`run_batch`, the seeds of one point from t = 0
+* :mod:`nematic_solids.model.accelerated.run`:
+  :func:`~nematic_solids.model.accelerated.run.run_batch`, the seeds of one point from t = 0
   to ``t_final``.
 
 ETDRK2, finite strain with the displacement solved at every stage (``displacement:
-equilibrium``), time protocols and the early stop are not here: :func:`run_batch` refuses them with
+equilibrium``), time protocols and the early stop are not here:
+:func:`~nematic_solids.model.accelerated.run.run_batch` refuses them with
 a :class:`nematic_solids.model.errors.ParameterError`. Importing this package enables JAX's float64
-(``jax_enable_x64``) for the process; without JAX installed it raises
-:class:`nematic_solids.model.errors.DeviceUnavailable` with the install line.
+(``jax_enable_x64``) for the process (a float32 run casts its arrays explicitly); without JAX
+installed it raises :class:`nematic_solids.model.errors.DeviceUnavailable` with the install line.
 """
 
 from __future__ import annotations

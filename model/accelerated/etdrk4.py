@@ -27,6 +27,11 @@ old step and the scaled one); every proposal is rounded down onto the ladder
 a non-finite state) is retried with h/4, and fails the seed at ``h <= 1e-3 dt_max``; a start whose
 well-posedness margin :math:`1 - \max (\alpha - B) S` is <= 0 fails it at once
 (``rate_problem_ill_posed``). A failed seed stops where it failed; the others go on.
+
+**Precision** (:mod:`nematic_solids.model.accelerated.dtypes`): the stages, the weights
+(:math:`\varphi_k(hL)` evaluated in the fields' precision) and the error estimate's fields are in
+the fields' precision; the time, the step size, the error norm (the RMS accumulated in float64)
+and the step factor are float64.
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from ..reference_kernels import krogstad_from_phi
+from .dtypes import narrow, wide_mean, wide_sum
 from .linear_rhs import Constants, Symbols, forward, inverse, linear_split
 
 Array: TypeAlias = jax.Array
@@ -76,7 +82,8 @@ class Control:
 
 class SeedState(NamedTuple):
     """One seed's state between steps: the fields (q in real space and as spectra, A), the
-    time, the next step size, the status (:data:`REASONS`), the time of a failure, the
+    time, the next step size, the status
+    (:data:`~nematic_solids.model.accelerated.etdrk4.REASONS`), the time of a failure, the
     smallest well-posedness margin, and the work counted."""
 
     q: Array
@@ -120,7 +127,8 @@ def phi_functions(z: Array, kmax: int) -> tuple[Array, ...]:
     terms = 20
     # coef[j, k - 1] = 1 / (j + k)!, highest power first
     coef = jnp.array(
-        [[1.0 / math.factorial(j + k) for k in range(1, kmax + 1)] for j in range(terms)][::-1]
+        [[1.0 / math.factorial(j + k) for k in range(1, kmax + 1)] for j in range(terms)][::-1],
+        dtype=z.dtype,
     )
 
     def horner(i: Array, p: Array) -> Array:
@@ -214,8 +222,10 @@ StepFunction = Callable[[SeedState, Array, Any, Any, str], Step]
 def krogstad_step(
     q: Array, q_hat: Array, A: Array, h: Array, sym: Symbols, c: Constants, error_norm: str
 ) -> Step:
-    """One Krogstad ETDRK4 step of size ``h`` from (q, q hat, A) (module docstring)."""
+    """One Krogstad ETDRK4 step of size ``h`` (float64) from (q, q hat, A) (module
+    docstring); the error is float64."""
     n = c.n
+    h = narrow(h, q)  # the step in the fields' precision
     wq = krogstad_weights(sym.Lq * h)
     Eq, nq_u, nq_ab, nq_c = wq[0], wq[7], wq[8], wq[9]
     LA = -(c.zeta + 3.0 * c.s * A * A) / c.tau
@@ -267,9 +277,10 @@ def krogstad_step(
         error = jnp.maximum(jnp.max(jnp.abs(inverse(err_q, n))), jnp.max(jnp.abs(err_A)))
         transforms = transforms + 2
     else:  # the RMS over the grid, from the spectra by Parseval (model.fourier.rms_hat)
-        w = jnp.full(sym.Lq.shape, 2.0).at[:, 0].set(1.0).at[:, -1].set(1.0)
-        rms = [jnp.sqrt(jnp.sum(w * jnp.abs(e) ** 2)) / n**2 for e in err_q]
-        error = jnp.maximum(jnp.maximum(rms[0], rms[1]), jnp.sqrt(jnp.mean(err_A**2)))
+        w = jnp.full(sym.Lq.shape, 2.0, A.dtype).at[:, 0].set(1.0).at[:, -1].set(1.0)
+        rms = [jnp.sqrt(wide_sum(w * jnp.abs(e) ** 2)) / n**2 for e in err_q]
+        error = jnp.maximum(jnp.maximum(rms[0], rms[1]), jnp.sqrt(wide_mean(err_A**2)))
+    error = error.astype(jnp.float64)
     spins_ok = converged[1] & converged[2] & converged[3]
     finite = jnp.all(jnp.isfinite(new_q)) & jnp.all(jnp.isfinite(new_A))
     return Step(

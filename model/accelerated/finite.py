@@ -46,6 +46,7 @@ from .. import reference_kernels
 from .. import tensors as T
 from ..parameters import Numerics, Parameters
 from ..pde import ActiveNematicPDE
+from .dtypes import narrow, real_dtype, wide_mean, wide_sum
 from .krylov import gmres_aux, pcg
 from .linear_rhs import Constant, forward, inverse, weighted_inner
 
@@ -110,6 +111,9 @@ class FiniteConstants:
     restart: int = 30
     #: the name of the seeds' axis under ``jax.vmap`` (None: one seed, unbatched)
     batch_axis: str | None = None
+    #: the fields' precision (``Numerics.precision``;
+    #: :mod:`nematic_solids.model.accelerated.dtypes`)
+    precision: str = "float64"
 
     @property
     def moduli(self) -> cl.Moduli:
@@ -155,13 +159,15 @@ def setup(params: Parameters, numerics: Numerics) -> tuple[FiniteSymbols, Finite
         cg_rtol=mech.cg_rtol,  # type: ignore[attr-defined]
         max_cg=mech.max_cg,  # type: ignore[attr-defined]
         spin_tol=mech.spin_tol,
+        precision=numerics.precision,
     )
     return symbols, consts
 
 
-def symbols_on(sym: FiniteSymbols, device: jax.Device) -> FiniteSymbols:
-    """The symbols as float64 arrays on ``device``."""
-    return FiniteSymbols(*(jax.device_put(np.asarray(a, dtype=np.float64), device) for a in sym))
+def symbols_on(sym: FiniteSymbols, device: jax.Device, precision: str = "float64") -> FiniteSymbols:
+    """The symbols as arrays of the run's ``precision`` (real) on ``device``."""
+    dtype = real_dtype(precision)
+    return FiniteSymbols(*(jax.device_put(np.asarray(a, dtype=dtype), device) for a in sym))
 
 
 # --- the displacement's deformation and the force-balance residual -----------------------
@@ -190,10 +196,11 @@ def deformation(u_hat: Array, sym: FiniteSymbols, c: FiniteConstants) -> Array:
 
 def residual(P: Array, P_hat: Array, sym: FiniteSymbols, n: int) -> Array:
     """The force-balance residual :math:`\\lVert \\hat k_J \\hat P_{iJ} \\rVert /
-    \\max(1, \\mathrm{RMS}\\, P)` (:meth:`nematic_solids.model.mechanics.Mechanics.residual`)."""
+    \\max(1, \\mathrm{RMS}\\, P)` (:meth:`nematic_solids.model.mechanics.Mechanics.residual`),
+    accumulated in float64 (a float64 scalar, compared with ``newton_tol``)."""
     r = sym.khx * P_hat[:, 0] + sym.khy * P_hat[:, 1]
-    norm = jnp.sqrt(jnp.sum(sym.weights * jnp.abs(r) ** 2)) / n**2
-    return norm / jnp.maximum(1.0, jnp.sqrt(jnp.mean(jnp.sum(P**2, axis=(0, 1)))))
+    norm = jnp.sqrt(wide_sum(sym.weights * jnp.abs(r) ** 2)) / n**2
+    return norm / jnp.maximum(1.0, jnp.sqrt(wide_mean(jnp.sum(P**2, axis=(0, 1)))))
 
 
 # --- force balance (Eq. 3) -------------------------------------------------------------
@@ -258,7 +265,7 @@ def force_balance(
 
         def search(t):
             k, step, *_ = t
-            trial = u_hat + step * cg.x
+            trial = u_hat + narrow(step, cg.x) * cg.x
             F_t = deformation(trial, sym, c)
             P_t, P_hat_t, res_t = evaluate(F_t)
             good = jnp.isfinite(res_t) & (res_t < res)
@@ -360,7 +367,7 @@ def finite_split(
         batch_axis=c.batch_axis,
         precondition=lambda r: green(r, sym, c),
         start=(udot0, grad0, b - of_gradient(grad0)),
-        aux_dtype=jnp.float64,
+        aux_dtype=real_dtype(c.precision),
     )
     qdot, _ = rk.corotational_rate(R, sol.Lx, q1, q2)
     tr = cl.second_piola_trace(F, P) if c.trS else trP

@@ -39,6 +39,7 @@ from .. import constitutive as cl
 from .. import tensors as T
 from ..wellposedness import N_ANGLES
 from . import finite as balance
+from .dtypes import complex_dtype, narrow, real_dtype, wide_mean, wide_sum
 from .etdrk4 import (
     ELLIPTICITY,
     FOLDED,
@@ -83,14 +84,14 @@ def initial_mechanics(
     """The force balance at the order ``q`` from the homogeneous state, as the reference's
     first save solves it: ``(mechanics, outcome, transforms)`` (outcome 0, or an index of
     :data:`nematic_solids.model.accelerated.etdrk4.REASONS`)."""
-    zero = jnp.zeros((2, c.n, c.n // 2 + 1), jnp.complex128)
+    zero = jnp.zeros((2, c.n, c.n // 2 + 1), complex_dtype(c.precision))
     bal = force_balance(q, zero, deformation(zero, sym, c), sym, c)
     mech = Mechanics(
         bal.u_hat,
         bal.F,
         bal.P,
         zero,
-        jnp.zeros((2, 2, c.n, c.n)),
+        jnp.zeros((2, 2, c.n, c.n), real_dtype(c.precision)),
         jnp.int32(0),  # (the steps' Newton iterations, as the reference's solver counts)
         bal.cg_iterations,
     )
@@ -132,12 +133,12 @@ def finite_margin(K: Array, E: Array, kappa: float) -> Array:
 
         return (M(0, 0) * M(1, 1) - M(0, 1) * M(1, 0)) / (kappa + 1.0)
 
-    D = det_at(jnp.asarray(angles), K0, K1, K2, E0, E1)  # (angle, x, y)
+    D = det_at(jnp.asarray(angles, K.dtype), K0, K1, K2, E0, E1)  # (angle, x, y)
     flat = jnp.argmin(D)
     ia, x, y = jnp.unravel_index(flat, D.shape)
     m = D[ia, x, y]
     dphi = np.pi / N_ANGLES
-    phis = jnp.asarray(angles)[ia] + dphi * jnp.array([-1.0, 0.0, 1.0])
+    phis = jnp.asarray(angles, K.dtype)[ia] + dphi * jnp.array([-1.0, 0.0, 1.0], K.dtype)
     d = det_at(phis, *(a[..., x, y] for a in (K0, K1, K2, E0, E1)))
     curv = d[0] - 2.0 * d[1] + d[2]
     refined = d[1] - 0.125 * (d[2] - d[0]) ** 2 / jnp.where(curv > 0, curv, 1.0)
@@ -148,9 +149,12 @@ def finite_step(
     s: SeedState, h: Array, sym: FiniteSymbols, c: FiniteConstants, error_norm: str
 ) -> Step:
     """One Krogstad ETDRK4 step of size ``h`` of finite strain from the seed's state, with
-    its displacement carried through the stages and projected (module docstring)."""
+    its displacement carried through the stages and projected (module docstring). ``h`` and
+    the error are float64, the rest in the fields' precision."""
     n = c.n
     q, q_hat, A, m = s.q, s.q_hat, s.A, s.mech
+    h = narrow(h, q)  # the step in the fields' precision
+    dtype = q.dtype
     Lq = jnp.asarray(sym.Lq)
     wq = krogstad_weights(Lq * h)
     Eq, nq_u, nq_ab, nq_c = wq[0], wq[7], wq[8], wq[9]
@@ -158,8 +162,8 @@ def finite_step(
     wA = krogstad_weights(LA * h)
     EA, nA_u, nA_ab, nA_c = wA[0], wA[7], wA[8], wA[9]
     offsets = jnp.stack([0.0 * h, 0.5 * h, 0.5 * h, h])
-    rk4 = jnp.array([1.0, 2.0, 2.0, 1.0])  # the classical RK4 weights of the displacement
-    errw = jnp.array([0.0, -1.0, 1.0, 0.0])  # G_b - G_a
+    rk4 = jnp.array([1.0, 2.0, 2.0, 1.0], dtype)  # the classical RK4 weights of the displacement
+    errw = jnp.array([0.0, -1.0, 1.0, 0.0], dtype)  # G_b - G_a
     stages = krogstad_stages(q, q_hat, A, h, wq, wA, n)
 
     def evaluate(i, carry):
@@ -195,12 +199,12 @@ def finite_step(
         m.udot_hat,
         m.udot_grad,
         jnp.zeros_like(m.udot_hat),
-        jnp.zeros(shape_g),
-        jnp.zeros(shape_g),
+        jnp.zeros(shape_g, dtype),
+        jnp.zeros(shape_g, dtype),
         m.udot_hat,
         m.udot_grad,
-        jnp.zeros((2, 2, 2, 2, n, n)),
-        jnp.zeros(shape_g),
+        jnp.zeros((2, 2, 2, 2, n, n), dtype),
+        jnp.zeros(shape_g, dtype),
         jnp.zeros(4, jnp.int32),
         zero,
         zero,
@@ -224,9 +228,10 @@ def finite_step(
         error = jnp.maximum(error, jnp.max(jnp.abs(err_G)))
         nfft = nfft + 2
     else:  # RMS over the grid, the spectra's by Parseval (model.fourier.rms_hat)
-        rms = [jnp.sqrt(jnp.sum(sym.weights * jnp.abs(e) ** 2)) / n**2 for e in err_q]
-        error = jnp.maximum(jnp.maximum(rms[0], rms[1]), jnp.sqrt(jnp.mean(err_A**2)))
-        error = jnp.maximum(error, jnp.max(jnp.sqrt(jnp.mean(err_G**2, axis=(2, 3)))))
+        rms = [jnp.sqrt(wide_sum(sym.weights * jnp.abs(e) ** 2)) / n**2 for e in err_q]
+        error = jnp.maximum(jnp.maximum(rms[0], rms[1]), jnp.sqrt(wide_mean(err_A**2)))
+        error = jnp.maximum(error, jnp.max(jnp.sqrt(wide_mean(err_G**2, axis=(2, 3)))))
+    error = error.astype(jnp.float64)
     first_ok = codes[0] == 0
     finite_new = jnp.all(jnp.isfinite(new_q)) & jnp.all(jnp.isfinite(new_A))
     later = jnp.where(codes[1] != 0, codes[1], jnp.where(codes[2] != 0, codes[2], codes[3]))

@@ -16,6 +16,13 @@ v_i)`, one application of the linear M per cycle instead of keeping every :math:
 (the same sum, in another order of rounding). Loops are ``lax.while_loop``; the sizes are
 fixed by ``restart`` (the Krylov basis is a ``(restart + 1, ...)`` array, the unused rows
 masked).
+
+**Precision**: the basis, the iterates and the operator's fields are in the precision of the
+right-hand side (float32 or float64); ``inner`` accumulates in float64
+(:func:`nematic_solids.model.accelerated.linear_rhs.weighted_inner`), and the Hessenberg
+matrix, the rotations and the residual estimate stay float64, so the stopping tests compare
+float64 numbers; a coefficient is narrowed to the fields' precision where it scales a field
+(:func:`nematic_solids.model.accelerated.dtypes.narrow`).
 """
 
 from __future__ import annotations
@@ -26,6 +33,8 @@ from typing import NamedTuple, TypeAlias
 import jax
 import jax.numpy as jnp
 from jax import lax
+
+from .dtypes import narrow
 
 Array: TypeAlias = jax.Array
 Operator = Callable[[Array], tuple[Array, Array]]
@@ -121,7 +130,7 @@ def gmres_aux(
         met = beta <= tol
         spent = total >= maxiter
         safe_beta = jnp.where(beta > 0.0, beta, 1.0)
-        V = jnp.zeros((restart + 1,) + b.shape, cdtype).at[0].set(r / safe_beta)
+        V = jnp.zeros((restart + 1,) + b.shape, cdtype).at[0].set(r / narrow(safe_beta, r))
         LZ = jnp.zeros((restart,) + aux_shape, adtype)
         H = jnp.zeros((restart + 1, restart))
         g = jnp.zeros(restart + 1).at[0].set(beta)
@@ -140,7 +149,7 @@ def gmres_aux(
             def gram_schmidt(i, wH):  # modified Gram-Schmidt against V[0..k]
                 w, H = wH
                 hik = inner(V[i], w)
-                return w - hik * V[i], H.at[i, k].set(hik)
+                return w - narrow(hik, w) * V[i], H.at[i, k].set(hik)
 
             w, Hn = lax.fori_loop(0, k + 1, gram_schmidt, (w, H))
             hn = jnp.sqrt(jnp.maximum(inner(w, w), 0.0))
@@ -150,7 +159,7 @@ def gmres_aux(
             stop = (jnp.abs(gn[k + 1]) <= tol) | (total >= maxiter) | (hn <= 1e-14 * beta)
             # V[k + 1] is read only after a step that did not stop: written unconditionally,
             # so the basis is never copied (a select of the whole basis per iteration)
-            V = V.at[k + 1].set(w / jnp.where(hn > 0.0, hn, 1.0))
+            V = V.at[k + 1].set(w / narrow(jnp.where(hn > 0.0, hn, 1.0), w))
             ends = active & (stop | (k == restart - 1))
             return (
                 jnp.where(active & ~ends, k + 1, k),
@@ -240,11 +249,11 @@ def pcg(
         pAp = inner(p, Ap)
         indefinite = ~at_cap & (pAp <= 0.0)
         step = rz / jnp.where(pAp == 0.0, 1.0, pAp)
-        x_new = x + step * p
-        r_new = r - step * Ap
+        x_new = x + narrow(step, p) * p
+        r_new = r - narrow(step, Ap) * Ap
         z = precondition(r_new)
         rz_new = inner(r_new, z)
-        p_new = z + (rz_new / jnp.where(rz == 0.0, 1.0, rz)) * p
+        p_new = z + narrow(rz_new / jnp.where(rz == 0.0, 1.0, rz), p) * p
         move = ~at_cap & ~indefinite
         status = jnp.where(at_cap, MAXITER, jnp.where(indefinite, INDEFINITE, status))
         return (

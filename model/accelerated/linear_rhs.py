@@ -38,6 +38,7 @@ import numpy as np
 
 from ..parameters import Numerics, Parameters
 from ..pde import ActiveNematicPDE
+from .dtypes import real_dtype, wide_sum
 from .krylov import gmres_aux
 
 Array: TypeAlias = jax.Array
@@ -79,6 +80,9 @@ class Constants:
     restart: int = 30
     #: the name of the seeds' axis under ``jax.vmap`` (None: one seed, unbatched)
     batch_axis: str | None = None
+    #: the fields' precision (``Numerics.precision``;
+    #: :mod:`nematic_solids.model.accelerated.dtypes`)
+    precision: str = "float64"
 
 
 def setup(params: Parameters, numerics: Numerics) -> tuple[Symbols, Constants]:
@@ -108,6 +112,7 @@ def setup(params: Parameters, numerics: Numerics) -> tuple[Symbols, Constants]:
         amb=p.alpha_minus_B,
         spin_tol=numerics.spin_tol,
         spin_maxiter=mech.spin_maxiter,  # type: ignore[attr-defined]
+        precision=numerics.precision,
     )
     return symbols, consts
 
@@ -124,10 +129,11 @@ def inverse(a: Array, n: int) -> Array:
 
 def weighted_inner(w: Array) -> Callable[[Array, Array], Array]:
     """The real-space inner product of half spectra, :math:`\\sum w\\, \\mathrm{Re}(\\bar a
-    b)` (Parseval; ``w`` repeats over leading axes)."""
+    b)` (Parseval; ``w`` repeats over leading axes), accumulated in float64 whatever the
+    precision of ``a`` and ``b`` (a float64 scalar)."""
 
     def inner(a: Array, b: Array) -> Array:
-        return jnp.sum(w * (a.real * b.real + a.imag * b.imag))
+        return wide_sum(w * (a.real * b.real + a.imag * b.imag))
 
     return inner
 
@@ -195,6 +201,7 @@ def linear_split(q: Array, A: Array, q_hat: Array, sym: Symbols, c: Constants) -
     return Rate(Nq, Adot, sol.iterations, sol.converged, nfft + 3 * sol.applications)
 
 
-def symbols_on(sym: Symbols, device: jax.Device) -> Symbols:
-    """The symbols as float64 arrays on ``device``."""
-    return Symbols(*(jax.device_put(np.asarray(a, dtype=np.float64), device) for a in sym))
+def symbols_on(sym: Symbols, device: jax.Device, precision: str = "float64") -> Symbols:
+    """The symbols as arrays of the run's ``precision`` (real) on ``device``."""
+    dtype = real_dtype(precision)
+    return Symbols(*(jax.device_put(np.asarray(a, dtype=dtype), device) for a in sym))

@@ -42,7 +42,10 @@ def shell_data(n: int) -> tuple[ShellData, int]:
 
 
 def observe(q: Array, A: Array, data: ShellData, nshell: int, alpha_minus_B: float) -> Array:
-    """The observables :data:`NAMES` of one seed's fields, as one float64 vector."""
+    """The observables :data:`NAMES` of one seed's fields, as one float64 vector: the fields
+    of a float32 run are widened to float64 first (exactly), so every mean, the spectrum and
+    its sums are float64 whatever the run's precision."""
+    q, A = q.astype(jnp.float64), A.astype(jnp.float64)
     S = jnp.sqrt(q[0] ** 2 + q[1] ** 2)
     mean_S = jnp.mean(S)
     dS = S - mean_S

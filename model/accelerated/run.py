@@ -30,6 +30,7 @@ from ..initial import initial_fields
 from ..parameters import Numerics, Parameters, check_compatible, save_times
 from . import finite, finite_step
 from .device import describe, select_device
+from .dtypes import complex_dtype, real_dtype
 from .etdrk4 import REASONS, Control, SeedState, advance, initial_state
 from .linear_rhs import Constants, setup, symbols_on
 from .observables import NAMES, ShellData, observe, shell_data
@@ -93,11 +94,14 @@ def _check_start(
     return t.pop()
 
 
-def _resumed(start: Sequence[RunState], dev: jax.Device, fin: tuple | None = None) -> SeedState:
+def _resumed(
+    start: Sequence[RunState], dev: jax.Device, precision: str, fin: tuple | None = None
+) -> SeedState:
     """The batch's device state from the seeds' saved states (the spectra transformed anew
-    where a state has none: a state saved before its run's first step); with finite
-    strain's ``fin`` = (symbols on the device, constants) their mechanics too
-    (:func:`nematic_solids.model.accelerated.finite_step.resumed_mechanics`)."""
+    where a state has none: a state saved before its run's first step), the fields in the
+    run's ``precision``; with finite strain's ``fin`` = (symbols on the device, constants)
+    their mechanics too (:func:`nematic_solids.model.accelerated.finite_step.resumed_mechanics`)."""
+    real, cplx = real_dtype(precision), complex_dtype(precision)
 
     def one(state: RunState) -> tuple:
         q = np.asarray(state.fields[:2], dtype=np.float64)
@@ -122,7 +126,7 @@ def _resumed(start: Sequence[RunState], dev: jax.Device, fin: tuple | None = Non
         )
 
     rows = [one(state) for state in start]
-    types = [np.float64, np.complex128, np.float64, np.float64, np.float64, np.int32]
+    types = [real, cplx, real, np.float64, np.float64, np.int32]
     types += [np.float64, np.float64] + [np.int32] * 6
     columns: list[np.ndarray] = [
         np.stack([np.asarray(r[k], dtype=t) for r in rows]) for k, t in enumerate(types)
@@ -132,7 +136,12 @@ def _resumed(start: Sequence[RunState], dev: jax.Device, fin: tuple | None = Non
         return state
     sym, c = fin
     saved = [
-        jax.device_put(np.stack([np.asarray(st.mechanics[k]) for st in start]), dev)
+        jax.device_put(
+            np.stack([np.asarray(st.mechanics[k]) for st in start]).astype(
+                cplx if k.endswith("_hat") else real
+            ),
+            dev,
+        )
         for k in finite_step.SAVED
     ]
     mech = jax.jit(
@@ -177,7 +186,8 @@ def _jitted(c: Constants | finite.FiniteConstants, ctl: Control, nshell: int, dt
         if isinstance(c, Constants):
             return values
         # finite strain's margin: at the state's force balance (the tangent and E there)
-        return values.at[-1].set(finite_step.save_margin(state.q, state.mech, c))
+        margin = finite_step.save_margin(state.q, state.mech, c)
+        return values.at[-1].set(margin.astype(jnp.float64))
 
     look = jax.jit(jax.vmap(observables, in_axes=(0, None)))
     return start, step, look
@@ -205,7 +215,8 @@ def run_batch(
     of the same seeds continues exactly as the batch that never stopped (tested bitwise).
 
     ``on_save(t, fields, state)`` is called at every save time with the seeds' fields
-    (B, 3, N, N) copied to the host and their :class:`SeedState` on the device (status codes,
+    (B, 3, N, N) copied to the host and their
+    :class:`~nematic_solids.model.accelerated.etdrk4.SeedState` on the device (status codes,
     steps, step size: the host computes what the device does not and takes states:
     :func:`nematic_solids.model.accelerated.datasets.batch_datasets`); its time counts in
     ``wall``."""
@@ -235,7 +246,12 @@ def run_batch(
             raise ParameterError(
                 "initial", fields0.shape, f"fields of shape ({len(seeds)}, 3, {n}, {n})"
             )
-    sym = symbols_on(symbols, dev) if linear else finite.symbols_on(symbols, dev)
+    precision = numerics.precision
+    sym = (
+        symbols_on(symbols, dev, precision)
+        if linear
+        else finite.symbols_on(symbols, dev, precision)
+    )
     shell_dev = ShellData(*(jax.device_put(a, dev) for a in shells))
     times = save_times(numerics)
     if start is not None:
@@ -245,11 +261,12 @@ def run_batch(
     # the first calls compile (XLA, for this device and batch size; nothing when JAX has the
     # code already): an advance to t = 0 takes no step
     t0 = time.perf_counter()
+    fields0 = fields0.astype(real_dtype(precision))
     q0, A0 = jax.device_put(fields0[:, :2], dev), jax.device_put(fields0[:, 2], dev)
     if start is None:
         state: SeedState = begin(q0, A0, sym)
     else:
-        state = _resumed(start, dev, None if linear else (sym, c))
+        state = _resumed(start, dev, precision, None if linear else (sym, c))
     state = step(state, jax.device_put(jnp.float64(0.0), dev), sym)
     jax.block_until_ready(look(state, shell_dev))
     compile_s = time.perf_counter() - t0
@@ -265,6 +282,7 @@ def run_batch(
         rows.append(values)
         if on_save is not None:
             host = np.concatenate([np.asarray(state.q), np.asarray(state.A)[:, None]], axis=1)
+            host = host.astype(np.float64)  # (exact from float32)
             on_save(float(t_save), host, state)
     jax.block_until_ready(state)
     wall, cpu = time.perf_counter() - t1, time.process_time() - cpu1
@@ -272,6 +290,7 @@ def run_batch(
     status = np.asarray(state.status)
     series = np.stack(rows, axis=-1)  # (B, names, T)
     fields = np.concatenate([np.asarray(state.q), np.asarray(state.A)[:, None]], axis=1)
+    fields = fields.astype(np.float64)
     return BatchResult(
         seeds=seeds,
         times=times,

@@ -27,6 +27,7 @@ from .app import (
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
     EXIT_OK,
+    EXIT_PRODUCTS_FAILED,
     EXIT_TOO_MANY_FAILURES,
     Console,
     err_console,
@@ -40,7 +41,14 @@ if TYPE_CHECKING:  # the spec package (and the model) load only when a command n
     from ..spec.collection import Collection
 
 #: exit codes from the most to the least severe: the collection exits with its worst
-SEVERITY = (EXIT_INTERRUPTED, EXIT_BAD_INPUT, EXIT_TOO_MANY_FAILURES, EXIT_FAILED_RUNS, EXIT_OK)
+SEVERITY = (
+    EXIT_INTERRUPTED,
+    EXIT_BAD_INPUT,
+    EXIT_TOO_MANY_FAILURES,
+    EXIT_FAILED_RUNS,
+    EXIT_PRODUCTS_FAILED,
+    EXIT_OK,
+)
 INDEX = "index.html"
 
 
@@ -266,6 +274,7 @@ def summary(
         EXIT_FAILED_RUNS: "some runs failed or were lost",
         EXIT_BAD_INPUT: "refused or stopped (bad input, locked, storage)",
         EXIT_TOO_MANY_FAILURES: "stopped by --max-failures",
+        EXIT_PRODUCTS_FAILED: "every run done, but a fit or figure failed",
         EXIT_INTERRUPTED: "interrupted",
     }
     say.print(

@@ -166,6 +166,13 @@ def status(
         )
         for ex in report.unreadable_examples:
             console.print(f"  {ex['run_id']}: {ex['problem']}", markup=False)
+    if report.reused:
+        parts = ", ".join(f"{n} from {name}" for name, n in report.reused.items())
+        console.print(
+            f"{sum(report.reused.values())} done run(s) made by other campaigns, taken in "
+            f"place: {parts}",
+            markup=False,
+        )
     if report.foreign_runs:
         console.print(
             f"{report.foreign_runs} run record(s) in the folder belong to other "

@@ -209,10 +209,13 @@ def parse_campaign(
     overrides: Overrides | None = None,
     default_name: str | None = None,
 ) -> Campaign:
-    """Validate campaign YAML ``text``; raise :class:`CampaignError` listing every problem.
+    """Validate campaign YAML ``text``; raise
+    :class:`~nematic_solids.sweep.errors.CampaignError` listing every problem.
 
-    Every grid point is then checked by the model's own :class:`Parameters` and
-    :class:`Numerics` (see :func:`nematic_solids.sweep.expand.check_points`), so impossible values
+    Every grid point is then checked by the model's own
+    :class:`~nematic_solids.model.parameters.Parameters` and
+    :class:`~nematic_solids.model.parameters.Numerics` (see ``sweep.spec.points.check_points``), so
+    impossible values
     anywhere in the sweep are rejected here too.
     """
     overrides = overrides or Overrides()

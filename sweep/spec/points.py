@@ -20,6 +20,7 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
     axis_names = {a.name for a in campaign.axes}
     swept = {k: v for k, v in protocol_axes(campaign.parameters).items() if k in axis_names}
     seen: set[tuple[str, str]] = set()
+    _check_variant_precision(checker, campaign)
     runs: dict[str, dict] = {}  # one grid point's run (seed 0) -> its coordinates
     for index, coords in iter_points(campaign):
         try:
@@ -31,6 +32,10 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
             if _report(checker, campaign, e, coords, axis_names, swept, seen):
                 return
             continue
+        if point.numerics.precision != "float64":
+            _check_float32(checker, campaign, axis_names, seen)
+        if _needs_samples(checker, campaign, point, coords, seen, axis_names):
+            return
         if campaign.execution.backend == "accelerated":
             try:
                 check_supported(point.parameters, point.numerics)
@@ -43,6 +48,50 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
                         f"the accelerated backend cannot run {e.name} = {e.value!r}; allowed: "
                         f"{e.allowed} (or backend: compiled)",
                     )
+
+
+#: why float32 is refused on the compiled backend
+COMPILED_FLOAT64 = (
+    "float32 runs on the accelerated backend only, for now (the compiled and numpy backends "
+    "compute in float64); give execution: {backend: accelerated}, or precision: float64"
+)
+
+
+def _check_variant_precision(checker: Checker, campaign: Campaign) -> None:
+    """A verification variant that asks for float32 runs where the campaign's runs do: on the
+    accelerated backend (``precision: float64``, the variant that checks a float32 campaign,
+    runs anywhere)."""
+    if campaign.verify is None or campaign.execution.backend == "accelerated":
+        return
+    for i, variant in enumerate(campaign.verify.variants):
+        if variant.settings.get("precision", "float64") != "float64":
+            checker.add(
+                ("verify", "variants", i, "precision"),
+                f"got {variant.settings['precision']!r}; {COMPILED_FLOAT64}",
+            )
+
+
+def _check_float32(
+    checker: Checker, campaign: Campaign, axis_names: set[str], seen: set[tuple[str, str]]
+) -> None:
+    """Refuse float32 where it does not run: on the compiled backend (float64 only, for now)
+    and in a chain (whose runs go one at a time on the compiled backend); once per cause, at
+    the key that sets the precision."""
+    swept = "precision" in axis_names
+    where = ("sweep", "axes", "precision") if swept else ("numerics", "precision")
+    if campaign.execution.backend != "accelerated":
+        why = COMPILED_FLOAT64
+    elif campaign.chain is not None:
+        why = (
+            "a chain's runs go one at a time on the compiled backend, which computes in "
+            "float64 only, for now; give precision: float64"
+        )
+    else:
+        return
+    key = ("precision", why)
+    if key not in seen:
+        seen.add(key)
+        checker.add(where, f"got 'float32'; {why}")
 
 
 def _report(
@@ -85,6 +134,44 @@ def _report(
         checker.add((), "further grid problems not shown")
         return True
     return False
+
+
+#: samples per period of the eps sine that the ``moduli`` fit needs (its docs: save_every <= T/8)
+MODULI_SAMPLES = 8
+
+
+def _needs_samples(
+    checker: Checker, campaign: Campaign, point, coords: dict, seen: set, axis_names: set[str]
+) -> bool:
+    """The ``moduli`` fit reads the stress series at the save times: ``save_every`` at most
+    1/:data:`MODULI_SAMPLES` of the eps sine's period, reported at save_every (or its axis)
+    once; ``True`` when enough problems are reported."""
+    if not any(f.name == "moduli" for f in campaign.fits):
+        return False
+    sine = dict(point.parameters.protocol.profiles).get("eps")
+    period = getattr(sine, "period", None)
+    save_every = point.numerics.save_every
+    if period is None or save_every <= period / MODULI_SAMPLES * (1 + 1e-9):
+        return False
+    if "save_every" in axis_names:
+        path: tuple[str | int, ...] = ("sweep", "axes", "save_every")
+    elif "eps_period" in axis_names:
+        path = ("sweep", "axes", "eps_period")
+    elif "save_every" in campaign.numerics:
+        path = ("numerics", "save_every")
+    else:
+        path = ("fits",)
+    key = (repr(path), "moduli samples")
+    if key in seen:
+        return False
+    seen.add(key)
+    at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
+    checker.add(
+        path,
+        f"the moduli fit needs save_every <= T/{MODULI_SAMPLES} of the eps sine; got save_every = "
+        f"{save_every:g} with T = {period:g}{f' (at the grid point {at})' if at else ''}",
+    )
+    return len(seen) >= MAX_POINT_PROBLEMS
 
 
 def _same_run(checker: Checker, point, coords: dict, runs: dict[str, dict]) -> bool:

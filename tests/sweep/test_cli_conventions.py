@@ -126,7 +126,7 @@ def _events(clock):
 
 
 def _plan(done=0):
-    return SimpleNamespace(done=list(range(done)), failed=[], todo=[])
+    return SimpleNamespace(done=list(range(done)), failed=[], todo=[], skipped=done)
 
 
 def test_progress_lines_and_a_median_eta():

@@ -36,8 +36,8 @@ sweep:
   zip: [[K, chi]]
 seeds: {count: 2, start: 3}
 store: {snapshot_dtype: float32, snapshot_fields: [q1, q2, A]}
-fits: [transition, {anisotropy: {}}]
-figures: [fig2]
+fits: [transition, {scaling: {select: {alpha_minus_B_level: 0.05}}}]
+figures: []
 execution: {workers: 2, threads_per_worker: 1}
 limits: {max_runs: 1000, run_memory: 4GB}
 verify: {variants: [{resolution: x2}, {tolerance: /10}], seeds: 1}
@@ -163,7 +163,7 @@ def test_every_value_of_every_section_replaced_by_every_hostile_value(tmp_path):
         (
             "chain: {axis: [alpha_minus_B, K]}\n",
             4,
-            "chain.axis: got ['alpha_minus_B', 'K']; allowed: a swept axis",
+            "chain.axis: got ['alpha_minus_B', 'K']; allowed: the name of one swept axis",
         ),
         ("limits: {run_memory: .inf}\n", 4, "limits.run_memory"),
         (

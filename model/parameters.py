@@ -45,10 +45,8 @@ BACKENDS = ("compiled", "numpy")
 #: the precision of a run's fields and passes (Numerics.precision; docs/guide/precision.md)
 PRECISIONS = ("float64", "float32")
 #: what the compiled and numpy backends allow (model.simulate.run)
-FLOAT64_ONLY = (
-    "float64 on the compiled and numpy backends: float32 runs on the accelerated backend only, "
-    "for now (execution: {backend: accelerated})"
-)
+FLOAT64_ONLY = "float64 on the compiled and numpy backends: float32 runs on the accelerated "
+FLOAT64_ONLY += "backend only, for now (execution: {backend: accelerated})"
 
 
 def _suggest(name: str, valid: list[str]) -> str:
@@ -373,6 +371,9 @@ class Numerics:
             raise ParameterError("backend", self.backend, " or ".join(BACKENDS))
         if self.precision not in PRECISIONS:
             raise ParameterError("precision", self.precision, " or ".join(PRECISIONS))
+        if self.precision == "float32" and self.mechanics == "finite" and self.newton_tol < 1e-6:
+            why = "at least 1e-6 with precision float32 (its Newton stalls near 9e-7: measured)"
+            raise ParameterError("newton_tol", self.newton_tol, why)
         for name in ("adaptive", "incompressible"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(name, getattr(self, name), "true or false")

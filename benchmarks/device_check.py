@@ -7,7 +7,7 @@ the machine lacks from ``benchmarks/device_wheels/``); ``--tiny`` is the CPU che
 Agreement (both mechanics, seeds 0 and 1 as one batch, the reference runs seed 0 on the host):
   * the accelerated float64 run against :func:`nematic_solids.model.simulate.run` (numpy backend)
     at every save: sigma2_S, lambda, mean_S within 1e-6 relative, <cos 2theta> within 1e-6
-    absolute (they agree to rounding: the same steps, docs/model.md);
+    absolute (they agree to rounding: the same steps, docs/model/accelerated.md);
   * float32 against float64 on the device: sigma2_S, lambda, mean_S within 1e-3 relative,
     <cos 2theta> within 1e-3 absolute (measured on the CPU: a few 1e-6 to 5e-5,
     docs/guide/precision.md).

@@ -33,7 +33,7 @@ def floor(n: int, precision: str, amb: float, tol: float) -> dict:
     q1, q2, _ = initial_fields(params, n, 0)
     q = np.stack([q1, q2])
     q = 0.5 * q / np.max(np.hypot(q[0], q[1]))  # |S| up to 0.5
-    q = jnp.asarray(q, dtype)
+    order = jnp.asarray(q, dtype)
     cdtype = jnp.complex64 if precision == "float32" else jnp.complex128
 
     @jax.jit
@@ -41,7 +41,7 @@ def floor(n: int, precision: str, amb: float, tol: float) -> dict:
         zero = jnp.zeros((2, n, n // 2 + 1), cdtype)
         return finite.force_balance(q, zero, finite.deformation(zero, sym, c), sym, c)
 
-    bal = solve(q)
+    bal = solve(order)
     return {
         "resolution": n,
         "precision": precision,

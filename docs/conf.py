@@ -8,6 +8,7 @@ executed by myst-nb at every build.
 
 from __future__ import annotations
 
+import logging
 import os
 import subprocess
 import sys
@@ -18,6 +19,16 @@ ROOT = DOCS.parent
 # the package (nematic_solids) comes from the environment's install (scripts/build_docs.sh
 # installs the checkout, editable); the notebook's kernel draws without a display
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the notebook's kernel (ipykernel) logs errors only: its note that it listens on a local TCP
+# port without encryption is not the build's business; an error in a cell fails the build
+_profile = DOCS / "_generated" / "ipython" / "profile_default"
+_profile.mkdir(parents=True, exist_ok=True)
+(_profile / "ipython_kernel_config.py").write_text('c.IPKernelApp.log_level = "ERROR"\n')
+os.environ["IPYTHONDIR"] = str(_profile.parent)
+# the root logger shows warnings and errors of the libraries that log there; configured here,
+# before the theme's accessible-pygments calls logging.basicConfig(level=INFO) on import (which
+# would print nbclient's "Executing notebook" line)
+logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
 
 project = "Active nematic solids"
 author = "the active-nematic-solids developers"
@@ -49,6 +60,30 @@ nb_execution_show_tb = True
 
 # --- API reference ---
 autodoc_member_order = "bysource"
+# names that the modules import for type checking only, as the signatures show them
+autodoc_type_aliases = {
+    "Campaign": "nematic_solids.sweep.campaign.Campaign",
+    "Expansion": "nematic_solids.sweep.expand.Expansion",
+}
+# every cross-reference must resolve (warnings are errors): the project's own types are
+# documented here; other libraries' types (no intersphinx: the site builds offline), module
+# references (docs/architecture.md maps the modules) and the internals the docstrings name
+# stay plain text
+nitpicky = True
+nitpick_ignore_regex = [
+    (
+        r"py:.*",
+        r"(numpy|np|xarray|xr|pandas|pd|pathlib|collections\.abc|typing|jax|jaxlib|pde)\..*",
+    ),
+    (r"py:class", r"Path|Array|ArrayLike|NDArray|PDEBase|optional"),
+    (r"py:meth", r"~?Mechanics\..*"),
+    (r"py:mod", r"nematic_solids\..*"),
+    (r"py:.*", r"nematic_solids\.sweep\.spec\.yaml_input\..*"),
+    (
+        r"py:.*",
+        r"nematic_solids\.model\.(observables|split|krylov|initial|mechanics|tensors|time_scales|accelerated\.etdrk4)\..*",
+    ),
+]
 autodoc_typehints = "description"
 autodoc_default_options: dict[str, bool] = {}
 napoleon_google_docstring = True

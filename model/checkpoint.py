@@ -72,11 +72,15 @@ class InitialState:
     or snapshot, under the new run's own parameters): ``fields`` q1, q2, A (3, N, N);
     ``displacement`` the periodic displacement u~ (2, N, N) in real space, finite strain's
     first guess for the force balance at t = 0 (the new parameters move it: Newton solves it
-    again); ``origin`` says where they come from (the Dataset's ``initial_from``)."""
+    again); ``origin`` says where they come from (the Dataset's ``initial_from``);
+    ``displacement_hat`` the end state's own displacement spectrum (finite strain), used
+    instead of ``displacement`` when given: the exact guess, whatever the run file keeps of its
+    snapshots (their precision, their fields)."""
 
     fields: Array
     displacement: Array | None = None
     origin: str = ""
+    displacement_hat: Array | None = None
 
     @classmethod
     def at(cls, state: RunState, time: float | None = None, origin: str = "") -> InitialState:
@@ -92,6 +96,18 @@ class InitialState:
         if time is None:  # the state's own fields, exact (a snapshot may be rounded)
             out.fields = np.asarray(state.fields, dtype=float)
         return out
+
+    @classmethod
+    def exact(cls, state: RunState, origin: str = "") -> InitialState:
+        """The end state ``state`` itself: its fields and (finite strain) its displacement
+        spectrum, bit for bit; nothing of its snapshots."""
+        u_hat = state.mechanics.get("u_hat")
+        return cls(
+            np.array(state.fields, dtype=float),
+            None,
+            origin,
+            None if u_hat is None else np.array(u_hat, dtype=complex),
+        )
 
     @classmethod
     def of_snapshot(cls, snapshot: Array, origin: str = "") -> InitialState:
@@ -128,9 +144,9 @@ class RunState:
     seed: int
     stopped: float = math.nan
     wall: float = 0.0
-    #: the history of the state: "run_id@t" entries a campaign adds (free text here)
+    #: the history of the state, the "run_id@t" entries a campaign adds (free text here)
     lineage: list[str] = field(default_factory=list)
-    #: where the run's fields at t = 0 came from (:attr:`InitialState.origin`; "" for the
+    #: where the run's fields at t = 0 came from (``InitialState.origin``; "" for the
     #: seeded texture)
     initial_from: str = ""
     #: the model version that computed it (``model.__version__``): a state of another
@@ -180,7 +196,7 @@ class RunState:
     def to_dataset(self, *, snapshots: bool = True) -> xr.Dataset:
         """The state as a Dataset (complex spectra as (re, im) pairs), with its checksum;
         ``snapshots=False`` leaves the snapshots out (a run file holds them already: the
-        reader puts them back, :attr:`snaps` is then empty)."""
+        reader puts them back, ``snaps`` is then empty)."""
         n = self.fields.shape[-1]
         columns = sorted({k for r in self.rows for k in r})
         table = np.array([[r.get(c, math.nan) for c in columns] for r in self.rows], dtype=float)

@@ -45,8 +45,7 @@ BACKENDS = ("compiled", "numpy")
 #: the precision of a run's fields and passes (Numerics.precision; docs/guide/precision.md)
 PRECISIONS = ("float64", "float32")
 #: what the compiled and numpy backends allow (model.simulate.run)
-FLOAT64_ONLY = "float64 on the compiled and numpy backends: float32 runs on the accelerated "
-FLOAT64_ONLY += "backend only, for now (execution: {backend: accelerated})"
+FLOAT64_ONLY = "float64 (float32 runs on the accelerated backend only, for now)"
 
 
 def _suggest(name: str, valid: list[str]) -> str:
@@ -78,7 +77,7 @@ class Parameters:
             Fourier modes 2 pi (n, m), n^2 + m^2 <= noise_modes^2: the same physical field at
             every resolution) or "per_node" (an independent random orientation at every grid
             node, the paper's "initial random orientation": resolution dependent by nature).
-        noise_modes: the band of the "band" texture (unused by "per_node").
+        noise_modes: the band of the "band" texture (unused by "per_node"); resolution > 2x it.
         texture_resolution: "per_node" only: the grid the per-node texture is drawn on (0,
             the default: the run's own grid). A run on a finer grid gets that texture by
             spectral interpolation, so that it starts from the same physical field (the
@@ -262,7 +261,8 @@ class Numerics:
     """How the equations are solved (not what they are).
 
     Attributes:
-        resolution: N, grid points per side of the periodic unit square (even, >= 16).
+        resolution: N, grid points per side of the periodic unit square (even, >= 16; band
+            texture: N > 2 ``noise_modes``, so that its modes fit the grid).
         t_final: end time (units of tau).
         dt: initial (and, with ``adaptive = False``, fixed) time step.
         scheme: time integrator, "etdrk4" (Krogstad's fourth-order exponential Runge-Kutta,
@@ -293,9 +293,8 @@ class Numerics:
             round-off level and stops changing).
         steady_window: the time span of that comparison (units of tau; with steady_tol > 0
             at least save_every and below t_final).
-        precision: "float64" (the default) or "float32": fields, transforms and passes in
-            float32, the sums, the time and the step size in float64
-            (docs/guide/precision.md); on the accelerated backend only, for now. In the id.
+        precision: "float64" (default) or "float32": fields, transforms and passes in float32,
+            sums, time and step in float64 (docs/guide/precision.md); accelerated only. In the id.
     """
 
     resolution: int = 128
@@ -371,9 +370,6 @@ class Numerics:
             raise ParameterError("backend", self.backend, " or ".join(BACKENDS))
         if self.precision not in PRECISIONS:
             raise ParameterError("precision", self.precision, " or ".join(PRECISIONS))
-        if self.precision == "float32" and self.mechanics == "finite" and self.newton_tol < 1e-6:
-            why = "at least 1e-6 with precision float32 (its Newton stalls near 9e-7: measured)"
-            raise ParameterError("newton_tol", self.newton_tol, why)
         for name in ("adaptive", "incompressible"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(name, getattr(self, name), "true or false")
@@ -446,7 +442,12 @@ class Numerics:
 def check_compatible(params: Parameters, numerics: Numerics) -> None:
     """Constraints that involve both objects: the grid must resolve a band-limited initial
     texture (resolution > 2 noise_modes, so the same physical field exists at this
-    resolution), and a per-node texture drawn on a grid no finer than the run's."""
+    resolution), a per-node texture drawn on a grid no finer than the run's, and a protocol's
+    time scales resolved (:func:`nematic_solids.model.time_scales.check_time_scales`)."""
+    if params.protocol:
+        from .time_scales import check_time_scales
+
+        check_time_scales(params, numerics)
     if params.texture_resolution > numerics.resolution:
         raise ParameterError(
             "texture_resolution",

@@ -23,6 +23,14 @@ one. Inside a step from :math:`t_0` every stage uses the piece that holds :math:
 time sees the value before the switch. Anywhere else the value is right-continuous: a save at a
 switch time (its observables and its force balance) sees the value after it.
 
+**Resolved structure.** No step steps over a function's structure: besides landing on the
+switch times, a step is at most :data:`SINE_STEP_FRACTION` of a sine's period (16 steps per
+period) and :data:`RAMP_STEP_FRACTION` of a ramp piece's duration (:meth:`Protocol.max_step`).
+Every value and every rate of a function is finite at every time (checked when it is read), and
+:meth:`Protocol.forced_steps` counts the steps these rules force on a run (the cost estimate's).
+The floor on a sine's period relative to the model's own time scales is
+:func:`nematic_solids.model.parameters.check_compatible`'s.
+
 A constant function is no protocol (:func:`profile_from` returns its value), so a constant
 protocol is the same run as the plain parameter.
 """
@@ -43,6 +51,13 @@ PROTOCOL_PARAMETERS = ("alpha_minus_B", "chi", "eps")
 FORMS = ("steps", "ramp", "pulse", "sine")
 #: most points of one steps or ramp function
 MAX_POINTS = 10_000
+#: the largest step inside a sine as a fraction of its period, T/16 (measured, the response of
+#: a sine at T/8 differs from the T/64 one by 1e-4 of its amplitude, at T/16 by 1e-6;
+#: tests/model/test_protocol_resolution.py)
+SINE_STEP_FRACTION = 1.0 / 16.0
+#: the largest step inside a ramp piece, as a fraction of its duration (a ramp is integrated
+#: by the stages exactly in time; the bound keeps the saved response resolved along it)
+RAMP_STEP_FRACTION = 1.0 / 8.0
 PULSE_KEYS = ("base", "level", "start", "duration")
 RAMP_KEYS = ("from", "to", "start", "duration")
 SINE_KEYS = ("mean", "amplitude", "period", "start")
@@ -91,6 +106,20 @@ class Piecewise:
     def breaks(self) -> tuple[float, ...]:
         return tuple(t for t, _ in self.points[1:])
 
+    def max_step(self, after: float) -> float:
+        """The largest step from ``after``: a fraction of the ramp piece that holds it."""
+        i = self._piece(after)
+        if not self.linear or i + 1 == len(self.points):
+            return math.inf
+        return (self.points[i + 1][0] - self.points[i][0]) * RAMP_STEP_FRACTION
+
+    def rate_bound(self) -> float:
+        """The largest ``|rate|`` anywhere on the time axis."""
+        if not self.linear:
+            return 0.0
+        pairs = zip(self.points, self.points[1:], strict=False)
+        return max((abs((v1 - v0) / (t1 - t0)) for (t0, v0), (t1, v1) in pairs), default=0.0)
+
     def extremes(self) -> tuple[float, float]:
         values = [v for _, v in self.points]
         return min(values), max(values)
@@ -124,6 +153,14 @@ class Sine:
 
     def breaks(self) -> tuple[float, ...]:
         return (self.start,) if self.start > 0 else ()
+
+    def max_step(self, after: float) -> float:
+        """The largest step from ``after``: a fraction of the period once the sine runs."""
+        return math.inf if after < self.start else self.period * SINE_STEP_FRACTION
+
+    def rate_bound(self) -> float:
+        """The largest ``|rate|``, a 2 pi / T."""
+        return abs(self.amplitude) * (2.0 * math.pi / self.period)
 
     def extremes(self) -> tuple[float, float]:
         a = abs(self.amplitude)
@@ -225,7 +262,22 @@ def profile_from(name: str, raw: Any) -> Profile | float:
         profile = Sine(r.get("mean", 0.0), r["amplitude"], r["period"], r.get("start", 0.0))
     else:
         raise ParameterError(where, spec, "a list of [time, value] pairs")
+    _check_finite(where, profile)
     return profile.extremes()[0] if profile.constant() else profile
+
+
+def _check_finite(name: str, profile: Profile) -> None:
+    """Every value and rate the function takes, at any time, is finite: its extremes, its
+    largest rate and (a ramp) every difference of neighbouring values (which the
+    interpolation forms)."""
+    # float arithmetic overflows to inf (no exception): the inf is what is checked
+    lo, hi = profile.extremes()
+    rate, spread = profile.rate_bound(), hi - lo
+    for what, x in (("lowest value", lo), ("highest value", hi), ("range of values", spread)):
+        if not math.isfinite(x):
+            raise ParameterError(name, f"{what} {x}", "finite values at every time")
+    if not math.isfinite(rate):
+        raise ParameterError(name, f"largest rate {rate}", "a finite rate at every time")
 
 
 @dataclass(frozen=True)
@@ -280,6 +332,26 @@ class Protocol:
 
     def extremes(self, name: str) -> tuple[float, float]:
         return dict(self.profiles)[name].extremes()
+
+    def max_step(self, after: float) -> float:
+        """The largest step from ``after`` that resolves every function's structure
+        (:data:`SINE_STEP_FRACTION`, :data:`RAMP_STEP_FRACTION`); infinity where none bounds
+        it. Constant between switch times, on which steps land."""
+        return min((p.max_step(after) for _, p in self.profiles), default=math.inf)
+
+    def forced_steps(self, t_final: float) -> float:
+        """The fewest steps a run to ``t_final`` takes for the protocol alone: one per piece
+        between switch times, and within a piece its length over :meth:`max_step`."""
+        edges = [0.0, *(b for b in self._breaks if 0.0 < b < t_final), t_final]
+        steps = 0.0
+        for a, b in zip(edges, edges[1:], strict=False):
+            bound = self.max_step(a)
+            steps += 1.0 if math.isinf(bound) else max(math.ceil((b - a) / bound - 1e-9), 1)
+        return steps
+
+    def shortest_period(self) -> float:
+        """The shortest period of a sine of the protocol (infinity without one)."""
+        return min((p.period for _, p in self.profiles if isinstance(p, Sine)), default=math.inf)
 
     def to_dict(self) -> dict[str, Any]:
         """The canonical form: {name: {"steps" | "ramp": [[t, v], ...]} or {"sine": {...}}}."""

@@ -170,7 +170,9 @@ def run(
     wall_before, t_start = 0.0, 0.0
     if initial is not None:
         state = make_state(*np.array(initial.fields, dtype=float))
-        if initial.displacement is not None and not linear:  # Newton's first guess at t = 0
+        if initial.displacement_hat is not None and not linear:  # Newton's first guess
+            eq.mechanics.u_hat = np.array(initial.displacement_hat, dtype=complex)
+        elif initial.displacement is not None and not linear:  # at t = 0
             eq.mechanics.u_hat = grid.forward(np.asarray(initial.displacement, dtype=float))
     elif start is None:
         state = make_state(*initial_fields(params, numerics.resolution, seed))

@@ -22,8 +22,11 @@ retried with h/4; if it still fails at ``h <= 1e-3 dt_max`` the failure is the r
 
 **Protocols** (:mod:`nematic_solids.model.protocol`): a step never crosses a switch time of the
 parameters' functions of time; one that would is shortened to end on it, and the next starts exactly
-there. Every stage of a step sets the constants at its time on the pieces that hold the step's
-start; the projection and the saves at the step's end use the values after it.
+there. Inside a sine no step is longer than 1/16 of its period, inside a ramp piece than 1/8 of its
+duration (:meth:`nematic_solids.model.protocol.Protocol.max_step`; adaptive: rounded down onto
+the ladder), whatever the error estimate allows, fixed steps included. Every stage of a step
+sets the constants at its time on the pieces that hold the step's start; the projection and the
+saves at the step's end use the values after it.
 """
 
 from __future__ import annotations
@@ -358,7 +361,14 @@ class ETDSolver(SolverBase):
                 # times (no step crosses one: nematic_solids.model.protocol)
                 switch = protocol.next_break(t)
                 target = min(t_end, switch)
-                h_try = min(h, self.dt_max, target - t) if self.adaptive else min(h, target - t)
+                # no step over a sine's period or a ramp's piece (its fraction, on the ladder)
+                cap = protocol.max_step(t) if protocol else math.inf
+                if self.adaptive:
+                    if cap < self.dt_max:
+                        cap = self._quantize(cap)
+                    h_try = min(h, self.dt_max, cap, target - t)
+                else:
+                    h_try = min(h, cap, target - t)
                 try:
                     self._after = t
                     new, err = self.step(cur, t, h_try)

@@ -12,6 +12,9 @@ if [ ! -x .venv/bin/python ]; then
     "$PY" -m venv .venv
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
-.venv/bin/python -m pip install --quiet -e '.[test]'
+# the one note of setuptools on our layout (package-dir maps nematic_solids.* onto model/ and
+# sweep/, installed editable through an import finder) is filtered by its message; pip's own
+# warnings and every error still show
+PYTHONWARNINGS="ignore:Editable installation" .venv/bin/python -m pip install --quiet -e '.[test]'
 .venv/bin/python -m nematic_solids.model.warmup "$@"
 echo "ready: .venv/bin/nematic (or 'source .venv/bin/activate' to put nematic on your PATH)"

@@ -10,11 +10,14 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-.venv/bin/python}
 if [ "${1:-}" != "--no-install" ]; then
-    "$PY" -m pip install -q -e '.[docs]'
+    # the one note of setuptools on our layout (package-dir maps nematic_solids.* onto model/
+    # and sweep/, installed editable through an import finder): filtered by its message
+    PYTHONWARNINGS="ignore:Editable installation" "$PY" -m pip install -q -e '.[docs]'
 fi
 rm -rf docs/_build docs/_generated
 start=$(date +%s)
-MPLBACKEND=Agg "$PY" -m sphinx -W --keep-going -b html docs docs/_build/html
+# -q: warnings and errors only (not the extensions' configuration dumps and progress lines)
+MPLBACKEND=Agg "$PY" -m sphinx -q -W --keep-going -b html docs docs/_build/html
 # the site works offline: no page loads a script, style, image or frame from elsewhere (the
 # committed reports under _downloads/ are the program's pages, checked by its own tests)
 if grep -rlE '<(script|img|link|iframe|source)[^>]*(src|href)="(https?:)?//' docs/_build/html \

@@ -142,7 +142,7 @@ class ExecutionSpec:
     memory_limit: str | None = None
     scheduler: str | None = None
     cluster: ClusterSpec | None = None
-    #: seconds to wait for a first worker (scheduler / cluster); 0: wait for ever
+    #: seconds to wait for a first worker (scheduler / cluster), or 0 to wait for ever
     wait_for_workers: float = DEFAULT_WORKER_WAIT
     #: seconds without any usable worker (or scheduler) after which a started campaign stops
     give_up_after: float = DEFAULT_GIVE_UP
@@ -150,7 +150,8 @@ class ExecutionSpec:
     tls: bool = True
     #: why the campaign opted out of TLS (required with ``security: {tls: false}``)
     insecure_reason: str | None = None
-    #: how a run is computed: "compiled" (each run its own task, :func:`model.simulate.run`
+    #: how a run is computed, "compiled" (each run its own task,
+    #: :func:`~nematic_solids.model.simulate.run`
     #: with ``numerics.backend``) or "accelerated" (JAX: up to ``batch`` seeds of one point
     #: per task, on ``device``; :mod:`nematic_solids.sweep.run.batch`)
     backend: str = "compiled"
@@ -185,7 +186,7 @@ def local_worker_count(execution: ExecutionSpec) -> int:
 class LimitsSpec:
     """Ceilings checked before the grid is built: ``max_runs`` (runs = product of the axis
     lengths x seeds) and ``run_memory`` (bytes one run may use; default: what one worker
-    has, see :func:`run_memory_limit`)."""
+    has, see ``sweep.spec.run_memory_limit``)."""
 
     max_runs: int = DEFAULT_MAX_RUNS
     run_memory: int | None = None
@@ -313,7 +314,7 @@ class PrecisionSpec:
 
     Every point gets the campaign's first ``initial`` seeds, then the next ``add`` per round
     until its decision is taken: ``precise`` (the ``confidence`` Student-t interval of the
-    seed mean of ``observable`` is narrower than ``width``, relative to |mean| when
+    seed mean of ``observable`` is narrower than ``width``, relative to ``|mean|`` when
     ``relative``), ``unanimous`` (at least ``unanimous`` seeds, all of one class: ``sigma2_S``
     above ``patterned_above`` or not, or the tuple of ``classes``' thresholds each run is
     above) or ``cap`` (every seed of the campaign run). ``width`` or ``unanimous`` may be
@@ -407,8 +408,9 @@ class VerifySpec:
 #: the name of the grid dimension of a chain's branches (``chain:``,
 #: :mod:`nematic_solids.sweep.chains`)
 BRANCH = "branch"
-#: the branches a chain may have: along its axis in increasing or decreasing order
+#: the branches a chain may have, along its axis in increasing or decreasing order
 BRANCHES = ("up", "down")
+CHAIN_STARTS = ("predecessor", "fresh")  #: ``chain: {up: ...}``: where the up branch starts
 
 
 @dataclass(frozen=True)
@@ -420,6 +422,9 @@ class ChainSpec:
 
     axis: str
     branches: tuple[str, ...] = BRANCHES
+    #: where each run of the up branch starts, ``"predecessor"`` (quasi-static) or ``"fresh"``
+    #: (each from the seeded texture, as Fig. 2's runs: the plain runs of its points)
+    up: str = "predecessor"
 
     @property
     def dim(self) -> Dim:
@@ -491,5 +496,5 @@ class InitialSpec:
 
     @property
     def time_text(self) -> str:
-        """The time as it enters the identity and the lineage: ``end`` or the number."""
+        """The time as it enters the identity and the lineage, ``end`` or the number."""
         return "end" if self.time is None else f"{self.time:.12g}"

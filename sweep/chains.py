@@ -10,6 +10,11 @@ predecessor's id (:func:`nematic_solids.sweep.identity.hash_canonical`'s ``start
 ids follow its whole history. The runs of a chain run one after the other (the driver submits a run
 with its predecessor's task as a dependency, or after its record), the chains in parallel; a chain
 stopped half-way resumes at its first run not done.
+
+With ``up: fresh`` every run of the up branch begins from the seeded texture, as Fig. 2's runs (the
+plain runs of its points), so that one campaign gives the jump from a texture and the down branch's
+from the pattern: the loop's width. The up branch's top run is then the down branch's first run too
+(the same run id: the driver runs it once), and the down branch's second run starts from it.
 """
 
 from __future__ import annotations
@@ -34,16 +39,22 @@ def chain_parents(campaign: Campaign) -> list[int | None]:
     rank = {k: r for r, k in enumerate(order)}
     shape, n_seeds = campaign.shape, len(campaign.seeds)
     strides = [math.prod(shape[j + 1 :]) for j in range(len(shape))]
+    branches = list(dims[bi].axes[0].values)
+    fresh = chain.up == "fresh" and "up" in branches
     out: list[int | None] = []
     for pos in range(campaign.n_runs):
         point, seed = divmod(pos, n_seeds)
         index = [(point // strides[j]) % shape[j] for j in range(len(shape))]
-        step = -1 if dims[bi].axes[0].values[index[bi]] == "up" else 1
-        previous = rank[index[ci]] + step
-        if not 0 <= previous < len(values):
+        up = branches[index[bi]] == "up"
+        previous = rank[index[ci]] + (-1 if up else 1)
+        if (up and fresh) or not 0 <= previous < len(values):
             out.append(None)
             continue
         index[ci] = order[previous]
+        if fresh and previous == len(values) - 1:
+            # the down branch's first run is the up branch's fresh run at the top: its twin
+            # (the same run id), which the driver runs once, at the up branch's position
+            index[bi] = branches.index("up")
         out.append(sum(i * s for i, s in zip(index, strides, strict=True)) * n_seeds + seed)
     return out
 

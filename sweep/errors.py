@@ -9,6 +9,7 @@ raises on purpose with one class. Every message names the bad value, what is all
 - :class:`ClusterError` no usable dask cluster
 - :class:`FitError`, :class:`FigureError` a fit or figure that these results cannot give
 - :class:`ExportError` a results table that cannot be exported as asked
+- :class:`CatalogueError` a catalogue of runs that cannot be opened where asked
 """
 
 from __future__ import annotations
@@ -73,3 +74,10 @@ class FigureError(NematicError, ValueError):
 
 class ExportError(NematicError, ValueError):
     """A results table cannot be exported as asked (unknown format, Parquet without pyarrow)."""
+
+
+class CatalogueError(NematicError, RuntimeError):
+    """The catalogue of runs (:mod:`nematic_solids.sweep.catalogue`) cannot be opened or used
+    where asked: a network filesystem under SQLite, an unreachable or unknown database URL, a
+    catalogue of another results root. Exit code 2. Never fails a run: the driver goes on
+    without the catalogue (the run files stay the source of truth)."""

@@ -19,7 +19,7 @@ from nematic_solids.model.resolution import resolve
 
 from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec, same_value
 from .chains import chain_parents, in_chain_order
-from .identity import PointHasher, hash_canonical, trajectory_id
+from .identity import PointHasher, hash_canonical, identity_start, start_state, trajectory_id
 from .protocols import with_axis_values
 
 log = logging.getLogger(__name__)
@@ -92,10 +92,18 @@ class Parents:
     the ones ``point`` pins, the others the child's own values of the same name, and the seed
     ``seed`` (``same``: the child's own). The child's run id includes the parent run's id and
     the time (:func:`nematic_solids.sweep.identity.hash_canonical`'s ``start``), so a child of
-    another parent, or of another time, is another run."""
+    another parent, or of another time, is another run; and, where it does not begin from the
+    parent's exact end state or a float64 snapshot of all fields (the parent keeps no end
+    state, or float32 or fewer snapshot fields), what it begins from (``state``)."""
 
     def __init__(self, spec: InitialSpec, parent: Expansion):
         self.spec, self.parent = spec, parent
+        store = parent.campaign.store
+        #: what the children begin from when it is not the exact end state (or "":
+        #: :func:`nematic_solids.sweep.run.continuation.start_state`), part of their ids
+        self.state = start_state(
+            spec.time_text, store.end_state, store.snapshot_dtype, store.snapshot_fields
+        )
 
     def of(self, point: GridPoint, seeds: Sequence[int]) -> list[str]:
         """The parent run ids of the child runs at ``point`` with ``seeds``; ``KeyError``
@@ -149,8 +157,8 @@ class Expansion:
     #: for the expansions of adaptive campaigns, which build their runs otherwise
     starts: list[dict[str, str]] | None = None
     parents: Parents | None = None
-    #: where each run of a chain begins: its predecessor's ``run`` id and ``time`` ("end"),
-    #: None for the first run of a branch
+    #: where each run of a chain begins, its predecessor's ``run`` id and ``time`` ("end"),
+    #: or None for the first run of a branch
     chain_starts: list[dict[str, str] | None] = []
 
     def __init__(self, campaign: Campaign):
@@ -176,11 +184,16 @@ class Expansion:
             p, n = point.parameters.to_dict(), point.numerics.to_dict()
             for seed, parent_id in zip(self.seeds, parents.of(point, self.seeds), strict=True):
                 start = {"run": parent_id, "time": parents.spec.time_text}
+                if parents.state:  # not the exact end state: another id (and a warning)
+                    start["state"] = parents.state
                 self.starts.append(start)
                 self.run_ids.append(hash_canonical(p, n, seed, start))
         self.parents = parents
-        self.position = {rid: i for i, rid in enumerate(self.run_ids)}
-        if len(self.position) != len(self.run_ids):
+        self.position: dict[str, int] = {}  # each run's first position
+        for i, rid in enumerate(self.run_ids):
+            self.position.setdefault(rid, i)
+        twins = campaign.chain is not None and campaign.chain.up == "fresh"  # by design
+        if len(self.position) != len(self.run_ids) and not twins:
             # Two grid points that normalise to the same run (e.g. alpha and alpha_minus_B
             # values that coincide) would share one file: that is a campaign mistake.
             dup = next(r for i, r in enumerate(self.run_ids) if self.position[r] != i)
@@ -234,7 +247,7 @@ def continued_runs(
     for i in todo:
         run = expansion.run(i)
         numerics = run.point.numerics
-        start = None if run.start is None else {k: run.start[k] for k in ("run", "time")}
+        start = identity_start(run.start)
         traj = trajectory_id(run.point.parameters.to_dict(), numerics.to_dict(), run.seed, start)
         shorter = [e for e in ends.get(traj, ()) if e[0] < numerics.t_final and e[1] != run.run_id]
         if shorter:

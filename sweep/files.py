@@ -86,6 +86,21 @@ def _read_only(path: Path) -> bool:
         return False
 
 
+def _no_space(folder: Path, probe: bool = True) -> str | None:
+    """ "the disk is full" (or its quota exceeded) when ``folder``'s filesystem has less than
+    :data:`NEARLY_FULL` bytes free or, with ``probe``, a test write there says so; else None."""
+    try:
+        vfs = os.statvfs(folder)
+    except OSError:
+        vfs = None
+    if vfs is not None and vfs.f_bavail * vfs.f_frsize < NEARLY_FULL:
+        return f"{_CAUSES[errno.ENOSPC]} ({vfs.f_bavail * vfs.f_frsize} bytes free)"
+    failed = probe_write(folder) if probe and folder.is_dir() else None
+    if failed is not None and failed.errno in (errno.ENOSPC, errno.EDQUOT):
+        return _CAUSES[failed.errno]
+    return None
+
+
 def storage_cause(path: Path, exc: BaseException | None = None) -> str:
     """Why ``path`` could not be written, in words, from the error (an ``OSError``'s errno)
     or, when the error does not say (netCDF reports "HDF error"), from the folder itself:
@@ -93,13 +108,17 @@ def storage_cause(path: Path, exc: BaseException | None = None) -> str:
     import resource
 
     if isinstance(exc, OSError) and exc.errno in (errno.EACCES, errno.EPERM, errno.ENOENT):
-        # some libraries (netCDF) report a read-only filesystem or a file in the way so
+        # some libraries report a read-only filesystem, a file in the way or a full disk so
+        # (netCDF's nc_create on a disk with no free block: "Permission denied")
         if _read_only(path):
             return _CAUSES[errno.EROFS]
         if not _existing(path.parent).is_dir():
             return f"{_CAUSES[errno.ENOTDIR]} ({_existing(path.parent)} is a file)"
         if not path.parent.exists():
             return f"the folder {path.parent} does not exist (deleted?)"
+        full = _no_space(_existing(path.parent))
+        if full is not None:
+            return full
     if isinstance(exc, OSError) and exc.errno in _CAUSES:
         cause = _CAUSES[exc.errno]
         if exc.errno == errno.EFBIG:
@@ -114,8 +133,9 @@ def storage_cause(path: Path, exc: BaseException | None = None) -> str:
         vfs = None
     if vfs is not None and vfs.f_flag & os.ST_RDONLY:
         return _CAUSES[errno.EROFS]
-    if vfs is not None and vfs.f_bavail * vfs.f_frsize < NEARLY_FULL:
-        return f"the disk is full ({vfs.f_bavail * vfs.f_frsize} bytes free)"
+    full = _no_space(folder, probe=False)
+    if full is not None:
+        return full
     soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
     if soft != resource.RLIM_INFINITY:
         return f"the file size limit was reached (ulimit -f: {soft} bytes)"

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.protocol import RAMP_STEP_FRACTION, SINE_STEP_FRACTION
 
 from .campaign import SIGNIFICANT_DIGITS
 
@@ -121,15 +122,49 @@ def canonical_json(
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`. ``start`` names the state
     a run begins from (``{"run": parent run id, "time": "end" or the time}``,
     :class:`nematic_solids.sweep.expand.Parents`); absent for a run from the seeded texture."""
+    payload = _point_payload(parameters, numerics)
+    payload["seed"] = canonical_value(int(seed))
+    if start is not None:
+        payload["start"] = canonical_value(dict(start))
+    return _dumps(payload)
+
+
+def _point_payload(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> dict[str, Any]:
+    """What the canonical text holds of a grid point (all its keys sort before ``seed``)."""
     payload: dict[str, Any] = {
         "numerics": canonical_value(identity_numerics(numerics)),
         "parameters": canonical_value(identity_parameters(parameters)),
         "schema": SCHEMA_VERSION,
-        "seed": canonical_value(int(seed)),
     }
-    if start is not None:
-        payload["start"] = canonical_value(dict(start))
-    return _dumps(payload)
+    rule = protocol_step_rule(parameters, numerics)
+    if rule is not None:
+        payload["protocol_steps"] = rule
+    return payload
+
+
+def protocol_step_rule(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> str | None:
+    """The bound on the step that a run's sine or ramp imposes
+    (:data:`~nematic_solids.model.protocol.SINE_STEP_FRACTION` of a period,
+    :data:`~nematic_solids.model.protocol.RAMP_STEP_FRACTION` of a ramp piece) as it enters the
+    canonical text, where it can change the steps, so the numbers: where the shortest such bound
+    is below the largest step the run may take otherwise (``dt_max``, or ``dt`` for fixed
+    steps). Runs made before the bound existed then have other ids. None where no bound is
+    below it (a slow sine, a run with steps and pulses only, which land on their switch
+    times): the id is unchanged."""
+    protocol = parameters.get("protocol") or {}
+    bounds = [math.inf]
+    for spec in protocol.values():
+        if not isinstance(spec, Mapping):
+            continue
+        if "sine" in spec:
+            bounds.append(float(spec["sine"]["period"]) * SINE_STEP_FRACTION)
+        if "ramp" in spec:
+            times = [float(t) for t, _ in spec["ramp"]]
+            bounds += [(b - a) * RAMP_STEP_FRACTION for a, b in zip(times, times[1:], strict=False)]
+    largest = numerics.get("dt_max" if numerics.get("adaptive", True) else "dt", math.inf)
+    if not min(bounds) < float(largest):
+        return None
+    return f"sine {SINE_STEP_FRACTION:.12g}, ramp {RAMP_STEP_FRACTION:.12g}"
 
 
 def hash_canonical(
@@ -151,6 +186,33 @@ def run_id_for(
     p = parameters if isinstance(parameters, Parameters) else Parameters.from_dict(parameters)
     n = numerics if isinstance(numerics, Numerics) else Numerics.from_dict(numerics)
     return hash_canonical(p.to_dict(), n.to_dict(), seed)
+
+
+#: the keys of a run's ``start`` that enter its identity: the parent ``run``, the ``time`` ("end"
+#: or the time) and, when it is not the exact end state or an exact snapshot, the ``state``
+START_KEYS = ("run", "time", "state")
+#: what a run begins from when it is not its parent's exact state (:func:`start_state`)
+SNAPSHOT = "snapshot"
+
+
+def start_state(time: str, end_state: bool, dtype: str, fields: tuple[str, ...] | None) -> str:
+    """The ``state`` of a run of ``initial.from`` as its identity names it: "" for the parent's
+    exact end state (``time`` "end", the parent keeps end states) or a float64 snapshot of every
+    field at ``time`` (the exact fields then); else ``"snapshot (<precision>, <fields>)"``: a
+    run begun from it computes other numbers, so it has another id (and its record a
+    warning). Chains always begin from exact end states (their validation asks for them)."""
+    exact_snapshot = dtype == "float64" and fields is None
+    if (time == "end" and end_state) or (time != "end" and exact_snapshot):
+        return ""
+    kept = f"{dtype}, {'all fields' if fields is None else ' '.join(fields)}"
+    return f"{SNAPSHOT} ({kept})"
+
+
+def identity_start(start: Mapping[str, Any] | None) -> dict[str, str] | None:
+    """The part of a run's ``start`` that enters its identity (:data:`START_KEYS`)."""
+    if start is None:
+        return None
+    return {k: str(start[k]) for k in START_KEYS if start.get(k)}
 
 
 #: The numerics a run can be continued past (nematic_solids.model.checkpoint.MAY_DIFFER): left out
@@ -183,13 +245,7 @@ class PointHasher:
     """
 
     def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
-        head = _dumps(
-            {
-                "numerics": canonical_value(identity_numerics(numerics)),
-                "parameters": canonical_value(identity_parameters(parameters)),
-                "schema": SCHEMA_VERSION,
-            }
-        )
+        head = _dumps(_point_payload(parameters, numerics))
         self._prefix = hashlib.sha256((head[:-1] + ',"seed":').encode("ascii"))
 
     def __call__(self, seed: int) -> str:

@@ -13,6 +13,7 @@ letting the allocation fail after minutes, or the machine swap.
 
 from __future__ import annotations
 
+import math
 import os
 import resource
 from typing import Any
@@ -36,6 +37,8 @@ def run_memory_bytes(resolution: int, mechanics: str = "finite") -> int:
 
 
 def fmt_bytes(n: float) -> str:
+    if n > 2**1000:  # more than a float holds after the division below
+        return "more than 1e+250 PiB"
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if abs(n) < 1024 or unit == "PiB":
             return f"{n:.3g} {unit}"
@@ -67,7 +70,7 @@ def parse_size(value: Any) -> int | None:
     if value is None or isinstance(value, bool):
         return None
     if isinstance(value, (int, float)):
-        return int(value) if value > 0 else None
+        return int(value) if value > 0 and math.isfinite(value) else None
     try:
         from dask.utils import parse_bytes
 

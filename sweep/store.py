@@ -60,7 +60,7 @@ MANIFEST = "manifest.json"
 PHASE = "phase.nc"
 LOCK = ".lock"
 CAMPAIGN_COPY = "campaign.yaml"
-MANIFEST_VERSION = 5
+MANIFEST_VERSION = 6
 #: Record keys kept in the manifest (the sidecar also has traceback, parameters, numerics).
 MANIFEST_KEYS = (
     "status",
@@ -78,6 +78,7 @@ MANIFEST_KEYS = (
     "finished",
     "trajectory",
     "end_state",
+    "reused_from",
 )
 #: Variables every run file holds (checked when a file without a checksum is verified; the
 #: time axis is ``t``, or ``time`` in files of schema 1: see :func:`series_time`).
@@ -85,8 +86,10 @@ RUN_FILE_VARIABLES = ("sigma2_S",)
 MAX_DETAIL = 500
 #: Reasons of records that say the result could not be stored or the run's worker was lost
 #: (no longer written; old folders may hold some), or that the run it begins from did not
-#: end (its parent, its predecessor in a chain): not that it failed. Redone by default.
-RETRYABLE_REASONS = ("write_error", "killed_worker", "parent_failed")
+#: end (its parent, its predecessor in a chain) or its state could not be used (corrupt: the
+#: parent is redone when its file no longer matches its record): not that it failed. Redone by
+#: default.
+RETRYABLE_REASONS = ("write_error", "killed_worker", "parent_failed", "parent_state")
 
 
 class Record(TypedDict, total=False):
@@ -140,6 +143,9 @@ class Record(TypedDict, total=False):
     lineage: list[str]
     #: why a checkpoint or end state it found was not used (corrupt, another run's, ...)
     start_warning: str
+    #: the campaign whose finished run this one is, taken in place (its file a link to that
+    #: campaign's; :mod:`nematic_solids.sweep.catalogue.reuse`)
+    reused_from: str
 
 
 # --------------------------------------------------------------------------- run records

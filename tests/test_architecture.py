@@ -95,16 +95,32 @@ def test_sweep_imports_form_no_cycle() -> None:
 #: and the base ("*": anything); the base imports only itself.
 MAY_IMPORT: dict[str, set[str]] = {
     "base": set(),
-    "spec": {"analysis.registry", "figures.registry"},  # the names of fits and figures
-    "run": set(),
-    "outputs": {"spec", "refine", "precision"},
-    "cost": {"outputs", "refine", "precision"},
+    # the names of fits and figures, and the shape of a campaign they need
+    "spec": {"analysis.registry", "analysis.shape", "figures.registry"},
+    "catalogue": set(),
+    "run": {"catalogue"},
+    "outputs": {"spec", "refine", "precision", "catalogue", "analysis.fits_file"},
+    "cost": {"outputs", "refine", "precision", "catalogue"},
     "analysis": set(),
     "figures": {"analysis", "verify"},
     "refine": {"spec", "run", "outputs", "precision", "analysis"},
     "precision": {"spec", "run", "outputs", "refine", "analysis"},
     "verify": {"spec", "run", "outputs", "refine", "precision", "analysis"},
     "report": {"spec", "outputs", "refine", "precision", "verify", "analysis", "figures"},
+    # the service: the queue, the runner that drives campaigns, the API and dashboard
+    "service": {
+        "catalogue",
+        "spec",
+        "run",
+        "outputs",
+        "cost",
+        "refine",
+        "precision",
+        "verify",
+        "analysis",
+        "figures",
+        "report",
+    },
     "cli": {"*"},
 }
 #: Where the base may reach out: ``python -m nematic_solids.sweep`` is the command line, and

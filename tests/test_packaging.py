@@ -57,6 +57,12 @@ def test_every_package_folder_is_listed() -> None:
         for init in (ROOT / top).rglob("__init__.py")
         if "__pycache__" not in init.parts
     }
+    # a folder of data only (no __init__.py) is listed as the package of its package-data
+    folders |= {
+        name
+        for name in config.get("package-data", {})
+        if not ROOT.joinpath(*name.split(".")[1:], "__init__.py").is_file()
+    }
     listed = set(config["packages"])
     assert listed == folders, (
         f"add to pyproject.toml's [tool.setuptools] packages: {sorted(folders - listed)}; "

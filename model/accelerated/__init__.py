@@ -30,11 +30,13 @@ masked), so a seed's trajectory is the one it has when run alone. Modules:
 * :mod:`nematic_solids.model.accelerated.finite_step`: finite strain's Krogstad step, the
   displacement carried through the stages and projected per accepted step;
 * :mod:`nematic_solids.model.accelerated.observables`: the per-save observables on the device;
-* :mod:`nematic_solids.model.accelerated.run`: :func:`run_batch`, the seeds of one point from t = 0
+* :mod:`nematic_solids.model.accelerated.run`:
+  :func:`~nematic_solids.model.accelerated.run.run_batch`, the seeds of one point from t = 0
   to ``t_final``.
 
 ETDRK2, finite strain with the displacement solved at every stage (``displacement:
-equilibrium``), time protocols and the early stop are not here: :func:`run_batch` refuses them with
+equilibrium``), time protocols and the early stop are not here:
+:func:`~nematic_solids.model.accelerated.run.run_batch` refuses them with
 a :class:`nematic_solids.model.errors.ParameterError`. Importing this package enables JAX's float64
 (``jax_enable_x64``) for the process (a float32 run casts its arrays explicitly); without JAX
 installed it raises :class:`nematic_solids.model.errors.DeviceUnavailable` with the install line.

@@ -88,7 +88,8 @@ def batch_datasets(
     schedule: Schedule = Schedule(),
     keep_state: bool = False,
 ) -> list[xr.Dataset] | list[tuple[xr.Dataset, RunState | None]]:
-    """Run the seeds ``seeds`` of one point together on ``device`` (:func:`run_batch`, whose
+    """Run the seeds ``seeds`` of one point together on ``device``
+    (:func:`~nematic_solids.model.accelerated.run.run_batch`, whose
     checks and errors it shares) and return one Dataset per seed, in the order of ``seeds``
     (see the module docstring).
 

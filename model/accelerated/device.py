@@ -23,9 +23,10 @@ def _devices(platform: str) -> list[jax.Device]:
 
 
 def select_device(name: str = "cpu") -> jax.Device:
-    """The device called ``name`` (:data:`DEVICES`); raises
+    """The device called ``name`` (:data:`~nematic_solids.model.accelerated_support.DEVICES`);
+    raises
     :class:`nematic_solids.model.errors.DeviceUnavailable` for a GPU that is not there, and for a
-    name not in :data:`DEVICES`."""
+    name not in :data:`~nematic_solids.model.accelerated_support.DEVICES`."""
     if name not in DEVICES:
         raise DeviceUnavailable(f"unknown device {name!r}: ask for one of {', '.join(DEVICES)}")
     if name in ("gpu", "auto"):

@@ -82,7 +82,8 @@ class Control:
 
 class SeedState(NamedTuple):
     """One seed's state between steps: the fields (q in real space and as spectra, A), the
-    time, the next step size, the status (:data:`REASONS`), the time of a failure, the
+    time, the next step size, the status
+    (:data:`~nematic_solids.model.accelerated.etdrk4.REASONS`), the time of a failure, the
     smallest well-posedness margin, and the work counted."""
 
     q: Array

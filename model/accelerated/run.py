@@ -215,7 +215,8 @@ def run_batch(
     of the same seeds continues exactly as the batch that never stopped (tested bitwise).
 
     ``on_save(t, fields, state)`` is called at every save time with the seeds' fields
-    (B, 3, N, N) copied to the host and their :class:`SeedState` on the device (status codes,
+    (B, 3, N, N) copied to the host and their
+    :class:`~nematic_solids.model.accelerated.etdrk4.SeedState` on the device (status codes,
     steps, step size: the host computes what the device does not and takes states:
     :func:`nematic_solids.model.accelerated.datasets.batch_datasets`); its time counts in
     ``wall``."""

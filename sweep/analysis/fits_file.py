@@ -43,14 +43,16 @@ def compute_fits(
         except NematicError as e:
             if strict:
                 raise
-            failures[name] = str(e)
-            log.warning("fit %s skipped: %s", name, e)
+            failures[name] = " ".join(str(e).split())
+            log.info("fit %s skipped: %s", name, failures[name])
             continue
         except Exception as e:
             if strict:
                 raise
-            failures[name] = f"{type(e).__name__}: {e}"  # a bug, or data we did not foresee
-            log.warning("fit %s failed", name, exc_info=True)
+            # a bug, or data we did not foresee: one line (the traceback with --verbose)
+            failures[name] = f"{type(e).__name__}: {' '.join(str(e).split())}"
+            log.info("fit %s failed: %s", name, failures[name])
+            log.debug("fit %s failed", name, exc_info=True)
             continue
         for var in part.data_vars.values():
             var.attrs.setdefault("fit", name)

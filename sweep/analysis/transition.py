@@ -37,6 +37,8 @@ class TransitionFit:
     level: float
     direction: int
     fraction_high: Array = field(repr=False)
+    #: why the location is NaN ("" when it is not)
+    reason: str = ""
 
 
 def largest_step(x: Array, y: Array, across: float | None = None) -> tuple[int, int, float]:
@@ -106,7 +108,8 @@ def fit_transition(
     nan = math.nan
     frac = np.full(xa.size, np.nan)
     if i < 0 or not abs(step) >= min_jump:
-        return TransitionFit(nan, nan, nan, nan, nan, nan, nan, step, nan, 0, frac)
+        why = no_jump_reason(y, step, min_jump, crossing, log, geometric)
+        return TransitionFit(nan, nan, nan, nan, nan, nan, nan, step, nan, 0, frac, why)
     level = 0.5 * (y[i] + y[j])
     direction = 1 if step > 0 else -1
     tv = log10(v) if log else v
@@ -142,6 +145,27 @@ def fit_transition(
         level=float(level),
         direction=direction,
         fraction_high=frac,
+    )
+
+
+def no_jump_reason(
+    y: Array, step: float, min_jump: float, crossing: float | None, log: bool, geometric: bool
+) -> str:
+    """Why :func:`fit_transition` found no transition in the seed means ``y``: one sentence."""
+    finite = int(np.isfinite(y).sum())
+    if finite < 2:
+        return f"{finite} grid value(s) with a finite seed mean: a jump needs two"
+    unit = " decades" if log else ""
+    if math.isnan(step):  # only with a crossing: no step goes across it
+        mean = "geometric seed mean (the mean of log10)" if geometric else "seed mean"
+        return f"the {mean} never crosses {crossing:g}, the class threshold (crossing); " + (
+            "a seed that stays below it pulls the geometric mean down: the option "
+            "mean: arithmetic marks where the first seed crosses"
+            if geometric
+            else "no grid value has its mean on the other side"
+        )
+    return (
+        f"the largest step of the seed mean, {abs(step):.3g}{unit}, is below min_jump {min_jump:g}"
     )
 
 
@@ -181,6 +205,7 @@ def transition(
         "direction",
     )
     out = {n: np.full(flat.shape[0], np.nan) for n in names}
+    reasons: list[str] = []
     frac = np.full((flat.shape[0], x.size), np.nan)
     order = np.argsort(x)
     for k in range(flat.shape[0]):
@@ -198,6 +223,7 @@ def transition(
         for n in names:
             out[n][k] = getattr(f, n)
         frac[k, order] = f.fraction_high
+        reasons.append(f.reason)
     unit = "1"  # CF: a pure number; a log-scale jump is in decades (its long_name says so)
     what = f"seed mean of {observable} along {axis}"
     long = {
@@ -234,11 +260,34 @@ def transition(
         "method": "largest step of the seed mean; bracket midpoint",
         "n_seeds": int(ds.sizes["seed"]),
     }
+    why = nan_reason(reasons, [dict(zip(others, c, strict=True)) for c in _cells(ds, others)])
     for n in names:
         result[f"{pre}_{n}"].attrs.update({f"fit_{k}": v for k, v in attrs.items()})
+        if why and n not in ("jump", "direction"):
+            result[f"{pre}_{n}"].attrs["nan_reason"] = why
     if BRANCH in others:
         _loop_width(result, pre, attrs)
     return result
+
+
+def _cells(ds: xr.Dataset, dims: list[str]) -> list[tuple[Any, ...]]:
+    """The values of ``dims`` of each fitted line, in the order of the flattened fit."""
+    import itertools
+
+    return list(itertools.product(*([v.item() for v in ds[d].values] for d in dims)))
+
+
+def nan_reason(reasons: list[str], cells: list[dict[str, Any]]) -> str:
+    """The ``nan_reason`` attribute of a fit over several lines: each line's reason with the
+    values that name the line (``branch = up: ...``), "" when no line is NaN."""
+    parts = []
+    for why, cell in zip(reasons, cells, strict=True):
+        if why:
+            where = ", ".join(
+                f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}" for k, v in cell.items()
+            )
+            parts.append(f"{where}: {why}" if where else why)
+    return "; ".join(parts)
 
 
 def _loop_width(result: xr.Dataset, pre: str, attrs: Mapping[str, Any]) -> None:
@@ -262,7 +311,12 @@ def _loop_width(result: xr.Dataset, pre: str, attrs: Mapping[str, Any]) -> None:
         "loop_width_upper": "hysteresis loop width, upper end (up branch's upper end minus the "
         "down branch's lower end)",
     }
+    lost = str(result[f"{pre}_location"].attrs.get("nan_reason", ""))
     for name, value in width.items():
         value.attrs = {"long_name": long[name], "units": "1"}
         value.attrs.update({f"fit_{k}": v for k, v in attrs.items()})
+        if not np.all(np.isfinite(value.values)):
+            value.attrs["nan_reason"] = "no transition on a branch: " + (
+                lost or "the loop width needs one on both"
+            )
         result[f"{pre}_{name}"] = value

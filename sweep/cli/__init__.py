@@ -15,8 +15,21 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from . import campaigns, driver, export, figures, report, run, simulate, stability, status, verify
-from .app import app
+from . import (
+    campaigns,
+    catalogue,
+    driver,
+    export,
+    figures,
+    report,
+    run,
+    service,
+    simulate,
+    stability,
+    status,
+    verify,
+)
+from .app import RegistryHelpCommand, app
 
 COMMANDS: dict[str, Callable[..., Any]] = {
     "validate": campaigns.validate,
@@ -25,14 +38,22 @@ COMMANDS: dict[str, Callable[..., Any]] = {
     "aggregate": campaigns.aggregate,
     "verify": verify.verify,
     "stop": driver.stop,
+    "serve": service.serve,
+    "submit": service.submit,
+    "queue": service.queue,
+    "cancel": service.cancel,
     "export": export.export,
     "report": report.report,
     "simulate": simulate.simulate,
     "stability": stability.stability,
     "figures": figures.figures,
+    "catalogue": catalogue.catalogue,
 }
 
+#: the commands whose help names the registered figures and fits
+NAMING_REGISTRIES = {"figures"}
+
 for _name, _command in COMMANDS.items():
-    app.command(_name)(_command)
+    app.command(_name, cls=RegistryHelpCommand if _name in NAMING_REGISTRIES else None)(_command)
 
 __all__ = ["COMMANDS", "app"]

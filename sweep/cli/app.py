@@ -2,7 +2,8 @@
 command is :func:`guarded`), the common options, logging, loading the campaign.
 
 Exit codes: :data:`EXIT_OK`, :data:`EXIT_FAILED_RUNS`, :data:`EXIT_BAD_INPUT`,
-:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_INTERRUPTED` (:mod:`nematic_solids.sweep.cli`).
+:data:`EXIT_TOO_MANY_FAILURES`, :data:`EXIT_PRODUCTS_FAILED`, :data:`EXIT_INTERRUPTED`
+(:mod:`nematic_solids.sweep.cli`).
 """
 
 from __future__ import annotations
@@ -17,17 +18,34 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import click
+import rich.console
 import typer
-from rich.console import Console
 from rich.logging import RichHandler
 from rich.markup import escape
+from typer.core import TyperCommand
 
 if TYPE_CHECKING:
     from ..campaign import Campaign
 
+
+class Console(rich.console.Console):
+    """rich's console, printing what it is given as typed: no emoji codes (``:x:`` in a value
+    stays ``:x:``), no highlighting, long lines not broken. Markup (``[bold]``) is on: every
+    value a user wrote goes through :func:`rich.markup.escape` (or ``markup=False``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("emoji", False)
+        kwargs.setdefault("highlight", False)
+        kwargs.setdefault("soft_wrap", True)
+        super().__init__(*args, **kwargs)
+
+
 EXIT_OK, EXIT_FAILED_RUNS, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: ``nematic run --max-failures``: the campaign stopped early, too many runs failed
 EXIT_TOO_MANY_FAILURES = 3
+#: every run succeeded (``nematic run``) but a fit or a figure failed, or (``nematic figures``)
+#: a fit or a figure failed; each is listed in one line
+EXIT_PRODUCTS_FAILED = 4
 #: Show Python tracebacks of errors (``nematic --debug ...`` or ``NEMATIC_DEBUG=1``).
 DEBUG = {"on": False}
 
@@ -106,13 +124,44 @@ class _App(typer.Typer):
         return decorator
 
 
+class RegistryHelpCommand(TyperCommand):
+    """A command whose option help names what is registered: ``{figures}`` and ``{fits}`` in
+    an option's help become the names of :data:`nematic_solids.sweep.figures.registry.REGISTRY`
+    and :data:`nematic_solids.sweep.analysis.registry.REGISTRY`, so that the help (and the
+    command reference generated from it) lists every registered name. The registries are
+    imported when the options are first asked for (help, the command reference, the command
+    itself), not when the program starts: they load xarray and matplotlib."""
+
+    _named = False
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        if not self._named:
+            names = registry_names()
+            for param in self.params:
+                text = getattr(param, "help", None)
+                if text:
+                    for key, value in names.items():
+                        text = text.replace("{" + key + "}", value)
+                    param.help = text  # type: ignore[attr-defined]
+            self._named = True
+        return super().get_params(ctx)
+
+
+def registry_names() -> dict[str, str]:
+    """The registered figures and fits, each as a comma-separated list of names."""
+    from ..analysis.registry import REGISTRY as FITS
+    from ..figures.registry import REGISTRY as FIGURES
+
+    return {"figures": ", ".join(FIGURES), "fits": ", ".join(FITS)}
+
+
 app = _App(
     name="nematic",
     help="Active nematic solids: run the model, sweep it, aggregate phase diagrams.",
     no_args_is_help=True,
     add_completion=True,
     pretty_exceptions_enable=False,
-    rich_markup_mode="markdown",
+    rich_markup_mode=None,
 )
 
 
@@ -152,6 +201,19 @@ NameOpt = Annotated[
     str | None,
     typer.Option("--name", help="Override the campaign name (and so its results folder)."),
 ]
+#: the catalogue of runs (``nematic catalogue``, ``nematic run``): sweep/catalogue/
+CatalogueOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--catalogue",
+        metavar="URL",
+        help="The catalogue: a database URL (postgresql+psycopg://USER@HOST/DB, "
+        "sqlite:///PATH) or an SQLite file; default $NEMATIC_CATALOGUE, else "
+        "ROOT/catalogue.sqlite (the results root's); off: none.",
+        show_default=False,
+    ),
+]
+
 VerboseOpt = Annotated[
     bool,
     typer.Option("--verbose", "-v", help="Also log details (INFO messages, library warnings)."),

@@ -8,9 +8,8 @@ from pathlib import Path
 from typing import NoReturn
 
 import typer
-from rich.console import Console
 
-from .app import EXIT_OK, err_console, error
+from .app import EXIT_OK, Console, err_console, error
 
 
 def launch_detached(

@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 
 from ..errors import CampaignLocked, StoreError
@@ -17,6 +16,7 @@ from ..startup import paused_gc
 from .app import (
     EXIT_BAD_INPUT,
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -94,7 +94,7 @@ def validate(
         "scheduler": f"dask scheduler {ex.scheduler}",
         "cluster": f"dask-jobqueue {ex.cluster.kind if ex.cluster else ''}",
     }[ex.mode]
-    console.print(f"  execution: {where}; results: {results / c.name}")
+    console.print(f"  execution: {where}; results: {results / c.name}", markup=False)
     if c.fits or c.figures is not None:
         shown = (
             "every one that applies"

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import typer
-from rich.console import Console
+from rich.markup import escape
 
 from ..campaign import Campaign
 from ..errors import CampaignError
@@ -27,7 +27,9 @@ from .app import (
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
     EXIT_OK,
+    EXIT_PRODUCTS_FAILED,
     EXIT_TOO_MANY_FAILURES,
+    Console,
     err_console,
     error,
     fmt_time,
@@ -39,7 +41,14 @@ if TYPE_CHECKING:  # the spec package (and the model) load only when a command n
     from ..spec.collection import Collection
 
 #: exit codes from the most to the least severe: the collection exits with its worst
-SEVERITY = (EXIT_INTERRUPTED, EXIT_BAD_INPUT, EXIT_TOO_MANY_FAILURES, EXIT_FAILED_RUNS, EXIT_OK)
+SEVERITY = (
+    EXIT_INTERRUPTED,
+    EXIT_BAD_INPUT,
+    EXIT_TOO_MANY_FAILURES,
+    EXIT_FAILED_RUNS,
+    EXIT_PRODUCTS_FAILED,
+    EXIT_OK,
+)
 INDEX = "index.html"
 
 
@@ -195,7 +204,7 @@ def validate_collection(
     collection's cost with ``--estimate``."""
     campaigns = load_members(coll, options["set_"], options["seeds"])
     console.print(
-        f"[green]valid[/]: collection [bold]{coll.name}[/] ({coll.source}): "
+        f"[green]valid[/]: collection [bold]{escape(coll.name)}[/] ({escape(coll.source)}): "
         f"{len(campaigns)} campaign(s)"
     )
     for member in coll.members:
@@ -265,6 +274,7 @@ def summary(
         EXIT_FAILED_RUNS: "some runs failed or were lost",
         EXIT_BAD_INPUT: "refused or stopped (bad input, locked, storage)",
         EXIT_TOO_MANY_FAILURES: "stopped by --max-failures",
+        EXIT_PRODUCTS_FAILED: "every run done, but a fit or figure failed",
         EXIT_INTERRUPTED: "interrupted",
     }
     say.print(

@@ -7,12 +7,12 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
 from ..campaign import Campaign
 from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
+    Console,
     QuietOpt,
     ResultsOpt,
     VerboseOpt,

@@ -7,11 +7,11 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
 from .app import (
     EXIT_BAD_INPUT,
     CampaignRefArg,
+    Console,
     QuietOpt,
     ResultsOpt,
     VerboseOpt,

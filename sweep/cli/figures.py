@@ -1,8 +1,8 @@
 """``nematic figures``: fits and figures of a campaign from its results folder.
 
 Only parses and calls :func:`nematic_solids.sweep.figures.produce.produce`.
-Exit codes: 0 every fit and figure was produced, 1 some failed (listed), 2 bad input (invalid
-campaign, unknown figure name, no phase.nc yet).
+Exit codes: 0 every fit and figure was produced, 4 some failed (each listed in one line), 2 bad
+input (invalid campaign, unknown figure name, no phase.nc yet).
 """
 
 from __future__ import annotations
@@ -11,13 +11,14 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
+from rich.markup import escape
 
 from ..errors import CampaignLocked, FigureError, StoreError
 from .app import (
     EXIT_BAD_INPUT,
-    EXIT_FAILED_RUNS,
+    EXIT_PRODUCTS_FAILED,
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -29,7 +30,7 @@ from .app import (
     load,
     setup_logging,
 )
-from .products import repair_products
+from .products import failure_lines, repair_products
 
 
 def figures(
@@ -43,17 +44,16 @@ def figures(
         typer.Option(
             "--only",
             metavar="FIGURE",
-            help="Draw only this figure (repeatable): fig2, fig3, fig4, figA1. Default: the "
-            "campaign's 'figures:' list ('figures: []': none), else every figure that "
-            "applies to its grid.",
+            help="Draw only this figure (repeatable): {figures}. Default: the campaign's "
+            "'figures:' list ('figures: []': none), else every figure that applies to its grid.",
         ),
     ] = None,
     fits: Annotated[
         bool,
         typer.Option(
             "--fits/--no-fits",
-            help="Recompute fits.nc from phase.nc first (default), or draw "
-            "from the fits.nc on disk.",
+            help="Recompute fits.nc from phase.nc first (default), or draw from the fits.nc on "
+            "disk. Fits: {fits}.",
         ),
     ] = True,
     verbose: VerboseOpt = False,
@@ -63,8 +63,8 @@ def figures(
 
     Figures read only the results folder (phase.nc, fits.nc, runs/*.nc). The overrides
     (--set, --seeds, --name) must match those of the run, since they name the folder. Exit 0
-    if everything was produced, 1 if a fit or figure failed (listed), 2 on bad input or
-    when the campaign has no phase.nc yet.
+    if everything was produced, 4 if a fit or figure failed (each listed in one line), 2 on
+    bad input or when the campaign has no phase.nc yet.
     """
     from ..figures.produce import produce
     from ..files import probe_write, storage_cause
@@ -77,8 +77,11 @@ def figures(
     problem = probe_write(root) if root.is_dir() else None
     if problem is not None:
         err.print(
-            f"[bold red]error:[/] cannot write the fits and figures in {root}: "
-            f"{storage_cause(root / 'figures', problem)}",
+            "[bold red]error:[/] "
+            + escape(
+                f"cannot write the fits and figures in {root}: "
+                f"{storage_cause(root / 'figures', problem)}"
+            ),
             soft_wrap=True,
             highlight=False,
         )
@@ -92,11 +95,11 @@ def figures(
         error(err, e)
         raise typer.Exit(EXIT_BAD_INPUT) from None
     if out.fits_path is not None:
-        console.print(f"fits: {out.fits_path}")
+        console.print(f"fits: {out.fits_path}", markup=False)
     for note in out.notes:
         console.print(f"  note: {note}", markup=False)
     for path in out.paths:
-        console.print(f"figure: {path}")
+        console.print(f"figure: {path}", markup=False)
     if not out.figures:
         why = (
             "the campaign lists none (figures: [])"
@@ -104,8 +107,7 @@ def figures(
             else "none applies to this grid"
         )
         console.print(f"no figures: {why}; --only FIGURE draws one", markup=False)
+    for line in failure_lines(out.failures):
+        err.print(f"[red]failed[/]: {escape(line)}", soft_wrap=True, highlight=False)
     if out.failures:
-        err.print(f"[red]{len(out.failures)} failed[/]:")
-        for what, why in out.failures.items():
-            err.print(f"  {what}: {why}", soft_wrap=True, highlight=False)
-        raise typer.Exit(EXIT_FAILED_RUNS)
+        raise typer.Exit(EXIT_PRODUCTS_FAILED)

@@ -4,11 +4,17 @@ fits.nc removed (:func:`repair_products`), and the figures drawn after a run."""
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from rich.console import Console
+from rich.markup import escape
 
 from ..campaign import Campaign
+from .app import Console
+
+if TYPE_CHECKING:
+    from ..figures.produce import Outcome
 
 
 def repair_products(
@@ -29,7 +35,8 @@ def repair_products(
         problem = netcdf_problem(store.phase_path, ("status", "run_id"))
         if problem is not None:
             console.print(
-                f"[yellow]{store.phase_path}: {problem}[/]; rebuilding it from the run records",
+                f"[yellow]{escape(f'{store.phase_path}: {problem}')}[/]; rebuilding it from the "
+                "run records",
                 soft_wrap=True,
                 highlight=False,
             )
@@ -44,7 +51,8 @@ def repair_products(
         problem = netcdf_problem(fits_path)
         if problem is not None:
             console.print(
-                f"[yellow]{fits_path}: {problem}[/]; removing it (the fits recompute it)",
+                f"[yellow]{escape(f'{fits_path}: {problem}')}[/]; removing it (the fits "
+                "recompute it)",
                 soft_wrap=True,
                 highlight=False,
             )
@@ -55,13 +63,33 @@ def repair_products(
 
 def regenerate_figures(
     campaign: Campaign, results: Path, *, fits: bool = True, draw_figures: bool = True
-) -> list[Path]:
-    """Fits and figures after a run (:func:`nematic_solids.sweep.figures.produce.regenerate`, which
-    logs and never raises for a figure it cannot draw); ``fits`` / ``draw_figures`` false leave
-    either out."""
-    from ..figures.produce import regenerate
+) -> Outcome:
+    """Fits and figures after a run (:func:`nematic_solids.sweep.figures.produce.produce`):
+    what was written and what failed (``Outcome.failures``; the caller reports them, and
+    ``nematic run`` exits :data:`~nematic_solids.sweep.cli.app.EXIT_PRODUCTS_FAILED`); the
+    fits' caveats are logged. No phase.nc yet: nothing written, logged. ``fits`` /
+    ``draw_figures`` false leave either out."""
+    import logging
 
-    return list(regenerate(campaign, results, fits=fits, draw_figures=draw_figures))
+    from ..errors import FigureError
+    from ..figures.produce import Outcome, produce
+
+    log = logging.getLogger(__name__)
+    try:
+        out = produce(campaign, results, fits=fits, draw_figures=draw_figures)
+    except FigureError as e:
+        log.warning("no figures: %s", e)
+        return Outcome()
+    for note in out.notes:
+        log.warning("fits: %s", note)
+    return out
+
+
+def failure_lines(failures: Mapping[str, str]) -> list[str]:
+    """One line per failed fit or figure (``Outcome.failures`` of
+    :func:`nematic_solids.sweep.figures.produce.produce`, keys ``fit NAME`` or the figure's
+    name): ``fit transition: why``, ``figure loop: why``."""
+    return [f"{k if k.startswith('fit') else 'figure ' + k}: {v}" for k, v in failures.items()]
 
 
 def regenerate_report(campaign: Campaign, results: Path) -> Path | None:

@@ -9,11 +9,10 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress, TaskID
 
-from .app import fmt_time
+from .app import Console, fmt_time
 
 if TYPE_CHECKING:
     from ..store import Record
@@ -69,6 +68,10 @@ class ProgressEvents:
             )
         if plan.adopted:
             self.console.print(f"recovered {plan.adopted} unindexed run file(s)")
+        if getattr(plan, "reused", None):
+            from ..catalogue.reuse import reuse_line
+
+            self.console.print(reuse_line(plan.reused), soft_wrap=True, markup=False)
         if plan.redone:
             self.console.print(
                 f"[yellow]{len(plan.redone)} run(s) will be redone[/] (their "
@@ -110,7 +113,7 @@ class ProgressEvents:
 
     def started(self, plan: Any, total: int, workers: int) -> None:
         self.ok = self.failed = 0  # per call: a refined campaign runs one call per round
-        self.skipped = len(plan.done) + len(plan.failed)
+        self.skipped = plan.skipped
         self.total = total
         self.workers = max(1, workers)
         self.t0 = self.last_log = self.clock()
@@ -163,7 +166,7 @@ class ProgressEvents:
             self.console.print(self.progress_line(), highlight=False, markup=False, soft_wrap=True)
 
     def finished_run(self, run: Any, record: Record) -> None:
-        from ..run.driver import describe_failure
+        from ..run.failures import describe_failure
 
         if record.get("status") == "ok":
             self.ok += 1

@@ -7,10 +7,17 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
 from ..startup import paused_gc
-from .app import CampaignRefArg, QuietOpt, ResultsOpt, VerboseOpt, err_console, setup_logging
+from .app import (
+    CampaignRefArg,
+    Console,
+    QuietOpt,
+    ResultsOpt,
+    VerboseOpt,
+    err_console,
+    setup_logging,
+)
 
 
 @paused_gc()  # a short command: nematic_solids.sweep.startup says why

@@ -3,12 +3,14 @@ phase.nc, fits, figures, verification and report; ``--dry-run`` and ``--detach``
 
 from __future__ import annotations
 
+import contextlib
+import os
+import shutil
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 from rich.progress import (
     BarColumn,
@@ -23,8 +25,11 @@ from .app import (
     EXIT_BAD_INPUT,
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
+    EXIT_PRODUCTS_FAILED,
     EXIT_TOO_MANY_FAILURES,
     CampaignArg,
+    CatalogueOpt,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -40,8 +45,11 @@ from .app import (
 )
 from .campaigns import print_estimate, report_changes, storage_message
 from .collection import collection_or_none, refuse_name, run_collection
-from .products import regenerate_figures, regenerate_report, repair_products
+from .products import failure_lines, regenerate_figures, regenerate_report, repair_products
 from .progress import ProgressEvents
+
+if TYPE_CHECKING:
+    from ..store import CampaignStore
 
 
 def run(
@@ -54,8 +62,7 @@ def run(
         str | None,
         typer.Option(
             "--scheduler",
-            help="Use the dask scheduler at this address (tcp://HOST:PORT) instead "
-            "of the campaign's execution section.",
+            help="Use the dask scheduler at tcp://HOST:PORT instead of the execution section.",
         ),
     ] = None,
     workers: Annotated[
@@ -68,8 +75,7 @@ def run(
         bool,
         typer.Option(
             "--retry-failed",
-            help="Also redo runs that failed before (their new record keeps "
-            "the earlier failures under previous_failures).",
+            help="Also redo the runs that failed before.",
         ),
     ] = False,
     max_failures: Annotated[
@@ -77,26 +83,22 @@ def run(
         typer.Option(
             "--max-failures",
             metavar="N",
-            help="Stop the campaign (exit 3) once more runs failed in this session than N: a "
-            "count (0 stops at the first failure) or a fraction of the runs to do (0.1). Runs "
-            "not finished stay pending.",
+            help="Stop (exit 3) once more than N runs failed: a count (0: the first failure) "
+            "or a fraction of the runs to do (0.1).",
         ),
     ] = None,
     prune: Annotated[
         bool,
         typer.Option(
             "--prune",
-            help="First remove the orphaned runs: the records and files in the "
-            "results folder of runs this campaign does not plan (e.g. values since removed from "
-            "an axis); says how many.",
+            help="First remove the runs in the folder that this campaign no longer plans.",
         ),
     ] = False,
     check_files: Annotated[
         bool,
         typer.Option(
             "--check-files",
-            help="Checksum every finished run's file (by default only files "
-            "whose size or mtime changed are), and redo the corrupt ones.",
+            help="Checksum every finished run's file (not only changed ones); redo corrupt ones.",
         ),
     ] = False,
     check_files_alias: Annotated[
@@ -106,8 +108,7 @@ def run(
         bool,
         typer.Option(
             "--verification/--no-verification",
-            help="Run the campaign's verify: section "
-            "(as 'nematic verify' does): after the fits, or first with verify.before.",
+            help="Run the campaign's verify: section, as 'nematic verify' does.",
         ),
     ] = True,
     aggregate: Annotated[
@@ -117,60 +118,62 @@ def run(
         bool,
         typer.Option(
             "--figures/--no-figures",
-            help="After phase.nc, write fits.nc and the figures "
-            "(as 'nematic figures' does), then report.html (as 'nematic report' does).",
+            help="Then write fits.nc, the figures and report.html.",
         ),
     ] = True,
     dashboard: Annotated[
         bool,
         typer.Option(
             "--dashboard/--no-dashboard",
-            help="Serve the dask dashboard (local cluster: on "
-            "127.0.0.1, a free port) and print its link.",
+            help="Serve the dask dashboard and print its link.",
         ),
     ] = True,
     dry_run: Annotated[
         bool,
         typer.Option(
             "--dry-run",
-            help="Run nothing and write nothing (no results folder, no lock): print "
-            "the runs to do, their estimated CPU time and the wall time on the workers at this "
-            "machine's load, from the campaign's own finished runs (per point, scaled by "
-            "resolution, length and mechanics), else from the calibrated cost model; with the "
-            "basis and the 10-90 % range. Takes --workers, --scheduler and --retry-failed into "
-            "account.",
+            help="Run and write nothing: print the runs to do and their estimated cost.",
         ),
     ] = False,
     detach: Annotated[
         bool,
         typer.Option(
             "--detach",
-            help="Run the driver in the background, in a session of its own "
-            "(closing the terminal or logging out does not end it), its output in "
-            "results/NAME/driver.log; prints how to follow it (`tail -f`, `nematic status`) and "
-            "stop it (`nematic stop NAME`).",
+            help="Run the driver in the background (log: results/NAME/driver.log); nematic "
+            "stop NAME ends it.",
         ),
     ] = False,
+    no_service: Annotated[
+        bool,
+        typer.Option(
+            "--no-service",
+            help="Run here, not in the results root's service (nematic serve).",
+        ),
+    ] = False,
+    catalogue: CatalogueOpt = None,
     verbose: VerboseOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
     """Run a campaign on dask, resuming where it stopped.
 
-    Finished runs are skipped, the rest run on a local dask cluster (default), a scheduler or
-    a dask-jobqueue cluster; one netCDF per run, phase.nc at the end. If the campaign
-    differs from the one its results were made with, what changed and the new, kept and
-    orphaned runs are printed first. Exit 0 if every run
-    succeeded, 1 if some failed (listed), 2 on bad input or a locked campaign, 3 when
-    stopped by `--max-failures`, 130 when interrupted (rerun to resume). With `--detach`,
-    0 once the driver runs in the background; with `--dry-run`, 0 after printing the cost.
+    With a service (`nematic serve`) for the results root, the campaign is handed to it
+    (exit 0 once queued) unless --no-service.
+
+    Finished runs are skipped. Exit 0: every run succeeded (--detach: the driver runs;
+    --dry-run: the cost printed), 1: some failed, 2: bad input or locked, 3: stopped by
+    --max-failures, 4: a fit or figure failed, 130: interrupted (docs/campaigns/execution.md).
     """
     from ..expand import expand
     from ..outputs.aggregate import write_phase
     from ..run.clusters import WORKER_LOSSES
-    from ..run.driver import describe_failure, drive
-    from ..run.failures import FailureLimit
+    from ..run.driver import drive
+    from ..run.failures import FailureLimit, describe_failure
     from ..store import CampaignStore
 
+    if catalogue is not None:  # the driver's recorder and the reuse of runs read it
+        from ..catalogue.location import ENV
+
+        os.environ[ENV] = catalogue
     err = err_console()
     setup_logging(err, verbose, quiet, cluster=True)
     coll = collection_or_none(campaign)
@@ -198,6 +201,7 @@ def run(
                 dashboard=dashboard,
                 dry_run=dry_run,
                 detach=detach,
+                no_service=no_service,
                 verbose=verbose,
                 quiet=quiet,
             ),
@@ -240,6 +244,22 @@ def run(
                     f"waiting: {waiting.problems[0].message}", markup=False
                 )
         return
+    if not no_service:
+        from .service import hand_to_service
+
+        options = {
+            "--scheduler": scheduler,
+            "--workers": workers,
+            "--retry-failed": retry_failed,
+            "--max-failures": max_failures,
+            "--prune": prune,
+            "--detach": detach,
+            "--check-files": check_files,
+            "--no-verification": not verification and c.verify is not None,
+            "--no-aggregate": not aggregate,
+            "--no-figures": not figures,
+        }
+        hand_to_service(campaign, results, set_, seeds, name, options, quiet)
     if detach:
         from .driver import run_detached
 
@@ -247,11 +267,16 @@ def run(
     say = Console(stderr=True, highlight=False, soft_wrap=True, quiet=quiet)
     store = CampaignStore(results, c.name)
     lock = store.lock()
+    fresh = not store.root.exists()  # made by this command: removed again if it is refused
     try:
         store.ensure()
         lock.acquire(command=" ".join(sys.argv))
     except (CampaignLocked, StoreError) as e:
         error(err, e)
+        if fresh:  # the folders ensure() made, if still empty (another driver's are not)
+            for folder in (store.runs_dir, store.root):
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
         raise typer.Exit(EXIT_BAD_INPUT) from None
     try:
         expansion = expand(c)
@@ -319,9 +344,13 @@ def run(
                     events.close()
         except (ClusterError, StoreError, CampaignError) as e:
             error(err, e)
+            if fresh:
+                discard_unused(store)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
             error(err, storage_message(store, e))
+            if fresh:
+                discard_unused(store)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:  # before any run was submitted
             err.print("[yellow]interrupted[/]; rerun the same command to resume")
@@ -365,6 +394,7 @@ def run(
                 f"{summary.completed} run(s) in {fmt_time(summary.wall_time)} "
                 f"(sum of run times {fmt_time(summary.run_time)})"
             )
+        product_failures: list[str] = []
         if aggregate:
             try:
                 write_phase(expansion, store)
@@ -374,13 +404,15 @@ def run(
                     if verification:  # the fits pick its sample; the figures show it
                         from .verify import verify_step
 
-                        regenerate_figures(c, results, draw_figures=False)
+                        fitted = regenerate_figures(c, results, draw_figures=False)
                         verify_step(c, store, say, before=False)
                         drawn = regenerate_figures(c, results, fits=False)
+                        drawn.failures = {**fitted.failures, **drawn.failures}
                     else:
                         drawn = regenerate_figures(c, results)
-                    for figure in drawn:
+                    for figure in drawn.paths:
                         say.print(f"figure: {escape(str(figure))}")
+                    product_failures = failure_lines(drawn.failures)
                     page = regenerate_report(c, results)
                     if page is not None:
                         say.print(f"report: {escape(str(page))}")
@@ -391,6 +423,8 @@ def run(
                     "aggregate) once the folder can be written",
                 )
                 raise typer.Exit(EXIT_BAD_INPUT) from None
+        for line in product_failures:
+            err.print(f"[red]failed[/]: {escape(line)}", soft_wrap=True, highlight=False)
         failures = [] if summary is None else summary.failed
         n_failed = len(failures) + len(plan.failed)
         if summary is not None and summary.lost:
@@ -419,7 +453,23 @@ def run(
                 err.print(
                     f"  ... and {len(plan.failed)} earlier failure(s); --retry-failed redoes them"
                 )
-            err.print(f"details: nematic status {campaign}")
+            err.print(f"details: nematic status {campaign}", markup=False)
             raise typer.Exit(EXIT_FAILED_RUNS)
+        if product_failures:
+            err.print(
+                f"every run succeeded, but {len(product_failures)} fit(s) or figure(s) failed "
+                f"(above); nematic figures {campaign} redraws them"
+            )
+            raise typer.Exit(EXIT_PRODUCTS_FAILED)
     finally:
         lock.release()
+
+
+def discard_unused(store: CampaignStore) -> None:
+    """Remove the campaign folder that this command made for a campaign it then refused
+    (e.g. its parent's runs are not done, or its cluster did not start): its lock file and
+    campaign copy, never a run's file (the folder is kept if ``runs/`` holds anything)."""
+    with contextlib.suppress(OSError):
+        if store.runs_dir.is_dir() and any(store.runs_dir.iterdir()):
+            return
+        shutil.rmtree(store.root)

@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from nematic_solids.model.errors import ParameterError
@@ -21,7 +20,15 @@ from nematic_solids.model.resolution import is_rule, read_rule
 from ..campaign import MAX_SEED
 from ..errors import CampaignError, StoreError
 from ..limits import available_memory, check_run_memory
-from .app import EXIT_BAD_INPUT, EXIT_FAILED_RUNS, QuietOpt, VerboseOpt, error, setup_logging
+from .app import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED_RUNS,
+    Console,
+    QuietOpt,
+    VerboseOpt,
+    error,
+    setup_logging,
+)
 
 #: the names ``--set`` accepts, from the dataclasses themselves (so the help cannot drift)
 _PARAMETER_NAMES = ", ".join([f.name for f in fields(Parameters)] + ["alpha_minus_B"])

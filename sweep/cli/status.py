@@ -8,12 +8,13 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from ..startup import paused_gc
 from .app import (
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,
@@ -106,7 +107,7 @@ def status(
         return
     pct = 100.0 * report.done / max(report.total, 1)
     console.print(
-        f"campaign [bold]{report.campaign}[/] ({report.folder}): "
+        f"campaign [bold]{escape(str(report.campaign))}[/] ({escape(str(report.folder))}): "
         f"[green]{report.done} done[/], [red]{report.failed} failed[/], "
         f"{report.pending} pending of {report.total} ({pct:.0f}% done)"
     )
@@ -148,12 +149,12 @@ def status(
         for col in (ax.dim, "done", "failed", "pending"):
             table.add_column(col, justify="right")
         for row in zip(ax.labels, ax.done, ax.failed, ax.pending, strict=True):
-            table.add_row(*map(str, row))
+            table.add_row(*(escape(str(x)) for x in row))
         console.print(table)
     if report.reasons:
         console.print(
             "[red]failures by reason[/]: "
-            + ", ".join(f"{k}: {v}" for k, v in report.reasons.items())
+            + escape(", ".join(f"{k}: {v}" for k, v in report.reasons.items()))
         )
         for group in report.failure_groups:
             for line in failure_group_lines(group):
@@ -165,6 +166,13 @@ def status(
         )
         for ex in report.unreadable_examples:
             console.print(f"  {ex['run_id']}: {ex['problem']}", markup=False)
+    if report.reused:
+        parts = ", ".join(f"{n} from {name}" for name, n in report.reused.items())
+        console.print(
+            f"{sum(report.reused.values())} done run(s) made by other campaigns, taken in "
+            f"place: {parts}",
+            markup=False,
+        )
     if report.foreign_runs:
         console.print(
             f"{report.foreign_runs} run record(s) in the folder belong to other "

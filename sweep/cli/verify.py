@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 
 from ..errors import CampaignLocked, ClusterError, StoreError
@@ -18,6 +17,7 @@ from .app import (
     EXIT_FAILED_RUNS,
     EXIT_INTERRUPTED,
     CampaignArg,
+    Console,
     NameOpt,
     QuietOpt,
     ResultsOpt,

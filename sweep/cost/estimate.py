@@ -175,7 +175,10 @@ class Basis:
             grid = self.prior.resolution.get(point_key(point.coords))
             n = point.numerics.resolution
             if grid is not None and grid != n:  # measured on another grid: scaled
-                known *= model / model_seconds(dataclasses.replace(point.numerics, resolution=grid))
+                known *= model / model_seconds(
+                    dataclasses.replace(point.numerics, resolution=grid),
+                    protocol=point.parameters.protocol,
+                )
                 why += f" on {grid}^2, scaled to {n}^2 by the cost model"
             return known, known * lo, known * hi, why
         ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
@@ -222,6 +225,25 @@ def classify(
     return todo, done, failed
 
 
+def reused_elsewhere(
+    expansion: Expansion, store: CampaignStore, todo: list[int]
+) -> tuple[list[int], dict[str, int]]:
+    """The runs to do that ``nematic run`` would take from other campaigns of the results
+    root instead of running them (read only: an existing catalogue alone), and how many
+    from which campaign."""
+    from ..catalogue.reuse import open_for_reuse, reusable
+
+    catalogue = open_for_reuse(store.results_root, create=False) if todo else None
+    if catalogue is None:
+        return todo, {}
+    with catalogue:
+        found = reusable(catalogue, store, [expansion.run_ids[i] for i in todo])
+    counts: dict[str, int] = {}
+    for src in found.values():
+        counts[src.campaign] = counts.get(src.campaign, 0) + 1
+    return [i for i in todo if expansion.run_ids[i] not in found], counts
+
+
 def measurements(
     expansion: Expansion, records: Mapping[str, Record], prior: Prior | None = None
 ) -> Basis:
@@ -240,7 +262,7 @@ def measurements(
         length = run_length(point, rec)
         key = (id(point), length)
         if key not in models:
-            models[key] = model_seconds(point.numerics, length)
+            models[key] = model_seconds(point.numerics, length, point.parameters.protocol)
         measured.append(
             (
                 point_label(point),
@@ -294,6 +316,8 @@ def estimate(
             f"; finished ({seeds.stop})" if seeds.finished else ""
         )
     todo, done, failed = classify(expansion, store, records, retry_failed=retry_failed)
+    todo, reused = reused_elsewhere(expansion, store, todo)
+    done += sum(reused.values())
     basis = measurements(expansion, records, campaign_prior(campaign)[0])
     costs: dict[str, Costed] = {}
     runs: list[tuple[float, float, float, bool]] = []  # (seconds, low, high, cost model?)
@@ -307,7 +331,8 @@ def estimate(
         point = expansion.run(i).point
         if id(point) not in per_point:
             label = point_label(point)
-            per_point[id(point)] = (label, *basis.cost(point, label, model_seconds(point.numerics)))
+            model = model_seconds(point.numerics, protocol=point.parameters.protocol)
+            per_point[id(point)] = (label, *basis.cost(point, label, model))
         label, est, lo, hi, why = per_point[id(point)]
         if i in continuing:
             rest = max(0.0, 1.0 - continuing[i][1] / point.numerics.t_final)
@@ -375,7 +400,11 @@ def estimate(
         later = precision_rounds(
             campaign,
             seeds,
-            lambda point: basis.cost(point, point_label(point), model_seconds(point.numerics))[0],
+            lambda point: basis.cost(
+                point,
+                point_label(point),
+                model_seconds(point.numerics, protocol=point.parameters.protocol),
+            )[0],
             workers,
         )
     changed = campaign_changes(campaign, store, dense, records)
@@ -407,4 +436,5 @@ def estimate(
         later=later,
         round_note=round_note,
         changes=[] if changed is None else changed.lines(),
+        reused=reused,
     )

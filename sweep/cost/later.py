@@ -153,7 +153,10 @@ def grid_factor(campaign: Campaign, prior: Prior, key: tuple[tuple[str, str], ..
     if point.numerics.resolution == grid:
         return 1.0
     there = dataclasses.replace(point.numerics, resolution=grid)
-    return model_seconds(point.numerics) / model_seconds(there)
+    protocol = point.parameters.protocol
+    return model_seconds(point.numerics, protocol=protocol) / model_seconds(
+        there, protocol=protocol
+    )
 
 
 def _value(text: str) -> Any:

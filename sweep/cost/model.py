@@ -13,9 +13,13 @@ curve (the median, over Fig. 2's activities alpha - B = 0.1 ... 1.0 at the model
 parameters, of the accepted steps by time t; extended beyond its last time with its last
 slope), scaled by ``(tolerance / 1e-3) ** (-1 / order)`` (the embedded error estimate's
 order: 4 for etdrk4, 2 for etdrk2) and never below ``t_final / dt_max``; a fixed-step run
-takes ``t_final / dt`` steps. Numerics other than the calibrated ones (etdrk2, the RMS error
-norm, incompressible linear mechanics, finite strain with ``displacement: equilibrium``)
-multiply the cost by their measured factor.
+takes ``t_final / dt`` steps. A time protocol forces steps of its own (one per piece between
+its switch times, 16 per period of a sine, 8 per ramp piece:
+:meth:`nematic_solids.model.protocol.Protocol.forced_steps`): a run takes the larger of the two
+counts (measured at 32^2 over t = 30, alpha - B switched 300 and 1000 times: 309 and 1006 steps
+against 301 and 1001 forced, 114 without the switches). Numerics other than the calibrated
+ones (etdrk2, the RMS error norm, incompressible linear mechanics, finite strain with
+``displacement: equilibrium``) multiply the cost by their measured factor.
 
 The constants are measured on this project's 2-core VM by ``benchmarks/bench_cost.py``
 (the fit and every row in ``benchmarks/cost_model.json``; ``tests/sweep/test_estimate.py`` checks
@@ -32,6 +36,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from nematic_solids.model.parameters import Numerics
+    from nematic_solids.model.protocol import Protocol
 
 #: ``X = N^2 log2 N / REFERENCE`` is 1 at the reference resolution 128^2
 REFERENCE = 128**2 * 7
@@ -120,17 +125,21 @@ def curve_steps(curve: tuple[tuple[float, float], ...], t: float) -> float:
     return s1 + (s1 - s0) / (t1 - t0) * (t - t1)
 
 
-def model_steps(numerics: Numerics, t_final: float | None = None) -> float:
-    """The steps the model expects of a run (to ``t_final``, default the numerics')."""
+def model_steps(
+    numerics: Numerics, t_final: float | None = None, protocol: Protocol | None = None
+) -> float:
+    """The steps the model expects of a run (to ``t_final``, default the numerics'), at least
+    those its ``protocol`` forces."""
     t = numerics.t_final if t_final is None else t_final
+    forced = protocol.forced_steps(t) if protocol else 0.0
     if not numerics.adaptive:
-        return t / numerics.dt
+        return max(t / numerics.dt, forced)
     cost = COSTS[numerics.mechanics]
     order = ORDER.get(numerics.scheme, 4)
     steps = curve_steps(cost.steps_curve, t) * (numerics.tolerance / REFERENCE_TOLERANCE) ** (
         -1.0 / order
     )
-    return max(steps, t / numerics.dt_max)
+    return max(steps, t / numerics.dt_max, forced)
 
 
 def variant_factor(numerics: Numerics) -> float:
@@ -143,15 +152,17 @@ def variant_factor(numerics: Numerics) -> float:
     return factor
 
 
-def model_seconds(numerics: Numerics, t_final: float | None = None) -> float:
+def model_seconds(
+    numerics: Numerics, t_final: float | None = None, protocol: Protocol | None = None
+) -> float:
     """The model's CPU seconds of one run with ``numerics`` (run to ``t_final``: default the
-    numerics' own; an early-stopped run's ``t_stopped``)."""
+    numerics' own; an early-stopped run's ``t_stopped``) under ``protocol``."""
     t = numerics.t_final if t_final is None else t_final
     cost = COSTS[numerics.mechanics]
     x = scale(numerics.resolution)
     saves = math.floor(t / numerics.save_every) + 1
     seconds = (
-        model_steps(numerics, t) * (cost.step[0] + cost.step[1] * x)
+        model_steps(numerics, t, protocol) * (cost.step[0] + cost.step[1] * x)
         + saves * (cost.save[0] + cost.save[1] * x)
         + cost.setup[0]
         + cost.setup[1] * x

@@ -92,6 +92,9 @@ class Estimate:
     #: what changed since the results were made (:mod:`nematic_solids.sweep.outputs.changes`), as
     #: lines
     changes: list[str] = field(default_factory=list)
+    #: runs to do that other campaigns of the results root finished (taken in place, not
+    #: run): campaign -> how many (:mod:`nematic_solids.sweep.catalogue.reuse`)
+    reused: dict[str, int] = field(default_factory=dict)
 
 
 def fmt_seconds(seconds: float) -> str:
@@ -141,6 +144,10 @@ def lines(e: Estimate, *, brief: bool = False) -> list[str]:
         out.append(
             f"  ... and {len(rest)} more point(s) with {sum(c.runs for c in rest)} run(s) to do"
         )
+    if e.reused:
+        from ..catalogue.reuse import reuse_line
+
+        out.append(reuse_line(e.reused))
     out.append(f"basis: {e.basis}")
     if e.to_do == 0:
         out.append(

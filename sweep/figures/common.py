@@ -18,6 +18,7 @@ from ..analysis.fits_file import FITS, load_fits, load_phase
 from ..analysis.phase import is_swept, select, sweep_dims, with_dim
 from ..campaign import AMB, same_value
 from ..errors import FigureError, FitError
+from ..names import NAMES
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -27,17 +28,8 @@ log = logging.getLogger(__name__)
 FIGURES = "figures"
 FORMATS = ("png", "pdf")
 PNG_DPI = 160
-LABELS = {
-    AMB: r"$\alpha - B$",
-    "alpha": r"$\alpha$",
-    "B": r"$B$",
-    "K": r"$K$",
-    "chi": r"$\chi$",
-    "eps": r"$\epsilon$",
-    "sigma2_S": r"$\sigma^2_S$",
-    "cos2theta": r"$\langle\cos 2\theta\rangle$",
-    "activity": r"$\chi(\alpha - B)$",
-}
+#: mathtext labels of the quantities (sweep/names.py: the one table the report uses too)
+LABELS = {name: n.tex for name, n in NAMES.items()}
 STYLE = {
     "font.size": 9,
     "axes.titlesize": 10,

@@ -17,6 +17,7 @@ import xarray as xr
 from nematic_solids.model.errors import NematicError
 
 from ..analysis.fits_file import fit_notes, load_fits, load_phase, write_fits
+from ..analysis.shape import Shape
 from ..campaign import Campaign
 from ..errors import FigureError, FitError
 from ..files import atomic_path
@@ -93,6 +94,7 @@ def plan(
     ``figures:`` list (``figures: []``: none), else (no ``figures:`` key) every registered
     figure that applies to this grid; the campaign's fits first (their options win), then
     the fits those figures need."""
+    shape = Shape.of_phase(phase)
     listed = (
         None if campaign.figures is None else {p.name: dict(p.options) for p in campaign.figures}
     )
@@ -106,12 +108,12 @@ def plan(
     elif listed is not None:
         figures = list(listed.items())
     else:
-        figures = [(n, {}) for n, spec in REGISTRY.items() if spec.applies(phase)]
+        figures = [(n, {}) for n, spec in REGISTRY.items() if spec.applies(shape)]
     fit_requests: list[tuple[str, dict[str, Any]]] = [
         (p.name, dict(p.options)) for p in campaign.fits
     ]
     for n, _ in figures:
-        fit_requests.extend(REGISTRY[n].fits(phase))
+        fit_requests.extend(REGISTRY[n].fits(shape))
     return fit_requests, figures
 
 
@@ -139,8 +141,8 @@ def produce(
         except NematicError as e:
             failed = {"fits": str(e)}
         except Exception as e:  # nor may the fits
-            failed = {"fits": f"{type(e).__name__}: {e}"}
-            log.warning("fits not written", exc_info=True)
+            failed = {"fits": one_line(e)}
+            log.debug("fits not written", exc_info=True)
         out.failures.update({f"fit {k}": v for k, v in failed.items()})
     if out.fits_path is not None:
         out.notes = fit_notes(load_fits(root))
@@ -151,12 +153,16 @@ def produce(
         try:
             out.paths.extend(draw(name, root, options, results))
         except NematicError as e:
-            out.failures[name] = str(e)
-            log.warning("figure %s not drawn: %s", name, e)
+            out.failures[name] = " ".join(str(e).split())
         except Exception as e:  # a figure must never sink the run it follows
-            out.failures[name] = f"{type(e).__name__}: {e}"
-            log.warning("figure %s not drawn", name, exc_info=True)
+            out.failures[name] = one_line(e)
+            log.debug("figure %s not drawn", name, exc_info=True)  # --verbose shows it
     return out
+
+
+def one_line(e: BaseException) -> str:
+    """An unexpected exception as one line: its type and message, whitespace collapsed."""
+    return f"{type(e).__name__}: {' '.join(str(e).split())}"
 
 
 def regenerate(

@@ -1,5 +1,6 @@
 """The figures a campaign can ask for (``figures:`` in its YAML), by name: :data:`REGISTRY`,
-with the fits each needs and the grids it applies to."""
+with the fits each needs, the grids it is drawn for unasked, and the campaigns it cannot be
+drawn for (:func:`shape_problems`, which the validator reports at the figure's file:line)."""
 
 from __future__ import annotations
 
@@ -7,10 +8,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import xarray as xr
-
-from ..analysis.phase import is_swept
-from ..campaign import AMB, BRANCH
+from ..analysis.shape import Shape
+from ..campaign import AMB
 from .common import Results, invalid_options
 from .fig2 import FIG2_OPTIONS, fig2
 from .fig3 import FIG3_OPTIONS, fig3
@@ -19,82 +18,116 @@ from .fig4 import FIG4_OPTIONS, fig4
 from .figA1 import FIGA1_OPTIONS, figA1
 from .loop import LOOP_OPTIONS, loop
 from .moduli import MODULI_FIGURE_OPTIONS, moduli_figure
-from .switch import LEVEL, SWITCH_OPTIONS, switch
+from .switch import DURATION, LEVEL, SWITCH_OPTIONS, switch
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 FigureFunction = Callable[[Results, Mapping[str, Any]], "Figure"]
+Fits = list[tuple[str, dict[str, Any]]]
+
+#: a switch-off campaign's swept numbers of the pulse of alpha - B
+LEVELS = (LEVEL, DURATION)
 
 
-def _swept_all(*names: str) -> Callable[[xr.Dataset], bool]:
-    return lambda phase: BRANCH not in phase.dims and all(is_swept(phase, n) for n in names)
+def _activity_line(figure: str) -> Callable[[Shape, Mapping[str, Any]], str | None]:
+    """A figure along alpha - B from a fresh texture (figs. 2, 3)."""
+
+    def needs(shape: Shape, options: Mapping[str, Any]) -> str | None:
+        if shape.chained:
+            return f"{figure} draws runs that each start from a fresh texture; a chain draws loop"
+        if not shape.swept(AMB):
+            return f"{figure} needs alpha_minus_B (or alpha, or B) as a sweep axis"
+        return None
+
+    return needs
 
 
-def _oscillatory(phase: xr.Dataset) -> bool:
-    """A campaign whose protocol has a sine of eps (an oscillatory shear)."""
-    raw = str(phase.attrs.get("param_protocol", ""))
-    return '"eps": {"sine"' in raw and BRANCH not in phase.dims
+def _fig3_needs(shape: Shape, options: Mapping[str, Any]) -> str | None:
+    if shape.chained:
+        return "fig3 draws runs that each start from a fresh texture; a chain draws loop"
+    return None
 
 
-def _chained(phase: xr.Dataset) -> bool:
-    return BRANCH in phase.dims
+def _fig4_axes(shape: Shape, options: Mapping[str, Any]) -> list[str]:
+    chosen = set((options.get("select") or {}).keys())
+    act = "chi" if shape.swept("chi") else AMB
+    return [a for a in (act, "K", "eps") if shape.swept(a) and a not in chosen]
 
 
-def _loop_fits(phase: xr.Dataset) -> list[tuple[str, dict[str, Any]]]:
-    return [("transition", {"axis": str(phase.attrs.get("chain_axis", AMB))})]
+def _fig4_needs(shape: Shape, options: Mapping[str, Any]) -> str | None:
+    if len(_fig4_axes(shape, options)) < 2:
+        return "fig4 needs at least two of chi (or alpha - B), K and eps swept (and not selected)"
+    return None
 
 
-def _fig4_applies(phase: xr.Dataset) -> bool:
-    if BRANCH in phase.dims:
-        return False
-    n = sum(is_swept(phase, a) for a in ("chi", "K", "eps"))
-    return n >= 2 and str(phase.attrs.get("num_mechanics", "finite")) == "finite"
+def _fig4_applies(shape: Shape) -> bool:
+    n = sum(shape.swept(a) for a in ("chi", "K", "eps"))  # unasked: not over alpha - B and K
+    return not shape.chained and n >= 2 and shape.mechanics == "finite"
 
 
-def _figA1_applies(phase: xr.Dataset) -> bool:
+def _loop_needs(shape: Shape, options: Mapping[str, Any]) -> str | None:
+    return None if shape.chained else "loop draws a chain: the campaign has no chain: section"
+
+
+def _switch_needs(shape: Shape, options: Mapping[str, Any]) -> str | None:
+    if not all(shape.swept(n) for n in LEVELS):
+        return (
+            "switch needs a switch-off of activity: a pulse of alpha_minus_B in protocol: "
+            f"with {' and '.join(LEVELS)} swept"
+        )
+    return None
+
+
+def _figA1_applies(shape: Shape) -> bool:
     return (
-        BRANCH not in phase.dims
-        and is_swept(phase, "eps")
-        and (is_swept(phase, "chi") or is_swept(phase, AMB))
-        and str(phase.attrs.get("num_mechanics", "")) == "linear"
+        not shape.chained
+        and shape.swept("eps")
+        and (shape.swept("chi") or shape.swept(AMB))
+        and shape.mechanics == "linear"
     )
+
+
+def _swept_all(*names: str) -> Callable[[Shape], bool]:
+    return lambda shape: not shape.chained and all(shape.swept(n) for n in names)
 
 
 @dataclass(frozen=True)
 class FigureSpec:
-    """A registered figure: how to draw it, which fits it needs, when it applies."""
+    """A registered figure: how to draw it, which fits it needs, when it is drawn unasked
+    (``applies``), and why it cannot be drawn for a campaign of some shape (``needs``: a
+    sentence, or None when it can; the fits it asks for are checked besides)."""
 
     function: FigureFunction
     description: str
-    fits: Callable[[xr.Dataset], list[tuple[str, dict[str, Any]]]]
-    applies: Callable[[xr.Dataset], bool] = field(default=lambda phase: True)
+    fits: Callable[[Shape], Fits]
+    applies: Callable[[Shape], bool] = field(default=lambda shape: True)
     options: tuple[str, ...] = ()
+    needs: Callable[[Shape, Mapping[str, Any]], str | None] = field(
+        default=lambda shape, options: None
+    )
 
 
-def _fig2_fits(phase: xr.Dataset) -> list[tuple[str, dict[str, Any]]]:
-    return [("transition", {"axis": AMB})]
+def _transition_along(axis: str) -> Callable[[Shape], Fits]:
+    return lambda shape: [("transition", {"axis": axis})]
 
 
-def _fig3_fits(phase: xr.Dataset) -> list[tuple[str, dict[str, Any]]]:
+def _fig3_fits(shape: Shape) -> Fits:
     return [("scaling", {}), ("transition", {"axis": AMB})]
 
 
-def _fig4_fits(phase: xr.Dataset) -> list[tuple[str, dict[str, Any]]]:
-    return [("anisotropy", {})] if is_swept(phase, "eps") else []
-
-
-def _figA1_fits(phase: xr.Dataset) -> list[tuple[str, dict[str, Any]]]:
-    return [("stability", {})]
+def _fig4_fits(shape: Shape) -> Fits:
+    return [("anisotropy", {})] if shape.swept("eps") else []
 
 
 REGISTRY: dict[str, FigureSpec] = {
     "fig2": FigureSpec(
         fig2,
         "snapshot, sigma2_S(t) and sigma2_S(t_final) vs alpha - B",
-        _fig2_fits,
+        _transition_along(AMB),
         _swept_all(AMB),
         FIG2_OPTIONS,
+        _activity_line("fig2"),
     ),
     "fig3": FigureSpec(
         fig3,
@@ -102,13 +135,15 @@ REGISTRY: dict[str, FigureSpec] = {
         _fig3_fits,
         _swept_all(AMB, "K"),
         FIG3_OPTIONS,
+        _fig3_needs,
     ),
     "fig3_growth": FigureSpec(
         fig3_growth,
         "lambda(t) and sigma2_S(t) for several alpha - B at one K, the growth peak marked",
-        lambda phase: [],
+        lambda shape: [],
         _swept_all(AMB, "K"),
         FIG3_GROWTH_OPTIONS,
+        _activity_line("fig3_growth"),
     ),
     "fig4": FigureSpec(
         fig4,
@@ -116,32 +151,35 @@ REGISTRY: dict[str, FigureSpec] = {
         _fig4_fits,
         _fig4_applies,
         FIG4_OPTIONS,
+        _fig4_needs,
     ),
     "loop": FigureSpec(
         loop,
         "a chain's hysteresis loop: both branches, each jump, the settling time per point",
-        _loop_fits,
-        _chained,
+        lambda shape: [("transition", {"axis": shape.chain_axis or AMB})],
+        lambda shape: shape.chained,
         LOOP_OPTIONS,
+        _loop_needs,
     ),
     "moduli": FigureSpec(
         moduli_figure,
         "an oscillatory shear's storage and loss moduli vs the sweep, and the stress-strain loop",
-        lambda phase: [("moduli", {})],
-        _oscillatory,
+        lambda shape: [("moduli", {})],
+        lambda shape: shape.sine_of_eps() and not shape.chained,
         MODULI_FIGURE_OPTIONS,
     ),
     "switch": FigureSpec(
         switch,
         "a pattern through a switch-off of activity: sigma2_S(t), how far it fell, its memory",
-        lambda phase: [("recovery", {})],
-        lambda phase: LEVEL in phase.dims,
+        lambda shape: [("recovery", {})],
+        lambda shape: all(shape.swept(n) for n in LEVELS),
         SWITCH_OPTIONS,
+        _switch_needs,
     ),
     "figA1": FigureSpec(
         figA1,
         "stable/unstable runs in (chi (alpha - B), eps) and the linear-stability boundary",
-        _figA1_fits,
+        lambda shape: [("stability", {})],
         _figA1_applies,
         FIGA1_OPTIONS,
     ),
@@ -154,3 +192,20 @@ def option_problems(name: str, options: Mapping[str, Any]) -> list[str]:
     if name not in REGISTRY:
         return [f"unknown figure {name!r}; registered: {', '.join(sorted(REGISTRY))}"]
     return invalid_options(name, options, REGISTRY[name].options)
+
+
+def shape_problems(
+    name: str, options: Mapping[str, Any], shape: Shape, fits: Mapping[str, Mapping[str, Any]]
+) -> list[str]:
+    """Why registered figure ``name`` with ``options`` cannot be drawn for a campaign of
+    ``shape`` (empty if it can): the figure's own needs and those of the fits it asks for, with
+    the options of the campaign's own ``fits`` entry where it has one (they win)."""
+    from ..analysis.registry import fit_shape_problems
+
+    spec = REGISTRY[name]
+    why = spec.needs(shape, options)
+    out = [] if why is None else [why]
+    for fit, fit_options in spec.fits(shape):
+        for problem in fit_shape_problems(fit, fits.get(fit, fit_options), shape):
+            out.append(f"{name} needs the fit {fit}: {problem}")
+    return out

@@ -30,6 +30,7 @@ from nematic_solids.model.resolution import is_rule, read_rule
 from ..campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from ..expand import Expansion
 from ..files import atomic_to_netcdf
+from ..names import NAMES
 from ..observables import NOT_OBSERVABLES, OBSERVABLES
 from ..protocols import AXIS_LONG_NAMES, PROTOCOL
 from ..provenance import code_version, git_commit, library_versions_text
@@ -43,22 +44,26 @@ log = logging.getLogger(__name__)
 STATUS_MISSING, STATUS_OK, STATUS_FAILED = 0, 1, 2
 
 
+#: the long names of the model's parameters (the one table: sweep/names.py)
 PARAMETER_LONG_NAMES = {
-    "alpha_minus_B": "contractility alpha - B",
-    "alpha": "active stress magnitude alpha",
-    "B": "nemato-elastic coupling B",
-    "K": "Frank constant K",
-    "chi": "stress-activity coupling chi",
-    "eps": "applied pure shear strain eps",
-    "S0": "initial nematic order S0",
-    "A0": "Landau-de Gennes coefficient A0",
-    "C": "quartic Landau-de Gennes coefficient C",
-    "zeta": "activity relaxation rate zeta",
-    "s": "cubic activity saturation s",
-    "gamma": "rotational viscosity gamma",
-    "tau": "activity time scale tau",
-    "kappa": "bulk modulus kappa",
-    "B_prime": "volumetric nemato-elastic coupling B'",
+    k: NAMES[k].long_name
+    for k in (
+        "alpha_minus_B",
+        "alpha",
+        "B",
+        "K",
+        "chi",
+        "eps",
+        "S0",
+        "A0",
+        "C",
+        "zeta",
+        "s",
+        "gamma",
+        "tau",
+        "kappa",
+        "B_prime",
+    )
 }
 
 
@@ -285,6 +290,7 @@ def build_phase(
                 {
                     "chain_axis": campaign.chain.axis,
                     "chain_branches": ", ".join(campaign.chain.branches),
+                    "chain_up": campaign.chain.up,
                 }
                 if campaign.chain is not None
                 else {}

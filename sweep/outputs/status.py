@@ -65,6 +65,9 @@ class StatusReport:
     #: pending runs with a rolling checkpoint (in progress, or interrupted): ``run_id``,
     #: ``coords``, ``t`` (the time reached), ``t_final``, ``checkpoint`` (its path), ``written``
     in_progress: list[dict[str, Any]] = field(default_factory=list)
+    #: done runs another campaign of the results root made, taken in place: campaign -> how
+    #: many (:mod:`nematic_solids.sweep.catalogue.reuse`)
+    reused: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -108,6 +111,7 @@ def campaign_status(
     n = len(expansion)
     state = np.full(n, 2, dtype=np.int8)  # 0 done, 1 failed, 2 pending
     reasons: Counter[str] = Counter()
+    reused: Counter[str] = Counter()
     examples: list[dict[str, Any]] = []
     first: dict[str, dict[str, Any]] = {}  # reason -> its first failed run
     times: list[float] = []
@@ -129,6 +133,8 @@ def campaign_status(
             continue
         if rec.get("status") == "ok":
             state[i] = 0
+            if rec.get("reused_from"):
+                reused[str(rec["reused_from"])] += 1
             wall = rec.get("wall_time")
             if isinstance(wall, (int, float)) and math.isfinite(wall):
                 times.append(float(wall))
@@ -191,6 +197,7 @@ def campaign_status(
         foreign_runs=len(set(records) - set(expansion.position)),
         unreadable=n_unreadable,
         unreadable_examples=unreadable,
+        reused=dict(sorted(reused.items())),
     )
     report.running = read_lock_holder(store.lock_path)
     for rid, info in store.in_progress().items():

@@ -1,5 +1,6 @@
 """A campaign's results where users analyse them (a notebook, pandas, a spreadsheet):
-:func:`open_campaign` gives the phase diagram as an xarray Dataset with a ``seed`` dimension
+:func:`~nematic_solids.sweep.open_campaign` gives the phase diagram as an xarray Dataset with a
+``seed`` dimension
 (the one ``phase.nc`` holds, built from the run records as
 :mod:`nematic_solids.sweep.outputs.aggregate` builds it) and the runs as a tidy pandas table, one
 row per finished run; :func:`write_table` writes that table as CSV or Parquet, atomically (``nematic
@@ -39,7 +40,8 @@ class CampaignResults:
     dims and ``seed``, NaN where a run is missing or failed, with the seed statistics);
     ``runs()`` is the table (``pandas.DataFrame``): one row per finished run (ok or failed),
     with every swept axis, ``seed``, ``run_id``, ``status``, ``reason`` and every per-run
-    scalar as columns. Both read the folder anew at each call."""
+    scalar as columns; ``fits()`` is ``fits.nc`` (``xarray.Dataset``: the campaign's fits with
+    their intervals, docs/campaigns/fits.md). Each reads the folder anew at each call."""
 
     def __init__(self, campaign: Campaign, results: str | Path = "results"):
         self.campaign = campaign
@@ -61,6 +63,21 @@ class CampaignResults:
     def runs(self) -> pd.DataFrame:
         """One row per finished run: swept axes, seed, run_id, status, reason, scalars."""
         return runs_table(self.phase())
+
+    def fits(self) -> xr.Dataset:
+        """The campaign's fits as ``nematic run`` or ``nematic figures`` last wrote them to
+        ``fits.nc`` (loaded into memory): each fitted quantity with its interval, units and
+        the reason of a NaN in its attributes. Raises
+        :class:`~nematic_solids.sweep.errors.StoreError` when there is no fits.nc yet."""
+        from ..analysis.fits_file import FITS, load_fits
+
+        path = self.store.root / FITS
+        if not path.is_file():
+            raise StoreError(
+                f"no {path} yet: `nematic figures` computes the fits from phase.nc "
+                "(`nematic run` does at its end)"
+            )
+        return load_fits(self.store.root)
 
 
 def runs_table(ds: xr.Dataset) -> pd.DataFrame:
@@ -85,7 +102,7 @@ def runs_table(ds: xr.Dataset) -> pd.DataFrame:
 def open_campaign(campaign: str | Path, results: str | Path = "results") -> CampaignResults:
     """Open a campaign's results: ``campaign`` is its YAML file, or its name (the folder
     ``results/<name>/``, read with the campaign copy the last ``nematic run`` left there, its
-    command-line overrides included). Raises :class:`~nematic_solids.sweep.errors.NematicError`
+    command-line overrides included). Raises :class:`~nematic_solids.model.errors.NematicError`
     subclasses with what is wrong (no such file or folder, an invalid campaign)."""
     path = Path(campaign)
     if path.is_file():
@@ -105,7 +122,8 @@ def open_campaign(campaign: str | Path, results: str | Path = "results") -> Camp
 
 def write_table(table: pd.DataFrame, path: Path, fmt: str) -> None:
     """Write ``table`` as ``fmt`` (csv or parquet) to ``path``, atomically. Parquet needs
-    pyarrow (the ``parquet`` extra); without it an :class:`ExportError` says so."""
+    pyarrow (the ``parquet`` extra); without it an
+    :class:`~nematic_solids.sweep.errors.ExportError` says so."""
     if fmt not in FORMATS:
         raise ExportError(f"unknown format {fmt!r}; allowed: {', '.join(FORMATS)}")
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -120,7 +138,8 @@ def write_table(table: pd.DataFrame, path: Path, fmt: str) -> None:
 
 def parquet_engine() -> Any:
     """The engine pandas writes Parquet with (pyarrow, else fastparquet); an
-    :class:`ExportError` naming the extra to install when there is none."""
+    :class:`~nematic_solids.sweep.errors.ExportError` naming the extra to install when there is
+    none."""
     try:
         import pyarrow  # noqa: F401
     except ImportError:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -26,6 +27,7 @@ from ..run.clusters import open_cluster
 from ..run.driver import REMOTE_TMP_AGE, RunEvents, RunSummary, dashboard_link, run_campaign
 from ..run.failures import FailureLimit
 from ..run.todo import Plan, plan_runs
+from ..run.workers import ClusterLink
 from ..store import CampaignStore
 from .report import round_lines
 from .rounds import Refinement, replay, write_plan
@@ -60,6 +62,8 @@ def drive_rounds(
     say: Callable[[str], None] = print,
     limit: FailureLimit | None = None,
     on_round: Callable[[int], None] | None = None,
+    link: ClusterLink | None = None,
+    stop: threading.Event | None = None,
 ) -> tuple[Plan, RunSummary | None, Expansion]:
     """Run a refined campaign to its end (or to an interruption) while holding its lock.
 
@@ -68,7 +72,9 @@ def drive_rounds(
     the rounds for ``phase.nc``. ``say`` prints each round's plan; ``limit``
     (``--max-failures``) counts the failures over every round of the session; ``on_round``
     is called with the number of each round planned from this call's results, before it
-    runs (the command line prints the cost re-estimated from the runs so far)."""
+    runs (the command line prints the cost re-estimated from the runs so far). With ``link``
+    the rounds run on that cluster, which stays open (the service's); ``stop`` set stops the
+    session as Ctrl-C does."""
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
     save_campaign_copy(store, campaign)
@@ -79,8 +85,8 @@ def drive_rounds(
     retry = retry_failed
     replay_fn, record, announce, what, done = _rounds_of(campaign)
     say(f"campaign {campaign.name}: {what} -> {store.root}")
+    own = link is None
     with contextlib.ExitStack() as stack:
-        link = None
         try:
             while True:
                 ref = replay_fn(campaign, store)
@@ -125,7 +131,7 @@ def drive_rounds(
                     )
                     if dashboard and events is not None:
                         events.dashboard(dashboard_link(link.client))
-                summary = run_campaign(runs, store, link, plan, events, limit=limit)
+                summary = run_campaign(runs, store, link, plan, events, limit=limit, stop=stop)
                 if total is None:
                     total = RunSummary(
                         total=0, skipped=summary.skipped, failed_before=summary.failed_before
@@ -144,7 +150,7 @@ def drive_rounds(
                 total = RunSummary(total=0, skipped=0)
             total.interrupted = True
         finally:
-            if local and link is not None:
+            if local and own and link is not None:
                 stack.close()  # the local workers are gone: clean what they left
                 store.clean_temporaries()
     store.scan()

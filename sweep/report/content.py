@@ -17,6 +17,7 @@ import xarray as xr
 
 from ..analysis.fits_file import FITS
 from ..figures.common import FIGURES
+from ..names import symbol, unit
 from ..outputs.status import StatusReport
 
 if TYPE_CHECKING:
@@ -48,6 +49,8 @@ class Content:
     axes: list[tuple[str, str]]
     seeds: str
     counts: dict[str, int]
+    #: the line that says which done runs other campaigns made ("" if none)
+    reused: str = ""
     figures: list[tuple[str, str]] = field(default_factory=list)
     fits: list[Table] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
@@ -81,8 +84,10 @@ def summary(opened: CampaignResults, status: StatusReport) -> Content:
     axes = []
     for d in c.dims:
         for a in d.axes:
-            zipped = f" (zipped with {d.name})" if a.name != d.name else ""
-            axes.append((f"{a.name}{zipped}", _values(a.values)))
+            zipped = f" (zipped with {symbol(d.name)})" if a.name != d.name else ""
+            shown = symbol(a.name)
+            named = f"{shown} ({a.name})" if shown != a.name else a.name
+            axes.append((f"{named}{zipped}", _values(a.values)))
     return Content(
         name=c.name,
         description=" ".join((c.description or "").split()),
@@ -94,7 +99,16 @@ def summary(opened: CampaignResults, status: StatusReport) -> Content:
             "failed": status.failed,
             "pending": status.pending,
         },
+        reused=_reuse_text(status.reused),
     )
+
+
+def _reuse_text(counts: dict[str, int]) -> str:
+    """``4 of the done runs were made by campaign first (taken in place)``, or ""."""
+    if not counts:
+        return ""
+    parts = ", ".join(f"{n} by {name}" for name, n in sorted(counts.items()))
+    return f"{sum(counts.values())} of the done runs were made by other campaigns: {parts}"
 
 
 def figure_images(root: Path) -> list[tuple[str, str]]:
@@ -113,40 +127,69 @@ def _unit(var: xr.DataArray) -> str:
     return "" if not units or units == "1" else f" [{units}]"
 
 
+#: fit variables that are a place on (or a width along) the fit's axis: the axis' units
+PLACES = ("_location", "_loop_width")
+
+
+def units_text(var: xr.DataArray) -> str:
+    """A fit variable's units for the fits table: its CF units, or for the model's pure numbers
+    (units "1") the scale of the axis it is a place on (sweep/names.py: ``L``, ``τ``), else
+    "1 (pure number)"; "" when the variable has no units."""
+    units = str(var.attrs.get("units") or "")
+    if units != "1":
+        return units
+    axis = str(var.attrs.get("fit_axis", "")) if str(var.name).endswith(PLACES) else ""
+    return (unit(axis) if axis else "") or "1 (pure number)"
+
+
+def _interval_ends(name: str, names: list[str]) -> tuple[str, str] | None:
+    """The variables that hold ``name``'s interval: ``X_lower`` and ``X_upper``, or for a
+    ``P_location`` the ``P_lower`` and ``P_upper`` of its fit."""
+    for base in (name, name.removesuffix("_location") if name.endswith("_location") else None):
+        if base and f"{base}_lower" in names and f"{base}_upper" in names:
+            return f"{base}_lower", f"{base}_upper"
+    return None
+
+
+def _value(fits: xr.Dataset, name: str, ends: tuple[str, str] | None, at: Any = None) -> str:
+    """A value with its interval (``0.25 [0.1, 0.4]``) at ``at`` (an isel, or a scalar)."""
+
+    def get(n: str) -> Any:
+        var = fits[n] if at is None else fits[n].isel(at)
+        return var.values.item()
+
+    text = fmt(get(name))
+    if ends is not None and text != "-":
+        text += f" [{fmt(get(ends[0]))}, {fmt(get(ends[1]))}]"
+    return text
+
+
 def fit_tables(fits: xr.Dataset) -> list[Table]:
     """``fits.nc`` as tables: one per fit and set of dims. A scalar fit is one row per
-    variable (its value, interval, units and long name); a fit over sweep values is one
-    row per coordinate value, a column per variable (its name and units; the long names
-    in the table's note). Interval ends (``X_lower``, ``X_upper``) stand with ``X``."""
+    variable (its value, interval, units and long name; a NaN value gives the fit's reason,
+    its ``nan_reason``); a fit over sweep values is one row per coordinate value, a column per
+    variable (its name and units; the long names, and where a value is NaN why, in the table's
+    note). An interval (``X_lower``, ``X_upper``; for ``P_location``, ``P_lower`` and
+    ``P_upper``) stands with its value: ``0.25 [0.1, 0.4]``."""
     groups: dict[tuple[str, tuple[str, ...]], list[str]] = {}
     for name, var in fits.data_vars.items():
         fit = str(var.attrs.get("fit", str(name).split("_")[0]))
         groups.setdefault((fit, tuple(str(d) for d in var.dims)), []).append(str(name))
     tables = []
     for (fit, dims), names in groups.items():
-        ends = {
-            n
-            for n in names
-            for s in ("_lower", "_upper")
-            if n.endswith(s) and n[: -len(s)] in names
-        }
+        pairs = {n: _interval_ends(n, names) for n in names}
+        ends = {e for pair in pairs.values() if pair for e in pair}
+        shown = [n for n in names if n not in ends]
         if not dims:
             rows = []
-            for n in names:
-                if n in ends:
-                    continue
-                lo, hi = f"{n}_lower", f"{n}_upper"
-                interval = (
-                    f"[{fmt(fits[lo].values.item())}, {fmt(fits[hi].values.item())}]"
-                    if lo in ends and hi in ends
-                    else ""
-                )
+            for n in shown:
+                value = _value(fits, n, pairs[n])
+                why = str(fits[n].attrs.get("nan_reason") or "")
                 rows.append(
                     [
                         n,
-                        fmt(fits[n].values.item()),
-                        interval,
-                        str(fits[n].attrs.get("units") or ""),
+                        f"no value: {why}" if value == "-" and why else value,
+                        units_text(fits[n]),
                         str(fits[n].attrs.get("long_name") or ""),
                     ]
                 )
@@ -154,38 +197,35 @@ def fit_tables(fits: xr.Dataset) -> list[Table]:
                 Table(
                     title=fit,
                     rows=rows,
-                    columns=["variable", "value", "interval", "units", "meaning"],
+                    columns=["variable", "value [interval]", "units", "meaning"],
                 )
             )
             continue
-        ordered = [
-            m
-            for n in names
-            if n not in ends
-            for m in (n, f"{n}_lower", f"{n}_upper")
-            if m == n or m in ends
-        ]
-        headers = [f"{d}{_unit(fits[d])}" if d in fits.coords else d for d in dims]
-        headers += [f"{n}{_unit(fits[n])}" for n in ordered]
+        headers = [f"{symbol(d)}{_unit(fits[d])}" if d in fits.coords else d for d in dims]
+        headers += [f"{n}{_unit(fits[n])}" for n in shown]
         rows = []
         size = int(np.prod([fits.sizes[d] for d in dims]))
         for index in list(np.ndindex(*[fits.sizes[d] for d in dims]))[:MAX_FIT_ROWS]:
             at = dict(zip(dims, index, strict=True))
             row = [fmt(fits[d].values[i]) if d in fits.coords else str(i) for d, i in at.items()]
-            row += [fmt(fits[n].isel(at).values.item()) for n in ordered]
+            row += [_value(fits, n, pairs[n], at) for n in shown]
             rows.append(row)
         meanings = "; ".join(
-            f"{n}: {fits[n].attrs['long_name']}"
-            for n in ordered
-            if n not in ends and fits[n].attrs.get("long_name")
+            f"{n}: {fits[n].attrs['long_name']}" for n in shown if fits[n].attrs.get("long_name")
         )
+        reasons = list(
+            dict.fromkeys(
+                str(fits[n].attrs["nan_reason"]) for n in shown if fits[n].attrs.get("nan_reason")
+            )
+        )
+        why = f" No value ('-') where: {'; '.join(reasons)}." if reasons else ""
         cut = f"the first {MAX_FIT_ROWS} of {size} rows. " if size > MAX_FIT_ROWS else ""
         tables.append(
             Table(
-                title=f"{fit} over {', '.join(dims)}",
+                title=f"{fit} over {', '.join(symbol(d) for d in dims)}",
                 columns=headers,
                 rows=rows,
-                note=cut + meanings,
+                note=cut + meanings + why,
             )
         )
     return tables

@@ -32,6 +32,8 @@ th { background: #f0f0f0; }
 .figure img { max-width: 100%; border: 1px solid #eee; }
 pre { background: #f6f6f6; padding: 0.7em; overflow-x: auto; font-size: 0.85em; }
 .note { color: #666; font-size: 0.9em; }
+.scroll { max-width: 100%; overflow-x: auto; }
+td { overflow-wrap: anywhere; }
 </style>
 {{ bokeh_resources | safe }}
 </head>
@@ -43,12 +45,13 @@ pre { background: #f6f6f6; padding: 0.7em; overflow-x: auto; font-size: 0.85em; 
 {% endfor %}<tr><th>seeds</th><td>{{ c.seeds }}</td></tr>
 <tr><th>runs</th><td>{{ c.counts.runs }}: {{ c.counts.done }} done, {{ c.counts.failed }} failed,
 {{ c.counts.pending }} pending</td></tr>
-</table>
+{% if c.reused %}<tr><th>reused</th><td id="reused">{{ c.reused }}</td></tr>
+{% endif %}</table>
 <p class="note">Written {{ created }} from {{ folder }}.</p>
 
 <h2 id="phase-diagram">Phase diagram</h2>
 {% if plot_div %}<p class="note">Hover over a point for its parameters and the seed values of
-the main observables; click it for one of its runs (last snapshot and sigma2_S(t)).</p>
+the main observables; click it for one of its runs (last snapshot and σ²_S(t)).</p>
 {{ plot_div | safe }}{% else %}<p>No phase diagram yet.</p>{% endif %}
 {% for note in plot_notes %}<p class="note">{{ note }}</p>{% endfor %}
 
@@ -59,9 +62,10 @@ the main observables; click it for one of its runs (last snapshot and sigma2_S(t
 
 <h2 id="fits">Fits</h2>
 {% for t in c.fits %}<h3>{{ t.title }}</h3>
-<table class="fit"><tr>{% for h in t.columns %}<th>{{ h }}</th>{% endfor %}</tr>
+<div class="scroll"><table class="fit"><tr>{% for h in t.columns %}<th>{{ h }}</th>
+{% endfor %}</tr>
 {% for row in t.rows %}<tr>{% for v in row %}<td>{{ v }}</td>{% endfor %}</tr>
-{% endfor %}</table>{% if t.note %}<p class="note">{{ t.note }}</p>{% endif %}
+{% endfor %}</table></div>{% if t.note %}<p class="note">{{ t.note }}</p>{% endif %}
 {% else %}<p>No fits (fits.nc is absent or empty).</p>{% endfor %}
 
 <h2 id="failures">Failures</h2>
@@ -90,11 +94,11 @@ its record, with the traceback: {{ g.record }}</p>
 variant; converged: every compared observable changes by less than
 {{ c.verification.threshold }} (relative; absolute for cos2theta) and the pattern class is
 kept (results/NAME/verify.nc).</p>
-<table class="verify"><tr><th>point</th><th>why</th><th>variant</th><th>verdict</th>
-<th>changes</th></tr>
+<div class="scroll"><table class="verify"><tr><th>point</th><th>why</th><th>variant</th>
+<th>verdict</th><th>changes</th></tr>
 {% for r in c.verification.rows %}<tr><td>{{ r.point }}</td><td>{{ r.why }}</td>
 <td>{{ r.variant }}</td><td>{{ r.verdict }}</td><td>{{ r.changes }}</td></tr>
-{% endfor %}</table>
+{% endfor %}</table></div>
 {% if c.verification.transitions %}<table class="verify-transitions"><tr><th>transition</th>
 <th>variant</th><th>recomputed</th></tr>
 {% for r in c.verification.transitions %}<tr><td>{{ r.transition }}</td><td>{{ r.variant }}</td>

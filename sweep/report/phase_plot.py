@@ -5,10 +5,12 @@ its last snapshot (a small PNG, embedded as a data URI) and its sigma2_S(t) (dra
 cached, by :mod:`.run_views`), through a bokeh ``CustomJS`` callback that copies the point's
 columns into the run panel.
 
-1-D campaigns get a line over the axis; 2-D a scatter over the two axes; more dims the first
-two axes, faceted over the combinations of the others (at most :data:`MAX_FACETS`). An axis
-whose values are all positive and span a decade or more (:data:`LOG_AXIS_RATIO`: K, swept as
-a logspace) is logarithmic."""
+The x axis is the chain's axis (a ``chain:`` campaign), else the first sweep axis; the y axis
+the next (numeric) one; the other dims (a chain's branch among them) are facets, at most
+:data:`MAX_FACETS`, as many in a row as fit the page (they stretch to its width). With one
+axis besides the facets, the facets are lines in one plot (a chain's two branches: its loop).
+An axis whose values are all positive and span a decade or more (:data:`LOG_AXIS_RATIO`: K,
+swept as a logspace) is logarithmic. Axes and titles carry the symbols of sweep/names.py."""
 
 from __future__ import annotations
 
@@ -22,6 +24,8 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.phase import sweep_dims
+from ..campaign import BRANCH
+from ..names import label, symbol
 from .run_views import run_views
 
 log = logging.getLogger(__name__)
@@ -34,6 +38,10 @@ SHOWN = "sigma2_S"
 MAX_POINTS_WITH_RUNS = 200
 #: Facets of a campaign with more than two sweep dims.
 MAX_FACETS = 9
+#: Facets side by side at most (they stretch to share the page's width; 4 facets: 2 x 2).
+FACETS_PER_ROW = 3
+#: The colours of the lines of a plot over one axis, one per facet (a chain's branches).
+LINE_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
 #: A numeric axis is logarithmic when its values are positive and max / min is at least this.
 LOG_AXIS_RATIO = 10.0
 STATUS_OK, STATUS_FAILED = 1, 2
@@ -99,9 +107,24 @@ def _seed_text(values: np.ndarray, seeds: np.ndarray, status: np.ndarray) -> str
     return ", ".join(parts) or "-"
 
 
-def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[str, list[Any]]:
+def plot_dims(phase: xr.Dataset) -> tuple[str, str | None, list[str]]:
+    """The dims of the phase diagram: ``(x, y or None, facets)``. x: the chain's axis, else
+    the first sweep dim that is not a chain's branch; y: the next such dim; facets: the rest."""
+    dims = sweep_dims(phase)
+    chain = str(phase.attrs.get("chain_axis", ""))
+    axes = [d for d in dims if d != BRANCH]
+    x = chain if chain in dims else (axes[0] if axes else dims[0])
+    y = next((d for d in axes if d != x), None)
+    return x, y, [d for d in dims if d not in (x, y)]
+
+
+def point_columns(
+    phase: xr.Dataset, runs_dir: Path, dims: list[str], facets: list[str] | None = None
+) -> dict[str, list[Any]]:
     """The points' columns for bokeh: coordinates, hover texts, the seed mean shown, and one
-    run of each point (the first seed that succeeded, else the first with a run file)."""
+    run of each point (the first seed that succeeded, else the first with a run file).
+    ``facets``: the dims whose values name a point's facet (default: ``dims[2:]``)."""
+    facet_dims = dims[2:] if facets is None else facets
     shape = [phase.sizes[d] for d in dims]
     n_seeds = phase.sizes["seed"]
     seeds = phase["seed"].values
@@ -148,10 +171,12 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
         at = dict(zip(dims, index, strict=True))
         coords = {d: phase[d].values[i] for d, i in at.items()}
         coords.update({c: phase[c].values[at[d]] for c, d in extra.items()})
-        where = ", ".join(f"{k}={_label(v)}" for k, v in coords.items())
+        where = ", ".join(f"{symbol(str(k))} = {_label(v)}" for k, v in coords.items())
         for d in dims:
             cols[d].append(_label(phase[d].values[at[d]]))
-        cols["facet"].append(", ".join(f"{d}={_label(phase[d].values[at[d]])}" for d in dims[2:]))
+        cols["facet"].append(
+            ", ".join(f"{symbol(d)} = {_label(phase[d].values[at[d]])}" for d in facet_dims)
+        )
         cols["where"].append(where)
         grid = f" on {int(grids[flat])}^2" if grids is not None else ""  # resolution: auto
         cols["counts"].append(
@@ -188,7 +213,7 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
         cols["run_id"].append(str(run_ids[flat][k]))
         cols["run_seed"].append(int(seeds[k]))
         cols["run_title"].append(
-            f"sigma2_S(t): seed {int(seeds[k])} ({state})"
+            f"{symbol('sigma2_S')}(t): seed {int(seeds[k])} ({state})"
             if chosen is not None
             else "run not embedded"
         )
@@ -198,20 +223,21 @@ def point_columns(phase: xr.Dataset, runs_dir: Path, dims: list[str]) -> dict[st
     return cols
 
 
-def _figure(x: Axis, y: Axis | None, title: str, tools: str) -> Any:
+def _figure(x: Axis, y: Axis | None, title: str, tools: str, *, stretch: bool = False) -> Any:
     from bokeh.models import FixedTicker
     from bokeh.plotting import figure
 
     fig = figure(
         title=title,
         width=520 if y is None else 440,
-        height=380,
+        height=380 if y is None else 340,
         tools=tools,
         name="phase_diagram",
         x_axis_type="log" if x.log else "linear",
         y_axis_type="log" if y is None or y.log else "linear",
-        x_axis_label=x.name,
-        y_axis_label=f"{SHOWN} (seed mean)" if y is None else y.name,
+        x_axis_label=label(x.name),
+        y_axis_label=f"{label(SHOWN)} (seed mean)" if y is None else label(y.name),
+        sizing_mode="stretch_width" if stretch else "fixed",
     )
     for ax, axis in ((fig.xaxis, x), (fig.yaxis, y)):
         if axis is not None and axis.ticks:
@@ -242,11 +268,12 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
     from bokeh.models.widgets.markups import Div
     from bokeh.plotting import figure
 
-    dims = sweep_dims(phase)
-    notes: list[str] = []
-    if not dims:
+    if not sweep_dims(phase):
         return None, 0, ["no sweep axis: nothing to plot"]
-    cols = point_columns(phase, runs_dir, dims)
+    x_dim, y_dim, facet_dims = plot_dims(phase)
+    dims = [x_dim, *([y_dim] if y_dim else []), *facet_dims]
+    notes: list[str] = []
+    cols = point_columns(phase, runs_dir, dims, facet_dims)
     if not cols["where"]:
         return None, 0, ["no run has finished yet"]
     embedded = sum(1 for s, t in zip(cols["snapshot"], cols["series_t"], strict=True) if s or t)
@@ -256,55 +283,63 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
             f"(at most {MAX_POINTS_WITH_RUNS}; a run that failed at once may leave "
             "nothing to show)"
         )
-    x_axis = Axis.of(phase, dims[0])
-    y_axis = Axis.of(phase, dims[1]) if len(dims) > 1 else None
-    cols["x"] = _position(x_axis, cols[dims[0]], phase)
-    if y_axis is not None:
-        cols["y"] = _position(y_axis, cols[dims[1]], phase)
-    else:
-        cols["y"] = cols["shown"]
+    x_axis = Axis.of(phase, x_dim)
+    y_axis = Axis.of(phase, y_dim) if y_dim else None
+    cols["x"] = _position(x_axis, cols[x_dim], phase)
+    cols["y"] = _position(y_axis, cols[y_dim], phase) if y_axis and y_dim else cols["shown"]
     source = ColumnDataSource(cols, name="points")
-    tooltips = [(d, f"@{{{d}}}") for d in dims]
+    tooltips = [(symbol(d), f"@{{{d}}}") for d in dims]
     if len(cols["where"][0].split(", ")) > len(dims):
         tooltips = [("point", "@where")]
     tooltips.append(("runs", "@counts"))
-    tooltips += [(f"{m} by seed", f"@{{seeds_{m}}}") for m in MAIN if f"seeds_{m}" in cols]
+    tooltips += [(f"{symbol(m)} by seed", f"@{{seeds_{m}}}") for m in MAIN if f"seeds_{m}" in cols]
     tools = "pan,wheel_zoom,box_zoom,reset,save"
-    plots = []
-    if y_axis is None:
-        fig = _figure(x_axis, None, f"{SHOWN} at t_final over {dims[0]} (click a point)", tools)
-        order = np.argsort(cols["x"])
-        fig.line(
-            [cols["x"][i] for i in order],
-            [cols["y"][i] for i in order],
-            line_width=2,
-            color="#1f77b4",
+    facets = list(dict.fromkeys(cols["facet"]))
+    if len(facets) > MAX_FACETS:
+        notes.append(
+            f"{len(facets)} combinations of {', '.join(symbol(d) for d in facet_dims)}: the "
+            f"first {MAX_FACETS} are shown"
         )
-        renderers = [
-            fig.scatter("x", "y", source=source, size=11, color="#1f77b4", name="phase_points")
-        ]
+        facets = facets[:MAX_FACETS]
+    plots, renderers = [], []
+    if y_axis is None:  # one plot, a line per facet (a chain's branches)
+        fig = _figure(
+            x_axis, None, f"{symbol(SHOWN)} at t_final over {symbol(x_dim)}", tools, stretch=True
+        )
+        for k, facet in enumerate(facets):
+            colour = LINE_COLOURS[k % len(LINE_COLOURS)]
+            rows = [i for i, f in enumerate(cols["facet"]) if f == facet]
+            rows.sort(key=lambda i: cols["x"][i])
+            fig.line(
+                [cols["x"][i] for i in rows],
+                [cols["y"][i] for i in rows],
+                line_width=2,
+                color=colour,
+                **({"legend_label": facet} if facet else {}),
+            )
+            view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
+            renderers.append(
+                fig.scatter(
+                    "x", "y", source=source, view=view, size=11, color=colour, name="phase_points"
+                )
+            )
+        if facet_dims:
+            fig.legend.location = "top_left"
         plots.append(fig)
+        notes.append("Click a point for one of its runs.")
     else:
         finite = [v for v in cols["shown_log"] if math.isfinite(v)]
         low, high = (min(finite), max(finite)) if finite else (0.0, 1.0)
         mapper = LinearColorMapper(
             palette="Viridis256", low=low, high=high if high > low else low + 1, nan_color="#d62728"
         )
-        facets = list(dict.fromkeys(cols["facet"]))
-        if len(facets) > MAX_FACETS:
-            notes.append(
-                f"{len(facets)} combinations of {', '.join(dims[2:])}: the first "
-                f"{MAX_FACETS} are shown"
-            )
-            facets = facets[:MAX_FACETS]
-        renderers = []
+        notes.append(
+            f"Colour: log10 of the seed mean of {symbol(SHOWN)} at t_final; red: no "
+            "successful run. Click a point for one of its runs."
+        )
         for facet in facets:
-            title = (
-                f"log10 {SHOWN} (seed mean)"
-                + (f" at {facet}" if facet else "")
-                + "; red: no successful run"
-            )
-            fig = _figure(x_axis, y_axis, title, tools)
+            title = facet or f"log10 {symbol(SHOWN)} (seed mean)"
+            fig = _figure(x_axis, y_axis, title, tools, stretch=len(facets) > 1)
             view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
             renderers.append(
                 fig.scatter(
@@ -322,21 +357,20 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
             plots.append(fig)
     series = ColumnDataSource({"t": [], "y": []}, name="series")
     run_plot = figure(
-        title="sigma2_S(t) of the clicked point's run",
-        width=360,
+        title=f"{symbol('sigma2_S')}(t) of the clicked point's run",
+        width=420,
         height=260,
         y_axis_type="log",
-        x_axis_label="t / tau",
-        y_axis_label="sigma2_S",
+        x_axis_label=label("t"),
+        y_axis_label=symbol("sigma2_S"),
         tools="pan,wheel_zoom,reset,save",
         name="run_plot",
     )
     run_plot.line("t", "y", source=series, line_width=2, color="#d62728")
-    panel = Div(text=HINT, width=360, name="run_panel")
-    for fig, renderer in zip(plots, renderers, strict=True):
-        fig.add_tools(
-            HoverTool(renderers=[renderer], tooltips=tooltips), TapTool(renderers=[renderer])
-        )
+    panel = Div(text=HINT, width=420, name="run_panel")
+    for fig in plots:
+        mine = [r for r in renderers if r in fig.renderers]
+        fig.add_tools(HoverTool(renderers=mine, tooltips=tooltips), TapTool(renderers=mine))
     source.selected.js_on_change(
         "indices",
         CustomJS(
@@ -344,5 +378,13 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
             code=ON_TAP,
         ),
     )
-    diagram = plots[0] if len(plots) == 1 else gridplot(plots, ncols=3)
-    return row(diagram, column(panel, run_plot)), embedded, notes
+    if len(plots) == 1:
+        diagram = plots[0]
+    else:
+        diagram = gridplot(
+            plots,
+            ncols=min(FACETS_PER_ROW, math.ceil(math.sqrt(len(plots)))),
+            sizing_mode="stretch_width",
+            merge_tools=False,
+        )
+    return column(diagram, row(panel, run_plot), sizing_mode="stretch_width"), embedded, notes

@@ -109,6 +109,20 @@ def make_jobqueue(spec: ClusterSpec, options: dict[str, Any]) -> Any:
         raise ClusterError(f"cannot set up the {cls.__name__} of execution.cluster: {e}") from None
 
 
+def make_cluster(execution: ExecutionSpec, campaign_dir: Path | None = None) -> Any:
+    """The dask-jobqueue cluster of ``execution.cluster`` as ``nematic run`` makes it (TLS,
+    dashboard, job logs; not scaled: no job is submitted), e.g. to inspect ``job_script()``.
+    Without ``campaign_dir`` the TLS credential files go to a private folder of the
+    temporary directory."""
+    import tempfile
+
+    assert execution.cluster is not None
+    if campaign_dir is None:
+        campaign_dir = Path(tempfile.gettempdir()) / f"nematic-jobscript-{os.getuid()}"
+    options, _ = jobqueue_options(execution.cluster, execution, campaign_dir)
+    return make_jobqueue(execution.cluster, options)
+
+
 @contextlib.contextmanager
 def open_cluster(
     execution: ExecutionSpec,

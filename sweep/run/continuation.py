@@ -12,11 +12,13 @@ Files:
 - the group ``state`` of a finished run's file: its end state (``store.end_state``, on by
   default), without the snapshots (the file holds them).
 
-A checkpoint or end state that cannot be read, is corrupt (its checksum) or is another run's
-is never loaded: the run starts from the next option and its record says why
-(``start_warning``). A longer run continues a shorter one's end state only if that run file
-holds every snapshot field the new run keeps, at its precision (else the earlier snapshots
-could not be written as a straight run would write them).
+A checkpoint or end state of its own trajectory that cannot be read, is corrupt (its checksum) or
+is another run's is never loaded: the run starts from the next option and its record says why
+(``start_warning``). The state a run of ``initial.from`` or of a chain begins from is another
+matter: it is what the run's identity names (:func:`parent_fields`), so one that cannot be used
+fails the run (reason ``parent_state``). A longer run continues a shorter one's end state only
+if that run file holds every snapshot field the new run keeps, at its precision (else the
+earlier snapshots could not be written as a straight run would write them).
 """
 
 from __future__ import annotations
@@ -55,6 +57,8 @@ class Run(Protocol):
     def numerics(self) -> dict[str, Any]: ...
     @property
     def parent(self) -> str | None: ...
+    @property
+    def parent_path(self) -> str | None: ...
     @property
     def snapshot_fields(self) -> tuple[str, ...] | None: ...
     @property
@@ -116,7 +120,8 @@ def starting_state(task: Run, store: CampaignStore) -> Start:
             return Start(state, "checkpoint", "; ".join(warnings))
     if task.parent:
         try:
-            state = read_end_state(store.nc_path(task.parent), task)
+            parent_file = Path(task.parent_path) if task.parent_path else None
+            state = read_end_state(parent_file or store.nc_path(task.parent), task)
             why = state.problem(params, numerics, task.seed)
             if why is not None:
                 raise CheckpointError(f"it does not continue to this run: {why}")
@@ -129,6 +134,12 @@ def starting_state(task: Run, store: CampaignStore) -> Start:
     initial = None
     if task.initial_from:
         initial = parent_fields(task.initial_from)
+        if task.initial_from.get("state"):
+            warnings.append(
+                f"begins from the {task.initial_from['state']} of {initial.origin}, not its "
+                "exact end state (its campaign keeps none): another run id than a start from "
+                "the end state"
+            )
     return Start(None, "", "; ".join(warnings), initial)
 
 
@@ -138,11 +149,21 @@ class ParentFailed(Exception):
     campaign runs again)."""
 
 
+class ParentUnusable(Exception):
+    """The run a run begins from ended, but the state it should begin from cannot be used:
+    its end state fails its checksum or is not in the file, or its snapshot is not the one the
+    run's identity names. The run fails with the reason ``parent_state`` (never a silent
+    fallback to another state), and is redone when the campaign runs again."""
+
+
 def parent_fields(source: Mapping[str, str]) -> InitialState:
-    """The fields a run of ``initial.from`` begins with: the parent run's end state
-    (``time: end``: exact, from the run file's group ``state`` if it has one, else its last
-    snapshot) or its snapshot at the time, with the displacement of that snapshot;
-    :class:`CheckpointError` naming the file if it has neither."""
+    """The fields a run of ``initial.from`` (or of a chain) begins with: the parent run's
+    exact end state (``time: end``: the run file's group ``state``, fields and displacement bit
+    for bit) or its snapshot at the time, with the displacement of that snapshot. Where the
+    identity says the run begins from a snapshot (``source["state"]``: the parent keeps no end
+    state), its last snapshot. :class:`ParentFailed` if the parent is not done or did not end
+    well; :class:`ParentUnusable` naming the file if the state it names cannot be used (an end
+    state that fails its checksum or is missing: never a fallback to a snapshot)."""
     from nematic_solids.model.checkpoint import CheckpointError, InitialState, RunState, read_netcdf
 
     path = Path(source["runs_dir"]) / f"{source['run']}.nc"
@@ -153,6 +174,7 @@ def parent_fields(source: Mapping[str, str]) -> InitialState:
     snaps = file_snapshots(main)
     try:
         if source["time"] != "end":
+            _check_precision(main, source.get("state") or "float64")
             t = float(source["time"])
             snap = next((s for s in snaps if math.isclose(s[0], t)), None)
             if snap is None:
@@ -163,14 +185,43 @@ def parent_fields(source: Mapping[str, str]) -> InitialState:
                 f"the run it begins from, {origin}, did not end "
                 f"(status {main.attrs.get('status')}: {main.attrs.get('reason')})"
             )
-        try:
-            state = RunState.from_dataset(read_netcdf(path, STATE_GROUP))
-        except CheckpointError:  # no end state kept: the last snapshot
+        if source.get("state"):  # its identity: the last snapshot (no end state kept)
+            _check_precision(main, source["state"])
             return InitialState.of_snapshot(snaps[-1][1], origin)
-        state.snaps = snaps
-        return InitialState.at(state, origin=origin)
+        if not has_group(path, STATE_GROUP):
+            raise CheckpointError(
+                "it keeps no end state (its campaign's store had end_state: false when it "
+                "ran); run it again with end_state: true"
+            )
+        state = RunState.from_dataset(read_netcdf(path, STATE_GROUP))
+        return InitialState.exact(state, origin=origin)
     except CheckpointError as e:
-        raise CheckpointError(f"the parent run's file {path}: {e}") from e
+        raise ParentUnusable(f"the parent run's file {path}: {e}") from e
+
+
+def _check_precision(main: Any, state: str) -> None:
+    """The parent's snapshots are kept at the precision the run's identity names (its campaign's
+    store may have changed since the parent ran)."""
+    from nematic_solids.model.checkpoint import CheckpointError
+
+    want = "float32" if "float32" in state else "float64"
+    have = str(main["q1"].dtype) if "q1" in main.data_vars else want
+    if have != want:
+        raise CheckpointError(
+            f"it keeps its snapshots as {have}, the run's identity names {want} (its campaign's "
+            "store changed since it ran)"
+        )
+
+
+def has_group(path: Path, group: str) -> bool:
+    """Whether the netCDF file ``path`` has the group ``group`` (False if it cannot be read)."""
+    import netCDF4
+
+    try:
+        with netCDF4.Dataset(path) as ds:
+            return group in ds.groups
+    except OSError:
+        return False
 
 
 def file_snapshots(main: Any) -> list[tuple[float, Any]]:

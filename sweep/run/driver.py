@@ -18,10 +18,10 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import os
+import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,15 +29,14 @@ from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from ..campaign import ExecutionSpec
 from ..campaign_copy import save_campaign_copy
+from ..catalogue.recorder import Recorder
 from ..chains import in_chain_order
 from ..errors import ClusterError
 from ..expand import Expansion, RunSpec
-from ..store import (
-    CampaignStore,
-    Record,
-)
+from ..store import CampaignStore, Record
 from .batch import BatchTask, execute_batch, group_runs
-from .clusters import WORKER_LOSSES, jobqueue_options, make_jobqueue, open_cluster
+from .clusters import WORKER_LOSSES, open_cluster
+from .clusters import make_cluster as make_cluster  # where it was first
 from .failures import FailureLimit
 from .task import UNSAVED, RunTask, check_device, execute_run, failure_record, warm_workers
 from .todo import Plan, parents_not_done, plan_runs
@@ -71,20 +70,6 @@ def dask_client(
         execution, timeout=timeout, dashboard=dashboard, campaign_dir=campaign_dir
     ) as link:
         yield link.client
-
-
-def make_cluster(execution: ExecutionSpec, campaign_dir: Path | None = None) -> Any:
-    """The dask-jobqueue cluster of ``execution.cluster`` as ``nematic run`` makes it (TLS,
-    dashboard, job logs; not scaled: no job is submitted), e.g. to inspect ``job_script()``.
-    Without ``campaign_dir`` the TLS credential files go to a private folder of the
-    temporary directory."""
-    import tempfile
-
-    assert execution.cluster is not None
-    if campaign_dir is None:
-        campaign_dir = Path(tempfile.gettempdir()) / f"nematic-jobscript-{os.getuid()}"
-    options, _ = jobqueue_options(execution.cluster, execution, campaign_dir)
-    return make_jobqueue(execution.cluster, options)
 
 
 # --------------------------------------------------------------------------- the driver
@@ -178,18 +163,42 @@ def run_campaign(
     *,
     clock: Callable[[], float] = time.monotonic,
     limit: FailureLimit | None = None,
+    stop: threading.Event | None = None,
+    record: bool = True,
 ) -> RunSummary:
     """Run ``plan.todo`` on the cluster; return when all are done or on Ctrl-C
     (``KeyboardInterrupt`` is caught: pending runs are cancelled and ``interrupted`` set).
     A run redone after a failure gets its earlier failures (``plan.history``) in its record.
     With ``limit``, once more runs failed than it allows the runs in flight are cancelled
     (they stay pending: a record is written whole or not at all) and ``stopped`` says why.
+    ``stop`` set (from another thread: the service cancelling the campaign, or stopping)
+    stops the campaign as Ctrl-C does.
 
     Waits (bounded) for the first worker, checks every worker that joins and sizes the
     submission window from the accepted workers
     (:class:`~nematic_solids.sweep.run.workers.Supervisor`). Raises :class:`ClusterError` when the
     workers cannot run the model or none is left for ``execution.give_up_after`` seconds (the runs
-    in flight stay pending)."""
+    in flight stay pending). With ``record``, each record goes into the root's catalogue
+    (:class:`~nematic_solids.sweep.catalogue.recorder.Recorder`; never fails a run)."""
+    recorder = Recorder(store) if record else None
+    try:
+        return _run_campaign(expansion, store, client, plan, events, clock, limit, recorder, stop)
+    finally:
+        if recorder is not None:
+            recorder.close()
+
+
+def _run_campaign(
+    expansion: Expansion,
+    store: CampaignStore,
+    client: Client | ClusterLink,
+    plan: Plan,
+    events: RunEvents | None,
+    clock: Callable[[], float],
+    limit: FailureLimit | None,
+    recorder: Recorder | None,
+    stop: threading.Event | None = None,
+) -> RunSummary:
     from distributed import as_completed
 
     campaign = expansion.campaign
@@ -198,7 +207,7 @@ def run_campaign(
     t0 = clock()
     summary = RunSummary(
         total=len(expansion),
-        skipped=len(plan.done) + len(plan.failed),
+        skipped=plan.skipped,
         failed_before=len(plan.failed),
     )
     watch = Supervisor(link, campaign.execution, clock=clock)
@@ -263,6 +272,7 @@ def run_campaign(
                     campaign.store,
                     plan.history.get(i),
                     plan.parents.get(i),
+                    plan.parent_paths.get(i),
                 )
                 held.append((run, task, i))
             # a run that goes again (its result was lost) gets a new key: the old one may
@@ -367,6 +377,8 @@ def run_campaign(
             with contextlib.suppress(Exception):
                 client.cancel(list(ac.futures))
             return False
+        if recorder is not None:
+            recorder.add(record)
         if record.get("status") == "ok":
             summary.ok += 1
         else:
@@ -388,6 +400,8 @@ def run_campaign(
         submit_more()
         going = True
         while going and (tasks or queue):
+            if stop is not None and stop.is_set():
+                raise KeyboardInterrupt
             if ac.has_ready():
                 for fut in ac.next_batch(block=False):
                     if not handle(fut):
@@ -434,12 +448,15 @@ def drive(
     events: DriveEvents | None = None,
     dashboard: bool = False,
     limit: FailureLimit | None = None,
+    link: ClusterLink | None = None,
+    stop: threading.Event | None = None,
 ) -> tuple[Plan, RunSummary | None]:
     """What ``nematic run`` does while holding the campaign's lock: clean up, record the
     campaign text, plan from disk, run what remains on the campaign's dask cluster and
     refresh the manifest. Returns the plan and the summary (``None`` if nothing was to do;
-    ``interrupted`` set on Ctrl-C). Raises :class:`~nematic_solids.sweep.errors.ClusterError` if the
-    cluster cannot be used."""
+    ``interrupted`` set on Ctrl-C, or once ``stop`` is set). With ``link`` the runs go to
+    that cluster, which stays open (the service's warm workers), else to the campaign's own.
+    Raises :class:`~nematic_solids.sweep.errors.ClusterError` if the cluster cannot be used."""
     campaign = expansion.campaign
     local = campaign.execution.mode == "local"
     store.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
@@ -453,18 +470,20 @@ def drive(
     summary = None
     if plan.todo and local and campaign.execution.backend == "accelerated":
         check_device(campaign.execution.device)  # one message before any worker starts
-    if plan.todo:
+    if plan.todo and link is not None:
+        summary = run_campaign(expansion, store, link, plan, events, limit=limit, stop=stop)
+    elif plan.todo:
         try:
             with open_cluster(
                 campaign.execution, dashboard=dashboard, campaign_dir=store.root
-            ) as link:
+            ) as own:
                 if dashboard and events:
-                    events.dashboard(dashboard_link(link.client))
-                summary = run_campaign(expansion, store, link, plan, events, limit=limit)
+                    events.dashboard(dashboard_link(own.client))
+                summary = run_campaign(expansion, store, own, plan, events, limit=limit, stop=stop)
         except KeyboardInterrupt:  # while the cluster was starting or closing
             summary = RunSummary(
                 total=len(expansion),
-                skipped=len(plan.done) + len(plan.failed),
+                skipped=plan.skipped,
                 failed_before=len(plan.failed),
                 interrupted=True,
             )
@@ -473,16 +492,3 @@ def drive(
                 store.clean_temporaries()
     store.scan()
     return plan, summary
-
-
-def describe_failure(run: RunSpec, record: Mapping[str, Any]) -> str:
-    """One line: the run, its swept values and seed, why and when it failed."""
-    coords = ", ".join(
-        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in run.coords.items()
-    )
-    when = record.get("t_failed")
-    at = f" at t = {when:.4g}" if isinstance(when, (int, float)) and math.isfinite(when) else ""
-    detail = str(record.get("detail") or "").strip().splitlines()
-    return f"run {run.run_id} ({coords}) failed: {record.get('reason') or 'unknown'}{at}" + (
-        f": {detail[-1]}" if detail else ""
-    )

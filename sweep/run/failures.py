@@ -8,7 +8,10 @@ import math
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ..expand import RunSpec
 
 #: What a record's ``previous_failures`` entry keeps of the failure it replaces.
 PREVIOUS_FAILURE_KEYS = (
@@ -97,3 +100,16 @@ class FailureLimit:
             f"too many runs failed: {self.failed} failed this session, more than "
             f"{self.describe()} allows ({reasons})"
         )
+
+
+def describe_failure(run: RunSpec, record: Mapping[str, Any]) -> str:
+    """One line: the run, its swept values and seed, why and when it failed."""
+    coords = ", ".join(
+        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in run.coords.items()
+    )
+    when = record.get("t_failed")
+    at = f" at t = {when:.4g}" if isinstance(when, (int, float)) and math.isfinite(when) else ""
+    detail = str(record.get("detail") or "").strip().splitlines()
+    return f"run {run.run_id} ({coords}) failed: {record.get('reason') or 'unknown'}{at}" + (
+        f": {detail[-1]}" if detail else ""
+    )

@@ -30,7 +30,7 @@ from ..campaign import StoreSpec
 from ..errors import StorageError, StoreError
 from ..expand import Expansion, RunSpec
 from ..files import atomic_to_netcdf, file_stamp
-from ..identity import SCHEMA_VERSION, trajectory_id
+from ..identity import SCHEMA_VERSION, identity_start, trajectory_id
 from ..store import CampaignStore, Record, now_iso, record_from_dataset
 from . import continuation
 
@@ -64,8 +64,10 @@ class RunTask:
     previous_failures: tuple[dict[str, Any], ...] = ()
     #: the run's trajectory id (:func:`nematic_solids.sweep.identity.trajectory_id`)
     trajectory: str = ""
-    #: the finished shorter run of its trajectory whose end state it continues (or None)
+    #: the finished shorter run of its trajectory whose end state it continues (or None),
+    #: and its file when another campaign made it (None: this campaign's runs folder)
     parent: str | None = None
+    parent_path: str | None = None
     #: the rolling checkpoint's interval: simulated time, wall seconds (store.checkpoint_every)
     checkpoint_tau: float = math.inf
     checkpoint_wall: float = math.inf
@@ -84,11 +86,12 @@ class RunTask:
         store_spec: StoreSpec,
         previous_failures: list[dict[str, Any]] | None = None,
         parent: str | None = None,
+        parent_path: str | None = None,
     ) -> RunTask:
         parameters, numerics = run.point.parameters.to_dict(), run.point.numerics.to_dict()
         initial_from, start = None, None
         if run.start is not None:
-            start = {"run": run.start["run"], "time": run.start["time"]}
+            start = identity_start(run.start)
             runs = CampaignStore(store.results_root, run.start["campaign"]).runs_dir
             initial_from = {**run.start, "runs_dir": str(runs.resolve())}
         return cls(
@@ -104,6 +107,7 @@ class RunTask:
             previous_failures=tuple(previous_failures or ()),
             trajectory=trajectory_id(parameters, numerics, run.seed, start),
             parent=parent,
+            parent_path=parent_path,
             checkpoint_tau=store_spec.checkpoint_tau,
             checkpoint_wall=store_spec.checkpoint_wall,
             end_state=store_spec.end_state,
@@ -290,6 +294,8 @@ def execute_run(task: RunTask) -> Record:
         )
     except continuation.ParentFailed as e:  # redone with its parent (RETRYABLE_REASONS)
         record = failure_record(task, "parent_failed", str(e), "", time.perf_counter() - t0)
+    except continuation.ParentUnusable as e:  # its state is corrupt or not the one named
+        record = failure_record(task, "parent_state", str(e), "", time.perf_counter() - t0)
     except Exception as e:  # noqa: BLE001 - any crash is recorded, the campaign goes on
         record = crash_record(task, "exception", e, t0)
     else:

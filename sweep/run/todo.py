@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..catalogue import reuse as across
 from ..errors import CampaignError, Problem
 from ..expand import Expansion, continued_runs
 from ..files import atomic_path
@@ -40,6 +41,20 @@ class Plan:
     #: runs to do that continue the end state of a shorter finished run of their
     #: trajectory (a campaign whose t_final grew): position -> that run's id
     parents: dict[int, str] = field(default_factory=dict)
+    #: positions whose run id an earlier position has (a chain's ``up: fresh`` top run is the
+    #: down branch's first run too): the run is done once, at that earlier position
+    twins: list[int] = field(default_factory=list)
+
+    @property
+    def skipped(self) -> int:
+        """Positions not to run this time: done, failed (kept) or another position's twin."""
+        return len(self.done) + len(self.failed) + len(self.twins)
+
+    #: the file of such a parent when another campaign made it: position -> its path
+    parent_paths: dict[int, str] = field(default_factory=dict)
+    #: runs another campaign of the root had finished, taken in place: campaign -> how many
+    #: (this plan's); they count as done
+    reused: dict[str, int] = field(default_factory=dict)
 
     @property
     def discarded(self) -> int:
@@ -52,6 +67,7 @@ def plan_runs(
     *,
     retry_failed: bool = False,
     check_files: bool = False,
+    reuse: bool = True,
 ) -> Plan:
     """Classify every run: done (skipped), failed (skipped unless ``retry_failed``: then
     its failure goes into :attr:`Plan.history`, kept by its next record), to do.
@@ -59,12 +75,18 @@ def plan_runs(
     A record whose file is missing, truncated or corrupt (:meth:`CampaignStore.check_run_file`;
     ``check_files`` checksums every file) is discarded and its run redone; a ``.nc`` without a
     record is adopted if it opens, else deleted; a record of a result that could not be
-    written (reason ``write_error``) is redone.
+    written (reason ``write_error``) is redone. With ``reuse``, runs another campaign of the
+    results root finished are taken in place, and longer runs continue the longest finished
+    run of their trajectory in any campaign (:func:`reuse_across`).
     """
     unspooled = import_spool(store)
     records = store.scan()
     plan = Plan(todo=[], done=[], failed=[], records=records, unspooled=unspooled)
+    first: dict[str, int] = {}
     for i, rid in enumerate(expansion.run_ids):
+        if first.setdefault(rid, i) != i:
+            plan.twins.append(i)
+            continue
         rec = records.get(rid)
         if rec is None and rid in store.nc_present:
             rec = store.adopt(rid)
@@ -95,8 +117,36 @@ def plan_runs(
             plan.failed.append(i)
     for i in (*plan.done, *plan.failed):  # killed between its record and the cleanup
         continuation.remove_checkpoint(store, expansion.run_ids[i])
-    plan.parents = {i: rid for i, (rid, _) in continued_runs(expansion, plan.todo, records).items()}
+    here = continued_runs(expansion, plan.todo, records)
+    plan.parents = {i: rid for i, (rid, _) in here.items()}
+    if reuse and plan.todo:
+        reuse_across(expansion, store, plan, here)
     return plan
+
+
+def reuse_across(
+    expansion: Expansion, store: CampaignStore, plan: Plan, here: dict[int, tuple[str, float]]
+) -> None:
+    """Take the runs to do that another campaign of the root finished, in place (they move
+    to ``done``), and continue the others from the longest finished run of their trajectory
+    in any campaign (:mod:`nematic_solids.sweep.catalogue.reuse`); nothing without a
+    catalogue."""
+    catalogue = across.open_for_reuse(store.results_root)
+    if catalogue is None:
+        return
+    with catalogue:
+        ids = {expansion.run_ids[i]: i for i in plan.todo}
+        taken = across.adopt(store, across.reusable(catalogue, store, ids), catalogue)
+        if taken:
+            plan.records.update(taken)
+            plan.done.extend(ids[rid] for rid in taken)
+            plan.todo = [i for i in plan.todo if expansion.run_ids[i] not in taken]
+            plan.reused = dict(across.reuse_counts(taken))
+            for i in (ids[rid] for rid in taken):
+                plan.history.pop(i, None)
+        far = across.continued_elsewhere(catalogue, expansion, plan.todo, here, store.results_root)
+        for i, (rid, _, path) in far.items():
+            plan.parents[i], plan.parent_paths[i] = rid, str(path)
 
 
 def import_spool(store: CampaignStore) -> int:

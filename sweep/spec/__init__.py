@@ -72,8 +72,8 @@ from .sections import (
     read_seeds,
     read_store,
 )
-from .verify import read_verify
-from .yaml_input import read_document
+from .verify import read_verify, variant_grid
+from .yaml_input import read_document, read_text
 
 #: The top-level keys, in the order error messages list them.
 TOP_KEYS = (
@@ -209,10 +209,13 @@ def parse_campaign(
     overrides: Overrides | None = None,
     default_name: str | None = None,
 ) -> Campaign:
-    """Validate campaign YAML ``text``; raise :class:`CampaignError` listing every problem.
+    """Validate campaign YAML ``text``; raise
+    :class:`~nematic_solids.sweep.errors.CampaignError` listing every problem.
 
-    Every grid point is then checked by the model's own :class:`Parameters` and
-    :class:`Numerics` (see :func:`nematic_solids.sweep.expand.check_points`), so impossible values
+    Every grid point is then checked by the model's own
+    :class:`~nematic_solids.model.parameters.Parameters` and
+    :class:`~nematic_solids.model.parameters.Numerics` (see ``sweep.spec.points.check_points``), so
+    impossible values
     anywhere in the sweep are rejected here too.
     """
     overrides = overrides or Overrides()
@@ -291,7 +294,7 @@ def _initial(c: Checker, request: InitialRequest, read: Mapping[str, Any]) -> In
     try:
         parent = load_campaign(request.file)
     except CampaignError as e:
-        parent_error(c, request, e)
+        parent_error(c, request, e, TOP_KEYS)
         return None
     finally:
         READING.reset(token)
@@ -338,23 +341,35 @@ def _check_memory(c: Checker, campaign: Campaign) -> None:
     if is_rule(resolutions[0]):
         resolutions = tuple(_rule_grids(campaign, axes))
     mechanics = axes.get("mechanics", (campaign.numerics.get("mechanics", Numerics.mechanics),))
-    for n in resolutions:
-        for mech in mechanics:
-            if not is_int(n) or n < 1:
-                continue  # the model's own check reports it
-            need = run_memory_bytes(int(n), str(mech))
+    more = (
+        "allowed: a lower resolution, or more memory per run (limits.run_memory, "
+        "execution.memory_limit, fewer workers)"
+    )
+    grid = [(n, str(m)) for n in resolutions for m in mechanics if is_int(n) and n >= 1]
+    for n, mech in grid:  # (other values: the model's own check reports them)
+        need = run_memory_bytes(int(n), mech)
+        if need > limit:
+            path: KeyPath = (
+                ("sweep", "axes", "resolution")
+                if "resolution" in axes
+                else ("numerics", "resolution")
+            )
+            c.add(
+                path,
+                f"got {n}: one run ({mech} mechanics) needs about {fmt_bytes(need)}, more "
+                f"than {what} allows ({fmt_bytes(limit)}); {more}",
+            )
+            return
+    for i, variant in enumerate(campaign.verify.variants if campaign.verify else ()):
+        for n, mech in grid:  # a verify variant's runs are bounded as the grid's are
+            vn, vmech = variant_grid(variant, int(n), mech)
+            need = run_memory_bytes(vn, vmech)
             if need > limit:
-                path: KeyPath = (
-                    ("sweep", "axes", "resolution")
-                    if "resolution" in axes
-                    else ("numerics", "resolution")
-                )
                 c.add(
-                    path,
-                    f"got {n}: one run ({mech} mechanics) needs about "
-                    f"{fmt_bytes(need)}, more than {what} allows ({fmt_bytes(limit)}); "
-                    "allowed: a lower resolution, or more memory per run (limits.run_memory,"
-                    " execution.memory_limit, fewer workers)",
+                    ("verify", "variants", i),
+                    f"the variant {variant.name} runs at resolution {vn} where the grid has "
+                    f"{n}: one run ({vmech} mechanics) needs about {fmt_bytes(need)}, more "
+                    f"than {what} allows ({fmt_bytes(limit)}); {more}",
                 )
                 return
 
@@ -373,14 +388,21 @@ def _rule_grids(campaign: Campaign, axes: dict[str, Any]) -> list[Any]:
 
 
 def load_campaign(path: str | Path, overrides: Overrides | None = None) -> Campaign:
-    """Read and validate a campaign file (see :func:`parse_campaign`)."""
+    """Read and validate a campaign file (see :func:`parse_campaign`): its size is checked
+    before it is read (:func:`~nematic_solids.sweep.spec.yaml_input.read_text`)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
+        text = read_text(p)
+        return parse_campaign(text, str(p), overrides, default_name=p.stem)
+    except MemoryError:
         raise CampaignError(
-            str(p), [Problem("", f"cannot read the file: {e.strerror}", str(p))]
+            str(p),
+            [
+                Problem(
+                    "",
+                    "not enough memory to read and check this campaign file (give the "
+                    "process more memory, or make the campaign smaller)",
+                    str(p),
+                )
+            ],
         ) from None
-    except UnicodeDecodeError:
-        raise CampaignError(str(p), [Problem("", "not a UTF-8 text file", str(p))]) from None
-    return parse_campaign(text, str(p), overrides, default_name=p.stem)

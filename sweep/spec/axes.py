@@ -52,6 +52,12 @@ def _range_values(c: Checker, kind: str, spec: Any, path: KeyPath) -> list[Any] 
     elif num > c.max_runs:
         c.bad((*path, "num"), num, f"at most {c.max_runs} values (limits.max_runs)")
         ok = False
+    if ok and kind == "logspace" and max(abs(float(start)), abs(float(stop))) > 300:
+        c.bad(path, [start, stop], "exponents from -300 to 300 (the values are 10**start ...)")
+        ok = False
+    if ok and kind == "linspace" and not math.isfinite(float(stop) - float(start)):
+        c.bad(path, [start, stop], "end points whose difference is a finite number")
+        ok = False
     if not ok:
         return None
     if kind == "linspace":

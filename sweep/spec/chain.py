@@ -8,17 +8,22 @@ from typing import Any
 
 from nematic_solids.model.resolution import is_rule
 
-from ..campaign import BRANCH, BRANCHES, ChainSpec
+from ..campaign import BRANCH, BRANCHES, CHAIN_STARTS, ChainSpec
 from .checker import Checker, is_number, suggest
 
-CHAIN_KEYS = ("axis", "branches")
+CHAIN_KEYS = ("axis", "branches", "up")
+#: the axes that set the grid of the fields: a run could not begin from its predecessor's
+GRID_AXES = ("resolution",)
 
 
 def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | None:
-    """``chain: {axis, branches}`` (branches: ``up``, ``down`` or both; default both). The
+    """``chain: {axis, branches, up}`` (branches: ``up``, ``down`` or both; default both; up:
+    ``predecessor``, default, or ``fresh``: each run of the up branch from the seeded texture). The
     axis is a swept dimension of its own (not zipped) with two or more numbers; a chain
     begins from the seeded texture, so it has no ``initial``, ``refine``, ``precision`` or
-    ``verify`` section. None without it."""
+    ``verify`` section. A run begins from its predecessor's fields on the same grid and from its
+    exact end state: the axis is not one that sets the grid (:data:`GRID_AXES`), and the store
+    keeps end states (``store.end_state``). None without it."""
     if raw is None:
         return None
     spec = c.mapping(("chain",), raw, CHAIN_KEYS)
@@ -27,7 +32,17 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
     dims = {d.name: d for d in read.get("sweep") or ()}
     axis = spec.get("axis")
     ok = True
-    if axis not in dims:
+    if not isinstance(axis, str):
+        c.bad(("chain", "axis"), axis, "the name of one swept axis")
+        ok = False
+    elif axis in GRID_AXES:
+        c.add(
+            ("chain", "axis"),
+            f"a chain along {axis} would change the grid between a run and the next, which "
+            "starts from its fields; sweep it as a plain axis (each chain keeps its grid)",
+        )
+        ok = False
+    elif axis not in dims:
         names = [a.name for d in dims.values() for a in d.axes]
         hint = f"; the swept axes: {', '.join(names)}" if names else " (nothing is swept)"
         c.bad(("chain", "axis"), axis, f"a swept axis{suggest(str(axis), names)}{hint}")
@@ -45,6 +60,15 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
             "and the next, which starts from its fields; set a resolution (a number)",
         )
         ok = False
+    store = read.get("store")
+    if store is not None and not store.end_state:
+        c.add(
+            ("store", "end_state"),
+            "a chain's runs begin from their predecessor's exact end state, which only a store "
+            "with end_state: true keeps (a snapshot is not it: another precision, fields left "
+            "out); keep end_state: true",
+        )
+        ok = False
     if BRANCH in dims:
         c.add(("sweep", "axes", BRANCH), f"'{BRANCH}' names the chain's branches; rename it")
         ok = False
@@ -59,8 +83,12 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
     ):
         c.bad(("chain", "branches"), spec.get("branches"), "up, down or [up, down]")
         ok = False
+    up = spec.get("up", CHAIN_STARTS[0])
+    if up not in CHAIN_STARTS:
+        c.bad(("chain", "up"), up, " or ".join(CHAIN_STARTS))
+        ok = False
     others = [k for k in ("initial", "refine", "precision", "verify") if read.get(k) is not None]
     if others:
         c.add(("chain",), f"a chain has no {' or '.join(others)} section (it starts from t = 0)")
         ok = False
-    return ChainSpec(str(axis), tuple(branches)) if ok else None
+    return ChainSpec(str(axis), tuple(branches), str(up)) if ok else None

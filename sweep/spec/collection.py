@@ -24,7 +24,7 @@ from pathlib import Path
 
 from ..errors import CampaignError, Problem
 from .checker import Checker
-from .yaml_input import read_document
+from .yaml_input import read_document, read_text
 
 KEYS = ("name", "description", "campaigns")
 #: The key that makes a YAML file a collection.
@@ -48,8 +48,8 @@ def read_collection(path: str | Path) -> Collection | None:
     :class:`CampaignError` listing every problem of a collection file."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError):
+        text = read_text(p)
+    except CampaignError:
         return None
     try:
         _, doc, lines, dups = read_document(text, str(p))

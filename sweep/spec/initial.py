@@ -2,10 +2,16 @@
 one's begin from, checked against it here (its file, the point, the seeds, the time, the
 resolution), so that a missing parent is an error of this file with its line.
 
+The parent is a campaign file (``.yaml`` or ``.yml``) in this campaign's folder or below it;
+one elsewhere (``../``, an absolute path, a link that leads out) is read only with
+``outside: true``. A file that is not a campaign (not YAML, or a mapping with other keys than a
+campaign's sections) is refused without showing any of its content.
+
 ```yaml
 initial:
   from:
     campaign: fig2.yaml        # the parent campaign's file, relative to this one
+    outside: false             # true: the file may lie outside this campaign's folder
     point: {alpha_minus_B: 1.0}  # the parent's swept values this pins (the rest: same names here)
     seed: same                 # or one seed of the parent's
     time: end                  # or one of the parent's snapshot times
@@ -15,7 +21,7 @@ initial:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,8 +33,11 @@ from nematic_solids.model.resolution import is_rule
 from ..campaign import InitialSpec, same_value
 from ..errors import CampaignError
 from .checker import Checker, KeyPath, is_int, is_number, suggest
+from .yaml_input import read_document, read_text
 
-FROM_KEYS = ("campaign", "point", "seed", "time")
+FROM_KEYS = ("campaign", "point", "seed", "time", "outside")
+#: what a campaign file is named
+SUFFIXES = (".yaml", ".yml")
 #: the model's numerics defaults (a parent or child that leaves them out)
 DEFAULTS = Numerics()
 #: the parent files being read (a chain of parents that comes back to itself is an error)
@@ -66,10 +75,28 @@ def read_initial(c: Checker, raw: Any, read: Mapping[str, Any]) -> InitialReques
     if not isinstance(name, str) or not name.strip():
         c.bad(where, name, "the parent campaign's file (a path, relative to this file)")
         return None
+    outside = f.get("outside", False)
+    if not isinstance(outside, bool):
+        c.bad(
+            (*path, "outside"),
+            outside,
+            "true (the parent's file may lie outside this campaign's folder) or false",
+        )
+        return None
     here = Path(c.source).parent if c.source and not c.source.startswith("<") else Path.cwd()
     file = here / name
     if not file.exists() and file.with_suffix(".yaml").exists():
         file = file.with_suffix(".yaml")
+    if file.suffix.lower() not in SUFFIXES:
+        c.add(where, f"{name} is not a campaign file (a {' or '.join(SUFFIXES)} file)")
+        return None
+    if not outside and not file.resolve().is_relative_to(here.resolve()):
+        c.add(
+            where,
+            f"{name} lies outside this campaign's folder ({here.resolve()}); a parent "
+            "elsewhere is read only when stated: initial.from.outside: true",
+        )
+        return None
     if not file.is_file():
         c.add(where, f"there is no campaign file {file}")
         return None
@@ -96,14 +123,34 @@ def resolve_initial(
     return InitialSpec(parent, str(request.file), point, seed, time, request.location)
 
 
-def parent_error(c: Checker, request: InitialRequest, error: CampaignError) -> None:
-    """The parent campaign could not be read: one problem of this file, at its line."""
+def parent_error(
+    c: Checker, request: InitialRequest, error: CampaignError, keys: Sequence[str]
+) -> None:
+    """The parent campaign could not be read: one problem of this file, at its line. Its
+    first problem is shown only when the file is a campaign file (a YAML mapping whose keys
+    are among ``keys``, the campaign's sections): nothing of another file is echoed."""
+    where: KeyPath = ("initial", "from", "campaign")
+    if not _is_campaign_file(request.file, keys):
+        c.add(
+            where,
+            f"{request.file} is not a campaign file (a YAML mapping of a campaign's sections: "
+            f"{', '.join(keys[:6])}, ...); its content is not shown",
+        )
+        return
     first = error.problems[0] if error.problems else error
     c.add(
-        ("initial", "from", "campaign"),
+        where,
         f"the parent campaign {request.file} is invalid ({len(error.problems)} problem(s)): "
         f"{first}",
     )
+
+
+def _is_campaign_file(file: Path, keys: Sequence[str]) -> bool:
+    try:
+        _, doc, _, _ = read_document(read_text(file), str(file))
+    except CampaignError:
+        return False
+    return isinstance(doc, Mapping) and all(isinstance(k, str) and k in keys for k in doc)
 
 
 def _point(c: Checker, parent: Any, raw: Any, dims: Any, path: KeyPath) -> dict[str, Any]:
@@ -211,6 +258,8 @@ def _resolution(c: Checker, parent: Any, read: Mapping[str, Any], path: KeyPath)
             "starts from the parent's fields on the parent's grid",
         )
         return
+    if not (is_int(mine_set) and is_int(theirs_set)):
+        return  # not a grid size: the model's check of the numerics reports it
     mine, theirs = int(mine_set), int(theirs_set)
     if mine != theirs:
         c.add(

@@ -4,7 +4,7 @@ built as :func:`nematic_solids.sweep.expand.make_point` builds them, each distin
 
 from __future__ import annotations
 
-from nematic_solids.model.accelerated_support import check_supported
+from nematic_solids.model.accelerated_support import check_precision, check_supported
 from nematic_solids.model.errors import ParameterError
 
 from ..campaign import AMB, Campaign
@@ -34,6 +34,14 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
             continue
         if point.numerics.precision != "float64":
             _check_float32(checker, campaign, axis_names, seen)
+            try:
+                check_precision(point.numerics)
+            except ParameterError as e:
+                if _report(checker, campaign, e, coords, axis_names, swept, seen):
+                    return
+                continue
+        if _needs_samples(checker, campaign, point, coords, seen, axis_names):
+            return
         if campaign.execution.backend == "accelerated":
             try:
                 check_supported(point.parameters, point.numerics)
@@ -132,6 +140,44 @@ def _report(
         checker.add((), "further grid problems not shown")
         return True
     return False
+
+
+#: samples per period of the eps sine that the ``moduli`` fit needs (its docs: save_every <= T/8)
+MODULI_SAMPLES = 8
+
+
+def _needs_samples(
+    checker: Checker, campaign: Campaign, point, coords: dict, seen: set, axis_names: set[str]
+) -> bool:
+    """The ``moduli`` fit reads the stress series at the save times: ``save_every`` at most
+    1/:data:`MODULI_SAMPLES` of the eps sine's period, reported at save_every (or its axis)
+    once; ``True`` when enough problems are reported."""
+    if not any(f.name == "moduli" for f in campaign.fits):
+        return False
+    sine = dict(point.parameters.protocol.profiles).get("eps")
+    period = getattr(sine, "period", None)
+    save_every = point.numerics.save_every
+    if period is None or save_every <= period / MODULI_SAMPLES * (1 + 1e-9):
+        return False
+    if "save_every" in axis_names:
+        path: tuple[str | int, ...] = ("sweep", "axes", "save_every")
+    elif "eps_period" in axis_names:
+        path = ("sweep", "axes", "eps_period")
+    elif "save_every" in campaign.numerics:
+        path = ("numerics", "save_every")
+    else:
+        path = ("fits",)
+    key = (repr(path), "moduli samples")
+    if key in seen:
+        return False
+    seen.add(key)
+    at = ", ".join(f"{k}={v!r}" for k, v in coords.items())
+    checker.add(
+        path,
+        f"the moduli fit needs save_every <= T/{MODULI_SAMPLES} of the eps sine; got save_every = "
+        f"{save_every:g} with T = {period:g}{f' (at the grid point {at})' if at else ''}",
+    )
+    return len(seen) >= MAX_POINT_PROBLEMS
 
 
 def _same_run(checker: Checker, point, coords: dict, runs: dict[str, dict]) -> bool:

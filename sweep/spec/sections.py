@@ -297,10 +297,15 @@ def check_product_options(c: Checker, campaign: Campaign) -> None:
     names = [a.name for a in campaign.axes]
     if AMB in names:
         names.append("alpha")
+    shape = None
     for kind, products in (("fits", campaign.fits), ("figures", campaign.figures or ())):
         for i, product in enumerate(products):
             path: KeyPath = (kind, i, product.name)
-            for problem in _registry_problems(kind, product):
+            problems = _registry_problems(kind, product)
+            if not problems:  # options fine: can this campaign have it at all?
+                shape = shape or _shape(campaign)
+                problems = _shape_problems(kind, product, shape, campaign)
+            for problem in problems:
                 c.add(path, problem)
             options = product.options
             for key in AXIS_OPTIONS:
@@ -341,6 +346,25 @@ def registry(kind: str) -> Mapping[str, Any]:
     from ..figures.registry import REGISTRY as FIGURES
 
     return FIGURES
+
+
+def _shape(campaign: Campaign) -> Any:
+    from ..analysis.shape import Shape
+
+    return Shape.of_campaign(campaign)
+
+
+def _shape_problems(kind: str, product: Product, shape: Any, campaign: Campaign) -> list[str]:
+    """Why ``product`` cannot be produced for a campaign of ``shape`` (the registries'
+    ``needs``), so that it is refused here rather than failing after the runs."""
+    if kind == "figures":
+        from ..figures.registry import shape_problems
+
+        fits = {p.name: p.options for p in campaign.fits}
+        return shape_problems(product.name, product.options, shape, fits)
+    from ..analysis.registry import fit_shape_problems
+
+    return fit_shape_problems(product.name, product.options, shape)
 
 
 def _registry_problems(kind: str, product: Product) -> list[str]:

@@ -128,6 +128,8 @@ def resolve(
         if f is not None:
             old = target[key]
             new = old * f[1] if f[0] == "x" else old / f[1]
+            if not math.isfinite(new):
+                raise ParameterError(key, value, f"a factor that leaves {key} finite")
             target[key] = int(round(new)) if kind == "int" else normalise_float(new)
         else:
             target[key] = coerce(kind, value)
@@ -141,6 +143,18 @@ def resolve(
     params, nums = Parameters.from_dict(p), Numerics.from_dict(n)
     check_compatible(params, nums)
     return params, nums
+
+
+def variant_grid(variant: Variant, resolution: int, mechanics: str) -> tuple[int, str]:
+    """The resolution and mechanics of ``variant``'s run at a point whose own are given (what
+    its memory is estimated from, :func:`nematic_solids.sweep.limits.run_memory_bytes`)."""
+    value = variant.settings.get("resolution", resolution)
+    f = _factor(value)
+    if f is not None:
+        value = resolution * f[1] if f[0] == "x" else resolution / f[1]
+    finite = is_number(value) and math.isfinite(float(value))
+    grid = int(round(float(value))) if finite else resolution
+    return grid, str(variant.settings.get("mechanics", mechanics))
 
 
 def read_verify(c: Checker, raw: Any, read: Mapping[str, Any]) -> VerifySpec | None:

@@ -1,28 +1,41 @@
 """Campaign YAML text -> a document with the line of every key, and command-line values read
-as YAML. A file too large, or whose aliases expand too far, is refused before it is built."""
+as YAML. Every bound is checked before the work it bounds: a file's size with ``fstat`` before
+it is read (then a read of at most :data:`MAX_TEXT_BYTES` + 1 bytes), and the number of YAML
+values, the expansion of aliases and the depth of nesting while the document is composed, node
+by node (:class:`_Bounded`), so that a file is refused after at most :data:`MAX_YAML_NODES`
+nodes of work whatever its size or its aliases."""
 
 from __future__ import annotations
 
+import errno
+import os
 import re
+import stat
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import yaml
+from yaml.composer import Composer
+from yaml.constructor import SafeConstructor
+from yaml.resolver import Resolver
 
 from ..errors import CampaignError, Problem
 from .checker import KeyPath
 
-#: Largest campaign file read (bytes), and most YAML nodes after aliases are expanded: a
-#: file of anchors that refer to anchors (a "billion laughs") is refused before it is built.
+#: Largest campaign file read (bytes), most YAML values (nodes: every key, value and list
+#: item, counted again for every alias ``*name`` that repeats one), and deepest nesting of
+#: mappings and lists. A campaign file has a few hundred values, nested five or six deep.
 MAX_TEXT_BYTES = 4 * 2**20
 MAX_YAML_NODES = 100_000
+MAX_YAML_DEPTH = 50
 
 
-class _Loader(yaml.SafeLoader):
-    """Safe loader that also reads ``1e-5`` (no dot) as a float, as YAML 1.2 does."""
+class _Resolver(Resolver):
+    """YAML 1.1's implicit types, and ``1e-5`` (no dot) read as a float, as YAML 1.2 does."""
 
 
-_Loader.add_implicit_resolver(
+_Resolver.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(
         r"^(?:[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+|[-+]?\.[0-9_]+[eE][-+]?[0-9]+)$"
@@ -31,11 +44,126 @@ _Loader.add_implicit_resolver(
 )
 
 
+class _Refused(yaml.YAMLError):
+    """A bound reached while composing: the problem and the line where it was reached."""
+
+    def __init__(self, message: str, line: int) -> None:
+        super().__init__(message)
+        self.message, self.line = message, line
+
+
+class _Bounded(Composer):
+    """PyYAML's composer that counts while it composes: every node, every node an alias
+    repeats (an anchored node's expanded size is known once it is composed, so an alias
+    costs one addition), and the depth; it stops at the first bound reached."""
+
+    def _start_counts(self) -> None:
+        self.nodes = 0  # nodes written in the file
+        self.expanded = 0  # nodes once every alias is expanded
+        self.depth = 0
+        self.sizes: dict[int, int] = {}  # anchored node -> its expanded size
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        event = self.peek_event()
+        line = event.start_mark.line + 1
+        if isinstance(event, yaml.AliasEvent):
+            target = self.anchors.get(event.anchor)
+            if target is not None:  # else PyYAML reports the undefined alias
+                size = self.sizes.get(id(target))
+                if size is None:
+                    raise _Refused(
+                        f"the alias *{event.anchor} is inside its own anchor: it expands to "
+                        f"more than {MAX_YAML_NODES} values (without end); allowed: an alias "
+                        "to a value written before it",
+                        line,
+                    )
+                self.expanded += size
+                if self.expanded > MAX_YAML_NODES:
+                    raise _Refused(
+                        f"the YAML expands to more than {MAX_YAML_NODES} values through its "
+                        "aliases (*name); allowed: a campaign without such nesting",
+                        line,
+                    )
+            return super().compose_node(parent, index)
+        self.nodes += 1
+        self.expanded += 1
+        if self.nodes > MAX_YAML_NODES:
+            raise _Refused(
+                f"the file has more than {MAX_YAML_NODES} YAML values (keys, values and list "
+                f"items; refused at line {line}); allowed: at most {MAX_YAML_NODES} (a long "
+                "list of values is written as a range: {linspace: [start, stop, num]})",
+                line,
+            )
+        if self.expanded > MAX_YAML_NODES:
+            raise _Refused(
+                f"the YAML expands to more than {MAX_YAML_NODES} values through its aliases "
+                "(*name); allowed: a campaign without such nesting",
+                line,
+            )
+        self.depth += 1
+        if self.depth > MAX_YAML_DEPTH:
+            raise _Refused(
+                f"the YAML is nested more than {MAX_YAML_DEPTH} levels deep; allowed: at most "
+                f"{MAX_YAML_DEPTH}",
+                line,
+            )
+        before = self.expanded
+        node = super().compose_node(parent, index)
+        self.depth -= 1
+        if getattr(event, "anchor", None) is not None:
+            self.sizes[id(node)] = self.expanded - before + 1
+        return node
+
+
+if yaml.__with_libyaml__:  # libyaml scans and parses; the counting composer is Python
+    from yaml._yaml import CParser as _CParser
+
+    class _Loader(_Bounded, _CParser, SafeConstructor, _Resolver):  # type: ignore[misc]
+        def __init__(self, stream: str) -> None:
+            _CParser.__init__(self, stream)
+            SafeConstructor.__init__(self)
+            _Resolver.__init__(self)
+            Composer.__init__(self)
+            self._start_counts()
+
+        # the composer's, not libyaml's (which would compose without counting)
+        check_node = Composer.check_node
+        get_node = Composer.get_node
+        get_single_node = Composer.get_single_node
+
+else:  # pragma: no cover - PyYAML without libyaml
+
+    class _Loader(  # type: ignore[no-redef]
+        yaml.reader.Reader,
+        yaml.scanner.Scanner,
+        yaml.parser.Parser,
+        _Bounded,
+        SafeConstructor,
+        _Resolver,
+    ):
+        def __init__(self, stream: str) -> None:
+            yaml.reader.Reader.__init__(self, stream)
+            yaml.scanner.Scanner.__init__(self)
+            yaml.parser.Parser.__init__(self)
+            Composer.__init__(self)
+            SafeConstructor.__init__(self)
+            _Resolver.__init__(self)
+            self._start_counts()
+
+
+def _load(text: str) -> Any:
+    loader = _Loader(text)
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
 def parse_value(text: str) -> Any:
     """A command-line value read as YAML (``0.3`` -> float, ``[1, 2]`` -> list, ``abc`` -> str)."""
     try:
-        return yaml.load(text, Loader=_Loader)  # _Loader is a SafeLoader
-    except yaml.YAMLError:
+        return _load(text)
+    except (yaml.YAMLError, RecursionError):
         return text
 
 
@@ -57,37 +185,52 @@ def parse_assignments(items: Sequence[str]) -> dict[str, Any]:
     return out
 
 
-def _expanded_size(root: yaml.Node) -> int:
-    """How many nodes the document has once every alias is expanded (each distinct node is
-    visited once: linear in the file, whatever the expansion)."""
-    sizes: dict[int, int] = {}
-    open_: set[int] = set()  # being sized: meeting one again is a recursive alias
-    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
-    while stack:
-        node, done = stack.pop()
-        if id(node) in sizes:
-            continue
-        if isinstance(node, yaml.MappingNode):
-            children = [n for pair in node.value for n in pair]
-        elif isinstance(node, yaml.SequenceNode):
-            children = list(node.value)
-        else:
-            sizes[id(node)] = 1
-            continue
-        if done:
-            sizes[id(node)] = min(1 + sum(sizes[id(n)] for n in children), 2**62)
-            open_.discard(id(node))
-            continue
-        if id(node) in open_:
-            return 2**62  # a value that contains itself: infinitely large
-        open_.add(id(node))
-        stack.append((node, True))
-        for n in children:
-            if id(n) in open_:
-                return 2**62
-            if id(n) not in sizes:
-                stack.append((n, False))
-    return sizes[id(root)]
+def _too_large(size: str) -> str:
+    return (
+        f"the file has {size} bytes; allowed: at most {MAX_TEXT_BYTES} (a campaign file is a "
+        "few kilobytes of text)"
+    )
+
+
+def read_text(path: str | Path) -> str:
+    """The UTF-8 text of the campaign file at ``path``. Its size is checked (``fstat`` of the
+    opened file) before anything is read, and at most :data:`MAX_TEXT_BYTES` + 1 bytes are
+    read; a folder, a device or a pipe is refused without reading it. Raises
+    :class:`CampaignError` naming the file."""
+    where = str(path)
+
+    def refused(message: str) -> CampaignError:
+        return CampaignError(where, [Problem("", message, where)])
+
+    try:
+        # O_NONBLOCK: opening a named pipe does not wait for a writer (it is refused below)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as e:
+        raise refused(f"cannot read the file: {e.strerror}") from None
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise refused(f"cannot read the file: {os.strerror(errno.EISDIR)}")
+        if not stat.S_ISREG(st.st_mode):
+            raise refused("cannot read the file: not a regular file (a device, pipe or socket)")
+        if st.st_size > MAX_TEXT_BYTES:
+            raise refused(_too_large(str(st.st_size)))
+        data = os.read(fd, MAX_TEXT_BYTES + 1)
+        while data and len(data) <= MAX_TEXT_BYTES:  # os.read may return less than asked
+            more = os.read(fd, MAX_TEXT_BYTES + 1 - len(data))
+            if not more:
+                break
+            data += more
+    except OSError as e:
+        raise refused(f"cannot read the file: {e.strerror}") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_TEXT_BYTES:  # it grew after fstat
+        raise refused(_too_large(f"more than {MAX_TEXT_BYTES}"))
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise refused("not a UTF-8 text file") from None
 
 
 def _walk(node: yaml.Node, path: KeyPath, lines: dict[KeyPath, int], dups: list[KeyPath]) -> None:
@@ -111,15 +254,16 @@ def read_document(
 ) -> tuple[yaml.Node | None, Any, dict[KeyPath, int], list[KeyPath]]:
     """``text`` parsed: its root node (``None`` for an empty document), the document, the line
     of every key path and the key paths written twice in one mapping. Raises
-    :class:`CampaignError` for text that is too long, not YAML, nested too deeply, or that
-    expands through its aliases to more than :data:`MAX_YAML_NODES` values."""
+    :class:`CampaignError` for text that is too long or not YAML, and, as soon as the bound is
+    reached while it is composed, for a document of more than :data:`MAX_YAML_NODES` values
+    (aliases expanded) or nested more than :data:`MAX_YAML_DEPTH` deep."""
     if len(text) > MAX_TEXT_BYTES:
         raise CampaignError(
             source,
             [
                 Problem(
                     "",
-                    f"the file has {len(text)} characters; allowed: at most {MAX_TEXT_BYTES}",
+                    f"the text has {len(text)} characters; allowed: at most {MAX_TEXT_BYTES}",
                     source,
                 )
             ],
@@ -128,29 +272,17 @@ def read_document(
         loader = _Loader(text)
         try:
             node = loader.get_single_node()
-            if node is not None:
-                size = _expanded_size(node)
-                if size > MAX_YAML_NODES:
-                    raise CampaignError(
-                        source,
-                        [
-                            Problem(
-                                "",
-                                f"the YAML expands to more than {MAX_YAML_NODES} values through "
-                                "its aliases (*name); allowed: a campaign without such nesting",
-                                f"{source}:{node.start_mark.line + 1}",
-                            )
-                        ],
-                    )
             doc = loader.construct_document(node) if node is not None else None
         finally:
             loader.dispose()
+    except _Refused as e:
+        raise CampaignError(source, [Problem("", e.message, f"{source}:{e.line}")]) from None
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
         msg = " ".join(str(getattr(e, "problem", None) or e).split())
         raise CampaignError(source, [Problem("", f"not valid YAML: {msg}", where)]) from None
-    except RecursionError:
+    except RecursionError:  # pragma: no cover - MAX_YAML_DEPTH stops it first
         raise CampaignError(
             source, [Problem("", "the YAML is nested too deeply", source)]
         ) from None
@@ -158,10 +290,5 @@ def read_document(
     dups: list[KeyPath] = []
     if node is None:
         return None, None, lines, dups
-    try:
-        _walk(node, (), lines, dups)
-    except RecursionError:
-        raise CampaignError(
-            source, [Problem("", "the YAML is nested too deeply", source)]
-        ) from None
+    _walk(node, (), lines, dups)
     return node, doc, lines, dups

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,7 @@ from ..refine.rounds import RunList
 from ..run.clusters import open_cluster
 from ..run.driver import REMOTE_TMP_AGE, RunEvents, RunSummary, run_campaign
 from ..run.todo import plan_runs
+from ..run.workers import ClusterLink
 from ..store import CampaignStore
 from .measure import verify_dataset, write_verify
 from .sample import Sample, plan_sample
@@ -89,8 +91,12 @@ def run_verification(
     events: RunEvents | None = None,
     dashboard: bool = False,
     say: Callable[[str], None] = print,
+    link: ClusterLink | None = None,
+    stop: threading.Event | None = None,
 ) -> VerifyOutcome:
-    """Run what the sample needs and write ``verify.nc``; the caller holds the lock."""
+    """Run what the sample needs and write ``verify.nc``; the caller holds the lock. With
+    ``link`` the runs go to that open cluster (the service's), which stays open; ``stop`` set
+    interrupts them as Ctrl-C does."""
     sample = sample_of(campaign, store, before=before)
     outcome = VerifyOutcome(sample)
     for problem in sample.problems:
@@ -99,7 +105,8 @@ def run_verification(
     vstore.ensure()
     base = RunList(campaign, sample.base_list())
     variants = RunList(campaign, sample.variant_list())
-    plan_b, plan_v = plan_runs(base, store), plan_runs(variants, vstore)
+    # the variants' folder is no campaign of the results root: no catalogue, no reuse there
+    plan_b, plan_v = plan_runs(base, store), plan_runs(variants, vstore, reuse=False)
     say(
         f"verify {campaign.name}: {len(sample.points)} points x {len(sample.seeds)} seeds, "
         f"{len(sample.variants)} variant(s): {len(base)} base runs ({len(plan_b.todo)} to "
@@ -108,10 +115,14 @@ def run_verification(
     local = campaign.execution.mode == "local"
     if plan_b.todo or plan_v.todo:
         with contextlib.ExitStack() as stack:
+            own = link is None
             try:
-                link = stack.enter_context(
-                    open_cluster(campaign.execution, dashboard=dashboard, campaign_dir=store.root)
-                )
+                if link is None:
+                    link = stack.enter_context(
+                        open_cluster(
+                            campaign.execution, dashboard=dashboard, campaign_dir=store.root
+                        )
+                    )
                 for runs, where, plan, attr in (
                     (base, store, plan_b, "base"),
                     (variants, vstore, plan_v, "variants"),
@@ -119,7 +130,10 @@ def run_verification(
                     if not plan.todo:
                         continue
                     where.clean_temporaries(min_age=0.0 if local else REMOTE_TMP_AGE)
-                    summary = run_campaign(runs, where, link, plan, events)
+                    # the variants' runs are not the campaign's: not in the catalogue
+                    summary = run_campaign(
+                        runs, where, link, plan, events, record=where is store, stop=stop
+                    )
                     setattr(outcome, attr, summary)
                     if summary.interrupted or summary.storage_error or summary.lost:
                         outcome.interrupted = True
@@ -127,7 +141,7 @@ def run_verification(
             except KeyboardInterrupt:
                 outcome.interrupted = True
             finally:
-                if local:
+                if local and own:
                     stack.close()
                     store.clean_temporaries()
                     vstore.clean_temporaries()

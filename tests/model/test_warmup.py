@@ -248,7 +248,7 @@ def test_the_parallel_warm_up_leaves_a_cache_a_fresh_process_only_loads(tmp_path
     first = _warmup(tmp_path, "--jobs", "2")
     assert first.returncode == 0, first
     assert re.search(
-        r"ready in \d+ s in 2 processes \([1-9]\d* signatures compiled", first.stdout
+        r"ready in \d+ s in 2 processes, \d+ CPU-s \([1-9]\d* signatures compiled", first.stdout
     ), first.stdout
     assert re.search(r"kernels ready in \d+ s \(0 compiled, [1-9]\d* loaded", first.stdout), (
         first.stdout

@@ -8,12 +8,15 @@ parent_failed and is redone with it."""
 from __future__ import annotations
 
 import base64
+import os
+import random
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import xarray as xr
-from sweep_helpers import kill_group, records, start_driver, wait_for
+from sweep_helpers import kill_group, records, start_driver, wait_for, wait_group_gone
 from typer.testing import CliRunner
 
 from nematic_solids.model.checkpoint import RunState, read_netcdf
@@ -99,6 +102,34 @@ def test_a_chain_mistake_is_reported_at_its_line(text, says):
     assert "loop.yaml:" in str(err.value)
 
 
+GRID = (
+    loop()
+    .replace("alpha_minus_B: [0.1, 0.8, 0.4]", "resolution: [32, 64]")
+    .replace("axis: alpha_minus_B", "axis: resolution")
+    .replace("resolution: 32, ", "")
+)
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "says"),
+    [
+        (GRID, 7, "would change the grid between a run and the next"),
+        (loop() + "store: {snapshot_dtype: float32, end_state: false}\n", 10, "exact end state"),
+        (loop() + "store:\n  snapshot_fields: [q1, q2]\n  end_state: false\n", 12, "end_state"),
+        (loop().replace("axis: alpha_minus_B", "axis: [alpha_minus_B, K]"), 7, "one swept axis"),
+    ],
+)
+def test_a_chain_that_could_not_feed_its_runs_is_refused_at_its_line(text, line, says):
+    """A chain along the grid (the successor's fields would be another shape), or whose store
+    keeps no end state (a successor would begin from a snapshot: float32, or without A), is
+    refused before anything runs, at the line that makes it so."""
+    with pytest.raises(CampaignError) as err:
+        parse_campaign(text, source="loop.yaml")
+    (problem,) = err.value.problems
+    assert problem.location == f"loop.yaml:{line}", str(err.value)
+    assert says in problem.message
+
+
 def _assert_chained_runs(results: Path, text: str) -> dict[str, np.ndarray]:
     """Every chained run's file equals the model's run from its predecessor's end state."""
     e = expand(parse_campaign(text))
@@ -177,6 +208,52 @@ def test_a_chain_driver_killed_half_way_resumes(tmp_path):
     result = invoke("run", path, "--results", results)
     assert result.exit_code == 0, result.output
     _assert_chained_runs(results, text)
+
+
+@pytest.mark.slow
+def test_a_chain_driver_killed_at_random_moments_ends_as_an_uninterrupted_one(tmp_path):
+    """SIGKILL of the driver and its workers twice, each at a random moment (after a random
+    number of runs is done, then a random delay: mid-run, mid-checkpoint, mid-write), then a
+    run to the end: every array of every run (the successors begun from their predecessors' end
+    states, some continued from checkpoints) is bit-identical to an uninterrupted campaign's."""
+    rng = random.Random(f"chain-kill-{os.getpid()}")
+    text = loop(t_final=20, seeds=1, values="[0.1, 0.4, 0.8]") + "store: {checkpoint_every: 2}\n"
+    reference = tmp_path / "reference"
+    assert invoke("run", write(reference, text), "--results", reference / "results").exit_code == 0
+    killed = tmp_path / "killed"
+    path = write(killed, text)
+    results = killed / "results"
+    runs = results / "loop" / "runs"
+    for attempt in range(2):
+        done = len(records(runs)) if runs.is_dir() else 0
+        wanted = done + rng.randint(0, 2)
+        log = killed / f"driver{attempt}.log"
+        proc = start_driver(["run", str(path), "--results", str(results), "--no-figures"], log)
+        try:
+            wait_for(
+                lambda wanted=wanted, proc=proc: (
+                    (runs.is_dir() and len(records(runs)) >= wanted) or proc.poll() is not None
+                ),
+                300,
+                f"{wanted} runs done",
+                interval=0.05,
+            )
+            time.sleep(rng.uniform(0.0, 1.5))
+        finally:
+            kill_group(proc)
+        wait_group_gone(proc.pid)
+        if attempt == 0:  # at most two runs and 1.5 s in: the chains are not through
+            assert len(records(runs)) < 6 if runs.is_dir() else True
+    result = invoke("run", path, "--results", results, "--no-figures")
+    assert result.exit_code == 0, result.output
+    _assert_chained_runs(results, text)
+    want_runs = reference / "results" / "loop" / "runs"
+    assert {p.name for p in runs.glob("*.nc")} == {p.name for p in want_runs.glob("*.nc")}
+    for got in runs.glob("*.nc"):
+        with xr.open_dataset(got) as a, xr.open_dataset(want_runs / got.name) as b:
+            for name in a.data_vars:
+                if name != "wall_time":
+                    assert np.array_equal(a[name].values, b[name].values, equal_nan=True), name
 
 
 def test_the_loop_figure_and_the_loop_width(tmp_path):

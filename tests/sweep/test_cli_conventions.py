@@ -11,12 +11,12 @@ from types import SimpleNamespace
 
 import typer.core
 import typer.main
-from rich.console import Console
 from rich.progress import Progress
 from typer.testing import CliRunner
 
 from nematic_solids import model
 from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.cli.app import Console
 from nematic_solids.sweep.cli.progress import ProgressEvents
 
 
@@ -126,7 +126,7 @@ def _events(clock):
 
 
 def _plan(done=0):
-    return SimpleNamespace(done=list(range(done)), failed=[], todo=[])
+    return SimpleNamespace(done=list(range(done)), failed=[], todo=[], skipped=done)
 
 
 def test_progress_lines_and_a_median_eta():

@@ -157,6 +157,36 @@ def test_model_scales_with_resolution_length_and_mechanics():
     assert curve_steps(curve, 50.0) == 25.0
 
 
+def test_the_model_prices_the_steps_a_protocol_forces(tmp_path):
+    """10,000 switches force 10,001 steps (one per piece); a sine 16 per period; the estimate
+    of a campaign with them is priced accordingly (not at the activity curve's 448 steps)."""
+    from nematic_solids.model.protocol import protocol_from
+
+    n = Numerics(t_final=300.0)
+    switches = [[0, 1.0]] + [[0.03 * (i + 1), 0.9 if i % 2 else 1.0] for i in range(9_999)]
+    protocol, _ = protocol_from({"alpha_minus_B": switches})
+    assert protocol.forced_steps(300.0) == 10_000
+    assert model_steps(n, protocol=protocol) == 10_000
+    sine, _ = protocol_from({"eps": {"sine": {"amplitude": 0.01, "period": 0.5}}})
+    assert model_steps(n, protocol=sine) == pytest.approx(300.0 / 0.5 * 16)
+    assert model_seconds(n, protocol=protocol) > 15 * model_seconds(n)
+    slow = Numerics(t_final=300.0, adaptive=False, dt=0.5)
+    assert model_steps(slow, protocol=protocol) == 10_000
+    # the campaign's estimate carries it
+    few = [[0, 1.0]] + [[0.1 * (i + 1), 0.9 if i % 2 else 1.0] for i in range(2_999)]
+    points = ", ".join(f"[{t:g}, {v:g}]" for t, v in few)
+    plain = "name: e\nparameters: {noise_modes: 8}\nnumerics: {resolution: 32, t_final: 300}\n"
+    (tmp_path / "a.yaml").write_text(plain)
+    (tmp_path / "b.yaml").write_text(plain + f"protocol: {{alpha_minus_B: [{points}]}}\n")
+    runs = {
+        f: estimate(
+            load_campaign(tmp_path / f), CampaignStore(tmp_path / "r", f), load_cores=(0.0, 2)
+        ).cpu[0]
+        for f in ("a.yaml", "b.yaml")
+    }
+    assert runs["b.yaml"] > 5 * runs["a.yaml"]  # 3,000 steps against the curve's 448
+
+
 def test_makespan_deals_runs_to_the_first_free_worker():
     assert makespan([10.0, 20.0, 30.0], 2) == 40.0  # 10 | 20, then 30 after the 10
     assert makespan([5.0] * 8, 2) == 20.0

@@ -253,6 +253,47 @@ def test_a_second_driver_is_refused(copy_of_small):
     assert read_lock_holder(lock.path) is None
 
 
+@pytest.mark.slow
+def test_two_driver_processes_on_one_folder(tmp_path):
+    """Two real drivers of one campaign on one results folder, the second started while the
+    first holds the lock: the second is refused (exit 2, naming the holder); the first ends
+    with every run's arrays bit-identical to a campaign run alone."""
+    alone = write_campaign(tmp_path / "alone", name="two", values="[0.1, 0.2]", t_final=20)
+    assert invoke("run", alone, "--results", tmp_path / "alone" / "results").exit_code == 0
+    path = write_campaign(tmp_path / "both", name="two", values="[0.1, 0.2]", t_final=20)
+    results = tmp_path / "both" / "results"
+    lock = results / "two" / ".lock"
+    first = start_driver(["run", str(path), "--results", str(results)], tmp_path / "first.log")
+    try:
+        wait_for(
+            lambda: read_lock_holder(lock) is not None or first.poll() is not None,
+            120,
+            "the first driver's lock",
+            interval=0.02,
+        )
+        assert first.poll() is None, (tmp_path / "first.log").read_text()
+        second = start_driver(
+            ["run", str(path), "--results", str(results)], tmp_path / "second.log"
+        )
+        try:
+            assert second.wait(timeout=120) == 2
+        finally:
+            kill_group(second)
+        said = " ".join((tmp_path / "second.log").read_text().split())
+        assert "in use by another driver" in said
+        assert f"pid {first.pid}" in said
+        assert first.wait(timeout=300) == 0, (tmp_path / "first.log").read_text()
+    finally:
+        kill_group(first)
+    runs, want = results / "two" / "runs", tmp_path / "alone" / "results" / "two" / "runs"
+    assert sorted(records(runs)) == sorted(records(want))
+    for got in runs.glob("*.nc"):
+        with xr.open_dataset(got) as a, xr.open_dataset(want / got.name) as b:
+            for name in a.data_vars:
+                if name != "wall_time":
+                    assert np.array_equal(a[name].values, b[name].values, equal_nan=True), name
+
+
 def test_aggregate_command(copy_of_small):
     phase = copy_of_small.results / "small" / "phase.nc"
     phase.unlink()

@@ -307,7 +307,9 @@ def test_empty_figures_list_draws_nothing_after_a_run(sizes, tmp_path):
     root = results / campaign.name
     root.mkdir(parents=True)
     shutil.copy(sizes.root / "phase.nc", root / "phase.nc")
-    assert regenerate_figures(campaign, results) == []
+    out = regenerate_figures(campaign, results)
+    assert out.paths == []
+    assert out.failures == {}
     assert not (root / "figures").exists()
     with xr.open_dataset(root / FITS) as f:
         assert "scaling_exponent" in f
@@ -341,8 +343,8 @@ def test_cli_figures_prints_the_fit_notes(sizes):
 
 
 def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(stab):
-    """fig2 needs alpha - B swept; this grid sweeps chi and eps: exit 1 with the reason,
-    figA1 still drawn (from the fits.nc on disk: --no-fits)."""
+    """fig2 needs alpha - B swept; this grid sweeps chi and eps: exit 4 with the reason in one
+    line, figA1 still drawn (from the fits.nc on disk: --no-fits)."""
     produce(stab.campaign, stab.results, names=["figA1"])  # fits.nc present
     result = CliRunner().invoke(
         app,
@@ -358,9 +360,9 @@ def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(stab):
             "--no-fits",
         ],
     )
-    assert result.exit_code == 1, result.output
+    assert result.exit_code == 4, result.output
+    assert "failed: figure fig2: fig2 needs alpha_minus_B" in result.output
     out = " ".join(result.output.split())
-    assert "fig2: fig2 needs alpha_minus_B" in out
     assert "figA1.png" in out
 
 

@@ -491,3 +491,40 @@ def test_a_transition_must_cross_the_level_it_is_given():
     f = fit_transition(x, patterned, crossing=1e-6)
     assert f.location == 0.5
     assert (f.lower, f.upper) == (0.0, 1.0)
+
+
+def test_a_nan_transition_says_why():
+    """One seed of two never patterns: the geometric seed mean (the mean of log10) stays a
+    decade below the class threshold 1e-6 on the patterned side and never crosses it, so the
+    fit is NaN and says so (naming the arithmetic mean, which does cross); too few points and a
+    step below min_jump give their own reasons; a fit over a branch names the branch."""
+    x = [0.0, 1.0, 2.0]
+    one_seed = [[1e-14, 1e-14], [1e-14, 1e-3], [1e-14, 1e-2]]  # geometric means 1e-8.5, 1e-8
+    f = fit_transition(x, one_seed, crossing=1e-6)
+    assert np.isnan(f.location)
+    assert "never crosses 1e-06, the class threshold" in f.reason
+    assert "mean: arithmetic" in f.reason
+    g = fit_transition(x, one_seed, crossing=1e-6, mean="arithmetic")
+    assert g.location == 0.5
+    assert g.reason == ""
+    assert (
+        "1 grid value(s) with a finite seed mean"
+        in fit_transition(x, [[1e-3, 1e-3], [np.nan, np.nan], [np.nan, np.nan]]).reason
+    )
+    flat = fit_transition(x, [[1e-3, 1e-3], [2e-3, 2e-3], [3e-3, 3e-3]])
+    assert "below min_jump 1" in flat.reason
+    values = np.array([one_seed, [[1e-14, 1e-14], [1e-3, 1e-3], [1e-2, 1e-2]]])
+    ds = phase(
+        {"sigma2_S": values},
+        {"branch": np.array(["up", "down"]), "alpha_minus_B": np.array(x)},
+    )
+    out = transition(ds, {"axis": "alpha_minus_B", "crossing": 1e-6, "n_boot": 50})
+    assert np.isnan(out.transition_location.sel(branch="up"))
+    assert float(out.transition_location.sel(branch="down")) == 0.5
+    why = out.transition_location.attrs["nan_reason"]
+    assert why.startswith("branch = up: the geometric seed mean")
+    assert "branch = down" not in why
+    assert np.isnan(float(out.transition_loop_width))
+    assert out.transition_loop_width.attrs["nan_reason"].startswith(
+        "no transition on a branch: branch = up:"
+    )

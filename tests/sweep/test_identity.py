@@ -4,6 +4,7 @@ and alpha vs alpha_minus_B (signac ``calc_id`` style)."""
 from __future__ import annotations
 
 import random
+from pathlib import Path
 
 import pytest
 
@@ -194,3 +195,54 @@ def test_the_per_node_texture_is_another_run_and_ignores_noise_modes():
     assert run_id_for(Parameters(initial="per_node", noise_modes=8), Numerics(), 0) == run_id_for(
         Parameters(initial="per_node"), Numerics(), 0
     )
+
+
+def test_a_step_bound_that_can_change_the_steps_enters_the_id():
+    """A sine or ramp whose step bound (a fraction of its period or piece) is below dt_max can
+    change a run's steps, so its numbers: its id names the bound. A slower sine, and steps or
+    pulses (which only land on their switch times), keep the ids they had without it."""
+    import json
+
+    from nematic_solids.model.parameters import Numerics, Parameters
+    from nematic_solids.sweep.identity import canonical_json
+
+    def text(protocol, **numerics):
+        p = Parameters.from_dict({"protocol": protocol})
+        return json.loads(canonical_json(p.to_dict(), Numerics(**numerics).to_dict(), 0))
+
+    fast = {"eps": {"sine": {"amplitude": 0.01, "period": 10}}}  # bound 0.625 < dt_max = 1
+    slow = {"eps": {"sine": {"amplitude": 0.01, "period": 50}}}  # bound 3.125 > dt_max
+    ramp = {"chi": {"ramp": {"from": 10, "to": 0, "start": 1, "duration": 4}}}  # 0.125, 0.5
+    pulse = {"chi": {"pulse": {"base": 10, "level": 0, "start": 1, "duration": 0.1}}}
+    assert text(fast)["protocol_steps"] == "sine 0.0625, ramp 0.125"
+    assert text(ramp)["protocol_steps"] == "sine 0.0625, ramp 0.125"
+    assert "protocol_steps" not in text(slow)
+    assert "protocol_steps" in text(slow, dt_max=4.0)
+    assert "protocol_steps" not in text(fast, dt_max=0.5)
+    assert "protocol_steps" in text(fast, adaptive=False, dt=1.0)
+    assert "protocol_steps" not in text(pulse)
+
+
+def test_the_shipped_rheology_runs_keep_their_ids_where_the_step_bound_cannot_bind(tmp_path):
+    """docs/results/rheology was run before the protocol step bound: its T = 50 runs (bound
+    3.125 above dt_max = 1) keep their ids, its T = 10 runs (bound 0.625) have new ones, so
+    their stored numbers are never taken for a run under the bound."""
+    import numpy as np
+    import xarray as xr
+
+    from nematic_solids.sweep.expand import expand
+    from nematic_solids.sweep.spec import load_campaign
+
+    results = Path(__file__).resolve().parents[2] / "docs" / "results" / "rheology"
+    with xr.open_dataset(results / "phase.nc") as phase:
+        periods = phase["eps_period"].broadcast_like(phase["run_id"]).values.ravel()
+        stored = [str(r) for r in np.asarray(phase["run_id"]).ravel()]
+        path = tmp_path / "rheology.yaml"
+        path.write_text(phase.attrs["campaign_yaml"])
+    planned = set(expand(load_campaign(path)).run_ids)
+    slow = {r for r, T in zip(stored, periods, strict=True) if r and T == 50}
+    fast = {r for r, T in zip(stored, periods, strict=True) if r and T == 10}
+    assert slow
+    assert fast
+    assert slow <= planned
+    assert not fast & planned

@@ -272,11 +272,53 @@ def test_fit_tables_put_intervals_with_their_values_and_label_units():
     )
     tables = {t.title: t for t in fit_tables(fits)}
     scalar = tables["transition"]
-    assert scalar.rows == [["transition_location", "0.35", "[0.3, 0.4]", "", "transition location"]]
+    assert scalar.columns == ["variable", "value [interval]", "units", "meaning"]
+    assert scalar.rows == [["transition_location", "0.35 [0.3, 0.4]", "", "transition location"]]
     over_k = tables["alpha_cr over K"]
-    assert over_k.columns == ["K", "alpha_cr", "alpha_cr_lower", "alpha_cr_upper", "wall [s]"]
-    assert over_k.rows == [["0.0001", "0.1", "0.05", "0.2", "3"], ["0.001", "-", "-", "-", "4"]]
+    assert over_k.columns == ["K", "alpha_cr", "wall [s]"]
+    assert over_k.rows == [["0.0001", "0.1 [0.05, 0.2]", "3"], ["0.001", "-", "4"]]
     assert "alpha_cr: critical activity" in over_k.note
+
+
+def test_the_fits_table_gives_the_loop_width_its_interval_units_and_why_it_is_nan():
+    """A chain's transition fit (tests/sweep/test_fits.py's two branches, the up one without a
+    jump): per branch the location with its interval (transition_lower/upper), the NaN one's
+    reason in the note; the loop width a row saying why it is NaN; with both jumps, its value
+    and interval, and the units of alpha - B (a pure number)."""
+    from nematic_solids.sweep.analysis.transition import transition
+
+    x = np.array([0.0, 1.0, 2.0])
+    values = np.array(
+        [
+            [[1e-14, 1e-14], [1e-14, 1e-3], [1e-14, 1e-2]],
+            [[1e-14, 1e-14], [1e-3, 1e-3], [1e-2, 1e-2]],
+        ]
+    )
+    n = values.shape
+    phase = xr.Dataset(
+        {"sigma2_S": (("branch", "alpha_minus_B", "seed"), values)},
+        coords={"branch": ["up", "down"], "alpha_minus_B": x, "seed": [0, 1]},
+    )
+    phase["status"] = (("branch", "alpha_minus_B", "seed"), np.ones(n, dtype=int))
+    fits = transition(phase, {"axis": "alpha_minus_B", "crossing": 1e-6, "n_boot": 50})
+    for v in fits.data_vars.values():
+        v.attrs["fit"] = "transition"
+    tables = {t.title: t for t in fit_tables(fits)}
+    per_branch = tables["transition over branch"]
+    assert per_branch.columns[:2] == ["branch", "transition_location"]
+    assert per_branch.rows[0][:2] == ["up", "-"]
+    assert per_branch.rows[1][:2] == ["down", "0.5 [0, 1]"]
+    assert "No value ('-') where: branch = up: the geometric seed mean" in per_branch.note
+    (width,) = [r for r in tables["transition"].rows if r[0] == "transition_loop_width"]
+    assert width[1].startswith("no value: no transition on a branch: branch = up:")
+    assert width[2] == "1 (pure number)"
+    both = transition(phase, {"axis": "alpha_minus_B", "mean": "arithmetic", "n_boot": 50})
+    for v in both.data_vars.values():
+        v.attrs["fit"] = "transition"
+    (width,) = [r for r in fit_tables(both)[-1].rows if r[0] == "transition_loop_width"]
+    w = float(both.transition_loop_width)
+    lo, hi = float(both.transition_loop_width_lower), float(both.transition_loop_width_upper)
+    assert width[1] == f"{w:.4g} [{lo:.4g}, {hi:.4g}]"
 
 
 def test_hover_texts_give_each_seed_and_skip_points_not_run(tmp_path):
@@ -339,12 +381,13 @@ def test_one_two_and_more_dims_give_a_line_a_scatter_and_facets(tmp_path):
 
     layout, embedded, notes = phase_layout(_phase({"alpha_minus_B": [0.1, 0.3, 0.5]}), tmp_path)
     (plot,) = _plots(layout)
-    assert plot.yaxis[0].axis_label == "sigma2_S (seed mean)"
+    assert plot.xaxis[0].axis_label == "α − B"  # symbols: sweep/names.py
+    assert plot.yaxis[0].axis_label == "σ²_S (seed mean)"
     assert embedded == 0  # no run files here
-    assert notes == [
+    assert notes[0] == (
         "0 of 3 points show a run when clicked (at most 200; a run that failed "
         "at once may leave nothing to show)"
-    ]
+    )
     # 2-D with a text axis: its values become tick labels at 0, 1
     layout, _, _ = phase_layout(
         _phase({"alpha_minus_B": [0.1, 0.3], "mechanics": ["linear", "finite"]}), tmp_path
@@ -372,8 +415,35 @@ def test_one_two_and_more_dims_give_a_line_a_scatter_and_facets(tmp_path):
     )
     plots = _plots(layout)
     assert len(plots) == MAX_FACETS < 12
-    shown = {p.title.text.split(" at ")[1].split(";")[0] for p in plots}
-    assert shown == {f"eps={e}, chi={c}" for e in ("0", "0.1") for c in (1, 2, 3, 4)} | {
-        "eps=0.2, chi=1"
+    shown = {p.title.text for p in plots}
+    assert shown == {f"ε = {e}, χ = {c}" for e in ("0", "0.1") for c in (1, 2, 3, 4)} | {
+        "ε = 0.2, χ = 1"
     }  # in the grid's order, chi varying fastest
-    assert notes[-1] == f"12 combinations of eps, chi: the first {MAX_FACETS} are shown"
+    assert f"12 combinations of ε, χ: the first {MAX_FACETS} are shown" in notes
+
+
+def test_a_chain_has_its_axis_on_x_and_its_branches_as_lines_or_facets(tmp_path):
+    """A chain's phase diagram (dims branch, K, alpha - B in phase.nc): the chain's axis on x;
+    over one axis the branches are two lines of one plot; over two, K is the y axis (log: it
+    spans a decade) and the branches are facets titled with the branch."""
+    from nematic_solids.sweep.report.phase_plot import phase_layout, plot_dims
+
+    one = _phase({"branch": ["up", "down"], "alpha_minus_B": [0.1, 0.5, 1.0]})
+    one.attrs["chain_axis"] = "alpha_minus_B"
+    assert plot_dims(one) == ("alpha_minus_B", None, ["branch"])
+    layout, _, _ = phase_layout(one, tmp_path)
+    (plot,) = _plots(layout)
+    assert plot.xaxis[0].axis_label == "α − B"
+    assert [item.label["value"] for item in plot.legend[0].items] == [
+        "branch = up",
+        "branch = down",
+    ]
+    two = _phase({"branch": ["up", "down"], "K": [1e-4, 1e-3], "alpha_minus_B": [0.1, 0.5, 1.0]})
+    two.attrs["chain_axis"] = "alpha_minus_B"
+    assert plot_dims(two) == ("alpha_minus_B", "K", ["branch"])
+    layout, _, _ = phase_layout(two, tmp_path)
+    plots = _plots(layout)
+    assert sorted(p.title.text for p in plots) == ["branch = down", "branch = up"]
+    assert {p.xaxis[0].axis_label for p in plots} == {"α − B"}
+    assert {p.yaxis[0].axis_label for p in plots} == {"K"}
+    assert all(p.y_scale.__class__.__name__ == "LogScale" for p in plots)

@@ -21,7 +21,9 @@ import shutil
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+import xarray as xr
 import yaml
 from typer.testing import CliRunner
 
@@ -264,7 +266,7 @@ def test_the_quickstart_page_works_offline(browser, report):
     assert all(width > 100 for _, width in figures)
     labels = browser.execute_script(LABELS)
     texts = {label["text"] for label in labels}
-    assert {"alpha_minus_B", "sigma2_S (seed mean)", "t / tau", "sigma2_S"} <= texts
+    assert {"α − B", "σ²_S (seed mean)", "t [τ]", "σ²_S"} <= texts  # sweep/names.py
     assert not any(label["tex"] for label in labels)
     urls = sent_requests(browser)
     assert report.as_uri() in urls  # the log sees the page's requests
@@ -321,3 +323,78 @@ def test_tex_in_a_label_renders_offline_with_bokehs_own_mathjax(browser, tmp_pat
     assert outside(sent_requests(browser)) == []
     severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert severe == []
+
+
+#: A chain over three axes (K x chi x alpha - B, the chain along alpha - B, its up branch from
+#: fresh textures): 48 grid positions, 40 runs at 32^2 to t/tau = 20.
+CHAIN3 = """\
+name: chain3
+parameters: {noise_modes: 8}
+numerics: {resolution: 32, t_final: 20, save_every: 1}
+sweep:
+  axes:
+    K: [1.0e-5, 2.0e-4]
+    chi: [5.0, 10.0]
+    alpha_minus_B: [0.1, 0.4, 0.8]
+chain: {axis: alpha_minus_B, up: fresh}
+seeds: 2
+fits: [{transition: {axis: alpha_minus_B, min_jump: 0.5}}]
+execution: {workers: 2}
+"""
+#: Every phase-diagram plot's title: its text, the width it takes in the title's font, and
+#: the width of the plot's frame it is drawn over.
+TITLES = (
+    FIND
+    + """
+const ctx = document.createElement("canvas").getContext("2d");
+return named("phase_diagram").map(m => {
+  const v = find(m);
+  const t = m.title;
+  ctx.font = `${t.text_font_style} ${t.text_font_size} ${t.text_font}`;
+  return {text: t.text, needed: ctx.measureText(t.text).width,
+          width: v ? v.frame.bbox.width : 0, x_label: String(m.below[0].axis_label)};
+});
+"""
+)
+SCROLL = "return [document.documentElement.scrollWidth, document.documentElement.clientWidth];"
+
+
+@pytest.fixture(scope="module")
+def chain_report(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("chain3")
+    path = folder / "chain3.yaml"
+    path.write_text(CHAIN3)
+    result = CliRunner().invoke(
+        app, ["run", str(path), "--results", str(folder / "results"), "--no-dashboard"]
+    )
+    assert result.exit_code == 0, result.output
+    return folder / "results" / "chain3" / "report.html"
+
+
+def test_a_three_axis_chain_report_fits_the_page(browser, chain_report, tmp_path):
+    """The chain's axis (alpha - B) on every plot's x, K on y, one facet per branch and chi;
+    the page does not scroll sideways at 1300 px, every facet's title fits over its plot, and
+    the fits give the loop width per (K, chi) with its interval."""
+    browser.get(chain_report.as_uri())
+    titles = _wait(browser, TITLES, lambda v: len(v) == 4 and all(t["width"] > 0 for t in v))
+    assert titles is not None, "the phase diagram did not render"
+    assert {t["x_label"] for t in titles} == {"α − B"}
+    assert sorted(t["text"] for t in titles) == sorted(
+        f"branch = {b}, χ = {c}" for b in ("up", "down") for c in ("5", "10")
+    )
+    for t in titles:
+        assert t["needed"] < t["width"], t
+    scroll, client = browser.execute_script(SCROLL)
+    assert scroll <= client
+    tables = browser.execute_script(
+        "return [...document.querySelectorAll('#fits ~ h3')].map(h => h.textContent);"
+    )
+    assert "transition over K, χ" in tables
+    page = chain_report.read_text()
+    assert "transition_loop_width" in page
+    fits = xr.open_dataset(chain_report.parent / "fits.nc")
+    assert fits.transition_loop_width.dims == ("K", "chi")
+    assert np.isfinite(fits.transition_loop_width.values).any()
+    severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert severe == []
+    assert browser.save_screenshot(str(tmp_path / "chain3.png"))

@@ -69,7 +69,10 @@ def test_defaults_and_name_from_file(tmp_path):
 def test_figures_empty_list_means_none_and_absent_means_default(tmp_path):
     """figures: [] draws no figure; no figures key (or null) keeps the default (every
     figure that applies: figures is None); validate says which."""
-    base = "parameters: {K: 1e-4}\nseeds: 1\nfits: [scaling]\n"
+    base = (
+        "parameters: {K: 1e-4}\nsweep: {axes: {alpha_minus_B: [0.1, 1.0]}}\nseeds: 1\n"
+        "fits: [scaling]\n"
+    )
     absent = load_campaign(write(tmp_path, base, "absent.yaml"))
     assert absent.figures is None
     assert load_campaign(write(tmp_path, base + "figures:\n", "null.yaml")).figures is None

@@ -15,6 +15,7 @@ from sweep_helpers import records
 from typer.testing import CliRunner
 
 from nematic_solids import sweep
+from nematic_solids.sweep.analysis.fits_file import write_fits
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.errors import ExportError, StoreError
 from nematic_solids.sweep.expand import expand
@@ -204,3 +205,23 @@ def test_open_by_name_reads_the_campaign_copy_with_its_overrides(tmp_path):
     assert opened.campaign.parameters["initial"] == "per_node"
     assert opened.campaign.parameters["C"] == 2.5
     assert expand(opened.campaign).run_ids == expand(expected).run_ids
+
+
+def test_fits_is_fits_nc_read_anew_and_says_how_to_make_it_when_missing(copy_of_small):
+    results = open_campaign("small", results=copy_of_small.results)
+    root = copy_of_small.results / "small"
+    # the run wrote fits.nc: the transition fit that applies to a one-axis grid
+    first = results.fits()
+    assert "transition_location" in first.data_vars
+    assert first.attrs["campaign"] == "small"
+    # fits written again (as `nematic figures` writes them) are what the next call returns
+    path, failed = write_fits(root, [("transition", {"observable": "mean_S"})])
+    assert failed == {}
+    again = results.fits()
+    with xr.open_dataset(path) as written:
+        xr.testing.assert_identical(again, written.load())
+    assert '"observable": "mean_S"' in again.attrs["fits"]
+    assert '"observable": "mean_S"' not in first.attrs["fits"]
+    path.unlink()
+    with pytest.raises(StoreError, match="nematic figures"):
+        results.fits()

@@ -1,0 +1,88 @@
+"""How long and how much memory does ``nematic validate`` take on large or hostile campaign
+files? (a benchmark, not a test; ``tests/sweep/test_hostile_limits.py`` holds the bounds)
+
+Each file is read and checked by ``load_campaign`` in one fresh process per file: CPU seconds
+of the read and check, and the growth of the process's peak resident memory over the peak
+after the imports. Also the model's check of every grid point (``grid_<n>``: an accepted
+campaign whose axis has n values, one seed), which is linear in the grid points.
+
+    python benchmarks/validate_bounds.py
+
+Prints a table and writes benchmarks/validate_bounds.json.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+PROBE = """
+import json, resource, sys, time
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.spec import load_campaign
+import nematic_solids.sweep.analysis.registry, nematic_solids.sweep.figures.registry
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+t0 = time.process_time()
+try:
+    load_campaign(sys.argv[1])
+    outcome = "accepted"
+except CampaignError as e:
+    outcome = " ".join(str(e).split())[-110:]
+cpu = time.process_time() - t0
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(json.dumps({"cpu_s": round(cpu, 3), "peak_growth_mib": round((peak - base) / 1024, 1),
+                  "outcome": outcome}))
+"""
+
+
+def _flat(n: int) -> str:
+    return "name: flat\nsweep:\n  axes:\n    eps: [" + ",".join("0" for _ in range(n)) + "]\n"
+
+
+def _grid(n: int) -> str:
+    values = ", ".join(f"{i * 1e-6:.6f}" for i in range(n))
+    return f"name: grid\nsweep:\n  axes:\n    eps: [{values}]\nseeds: 1\n"
+
+
+def cases(folder: Path) -> dict[str, Path]:
+    texts = {
+        "flat_2096000_values_4MiB": _flat(2_096_000),
+        "flat_385000_values_0.77MB": _flat(385_000),
+        "aliases_1e9": "a0: &a0 [x, x, x, x, x, x, x, x, x, x]\n"
+        + "".join(f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]\n" for i in range(1, 9))
+        + "description: *a8\n",
+        "nested_3000_deep": "x: " + "[" * 3000 + "]" * 3000 + "\n",
+        "string_4MiB": "name: s\ndescription: " + "x" * (4 * 2**20 - 100) + "\nseeds: 1\n",
+        "grid_1000": _grid(1000),
+        "grid_10000": _grid(10_000),
+    }
+    out = {}
+    for name, text in texts.items():
+        out[name] = folder / f"{name}.yaml"
+        out[name].write_text(text)
+    out["sparse_10GiB"] = folder / "sparse.yaml"
+    with open(out["sparse_10GiB"], "wb") as f:
+        f.truncate(10 * 2**30)
+    return out
+
+
+def main() -> None:
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, path in cases(Path(tmp)).items():
+            done = subprocess.run(
+                [sys.executable, "-c", PROBE, str(path)], capture_output=True, text=True
+            )
+            results[name] = json.loads(done.stdout)
+            r = results[name]
+            print(f"{name:28s} {r['cpu_s']:7.3f} s {r['peak_growth_mib']:7.1f} MiB  {r['outcome']}")
+    out = Path(__file__).with_suffix(".json")
+    out.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

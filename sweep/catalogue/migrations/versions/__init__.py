@@ -1,0 +1,1 @@
+"""One module per migration of the catalogue's schema, chained by ``down_revision``."""

@@ -1,0 +1,197 @@
+"""Limits are checked before the work they bound: a campaign file's size with ``fstat``
+before it is read (then a bounded read), the YAML's values, aliases and nesting while it is
+composed. Large inputs are answered in a bounded time and memory, measured in a subprocess
+(CPU seconds and the growth of its peak resident memory), and a memory error names the
+file."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from nematic_solids.sweep import spec as spec_module
+from nematic_solids.sweep.cli import app
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.spec import load_campaign, parse_campaign
+from nematic_solids.sweep.spec.yaml_input import (
+    MAX_TEXT_BYTES,
+    MAX_YAML_DEPTH,
+    MAX_YAML_NODES,
+    read_text,
+)
+
+#: Each case validated in one subprocess: {name: [message, CPU seconds]}, and the growth of
+#: the peak RSS over all of them (MiB) against the peak after the imports.
+PROBE = """
+import json, resource, sys, time
+from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.spec import load_campaign
+import nematic_solids.sweep.analysis.registry, nematic_solids.sweep.figures.registry
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+out = {}
+for path in sys.argv[1:]:
+    t0 = time.process_time()
+    try:
+        load_campaign(path)
+        message = "accepted"
+    except CampaignError as e:
+        message = str(e)
+    out[path] = [message, time.process_time() - t0]
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(json.dumps({"cases": out, "peak_growth_mib": (peak - base) / 1024}))
+"""
+
+
+def _flat_list(n: int) -> str:
+    return "name: flat\nsweep:\n  axes:\n    eps: [" + ",".join("0" for _ in range(n)) + "]\n"
+
+
+def _write_cases(folder: Path) -> dict[str, tuple[Path, str]]:
+    """name -> (file, words its refusal says; "accepted" for a file that is valid)."""
+    cases: dict[str, tuple[str | None, str]] = {
+        # 2.1 million numbers just under 4 MiB, no aliases: took 191 s and 2.9 GB when the
+        # node count was checked after the document was built
+        "flat": (_flat_list(2_096_000), f"more than {MAX_YAML_NODES} YAML values"),
+        # 0.77 MB of numbers: 24.7 s and 322 MB before
+        "mid": (_flat_list(385_000), f"more than {MAX_YAML_NODES} YAML values"),
+        # libyaml's own bound (depth 1000) or ours, whichever the parser meets first
+        "deep_flow": ("x: " + "[" * 3000 + "]" * 3000 + "\n", "nest"),
+        "deep_block": (
+            "".join(" " * i + f"k{i}:\n" for i in range(200)) + " " * 200 + "v: 1\n",
+            f"nested more than {MAX_YAML_DEPTH} levels",
+        ),
+        "aliases": (
+            "a0: &a0 [x, x, x, x, x, x, x, x, x, x]\n"
+            + "".join(f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]\n" for i in range(1, 9))
+            + "description: *a8\n",
+            "expands to more than",
+        ),
+        "long_string": (
+            "name: s\ndescription: " + "x" * (MAX_TEXT_BYTES - 100) + "\nseeds: 1\n",
+            "accepted",
+        ),
+        "huge": (None, "bytes; allowed: at most"),  # a 10 GiB sparse file
+    }
+    out = {}
+    for name, (text, words) in cases.items():
+        path = folder / f"{name}.yaml"
+        if text is None:
+            with open(path, "wb") as f:
+                f.truncate(10 * 2**30)  # sparse: no disk space used
+        else:
+            path.write_text(text)
+            assert path.stat().st_size <= MAX_TEXT_BYTES, name
+        out[name] = (path, words)
+    return out
+
+
+def test_large_inputs_are_answered_in_bounded_time_and_memory(tmp_path):
+    cases = _write_cases(tmp_path)
+    proc = subprocess.run(
+        [sys.executable, "-c", PROBE, *(str(p) for p, _ in cases.values())],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    for name, (path, words) in cases.items():
+        message, cpu = result["cases"][str(path)]
+        said = " ".join(message.split())
+        assert words in said, (name, said)
+        if words != "accepted":
+            assert f"{path}:" in said or str(path) in said, (name, said)  # the file is named
+        # generous bounds (this machine: well under a second each); the unbounded reads took
+        # 19.6 s (10 GiB) and 191 s (2.1 million values)
+        assert cpu < 5.0, (name, cpu)
+    # the unbounded reads peaked at 20.5 GB and 2.9 GB; the bounded ones grow the peak by
+    # the file (4 MiB) and at most MAX_YAML_NODES nodes
+    assert result["peak_growth_mib"] < 200, result["peak_growth_mib"]
+    assert "aliases" not in result["cases"][str(cases["flat"][0])][0]  # said: its size
+
+
+def test_a_file_is_refused_by_its_size_before_it_is_read(tmp_path, monkeypatch):
+    big = tmp_path / "big.yaml"
+    with open(big, "wb") as f:
+        f.truncate(MAX_TEXT_BYTES + 1)
+    reads: list[int] = []
+    real_read = os.read
+
+    def counted(fd: int, n: int) -> bytes:
+        reads.append(n)
+        return real_read(fd, n)
+
+    monkeypatch.setattr(os, "read", counted)
+    with pytest.raises(CampaignError, match=f"has {MAX_TEXT_BYTES + 1} bytes"):
+        read_text(big)
+    assert reads == []  # refused by fstat: nothing read
+    small = tmp_path / "small.yaml"
+    small.write_text("seeds: 1\n")
+    assert read_text(small) == "seeds: 1\n"
+    assert max(reads) <= MAX_TEXT_BYTES + 1  # a bounded read
+
+
+def test_devices_pipes_and_folders_are_refused_without_reading(tmp_path):
+    fifo = tmp_path / "pipe.yaml"
+    os.mkfifo(fifo)  # opening it for reading would wait for a writer
+    for path, words in (
+        (fifo, "not a regular file"),
+        (Path("/dev/zero"), "not a regular file"),
+        (tmp_path, "Is a directory"),
+        (tmp_path / "missing.yaml", "No such file"),
+    ):
+        with pytest.raises(CampaignError, match=words):
+            read_text(path)
+    res = CliRunner().invoke(app, ["validate", str(fifo)])
+    assert res.exit_code == 2, res.output
+    assert "not a regular file" in res.output
+
+
+def test_a_parent_named_by_initial_from_is_size_checked_before_it_is_read(tmp_path):
+    with open(tmp_path / "parent.yaml", "wb") as f:
+        f.truncate(10 * 2**30)
+    child = tmp_path / "child.yaml"
+    child.write_text("seeds: 1\ninitial: {from: {campaign: parent.yaml}}\n")
+    with pytest.raises(CampaignError) as err:
+        load_campaign(child)
+    said = " ".join(str(err.value).split())
+    assert f"{child}:2: initial.from.campaign" in said, said
+    assert "is not a campaign file" in said, said
+
+
+def test_the_node_bound_counts_values_written_and_values_repeated_by_aliases():
+    values = ", ".join(f"{i * 1e-3:g}" for i in range(100))
+    text = f"name: ok\nseeds: 1\nsweep: {{axes: {{eps: [{values}]}}}}\n"
+    assert parse_campaign(text).n_runs == 100
+    # an alias costs the size of what it repeats: 11 anchors of 10 give 10^11 values
+    with pytest.raises(CampaignError, match="through its aliases") as err:
+        parse_campaign(
+            "a0: &a0 [x, x, x, x, x, x, x, x, x, x]\n"
+            + "".join(f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]\n" for i in range(1, 11)),
+            source="bomb.yaml",
+        )
+    assert "bomb.yaml:" in str(err.value)
+    with pytest.raises(CampaignError, match="inside its own anchor"):
+        parse_campaign("a: &a [1, *a]\n", source="self.yaml")
+
+
+def test_a_memory_error_names_the_campaign_file(tmp_path, monkeypatch):
+    path = tmp_path / "c.yaml"
+    path.write_text("seeds: 1\n")
+
+    def exhausted(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(spec_module, "parse_campaign", exhausted)
+    res = CliRunner().invoke(app, ["validate", str(path)])
+    assert res.exit_code == 2, res.output
+    said = " ".join(res.output.split())
+    assert str(path) in said, said
+    assert "not enough memory" in said, said
+    assert "internal error" not in said

@@ -77,8 +77,11 @@ def main() -> None:
     default_out = Path(__file__).with_name("precision_agreement.json")
     ap.add_argument("--out", type=Path, default=default_out)
     args = ap.parse_args()
-    rows = []
+    rows: list[dict] = []
     start = time.time()
+    command = "benchmarks/precision_agreement.py " + " ".join(
+        f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k != "out"
+    )
     for mech in args.mechanics:
         for n in args.sizes:
             for amb in args.values:
@@ -91,19 +94,20 @@ def main() -> None:
                     + " ".join(f"{k}={v:.2e}" for k, v in worst.items()),
                     flush=True,
                 )
-    args.out.write_text(
-        json.dumps(
-            {
-                "what": "float32 vs float64, accelerated backend on the CPU",
-                "command": "benchmarks/precision_agreement.py "
-                + " ".join(f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items()),
-                "machine": platform.processor() or platform.machine(),
-                "total_s": time.time() - start,
-                "runs": rows,
-            },
-            indent=1,
-        )
-    )
+                # written after every row (atomically), so a run cut short keeps its rows
+                record = {
+                    "what": "float32 vs float64, accelerated backend on the CPU",
+                    "command": command,
+                    "machine": platform.processor() or platform.machine(),
+                    "total_s": time.time() - start,
+                    "complete": False,
+                    "runs": rows,
+                }
+                tmp = args.out.with_suffix(".json.tmp")
+                tmp.write_text(json.dumps(record, indent=1))
+                tmp.replace(args.out)
+    record["complete"] = True
+    args.out.write_text(json.dumps(record, indent=1))
 
 
 if __name__ == "__main__":

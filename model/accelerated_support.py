@@ -24,6 +24,27 @@ def jax_installed() -> bool:
     return importlib.util.find_spec("jax") is not None
 
 
+#: the smallest force-balance tolerance a float32 finite-strain run accepts: its Newton solve
+#: stalls near a residual of 9e-7 (benchmarks/float32_newton_floor.json, docs/guide/precision.md)
+FLOAT32_NEWTON_TOL = 1e-6
+
+
+def check_precision(numerics: Numerics) -> None:
+    """Refuse with :class:`nematic_solids.model.errors.ParameterError` what float32 cannot do:
+    finite strain's ``newton_tol`` below :data:`FLOAT32_NEWTON_TOL`."""
+    if (
+        numerics.precision == "float32"
+        and numerics.mechanics == "finite"
+        and numerics.newton_tol < FLOAT32_NEWTON_TOL
+    ):
+        raise ParameterError(
+            "newton_tol",
+            numerics.newton_tol,
+            f"at least {FLOAT32_NEWTON_TOL:g} with precision float32 (its Newton solve stalls "
+            "near a residual of 9e-7, measured: docs/guide/precision.md)",
+        )
+
+
 def check_supported(params: Parameters, numerics: Numerics) -> None:
     """Refuse with :class:`nematic_solids.model.errors.ParameterError` what the accelerated path
     does not do yet: ETDRK2, finite strain with its displacement solved at every stage
@@ -40,3 +61,4 @@ def check_supported(params: Parameters, numerics: Numerics) -> None:
         )
     if numerics.steady_tol > 0:
         raise ParameterError("steady_tol", numerics.steady_tol, "0 in the accelerated backend")
+    check_precision(numerics)

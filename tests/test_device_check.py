@@ -33,6 +33,8 @@ def test_the_differences_are_relative_or_absolute_and_nan_is_never_agreement():
     assert dc.worst(a, b, absolute=False) == pytest.approx(1e-3)
     assert dc.worst(np.array([0.0]), np.array([1e-4]), absolute=True) == pytest.approx(1e-4)
     assert dc.worst(np.array([np.nan]), np.array([np.nan]), absolute=False) == float("inf")
+    # a value near zero (sigma2_S of a uniform S: round-off) is compared by its absolute change
+    assert dc.worst(np.array([1e-33]), np.array([1e-18]), absolute=False) == pytest.approx(1e-9)
 
 
 def test_the_rows_run_batch_8_at_every_size_first():

@@ -98,6 +98,13 @@ def stability(
                 numerics.mechanics,
                 "'linear' (the stability analysis is of the small-strain model)",
             )
+        if numerics.precision != "float64":
+            raise ParameterError(
+                "precision",
+                numerics.precision,
+                "float64 (the stability analysis computes its eigenvalues in float64 only; "
+                "float32 runs on the accelerated backend only, for now)",
+            )
         params = Parameters.from_dict(pvals)
     except (ValueError, TypeError) as exc:
         error(err_console(), exc)

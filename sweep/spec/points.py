@@ -4,7 +4,7 @@ built as :func:`nematic_solids.sweep.expand.make_point` builds them, each distin
 
 from __future__ import annotations
 
-from nematic_solids.model.accelerated_support import check_supported
+from nematic_solids.model.accelerated_support import check_precision, check_supported
 from nematic_solids.model.errors import ParameterError
 
 from ..campaign import AMB, Campaign
@@ -34,6 +34,12 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
             continue
         if point.numerics.precision != "float64":
             _check_float32(checker, campaign, axis_names, seen)
+            try:
+                check_precision(point.numerics)
+            except ParameterError as e:
+                if _report(checker, campaign, e, coords, axis_names, swept, seen):
+                    return
+                continue
         if _needs_samples(checker, campaign, point, coords, seen, axis_names):
             return
         if campaign.execution.backend == "accelerated":

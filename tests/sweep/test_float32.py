@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from nematic_solids.model.accelerated_support import check_precision
 from nematic_solids.model.errors import ParameterError
 from nematic_solids.model.parameters import Numerics, Parameters
 from nematic_solids.model.simulate import run
@@ -182,7 +183,7 @@ def test_a_float32_variant_on_the_compiled_backend_is_refused_at_its_line(tmp_pa
     assert "accelerated backend only, for now" in msg
 
 
-@pytest.mark.slow  # (about a minute: the small-strain batch compiles in both precisions)
+@pytest.mark.slow  # (minutes: the small-strain batch compiles in both precisions, dask starts)
 def test_a_float32_campaign_runs_and_reports_its_verdict_against_float64(tmp_path):
     pytest.importorskip("jax", reason="the accelerated backend needs JAX")
     from typer.testing import CliRunner
@@ -212,3 +213,31 @@ def test_a_float32_campaign_runs_and_reports_its_verdict_against_float64(tmp_pat
     # float32 agrees with float64 far inside the verification's 5 % threshold
     assert set(ds["converged"].values.ravel()) == {CONVERGED}
     assert "sampled points converged" in " ".join(result.output.split())
+
+
+def test_the_stability_analysis_refuses_float32():
+    from typer.testing import CliRunner
+
+    from nematic_solids.sweep.cli import app
+
+    result = CliRunner().invoke(app, ["stability", "--set", "precision=float32"])
+    assert result.exit_code == 2
+    text = " ".join(result.output.split())
+    assert "invalid value for 'precision'" in text
+    assert "eigenvalues in float64 only" in text
+
+
+def test_a_newton_tolerance_below_the_float32_floor_is_refused(tmp_path):
+    # float32's Newton stalls at a residual of 9e-7 (benchmarks/float32_newton_floor.json)
+    with pytest.raises(ParameterError, match="at least 1e-06 with precision float32"):
+        check_precision(Numerics(mechanics="finite", precision="float32", newton_tol=1e-7))
+    check_precision(Numerics(mechanics="finite", precision="float32", newton_tol=1e-6))
+    check_precision(Numerics(mechanics="linear", precision="float32", newton_tol=1e-7))
+    check_precision(Numerics(mechanics="finite", precision="float64", newton_tol=1e-7))
+    pytest.importorskip("jax", reason="the accelerated backend needs JAX")
+    text = campaign_text(
+        numerics=", precision: float32, newton_tol: 1.0e-7",
+        execution=", backend: accelerated, batch: 2",
+    ).replace("mechanics: linear", "mechanics: finite")
+    msg = refusal(tmp_path, text)
+    assert "f32.yaml:4: numerics.newton_tol: got 1e-07" in msg

@@ -65,6 +65,8 @@ class ServicePaths:
     def running(self) -> dict[str, Any] | None:
         """Where the service of this root listens (``service.json``), if one runs: its lock is
         held (a service killed with ``kill -9`` holds none, whatever its file says)."""
+        if not self.folder.is_dir():  # never started here (or the root is not a folder)
+            return None
         if read_lock_holder(self.lock) is None:
             return None
         try:

@@ -124,8 +124,11 @@ return out;
 BLOCKED = ["http://*", "https://*", "ws://*", "wss://*", "ftp://*"]
 
 
-@pytest.fixture(scope="module")
-def browser():
+def headless_chromium(window: str, bypass: str, blocked: list[str] | None = None):
+    """Headless Chromium driven by selenium, with no network: a proxy that is not there for
+    any host but ``bypass``, the requests in the performance log (Chrome's DevTools events),
+    and ``blocked`` URL patterns refused. Skips where Chromium, its driver or selenium is
+    missing. A generator for a fixture to yield from."""
     if CHROMIUM is None or CHROMEDRIVER is None:
         pytest.skip(
             "needs Chromium and its driver (Debian: apt-get install chromium "
@@ -143,21 +146,26 @@ def browser():
         "--no-sandbox",
         "--disable-gpu",
         "--disable-dev-shm-usage",
-        "--window-size=1300,1050",
-        # no network: a proxy that is not there, for any host but this machine
+        f"--window-size={window}",
         "--proxy-server=http://127.0.0.1:9",
-        "--proxy-bypass-list=<-loopback>",
+        f"--proxy-bypass-list={bypass}",
     ):
         options.add_argument(arg)
-    # the performance log holds every request the browser sends (Chrome's DevTools events)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL", "performance": "ALL"})
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
     try:
         driver.execute_cdp_cmd("Network.enable", {})
-        driver.execute_cdp_cmd("Network.setBlockedURLs", {"urls": BLOCKED})
+        if blocked:
+            driver.execute_cdp_cmd("Network.setBlockedURLs", {"urls": blocked})
         yield driver
     finally:
         driver.quit()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    # no network but this machine, every request of a network scheme blocked
+    yield from headless_chromium("1300,1050", "<-loopback>", BLOCKED)
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 from sweep_helpers import kill_group, wait_group_gone
-from test_report_browser import CHROMEDRIVER, CHROMIUM, sent_requests
+from test_report_browser import headless_chromium, sent_requests
 from test_service_process import TINY, invoke, start_service, wait_state
 
 from nematic_solids.sweep.service.paths import ServicePaths
@@ -25,36 +25,8 @@ pytestmark = pytest.mark.browser
 
 @pytest.fixture(scope="module")
 def chromium():
-    if CHROMIUM is None or CHROMEDRIVER is None:
-        pytest.skip(
-            "needs Chromium and its driver (Debian: apt-get install chromium "
-            "chromium-driver; .ci/run installs them)"
-        )
-    webdriver = pytest.importorskip(
-        "selenium.webdriver", reason="needs selenium (a test dependency: pip install selenium)"
-    )
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for arg in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-dev-shm-usage",
-        "--window-size=1300,1000",
-        # no network: a proxy that is not there, for any host but the service (127.0.0.1)
-        "--proxy-server=http://127.0.0.1:9",
-        "--proxy-bypass-list=127.0.0.1",
-    ):
-        options.add_argument(arg)
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL", "performance": "ALL"})
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
-    try:
-        driver.execute_cdp_cmd("Network.enable", {})
-        yield driver
-    finally:
-        driver.quit()
+    # no network: a proxy that is not there, for any host but the service (127.0.0.1)
+    yield from headless_chromium("1300,1000", "127.0.0.1")
 
 
 def wait_js(driver, script: str, ready, timeout: float, what: str):

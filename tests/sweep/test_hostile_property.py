@@ -180,7 +180,7 @@ def test_a_mutated_campaign_is_refused_with_its_line_or_runs(tmp_path_factory, d
 
 
 @pytest.mark.slow
-@settings(COMMON, max_examples=300)
+@settings(COMMON, max_examples=150)
 @given(doc=campaigns())
 def test_many_mutated_campaigns_are_refused_with_their_line_or_run(tmp_path_factory, doc):
-    _check(tmp_path_factory.mktemp("prop"), doc, max_runs=20)
+    _check(tmp_path_factory.mktemp("prop"), doc, max_runs=8)

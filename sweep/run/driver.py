@@ -48,7 +48,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: How long the driver sleeps when no result is ready (seconds).
+#: How long the driver waits at most for a task to end when no result is ready (seconds).
 POLL = 0.2
 #: How long the driver waits for the result of a finished run to arrive (seconds).
 RESULT_WAIT = 10.0
@@ -235,6 +235,7 @@ def _run_campaign(
     tasks: dict[Any, list[tuple[RunSpec, RunTask, int]]] = {}
     attempts: dict[int, int] = {}
     ac = as_completed()
+    ready = threading.Event()  # set as a task ends
     last_manifest = clock()
 
     def next_ready() -> int | None:
@@ -290,6 +291,7 @@ def _run_campaign(
             else:
                 fut = client.submit(execute_run, held[0][1], key=key, pure=False)
             tasks[fut.key] = held
+            fut.add_done_callback(lambda _: ready.set())
             ac.add(fut)
             summary.submitted += len(held)
 
@@ -410,8 +412,9 @@ def _run_campaign(
                     if not handle(fut):
                         going = False
                         break
-            else:
-                time.sleep(POLL)
+            else:  # until a task ends (POLL at most)
+                ready.wait(POLL)
+                ready.clear()
             if going and clock() - watch.last_check >= CHECK_EVERY:
                 try:
                     watch.check()

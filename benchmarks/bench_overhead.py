@@ -13,7 +13,9 @@ run per task (``runs_per_task: 1``), so that the machine's drift falls on all th
 table gives each round's times and the ratios campaign / loop of the same round, then their
 median, min and max. A campaign's time is ``run_campaign`` from its call to its return:
 waiting for the workers, their warm-up (the kernels loaded), every run written (run file and
-record) and every record in the catalogue; the cluster's start and close are apart. The loop's
+record) and every record in the catalogue; its runs' time (``runs_s``) from the submission of
+the first run to the driver's taking of the last record; the cluster's start and close are
+apart. The loop's
 first run (the kernels loaded) is not timed. Work counted: runs, dask tasks (the driver's
 grouping for the cluster's threads), run files and records on disk, catalogue rows. Writes
 ``benchmarks/bench_overhead.json`` (``--out``).
@@ -71,6 +73,26 @@ def plain_loop(expansion: Expansion) -> float:
     return time.perf_counter() - t0
 
 
+class Clock:
+    """The driver's events, timed: the workers warmed, the runs submitted, the last record."""
+
+    def __init__(self) -> None:
+        self.started = self.last = self.warmed_s = 0.0
+
+    def dashboard(self, link: str | None) -> None: ...
+
+    def warming(self) -> None: ...
+
+    def warmed(self, infos: list[dict[str, Any]], seconds: float) -> None:
+        self.warmed_s = seconds
+
+    def started(self, plan: Any, total: int, workers: int) -> None:
+        self.started = time.perf_counter()
+
+    def finished_run(self, run: Any, record: Any) -> None:
+        self.last = time.perf_counter()
+
+
 def driven(expansion: Expansion, workers: int) -> dict[str, Any]:
     """The campaign into a fresh results folder on a fresh local cluster."""
     with tempfile.TemporaryDirectory(prefix="bench-overhead-") as tmp:
@@ -81,7 +103,8 @@ def driven(expansion: Expansion, workers: int) -> dict[str, Any]:
         t0 = time.perf_counter()
         with open_cluster(expansion.campaign.execution) as link:
             t1 = time.perf_counter()
-            summary = run_campaign(expansion, store, link, plan)
+            clock = Clock()
+            summary = run_campaign(expansion, store, link, plan, clock)
             t2 = time.perf_counter()
         t3 = time.perf_counter()
         catalogue = open_catalogue(store.results_root)
@@ -91,6 +114,8 @@ def driven(expansion: Expansion, workers: int) -> dict[str, Any]:
             catalogue.close()
         return {
             "campaign_s": t2 - t1,
+            "warm_up_s": clock.warmed_s,
+            "runs_s": clock.last - clock.started,
             "cluster_start_s": t1 - t0,
             "cluster_close_s": t3 - t2,
             "runs_ok": summary.ok,
@@ -124,6 +149,8 @@ def main() -> None:
         row["one_per_task"] = driven(alone, args.workers)
         row["ratio_grouped"] = row["grouped"]["campaign_s"] / row["loop_s"]
         row["ratio_one_per_task"] = row["one_per_task"]["campaign_s"] / row["loop_s"]
+        row["runs_ratio_grouped"] = row["grouped"]["runs_s"] / row["loop_s"]
+        row["runs_ratio_one_per_task"] = row["one_per_task"]["runs_s"] / row["loop_s"]
         rounds.append(row)
         print(
             f"round {k + 1}: loop {row['loop_s']:.2f} s, grouped "
@@ -139,6 +166,11 @@ def main() -> None:
         "one_per_task_s": spread([r["one_per_task"]["campaign_s"] for r in rounds]),
         "ratio_grouped": spread([r["ratio_grouped"] for r in rounds]),
         "ratio_one_per_task": spread([r["ratio_one_per_task"] for r in rounds]),
+        "grouped_runs_s": spread([r["grouped"]["runs_s"] for r in rounds]),
+        "one_per_task_runs_s": spread([r["one_per_task"]["runs_s"] for r in rounds]),
+        "runs_ratio_grouped": spread([r["runs_ratio_grouped"] for r in rounds]),
+        "runs_ratio_one_per_task": spread([r["runs_ratio_one_per_task"] for r in rounds]),
+        "grouped_warm_up_s": spread([r["grouped"]["warm_up_s"] for r in rounds]),
     }
     n = len(grouped)
     print()

@@ -77,7 +77,7 @@ class Clock:
     """The driver's events, timed: the workers warmed, the runs submitted, the last record."""
 
     def __init__(self) -> None:
-        self.started = self.last = self.warmed_s = 0.0
+        self.t_started = self.t_last = self.warmed_s = 0.0
 
     def dashboard(self, link: str | None) -> None: ...
 
@@ -87,10 +87,10 @@ class Clock:
         self.warmed_s = seconds
 
     def started(self, plan: Any, total: int, workers: int) -> None:
-        self.started = time.perf_counter()
+        self.t_started = time.perf_counter()
 
     def finished_run(self, run: Any, record: Any) -> None:
-        self.last = time.perf_counter()
+        self.t_last = time.perf_counter()
 
 
 def driven(expansion: Expansion, workers: int) -> dict[str, Any]:
@@ -115,7 +115,7 @@ def driven(expansion: Expansion, workers: int) -> dict[str, Any]:
         return {
             "campaign_s": t2 - t1,
             "warm_up_s": clock.warmed_s,
-            "runs_s": clock.last - clock.started,
+            "runs_s": clock.t_last - clock.t_started,
             "cluster_start_s": t1 - t0,
             "cluster_close_s": t3 - t2,
             "runs_ok": summary.ok,

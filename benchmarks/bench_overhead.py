@@ -177,7 +177,7 @@ def main() -> None:
     print(f"{n} runs, 16^2 linear to t = 0.5, {args.workers} workers, {args.rounds} rounds")
     print(f"{'':<28}{'median':>9}{'min':>9}{'max':>9}")
     for key, value in summary.items():
-        unit = "" if key.startswith("ratio") else " s"
+        unit = "" if "ratio" in key else " s"
         print(f"{key + unit:<28}{value['median']:>9.2f}{value['min']:>9.2f}{value['max']:>9.2f}")
     g, o = rounds[-1]["grouped"], rounds[-1]["one_per_task"]
     for name, w in (("grouped", g), ("one per task", o)):

@@ -43,9 +43,10 @@ from .task import (
     unsaved,
 )
 
-#: The predicted run time of one task of grouped runs (seconds): long enough that dask's and
-#: the driver's cost per task (10-30 ms measured on the 2-core VM) is a few per cent, short
-#: enough that a lost worker loses little and the campaign's last tasks end close together.
+#: The predicted run time of one task of grouped runs (seconds): long enough that the cost
+#: of a task (about 60 ms on the 2-core VM: benchmarks/bench_overhead.py, 200 tasks against 20)
+#: is paid rarely, short enough that a lost worker loses little and the campaign's last tasks
+#: end close together.
 TASK_SECONDS = 0.5
 #: The fewest tasks per worker thread that grouping leaves a campaign (so that the last
 #: group to finish is a small part of the campaign).

@@ -37,7 +37,16 @@ def git_commit() -> str:
 def library_versions() -> dict[str, str]:
     """Versions of the libraries a run's numbers depend on (numpy, scipy, py-pde, numba,
     FFTW, pyfftw, xarray, netCDF4, dask), for the files' provenance attributes; a library
-    that is not installed is left out."""
+    that is not installed is left out. Read once per process (:func:`_library_versions`:
+    parsing the packages' metadata took 18 ms a run, measured at 16^2 on the 2-core VM,
+    where the run's own steps took 30 ms)."""
+    return dict(_library_versions())
+
+
+@functools.lru_cache(maxsize=1)
+def _library_versions() -> tuple[tuple[str, str], ...]:
+    """:func:`library_versions`, read once: the versions of the libraries this process loaded
+    do not change while it runs."""
     import importlib.metadata as md
 
     out: dict[str, str] = {}
@@ -58,7 +67,7 @@ def library_versions() -> dict[str, str]:
     fftw = _fftw_version()
     if fftw:
         out["fftw"] = fftw
-    return out
+    return tuple(out.items())
 
 
 @functools.lru_cache(maxsize=1)

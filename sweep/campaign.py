@@ -150,13 +150,13 @@ class ExecutionSpec:
     tls: bool = True
     #: why the campaign opted out of TLS (required with ``security: {tls: false}``)
     insecure_reason: str | None = None
-    #: how a run is computed, "compiled" (each run its own task,
-    #: :func:`~nematic_solids.model.simulate.run`
-    #: with ``numerics.backend``) or "accelerated" (JAX: up to ``batch`` seeds of one point
-    #: per task, on ``device``; :mod:`nematic_solids.sweep.run.batch`)
+    #: how a run is computed, "compiled" (:func:`~nematic_solids.model.simulate.run`, up to
+    #: ``runs_per_task`` runs per task, None: from the cost model; sweep.run.group) or
+    #: "accelerated" (JAX: up to ``batch`` seeds of a point per task, on ``device``; run.batch)
     backend: str = "compiled"
     batch: int = 1
     device: str = "auto"
+    runs_per_task: int | None = None
 
     @property
     def mode(self) -> str:
@@ -169,8 +169,8 @@ class ExecutionSpec:
 #: ``execution.backend``: how runs are computed (not part of a run's identity: the accelerated
 #: backend's results agree with the compiled one's to 1e-10 relative, tested)
 EXECUTION_BACKENDS = ("compiled", "accelerated")
-#: Most seeds in one accelerated task (``execution.batch``).
-MAX_BATCH = 1000
+#: Most seeds in one accelerated task (``execution.batch``), runs in one compiled task.
+MAX_BATCH, MAX_RUNS_PER_TASK = 1000, 10_000
 
 
 def local_worker_count(execution: ExecutionSpec) -> int:

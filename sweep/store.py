@@ -284,8 +284,9 @@ class CampaignStore:
             )
 
     # records
-    def write_record(self, record: Mapping[str, Any]) -> None:
-        atomic_write_text(self.record_path(str(record["run_id"])), dumps(dict(record)))
+    def write_record(self, record: Mapping[str, Any], *, sync_dir: bool = True) -> None:
+        path = self.record_path(str(record["run_id"]))  # sync_dir: as files.atomic_path's
+        atomic_write_text(path, dumps(dict(record)), sync_dir=sync_dir)
 
     def read_record(self, run_id: str) -> Record | None:
         try:

@@ -98,7 +98,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     # the names of fits and figures, and the shape of a campaign they need
     "spec": {"analysis.registry", "analysis.shape", "figures.registry"},
     "catalogue": set(),
-    "run": {"catalogue"},
+    # the cost model sizes the tasks of grouped runs (sweep.run.group)
+    "run": {"catalogue", "cost.model"},
     "outputs": {"spec", "refine", "precision", "catalogue", "analysis.fits_file"},
     "cost": {"outputs", "refine", "precision", "catalogue"},
     "analysis": set(),

@@ -34,10 +34,11 @@ from ..chains import in_chain_order
 from ..errors import ClusterError
 from ..expand import Expansion, RunSpec
 from ..store import CampaignStore, Record
-from .batch import BatchTask, execute_batch, group_runs
+from .batch import BatchTask, execute_batch
 from .clusters import WORKER_LOSSES, open_cluster
 from .clusters import make_cluster as make_cluster  # where it was first
 from .failures import FailureLimit
+from .group import RunGroup, execute_group, planned_stamp, tasks_of
 from .task import UNSAVED, RunTask, check_device, execute_run, failure_record, warm_workers
 from .todo import Plan, parents_not_done, plan_runs
 from .workers import CHECK_EVERY, ClusterLink, Supervisor
@@ -47,7 +48,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: How long the driver sleeps when no result is ready (seconds).
+#: How long the driver waits at most for a task to end when no result is ready (seconds).
 POLL = 0.2
 #: How long the driver waits for the result of a finished run to arrive (seconds).
 RESULT_WAIT = 10.0
@@ -228,14 +229,13 @@ def _run_campaign(
     # position
     chained = expansion.chain_parents if campaign.chain is not None else None
     order = plan.todo if chained is None else in_chain_order(plan.todo, chained)
-    # the accelerated backend: up to execution.batch seeds of one point per task
+    units = tasks_of(expansion, order, chained is not None, max(1, watch.threads))
     batched = campaign.execution.backend == "accelerated" and chained is None
-    size = campaign.execution.batch if batched else 1
-    units = group_runs(order, lambda i: expansion.run(i).point, size)
     queue = list(reversed(units))  # the runs of each task, the next task last
     tasks: dict[Any, list[tuple[RunSpec, RunTask, int]]] = {}
     attempts: dict[int, int] = {}
     ac = as_completed()
+    ready = threading.Event()  # set as a task ends
     last_manifest = clock()
 
     def next_ready() -> int | None:
@@ -284,9 +284,14 @@ def _run_campaign(
             if batched:  # one task for the seeds held
                 one = BatchTask(tuple(t for _, t, _ in held), campaign.execution.device)
                 fut: Any = client.submit(execute_batch, one, key=f"{key}-b{len(held)}", pure=False)
+            elif len(held) > 1:  # one task for the runs held
+                stamps = tuple(planned_stamp(plan.records, run.run_id) for run, _, _ in held)
+                group = RunGroup(tuple(t for _, t, _ in held), stamps)
+                fut = client.submit(execute_group, group, key=f"{key}-g{len(held)}", pure=False)
             else:
                 fut = client.submit(execute_run, held[0][1], key=key, pure=False)
             tasks[fut.key] = held
+            fut.add_done_callback(lambda _: ready.set())
             ac.add(fut)
             summary.submitted += len(held)
 
@@ -407,8 +412,9 @@ def _run_campaign(
                     if not handle(fut):
                         going = False
                         break
-            else:
-                time.sleep(POLL)
+            else:  # until a task ends (POLL at most)
+                ready.wait(POLL)
+                ready.clear()
             if going and clock() - watch.last_check >= CHECK_EVERY:
                 try:
                     watch.check()

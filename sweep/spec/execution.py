@@ -20,6 +20,7 @@ from ..campaign import (
     DEFAULT_WORKER_WAIT,
     EXECUTION_BACKENDS,
     MAX_BATCH,
+    MAX_RUNS_PER_TASK,
     ClusterSpec,
     ExecutionSpec,
 )
@@ -38,6 +39,7 @@ EXECUTION_KEYS = (
     "backend",
     "batch",
     "device",
+    "runs_per_task",
 )
 SECURITY_KEYS = ("tls", "reason")
 #: Most batch jobs of a dask-jobqueue cluster.
@@ -144,6 +146,7 @@ def read_execution(c: Checker, raw: Any, read: Mapping[str, Any]) -> ExecutionSp
         backend=backend,
         batch=batch,
         device=device,
+        runs_per_task=_check_runs_per_task(c, ex, backend),
         workers=workers,
         threads_per_worker=int(tpw),
         memory_limit=None if memory is None else str(memory),
@@ -184,6 +187,27 @@ def _check_backend(c: Checker, ex: Mapping[str, Any], *, local: bool) -> tuple[s
             f"the accelerated backend needs JAX, which is not installed here: {INSTALL}",
         )
     return str(backend), int(batch), str(device)
+
+
+def _check_runs_per_task(c: Checker, ex: Mapping[str, Any], backend: str) -> int | None:
+    """``execution.runs_per_task``: ``auto`` (None, the default: from the cost model) or a
+    number of runs of the compiled backend per task (the accelerated one groups by ``batch``)."""
+    value = ex.get("runs_per_task", "auto")
+    if value == "auto":
+        return None
+    if not is_int(value) or not 1 <= value <= MAX_RUNS_PER_TASK:
+        c.bad(
+            ("execution", "runs_per_task"),
+            value,
+            f"'auto' or an integer from 1 to {MAX_RUNS_PER_TASK} (runs per dask task)",
+        )
+        return None
+    if backend == "accelerated":
+        c.add(
+            ("execution", "runs_per_task"),
+            "the accelerated backend groups the seeds of a point by 'batch', not 'runs_per_task'",
+        )
+    return int(value)
 
 
 def _check_security(c: Checker, raw: Any) -> tuple[bool, str | None]:

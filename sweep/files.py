@@ -241,6 +241,18 @@ def atomic_to_netcdf(
     return size
 
 
+def netcdf_lock() -> Any:
+    """The process's lock around netCDF-C / HDF5 calls: xarray's own
+    (``NETCDF4_PYTHON_LOCK``), which its netCDF4 backend takes for every read and write.
+    HDF5 is built without thread safety, so a file opened with ``netCDF4.Dataset`` directly
+    is opened, used and closed under it: a run file written by a worker thread of an
+    in-process cluster while the driver's catalogue thread reads a phase.nc crashed the
+    process (a segmentation fault) without it. Not re-entrant: no xarray call inside."""
+    from xarray.backends.netCDF4_ import NETCDF4_PYTHON_LOCK
+
+    return NETCDF4_PYTHON_LOCK
+
+
 class _DeferredWrites:
     """xarray's array writer, holding every data write until all variables are defined.
 
@@ -273,17 +285,20 @@ def _write_netcdf(
     import netCDF4
     from xarray.backends import NetCDF4DataStore
 
-    # the file opened here, not by xarray's file manager (whose cache and lock cost a fifth of
-    # the write): the store only writes into it
-    nc = netCDF4.Dataset(path, mode="w", format="NETCDF4")
-    try:
-        writer = _DeferredWrites()
-        ds.dump_to_store(NetCDF4DataStore(nc), writer=writer, encoding=encoding)
-        for name, group in groups.items():
-            group.dump_to_store(NetCDF4DataStore(nc.createGroup(name)), writer=writer)
-        writer.flush()
-    finally:
-        nc.close()
+    # the file opened here, not by xarray's file manager (whose cache costs a fifth of the
+    # write): the store only writes into it, the whole write under the process's netCDF lock
+    # once (the stores take none: lock=False)
+    with netcdf_lock():
+        nc = netCDF4.Dataset(path, mode="w", format="NETCDF4")
+        try:
+            writer = _DeferredWrites()
+            ds.dump_to_store(NetCDF4DataStore(nc, lock=False), writer=writer, encoding=encoding)
+            for name, group in groups.items():
+                store = NetCDF4DataStore(nc.createGroup(name), lock=False)
+                group.dump_to_store(store, writer=writer)
+            writer.flush()
+        finally:
+            nc.close()
 
 
 # --------------------------------------------------------------------------- file checks
@@ -309,7 +324,7 @@ def netcdf_problem(path: Path, variables: Iterable[str] = ()) -> str | None:
     import netCDF4
 
     try:
-        with netCDF4.Dataset(path, "r") as nc:
+        with netcdf_lock(), netCDF4.Dataset(path, "r") as nc:
             missing = [v for v in variables if v not in nc.variables]
     except FileNotFoundError:
         return "the file is missing"

@@ -41,6 +41,7 @@ from .files import (
     dumps,
     file_sha256,
     file_stamp,
+    netcdf_lock,
     netcdf_problem,
     now_iso,
     probe_write,
@@ -240,8 +241,7 @@ class CampaignStore:
 
     def in_progress(self) -> dict[str, dict[str, Any]]:
         """The runs with a rolling checkpoint: run_id -> ``t`` (the time it holds, NaN if
-        unreadable), ``checkpoint`` (its path) and ``written`` (its mtime, ISO 8601). Reads
-        the attributes alone (one header per run in progress)."""
+        unreadable), ``checkpoint`` (its path) and ``written`` (its mtime): headers only."""
         import netCDF4
 
         out: dict[str, dict[str, Any]] = {}
@@ -252,7 +252,7 @@ class CampaignStore:
         for path in entries:
             try:
                 written = _dt.datetime.fromtimestamp(path.stat().st_mtime, _dt.UTC)
-                with netCDF4.Dataset(path, "r") as nc:
+                with netcdf_lock(), netCDF4.Dataset(path, "r") as nc:
                     t = float(nc.getncattr("t"))
             except FileNotFoundError:  # the run ended meanwhile
                 continue

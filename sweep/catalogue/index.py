@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..files import netcdf_lock
 from ..store import CAMPAIGN_COPY, MANIFEST, PHASE, RUNS, CampaignStore
 from .catalogue import Catalogue
 from .rows import RunRow, row_from_record
@@ -68,7 +69,7 @@ def campaign_hash(folder: Path) -> str | None:
     try:
         import netCDF4
 
-        with netCDF4.Dataset(folder / PHASE, "r") as nc:
+        with netcdf_lock(), netCDF4.Dataset(folder / PHASE, "r") as nc:
             text = str(nc.getncattr("campaign_yaml"))
     except (OSError, AttributeError, KeyError):
         return None

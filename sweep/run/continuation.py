@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from nematic_solids.model.parameters import Numerics, Parameters
 
 from ..errors import StorageError
-from ..files import atomic_to_netcdf
+from ..files import atomic_to_netcdf, netcdf_lock
 from ..store import CampaignStore
 
 if TYPE_CHECKING:
@@ -218,7 +218,7 @@ def has_group(path: Path, group: str) -> bool:
     import netCDF4
 
     try:
-        with netCDF4.Dataset(path) as ds:
+        with netcdf_lock(), netCDF4.Dataset(path) as ds:
             return group in ds.groups
     except OSError:
         return False

@@ -131,6 +131,8 @@ def test_max_failures_stops_the_campaign_with_exit_3(tmp_path):
         t_final=2.0,
         workers=1,
     )
+    # one run per task, so that the window counts runs (short runs share a task by default)
+    path.write_text(path.read_text().replace("{workers: 1}", "{workers: 1, runs_per_task: 1}"))
     results = tmp_path / "results"
     result = invoke("run", path, "--results", results, "--max-failures", "0", "--no-figures")
     out = flat(result.output)

@@ -164,7 +164,13 @@ def test_a_driver_that_loses_its_cluster_gives_up_in_bounded_time(tmp_path, lose
     assert took < 60, (took, text)
     if lose == "scheduler":  # dask cancels the runs in flight at once
         assert rc == 1, text
-        assert f"the connection to the dask scheduler at {address} is lost" in text, text
+        # the lost scheduler is named: by the driver, or, when every task it had was cancelled
+        # before it saw the connection go (short runs share a task: one may hold all that
+        # remain), by the cancellations' reason
+        assert (
+            f"the connection to the dask scheduler at {address} is lost" in text
+            or "scheduler-connection-lost" in text
+        ), text
         assert (
             "were cancelled by dask (the scheduler or cluster went away); rerun the same "
             "command to do them" in text

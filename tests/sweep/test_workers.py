@@ -85,8 +85,12 @@ def campaign(folder: Path, name: str) -> Path:
     path = write_campaign(
         folder, name=name, values="[0.1, 0.15, 0.2]", seeds=2, t_final=3.0, workers=1
     )
+    # one run per task, so that the cluster is lost with runs in flight (short runs would
+    # share a task, and all end at once)
     path.write_text(
-        path.read_text().replace("execution: {workers: 1}", "execution: {give_up_after: 8}")
+        path.read_text().replace(
+            "execution: {workers: 1}", "execution: {give_up_after: 8, runs_per_task: 1}"
+        )
     )
     return path
 

@@ -4,6 +4,7 @@ phase.nc, fits, figures, verification and report; ``--dry-run`` and ``--detach``
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import shutil
 import sys
@@ -344,17 +345,21 @@ def run(
                     events.close()
         except (ClusterError, StoreError, CampaignError) as e:
             error(err, e)
-            if fresh:
-                discard_unused(store)
-            raise typer.Exit(EXIT_BAD_INPUT) from None
+            refused = True
         except OSError as e:  # the folder itself (cleaning up, discarding, adopting)
             error(err, storage_message(store, e))
-            if fresh:
-                discard_unused(store)
-            raise typer.Exit(EXIT_BAD_INPUT) from None
+            refused = True
         except KeyboardInterrupt:  # before any run was submitted
             err.print("[yellow]interrupted[/]; rerun the same command to resume")
             raise typer.Exit(EXIT_INTERRUPTED) from None
+        else:
+            refused = False
+        if refused:
+            # outside the handler: the failure's traceback no longer holds the cluster's
+            # objects (a batch job's credential files, removed when it is collected)
+            if fresh:
+                discard_unused(store)
+            raise typer.Exit(EXIT_BAD_INPUT)
         if summary is not None and summary.storage_error is not None:
             kept = [str(rec.get("saved_to")) for _, rec in summary.unsaved if rec.get("saved_to")]
             err.print(
@@ -469,6 +474,7 @@ def discard_unused(store: CampaignStore) -> None:
     """Remove the campaign folder that this command made for a campaign it then refused
     (e.g. its parent's runs are not done, or its cluster did not start): its lock file and
     campaign copy, never a run's file (the folder is kept if ``runs/`` holds anything)."""
+    gc.collect()  # objects of a cluster that did not start remove their files in it first
     with contextlib.suppress(OSError):
         if store.runs_dir.is_dir() and any(store.runs_dir.iterdir()):
             return

@@ -1,0 +1,210 @@
+"""The model interface: what a model declares so that the campaign manager can run it.
+
+A model is an object with the attributes and methods of :class:`Model`. The campaign
+manager's core (spec, run, store, outputs, refine, precision, verify, report) reads a model's
+settings, observables and capabilities from here and runs a point through
+:meth:`Model.run`; it names no parameter or observable of any model.
+
+- :class:`Setting`: one input of a run (a physical parameter or a numerical choice), with its
+  type, default, long name and units, and whether a campaign may sweep it or give it a time
+  protocol.
+- :class:`Observable`: one scalar of a run that phase.nc keeps per point, declared once with
+  its metadata and the rules that aggregate it: the seed mean (arithmetic or geometric), how a
+  change between two runs is measured (absolute or relative) and whether it classifies the
+  pattern.
+- :class:`Capabilities`: the optional parts of the machinery a model supports (exact
+  continuation, protocols, batched runs, a cost model, a resolution rule, memory per run).
+- :class:`RunRequest` and :class:`RunOutcome`: one point and seed in, the run's dataset and
+  its end state out.
+
+Models are found by name through the entry point group :data:`ENTRY_POINT_GROUP`
+(:mod:`nematic_solids.sweep.models.registry`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+#: The entry point group under which packages register models (``name = "module:object"``).
+ENTRY_POINT_GROUP = "nematic_solids.models"
+#: The model a campaign runs when it names none (``model:`` absent): this paper's.
+DEFAULT_MODEL = "nematic"
+
+SETTING_KINDS = ("parameter", "numerics")
+SEED_MEANS = ("arithmetic", "geometric")
+CHANGES = ("absolute", "relative")
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One input of a run.
+
+    ``kind`` is ``"parameter"`` (physics: part of a point's coordinates) or ``"numerics"``
+    (how the run is computed). ``type`` is the Python type a campaign value must have
+    (``float`` accepts ints); ``choices`` lists the allowed words of a ``str`` setting."""
+
+    name: str
+    kind: Literal["parameter", "numerics"]
+    type: type
+    default: Any
+    long_name: str
+    units: str = "1"
+    #: whether a campaign may give it several values (an axis of the phase diagram)
+    sweepable: bool = True
+    #: whether it may follow a time protocol within a run (a ramp, a sine, steps)
+    protocol: bool = False
+    #: the symbol that figures and reports print (plain text or LaTeX between $...$)
+    symbol: str | None = None
+    choices: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.kind not in SETTING_KINDS:
+            raise ValueError(f"setting {self.name}: kind {self.kind!r} not in {SETTING_KINDS}")
+        if self.choices and self.type is not str:
+            raise ValueError(f"setting {self.name}: choices need type str")
+
+    def accepts(self, value: Any) -> bool:
+        """Whether ``value`` has this setting's type (bools are not numbers; ints are
+        floats), and is one of its choices if it has any."""
+        if isinstance(value, bool) and self.type is not bool:
+            return False
+        wanted: tuple[type, ...] = (int, float) if self.type is float else (self.type,)
+        ok = isinstance(value, wanted)
+        return ok and (not self.choices or value in self.choices)
+
+
+@dataclass(frozen=True)
+class Observable:
+    """One scalar of a run that phase.nc keeps per point, and how it is aggregated.
+
+    ``scalar`` names the run file's scalar it is read from (often ``name`` itself, or its
+    value at the end, ``<name>_final``). ``seed_mean`` is the mean over seeds: ``"geometric"``
+    for quantities that span decades between seeds (a pattern's variance near onset),
+    ``"arithmetic"`` otherwise. ``change`` is how two runs' values are compared (verification,
+    convergence): ``"relative"`` (|a - b| / |b|) or ``"absolute"`` (|a - b|). ``classifies``
+    marks the observable whose seed mean decides the pattern class (:meth:`Model.classify`
+    reads it)."""
+
+    name: str
+    scalar: str
+    long_name: str
+    units: str = "1"
+    seed_mean: Literal["arithmetic", "geometric"] = "arithmetic"
+    change: Literal["absolute", "relative"] = "relative"
+    classifies: bool = False
+    symbol: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.seed_mean not in SEED_MEANS:
+            raise ValueError(f"observable {self.name}: seed_mean not in {SEED_MEANS}")
+        if self.change not in CHANGES:
+            raise ValueError(f"observable {self.name}: change not in {CHANGES}")
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """The optional parts of the machinery a model supports. A campaign section that needs a
+    capability the model lacks is refused at validation, naming the model and the section."""
+
+    #: a longer run continues a shorter one's end state, with results equal to a run that
+    #: never stopped (otherwise a longer run starts again from t = 0)
+    exact_continuation: bool = False
+    #: settings may follow a time protocol (those whose :attr:`Setting.protocol` is true)
+    protocols: bool = False
+    #: a run may start from another run's end state (chains, ``initial.from``)
+    start_from_state: bool = False
+    #: several seeds of one point run as one batch (:meth:`Model.run_batch`)
+    batched: bool = False
+    #: :meth:`Model.cost_seconds` predicts a run's wall time
+    cost_model: bool = False
+    #: :meth:`Model.resolution_rule` gives the resolution a point needs
+    resolution_rule: bool = False
+    #: :meth:`Model.memory_bytes` bounds a run's memory
+    memory_per_run: bool = False
+    #: the precisions its runs can compute in (the first is the default)
+    precisions: tuple[str, ...] = ("float64",)
+
+
+@dataclass(frozen=True)
+class RunRequest:
+    """One run: a point (its parameter and numerics values, every setting given) and a seed.
+
+    ``start`` is the model's own end state of an earlier run to continue (exact
+    continuation: the same point, a shorter ``t_final``) and ``initial`` a state to begin from
+    at t = 0 instead of the seeded initial condition (chains, ``initial.from``); both are
+    objects the same model returned. ``checkpoint`` is called with the run's state at the
+    times ``checkpoint_every`` (simulated time) asks for; ``progress`` with the simulated
+    time reached."""
+
+    parameters: Mapping[str, Any]
+    numerics: Mapping[str, Any]
+    seed: int
+    start: Any | None = None
+    initial: Any | None = None
+    checkpoint: Callable[[Any], None] | None = None
+    checkpoint_every: float = float("inf")
+    progress: Callable[[float], None] | None = None
+
+
+@dataclass
+class RunOutcome:
+    """A run's result: its dataset (time series, snapshots, the observables' scalars as
+    attributes or 0-d variables) and its end state (None where the run failed or the model
+    keeps none)."""
+
+    dataset: xr.Dataset
+    end_state: Any | None = None
+    #: messages a user should see in the run's record (e.g. a continuation that is not exact)
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+
+@runtime_checkable
+class Model(Protocol):
+    """What the campaign manager needs of a model (see the module docstring)."""
+
+    #: the name a campaign gives (``model: NAME``) and the entry point's name
+    name: str
+    long_name: str
+    settings: tuple[Setting, ...]
+    observables: tuple[Observable, ...]
+    capabilities: Capabilities
+
+    def run(self, request: RunRequest) -> RunOutcome:
+        """Run one point and seed; raise an exception whose message says why a run fails."""
+        ...
+
+    def classify(self, values: Mapping[str, float]) -> str:
+        """The pattern class of a point from its observables' seed means (``values``)."""
+        ...
+
+
+def setting(model: Model, name: str) -> Setting:
+    """``model``'s setting ``name`` (KeyError with the known names otherwise)."""
+    for s in model.settings:
+        if s.name == name:
+            return s
+    raise KeyError(f"model {model.name} has no setting {name!r}; it has {setting_names(model)}")
+
+
+def setting_names(model: Model, kind: str | None = None) -> list[str]:
+    """The names of ``model``'s settings (of one ``kind`` if given), in declaration order."""
+    return [s.name for s in model.settings if kind is None or s.kind == kind]
+
+
+def observable(model: Model, name: str) -> Observable:
+    """``model``'s observable ``name`` (KeyError with the known names otherwise)."""
+    for o in model.observables:
+        if o.name == name:
+            return o
+    known = [o.name for o in model.observables]
+    raise KeyError(f"model {model.name} has no observable {name!r}; it has {known}")
+
+
+def defaults(model: Model, kind: str) -> dict[str, Any]:
+    """The default value of each of ``model``'s settings of ``kind``."""
+    return {s.name: s.default for s in model.settings if s.kind == kind}

@@ -1,5 +1,7 @@
 """A campaign's page kept in memory and brought up to date incrementally: :class:`CampaignView`
-is built once from the campaign's folder (the run records are the source of truth), then
+is built once, from the campaign's layout (its copy of the campaign file, its rounds) and the
+state of its runs (the catalogue's, in one query, for the runs done ok; the record file of a
+run that failed or that the catalogue lacks, the run records being the source of truth), then
 follows the catalogue's change counter (``runs.seq``): on each request it asks the catalogue
 which runs of the campaign changed since the ``seq`` it has seen
 (:meth:`~nematic_solids.sweep.catalogue.Catalogue.campaign_changes`, an indexed query whose
@@ -21,11 +23,13 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from ..catalogue import Catalogue
 from ..observables import OBSERVABLES
@@ -132,7 +136,7 @@ class CampaignView:
             self._head = not_started(self.name)
             return
         expansion = expansion_of(campaign, self.store)
-        records = self.store.scan(save=False)
+        records = self._records(seq)
         by_index: dict[tuple[int, ...], _Point] = {}
         for run in expansion:
             point = by_index.get(run.point.index)
@@ -147,7 +151,7 @@ class CampaignView:
             point.seeds.append(int(run.seed))
             self._runs[run.run_id] = _Run(point.index, int(run.seed))
             self._counts["pending"] += 1
-            self._apply(run.run_id, records.get(run.run_id), seq, coords=run.coords)
+            self._apply(run.run_id, records(run.run_id), seq, coords=run.coords)
         for point in self._points:
             self._summarise(point)
         self._head = {
@@ -159,6 +163,36 @@ class CampaignView:
             "confidence": CONFIDENCE,
             "total": len(expansion),
         }
+
+    def _records(self, seq: int) -> Callable[[str], Record | None]:
+        """How the build reads a run's record: the catalogue's state of every run of the
+        campaign in one query (a run done ok needs no more), its record file for a run that
+        failed (the reason's detail and time) or that the catalogue lacks (a driver that ran
+        without it); no record file: not run. Without a catalogue: every record file."""
+        scalar = OBSERVABLES[SHOWN][0]
+        try:
+            states = self.catalogue.campaign_states(self.name, scalar) if seq else {}
+        except Exception:  # noqa: BLE001 - the folder is the truth
+            log.warning("catalogue not readable: %s read from its folder", self.name)
+            states = {}
+        try:
+            with os.scandir(self.store.runs_dir) as entries:
+                on_disk = {
+                    e.name[:-5] for e in entries if e.name.endswith(".json") and e.name[0] != "."
+                }
+        except OSError:
+            on_disk = set()
+
+        def record(run_id: str) -> Record | None:
+            if run_id not in on_disk:
+                return None
+            state = states.get(run_id)
+            if state is None or state[0] != "ok":
+                return self.store.read_record(run_id)
+            status, wall, value = state
+            return cast(Record, {"status": status, "wall_time": wall, "scalars": {scalar: value}})
+
+        return record
 
     def _apply(
         self, run_id: str, record: Record | None, seq: int, coords: dict[str, Any] | None = None

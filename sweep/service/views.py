@@ -8,6 +8,7 @@ keeps them up to date."""
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from collections.abc import Mapping
@@ -71,18 +72,23 @@ def expansion_of(campaign: Campaign, store: CampaignStore) -> Expansion:
     return expansion_for(campaign, store)
 
 
+@functools.cache
+def _t_quantile(dof: int) -> float:
+    from scipy.stats import t as student
+
+    return float(student.ppf(0.5 + CONFIDENCE / 2, dof))
+
+
 def interval(values: list[float]) -> tuple[float, float, float]:
     """Mean and the ends of its :data:`CONFIDENCE` Student-t interval (NaN ends below two
     values)."""
-    from scipy.stats import t as student
-
     x = np.asarray([v for v in values if math.isfinite(v)], dtype=float)
     if x.size == 0:
         return math.nan, math.nan, math.nan
     mean = float(x.mean())
     if x.size < 2:
         return mean, math.nan, math.nan
-    half = float(student.ppf(0.5 + CONFIDENCE / 2, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+    half = _t_quantile(int(x.size - 1)) * float(x.std(ddof=1)) / math.sqrt(x.size)
     return mean, mean - half, mean + half
 
 
@@ -153,19 +159,22 @@ def point_key(coords: Mapping[str, Any]) -> str:
 
 def point_marks(store: CampaignStore) -> dict[str, dict[str, Any]]:
     """What the phase diagram marks on each point, by :func:`point_key`: ``round``, the round
-    of rounds (``refine.json``, ``precision.json``) that first ran it; ``decision``, its seeds'
+    that added it (``refine.json``: adaptive refinement) or that last ran seeds at it
+    (``precision.json``: seeds by precision); ``decision``, its seeds'
     decision under a precision; ``verdict``, its verification verdict (``verify.nc``:
     "CHANGED" where a variant changed it, "converged" where every variant agreed, else "not
     compared") with ``verdicts``, one text per variant."""
     out: dict[str, dict[str, Any]] = {}
-    plan = _plan_file(store, "refine.json") or _plan_file(store, "precision.json")
+    refine = _plan_file(store, "refine.json")
+    plan = refine or _plan_file(store, "precision.json")
+    which = min if refine is not None else max  # the round that added it, or seeded it last
     for rnd in (plan or {}).get("rounds") or []:
         if not isinstance(rnd, dict) or not isinstance(rnd.get("round"), int):
             continue
         for run in rnd.get("runs") or []:
             if isinstance(run, dict) and isinstance(run.get("coords"), dict):
                 mark = out.setdefault(point_key(run["coords"]), {})
-                mark["round"] = min(mark.get("round", rnd["round"]), rnd["round"])
+                mark["round"] = which(mark.get("round", rnd["round"]), rnd["round"])
     for p in (plan or {}).get("points") or []:
         if isinstance(p, dict) and isinstance(p.get("coords"), dict) and p.get("decision"):
             out.setdefault(point_key(p["coords"]), {})["decision"] = str(p["decision"])

@@ -149,7 +149,7 @@
     const rounds = pts.some((p) => p.round > 0), verdicts = pts.some((p) => p.verdict);
     el("text", {x: L, y: 14}, svg).textContent = (ydim ?
       `colour: seed mean of ${data.shown} (${fmt(cmin)} to ${fmt(cmax)}); grey: no run done; red ring: failures` :
-      "grey: no run done; red ring: failures") + (rounds ? "; rN: added in round N" : "") +
+      "grey: no run done; red ring: failures") + (rounds ? "; rN: its round N (added, or seeded last)" : "") +
       (verdicts ? "; \u2713/\u2717: verified, converged/changed" : "");
     pts.forEach((p) => {
       const key = where(p.coords);

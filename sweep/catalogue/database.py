@@ -335,9 +335,9 @@ class Database:
         with self.engine.begin() as conn:
             for name in sorted({r.campaign for r in rows}):
                 self.ensure_campaign(conn, name, (folders or {}).get(name, name))
+            first = next_seqs(conn, len(by_run))  # the counter's row lock: writers in turn
             ids = list(by_run)
-            before = _summary_state(conn, ids)
-            first = next_seqs(conn, len(by_run))
+            before = _summary_state(conn, ids)  # read under it: no other writer in between
             run_rows = [{**r.run_values(), "seq": first + k} for k, r in enumerate(by_run.values())]
             columns = [c for c in run_rows[0] if c != "run_id"]
             _upsert(conn, t.runs, run_rows, ["run_id"], columns)

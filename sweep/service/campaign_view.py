@@ -26,10 +26,9 @@ import math
 import os
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 from ..catalogue import Catalogue
 from ..observables import OBSERVABLES
@@ -136,22 +135,31 @@ class CampaignView:
             self._head = not_started(self.name)
             return
         expansion = expansion_of(campaign, self.store)
-        records = self._records(seq)
+        states, on_disk = self._states(seq)
         by_index: dict[tuple[int, ...], _Point] = {}
+        counts, cost = self._counts, 0.0
         for run in expansion:
-            point = by_index.get(run.point.index)
+            rid, seed, where = run.run_id, int(run.seed), run.point
+            point = by_index.get(where.index)
             if point is None:
-                point = _Point(
-                    len(self._points), {k: plain(v) for k, v in run.point.coords.items()}
-                )
+                point = _Point(len(self._points), {k: plain(v) for k, v in where.coords.items()})
                 point.seq = seq
-                by_index[run.point.index] = point
+                by_index[where.index] = point
                 self._points.append(point)
-            point.run_ids.append(run.run_id)
-            point.seeds.append(int(run.seed))
-            self._runs[run.run_id] = _Run(point.index, int(run.seed))
-            self._counts["pending"] += 1
-            self._apply(run.run_id, records(run.run_id), seq, coords=run.coords)
+            point.run_ids.append(rid)
+            point.seeds.append(seed)
+            state = states.get(rid) if rid in on_disk else None
+            if state is not None and state[0] == "ok":  # what the catalogue holds is enough
+                wall = _finite(state[1]) or 0.0
+                self._runs[rid] = _Run(point.index, seed, "ok", _finite(state[2]), wall)
+                counts["ok"] += 1
+                cost += wall
+                continue
+            self._runs[rid] = _Run(point.index, seed)
+            counts["pending"] += 1
+            if rid in on_disk:  # failed, or not in the catalogue: its record
+                self._apply(rid, self.store.read_record(rid), seq, coords=run.coords)
+        self._cost += cost
         for point in self._points:
             self._summarise(point)
         self._head = {
@@ -164,13 +172,15 @@ class CampaignView:
             "total": len(expansion),
         }
 
-    def _records(self, seq: int) -> Callable[[str], Record | None]:
-        """How the build reads a run's record: the catalogue's state of every run of the
-        campaign in one query (a run done ok needs no more), its record file for a run that
-        failed (the reason's detail and time) or that the catalogue lacks (a driver that ran
-        without it); no record file: not run. Without a catalogue: every record file."""
-        scalar = OBSERVABLES[SHOWN][0]
+    def _states(
+        self, seq: int
+    ) -> tuple[dict[str, tuple[str, float | None, float | None]], set[str]]:
+        """What the build reads of the runs: the catalogue's state of every run of the
+        campaign in one query (status, wall time, the shown value: enough for a run done ok),
+        and the run ids with a record file (none: not run). A run that failed, or that the
+        catalogue lacks (a driver that ran without it), is read from its record file."""
         try:
+            scalar = OBSERVABLES[SHOWN][0]
             states = self.catalogue.campaign_states(self.name, scalar) if seq else {}
         except Exception:  # noqa: BLE001 - the folder is the truth
             log.warning("catalogue not readable: %s read from its folder", self.name)
@@ -182,17 +192,7 @@ class CampaignView:
                 }
         except OSError:
             on_disk = set()
-
-        def record(run_id: str) -> Record | None:
-            if run_id not in on_disk:
-                return None
-            state = states.get(run_id)
-            if state is None or state[0] != "ok":
-                return self.store.read_record(run_id)
-            status, wall, value = state
-            return cast(Record, {"status": status, "wall_time": wall, "scalars": {scalar: value}})
-
-        return record
+        return states, on_disk
 
     def _apply(
         self, run_id: str, record: Record | None, seq: int, coords: dict[str, Any] | None = None

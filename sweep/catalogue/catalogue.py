@@ -101,10 +101,44 @@ class Catalogue:
         parameter, numeric and scalar by name."""
         return frame(self._rows(select_runs(campaign, where, status), campaign))
 
-    def changes(self, since_seq: int = 0) -> pd.DataFrame:
-        """The runs inserted or updated after ``since_seq``, in ``seq`` order (the table of
-        :meth:`runs`; its last ``seq`` is where the next poll starts)."""
-        return frame(self._rows(select_runs(since_seq=since_seq), None))
+    def changes(self, since_seq: int = 0, limit: int | None = None) -> pd.DataFrame:
+        """The runs inserted or updated after ``since_seq``, in ``seq`` order, ``limit`` at
+        most (the table of :meth:`runs`; its last ``seq`` is where the next poll starts)."""
+        stmt = select_runs(since_seq=since_seq)
+        return frame(self._rows(stmt if limit is None else stmt.limit(limit), None))
+
+    def campaign_changes(
+        self, campaign: str, since_seq: int, upto_seq: int
+    ) -> list[tuple[str, int]]:
+        """``(run_id, seq)`` of the runs of ``campaign`` inserted or updated after
+        ``since_seq`` and up to ``upto_seq`` (both ends from :meth:`last_seq`: what a reader
+        saw before and now), in ``seq`` order; through the ``seq`` index, so its cost follows
+        the number of changes, not of runs."""
+        r, m = t.runs, t.campaign_runs
+        stmt = (
+            sa.select(r.c.run_id, r.c.seq)
+            .join(m, m.c.run_id == r.c.run_id)
+            .where(m.c.campaign == campaign, r.c.seq > since_seq, r.c.seq <= upto_seq)
+            .order_by(r.c.seq)
+        )
+        with self.db.engine.connect() as conn:
+            return [(str(rid), int(seq)) for rid, seq in conn.execute(stmt)]
+
+    def campaign_states(
+        self, campaign: str, scalar: str
+    ) -> dict[str, tuple[str, float | None, float | None]]:
+        """Every run of ``campaign``: run_id -> (status, wall time, the value of scalar
+        ``scalar`` or None), in one query (what a campaign's page needs of each run)."""
+        r, m, v = t.runs, t.campaign_runs, t.run_values
+        value = sa.and_(v.c.run_id == r.c.run_id, v.c.space == "scalars", v.c.key == scalar)
+        stmt = (
+            sa.select(r.c.run_id, r.c.status, r.c.wall_time, v.c.num_value)
+            .join(m, m.c.run_id == r.c.run_id)
+            .outerjoin(v, value)
+            .where(m.c.campaign == campaign)
+        )
+        with self.db.engine.connect() as conn:
+            return {str(rid): (str(st), wall, x) for rid, st, wall, x in conn.execute(stmt)}
 
     def campaigns(self) -> pd.DataFrame:
         """One row per campaign: ``name``, ``folder``, ``campaign_sha256``, ``first_seen``,

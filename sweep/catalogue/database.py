@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -185,6 +185,70 @@ def is_corrupt(e: BaseException) -> bool:
     return any(text in str(getattr(e, "orig", e)) for text in CORRUPT)
 
 
+#: a campaign's counts of ``campaign_summary`` that one membership adds to
+COUNTS = ("runs", "ok", "failed", "made", "reused")
+
+
+def _counted(status: str | None, origin: str) -> dict[str, int]:
+    """What one run (its status) held by a campaign (its origin there) adds to its counts."""
+    return {
+        "runs": 1,
+        "ok": int(status == "ok"),
+        "failed": int(status != "ok"),
+        "made": int(origin == "made"),
+        "reused": int(origin == "reused"),
+    }
+
+
+def _summary_state(
+    conn: Connection, run_ids: Sequence[str]
+) -> tuple[dict[str, str], dict[tuple[str, str], str]]:
+    """The runs' statuses and memberships (campaign, run) -> origin before a write."""
+    r, m = t.runs, t.campaign_runs
+    status: dict[str, str] = {}
+    members: dict[tuple[str, str], str] = {}
+    for start in range(0, len(run_ids), CHUNK):
+        chunk = list(run_ids[start : start + CHUNK])
+        for rid, st in conn.execute(sa.select(r.c.run_id, r.c.status).where(r.c.run_id.in_(chunk))):
+            status[rid] = st
+        rows = conn.execute(
+            sa.select(m.c.campaign, m.c.run_id, m.c.origin).where(m.c.run_id.in_(chunk))
+        )
+        for name, rid, origin in rows:
+            members[(name, rid)] = origin
+    return status, members
+
+
+def _update_summary(
+    conn: Connection,
+    before: tuple[dict[str, str], dict[tuple[str, str], str]],
+    status: Mapping[str, str],
+    origins: Mapping[tuple[str, str], str],
+    seq: int,
+) -> None:
+    """Move each campaign's counts by what the write changed: every membership of a written
+    run (in any campaign: a reused run's new status counts wherever it is held) less what it
+    counted before; ``seq``: the write's last."""
+    old_status, old_members = before
+    delta: dict[str, dict[str, int]] = {}
+    for key in set(old_members) | set(origins):
+        name, rid = key
+        d = delta.setdefault(name, dict.fromkeys(COUNTS, 0))
+        if key in old_members:
+            for k, v in _counted(old_status.get(rid), old_members[key]).items():
+                d[k] -= v
+        new_status = status.get(rid, old_status.get(rid))
+        for k, v in _counted(new_status, origins.get(key, old_members.get(key, ""))).items():
+            d[k] += v
+    s = t.campaign_summary
+    for name in sorted(delta):
+        conn.execute(
+            s.update()
+            .where(s.c.campaign == name)
+            .values(**{k: s.c[k] + v for k, v in delta[name].items()}, seq=seq)
+        )
+
+
 class Database:
     """The connection to one catalogue: migrated on construction, written in batches.
     ``readonly``: not migrated, an SQLite file opened immutable (:func:`make_engine`); a
@@ -257,6 +321,8 @@ class Database:
         }
         update = ["folder", "last_seen"] + (["campaign_sha256"] if sha256 else [])
         _upsert(conn, t.campaigns, [row], ["name"], update)
+        zero = {k: 0 for k in ("runs", "ok", "failed", "made", "reused", "seq")}
+        _upsert(conn, t.campaign_summary, [{"campaign": name, **zero}], ["campaign"], None)
 
     def write(self, rows: Iterable[RunRow], folders: dict[str, str] | None = None) -> int:
         """Record ``rows`` in one transaction (campaigns created as needed, ``folders``:
@@ -269,11 +335,12 @@ class Database:
         with self.engine.begin() as conn:
             for name in sorted({r.campaign for r in rows}):
                 self.ensure_campaign(conn, name, (folders or {}).get(name, name))
-            first = next_seqs(conn, len(by_run))
+            first = next_seqs(conn, len(by_run))  # the counter's row lock: writers in turn
+            ids = list(by_run)
+            before = _summary_state(conn, ids)  # read under it: no other writer in between
             run_rows = [{**r.run_values(), "seq": first + k} for k, r in enumerate(by_run.values())]
             columns = [c for c in run_rows[0] if c != "run_id"]
             _upsert(conn, t.runs, run_rows, ["run_id"], columns)
-            ids = list(by_run)
             for start in range(0, len(ids), CHUNK):
                 conn.execute(
                     t.run_values.delete().where(
@@ -298,6 +365,9 @@ class Database:
                 ["campaign", "run_id"],
                 ["origin", "coords"],
             )
+            status = {r.run_id: r.status for r in by_run.values()}
+            origins = {key: str(m["origin"]) for key, m in members.items()}
+            _update_summary(conn, before, status, origins, first + len(by_run) - 1)
             parents = {
                 (r.run_id, kind, parent): {
                     "run_id": r.run_id,

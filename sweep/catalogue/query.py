@@ -217,7 +217,28 @@ def frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
 
 
 def campaign_counts() -> sa.Select[Any]:
-    """Each campaign with its counts of runs: all, ok, failed, made, reused."""
+    """Each campaign with its counts of runs (all, ok, failed, made, reused), read from
+    ``campaign_summary``: one row per campaign, whatever the number of runs."""
+    c, s = t.campaigns, t.campaign_summary
+    return (
+        sa.select(
+            c.c.name,
+            c.c.folder,
+            c.c.campaign_sha256,
+            c.c.first_seen,
+            c.c.last_seen,
+            *(
+                sa.func.coalesce(s.c[k], 0).label(k)
+                for k in ("runs", "ok", "failed", "made", "reused")
+            ),
+        )
+        .select_from(c.outerjoin(s, s.c.campaign == c.c.name))
+        .order_by(c.c.name)
+    )
+
+
+def recount_campaigns() -> sa.Select[Any]:
+    """:func:`campaign_counts` counted from every run (what ``campaign_summary`` must hold)."""
     c, m, r = t.campaigns, t.campaign_runs, t.runs
     ok = sa.func.sum(sa.case((r.c.status == "ok", 1), else_=0))
     failed = sa.func.sum(sa.case((r.c.status != "ok", 1), else_=0))

@@ -19,6 +19,10 @@ alike (JSON operators differ between the two; a key/value table does not).
   (``coords``) and its ``origin``: "made" (the campaign ran it) or "reused" (another
   campaign's file, used in place).
 - ``lineage``: ``(run_id, parent_run_id, kind)``, ``kind`` one of :data:`LINEAGE_KINDS`.
+- ``campaign_summary``: each campaign's counts of runs (``runs``, ``ok``, ``failed``,
+  ``made``, ``reused``) and the ``seq`` of its latest change, kept by the writer in the
+  transaction that records the runs (:meth:`Database.write`), so the campaign list reads one
+  row per campaign whatever the number of runs.
 
 Changing a table means a new migration in ``migrations/versions/`` and the same change here.
 """
@@ -110,6 +114,19 @@ run_values = sa.Table(
 )
 
 
+campaign_summary = sa.Table(
+    "campaign_summary",
+    metadata,
+    sa.Column("campaign", sa.String(255), sa.ForeignKey("campaigns.name"), primary_key=True),
+    sa.Column("runs", sa.BigInteger, nullable=False),
+    sa.Column("ok", sa.BigInteger, nullable=False),
+    sa.Column("failed", sa.BigInteger, nullable=False),
+    sa.Column("made", sa.BigInteger, nullable=False),
+    sa.Column("reused", sa.BigInteger, nullable=False),
+    sa.Column("seq", sa.BigInteger, nullable=False),
+)
+
+
 class _Tables:
     """The tables by name, as ``t.runs`` (what the catalogue's modules import as ``t``)."""
 
@@ -119,6 +136,7 @@ class _Tables:
     campaign_runs = campaign_runs
     lineage = lineage
     run_values = run_values
+    campaign_summary = campaign_summary
     SPACES = SPACES
 
 

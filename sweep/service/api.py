@@ -23,6 +23,7 @@ from sse_starlette.sse import EventSourceResponse
 from ..catalogue import Catalogue
 from ..errors import CampaignError
 from ..files import now_iso
+from .campaign_view import CampaignViews
 from .dashboard import campaign_page, index_page
 from .queue import Entry, QueueStore
 from .runner import Changes, Runner
@@ -36,7 +37,6 @@ from .security import (
 )
 from .views import (
     NotFound,
-    campaign_detail,
     campaign_names,
     campaign_store,
     not_started,
@@ -70,6 +70,11 @@ class ServiceContext:
     changes: Changes = field(default_factory=Changes)
     runner: Runner | None = None
     started: str = field(default_factory=now_iso)
+    #: the campaign pages kept up to date (a few at most: :data:`.campaign_view.MAX_VIEWS`)
+    views: CampaignViews = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.views = CampaignViews(self.root, self.catalogue)
 
     def seq(self) -> int:
         """The catalogue's latest change (0 where it cannot be read)."""
@@ -288,24 +293,38 @@ def create_app(context: ServiceContext) -> FastAPI:
         }
 
     @app.get("/api/campaigns/{name}")
-    def campaign(name: str) -> dict[str, Any]:
-        """A campaign's page: its points (seed means with intervals), failures with reasons,
-        cost so far against the estimate made at launch, rounds and verification."""
+    def campaign(name: str, since: int | None = None) -> dict[str, Any]:
+        """A campaign's page: its points (seed means with intervals, each marked with its
+        round, decision and verification verdict), failures with reasons, cost so far
+        against the estimate made at launch, rounds and verification. With ``since`` (the
+        ``seq`` of an earlier answer): ``delta`` true and only the points and failures
+        changed after it (``cleared``: failures since resolved); the whole page (``delta``
+        false) when the campaign's layout changed after it."""
         entries = queued(name)
         try:
-            out = campaign_detail(campaign_store(ctx.root, name))
+            out = ctx.views.get(name).page(since)
         except NotFound as e:
             if not entries:  # nor in the queue
                 raise _not_found(e) from None
-            out = not_started(name)
+            out = {**not_started(name), "delta": False, "seq": ctx.seq(), "cleared": []}
         last = max(entries, key=lambda e: e.id) if entries else None
         out["queue"] = last.public() if last is not None else None
         out["estimate"] = last.estimate if last is not None else None
         runner = ctx.runner
         progress = runner.progress if runner is not None else None
         out["progress"] = progress.as_dict() if progress and progress.name == name else None
-        out["seq"] = ctx.seq()
         return out
+
+    @app.get("/api/campaigns/{name}/points/{index}")
+    def point(name: str, index: int) -> dict[str, Any]:
+        """The runs of one point of a campaign's page (``index``: the point's): run id,
+        seed, status and the shown observable's value."""
+        try:
+            return {"index": index, "runs": ctx.views.get(name).point_runs(index)}
+        except NotFound as e:
+            raise _not_found(e) from None
+        except IndexError:
+            raise HTTPException(404, f"no point {index} in campaign {name}") from None
 
     @app.get("/api/campaigns/{name}/runs/{run_id}")
     def run(name: str, run_id: str) -> dict[str, Any]:
@@ -321,7 +340,7 @@ def create_app(context: ServiceContext) -> FastAPI:
         earlier answer; 0: all), at most ``limit`` in ``seq`` order, and the campaigns they
         belong to; ``complete`` false when more follow (ask again from ``seq``)."""
         limit = max(1, min(limit, CHANGES_LIMIT))
-        frame = ctx.catalogue.changes(since)
+        frame = ctx.catalogue.changes(since, limit + 1)  # one more: whether more follow
         rows = frame.head(limit).to_dict("records") if len(frame) else []
         runs: list[dict[str, Any]] = [
             {

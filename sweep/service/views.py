@@ -1,11 +1,14 @@
 """What the API and the dashboard show of a campaign, read from its results folder (the run
-records are the source of truth): its points with the seed mean of the shown observable and
-its 95 % interval (Student t), its failures with their reasons, its cost so far, its rounds
-(``refine.json``, ``precision.json``) and verification verdicts (``verify.nc``), and one run's
-time series. Every name that reaches the disk is checked first (:func:`campaign_store`)."""
+records are the source of truth): the seed mean of the shown observable with its 95 % interval
+(Student t), a failure with its reason, the rounds (``refine.json``, ``precision.json``), the
+marks of the phase diagram (each point's round, decision and verification verdict) and the
+verification's summary (``verify.nc``), and one run's time series. Every name that reaches the
+disk is checked first (:func:`campaign_store`). :mod:`.campaign_view` puts them together and
+keeps them up to date."""
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from collections.abc import Mapping
@@ -17,7 +20,6 @@ import numpy as np
 from ..campaign import Campaign
 from ..errors import CampaignError
 from ..expand import Expansion
-from ..observables import OBSERVABLES
 from ..store import CampaignStore, Record
 from .security import inside, safe_name
 
@@ -70,18 +72,23 @@ def expansion_of(campaign: Campaign, store: CampaignStore) -> Expansion:
     return expansion_for(campaign, store)
 
 
-def _interval(values: list[float]) -> tuple[float, float, float]:
-    """Mean and the ends of its :data:`CONFIDENCE` Student-t interval (NaN ends below two
-    values)."""
+@functools.cache
+def _t_quantile(dof: int) -> float:
     from scipy.stats import t as student
 
+    return float(student.ppf(0.5 + CONFIDENCE / 2, dof))
+
+
+def interval(values: list[float]) -> tuple[float, float, float]:
+    """Mean and the ends of its :data:`CONFIDENCE` Student-t interval (NaN ends below two
+    values)."""
     x = np.asarray([v for v in values if math.isfinite(v)], dtype=float)
     if x.size == 0:
         return math.nan, math.nan, math.nan
     mean = float(x.mean())
     if x.size < 2:
         return mean, math.nan, math.nan
-    half = float(student.ppf(0.5 + CONFIDENCE / 2, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+    half = _t_quantile(int(x.size - 1)) * float(x.std(ddof=1)) / math.sqrt(x.size)
     return mean, mean - half, mean + half
 
 
@@ -89,7 +96,7 @@ def _finite(x: Any) -> float | None:
     return float(x) if isinstance(x, (int, float)) and math.isfinite(x) else None
 
 
-def _plain(value: Any) -> Any:
+def plain(value: Any) -> Any:
     if isinstance(value, (np.floating, float)):
         return _finite(float(value))
     if isinstance(value, np.integer):
@@ -97,67 +104,16 @@ def _plain(value: Any) -> Any:
     return value if isinstance(value, (int, str, bool)) or value is None else str(value)
 
 
-def points(expansion: Expansion, records: Mapping[str, Record]) -> list[dict[str, Any]]:
-    """One entry per grid point: its swept values, its runs (id, seed, status, value), the
-    seed mean of :data:`SHOWN` and its interval, counts by status."""
-    scalar = OBSERVABLES[SHOWN][0]
-    by_point: dict[tuple[int, ...], dict[str, Any]] = {}
-    for run in expansion:
-        entry = by_point.setdefault(
-            run.point.index,
-            {
-                "coords": {k: _plain(v) for k, v in run.point.coords.items()},
-                "runs": [],
-                "ok": 0,
-                "failed": 0,
-                "pending": 0,
-            },
-        )
-        rec = records.get(run.run_id)
-        status = "pending" if rec is None else str(rec.get("status"))
-        value = None if rec is None else _finite((rec.get("scalars") or {}).get(scalar))
-        entry["runs"].append(
-            {"run_id": run.run_id, "seed": run.seed, "status": status, "value": value}
-        )
-        entry[status if status in ("ok", "failed") else "pending"] += 1
-    out = []
-    for entry in by_point.values():
-        values = [
-            r["value"] for r in entry["runs"] if r["status"] == "ok" and r["value"] is not None
-        ]
-        mean, low, high = _interval(values)
-        entry.update(mean=_finite(mean), low=_finite(low), high=_finite(high), n=len(values))
-        out.append(entry)
-    return out
-
-
-def failures(expansion: Expansion, records: Mapping[str, Record]) -> list[dict[str, Any]]:
-    out = []
-    for run in expansion:
-        rec = records.get(run.run_id)
-        if rec is None or rec.get("status") == "ok":
-            continue
-        detail = str(rec.get("detail") or "").strip().splitlines()
-        out.append(
-            {
-                "run_id": run.run_id,
-                "coords": {k: _plain(v) for k, v in run.coords.items()},
-                "reason": str(rec.get("reason") or "unknown"),
-                "t_failed": _finite(rec.get("t_failed")),
-                "detail": detail[-1] if detail else "",
-            }
-        )
-    return out
-
-
-def cost_so_far(expansion: Expansion, records: Mapping[str, Record]) -> dict[str, Any]:
-    times = [
-        float(t)
-        for run in expansion
-        if (rec := records.get(run.run_id)) is not None
-        and (t := _finite(rec.get("wall_time"))) is not None
-    ]
-    return {"runs": len(times), "cpu_seconds": float(sum(times))}
+def failure_entry(run_id: str, coords: Mapping[str, Any], record: Record) -> dict[str, Any]:
+    """A failed run as the page lists it: where, the reason, when, the detail's last line."""
+    detail = str(record.get("detail") or "").strip().splitlines()
+    return {
+        "run_id": run_id,
+        "coords": {k: plain(v) for k, v in coords.items()},
+        "reason": str(record.get("reason") or "unknown"),
+        "t_failed": _finite(record.get("t_failed")),
+        "detail": detail[-1] if detail else "",
+    }
 
 
 def _plan_file(store: CampaignStore, name: str) -> dict[str, Any] | None:
@@ -190,6 +146,72 @@ def rounds(store: CampaignStore) -> dict[str, Any] | None:
     }
 
 
+def point_key(coords: Mapping[str, Any]) -> str:
+    """A point's swept values as one text, numbers to 12 significant digits (the same point
+    read from the expansion, a plan file or verify.nc gives the same key)."""
+    parts = []
+    for k in sorted(coords):
+        v = coords[k]
+        number = isinstance(v, (int, float, np.number)) and not isinstance(v, bool)
+        parts.append(f"{k}={float(v):.12g}" if number else f"{k}={v}")
+    return ",".join(parts)
+
+
+def point_marks(store: CampaignStore) -> dict[str, dict[str, Any]]:
+    """What the phase diagram marks on each point, by :func:`point_key`: ``round``, the round
+    that added it (``refine.json``: adaptive refinement) or that last ran seeds at it
+    (``precision.json``: seeds by precision); ``decision``, its seeds'
+    decision under a precision; ``verdict``, its verification verdict (``verify.nc``:
+    "CHANGED" where a variant changed it, "converged" where every variant agreed, else "not
+    compared") with ``verdicts``, one text per variant."""
+    out: dict[str, dict[str, Any]] = {}
+    refine = _plan_file(store, "refine.json")
+    plan = refine or _plan_file(store, "precision.json")
+    which = min if refine is not None else max  # the round that added it, or seeded it last
+    for rnd in (plan or {}).get("rounds") or []:
+        if not isinstance(rnd, dict) or not isinstance(rnd.get("round"), int):
+            continue
+        for run in rnd.get("runs") or []:
+            if isinstance(run, dict) and isinstance(run.get("coords"), dict):
+                mark = out.setdefault(point_key(run["coords"]), {})
+                mark["round"] = which(mark.get("round", rnd["round"]), rnd["round"])
+    for p in (plan or {}).get("points") or []:
+        if isinstance(p, dict) and isinstance(p.get("coords"), dict) and p.get("decision"):
+            out.setdefault(point_key(p["coords"]), {})["decision"] = str(p["decision"])
+    _verdict_marks(store, out)
+    return out
+
+
+def _verdict_marks(store: CampaignStore, out: dict[str, dict[str, Any]]) -> None:
+    from ..verify.summary import CHANGED, CONVERGED, VERDICT_TEXT, read_verify
+
+    try:
+        ds = read_verify(store.root)
+    except (OSError, ValueError):
+        return
+    if ds is None or "converged" not in ds or "point" not in ds.dims:
+        return
+    axes = [str(c) for c in ds.coords if ds[c].dims == ("point",) and str(c) != "point"]
+    axes = [a for a in axes if np.issubdtype(ds[a].dtype, np.number)]
+    names = [str(v) for v in ds["variant_name"].values]
+    for p in range(ds.sizes["point"]):
+        codes = [int(c) for c in np.asarray(ds["converged"].values[p])]
+        verdict = (
+            "CHANGED"
+            if CHANGED in codes
+            else "converged"
+            if codes and all(c == CONVERGED for c in codes)
+            else "not compared"
+        )
+        key = point_key({a: float(ds[a].values[p]) for a in axes})
+        out.setdefault(key, {}).update(
+            verdict=verdict,
+            verdicts=[
+                f"{n}: {VERDICT_TEXT.get(c, '?')}" for n, c in zip(names, codes, strict=True)
+            ],
+        )
+
+
 def verification(store: CampaignStore) -> dict[str, Any] | None:
     """The verification's summary and verdicts (``verify.nc``), or ``None``."""
     from ..verify.summary import read_verify, summary_line, verdict_rows
@@ -218,32 +240,6 @@ def not_started(name: str) -> dict[str, Any]:
         "cost": {"runs": 0, "cpu_seconds": 0.0},
         "rounds": None,
         "verification": None,
-    }
-
-
-def campaign_detail(store: CampaignStore) -> dict[str, Any]:
-    """Everything the campaign's page shows but the queue's view of it."""
-    campaign = load_stored(store)
-    if campaign is None:
-        return not_started(store.root.name)
-    records = store.scan(save=False)
-    expansion = expansion_of(campaign, store)
-    pts = points(expansion, records)
-    counts = {s: sum(p[s] for p in pts) for s in ("ok", "failed", "pending")}
-    return {
-        "name": campaign.name,
-        "readable": True,
-        "description": campaign.description,
-        "dims": [d.name for d in campaign.dims],
-        "shown": SHOWN,
-        "confidence": CONFIDENCE,
-        "total": len(expansion),
-        "counts": counts,
-        "points": pts,
-        "failures": failures(expansion, records),
-        "cost": cost_so_far(expansion, records),
-        "rounds": rounds(store),
-        "verification": verification(store),
     }
 
 

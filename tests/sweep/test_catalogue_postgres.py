@@ -247,3 +247,77 @@ def test_the_recorder_writes_runs_arriving_every_50_ms(url, tmp_path):
     assert sorted(runs["run_id"]) == [f"run{i:03d}" for i in range(n)]
     assert sorted(runs["seq"]) == list(range(1, n + 1))
     cat.close()
+
+
+def test_concurrent_writers_keep_the_campaign_counts(url, tmp_path):
+    """Two writers record the same runs in turn into different campaigns (one reuses the
+    other's), their statuses changing: the counts kept by the writers equal a recount."""
+    from nematic_solids.sweep.catalogue.query import campaign_counts, recount_campaigns
+
+    errors: list[BaseException] = []
+
+    def write(campaign: str, origin: str, offset: int) -> None:
+        try:
+            cat = open_catalogue(url, root=tmp_path)
+            for k in range(15):
+                cat.record(
+                    RunRow(
+                        run_id=f"r{(i + k) % 12}",
+                        campaign=campaign,
+                        origin=origin,
+                        status="ok" if (i + k + offset) % 3 else "failed",
+                    )
+                    for i in range(6)
+                )
+            cat.close()
+        except BaseException as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [
+        threading.Thread(target=write, args=("a", "made", 0)),
+        threading.Thread(target=write, args=("b", "reused", 1)),
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    cat = open_catalogue(url, root=tmp_path)
+    with cat.engine.connect() as conn:
+        kept = [dict(r._mapping) for r in conn.execute(campaign_counts())]
+        counted = [dict(r._mapping) for r in conn.execute(recount_campaigns())]
+    assert kept == counted
+    assert [r["runs"] for r in kept] == [12, 12]
+    cat.close()
+
+
+def test_a_campaign_page_follows_the_changes_on_postgresql(url, tmp_path, monkeypatch):
+    """The service's campaign page on a PostgreSQL catalogue: updates after a cursor, and
+    runs recorded every 50 ms all shown (the SQLite tests of test_service_deltas.py)."""
+    pytest.importorskip("fastapi")
+    import test_service_deltas as deltas
+
+    (tmp_path / "one").mkdir()
+    (tmp_path / "two").mkdir()
+    monkeypatch.setenv(location.ENV, url)
+    deltas.test_a_run_recorded_after_a_cursor_is_in_the_update_after_it_and_no_other(
+        tmp_path / "one"
+    )
+    monkeypatch.setenv(location.ENV, url.rsplit("/", 1)[0] + "/" + _fresh(url, "two"))
+    deltas.test_runs_recorded_every_50_ms_are_all_shown_none_lost(tmp_path / "two")
+
+
+def _fresh(url: str, suffix: str) -> str:
+    """A new empty database beside ``url``'s; returns its name."""
+    import psycopg
+    import sqlalchemy as sa
+
+    parsed = sa.engine.make_url(url)
+    name = f"{parsed.database}_{suffix}"
+    with psycopg.connect(
+        f"host={parsed.host} port={parsed.port} user={parsed.username} dbname=postgres",
+        autocommit=True,
+    ) as conn:
+        conn.execute(f'DROP DATABASE IF EXISTS "{name}"')
+        conn.execute(f'CREATE DATABASE "{name}"')
+    return name

@@ -246,6 +246,7 @@ def test_the_openapi_description_lists_the_endpoints(client):
         "/api/campaigns",
         "/api/campaigns/{name}",
         "/api/campaigns/{name}/runs/{run_id}",
+        "/api/campaigns/{name}/points/{index}",
         "/api/changes",
         "/api/events",
         "/api/service",
@@ -262,8 +263,10 @@ def test_a_campaign_shows_its_points_failures_and_runs(copy_of_small):
     assert data["total"] == len(copy_of_small.ids) == 6
     assert data["counts"] == {"ok": 4, "failed": 2, "pending": 0}
     for p in data["points"]:
+        runs = c.get(f"/api/campaigns/small/points/{p['index']}", headers=AUTH).json()["runs"]
+        assert len(runs) == 2
         values = [
-            recs[r["run_id"]]["scalars"]["sigma2_S_final"] for r in p["runs"] if r["status"] == "ok"
+            recs[r["run_id"]]["scalars"]["sigma2_S_final"] for r in runs if r["status"] == "ok"
         ]
         if not values:
             assert p["mean"] is None

@@ -1,8 +1,9 @@
 """The service's dashboard in headless Chromium (selenium, Debian's chromium and
 chromium-driver), against a real ``nematic serve``: the page opened with the token (which
 becomes a cookie), a campaign's page that fills in as runs finish without a reload (pushed by
-the event stream), a click on a point that shows its runs and a run's sigma2_S(t), and no
-request that leaves the service (no CDN). Marked ``browser``; skipped, with the reason, where
+the event stream; a run recorded later reaches it as an update after its cursor), a click on
+a point that shows its runs and a run's sigma2_S(t), and no request that leaves the service
+(no CDN). Marked ``browser``; skipped, with the reason, where
 Chromium, its driver or selenium is missing. A screenshot of the page is saved in the test's
 temporary folder."""
 
@@ -91,6 +92,26 @@ def test_the_dashboard_fills_in_without_reload_and_a_click_shows_a_run(chromium,
         assert seen == ["4", "done"]
         assert chromium.execute_script("return window.notReloaded") is True
         assert wait_state(root, second, ("done",), 60)["state"] == "done"
+        # a run recorded again (as any driver of the root records one): the page gets an
+        # update after its cursor, not the whole page, and shows the same
+        from nematic_solids.sweep.catalogue import open_catalogue
+        from nematic_solids.sweep.catalogue.index import record_rows
+        from nematic_solids.sweep.store import CampaignStore
+
+        updates = int(chromium.execute_script("return document.body.dataset.updates || '0'"))
+        store = CampaignStore(root, "tiny")
+        rid = next(iter(store.scan(save=False)))
+        with open_catalogue(root) as catalogue:
+            catalogue.record(list(record_rows(store, [rid])), {"tiny": "tiny"})
+        wait_js(
+            chromium,
+            "return Number(document.body.dataset.updates || 0)",
+            lambda v: v > updates,
+            30,
+            "an update after the page's cursor",
+        )
+        assert chromium.execute_script("return document.body.dataset.ok") == "4"
+        assert chromium.execute_script("return window.notReloaded") is True
         # a click on a point shows its runs and one run's series
         point = chromium.find_elements(By.CSS_SELECTOR, "#phase circle.point")[1]
         key = point.get_attribute("data-key")

@@ -3,7 +3,7 @@
 "use strict";
 (function () {
   const body = document.body;
-  const page = body.dataset.page;
+  const kind = body.dataset.page;
   const name = body.dataset.campaign;
   const csrf = document.querySelector('meta[name="nematic-csrf"]').content;
   const main = document.getElementById("main");
@@ -94,16 +94,37 @@
     if (parent) { parent.appendChild(e); }
     return e;
   }
+  // the dims beyond the diagram's two: one selector each (the slice shown)
+  const slice = {};
+  function sliceOf(data) {
+    const extra = data.dims.slice(2);
+    for (const d of extra) {
+      const values = [...new Set(data.points.map((p) => p.coords[d]))].sort((a, b) => a < b ? -1 : a > b ? 1 : 0);
+      if (!values.some((v) => v === slice[d])) { slice[d] = values[0]; }
+    }
+    return extra;
+  }
+  function selectors(data) {
+    const extra = sliceOf(data);
+    if (!extra.length) { return ""; }
+    return `<p id="slice">` + extra.map((d) => {
+      const values = [...new Set(data.points.map((p) => p.coords[d]))].sort((a, b) => a < b ? -1 : a > b ? 1 : 0);
+      return `<label>${esc(d)} <select data-dim="${esc(d)}">` + values.map((v, i) =>
+        `<option value="${i}"${v === slice[d] ? " selected" : ""}>${esc(fmt(v))}</option>`).join("") + "</select></label> ";
+    }).join("") + `<span class="muted">(the diagram shows one value of each other axis)</span></p>`;
+  }
+  const GLYPH = {converged: "\u2713", CHANGED: "\u2717", "not compared": "?"};
   function phaseDiagram(data) {
     const W = 580, H = 420, L = 84, R = 20, T = 24, B = 46;
     const svg = el("svg", {width: W, height: H, id: "phase", role: "img"});
     const dims = data.dims;
-    const pts = data.points;
+    const extra = sliceOf(data);
+    const pts = data.points.filter((p) => extra.every((d) => p.coords[d] === slice[d]));
     const xdim = dims[0], ydim = dims.length > 1 ? dims[1] : null;
     const xs = scale(pts.map((p) => p.coords[xdim]), L, W - R);
-    const means = pts.map((p) => p.mean).filter(Number.isFinite);
+    const means = data.points.map((p) => p.mean).filter(Number.isFinite);
     const cmin = Math.min(...means), cmax = Math.max(...means);
-    let ys, value;
+    let ys;
     if (ydim) {
       ys = scale(pts.map((p) => p.coords[ydim]), H - B, T);
     } else {
@@ -120,14 +141,17 @@
     const ylabel = ydim ? ydim + (ys.log ? " (log)" : "") : `${data.shown} (seed mean, ${Math.round(100 * data.confidence)} % interval)`;
     el("text", {x: 14, y: (T + H - B) / 2, transform: `rotate(-90 14 ${(T + H - B) / 2})`,
       "text-anchor": "middle"}, svg).textContent = ylabel;
-    const yticks = ydim ? ys.ticks : (means.length ? [Math.min(...means), Math.max(...means)] : []);
+    const shownMeans = pts.map((p) => p.mean).filter(Number.isFinite);
+    const yticks = ydim ? ys.ticks : (shownMeans.length ? [Math.min(...shownMeans), Math.max(...shownMeans)] : []);
     for (const v of yticks) {
       el("text", {x: L - 4, y: ys.f(v) + 4, "text-anchor": "end"}, svg).textContent = fmt(v);
     }
-    el("text", {x: L, y: 14}, svg).textContent = ydim ?
+    const rounds = pts.some((p) => p.round > 0), verdicts = pts.some((p) => p.verdict);
+    el("text", {x: L, y: 14}, svg).textContent = (ydim ?
       `colour: seed mean of ${data.shown} (${fmt(cmin)} to ${fmt(cmax)}); grey: no run done; red ring: failures` :
-      "grey: no run done; red ring: failures";
-    pts.forEach((p, i) => {
+      "grey: no run done; red ring: failures") + (rounds ? "; rN: its round N (added, or seeded last)" : "") +
+      (verdicts ? "; \u2713/\u2717: verified, converged/changed" : "");
+    pts.forEach((p) => {
       const key = where(p.coords);
       const x = xs.f(p.coords[xdim]);
       let y;
@@ -138,15 +162,29 @@
         }
       }
       const t = cmax > cmin ? (p.mean - cmin) / (cmax - cmin) : 0.5;
-      const c = el("circle", {cx: x, cy: y, r: ydim ? 9 : 6,
+      const r = ydim ? 9 : 6;
+      const c = el("circle", {cx: x, cy: y, r,
         fill: p.n ? (ydim ? colour(t) : "#36c") : "#ddd",
         stroke: p.failed ? "#d00" : "#555", "stroke-width": p.failed ? 2.5 : 1,
-        class: "point" + (key === selected ? " selected" : ""), "data-index": i,
+        class: "point" + (key === selected ? " selected" : ""), "data-index": p.index,
         "data-key": key}, svg);
       const title = el("title", {}, c);
       title.textContent = `${key}: ${data.shown} = ${fmt(p.mean)} [${fmt(p.low)}, ${fmt(p.high)}], ` +
-        `${p.ok} ok, ${p.failed} failed, ${p.pending} pending`;
-      c.addEventListener("click", () => { selected = key; showPoint(data, p); draw(data); });
+        `${p.ok} ok, ${p.failed} failed, ${p.pending} pending` +
+        (p.round !== undefined ? `; round ${p.round}` : "") + (p.decision ? `; seeds: ${p.decision}` : "") +
+        (p.verdicts ? `; verification: ${p.verdicts.join(", ")}` : "");
+      c.addEventListener("click", () => { selected = key; draw(data); });
+      if (p.round > 0) {
+        el("text", {x: x - r - 2, y: y - r + 2, "text-anchor": "end", class: "round",
+          "data-round": p.round}, svg).textContent = `r${p.round}`;
+      }
+      if (p.verdict) {
+        const g = el("text", {x: x + r + 1, y: y - r + 4, class: "verdict " +
+          (p.verdict === "CHANGED" ? "changed" : p.verdict === "converged" ? "converged" : "open"),
+          "data-verdict": p.verdict}, svg);
+        g.textContent = GLYPH[p.verdict] || "?";
+        el("title", {}, g).textContent = `verification: ${(p.verdicts || []).join(", ")}`;
+      }
     });
     return svg;
   }
@@ -185,17 +223,20 @@
     box.appendChild(seriesPlot(run));
   }
 
-  function showPoint(data, p) {
+  async function showPoint(data, p) {
     const box = document.getElementById("point");
     if (!box) { return; }
-    const rows = p.runs.map((r) => `<tr><td>${esc(r.seed)}</td><td class="state ${r.status === "ok" ? "done" : esc(r.status)}">${esc(r.status)}</td>` +
+    const runs = (await api(`/api/campaigns/${encodeURIComponent(name)}/points/${p.index}`)).runs;
+    const rows = runs.map((r) => `<tr><td>${esc(r.seed)}</td><td class="state ${r.status === "ok" ? "done" : esc(r.status)}">${esc(r.status)}</td>` +
       `<td>${fmt(r.value)}</td><td>${r.status === "pending" ? "" : `<span class="run-link" data-run="${esc(r.run_id)}">${esc(r.run_id)}</span>`}</td></tr>`).join("");
+    const marks = (p.round !== undefined ? `<p>round ${esc(p.round)}${p.decision ? `, seeds: ${esc(p.decision)}` : ""}</p>` : "") +
+      (p.verdicts ? `<p>verification: ${esc(p.verdicts.join(", "))}</p>` : "");
     box.innerHTML = `<h3>${esc(where(p.coords))}</h3><p>${data.shown}: ${fmt(p.mean)} ` +
-      `[${fmt(p.low)}, ${fmt(p.high)}] over ${p.n} seed(s)</p><table><tr><th>seed</th><th>status</th>` +
+      `[${fmt(p.low)}, ${fmt(p.high)}] over ${p.n} seed(s)</p>${marks}<table><tr><th>seed</th><th>status</th>` +
       `<th>${data.shown}</th><th>run</th></tr>${rows}</table><div id="run"></div>`;
     for (const a of box.querySelectorAll(".run-link")) { a.onclick = () => showRun(a.dataset.run); }
-    const first = p.runs.find((r) => r.status !== "pending");
-    if (first) { showRun(shownRun && p.runs.some((r) => r.run_id === shownRun) ? shownRun : first.run_id); }
+    const first = runs.find((r) => r.status !== "pending");
+    if (first) { showRun(shownRun && runs.some((r) => r.run_id === shownRun) ? shownRun : first.run_id); }
   }
 
   function draw(data) {
@@ -231,15 +272,27 @@
       `<p id="progress">${bar(c.ok, c.failed, data.total)} ${p ? `<span class="muted">${esc(p.phase)}</span>` : ""} ` +
       `<span class="muted">${esc(q.message || "")}</span></p>` +
       `<p id="cost">cost so far: ${secs(cost.cpu_seconds)} CPU over ${cost.runs} run(s); ${estText}</p>` +
+      selectors(data) +
       `<div class="grid"><div class="panel" id="diagram"></div><div class="panel" id="point">` +
       `<p class="muted">Click a point to show its runs.</p></div></div>` +
       `<h2>Failures (${(data.failures || []).length})</h2>` +
       (fails ? `<table id="failures"><tr><th>run</th><th>where</th><th>reason</th><th>t</th><th>detail</th></tr>${fails}</table>` : "<p>none</p>") +
       rounds + verify;
     document.getElementById("diagram").appendChild(data.points.length ? phaseDiagram(data) : document.createTextNode("no points yet"));
+    for (const s of main.querySelectorAll("#slice select")) {
+      s.onchange = () => {
+        const d = s.dataset.dim;
+        const values = [...new Set(data.points.map((p) => p.coords[d]))].sort((a, b) => a < b ? -1 : a > b ? 1 : 0);
+        slice[d] = values[Number(s.value)];
+        draw(data);
+      };
+    }
     for (const a of main.querySelectorAll("#failures .run-link")) {
-      a.onclick = () => { const f = data.points.find((pt) => pt.runs.some((r) => r.run_id === a.dataset.run));
-        if (f) { selected = where(f.coords); showPoint(data, f); showRun(a.dataset.run); } };
+      a.onclick = async () => {
+        const f = (data.failures || []).find((x) => x.run_id === a.dataset.run);
+        const pt = f && data.points.find((q) => q.index === f.point);
+        if (pt) { selected = where(pt.coords); shownRun = a.dataset.run; await showPoint(data, pt); }
+      };
     }
     if (selected) {
       const p2 = data.points.find((pt) => where(pt.coords) === selected);
@@ -247,11 +300,25 @@
     }
   }
 
+  let page = null; // the campaign's page as last drawn: updates are applied to it
+  function apply(delta) {
+    if (!page || !delta.delta) { return delta; }
+    const points = new Map(page.points.map((p) => [p.index, p]));
+    for (const p of delta.points) { points.set(p.index, p); }
+    const failures = new Map(page.failures.map((f) => [f.run_id, f]));
+    for (const r of delta.cleared) { failures.delete(r); }
+    for (const f of delta.failures) { failures.set(f.run_id, f); }
+    return Object.assign({}, delta, {points: [...points.values()].sort((a, b) => a.index - b.index),
+      failures: [...failures.values()], delta: false, cleared: []});
+  }
   async function drawCampaign() {
-    const data = await api(`/api/campaigns/${encodeURIComponent(name)}`);
-    seq = data.seq;
-    draw(data);
-    body.dataset.ok = String(data.counts ? data.counts.ok : 0);
+    const url = `/api/campaigns/${encodeURIComponent(name)}` + (page ? `?since=${seq}` : "");
+    const answer = await api(url);
+    body.dataset.updates = String(Number(body.dataset.updates || 0) + (answer.delta ? 1 : 0));
+    page = apply(answer);
+    seq = page.seq;
+    draw(page);
+    body.dataset.ok = String(page.counts ? page.counts.ok : 0);
   }
 
   // ------------------------------------------------------------------ updates
@@ -259,20 +326,13 @@
     if (busy) { again = true; return; }
     busy = true;
     try {
-      do { again = false; await (page === "index" ? drawIndex() : drawCampaign()); } while (again);
+      do { again = false; await (kind === "index" ? drawIndex() : drawCampaign()); } while (again);
       body.dataset.updated = String(Date.now());
     } catch (e) {
       live.textContent = "error: " + e.message;
     } finally { busy = false; }
   }
-  async function onChange() {
-    if (page === "campaign") {
-      const ch = await api(`/api/changes?since=${seq}`);
-      const mine = !ch.complete || ch.campaigns.includes(name) || ch.runs.length === 0;
-      if (!mine) { seq = ch.seq; return; }
-    }
-    refresh();
-  }
+  function onChange() { refresh(); }
   function listen() {
     const source = new EventSource("/api/events");
     source.addEventListener("change", () => { live.textContent = "live"; live.className = "on"; onChange(); });

@@ -110,7 +110,7 @@ def test_every_yaml_example_of_the_reference_validates(page, tmp_path):
         elif read_collection(path) is None:
             load_campaign(path)  # raises CampaignError, with the file:line, if refused
     if without_jax:
-        pytest.skip(f"{page}: {without_jax} need JAX (pip install '.[accel]')")
+        pytest.skip(f"{page}: {without_jax} need JAX (pip install -e '.[accel]')")
 
 
 @pytest.mark.parametrize("page", reference_pages(), ids=lambda p: f"{p.parent.name}/{p.name}")

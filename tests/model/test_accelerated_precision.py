@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-pytest.importorskip("jax", reason="the accelerated backend needs JAX: pip install '.[accel]'")
+pytest.importorskip("jax", reason="the accelerated backend needs JAX: pip install -e '.[accel]'")
 
 import jax
 import jax.numpy as jnp

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import os
 import resource
+from collections.abc import Mapping
 from typing import Any
 
 from nematic_solids.model.errors import ParameterError
@@ -100,6 +101,27 @@ def check_run_memory(numerics: Any, limit: int | None, what: str) -> None:
             f"{numerics.resolution} ({numerics.mechanics} mechanics) needs about "
             f"{fmt_bytes(need)}",
         )
+
+
+#: The reason recorded for a run that raised MemoryError (:func:`out_of_memory`).
+OUT_OF_MEMORY = "out_of_memory"
+
+
+def out_of_memory(numerics: Mapping[str, Any], error: BaseException, seeds: int = 1) -> str:
+    """What a run's record says when it raised MemoryError: that it needed more memory than
+    its process has, at what resolution and mechanics, how many seeds were computed together
+    (an accelerated batch), the estimate of one run and what this process may use."""
+    n = int(numerics.get("resolution") or 128)
+    mechanics = str(numerics.get("mechanics") or "finite")
+    limit = available_memory()
+    may = f"this process may use {fmt_bytes(limit)}" if limit else "its limit is not known"
+    together = f", {seeds} seeds computed together" if seeds > 1 else ""
+    return (
+        f"the run needed more memory than its process has (resolution {n}, {mechanics} "
+        f"mechanics{together}; one run needs about {fmt_bytes(run_memory_bytes(n, mechanics))}, "
+        f"{may}): {type(error).__name__}: {error}; allowed: a lower resolution, or more memory "
+        "per run (fewer workers, execution.memory_limit, limits.run_memory, a smaller batch)"
+    )
 
 
 def max_local_workers() -> int:

@@ -79,7 +79,7 @@ from .sections import (
     read_store,
 )
 from .verify import read_verify, variant_grid
-from .yaml_input import read_document, read_text
+from .yaml_input import NO_MEMORY, read_document, read_text
 
 #: The top-level keys, in the order error messages list them.
 TOP_KEYS = (
@@ -422,15 +422,6 @@ def load_campaign(path: str | Path, overrides: Overrides | None = None) -> Campa
     try:
         text = read_text(p)
         return parse_campaign(text, str(p), overrides, default_name=p.stem)
-    except MemoryError:
-        raise CampaignError(
-            str(p),
-            [
-                Problem(
-                    "",
-                    "not enough memory to read and check this campaign file (give the "
-                    "process more memory, or make the campaign smaller)",
-                    str(p),
-                )
-            ],
-        ) from None
+    except MemoryError:  # refused below, once what the check held is freed
+        pass
+    raise CampaignError(str(p), [Problem("", NO_MEMORY, str(p))])

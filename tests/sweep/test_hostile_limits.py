@@ -19,7 +19,13 @@ from typer.testing import CliRunner
 from nematic_solids.sweep import spec as spec_module
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.errors import CampaignError
-from nematic_solids.sweep.limits import MAX_GRID_POINTS
+from nematic_solids.sweep.limits import (
+    MAX_GRID_POINTS,
+    OUT_OF_MEMORY,
+    fmt_bytes,
+    out_of_memory,
+    run_memory_bytes,
+)
 from nematic_solids.sweep.spec import load_campaign, parse_campaign
 from nematic_solids.sweep.spec.yaml_input import (
     MAX_TEXT_BYTES,
@@ -33,7 +39,13 @@ from nematic_solids.sweep.spec.yaml_input import (
 PROBE = """
 import json, resource, sys, time
 from nematic_solids.sweep.errors import CampaignError
-from nematic_solids.sweep.limits import MAX_GRID_POINTS
+from nematic_solids.sweep.limits import (
+    MAX_GRID_POINTS,
+    OUT_OF_MEMORY,
+    fmt_bytes,
+    out_of_memory,
+    run_memory_bytes,
+)
 from nematic_solids.sweep.spec import load_campaign
 import nematic_solids.sweep.analysis.registry, nematic_solids.sweep.figures.registry
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -298,3 +310,82 @@ def test_the_parents_grid_points_count_with_the_campaigns(tmp_path):
     assert f"{child}:" in said, said
     assert f"sweep: {len(half) * (side + 1)} grid points" in said, said
     assert f"and {MAX_GRID_POINTS // 2} of the campaigns it begins from" in said, said
+
+
+#: Validates a campaign file with ``nematic validate`` under an address-space limit a few MiB
+#: above what the process holds after its imports (argv: the file, the margin in MiB).
+TIGHT_VALIDATE = """
+import resource, sys
+from nematic_solids.sweep.cli import app
+import nematic_solids.sweep.analysis.registry, nematic_solids.sweep.figures.registry
+vm = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize"))
+limit = vm * 1024 + int(sys.argv[2]) * 2**20
+resource.setrlimit(resource.RLIMIT_AS, (limit, resource.RLIM_INFINITY))
+app(["validate", sys.argv[1]])
+"""
+
+
+def test_a_real_memory_error_while_reading_a_campaign_names_the_file(tmp_path):
+    """The 2-million-value file needs about 36 MiB to be read and refused: under a limit a
+    few MiB above the imports the reader runs out of memory (in the read, the decoding or
+    the YAML's composition, wherever the limit falls) and says so, naming the file; nothing
+    it held is kept while the refusal is made, so no second MemoryError follows."""
+    path = tmp_path / "flat.yaml"
+    path.write_text(_flat_list(2_096_000))
+    said_memory = []
+    for margin in (12, 20, 28):
+        proc = subprocess.run(
+            [sys.executable, "-c", TIGHT_VALIDATE, str(path), str(margin)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        out = " ".join((proc.stdout + proc.stderr).split())
+        assert proc.returncode == 2, (margin, out)
+        assert "Traceback" not in out, (margin, out)
+        assert f"{path}" in out, (margin, out)
+        said_memory.append("not enough memory to read and check this campaign file" in out)
+    assert any(said_memory), said_memory
+
+
+#: One small run (so that the model is loaded), then a run at resolution 2048 (about 7 GiB)
+#: under an address-space limit 300 MiB above what the process holds (argv: the runs folder).
+TIGHT_RUN = """
+import json, resource, sys
+from nematic_solids.sweep.run.task import RunTask, execute_run
+def task(run_id, n):
+    return RunTask(run_id=run_id, seed=0, parameters={"noise_modes": 4},
+                   numerics={"resolution": n, "t_final": 0.05, "save_every": 0.05},
+                   runs_dir=sys.argv[1], campaign="oom")
+assert execute_run(task("small00000000000", 16))["status"] == "ok"
+vm = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize"))
+resource.setrlimit(resource.RLIMIT_AS, (vm * 1024 + 300 * 2**20, resource.RLIM_INFINITY))
+print(json.dumps(execute_run(task("large00000000000", 2048))))
+"""
+
+
+def test_a_real_memory_error_in_a_run_is_recorded_with_the_run_and_what_it_needed(tmp_path):
+    runs = tmp_path / "results" / "oom" / "runs"
+    runs.mkdir(parents=True)
+    proc = subprocess.run(
+        [sys.executable, "-c", TIGHT_RUN, str(runs)], capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr
+    record = json.loads(proc.stdout.splitlines()[-1])
+    written = json.loads((runs / "large00000000000.json").read_text())
+    for rec in (record, written):
+        assert rec["run_id"] == "large00000000000"
+        assert rec["status"] == "failed"
+        assert rec["reason"] == OUT_OF_MEMORY
+        detail = " ".join(rec["detail"].split())
+        assert "the run needed more memory than its process has" in detail, detail
+        assert "resolution 2048, finite mechanics" in detail, detail
+        assert "MemoryError: Unable to allocate" in detail, detail  # numpy's own words
+        assert "allowed: a lower resolution" in detail, detail
+    assert not (runs / "large00000000000.nc").exists()
+
+
+def test_a_batch_that_runs_out_of_memory_says_how_many_seeds_it_held():
+    detail = out_of_memory({"resolution": 512, "mechanics": "linear"}, MemoryError("x"), seeds=8)
+    assert "resolution 512, linear mechanics, 8 seeds computed together" in detail, detail
+    assert f"one run needs about {fmt_bytes(run_memory_bytes(512, 'linear'))}" in detail, detail

@@ -137,7 +137,28 @@ def canonical_json(
     payload["seed"] = canonical_value(int(seed))
     if start is not None:
         payload["start"] = canonical_value(dict(start))
+        guess = start_guess(numerics, start)
+        if guess is not None:
+            payload["start_guess"] = guess
     return _dumps(payload)
+
+
+#: The first guess of the displacement of a finite-strain run begun from an exact end state (a
+#: chain's successor, a run of ``initial.from`` at ``time: end``), as it enters the canonical
+#: text: the end state's own displacement spectrum, bit for bit.
+EXACT_GUESS = "end state displacement spectrum"
+
+
+def start_guess(numerics: Mapping[str, Any], start: Mapping[str, Any]) -> str | None:
+    """:data:`EXACT_GUESS` where a run's force balance at t = 0 is solved from the exact end
+    state's displacement spectrum: finite strain, from an end state (``time`` "end", no
+    snapshot ``state``). Runs made before began from the end snapshot's displacement, and
+    Newton's solve stops at an iterate that depends on its first guess (numbers apart by
+    rounding, up to the Newton tolerance): those runs have the ids without it. None where
+    nothing changed: linear strain (no guess), a start from a snapshot, the seeded texture."""
+    if start.get("time") != "end" or start.get("state"):
+        return None
+    return EXACT_GUESS if numerics.get("mechanics", "finite") == "finite" else None
 
 
 def _point_payload(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> dict[str, Any]:

@@ -119,6 +119,26 @@ def five_point_laplacian(u: np.ndarray, dx: float, dy: float) -> np.ndarray:
     return along_x + (np.roll(u, 1, 1) - 2 * u + np.roll(u, -1, 1)) / dy**2
 
 
+def theory(g: float, order: str = "leading") -> dict[str, float]:
+    """The amplitude equations' boundaries (docs/model/swift_hohenberg.md): hexagons exist
+    above ``eps_H``, stripes are stable above ``eps_S``, hexagons below ``eps_X``; the uniform
+    state is stable below 0. ``order="leading"``: -g^2/15, 4 g^2/3, 16 g^2/3. ``"next"``: with
+    the mean and the harmonics that g u^2 drives slaved, the cubic coefficients become
+    3 - 38 g^2/9 and 6 - 5 g^2 (valid while g^2 is small against them)."""
+    nu2 = 4 * g**2
+    if order == "leading":
+        gamma, h = 3.0, 6.0
+    elif order == "next":
+        gamma, h = 3 - 38 * g**2 / 9, 6 - 5 * g**2
+    else:
+        raise ValueError(f"order {order!r} is not 'leading' or 'next'")
+    return {
+        "eps_H": -nu2 / (4 * (gamma + 2 * h)),
+        "eps_S": nu2 * gamma / (h - gamma) ** 2,
+        "eps_X": nu2 * (2 * gamma + h) / (h - gamma) ** 2,
+    }
+
+
 def make_pde(s: Settings) -> pde.SwiftHohenbergPDE:
     """py-pde's Swift-Hohenberg PDE for ``s``; refuses a step RK4 or Euler is unstable at."""
     grid = make_grid(s)

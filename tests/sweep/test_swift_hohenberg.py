@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pde
@@ -151,3 +152,72 @@ def test_continuation_is_exact() -> None:
 def test_an_unstable_step_is_refused() -> None:
     with pytest.raises(ValueError, match="stability limit"):
         MODEL.run(request(0.1, dt=0.05, save_every=0.5, t_final=1.0))
+
+
+def amplitude_rates(a: np.ndarray, eps: float, g: float) -> np.ndarray:
+    """The three real amplitude equations of docs/model/swift_hohenberg.md."""
+    a1, a2, a3 = a
+    return np.array(
+        [
+            eps * a1 + 2 * g * a2 * a3 - 3 * (a1**2 + 2 * a2**2 + 2 * a3**2) * a1,
+            eps * a2 + 2 * g * a3 * a1 - 3 * (a2**2 + 2 * a3**2 + 2 * a1**2) * a2,
+            eps * a3 + 2 * g * a1 * a2 - 3 * (a3**2 + 2 * a1**2 + 2 * a2**2) * a3,
+        ]
+    )
+
+
+def largest_rate(a: np.ndarray, eps: float, g: float) -> float:
+    """The largest real part of the eigenvalues of the Jacobian at ``a`` (central
+    differences)."""
+    h = 1e-7
+    jac = np.array(
+        [
+            (amplitude_rates(a + h * e, eps, g) - amplitude_rates(a - h * e, eps, g)) / (2 * h)
+            for e in np.eye(3)
+        ]
+    ).T
+    return float(np.linalg.eigvals(jac).real.max())
+
+
+@pytest.mark.parametrize("g", [0.3, 0.5, 1.0])
+def test_the_amplitude_equation_boundaries(g: float) -> None:
+    """theory(g) against the three-mode equations: hexagons R+ exist from eps_H and are
+    stable up to eps_X; stripes are stable from eps_S (just inside and outside each bound)."""
+    th = sh.theory(g)
+
+    def hexagons(eps: float) -> float:
+        r = (g + math.sqrt(g**2 + 15 * eps)) / 15
+        np.testing.assert_allclose(amplitude_rates(np.full(3, r), eps, g), 0, atol=1e-14)
+        return largest_rate(np.full(3, r), eps, g)
+
+    def stripes(eps: float) -> float:
+        return largest_rate(np.array([math.sqrt(eps / 3), 0, 0]), eps, g)
+
+    d = 1e-3 * g**2
+    assert hexagons(th["eps_H"] + d) < 0
+    with pytest.raises(ValueError, match="math domain"):
+        hexagons(th["eps_H"] - d)
+    assert hexagons(th["eps_X"] - d) < 0 < hexagons(th["eps_X"] + d)
+    assert stripes(th["eps_S"] - d) > 0 > stripes(th["eps_S"] + d)
+
+
+def test_the_campaign_file_names_the_models_settings() -> None:
+    """campaigns/swift_hohenberg.yaml (run by ``nematic run`` once the campaign core runs
+    models through the registry): its model is registered, every numerics value and axis
+    value is one the model accepts, and its chain walks a sweepable parameter."""
+    import yaml
+
+    path = Path(__file__).resolve().parents[2] / "campaigns" / "swift_hohenberg.yaml"
+    spec = yaml.safe_load(path.read_text())
+    model = get_model(spec["model"])
+    settings = {s.name: s for s in model.settings}
+    for name, value in spec["numerics"].items():
+        assert settings[name].kind == "numerics"
+        assert settings[name].accepts(value), (name, value)
+    for name, values in spec["sweep"]["axes"].items():
+        assert settings[name].kind == "parameter"
+        assert settings[name].sweepable
+        assert all(settings[name].accepts(v) for v in values)
+    assert settings[spec["chain"]["axis"]].kind == "parameter"
+    s = sh.Settings(**{**spec["numerics"], "eps": max(spec["sweep"]["axes"]["eps"])})
+    sh.make_pde(s)  # its step is below the stability limit on its grid

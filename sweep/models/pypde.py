@@ -264,7 +264,8 @@ class PDEModel:
 
     def run(self, request: RunRequest) -> RunOutcome:
         s = self.make_settings(request)
-        warnings = _check_steps(s)
+        _check_steps(s)
+        warnings: list[str] = []
         grid = self.grid(s)
         equation = self.pde_factory(s)
         start = request.start
@@ -363,8 +364,8 @@ CONTINUATION_ADAPTIVE = (
 )
 
 
-def _check_steps(s: Any) -> list[str]:
-    """Errors for save and final times that the step cannot land on; warnings otherwise."""
+def _check_steps(s: Any) -> None:
+    """Refuses save and final times that the step cannot land on."""
     for name in ("t_final", "dt", "save_every"):
         v = getattr(s, name)
         if not (math.isfinite(v) and v > 0):
@@ -378,7 +379,6 @@ def _check_steps(s: Any) -> list[str]:
             f"save_every = {s.save_every} is not a whole number of steps "
             f"dt = {s.dt} (a fixed step lands on every save time)"
         )
-    return []
 
 
 def _solver(equation: pde.PDEBase, s: Any) -> pde.SolverBase:

@@ -221,3 +221,42 @@ def test_a_time_dependent_setting_follows_its_protocol() -> None:
     np.testing.assert_allclose(
         ds.amplitude.values, np.exp(-kappa2 * (0.5 * t + 0.25 * t**2)), rtol=5e-6
     )
+
+
+class Checkpoints:
+    """Collects the states a run hands to its checkpoint callback and the progress times."""
+
+    def __init__(self) -> None:
+        self.states: list[PDEState] = []
+        self.times: list[float] = []
+
+    def checkpoint(self, state: object) -> None:
+        assert isinstance(state, PDEState)
+        self.states.append(state)
+
+    def progress(self, t: float) -> None:
+        self.times.append(t)
+
+
+def test_checkpoints_are_end_states_that_continue_exactly() -> None:
+    seen = Checkpoints()
+    req = dataclasses.replace(
+        request(t_final=1.0),
+        checkpoint=seen.checkpoint,
+        checkpoint_every=0.5,
+        progress=seen.progress,
+    )
+    whole = HEAT.run(req)
+    assert [s.t for s in seen.states] == pytest.approx([0.5, 1.0])
+    assert seen.times == pytest.approx([0, 0.25, 0.5, 0.75, 1.0])
+    rest = HEAT.run(dataclasses.replace(request(t_final=1.0), start=seen.states[0]))
+    np.testing.assert_array_equal(rest.dataset.u_final.values, whole.dataset.u_final.values)
+    np.testing.assert_array_equal(rest.dataset.amplitude.values, whole.dataset.amplitude.values)
+
+
+def test_a_finished_run_continued_to_its_own_end_is_unchanged() -> None:
+    whole = HEAT.run(request(t_final=1.0))
+    again = HEAT.run(dataclasses.replace(request(t_final=1.0), start=end(whole)))
+    xr.testing.assert_identical(again.dataset.drop_attrs(), whole.dataset.drop_attrs())
+    with pytest.raises(ValueError, match="shorter t_final"):
+        HEAT.run(dataclasses.replace(request(t_final=0.5), start=end(whole)))

@@ -100,7 +100,7 @@ def growth_rate(eps: float, kappa2: np.ndarray | float) -> np.ndarray | float:
 class SwiftHohenbergPDE(pde.SwiftHohenbergPDE):
     """py-pde's Swift-Hohenberg PDE with a faster numpy evolution rate: the same five-point
     Laplacian on a periodic grid, applied to the data with ``numpy.roll`` (py-pde's own numpy
-    path builds fields and boundary conditions at every call, 20 times slower on small grids;
+    path builds fields and boundary conditions at every call, much slower on small grids;
     the numba backend compiles anew for every value of eps and g). The two rates agree to
     rounding (tests/sweep/test_swift_hohenberg.py)."""
 

@@ -101,13 +101,14 @@ def test_a_chain_down_and_up_in_eps_shows_the_hysteresis_loop() -> None:
     down = chain(list(down_values), g)
     up = chain(list(np.round(np.arange(-0.04, 0.06 + 1e-9, step), 4)), g)
     for name, branch in (("down", down), ("up", up)):
-        print(name, [(e, p, f"{a:.3g}") for e, p, a in branch])
+        print(name, [(float(e), p, f"{a:.3g}") for e, p, a in branch])
     eps_down = lowest(down, "hexagons")
     eps_up = lowest(up, "hexagons")
     leading = sh.theory(g)["eps_H"] + shift["triad"]
     corrected = sh.theory(g, "next")["eps_H"] + shift["triad"]
     print(f"hexagons down to {eps_down}: theory {leading:.4f} (leading), {corrected:.4f} (next)")
-    print(f"uniform up to {eps_up - step}, hexagons from {eps_up}: onset {shift['onset']:.4f}")
+    last_uniform = max(e for e, p, _ in up if p == "uniform")
+    print(f"uniform up to {last_uniform}, hexagons from {eps_up}: onset {shift['onset']:.4f}")
     assert all(p == "hexagons" for e, p, _ in down if e >= 0)
     assert corrected - 2 * step <= eps_down <= leading + step
     assert all(p == "uniform" for e, p, _ in down if e < eps_down)

@@ -6,12 +6,14 @@ run, white noise of 1e-3 added at each start, seed 1.
     python scripts/swift_hohenberg_loops.py loop --g 1.0 --step 0.02 --low -0.2
     python scripts/swift_hohenberg_loops.py band --g 0.25 --step 0.02 --high 0.5
     python scripts/swift_hohenberg_loops.py stripes --g 0.25 0.04 0.06 0.08 0.1
+    python scripts/swift_hohenberg_loops.py stripes --g 0.25 --runs 7 0.04 0.06
 
 ``loop``: down from hexagons grown from noise at eps = 0.06 (0.06, 0.04, 0.02, 0, then in
 steps down to ``--low``), then a fresh chain up from ``--low`` to 0.06 (the slow test
 tests/sweep/test_swift_hohenberg_chains.py runs the first). ``band``: one chain up from
 hexagons grown from noise at 0.04 to ``--high`` and back down, continuing the same state.
-``stripes``: stripes 2 sqrt(eps/3) cos(x) as the start at each eps, two runs (t = 300).
+``stripes``: stripes 2 sqrt(eps/3) cos(x) as the start at each eps, ``--runs`` runs of t = 150
+each from the previous one's end state.
 """
 
 from __future__ import annotations
@@ -55,16 +57,17 @@ def band(g: float, step: float, high: float) -> None:
             show(name, eps, pattern(out), float(ds.amplitude_final), float(ds.hexagonality_final))
 
 
-def stripes(g: float, values: list[float]) -> None:
+def stripes(g: float, values: list[float], runs: int) -> None:
     grid = sh.make_grid(sh.Settings(periods=2, points=8))
     x, _ = np.meshgrid(*grid.axes_coords, indexing="ij")
     for eps in values:
         state: object = PDEState(2 * np.sqrt(eps / 3) * np.cos(x), 0.0)
-        for _ in range(2):
+        for i in range(runs):
             out = run(eps, g, initial=state)
             state = out.end_state
-        ds = out.dataset
-        show("t=300", eps, pattern(out), float(ds.amplitude_final), float(ds.hexagonality_final))
+            ds = out.dataset
+            t = f"t={150 * (i + 1)}"
+            show(t, eps, pattern(out), float(ds.amplitude_final), float(ds.hexagonality_final))
 
 
 def main() -> None:
@@ -80,6 +83,7 @@ def main() -> None:
     p.add_argument("--high", type=float, required=True)
     p = sub.add_parser("stripes")
     p.add_argument("--g", type=float, required=True)
+    p.add_argument("--runs", type=int, default=2, help="runs of t = 150 from each start")
     p.add_argument("eps", type=float, nargs="+")
     args = parser.parse_args()
     if args.what == "loop":
@@ -87,7 +91,7 @@ def main() -> None:
     elif args.what == "band":
         band(args.g, args.step, args.high)
     else:
-        stripes(args.g, args.eps)
+        stripes(args.g, args.eps, args.runs)
 
 
 if __name__ == "__main__":

@@ -204,6 +204,7 @@ class Linear:
         return self.a + self.b * t
 
 
+@pytest.mark.slow  # about a minute on 2 loaded cores: py-pde's numpy path, 400 evaluations
 def test_a_time_dependent_setting_follows_its_protocol() -> None:
     """With D(t) = 0.5 + 0.5 t the mode decays as exp(-kappa^2 (0.5 t + 0.25 t^2)). RK4's
     error in the exponent is at most z^5/120 per step, z = kappa^2 D dt <= 0.089: 4.7e-6 over

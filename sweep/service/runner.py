@@ -20,6 +20,7 @@ from typing import Any
 from ..campaign import Campaign, ExecutionSpec
 from ..errors import CampaignError, CampaignLocked, ClusterError, StoreError
 from ..expand import Expansion, RunSpec
+from ..figures.failed import read_failed
 from ..run.clusters import open_cluster
 from ..run.todo import Plan
 from ..run.workers import ClusterLink
@@ -349,7 +350,17 @@ class Runner(threading.Thread):
         if self._products(campaign, expansion, store, link, stop):
             return self._stopped(outcome)
         failed = outcome["failed"] + outcome["failed_before"]
-        return DONE, (f"{failed} run(s) failed" if failed else "all runs ok"), outcome
+        runs = f"{failed} run(s) failed" if failed else "all runs ok"
+        products = read_failed(store.root)
+        if products:  # as nematic run's exit 4: a campaign whose products failed is no success
+            outcome["failed_products"] = products
+            return (
+                FAILED,
+                f"{runs}, but {len(products)} fit(s) or figure(s) failed "
+                f"({', '.join(products)}); nematic figures {campaign.name} redraws them",
+                outcome,
+            )
+        return DONE, runs, outcome
 
     def _stopped(
         self, outcome: dict[str, Any] | None

@@ -24,8 +24,8 @@ from nematic_solids.model.errors import ParameterError
 #: Default ceiling on the runs of one campaign (``limits.max_runs`` changes it).
 DEFAULT_MAX_RUNS = 1_000_000
 #: Most grid points of a campaign, its parents' (``initial.from``) included. Validation builds the
-#: model's objects at every grid point and compares their identities (about 0.1 ms a point on
-#: the reference machine, a point with a time protocol up to 0.15 ms), so the largest accepted
+#: model's objects at every grid point and compares their identities (about 0.06 ms a point on
+#: the reference machine, a point with time protocols 0.13 ms), so the largest accepted
 #: campaign is answered in about a second (``benchmarks/validate_bounds.py``). Not a setting: a
 #: file could raise it itself; a larger study is several campaigns, or an adaptive one.
 MAX_GRID_POINTS = 10_000

@@ -3,8 +3,10 @@ files? (a benchmark, not a test; ``tests/sweep/test_hostile_limits.py`` holds th
 
 Each file is read and checked by ``load_campaign`` in one fresh process per file: CPU seconds
 of the read and check, and the growth of the process's peak resident memory over the peak
-after the imports. Also the model's check of every grid point (``grid_<n>``: an accepted
-campaign whose axis has n values, one seed), which is linear in the grid points.
+after the imports. Also the model's check of every grid point (``grid_<n>``, ``grid_<n>x<m>``:
+an accepted campaign of that many grid points, one seed; ``protocol_<n>x<n>``: each point with
+a pulse and a sine), which is linear in the grid points: the largest accepted grids have
+sweep.limits.MAX_GRID_POINTS points, and ``grid_1000x1000`` is refused by its size.
 
     python benchmarks/validate_bounds.py
 
@@ -42,9 +44,26 @@ def _flat(n: int) -> str:
     return "name: flat\nsweep:\n  axes:\n    eps: [" + ",".join("0" for _ in range(n)) + "]\n"
 
 
-def _grid(n: int) -> str:
-    values = ", ".join(f"{i * 1e-6:.6f}" for i in range(n))
-    return f"name: grid\nsweep:\n  axes:\n    eps: [{values}]\nseeds: 1\n"
+def _grid(n: int, m: int = 1) -> str:
+    """An accepted grid of n x m points (one seed), its values written out."""
+    eps = ", ".join(f"{i * 1e-6:.6f}" for i in range(n))
+    ks = (
+        f"\n    K: [{', '.join(f'{1e-5 * (1 + i * 1e-3):.8g}' for i in range(m))}]" if m > 1 else ""
+    )
+    return f"name: grid\nsweep:\n  axes:\n    eps: [{eps}]{ks}\nseeds: 1\n"
+
+
+def _protocol_grid(n: int) -> str:
+    """n x n points, each with a pulse of alpha - B and an eps sine (the moduli fit checks
+    save_every against the period at every point): the costliest point check."""
+    levels = ", ".join(f"{0.05 + i * 1e-3:.6f}" for i in range(n))
+    durations = ", ".join(f"{25 + i * 0.5:.3f}" for i in range(n))
+    return (
+        "name: protocol\nprotocol:\n  alpha_minus_B: {pulse: {base: 1.0, start: 150}}\n"
+        "  eps: {sine: {amplitude: 0.01, period: 40}}\nfits: [moduli]\nsweep:\n  axes:\n"
+        f"    alpha_minus_B_level: [{levels}]\n    alpha_minus_B_duration: [{durations}]\n"
+        "seeds: 1\n"
+    )
 
 
 def cases(folder: Path) -> dict[str, Path]:
@@ -58,6 +77,10 @@ def cases(folder: Path) -> dict[str, Path]:
         "string_4MiB": "name: s\ndescription: " + "x" * (4 * 2**20 - 100) + "\nseeds: 1\n",
         "grid_1000": _grid(1000),
         "grid_10000": _grid(10_000),
+        "grid_100x100": _grid(100, 100),
+        "protocol_100x100": _protocol_grid(100),
+        "grid_1000x1000": "name: big\nsweep:\n  axes:\n    eps: {linspace: [0, 0.1, 1000]}\n"
+        "    K: {linspace: [1.0e-5, 1.0e-3, 1000]}\nseeds: 1\n",
     }
     out = {}
     for name, text in texts.items():

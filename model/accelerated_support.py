@@ -16,7 +16,7 @@ from .parameters import Numerics, Parameters
 #: sees, or a GPU if there is one and else the CPU
 DEVICES = ("cpu", "gpu", "auto")
 #: how to install the backend's library
-INSTALL = "pip install '.[accel]' (and 'jax[cuda12]' for an NVIDIA GPU)"
+INSTALL = "pip install -e '.[accel]' (and 'jax[cuda12]' for an NVIDIA GPU)"
 
 
 def jax_installed() -> bool:

@@ -10,7 +10,6 @@ reason in ``docs/model/constants.md`` (table "Constants").
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import math
 from collections.abc import Mapping
@@ -415,7 +414,7 @@ class Numerics:
             )
 
     def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
         d["snapshot_times"] = list(self.snapshot_times)
         return d
 

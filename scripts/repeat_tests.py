@@ -47,7 +47,8 @@ PROCESS_TESTS = (
 
 
 #: the fault tests: random SIGKILL during chains (and of drivers and workers), corrupt
-#: checkpoints and run files, a full disk, two drivers on one folder
+#: checkpoints and run files, a full disk, two drivers on one folder, memory exhausted under an
+#: address-space limit (while a campaign file is read, in a run)
 FAULT_TESTS = (
     "tests/sweep/test_chains.py::test_a_chain_driver_killed_at_random_moments_ends_as_an_uninterrupted_one",
     "tests/sweep/test_chains.py::test_a_chain_driver_killed_half_way_resumes",
@@ -58,6 +59,8 @@ FAULT_TESTS = (
     "tests/sweep/test_faults.py::test_a_full_disk_keeps_the_result_elsewhere_and_a_rerun_moves_it_in",
     "tests/sweep/test_execute.py::test_a_second_driver_is_refused",
     "tests/sweep/test_execute.py::test_two_driver_processes_on_one_folder",
+    "tests/sweep/test_hostile_limits.py::test_a_real_memory_error_while_reading_a_campaign_names_the_file",
+    "tests/sweep/test_hostile_limits.py::test_a_real_memory_error_in_a_run_is_recorded_with_the_run_and_what_it_needed",
 )
 
 #: Lines of a failed run's output kept in ``--json`` (enough for its traceback).

@@ -87,16 +87,19 @@ def identity_numerics(numerics: Mapping[str, Any]) -> dict[str, Any]:
 
 def canonical_value(value: Any) -> Any:
     """One value in canonical form (JSON-ready): floats as ``'%.12g'`` strings."""
+    kind = type(value)  # the common exact types first (the grid check canonicalises each point)
+    if kind is float:
+        return _canonical_float(value)
+    if kind is str:
+        return value
+    if kind is dict:
+        return {str(k): canonical_value(v) for k, v in value.items()}
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):
         return str(int(value))
     if isinstance(value, (float, np.floating)):
-        x = float(value)
-        if not math.isfinite(x):
-            return str(x)
-        text = f"{x:.{SIGNIFICANT_DIGITS}g}"
-        return "0" if float(text) == 0 else text
+        return _canonical_float(float(value))
     if isinstance(value, str):
         return value
     if value is None:
@@ -106,6 +109,14 @@ def canonical_value(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [canonical_value(v) for v in value]
     raise TypeError(f"cannot canonicalise {value!r} of type {type(value).__name__}")
+
+
+@functools.lru_cache(maxsize=2**14)  # a grid's points share most of their values
+def _canonical_float(x: float) -> str:
+    if not math.isfinite(x):
+        return str(x)
+    text = f"{x:.{SIGNIFICANT_DIGITS}g}"
+    return "0" if float(text) == 0 else text
 
 
 def _dumps(obj: Any) -> str:
@@ -126,7 +137,28 @@ def canonical_json(
     payload["seed"] = canonical_value(int(seed))
     if start is not None:
         payload["start"] = canonical_value(dict(start))
+        guess = start_guess(numerics, start)
+        if guess is not None:
+            payload["start_guess"] = guess
     return _dumps(payload)
+
+
+#: The first guess of the displacement of a finite-strain run begun from an exact end state (a
+#: chain's successor, a run of ``initial.from`` at ``time: end``), as it enters the canonical
+#: text: the end state's own displacement spectrum, bit for bit.
+EXACT_GUESS = "end state displacement spectrum"
+
+
+def start_guess(numerics: Mapping[str, Any], start: Mapping[str, Any]) -> str | None:
+    """:data:`EXACT_GUESS` where a run's force balance at t = 0 is solved from the exact end
+    state's displacement spectrum: finite strain, from an end state (``time`` "end", no
+    snapshot ``state``). Runs made before began from the end snapshot's displacement, and
+    Newton's solve stops at an iterate that depends on its first guess (numbers apart by
+    rounding, up to the Newton tolerance): those runs have the ids without it. None where
+    nothing changed: linear strain (no guess), a start from a snapshot, the seeded texture."""
+    if start.get("time") != "end" or start.get("state"):
+        return None
+    return EXACT_GUESS if numerics.get("mechanics", "finite") == "finite" else None
 
 
 def _point_payload(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> dict[str, Any]:
@@ -235,6 +267,26 @@ def trajectory_id(
     return hash_canonical(
         parameters, {k: v for k, v in numerics.items() if k not in CONTINUABLE}, seed, start
     )
+
+
+class PointIdentity:
+    """A key of grid points that is equal for two points exactly when their runs (one seed, from
+    the seeded texture) have one :func:`hash_canonical` id: the canonical text's parts, not
+    hashed, the numerics canonicalised once per distinct value (a grid's points mostly share
+    them). The validation's check that no two grid points are one run
+    (``sweep.spec.points``) keys every point by it."""
+
+    def __init__(self) -> None:
+        self._numerics: dict[Numerics, tuple[dict[str, Any], str]] = {}
+
+    def __call__(self, parameters: Parameters, numerics: Numerics) -> tuple[str, str, str | None]:
+        known = self._numerics.get(numerics)
+        if known is None:
+            n = numerics.to_dict()
+            known = self._numerics[numerics] = (n, _dumps(canonical_value(identity_numerics(n))))
+        p = parameters.to_dict()
+        text = _dumps(canonical_value(identity_parameters(p)))
+        return text, known[1], protocol_step_rule(p, known[0])
 
 
 class PointHasher:

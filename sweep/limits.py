@@ -16,12 +16,19 @@ from __future__ import annotations
 import math
 import os
 import resource
+from collections.abc import Mapping
 from typing import Any
 
 from nematic_solids.model.errors import ParameterError
 
 #: Default ceiling on the runs of one campaign (``limits.max_runs`` changes it).
 DEFAULT_MAX_RUNS = 1_000_000
+#: Most grid points of a campaign, its parents' (``initial.from``) included. Validation builds the
+#: model's objects at every grid point and compares their identities (about 0.1 ms a point on
+#: the reference machine, a point with a time protocol up to 0.15 ms), so the largest accepted
+#: campaign is answered in about a second (``benchmarks/validate_bounds.py``). Not a setting: a
+#: file could raise it itself; a larger study is several campaigns, or an adaptive one.
+MAX_GRID_POINTS = 10_000
 #: Local worker processes allowed per CPU core.
 MAX_WORKERS_PER_CORE = 4
 #: Peak memory of a run without its arrays: the interpreter, numpy, xarray, py-pde, numba.
@@ -94,6 +101,27 @@ def check_run_memory(numerics: Any, limit: int | None, what: str) -> None:
             f"{numerics.resolution} ({numerics.mechanics} mechanics) needs about "
             f"{fmt_bytes(need)}",
         )
+
+
+#: The reason recorded for a run that raised MemoryError (:func:`out_of_memory`).
+OUT_OF_MEMORY = "out_of_memory"
+
+
+def out_of_memory(numerics: Mapping[str, Any], error: BaseException, seeds: int = 1) -> str:
+    """What a run's record says when it raised MemoryError: that it needed more memory than
+    its process has, at what resolution and mechanics, how many seeds were computed together
+    (an accelerated batch), the estimate of one run and what this process may use."""
+    n = int(numerics.get("resolution") or 128)
+    mechanics = str(numerics.get("mechanics") or "finite")
+    limit = available_memory()
+    may = f"this process may use {fmt_bytes(limit)}" if limit else "its limit is not known"
+    together = f", {seeds} seeds computed together" if seeds > 1 else ""
+    return (
+        f"the run needed more memory than its process has (resolution {n}, {mechanics} "
+        f"mechanics{together}; one run needs about {fmt_bytes(run_memory_bytes(n, mechanics))}, "
+        f"{may}): {type(error).__name__}: {error}; allowed: a lower resolution, or more memory "
+        "per run (fewer workers, execution.memory_limit, limits.run_memory, a smaller batch)"
+    )
 
 
 def max_local_workers() -> int:

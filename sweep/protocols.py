@@ -12,7 +12,6 @@ the point (``parameters["protocol"]``), which the model validates and the run's 
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Mapping
 from typing import Any
 
@@ -59,7 +58,7 @@ def with_axis_values(parameters: dict[str, Any], values: Mapping[str, Any]) -> N
     swept = {name: v for name, v in values.items() if name in axes}
     if not swept:
         return
-    protocol = copy.deepcopy(dict(parameters[PROTOCOL]))
+    protocol = dict(parameters[PROTOCOL])  # the swept functions are new mappings below
     for name, value in swept.items():
         param, form, key = axes[name]
         protocol[param] = {form: {**protocol[param][form], key: value}}

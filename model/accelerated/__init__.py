@@ -50,8 +50,8 @@ try:
     import jax
 except ImportError as exc:  # pragma: no cover - exercised where jax is absent
     raise DeviceUnavailable(
-        "the accelerated backend needs JAX, which is not installed: pip install '.[accel]' "
-        "(CPU), or pip install '.[accel]' 'jax[cuda12]' for an NVIDIA GPU"
+        "the accelerated backend needs JAX, which is not installed: pip install -e '.[accel]' "
+        "(CPU), or pip install -e '.[accel]' 'jax[cuda12]' for an NVIDIA GPU"
     ) from exc
 
 jax.config.update("jax_enable_x64", True)

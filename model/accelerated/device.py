@@ -37,7 +37,7 @@ def select_device(name: str = "cpu") -> jax.Device:
             have = ", ".join(sorted({d.platform for d in jax.devices()})) or "none"
             raise DeviceUnavailable(
                 f"a GPU was asked for, but JAX {jax.__version__} sees none (devices here: "
-                f"{have}); on a machine with an NVIDIA GPU install pip install '.[accel]' "
+                f"{have}); on a machine with an NVIDIA GPU install pip install -e '.[accel]' "
                 "'jax[cuda12]', or ask for device 'cpu' or 'auto'"
             )
     return _devices("cpu")[0]

@@ -5,7 +5,8 @@ definitions of :mod:`nematic_solids.model.observables` (docs/model/observables.m
 from the shell-summed spectrum :math:`E(n)` of :math:`S - \langle S\rangle`,
 :math:`\bar n = \sum_{n\ge1} n E^2 / \sum_{n\ge1} E^2`, ``lambda_mean`` :math:`2\pi/\bar k`
 (the spectrum-weighted mean wavenumber), ``mean_A`` :math:`\langle A\rangle` and the
-small-strain ``rate_margin`` :math:`1 - \max (\alpha - B) S`; both sizes NaN for a uniform S.
+small-strain ``rate_margin`` :math:`1 - \max (\alpha - B) S`; both sizes NaN for a uniform S
+(a variance below the rounding of the run's precision).
 """
 
 from __future__ import annotations
@@ -45,6 +46,10 @@ def observe(q: Array, A: Array, data: ShellData, nshell: int, alpha_minus_B: flo
     """The observables :data:`NAMES` of one seed's fields, as one float64 vector: the fields
     of a float32 run are widened to float64 first (exactly), so every mean, the spectrum and
     its sums are float64 whatever the run's precision."""
+    # a field is uniform below the rounding of the run's precision: float64's floor, scaled
+    # by the squared ratio of the machine epsilons in a float32 run (its rounding alone gives
+    # sigma2_S ~ 1e-18 at t = 0, and a pattern size of that noise)
+    floor = 1e-30 * (float(jnp.finfo(q.dtype).eps) / float(jnp.finfo(jnp.float64).eps)) ** 2
     q, A = q.astype(jnp.float64), A.astype(jnp.float64)
     S = jnp.sqrt(q[0] ** 2 + q[1] ** 2)
     mean_S = jnp.mean(S)
@@ -54,7 +59,7 @@ def observe(q: Array, A: Array, data: ShellData, nshell: int, alpha_minus_B: flo
     power = data.weights * jnp.abs(forward(dS)) ** 2
     power = power.at[0, 0].set(0.0)
     total = jnp.sum(power)
-    uniform = total <= 1e-30 * S.size**2
+    uniform = total <= floor * S.size**2
     E = jnp.zeros(nshell).at[data.shell.ravel()].add(power.ravel())[1:]
     peak = jnp.max(E)
     wE = (E / jnp.where(peak > 0.0, peak, 1.0)) ** 2

@@ -30,7 +30,7 @@ from .app import (
     load,
     setup_logging,
 )
-from .products import failure_lines, repair_products
+from .products import failure_lines, regenerate_report, repair_products
 
 
 def figures(
@@ -63,11 +63,13 @@ def figures(
 
     Figures read only the results folder (phase.nc, fits.nc, runs/*.nc). The overrides
     (--set, --seeds, --name) must match those of the run, since they name the folder. Exit 0
-    if everything was produced, 4 if a fit or figure failed (each listed in one line), 2 on
-    bad input or when the campaign has no phase.nc yet.
+    if everything was produced, 4 if a fit or figure failed (each listed in one line, and
+    in the report, which is rewritten if there is one), 2 on bad input or when the campaign
+    has no phase.nc yet.
     """
     from ..figures.produce import produce
     from ..files import probe_write, storage_cause
+    from ..report.page import REPORT
 
     console = Console(highlight=False, soft_wrap=True, quiet=quiet)
     err = err_console()
@@ -107,6 +109,10 @@ def figures(
             else "none applies to this grid"
         )
         console.print(f"no figures: {why}; --only FIGURE draws one", markup=False)
+    if (root / REPORT).is_file():  # a report written before shows these figures and failures
+        page = regenerate_report(c, results)
+        if page is not None:
+            console.print(f"report: {page}", markup=False)
     for line in failure_lines(out.failures):
         err.print(f"[red]failed[/]: {escape(line)}", soft_wrap=True, highlight=False)
     if out.failures:

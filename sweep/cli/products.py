@@ -89,7 +89,9 @@ def failure_lines(failures: Mapping[str, str]) -> list[str]:
     """One line per failed fit or figure (``Outcome.failures`` of
     :func:`nematic_solids.sweep.figures.produce.produce`, keys ``fit NAME`` or the figure's
     name): ``fit transition: why``, ``figure loop: why``."""
-    return [f"{k if k.startswith('fit') else 'figure ' + k}: {v}" for k, v in failures.items()]
+    from ..figures.failed import label
+
+    return [f"{label(k)}: {v}" for k, v in failures.items()]
 
 
 def regenerate_report(campaign: Campaign, results: Path) -> Path | None:

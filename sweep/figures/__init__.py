@@ -11,6 +11,7 @@ Its modules (under :mod:`nematic_solids.sweep.figures`):
 - ``fig2``, ``fig3``, ``fig4``, ``figA1``: one module per figure of the paper
 - ``registry``: the figures by name, the fits each needs, when each applies
 - ``produce``: plan, draw and write them (``nematic figures``, and the end of ``nematic run``)
+- ``failed``: the fits and figures that failed, kept for the report (``failed_products.json``)
 
 What each figure shows, and its options, is documented for users in docs/campaigns/figures.md.
 """

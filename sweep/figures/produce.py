@@ -22,6 +22,7 @@ from ..campaign import Campaign
 from ..errors import FigureError, FitError
 from ..files import atomic_path
 from .common import FIGURES, FORMATS, PNG_DPI, STYLE, Results
+from .failed import record_failed
 from .registry import REGISTRY
 
 if TYPE_CHECKING:
@@ -127,7 +128,8 @@ def produce(
 ) -> Outcome:
     """Write ``fits.nc`` (unless ``fits`` is false) and the figures of ``campaign`` (see
     :func:`plan`; none unless ``draw_figures``) from ``results_dir/<name>/``. Failures are
-    collected, not raised, except for a missing phase.nc (:class:`FigureError`)."""
+    collected, not raised, except for a missing phase.nc (:class:`FigureError`), and recorded
+    for the report in ``failed_products.json`` (:func:`.failed.record_failed`)."""
     root = Path(results_dir) / campaign.name
     try:
         phase = load_phase(root)
@@ -146,17 +148,21 @@ def produce(
         out.failures.update({f"fit {k}": v for k, v in failed.items()})
     if out.fits_path is not None:
         out.notes = fit_notes(load_fits(root))
-    if not figures or not draw_figures:  # figures: [] in the campaign, or the fits alone
-        return out
-    results = Results(root)
-    for name, options in figures:
-        try:
-            out.paths.extend(draw(name, root, options, results))
-        except NematicError as e:
-            out.failures[name] = " ".join(str(e).split())
-        except Exception as e:  # a figure must never sink the run it follows
-            out.failures[name] = one_line(e)
-            log.debug("figure %s not drawn", name, exc_info=True)  # --verbose shows it
+    if figures and draw_figures:  # not with figures: [] in the campaign, or the fits alone
+        results = Results(root)
+        for name, options in figures:
+            try:
+                out.paths.extend(draw(name, root, options, results))
+            except NematicError as e:
+                out.failures[name] = " ".join(str(e).split())
+            except Exception as e:  # a figure must never sink the run it follows
+                out.failures[name] = one_line(e)
+                log.debug("figure %s not drawn", name, exc_info=True)  # --verbose shows it
+    drawn = [] if not draw_figures else (list(names) if names else None)
+    try:
+        record_failed(root, out.failures, fits=bool(fits and fit_requests), figures=drawn)
+    except (NematicError, OSError) as e:  # the failures are still printed, and exit 4
+        log.warning("the failed products are not recorded for the report: %s", e)
     return out
 
 

@@ -1,7 +1,7 @@
 """What the report says, gathered from a campaign's results folder: the summary (question,
-grid, seeds, counts), the figures, the fits as tables, the failures by reason, the
-refinement rounds, the cost and the provenance. Plain data for :mod:`.page`; nothing here
-writes a file."""
+grid, seeds, counts), the fits and figures that failed, the figures, the fits as tables, the
+failed runs by reason, the refinement rounds, the cost and the provenance. Plain data for
+:mod:`.page`; nothing here writes a file."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ import xarray as xr
 
 from ..analysis.fits_file import FITS
 from ..figures.common import FIGURES
+from ..figures.failed import read_failed
 from ..names import symbol, unit
 from ..outputs.status import StatusReport
 
@@ -52,6 +53,8 @@ class Content:
     #: the line that says which done runs other campaigns made ("" if none)
     reused: str = ""
     figures: list[tuple[str, str]] = field(default_factory=list)
+    #: the fits and figures that failed when last produced: (product, why)
+    product_failures: list[tuple[str, str]] = field(default_factory=list)
     fits: list[Table] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
     refine: dict[str, Any] | None = None
@@ -448,6 +451,7 @@ def gather(
     root = opened.store.root
     content = summary(opened, status)
     content.figures = figure_images(root)
+    content.product_failures = list(read_failed(root).items())
     fits = load_fits(root) if (root / FITS).is_file() else xr.Dataset()
     content.fits = fit_tables(fits)
     content.failures = failure_groups(status, phase)

@@ -55,6 +55,13 @@ the main observables; click it for one of its runs (last snapshot and σ²_S(t))
 {{ plot_div | safe }}{% else %}<p>No phase diagram yet.</p>{% endif %}
 {% for note in plot_notes %}<p class="note">{{ note }}</p>{% endfor %}
 
+{% if c.product_failures %}<h2 id="product-failures">Products that failed</h2>
+<p>These fits and figures failed when they were last produced ({{ failed_file }});
+nematic figures draws them again.</p>
+<table class="product-failures"><tr><th>product</th><th>why</th></tr>
+{% for product, why in c.product_failures %}<tr><td>{{ product }}</td><td>{{ why }}</td></tr>
+{% endfor %}</table>{% endif %}
+
 <h2 id="figures">Figures</h2>
 {% for name, uri in c.figures %}<div class="figure"><h3>{{ name }}</h3>
 <img alt="{{ name }}" src="{{ uri }}"></div>
@@ -143,6 +150,7 @@ def build_report(opened: CampaignResults) -> str:
     import jinja2
     from bokeh.embed import components
 
+    from ..figures.failed import FAILED_PRODUCTS
     from ..outputs.aggregate import phase_dataset
     from ..outputs.status import campaign_status
     from .content import gather
@@ -169,6 +177,7 @@ def build_report(opened: CampaignResults) -> str:
         plot_notes=notes,
         created=created,
         folder=str(store.root),
+        failed_file=FAILED_PRODUCTS,
     )
 
 

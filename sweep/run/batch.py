@@ -122,7 +122,7 @@ def _run_together(
     except Exception as e:  # noqa: BLE001 - the batch's crash fails each of its seeds
         return {
             k: finish_record(
-                task, task_store(task), crash_record(task, "exception", e, t0), start, t0
+                task, task_store(task), crash_record(task, "exception", e, t0, len(held)), start, t0
             )
             for k, task, start in held
         }

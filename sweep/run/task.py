@@ -32,6 +32,7 @@ from ..errors import StorageError, StoreError
 from ..expand import Expansion, RunSpec
 from ..files import atomic_to_netcdf, file_stamp
 from ..identity import SCHEMA_VERSION, identity_start, trajectory_id
+from ..limits import OUT_OF_MEMORY, out_of_memory
 from ..store import CampaignStore, Record, now_iso, record_from_dataset
 from . import continuation
 
@@ -170,10 +171,13 @@ def failure_record(task: RunTask, reason: str, detail: str, tb: str, wall: float
     }
 
 
-def crash_record(task: RunTask, reason: str, error: Exception, t0: float) -> Record:
+def crash_record(task: RunTask, reason: str, error: Exception, t0: float, seeds: int = 1) -> Record:
     """The failure record of ``error``, being handled (its traceback), for a run started at
-    ``t0`` (``time.perf_counter``)."""
+    ``t0`` (``time.perf_counter``); a MemoryError is recorded as :data:`OUT_OF_MEMORY` with
+    what the run needed (``seeds``: computed together with it, an accelerated batch)."""
     detail = f"{type(error).__name__}: {error}"
+    if isinstance(error, MemoryError):
+        reason, detail = OUT_OF_MEMORY, out_of_memory(task.numerics, error, seeds)
     return failure_record(task, reason, detail, traceback.format_exc(), time.perf_counter() - t0)
 
 

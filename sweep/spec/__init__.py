@@ -49,7 +49,13 @@ from nematic_solids.model.resolution import is_rule, read_rule
 
 from ..campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec
 from ..errors import CampaignError, Problem
-from ..limits import available_memory, fmt_bytes, parse_size, run_memory_bytes
+from ..limits import (
+    MAX_GRID_POINTS,
+    available_memory,
+    fmt_bytes,
+    parse_size,
+    run_memory_bytes,
+)
 from .axes import read_sweep
 from .chain import read_chain
 from .checker import Checker, KeyPath, is_int, suggest
@@ -73,7 +79,7 @@ from .sections import (
     read_store,
 )
 from .verify import read_verify, variant_grid
-from .yaml_input import read_document, read_text
+from .yaml_input import NO_MEMORY, read_document, read_text
 
 #: The top-level keys, in the order error messages list them.
 TOP_KEYS = (
@@ -270,6 +276,7 @@ def parse_campaign(
             f"{campaign.n_runs} runs ({sizes + ' x ' if dims else ''}{len(seeds)} seeds); "
             f"allowed: at most {limits.max_runs} (limits.max_runs)",
         )
+    _check_points(c, campaign)
     _check_memory(c, campaign)
     if len(c.problems) > before_bounds:  # out of bounds: stop before any point is built
         c.raise_if_any()
@@ -299,6 +306,27 @@ def _initial(c: Checker, request: InitialRequest, read: Mapping[str, Any]) -> In
     finally:
         READING.reset(token)
     return resolve_initial(c, request, parent, read)
+
+
+def _check_points(c: Checker, campaign: Campaign) -> None:
+    """Refuse more than :data:`~nematic_solids.sweep.limits.MAX_GRID_POINTS` grid points, the
+    parents' (``initial.from``, each already checked) counted with this campaign's: every one
+    is built and checked by the model before anything runs."""
+    parents, ancestor = 0, campaign.initial
+    while ancestor is not None:
+        parents += ancestor.parent.n_points
+        ancestor = ancestor.parent.initial
+    total = campaign.n_points + parents
+    if total <= MAX_GRID_POINTS:
+        return
+    sizes = " x ".join(f"{len(d)} ({d.name})" for d in campaign.dims)
+    theirs = f" and {parents} of the campaigns it begins from" if parents else ""
+    c.add(
+        ("sweep",),
+        f"{campaign.n_points} grid points ({sizes}){theirs}; allowed: at most "
+        f"{MAX_GRID_POINTS} (each is checked by the model before anything runs): split the "
+        "study into several campaigns, or refine where the outcome changes (refine:)",
+    )
 
 
 def run_memory_limit(campaign: Campaign) -> tuple[int | None, str]:
@@ -394,15 +422,6 @@ def load_campaign(path: str | Path, overrides: Overrides | None = None) -> Campa
     try:
         text = read_text(p)
         return parse_campaign(text, str(p), overrides, default_name=p.stem)
-    except MemoryError:
-        raise CampaignError(
-            str(p),
-            [
-                Problem(
-                    "",
-                    "not enough memory to read and check this campaign file (give the "
-                    "process more memory, or make the campaign smaller)",
-                    str(p),
-                )
-            ],
-        ) from None
+    except MemoryError:  # refused below, once what the check held is freed
+        pass
+    raise CampaignError(str(p), [Problem("", NO_MEMORY, str(p))])

@@ -9,7 +9,7 @@ from nematic_solids.model.errors import ParameterError
 
 from ..campaign import AMB, Campaign
 from ..expand import MAX_POINT_PROBLEMS, iter_points, make_point
-from ..identity import hash_canonical
+from ..identity import PointIdentity
 from ..protocols import error_path, protocol_axes
 from .checker import Checker
 
@@ -21,12 +21,15 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
     swept = {k: v for k, v in protocol_axes(campaign.parameters).items() if k in axis_names}
     seen: set[tuple[str, str]] = set()
     _check_variant_precision(checker, campaign)
-    runs: dict[str, dict] = {}  # one grid point's run (seed 0) -> its coordinates
+    runs: dict[tuple, dict] = {}  # one grid point's run (its identity) -> its coordinates
+    identity = PointIdentity()
     for index, coords in iter_points(campaign):
         try:
             point = make_point(campaign, index, coords)
             plain = campaign.initial is None and campaign.chain is None  # ids of their own
-            if plain and _same_run(checker, point, coords, runs):
+            if plain and _same_run(
+                checker, identity(point.parameters, point.numerics), coords, runs
+            ):
                 return
         except ParameterError as e:
             if _report(checker, campaign, e, coords, axis_names, swept, seen):
@@ -180,11 +183,11 @@ def _needs_samples(
     return len(seen) >= MAX_POINT_PROBLEMS
 
 
-def _same_run(checker: Checker, point, coords: dict, runs: dict[str, dict]) -> bool:
-    """Whether ``point`` is a grid point already seen under other coordinates (the same run:
-    e.g. a pulse whose level is its base, which is the constant parameter): reported once."""
-    rid = hash_canonical(point.parameters.to_dict(), point.numerics.to_dict(), 0)
-    first = runs.setdefault(rid, coords)
+def _same_run(checker: Checker, key: tuple, coords: dict, runs: dict[tuple, dict]) -> bool:
+    """Whether the grid point at ``coords`` (its run's identity: ``key``) was already seen
+    under other coordinates (the same run: e.g. a pulse whose level is its base, which is the
+    constant parameter): reported once."""
+    first = runs.setdefault(key, coords)
     if first is coords:
         return False
     fmt = ", ".join

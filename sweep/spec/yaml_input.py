@@ -185,6 +185,13 @@ def parse_assignments(items: Sequence[str]) -> dict[str, Any]:
     return out
 
 
+#: What a campaign file that the process has not the memory to read or check is refused with.
+NO_MEMORY = (
+    "not enough memory to read and check this campaign file (give the process more memory, or "
+    "make the campaign smaller)"
+)
+
+
 def _too_large(size: str) -> str:
     return (
         f"the file has {size} bytes; allowed: at most {MAX_TEXT_BYTES} (a campaign file is a "
@@ -202,6 +209,7 @@ def read_text(path: str | Path) -> str:
     def refused(message: str) -> CampaignError:
         return CampaignError(where, [Problem("", message, where)])
 
+    exhausted = False
     try:
         # O_NONBLOCK: opening a named pipe does not wait for a writer (it is refused below)
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
@@ -223,14 +231,21 @@ def read_text(path: str | Path) -> str:
             data += more
     except OSError as e:
         raise refused(f"cannot read the file: {e.strerror}") from None
+    except MemoryError:  # refused below (not while handling it: what it held is freed)
+        exhausted = True
     finally:
         os.close(fd)
-    if len(data) > MAX_TEXT_BYTES:  # it grew after fstat
+    if not exhausted and len(data) > MAX_TEXT_BYTES:  # it grew after fstat
         raise refused(_too_large(f"more than {MAX_TEXT_BYTES}"))
     try:
-        return data.decode("utf-8")
+        if not exhausted:
+            return data.decode("utf-8")
     except UnicodeDecodeError:
         raise refused("not a UTF-8 text file") from None
+    except MemoryError:
+        pass
+    data = b""  # what was read is freed before the refusal is made
+    raise refused(NO_MEMORY)
 
 
 def _walk(node: yaml.Node, path: KeyPath, lines: dict[KeyPath, int], dups: list[KeyPath]) -> None:
@@ -268,6 +283,8 @@ def read_document(
                 )
             ],
         )
+    refusal: Problem | None = None
+    exhausted = False
     try:
         loader = _Loader(text)
         try:
@@ -276,16 +293,20 @@ def read_document(
         finally:
             loader.dispose()
     except _Refused as e:
-        raise CampaignError(source, [Problem("", e.message, f"{source}:{e.line}")]) from None
+        refusal = Problem("", e.message, f"{source}:{e.line}")
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
         msg = " ".join(str(getattr(e, "problem", None) or e).split())
-        raise CampaignError(source, [Problem("", f"not valid YAML: {msg}", where)]) from None
+        refusal = Problem("", f"not valid YAML: {msg}", where)
     except RecursionError:  # pragma: no cover - MAX_YAML_DEPTH stops it first
-        raise CampaignError(
-            source, [Problem("", "the YAML is nested too deeply", source)]
-        ) from None
+        refusal = Problem("", "the YAML is nested too deeply", source)
+    except MemoryError:  # nothing allocated while the parse's frames hold its nodes
+        exhausted = True
+    if exhausted:
+        refusal = Problem("", NO_MEMORY, source)
+    if refusal is not None:  # raised here, not while handling: the parse's frames are freed
+        raise CampaignError(source, [refusal])
     lines: dict[KeyPath, int] = {}
     dups: list[KeyPath] = []
     if node is None:

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-pytest.importorskip("jax", reason="the accelerated backend needs JAX: pip install '.[accel]'")
+pytest.importorskip("jax", reason="the accelerated backend needs JAX: pip install -e '.[accel]'")
 
 import jax
 

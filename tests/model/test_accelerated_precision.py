@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-pytest.importorskip("jax", reason="the accelerated backend needs JAX: pip install '.[accel]'")
+pytest.importorskip("jax", reason="the accelerated backend needs JAX: pip install -e '.[accel]'")
 
 import jax
 import jax.numpy as jnp
@@ -123,6 +123,11 @@ def test_a_float32_linear_run_agrees_with_float64():
     assert b.fields.dtype == np.float64  # handed to the host widened (exactly)
     assert not np.array_equal(a.fields, b.fields)  # it did compute in float32
     for name in ("sigma2_S", "lambda", "cos2theta", "mean_S"):
-        np.testing.assert_allclose(b.series[name], a.series[name], rtol=1e-4, err_msg=name)
+        # relative to each value, and to the series' scale where a value is rounding noise
+        # (sigma2_S at t = 0 of the uniform band: 2e-30 in float64, 4e-18 in float32)
+        scale = float(np.nanmax(np.abs(a.series[name])))
+        np.testing.assert_allclose(
+            b.series[name], a.series[name], rtol=1e-4, atol=1e-6 * scale, err_msg=name
+        )
     steps64, steps32 = a.work["steps"], b.work["steps"]
     assert np.all(np.abs(steps32 - steps64) <= 0.1 * steps64)

@@ -114,7 +114,7 @@ def test_the_accelerated_backend_needs_jax_on_a_local_cluster(monkeypatch):
         importlib.util, "find_spec", lambda name, *a: None if name == "jax" else real(name, *a)
     )
     text = problems(campaign_text(BATCHED))
-    assert "needs JAX, which is not installed here: pip install '.[accel]'" in text
+    assert "needs JAX, which is not installed here: pip install -e '.[accel]'" in text
 
 
 def test_batches_hold_runs_of_one_point_in_queue_order():

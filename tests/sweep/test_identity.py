@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import random
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -13,6 +14,7 @@ from nematic_solids.sweep.expand import expand
 from nematic_solids.sweep.identity import (
     SCHEMA_VERSION,
     PointHasher,
+    PointIdentity,
     canonical_json,
     hash_canonical,
     run_id_for,
@@ -138,6 +140,39 @@ def test_point_hasher_equals_hash_canonical():
     h = PointHasher(P, N)
     for seed in (0, 1, 49, 12345678901):
         assert h(seed) == hash_canonical(P, N, seed)
+
+
+PULSE = {"start": 5.0, "duration": 2.0}
+
+
+def test_point_identity_is_equal_exactly_where_the_run_ids_are():
+    """The validation's key of a grid point (no hash, numerics canonicalised once) and the run
+    id agree: points that differ below the 12 significant digits, a constant pulse and the
+    plain parameter, a protocol whose step bound binds or not."""
+    points: list[tuple[dict[str, Any], dict[str, Any]]] = [
+        ({"B": 1.0e6, "alpha_minus_B": 1.0e-7}, {}),
+        ({"B": 1.0e6, "alpha_minus_B": 2.0e-7}, {}),  # alpha equal to 12 digits: one run
+        ({"alpha_minus_B": 1.0}, {}),
+        ({"protocol": {"alpha_minus_B": {"pulse": {**PULSE, "base": 1.0, "level": 1.0}}}}, {}),
+        ({"protocol": {"eps": {"sine": {"amplitude": 0.01, "period": 40}}}}, {}),
+        ({"protocol": {"eps": {"sine": {"amplitude": 0.01, "period": 4}}}}, {}),
+        ({"protocol": {"eps": {"sine": {"amplitude": 0.01, "period": 4}}}}, {"dt_max": 0.1}),
+        ({}, {"steady_window": 20.0}),  # early stop off: the window changes nothing
+        ({}, {"backend": "numpy"}),
+        ({}, {"t_final": 100.0}),
+        ({"K": 1e-4}, {"t_final": 100.0}),
+    ]
+    key = PointIdentity()
+    built = [(Parameters.from_dict(p), Numerics.from_dict(n)) for p, n in points]
+    keys = [key(p, n) for p, n in built]
+    ids = [hash_canonical(p.to_dict(), n.to_dict(), 0) for p, n in built]
+    for i in range(len(built)):
+        for j in range(len(built)):
+            assert (keys[i] == keys[j]) == (ids[i] == ids[j]), (points[i], points[j])
+    # the cases above are there: alpha to 12 digits; 1.0 = the constant pulse = the defaults
+    assert keys[0] == keys[1]
+    assert keys[2] == keys[3] == keys[7] == keys[8]
+    assert len(set(ids)) == len(ids) - 4
 
 
 def test_expansion_ids_match_single_run_ids():

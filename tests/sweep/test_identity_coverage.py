@@ -10,6 +10,7 @@ reason ``parent_state``, never a fallback to a snapshot."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -18,9 +19,20 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from nematic_solids.model.checkpoint import InitialState, RunState, read_netcdf
+from nematic_solids.model.parameters import Numerics, Parameters
+from nematic_solids.model.simulate import run as simulate
 from nematic_solids.sweep.campaign import NUMERICS_TYPES
 from nematic_solids.sweep.expand import expand
-from nematic_solids.sweep.run.continuation import STATE_GROUP
+from nematic_solids.sweep.identity import (
+    EXACT_GUESS,
+    ID_LENGTH,
+    canonical_json,
+    hash_canonical,
+    identity_start,
+    start_guess,
+)
+from nematic_solids.sweep.run.continuation import STATE_GROUP, file_snapshots
 from nematic_solids.sweep.run.task import RunTask, execute_run
 from nematic_solids.sweep.spec import load_campaign
 from nematic_solids.sweep.spec.sections import STORE_KEYS
@@ -266,3 +278,85 @@ def test_a_parent_state_that_cannot_be_used_fails_the_run_with_its_reason(tmp_pa
     assert str(parent_file) in rec["detail"]
     assert not (store.runs_dir / f"{run.run_id}.nc").exists()  # nothing from a fallback
     assert "parent_state" in RETRYABLE_REASONS  # redone once the parent is whole again
+
+
+def _without_guess(text: str) -> str:
+    """The run id a canonical text had before the exact guess entered it."""
+    payload = json.loads(text)
+    payload.pop("start_guess", None)
+    compact = json.dumps(payload, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return hashlib.sha256(compact.encode("ascii")).hexdigest()[:ID_LENGTH]
+
+
+def test_a_finite_strain_successor_names_its_exact_guess_in_its_id(tmp_path):
+    """A finite-strain run begun from an exact end state solves its force balance at t = 0
+    from the end state's displacement spectrum (runs made before: from the end snapshot's
+    displacement), so its id names that guess; the first runs of a chain, linear strain and
+    a start from a snapshot keep the ids they had."""
+    for mechanics, marked in (("finite", True), ("linear", False)):
+        path = tmp_path / f"{mechanics}.yaml"
+        path.write_text(_text(numerics=f", mechanics: {mechanics}"))
+        for run in expand(load_campaign(path)):
+            p, n = run.point.parameters.to_dict(), run.point.numerics.to_dict()
+            start = identity_start(run.start)
+            text = canonical_json(p, n, run.seed, start)
+            assert run.run_id == hash_canonical(p, n, run.seed, start)
+            if start is None or not marked:
+                assert "start_guess" not in json.loads(text)
+                assert run.run_id == _without_guess(text)  # as before
+            else:
+                assert json.loads(text)["start_guess"] == EXACT_GUESS
+                assert run.run_id != _without_guess(text)  # another id than before
+    finite = Numerics().to_dict()
+    p = Parameters().to_dict()
+    assert start_guess(finite, {"run": "a", "time": "end"}) == EXACT_GUESS  # initial.from
+    assert start_guess(finite, {"run": "a", "time": "1"}) is None  # a snapshot's displacement
+    assert start_guess(finite, {"run": "a", "time": "end", "state": "snapshot (float32)"}) is None
+    assert "start_guess" not in canonical_json(p, finite, 0)  # the seeded texture
+
+
+def test_a_successor_from_the_guess_runs_were_made_with_has_other_numbers(tmp_path):
+    """Why the guess enters the id: the chain's successor run again from its predecessor's
+    end state with the first guess that runs made before took (the displacement of the end
+    snapshot in real space, the state's own fields) gives other arrays than the exact
+    spectrum (here apart by rounding; Newton's stop bounds them by its tolerance), while the
+    exact guess reproduces the run's file bit for bit."""
+    runs = _run_chain(tmp_path, _text())
+    campaign = load_campaign(tmp_path / "c.yaml")
+    successor = next(r for r in expand(campaign) if r.start is not None)
+    assert successor.start is not None
+    before = tmp_path / "results" / "c" / "runs" / f"{successor.start['run']}.nc"
+    state = RunState.from_dataset(read_netcdf(before, STATE_GROUP))
+    with xr.open_dataset(before) as main:
+        state.snaps = file_snapshots(main.load())
+    params, numerics = successor.point.parameters, successor.point.numerics
+    exact = simulate(params, numerics, successor.seed, initial=InitialState.exact(state))
+    older = simulate(params, numerics, successor.seed, initial=InitialState.at(state))
+    stored = runs[(successor.coords["alpha_minus_B"], successor.run_id)]
+    for name in ("q1", "q2", "A", "sigma2_S", "mean_S"):
+        np.testing.assert_array_equal(exact[name].values, stored[name].values)
+    assert any(
+        not np.array_equal(exact[name].values, older[name].values) for name in ("q1", "q2", "A")
+    )
+    np.testing.assert_allclose(older["q1"].values, exact["q1"].values, rtol=0, atol=1e-9)
+
+
+def test_the_shipped_chain_keeps_its_first_runs_and_not_its_successors(tmp_path):
+    """docs/results/fig2_loop was run before the exact guess: the first run of each branch
+    (from the seeded texture) keeps its id, every successor has a new one, so its stored
+    numbers are never taken for a run from the exact guess."""
+    results = Path(__file__).resolve().parents[2] / "docs" / "results" / "fig2_loop"
+    with xr.open_dataset(results / "phase.nc") as phase:
+        ids = phase["run_id"].transpose("branch", "alpha_minus_B", "seed").values
+        path = tmp_path / "fig2_loop.yaml"
+        path.write_text(phase.attrs["campaign_yaml"])
+        assert phase.attrs.get("campaign_overrides", "") == ""
+        first = {"up": 0, "down": len(phase["alpha_minus_B"]) - 1}  # each branch's first value
+        branches = [str(b) for b in phase["branch"].values]
+    planned = set(expand(load_campaign(path)).run_ids)
+    firsts = {str(r) for b, i in first.items() for r in ids[branches.index(b), i]}
+    successors = {str(r) for r in ids.ravel()} - firsts
+    assert len(firsts) == 20
+    assert len(successors) == 2 * 12 * 10
+    assert firsts <= planned
+    assert not successors & planned

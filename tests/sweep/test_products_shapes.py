@@ -9,6 +9,7 @@ and the precision campaigns, `nematic run`)."""
 from __future__ import annotations
 
 import re
+from html.parser import HTMLParser
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -177,14 +178,56 @@ def test_every_product_is_produced_or_refused_at_its_line(built, shape, monkeypa
     assert "produced" in outcome.values()
 
 
+class _FailedProducts(HTMLParser):
+    """The report's "Products that failed" section: whether its heading is there, and the
+    cells of its table's rows."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.heading = False
+        self.rows: list[list[str]] = []
+        self._in_table = self._in_cell = False
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.heading |= a.get("id") == "product-failures"
+        if tag == "table":
+            self._in_table = a.get("class") == "product-failures"
+        elif self._in_table and tag == "tr":
+            self.rows.append([])
+        elif self._in_table and tag == "td":
+            self._in_cell = True
+            self.rows[-1].append("")
+
+    def handle_endtag(self, tag):
+        self._in_cell &= tag != "td"
+        self._in_table &= tag != "table"
+
+    def handle_data(self, data):
+        if self._in_cell:
+            self.rows[-1][-1] += data
+
+
+def failed_products_in(report: Path) -> list[tuple[str, str]]:
+    """The rows of the report's "Products that failed" table (none: the section is absent)."""
+    parser = _FailedProducts()
+    parser.feed(report.read_text(encoding="utf-8"))
+    rows = [(r[0], " ".join(r[1].split())) for r in parser.rows if r]
+    assert parser.heading == bool(rows)
+    return rows
+
+
 def test_a_product_that_fails_fails_the_run_and_figures_in_one_line(tmp_path):
     """Every run succeeds, but the figures cannot be written (a file where their folder goes):
-    `nematic run` and `nematic figures` name the figure in one line each and exit 4, not 0."""
+    `nematic run` and `nematic figures` name the figure in one line each and exit 4, not 0,
+    and the report names it with the same reason; once it is drawn (`nematic figures` rewrites
+    the report), the report names none."""
     path = tmp_path / "one.yaml"
     path.write_text(text_of("one_axis") + "figures: [fig2]\nexecution: {workers: 1}\n")
     results = tmp_path / "results"
-    (results / "one_axis").mkdir(parents=True)
-    (results / "one_axis" / "figures").write_text("not a folder")
+    root = results / "one_axis"
+    root.mkdir(parents=True)
+    (root / "figures").write_text("not a folder")
     runner = CliRunner()
     r = runner.invoke(app, ["run", str(path), "--results", str(results)])
     assert r.exit_code == 4, r.output
@@ -192,10 +235,37 @@ def test_a_product_that_fails_fails_the_run_and_figures_in_one_line(tmp_path):
     assert len(lines) == 1, r.output
     assert "Traceback" not in r.output
     assert "every run succeeded, but 1 fit(s) or figure(s) failed" in " ".join(r.output.split())
-    assert (results / "one_axis" / "phase.nc").is_file()  # the runs are kept
+    assert (root / "phase.nc").is_file()  # the runs are kept
+    why = lines[0].removeprefix("failed: figure fig2: ")
+    assert failed_products_in(root / "report.html") == [("figure fig2", why)]
     r = runner.invoke(app, ["figures", str(path), "--results", str(results)])
     assert r.exit_code == 4, r.output
     assert len([ln for ln in r.output.splitlines() if ln.startswith("failed: figure fig2: ")]) == 1
-    (results / "one_axis" / "figures").unlink()
+    (root / "figures").unlink()
     r = runner.invoke(app, ["figures", str(path), "--results", str(results)])
     assert r.exit_code == 0, r.output
+    assert not (root / "failed_products.json").exists()
+    assert failed_products_in(root / "report.html") == []  # nematic figures rewrote it
+    assert '<img alt="fig2"' in (root / "report.html").read_text(encoding="utf-8")
+
+
+def test_the_failed_products_record_keeps_what_was_not_produced_again(tmp_path):
+    """failed_products.json after each products step: what was produced again is replaced (all
+    the fits when fits.nc is rewritten; the figures drawn), the rest kept; none left, no file."""
+    from nematic_solids.sweep.figures.failed import FAILED_PRODUCTS, read_failed, record_failed
+
+    record_failed(
+        tmp_path, {"fit transition": "a", "loop": "b", "fig2": "c"}, fits=True, figures=None
+    )
+    assert read_failed(tmp_path) == {
+        "figure fig2": "c",
+        "figure loop": "b",
+        "fit transition": "a",
+    }
+    record_failed(tmp_path, {}, fits=False, figures=["loop"])  # --only loop, --no-fits
+    assert read_failed(tmp_path) == {"figure fig2": "c", "fit transition": "a"}
+    record_failed(tmp_path, {"fig3": "d"}, fits=True, figures=[])  # the fits alone
+    assert read_failed(tmp_path) == {"figure fig2": "c", "figure fig3": "d"}
+    record_failed(tmp_path, {}, fits=True, figures=None)
+    assert read_failed(tmp_path) == {}
+    assert not (tmp_path / FAILED_PRODUCTS).exists()

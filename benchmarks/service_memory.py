@@ -57,6 +57,27 @@ def proc_status(pid: int) -> dict[str, float]:
     return out
 
 
+def growth(samples: list[dict[str, Any]]) -> dict[str, Any]:
+    """RSS at the start, half way and the end; over the second half (the first warms imports,
+    caches and the cluster): the least-squares slope per campaign and the range."""
+    import numpy as np
+
+    half = samples[len(samples) // 2 :]
+    x = np.array([s["campaigns"] for s in half], dtype=float)
+    y = np.array([s["VmRSS"] for s in half], dtype=float)
+    slope = float(np.polyfit(x, y, 1)[0]) if len(half) > 1 else float("nan")
+    return {
+        "rss_start_mib": samples[0]["VmRSS"],
+        "rss_half_mib": half[0]["VmRSS"],
+        "rss_end_mib": half[-1]["VmRSS"],
+        "rss_peak_mib": max(s["VmHWM"] for s in samples),
+        "rss_second_half_range_mib": [float(y.min()), float(y.max())],
+        "rss_slope_second_half_kib_per_campaign": 1024 * slope,
+        "threads_half_end": [half[0]["Threads"], half[-1]["Threads"]],
+        "fds_half_end": [half[0]["fds"], half[-1]["fds"]],
+    }
+
+
 def events(url: str, headers: dict[str, str], n: int) -> None:
     """Open ``n`` event streams, read each one's first event, drop them."""
     for _ in range(n):
@@ -143,9 +164,6 @@ def main() -> None:
         client.close()
         os.kill(proc.pid, signal.SIGTERM)
         proc.wait(timeout=120)
-    half = samples[len(samples) // 2 :]
-    first, last = half[0], half[-1]
-    per = max(1, last["campaigns"] - first["campaigns"])
     out = {
         "what": "the service process's memory over many small campaigns, streams and pages",
         "command": f"python benchmarks/service_memory.py --campaigns {args.campaigns}",
@@ -156,13 +174,7 @@ def main() -> None:
             "runs": 4,
         },
         "states": states,
-        "rss_start_mib": samples[0]["VmRSS"],
-        "rss_half_mib": first["VmRSS"],
-        "rss_end_mib": last["VmRSS"],
-        "rss_peak_mib": max(s["VmHWM"] for s in samples),
-        "rss_growth_second_half_kib_per_campaign": 1024 * (last["VmRSS"] - first["VmRSS"]) / per,
-        "threads_half_end": [first["Threads"], last["Threads"]],
-        "fds_half_end": [first["fds"], last["fds"]],
+        **growth(samples),
         "samples": samples,
         "machine": {
             "cpus": os.cpu_count(),

@@ -138,6 +138,7 @@ def main() -> None:
         save_campaign_copy(small, load_campaign(write_small(folder)))
         timed(client, "/api/campaigns/small")
         import scipy.stats  # noqa: F401 - what a page with seed intervals imports once
+
         _, figures["campaign_list_s"], _ = timed(client, "/api/campaigns")
         _, figures["campaign_list_again_s"], _ = timed(client, "/api/campaigns")
         page, figures["campaign_page_first_s"], figures["campaign_page_bytes"] = timed(

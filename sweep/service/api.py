@@ -364,7 +364,8 @@ def create_app(context: ServiceContext) -> FastAPI:
     async def events(request: Request) -> EventSourceResponse:
         """Server-sent events: ``change`` with ``{"seq", "changes"}`` whenever the catalogue
         records a run (from this service or any driver of the root) or the service's state
-        moves (the queue, a campaign's phase); the page then asks ``/api/changes``."""
+        moves (the queue, a campaign's phase); a campaign's page then asks for what changed after
+        its ``seq`` (``/api/campaigns/{name}?since=``)."""
 
         async def stream() -> AsyncIterator[dict[str, str]]:
             last: tuple[int, int] | None = None

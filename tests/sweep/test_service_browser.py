@@ -98,18 +98,19 @@ def test_the_dashboard_fills_in_without_reload_and_a_click_shows_a_run(chromium,
         from nematic_solids.sweep.catalogue.index import record_rows
         from nematic_solids.sweep.store import CampaignStore
 
-        updates = int(chromium.execute_script("return document.body.dataset.updates || '0'"))
         store = CampaignStore(root, "tiny")
         rid = next(iter(store.scan(save=False)))
         with open_catalogue(root) as catalogue:
             catalogue.record(list(record_rows(store, [rid])), {"tiny": "tiny"})
-        wait_js(
+            recorded = catalogue.last_seq()
+        seen = wait_js(
             chromium,
-            "return Number(document.body.dataset.updates || 0)",
-            lambda v: v > updates,
+            "return [Number(document.body.dataset.seq), document.body.dataset.delta]",
+            lambda v: v[0] >= recorded,
             30,
-            "an update after the page's cursor",
+            "the page past the run recorded",
         )
+        assert seen[1] == "true"  # brought by an update after the page's cursor
         assert chromium.execute_script("return document.body.dataset.ok") == "4"
         assert chromium.execute_script("return window.notReloaded") is True
         # a click on a point shows its runs and one run's series

@@ -120,7 +120,6 @@ def test_the_page_marks_rounds_and_verdicts(tmp_path):
 
 @pytest.mark.browser
 def test_the_diagram_draws_rounds_verdicts_and_a_selector_of_the_third_axis(tmp_path):
-    from selenium.webdriver.support.ui import Select
     from sweep_helpers import kill_group, wait_group_gone
     from test_report_browser import headless_chromium
     from test_service_browser import wait_js
@@ -158,11 +157,17 @@ def test_the_diagram_draws_rounds_verdicts_and_a_selector_of_the_third_axis(tmp_
             "return [...document.querySelectorAll('#phase text.round')].map(t => t.textContent)"
         )
         assert labels == []  # round 1's points are at chi = 10
-        Select(
-            chromium.find_element("css selector", "#slice select[data-dim=chi]")
-        ).select_by_index(1)
+        # chosen in one script: a redraw (an event) cannot come between finding and choosing
+        chromium.execute_script(
+            "const s = document.querySelector('#slice select[data-dim=chi]');"
+            "s.value = '1'; s.dispatchEvent(new Event('change'));"
+        )
         shown = wait_js(
-            chromium, keys, lambda v: all(k.endswith("chi=10") for k in v), 30, "the other slice"
+            chromium,
+            keys,
+            lambda v: len(v) == 4 and all(k.endswith("chi=10") for k in v),
+            30,
+            "the other slice",
         )
         assert len(shown) == 4
         labels = chromium.execute_script(

@@ -319,6 +319,8 @@
     seq = page.seq;
     draw(page);
     body.dataset.ok = String(page.counts ? page.counts.ok : 0);
+    body.dataset.seq = String(seq);
+    body.dataset.delta = String(answer.delta);
   }
 
   // ------------------------------------------------------------------ updates

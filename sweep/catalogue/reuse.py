@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..files import temporary_path
-from ..identity import trajectory_id
+from ..identity import identity_start, trajectory_id
 from ..store import CampaignStore, Record
 from .catalogue import Catalogue
 from .location import ENV, FILENAME
@@ -174,7 +174,7 @@ def trajectories(expansion: Expansion, positions: Iterable[int]) -> dict[int, st
     out = {}
     for i in positions:
         run = expansion.run(i)
-        start = None if run.start is None else {k: run.start[k] for k in ("run", "time")}
+        start = identity_start(run.start)  # as the run task records it (the state too)
         out[i] = trajectory_id(
             run.point.parameters.to_dict(), run.point.numerics.to_dict(), run.seed, start
         )

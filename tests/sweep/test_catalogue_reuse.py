@@ -145,3 +145,32 @@ def test_a_longer_run_continues_another_campaigns_run(two, tmp_path):
     cat = open_catalogue(root)
     assert (first_id, "continued") in cat.lineage(rid)
     cat.close()
+
+
+def test_a_run_begun_from_a_snapshot_looks_for_its_own_trajectory():
+    """The catalogue looks for the trajectory the run task records: a run begun from another
+    run's snapshot (``state: snapshot``) is not taken for one begun from its exact end state."""
+    from types import SimpleNamespace
+
+    from nematic_solids.model.parameters import Numerics, Parameters
+    from nematic_solids.sweep.catalogue.reuse import trajectories
+    from nematic_solids.sweep.identity import identity_start, trajectory_id
+
+    parameters, numerics = Parameters(), Numerics(resolution=16, t_final=1.0)
+    starts = [
+        {"run": "a" * 16, "time": "end"},
+        {"run": "a" * 16, "time": "end", "state": "snapshot"},
+    ]
+    runs = [
+        SimpleNamespace(
+            point=SimpleNamespace(parameters=parameters, numerics=numerics), seed=0, start=s
+        )
+        for s in starts
+    ]
+    found = trajectories(SimpleNamespace(run=runs.__getitem__), [0, 1])
+    recorded = [
+        trajectory_id(parameters.to_dict(), numerics.to_dict(), 0, identity_start(s))
+        for s in starts
+    ]
+    assert [found[0], found[1]] == recorded
+    assert found[0] != found[1]

@@ -16,6 +16,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+# DeviceUnavailable: the model's error for a device (a GPU) that is not there, which the
+# driver raises too when a worker host lacks it
+from nematic_solids.model.errors import DeviceUnavailable as DeviceUnavailable
 from nematic_solids.model.errors import NematicError
 
 

@@ -30,8 +30,8 @@ from nematic_solids.model.resolution import is_rule, read_rule
 from ..campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from ..expand import Expansion
 from ..files import atomic_to_netcdf
+from ..models.registry import get_model
 from ..names import NAMES
-from ..observables import NOT_OBSERVABLES, OBSERVABLES
 from ..protocols import AXIS_LONG_NAMES, PROTOCOL
 from ..provenance import code_version, git_commit, library_versions_text
 from ..store import RETRYABLE_REASONS, CampaignStore, Record, now_iso
@@ -67,9 +67,15 @@ PARAMETER_LONG_NAMES = {
 }
 
 
-def _observable_names(records: Mapping[str, Record]) -> dict[str, tuple[str, str]]:
-    out = dict(OBSERVABLES)
-    known = {src for src, _ in OBSERVABLES.values()}
+#: Scalars of the run files that are not observables (they differ between identical runs).
+NOT_OBSERVABLES = {"wall_time"}
+
+
+def _observable_names(records: Mapping[str, Record], model: str) -> dict[str, tuple[str, str]]:
+    """phase.nc name -> (run scalar, long name): ``model``'s observables, then every other
+    scalar the records hold (``<name>_final`` as ``<name>``), except :data:`NOT_OBSERVABLES`."""
+    out = {o.name: (o.scalar, o.long_name) for o in get_model(model).observables}
+    known = {src for src, _ in out.values()}
     extra: set[str] = set()
     for rec in records.values():
         extra.update((rec.get("scalars") or {}).keys())
@@ -108,7 +114,7 @@ def build_phase(
     expansion: Expansion, records: Mapping[str, Record], store: CampaignStore | None = None
 ) -> xr.Dataset:
     """The phase-diagram Dataset of a campaign from its run records (see module doc)."""
-    import xarray as xr  # here: the campaign's reader needs OBSERVABLES, not xarray
+    import xarray as xr  # here: the campaign's reader needs this module, not xarray
 
     campaign = expansion.campaign
     dims = [d.name for d in campaign.dims] + ["seed"]
@@ -116,7 +122,7 @@ def build_phase(
     n = len(expansion)
     status = np.zeros(n, dtype=np.int8)
     reason = np.full(n, "", dtype=object)
-    observables = _observable_names(records)
+    observables = _observable_names(records, campaign.model)
     data = {name: np.full(n, np.nan) for name in observables}
     run_time = np.full(n, np.nan)
     versions: set[str] = set()

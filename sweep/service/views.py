@@ -17,7 +17,7 @@ import numpy as np
 from ..campaign import Campaign
 from ..errors import CampaignError
 from ..expand import Expansion
-from ..observables import OBSERVABLES
+from ..models.registry import get_model
 from ..store import CampaignStore, Record
 from .security import inside, safe_name
 
@@ -100,7 +100,9 @@ def _plain(value: Any) -> Any:
 def points(expansion: Expansion, records: Mapping[str, Record]) -> list[dict[str, Any]]:
     """One entry per grid point: its swept values, its runs (id, seed, status, value), the
     seed mean of :data:`SHOWN` and its interval, counts by status."""
-    scalar = OBSERVABLES[SHOWN][0]
+    scalar = next(
+        o.scalar for o in get_model(expansion.campaign.model).observables if o.name == SHOWN
+    )
     by_point: dict[tuple[int, ...], dict[str, Any]] = {}
     for run in expansion:
         entry = by_point.setdefault(

@@ -18,7 +18,7 @@ import os
 import resource
 from typing import Any
 
-from nematic_solids.model.errors import ParameterError
+from .errors import ParameterError
 
 #: Default ceiling on the runs of one campaign (``limits.max_runs`` changes it).
 DEFAULT_MAX_RUNS = 1_000_000

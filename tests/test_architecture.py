@@ -290,22 +290,18 @@ PLUGIN = "sweep/models/nematic.py"
 #: so the list only shrinks.
 CORE_MODEL_IMPORTS: dict[str, str] = {
     "sweep/campaign.py": "PARAMETER_TYPES/NUMERICS_TYPES read from Parameters and Numerics",
-    "sweep/errors.py": "the campaign manager's exceptions extend the model's NematicError",
+    "sweep/errors.py": "exceptions extend NematicError; ParameterError, DeviceUnavailable",
     "sweep/expand.py": "grid points are Parameters and Numerics; the resolution rule",
     "sweep/identity.py": "run ids of Parameters/Numerics; the protocol's step bound",
-    "sweep/limits.py": "ParameterError for a bound",
-    "sweep/outputs/aggregate.py": "the resolution rule's attributes in phase.nc",
     "sweep/protocols.py": "protocol axes read with the model's Protocol",
     "sweep/provenance.py": "the model's version and library versions",
     "sweep/run/continuation.py": "checkpoints and end states are the model's RunState",
     "sweep/spec/__init__.py": "grid points checked by Parameters/Numerics; resolution rule",
-    "sweep/spec/chain.py": "the resolution rule of a chain's points",
     "sweep/spec/execution.py": "what the accelerated backend supports",
     "sweep/spec/initial.py": "a parent's points as Parameters/Numerics; the resolution rule",
     "sweep/spec/points.py": "every grid point checked by the model's objects",
     "sweep/spec/protocol.py": "the protocol section read by the model's Protocol",
     "sweep/spec/verify.py": "a variant's settings checked by Parameters/Numerics",
-    "sweep/verify/sample.py": "ParameterError of a variant not valid at a point",
 }
 #: Files outside the core that import nematic_solids.model: the paper's own commands, fits
 #: and cost calibration, and the command line's and service's handling of the model's errors.

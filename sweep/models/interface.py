@@ -151,7 +151,8 @@ class Capabilities:
     batched: bool = False
     #: :meth:`Model.cost_seconds` predicts a run's wall time
     cost_model: bool = False
-    #: :meth:`Model.resolution_rule` gives the resolution a point needs
+    #: a resolution setting may be a rule that gives each point its grid
+    #: (:class:`ResolutionRule`: :meth:`~ResolutionRule.resolution`, :meth:`~ResolutionRule.rule`)
     resolution_rule: bool = False
     #: :meth:`Model.memory_bytes` bounds a run's memory
     memory_per_run: bool = False
@@ -242,6 +243,28 @@ class Compiled(Protocol):
 
 
 @runtime_checkable
+class ResolutionRule(Protocol):
+    """A model whose resolution setting may be a rule (a grid chosen at each point from its
+    parameters) instead of a number."""
+
+    def resolution(self, setting: Any, parameters: Mapping[str, Any]) -> Any:
+        """The grid the resolution ``setting`` gives at the point ``parameters``."""
+        ...
+
+    def rule(self, setting: Any) -> str | None:
+        """The rule a resolution ``setting`` is, described; None where it is a number."""
+        ...
+
+
+def resolution_rule(model: Model, setting: Any) -> str | None:
+    """The rule the resolution ``setting`` of ``model`` is, described; None where it is a
+    number or the model has no rules."""
+    if model.capabilities.resolution_rule and isinstance(model, ResolutionRule):
+        return model.rule(setting)
+    return None
+
+
+@runtime_checkable
 class BatchedModel(Model, Protocol):
     """A model whose capabilities say ``batched``: several seeds of one point in one call,
     on a device."""
@@ -286,6 +309,15 @@ def observable(model: Model, name: str) -> Observable:
             return o
     known = [o.name for o in model.observables]
     raise KeyError(f"model {model.name} has no observable {name!r}; it has {known}")
+
+
+def classifier(model: Model) -> Observable:
+    """The observable whose seed mean classifies ``model``'s points (``classifies``; the
+    first if several do); ValueError where none does."""
+    for o in model.observables:
+        if o.classifies:
+            return o
+    raise ValueError(f"model {model.name} declares no observable that classifies a pattern")
 
 
 def defaults(model: Model, kind: str) -> dict[str, Any]:

@@ -336,6 +336,13 @@ class Nematic:
         p = Parameters.from_dict(parameters)
         return resolve(setting, p.K, p.A0)
 
+    def rule(self, setting: Any) -> str | None:
+        """The resolution rule ``setting`` is (``"auto"`` or a mapping), described
+        (:meth:`nematic_solids.model.resolution.ResolutionRule.describe`); None for a number."""
+        from nematic_solids.model.resolution import is_rule, read_rule
+
+        return read_rule(setting).describe() if is_rule(setting) else None
+
     def memory_bytes(self, numerics: Mapping[str, Any]) -> int:
         """The estimated peak memory of one run
         (:func:`nematic_solids.sweep.limits.run_memory_bytes`)."""

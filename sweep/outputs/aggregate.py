@@ -25,11 +25,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from nematic_solids.model.resolution import is_rule, read_rule
-
 from ..campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from ..expand import Expansion
 from ..files import atomic_to_netcdf
+from ..models.interface import resolution_rule
 from ..models.registry import get_model
 from ..names import NAMES
 from ..protocols import AXIS_LONG_NAMES, PROTOCOL
@@ -237,14 +236,14 @@ def build_phase(
             sd, count, {"long_name": f"number of seeds with a value of {name}", "units": "1"}
         )
 
-    by_rule = is_rule(campaign.numerics.get("resolution"))
+    by_rule = resolution_rule(get_model(campaign.model), campaign.numerics.get("resolution"))
     if by_rule and "resolution" not in {a.name for a in campaign.axes}:
         ds["resolution"] = xr.Variable(  # resolution: auto, each point's own grid
             dims[:-1],
             np.asarray([p.numerics.resolution for p in expansion.points]).reshape(shape[:-1]),
             {
                 "long_name": "grid points per side of the point's runs, chosen by the rule "
-                + read_rule(campaign.numerics["resolution"]).describe(),
+                + by_rule,
                 "units": "1",
             },
         )
@@ -269,7 +268,7 @@ def build_phase(
                 fixed_params.pop(key, None)
     fixed_numerics = {k: v for k, v in first.numerics.to_dict().items() if k not in swept}
     if by_rule:  # the rule, not the first point's grid (the variable resolution has each)
-        fixed_numerics["resolution"] = read_rule(campaign.numerics["resolution"]).describe()
+        fixed_numerics["resolution"] = by_rule
     n_ok = int((status == STATUS_OK).sum())
     n_failed = int((status == STATUS_FAILED).sum())
     ds.attrs.update(

@@ -14,15 +14,21 @@ from typing import Any
 
 import numpy as np
 
-from ..campaign import Campaign
+from ..campaign import DEFAULT_MODEL, Campaign
 from ..errors import CampaignError
 from ..expand import Expansion
+from ..models.interface import Observable, classifier
 from ..models.registry import get_model
 from ..store import CampaignStore, Record
 from .security import inside, safe_name
 
-#: The observable the phase diagram shows (the report's, ``report.phase_plot.SHOWN``).
-SHOWN = "sigma2_S"
+
+def shown(model: str = DEFAULT_MODEL) -> Observable:
+    """The observable the phase diagram shows: the one that classifies the model's points
+    (the nematic model's sigma2_S, as the report's ``report.phase_plot.SHOWN``)."""
+    return classifier(get_model(model))
+
+
 #: The confidence of a point's interval.
 CONFIDENCE = 0.95
 #: Series of a run file the run view sends (those present).
@@ -99,10 +105,8 @@ def _plain(value: Any) -> Any:
 
 def points(expansion: Expansion, records: Mapping[str, Record]) -> list[dict[str, Any]]:
     """One entry per grid point: its swept values, its runs (id, seed, status, value), the
-    seed mean of :data:`SHOWN` and its interval, counts by status."""
-    scalar = next(
-        o.scalar for o in get_model(expansion.campaign.model).observables if o.name == SHOWN
-    )
+    seed mean of the :func:`shown` observable and its interval, counts by status."""
+    scalar = shown(expansion.campaign.model).scalar
     by_point: dict[tuple[int, ...], dict[str, Any]] = {}
     for run in expansion:
         entry = by_point.setdefault(
@@ -211,7 +215,7 @@ def not_started(name: str) -> dict[str, Any]:
         "name": name,
         "readable": False,
         "dims": [],
-        "shown": SHOWN,
+        "shown": shown().name,
         "confidence": CONFIDENCE,
         "total": 0,
         "counts": {"ok": 0, "failed": 0, "pending": 0},
@@ -237,7 +241,7 @@ def campaign_detail(store: CampaignStore) -> dict[str, Any]:
         "readable": True,
         "description": campaign.description,
         "dims": [d.name for d in campaign.dims],
-        "shown": SHOWN,
+        "shown": shown(campaign.model).name,
         "confidence": CONFIDENCE,
         "total": len(expansion),
         "counts": counts,

@@ -43,7 +43,7 @@ import xarray as xr
 from ..analysis.transition import fit_transition
 from ..expand import RunSpec
 from ..files import atomic_to_netcdf
-from ..models.interface import Observable, observable
+from ..models.interface import Observable, classifier, observable
 from ..models.registry import get_model
 from ..outputs.aggregate import coord_attrs
 from ..provenance import code_version, git_commit, library_versions_text
@@ -77,11 +77,6 @@ def _values(
     return out, ok
 
 
-def classifier(observables: Sequence[Observable]) -> Observable:
-    """The observable whose seed mean classifies a point (the one marked ``classifies``)."""
-    return next(o for o in observables if o.classifies)
-
-
 def verify_dataset(
     sample: Sample, base_records: Mapping[str, Record], variant_records: Mapping[str, Record]
 ) -> xr.Dataset:
@@ -91,7 +86,7 @@ def verify_dataset(
     model = get_model(sample.campaign.model)
     n_p, n_v = len(sample.points), len(sample.variants)
     level = spec.patterned_above
-    sig_src = classifier(model.observables).scalar
+    sig_src = classifier(model).scalar
     base_sig = [_values(runs, base_records, sig_src) for runs in sample.base]
     base_frac = np.array([_fraction(v, ok, level) for v, ok in base_sig])
     var_sig: list[list[np.ndarray]] = [[np.full(0, np.nan)] * n_v for _ in range(n_p)]

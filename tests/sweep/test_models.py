@@ -138,6 +138,9 @@ def test_a_run_through_the_interface_is_the_models_run_bit_for_bit():
     np.testing.assert_array_equal(out.end_state.fields, end.fields)
     for name in ("sigma2_S", "mean_S"):
         np.testing.assert_array_equal(out.dataset[name].values, ds[name].values)
+    # every declared observable is read from a scalar the run file holds
+    for o in MODEL.observables:
+        assert out.dataset[o.scalar].ndim == 0, o
 
 
 def test_a_longer_run_continues_the_end_state_exactly_and_checkpoints_are_handed_out():

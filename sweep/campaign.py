@@ -21,6 +21,7 @@ from nematic_solids.model.parameters import Numerics, Parameters
 from .limits import DEFAULT_MAX_RUNS
 
 AMB = "alpha_minus_B"
+DEFAULT_MODEL = "nematic"  # a campaign without model: runs it (models.interface.DEFAULT_MODEL)
 #: Significant digits kept when normalising swept floats (and in run identity).
 SIGNIFICANT_DIGITS = 12
 DEFAULT_SEEDS = 50
@@ -192,8 +193,6 @@ class LimitsSpec:
     run_memory: int | None = None
 
 
-#: The run scalar of sigma2_S, the pattern class's measure (``patterned_above``).
-PATTERN_SOURCE = "sigma2_S_final"
 #: Defaults of the ``refine:`` section (an adaptive campaign, :mod:`nematic_solids.sweep.refine`).
 DEFAULT_ROUNDS = 4
 DEFAULT_FRACTION = (0.1, 0.9)
@@ -339,7 +338,7 @@ class PrecisionSpec:
             return self.classes
         if self.patterned_above is None:
             return ()
-        return (Threshold("sigma2_S", PATTERN_SOURCE, self.patterned_above),)
+        return (Threshold("sigma2_S", "sigma2_S_final", self.patterned_above),)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -464,6 +463,7 @@ class Campaign:
     chain: ChainSpec | None = None
     #: ``prior:`` the phase.nc whose seeds per point price the later rounds (sweep/cost/later)
     prior: str | None = None
+    model: str = DEFAULT_MODEL  # ``model:`` by name (the default adds nothing to run ids)
 
     @property
     def axes(self) -> tuple[Axis, ...]:

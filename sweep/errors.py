@@ -16,7 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+# the model's errors that the campaign manager raises too: a device (a GPU) that is not there
+# on a worker host, a setting out of a bound (limits) -- one place where the core meets them
+from nematic_solids.model.errors import DeviceUnavailable as DeviceUnavailable
 from nematic_solids.model.errors import NematicError
+from nematic_solids.model.errors import ParameterError as ParameterError
 
 
 @dataclass(frozen=True)

@@ -178,7 +178,9 @@ class Expansion:
             point = make_point(campaign, index, coords)
             self.points.append(point)
             if parents is None or self.starts is None:
-                hasher = PointHasher(point.parameters.to_dict(), point.numerics.to_dict())
+                hasher = PointHasher(
+                    point.parameters.to_dict(), point.numerics.to_dict(), campaign.model
+                )
                 self.run_ids.extend(hasher.many(self.seeds))
                 continue
             p, n = point.parameters.to_dict(), point.numerics.to_dict()
@@ -187,7 +189,7 @@ class Expansion:
                 if parents.state:  # not the exact end state: another id (and a warning)
                     start["state"] = parents.state
                 self.starts.append(start)
-                self.run_ids.append(hash_canonical(p, n, seed, start))
+                self.run_ids.append(hash_canonical(p, n, seed, start, campaign.model))
         self.parents = parents
         self.position: dict[str, int] = {}  # each run's first position
         for i, rid in enumerate(self.run_ids):
@@ -211,7 +213,7 @@ class Expansion:
             point, parent = self.points[i // n], self.chain_parents[i]
             p, num = point.parameters.to_dict(), point.numerics.to_dict()
             starts[i] = None if parent is None else {"run": ids[parent], "time": "end"}
-            ids[i] = hash_canonical(p, num, self.seeds[i % n], starts[i])
+            ids[i] = hash_canonical(p, num, self.seeds[i % n], starts[i], campaign.model)
         self.run_ids, self.chain_starts = ids, starts
 
     def __len__(self) -> int:
@@ -248,7 +250,13 @@ def continued_runs(
         run = expansion.run(i)
         numerics = run.point.numerics
         start = identity_start(run.start)
-        traj = trajectory_id(run.point.parameters.to_dict(), numerics.to_dict(), run.seed, start)
+        traj = trajectory_id(
+            run.point.parameters.to_dict(),
+            numerics.to_dict(),
+            run.seed,
+            start,
+            expansion.campaign.model,
+        )
         shorter = [e for e in ends.get(traj, ()) if e[0] < numerics.t_final and e[1] != run.run_id]
         if shorter:
             t_end, rid = max(shorter)

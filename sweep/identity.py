@@ -33,7 +33,7 @@ import numpy as np
 from nematic_solids.model.parameters import Numerics, Parameters
 from nematic_solids.model.protocol import RAMP_STEP_FRACTION, SINE_STEP_FRACTION
 
-from .campaign import SIGNIFICANT_DIGITS
+from .campaign import DEFAULT_MODEL, SIGNIFICANT_DIGITS
 
 SCHEMA_VERSION = 1
 ID_LENGTH = 16
@@ -128,16 +128,20 @@ def canonical_json(
     numerics: Mapping[str, Any],
     seed: int,
     start: Mapping[str, str] | None = None,
+    model: str = DEFAULT_MODEL,
 ) -> str:
     """The canonical text that is hashed. The mappings are taken as given: pass complete
     dicts (``Parameters.to_dict()``), or use :func:`run_id_for`. ``start`` names the state
     a run begins from (``{"run": parent run id, "time": "end" or the time}``,
-    :class:`nematic_solids.sweep.expand.Parents`); absent for a run from the seeded texture."""
-    payload = _point_payload(parameters, numerics)
+    :class:`nematic_solids.sweep.expand.Parents`); absent for a run from the seeded texture.
+    ``model`` (the campaign's ``model:``) enters the text only where it is not the default
+    model, so every run of the default model keeps its id."""
+    payload = _point_payload(parameters, numerics, model)
     payload["seed"] = canonical_value(int(seed))
     if start is not None:
         payload["start"] = canonical_value(dict(start))
-        guess = start_guess(numerics, start)
+        # the paper's finite strain only (another model's numerics name no mechanics)
+        guess = start_guess(numerics, start) if model == DEFAULT_MODEL else None
         if guess is not None:
             payload["start_guess"] = guess
     return _dumps(payload)
@@ -161,7 +165,9 @@ def start_guess(numerics: Mapping[str, Any], start: Mapping[str, Any]) -> str | 
     return EXACT_GUESS if numerics.get("mechanics", "finite") == "finite" else None
 
 
-def _point_payload(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> dict[str, Any]:
+def _point_payload(
+    parameters: Mapping[str, Any], numerics: Mapping[str, Any], model: str = DEFAULT_MODEL
+) -> dict[str, Any]:
     """What the canonical text holds of a grid point (all its keys sort before ``seed``)."""
     payload: dict[str, Any] = {
         "numerics": canonical_value(identity_numerics(numerics)),
@@ -171,6 +177,8 @@ def _point_payload(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -
     rule = protocol_step_rule(parameters, numerics)
     if rule is not None:
         payload["protocol_steps"] = rule
+    if model != DEFAULT_MODEL:
+        payload["model"] = model
     return payload
 
 
@@ -204,9 +212,10 @@ def hash_canonical(
     numerics: Mapping[str, Any],
     seed: int,
     start: Mapping[str, str] | None = None,
+    model: str = DEFAULT_MODEL,
 ) -> str:
-    """run_id of complete parameter / numerics dicts (no defaults filled in)."""
-    text = canonical_json(parameters, numerics, seed, start)
+    """run_id of complete parameter / numerics dicts (no defaults filled in) of ``model``."""
+    text = canonical_json(parameters, numerics, seed, start, model)
     return hashlib.sha256(text.encode("ascii")).hexdigest()[:ID_LENGTH]
 
 
@@ -257,6 +266,7 @@ def trajectory_id(
     numerics: Mapping[str, Any],
     seed: int,
     start: Mapping[str, str] | None = None,
+    model: str = DEFAULT_MODEL,
 ) -> str:
     """The id of a run's trajectory: the hash of its canonical text without ``t_final`` and
     ``snapshot_times``, shared by the runs of one (parameters, numerics, seed) to different
@@ -265,7 +275,7 @@ def trajectory_id(
     for :func:`hash_canonical`; never a run_id (a run's canonical numerics always holds
     ``t_final``)."""
     return hash_canonical(
-        parameters, {k: v for k, v in numerics.items() if k not in CONTINUABLE}, seed, start
+        parameters, {k: v for k, v in numerics.items() if k not in CONTINUABLE}, seed, start, model
     )
 
 
@@ -296,8 +306,13 @@ class PointHasher:
     text is ``prefix + '"seed":"<seed>"}'``); checked by the tests.
     """
 
-    def __init__(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]):
-        head = _dumps(_point_payload(parameters, numerics))
+    def __init__(
+        self,
+        parameters: Mapping[str, Any],
+        numerics: Mapping[str, Any],
+        model: str = DEFAULT_MODEL,
+    ):
+        head = _dumps(_point_payload(parameters, numerics, model))
         self._prefix = hashlib.sha256((head[:-1] + ',"seed":').encode("ascii"))
 
     def __call__(self, seed: int) -> str:

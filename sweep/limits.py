@@ -19,7 +19,7 @@ import resource
 from collections.abc import Mapping
 from typing import Any
 
-from nematic_solids.model.errors import ParameterError
+from .errors import ParameterError
 
 #: Default ceiling on the runs of one campaign (``limits.max_runs`` changes it).
 DEFAULT_MAX_RUNS = 1_000_000

@@ -96,23 +96,26 @@ def test_sweep_imports_form_no_cycle() -> None:
 MAY_IMPORT: dict[str, set[str]] = {
     "base": set(),
     # the names of fits and figures, and the shape of a campaign they need
-    "spec": {"analysis.registry", "analysis.shape", "figures.registry"},
+    # the campaign's model (its settings and observables)
+    "spec": {"analysis.registry", "analysis.shape", "figures.registry", "models"},
     "catalogue": set(),
-    # the model interface and registry, and the models shipped as plugins
-    "models": set(),
+    # the model interface and registry, and the models shipped as plugins (the nematic
+    # model's cost is the calibrated cost model)
+    "models": {"cost.model"},
     # the cost model sizes the tasks of grouped runs (sweep.run.group)
-    "run": {"catalogue", "cost.model"},
-    "outputs": {"spec", "refine", "precision", "catalogue", "analysis.fits_file"},
+    "run": {"catalogue", "cost.model", "models"},
+    "outputs": {"spec", "refine", "precision", "catalogue", "analysis.fits_file", "models"},
     "cost": {"outputs", "refine", "precision", "catalogue"},
     "analysis": set(),
     "figures": {"analysis", "verify"},
     "refine": {"spec", "run", "outputs", "precision", "analysis"},
     "precision": {"spec", "run", "outputs", "refine", "analysis"},
-    "verify": {"spec", "run", "outputs", "refine", "precision", "analysis"},
+    "verify": {"spec", "run", "outputs", "refine", "precision", "analysis", "models"},
     "report": {"spec", "outputs", "refine", "precision", "verify", "analysis", "figures"},
     # the service: the queue, the runner that drives campaigns, the API and dashboard
     "service": {
         "catalogue",
+        "models",
         "spec",
         "run",
         "outputs",
@@ -274,3 +277,86 @@ def test_imports_are_resolved(tmp_path: Path, source: str, expected: set[str]) -
     path = tmp_path / "sweep" / "expand.py"
     path.write_text(source)
     assert imported_modules(path, tmp_path) == expected
+
+
+# --------------------------------------------------------------------------- the models' seam
+#: The campaign manager's core (docs/architecture.md, "The seam"): the base (campaign, store,
+#: identity, expand, ...) and these groups. It reaches a model through sweep.models only.
+CORE_GROUPS = ("base", "spec", "run", "outputs", "refine", "precision", "verify", "report")
+#: The one module that may import the nematic model's code at will: its plugin.
+PLUGIN = "sweep/models/nematic.py"
+#: Core files that still import nematic_solids.model, and why: a ratchet. The test fails when
+#: another core file imports it, and when a file listed here no longer does (remove it then),
+#: so the list only shrinks.
+CORE_MODEL_IMPORTS: dict[str, str] = {
+    "sweep/campaign.py": "PARAMETER_TYPES/NUMERICS_TYPES read from Parameters and Numerics",
+    "sweep/errors.py": "exceptions extend NematicError; ParameterError, DeviceUnavailable",
+    "sweep/expand.py": "grid points are Parameters and Numerics; the resolution rule",
+    "sweep/identity.py": "run ids of Parameters/Numerics; the protocol's step bound",
+    "sweep/protocols.py": "protocol axes read with the model's Protocol",
+    "sweep/provenance.py": "the model's version and library versions",
+    "sweep/run/continuation.py": "checkpoints and end states are the model's RunState",
+    "sweep/spec/__init__.py": "grid points checked by Parameters/Numerics; resolution rule",
+    "sweep/spec/execution.py": "what the accelerated backend supports",
+    "sweep/spec/initial.py": "a parent's points as Parameters/Numerics; the resolution rule",
+    "sweep/spec/points.py": "every grid point checked by the model's objects",
+    "sweep/spec/protocol.py": "the protocol section read by the model's Protocol",
+    "sweep/spec/verify.py": "a variant's settings checked by Parameters/Numerics",
+}
+#: Files outside the core that import nematic_solids.model: the paper's own commands, fits
+#: and cost calibration, and the command line's and service's handling of the model's errors.
+OTHER_MODEL_IMPORTS: dict[str, str] = {
+    "sweep/analysis/fits_file.py": "the model's errors",
+    "sweep/analysis/stability.py": "the stability fit: the model's linear stability analysis",
+    "sweep/cli/app.py": "one line for any of the model's errors",
+    "sweep/cli/products.py": "the model's errors",
+    "sweep/cli/simulate.py": "nematic simulate: one run of the model",
+    "sweep/cli/stability.py": "nematic stability: the model's linear stability analysis",
+    "sweep/cost/estimate.py": "the resolution rule of a point",
+    "sweep/cost/model.py": "the nematic model's calibrated run time",
+    "sweep/figures/produce.py": "the model's errors",
+    "sweep/service/__init__.py": "the model's errors",
+}
+
+
+def model_importers(root: Path = ROOT) -> dict[str, str]:
+    """Each file of sweep/ that imports nematic_solids.model (or a module of it) -> its group."""
+    out = {}
+    for f in sorted((root / "sweep").rglob("*.py")):
+        if any(
+            m == f"{PARENT}.model" or m.startswith(f"{PARENT}.model.")
+            for m in imported_modules(f, root)
+        ):
+            rel = f.relative_to(root)
+            out[rel.as_posix()] = rel.parts[1] if len(rel.parts) > 2 else "base"
+    return out
+
+
+def test_the_core_reaches_the_model_only_through_the_listed_files() -> None:
+    found = model_importers()
+    core = {f for f, g in found.items() if g in CORE_GROUPS}
+    assert core - set(CORE_MODEL_IMPORTS) == set(), (
+        "core files that import nematic_solids.model: reach the model through "
+        "sweep.models (get_model(campaign.model)) instead"
+    )
+    assert set(CORE_MODEL_IMPORTS) - core == set(), (
+        "files that no longer import nematic_solids.model: remove them from CORE_MODEL_IMPORTS"
+    )
+
+
+def test_only_the_plugin_and_the_listed_products_import_the_model() -> None:
+    found = model_importers()
+    other = {f for f, g in found.items() if g not in CORE_GROUPS} - {PLUGIN}
+    assert PLUGIN in found
+    assert other - set(OTHER_MODEL_IMPORTS) == set(), "import the model through sweep.models"
+    assert set(OTHER_MODEL_IMPORTS) - other == set(), "no longer imports it: remove from the list"
+    assert all(g in MAY_IMPORT for g in CORE_GROUPS if g != "base")
+
+
+def test_the_seam_check_finds_a_new_importer(tmp_path: Path) -> None:
+    (tmp_path / "sweep" / "run").mkdir(parents=True)
+    (tmp_path / "sweep" / "run" / "task.py").write_text(
+        "def f():\n    from nematic_solids.model.simulate import run\n"
+    )
+    (tmp_path / "sweep" / "expand.py").write_text("from nematic_solids.sweep import models\n")
+    assert model_importers(tmp_path) == {"sweep/run/task.py": "run"}

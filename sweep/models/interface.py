@@ -23,12 +23,14 @@ Models are found by name through the entry point group :data:`ENTRY_POINT_GROUP`
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 if TYPE_CHECKING:
     import xarray as xr
+    from numpy.typing import ArrayLike
 
 #: The entry point group under which packages register models (``name = "module:object"``).
 ENTRY_POINT_GROUP = "nematic_solids.models"
@@ -97,6 +99,9 @@ class Observable:
     seed_mean: Literal["arithmetic", "geometric"] = "arithmetic"
     change: Literal["absolute", "relative"] = "relative"
     classifies: bool = False
+    #: a measure of a pattern: its seed mean is taken over the patterned runs only (a relaxed
+    #: run's value is the floor of the solver or its initial texture's, no pattern's)
+    pattern: bool = False
     symbol: str | None = None
 
     def __post_init__(self) -> None:
@@ -104,6 +109,30 @@ class Observable:
             raise ValueError(f"observable {self.name}: seed_mean not in {SEED_MEANS}")
         if self.change not in CHANGES:
             raise ValueError(f"observable {self.name}: change not in {CHANGES}")
+
+    def mean(self, values: ArrayLike) -> float:
+        """The seed mean of ``values`` by :attr:`seed_mean`, over the finite ones (and the
+        positive ones for the geometric mean); NaN when none is left."""
+        import numpy as np  # here: reading a campaign file needs the declarations only
+
+        v = np.asarray(values, dtype=float)
+        v = v[np.isfinite(v)]
+        if self.seed_mean == "geometric":
+            v = v[v > 0]
+            return float(10 ** np.mean(np.log10(v))) if v.size else math.nan
+        return float(np.mean(v)) if v.size else math.nan
+
+    def difference(self, base: float, value: float) -> float:
+        """How ``value`` differs from ``base`` by :attr:`change`: ``value - base``, or that
+        over ``|base|`` (0 where both are 0, infinite where only the base is); NaN where
+        either is not finite."""
+        if not (math.isfinite(base) and math.isfinite(value)):
+            return math.nan
+        if self.change == "absolute":
+            return value - base
+        if base == 0:
+            return 0.0 if value == 0 else math.inf
+        return (value - base) / abs(base)
 
 
 @dataclass(frozen=True)
@@ -122,7 +151,8 @@ class Capabilities:
     batched: bool = False
     #: :meth:`Model.cost_seconds` predicts a run's wall time
     cost_model: bool = False
-    #: :meth:`Model.resolution_rule` gives the resolution a point needs
+    #: a resolution setting may be a rule that gives each point its grid
+    #: (:class:`ResolutionRule`: :meth:`~ResolutionRule.resolution`, :meth:`~ResolutionRule.rule`)
     resolution_rule: bool = False
     #: :meth:`Model.memory_bytes` bounds a run's memory
     memory_per_run: bool = False
@@ -137,9 +167,9 @@ class RunRequest:
     ``start`` is the model's own end state of an earlier run to continue (exact
     continuation: the same point, a shorter ``t_final``) and ``initial`` a state to begin from
     at t = 0 instead of the seeded initial condition (chains, ``initial.from``); both are
-    objects the same model returned. ``checkpoint`` is called with the run's state at the
-    times ``checkpoint_every`` (simulated time) asks for; ``progress`` with the simulated
-    time reached."""
+    objects the same model returned. ``checkpoint`` is called with the run's state after the
+    first save at least ``checkpoint_every`` (simulated time) or ``checkpoint_wall`` (seconds
+    of wall time) after the last one; ``progress`` with the simulated time reached."""
 
     parameters: Mapping[str, Any]
     numerics: Mapping[str, Any]
@@ -148,6 +178,7 @@ class RunRequest:
     initial: Any | None = None
     checkpoint: Callable[[Any], None] | None = None
     checkpoint_every: float = float("inf")
+    checkpoint_wall: float = float("inf")
     progress: Callable[[float], None] | None = None
 
 
@@ -183,6 +214,81 @@ class Model(Protocol):
         ...
 
 
+@runtime_checkable
+class State(Protocol):
+    """What the campaign manager reads of a model's end state or checkpoint: its time and
+    its dataset (written as the run file's group ``state`` or as a rolling checkpoint)."""
+
+    t: float
+
+    def to_dataset(self, snapshots: bool = True) -> xr.Dataset: ...
+
+
+@runtime_checkable
+class Compiled(Protocol):
+    """A model whose runs use compiled kernels: :meth:`warm_up` compiles them (or loads them
+    from a disk cache) with tiny runs, once per host before a campaign's runs start."""
+
+    def warm_up(
+        self, points: Sequence[tuple[Mapping[str, Any], Mapping[str, Any]]]
+    ) -> dict[str, Any]:
+        """Tiny runs of each ``(parameters, numerics)``; what it did (times, counts) as a
+        JSON-ready mapping. Never raises for a failed tiny run."""
+        ...
+
+    def import_kernels(self) -> None:
+        """Import the modules its runs need (a worker does it once, under a lock, before its
+        first run: two threads importing them at once can deadlock)."""
+        ...
+
+
+@runtime_checkable
+class ResolutionRule(Protocol):
+    """A model whose resolution setting may be a rule (a grid chosen at each point from its
+    parameters) instead of a number."""
+
+    def resolution(self, setting: Any, parameters: Mapping[str, Any]) -> Any:
+        """The grid the resolution ``setting`` gives at the point ``parameters``."""
+        ...
+
+    def rule(self, setting: Any) -> str | None:
+        """The rule a resolution ``setting`` is, described; None where it is a number."""
+        ...
+
+
+def resolution_rule(model: Model, setting: Any) -> str | None:
+    """The rule the resolution ``setting`` of ``model`` is, described; None where it is a
+    number or the model has no rules."""
+    if model.capabilities.resolution_rule and isinstance(model, ResolutionRule):
+        return model.rule(setting)
+    return None
+
+
+@runtime_checkable
+class BatchedModel(Model, Protocol):
+    """A model whose capabilities say ``batched``: several seeds of one point in one call,
+    on a device."""
+
+    def check_device(self, device: str) -> str:
+        """The device ``device`` names on this host, described; raises an error saying why
+        where there is none."""
+        ...
+
+    def run_batch(self, requests: Sequence[RunRequest], device: str) -> list[RunOutcome]:
+        """The runs ``requests`` (one point: they differ by seed, start and initial only) as
+        one batch on ``device``, their outcomes in the same order; raise where the batch
+        fails as a whole."""
+        ...
+
+
+def batched(model: Model) -> BatchedModel:
+    """``model`` as a :class:`BatchedModel`; ValueError where its capabilities do not say
+    ``batched``."""
+    if not model.capabilities.batched or not isinstance(model, BatchedModel):
+        raise ValueError(f"model {model.name} does not run batches of seeds")
+    return model
+
+
 def setting(model: Model, name: str) -> Setting:
     """``model``'s setting ``name`` (KeyError with the known names otherwise)."""
     for s in model.settings:
@@ -203,6 +309,15 @@ def observable(model: Model, name: str) -> Observable:
             return o
     known = [o.name for o in model.observables]
     raise KeyError(f"model {model.name} has no observable {name!r}; it has {known}")
+
+
+def classifier(model: Model) -> Observable:
+    """The observable whose seed mean classifies ``model``'s points (``classifies``; the
+    first if several do); ValueError where none does."""
+    for o in model.observables:
+        if o.classifies:
+            return o
+    raise ValueError(f"model {model.name} declares no observable that classifies a pattern")
 
 
 def defaults(model: Model, kind: str) -> dict[str, Any]:

@@ -25,13 +25,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from nematic_solids.model.resolution import is_rule, read_rule
-
 from ..campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
 from ..expand import Expansion
 from ..files import atomic_to_netcdf
+from ..models.interface import resolution_rule
+from ..models.registry import get_model
 from ..names import NAMES
-from ..observables import NOT_OBSERVABLES, OBSERVABLES
 from ..protocols import AXIS_LONG_NAMES, PROTOCOL
 from ..provenance import code_version, git_commit, library_versions_text
 from ..store import RETRYABLE_REASONS, CampaignStore, Record, now_iso
@@ -67,9 +66,15 @@ PARAMETER_LONG_NAMES = {
 }
 
 
-def _observable_names(records: Mapping[str, Record]) -> dict[str, tuple[str, str]]:
-    out = dict(OBSERVABLES)
-    known = {src for src, _ in OBSERVABLES.values()}
+#: Scalars of the run files that are not observables (they differ between identical runs).
+NOT_OBSERVABLES = {"wall_time"}
+
+
+def _observable_names(records: Mapping[str, Record], model: str) -> dict[str, tuple[str, str]]:
+    """phase.nc name -> (run scalar, long name): ``model``'s observables, then every other
+    scalar the records hold (``<name>_final`` as ``<name>``), except :data:`NOT_OBSERVABLES`."""
+    out = {o.name: (o.scalar, o.long_name) for o in get_model(model).observables}
+    known = {src for src, _ in out.values()}
     extra: set[str] = set()
     for rec in records.values():
         extra.update((rec.get("scalars") or {}).keys())
@@ -108,7 +113,7 @@ def build_phase(
     expansion: Expansion, records: Mapping[str, Record], store: CampaignStore | None = None
 ) -> xr.Dataset:
     """The phase-diagram Dataset of a campaign from its run records (see module doc)."""
-    import xarray as xr  # here: the campaign's reader needs OBSERVABLES, not xarray
+    import xarray as xr  # here: the campaign's reader needs this module, not xarray
 
     campaign = expansion.campaign
     dims = [d.name for d in campaign.dims] + ["seed"]
@@ -116,7 +121,7 @@ def build_phase(
     n = len(expansion)
     status = np.zeros(n, dtype=np.int8)
     reason = np.full(n, "", dtype=object)
-    observables = _observable_names(records)
+    observables = _observable_names(records, campaign.model)
     data = {name: np.full(n, np.nan) for name in observables}
     run_time = np.full(n, np.nan)
     versions: set[str] = set()
@@ -231,14 +236,14 @@ def build_phase(
             sd, count, {"long_name": f"number of seeds with a value of {name}", "units": "1"}
         )
 
-    by_rule = is_rule(campaign.numerics.get("resolution"))
+    by_rule = resolution_rule(get_model(campaign.model), campaign.numerics.get("resolution"))
     if by_rule and "resolution" not in {a.name for a in campaign.axes}:
         ds["resolution"] = xr.Variable(  # resolution: auto, each point's own grid
             dims[:-1],
             np.asarray([p.numerics.resolution for p in expansion.points]).reshape(shape[:-1]),
             {
                 "long_name": "grid points per side of the point's runs, chosen by the rule "
-                + read_rule(campaign.numerics["resolution"]).describe(),
+                + by_rule,
                 "units": "1",
             },
         )
@@ -263,7 +268,7 @@ def build_phase(
                 fixed_params.pop(key, None)
     fixed_numerics = {k: v for k, v in first.numerics.to_dict().items() if k not in swept}
     if by_rule:  # the rule, not the first point's grid (the variable resolution has each)
-        fixed_numerics["resolution"] = read_rule(campaign.numerics["resolution"]).describe()
+        fixed_numerics["resolution"] = by_rule
     n_ok = int((status == STATUS_OK).sum())
     n_failed = int((status == STATUS_FAILED).sum())
     ds.attrs.update(

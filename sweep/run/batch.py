@@ -1,6 +1,7 @@
 """The worker task of the accelerated backend (``execution: {backend: accelerated, batch: N}``):
 several seeds of one grid point in one task, advanced together on a device by
-:func:`nematic_solids.model.accelerated.datasets.batch_datasets`, each seed written as its own run
+:meth:`run_batch` of the campaign's model (the nematic model's:
+:func:`nematic_solids.model.accelerated.datasets.batch_datasets`), each seed written as its own run
 (its run file and record, by :func:`nematic_solids.sweep.run.task.save_result`, exactly as a
 compiled run's), so that identity, aggregation, resumption and the failure rules stay per run.
 
@@ -21,13 +22,20 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
-from nematic_solids.model.parameters import Numerics, Parameters
-
+from ..campaign import DEFAULT_MODEL
+from ..models.interface import batched
+from ..models.registry import get_model
 from ..store import Record
 from . import continuation
-from .task import RunTask, crash_record, execute_run, finish_record, save_result, task_store
+from .task import (
+    RunTask,
+    crash_record,
+    execute_run,
+    finish_record,
+    request,
+    save_result,
+    task_store,
+)
 
 
 @dataclass(frozen=True)
@@ -63,7 +71,7 @@ def execute_batch(batch: BatchTask) -> list[Record]:
     :func:`execute_run` does."""
     from .workers import import_model
 
-    import_model()
+    import_model(batch.tasks[0].model if batch.tasks else DEFAULT_MODEL)
     t0 = time.perf_counter()
     records: dict[int, Record] = {}
     groups: dict[float | None, list[tuple[int, RunTask, continuation.Start]]] = {}
@@ -86,39 +94,10 @@ def _run_together(
     """The seeds ``held`` (all from t = 0: their seeded textures or another campaign's fields;
     or all from states at one time) advanced as one batch, each stored as its own run, with
     its rolling checkpoints on the way and its end state."""
-    from nematic_solids.model.accelerated.datasets import batch_datasets
-    from nematic_solids.model.checkpoint import Schedule
-    from nematic_solids.model.initial import initial_fields
-
-    first = held[0][1]
-    params = Parameters.from_dict(first.parameters)
-    numerics = Numerics.from_dict(first.numerics)
-    seeds = [task.seed for _, task, _ in held]
-    states = [start.state for _, _, start in held if start.state is not None]
-    initial = None
-    if not states and any(start.initial is not None for _, _, start in held):
-        n = numerics.resolution
-        initial = np.stack(
-            [
-                start.initial.fields
-                if start.initial is not None
-                else np.stack(initial_fields(params, n, task.seed))
-                for _, task, start in held
-            ]
-        )
-    writers = [continuation.Checkpointer(task_store(task), task.run_id) for _, task, _ in held]
+    model = batched(get_model(held[0][1].model))
+    requests = [request(task, start, task_store(task)) for _, task, start in held]
     try:
-        out = batch_datasets(
-            params,
-            numerics,
-            seeds,
-            device=device,
-            initial=initial,
-            start=states or None,
-            checkpoint=lambda b, state: writers[b](state),
-            schedule=Schedule(first.checkpoint_tau, first.checkpoint_wall),
-            keep_state=True,
-        )
+        out = model.run_batch(requests, device)
     except Exception as e:  # noqa: BLE001 - the batch's crash fails each of its seeds
         return {
             k: finish_record(
@@ -127,6 +106,6 @@ def _run_together(
             for k, task, start in held
         }
     return {
-        k: save_result(task, task_store(task), ds, end, start, t0)
-        for (k, task, start), (ds, end) in zip(held, out, strict=True)
+        k: save_result(task, task_store(task), o.dataset, o.end_state, start, t0)
+        for (k, task, start), o in zip(held, out, strict=True)
     }

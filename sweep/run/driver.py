@@ -1,10 +1,9 @@
 """The driver that fans a campaign's runs out over dask.
 
-The driver (:func:`run_campaign`) plans from what is on disk
-(:func:`nematic_solids.sweep.run.todo.plan_runs`), submits the remaining runs (the worker task
-:func:`nematic_solids.sweep.run.task.execute_run`) through a bounded window, reports each result as
-it arrives and can be interrupted at any point: everything it needs to resume is on disk, nothing is
-kept in dask.
+The driver (:func:`run_campaign`) plans from what is on disk (:func:`.todo.plan_runs`), submits
+the remaining runs (the worker task :func:`.task.execute_run`) through a bounded window, reports
+each result as it arrives and can be interrupted at any point: everything it needs to resume is on
+disk, nothing is kept in dask.
 
 Clusters (:mod:`nematic_solids.sweep.run.workers`): an embedded ``LocalCluster`` (default), an
 existing scheduler (``execution.scheduler`` / ``--scheduler``) or a dask-jobqueue cluster
@@ -273,6 +272,7 @@ def _run_campaign(
                     plan.history.get(i),
                     plan.parents.get(i),
                     plan.parent_paths.get(i),
+                    model=campaign.model,
                 )
                 held.append((run, task, i))
             # a run that goes again (its result was lost) gets a new key: the old one may
@@ -475,7 +475,7 @@ def drive(
         events.planned(plan, expansion)
     summary = None
     if plan.todo and local and campaign.execution.backend == "accelerated":
-        check_device(campaign.execution.device)  # one message before any worker starts
+        check_device(campaign.execution.device, campaign.model)  # one message before workers
     if plan.todo and link is not None:
         summary = run_campaign(expansion, store, link, plan, events, limit=limit, stop=stop)
     elif plan.todo:

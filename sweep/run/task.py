@@ -25,22 +25,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
-from nematic_solids.model.parameters import Numerics, Parameters
-
-from ..campaign import StoreSpec
-from ..errors import StorageError, StoreError
+from ..campaign import DEFAULT_MODEL, StoreSpec
+from ..errors import DeviceUnavailable, StorageError, StoreError
 from ..expand import Expansion, RunSpec
 from ..files import atomic_to_netcdf, file_stamp
 from ..identity import SCHEMA_VERSION, identity_start, trajectory_id
 from ..limits import OUT_OF_MEMORY, out_of_memory
+from ..models.interface import Compiled, RunRequest, State, batched
+from ..models.registry import get_model
 from ..store import CampaignStore, Record, now_iso, record_from_dataset
 from . import continuation
 
 if TYPE_CHECKING:
     import xarray as xr
     from distributed import Client
-
-    from nematic_solids.model.checkpoint import RunState
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +76,8 @@ class RunTask:
     #: the run of another campaign it begins from (``initial.from``): its ``run`` id, the
     #: ``time`` ("end" or the time), its ``campaign`` and ``runs_dir``; None: the texture
     initial_from: dict[str, str] | None = None
+    #: the model that computes it, by its registered name (the campaign's ``model:``)
+    model: str = DEFAULT_MODEL
 
     @classmethod
     def from_spec(
@@ -89,6 +89,8 @@ class RunTask:
         previous_failures: list[dict[str, Any]] | None = None,
         parent: str | None = None,
         parent_path: str | None = None,
+        *,
+        model: str = DEFAULT_MODEL,
     ) -> RunTask:
         parameters, numerics = run.point.parameters.to_dict(), run.point.numerics.to_dict()
         initial_from, start = None, None
@@ -107,13 +109,14 @@ class RunTask:
             snapshot_fields=store_spec.snapshot_fields,
             snapshot_dtype=store_spec.snapshot_dtype,
             previous_failures=tuple(previous_failures or ()),
-            trajectory=trajectory_id(parameters, numerics, run.seed, start),
+            trajectory=trajectory_id(parameters, numerics, run.seed, start, model),
             parent=parent,
             parent_path=parent_path,
             checkpoint_tau=store_spec.checkpoint_tau,
             checkpoint_wall=store_spec.checkpoint_wall,
             end_state=store_spec.end_state,
             initial_from=initial_from,
+            model=model,
         )
 
     def identity(self) -> dict[str, Any]:
@@ -280,6 +283,22 @@ def restore_heap_reuse() -> bool:
 Held = list[tuple[RunTask, CampaignStore, Record, float]]
 
 
+def request(task: RunTask, start: continuation.Start, store: CampaignStore) -> RunRequest:
+    """What the task's model is asked to run: its point and seed, from ``start`` (a state
+    to continue, or fields to begin from at t = 0), its rolling checkpoints written into
+    ``store``."""
+    return RunRequest(
+        parameters=task.parameters,
+        numerics=task.numerics,
+        seed=task.seed,
+        start=start.state,
+        initial=start.initial,
+        checkpoint=continuation.Checkpointer(store, task.run_id),
+        checkpoint_every=task.checkpoint_tau,
+        checkpoint_wall=task.checkpoint_wall,
+    )
+
+
 def execute_run(task: RunTask, held: Held | None = None) -> Record:
     """Run one simulation on a worker; write ``<run_id>.nc`` then ``<run_id>.json``
     atomically; return the record. A run the model reports as failed keeps its (partial)
@@ -293,27 +312,16 @@ def execute_run(task: RunTask, held: Held | None = None) -> Record:
     folder once, then writes the records."""
     from .workers import import_model
 
-    import_model()
-    from nematic_solids.model.checkpoint import Schedule
-    from nematic_solids.model.simulate import run as simulate
-
+    import_model(task.model)
     restore_heap_reuse()
     store = task_store(task)
     t0 = time.perf_counter()
     start = continuation.Start()
-    end_state: RunState | None = None
+    end_state: State | None = None
     try:
         start = continuation.starting_state(task, store)
-        ds, end_state = simulate(
-            Parameters.from_dict(task.parameters),
-            Numerics.from_dict(task.numerics),
-            task.seed,
-            start=start.state,
-            initial=start.initial,
-            checkpoint=continuation.Checkpointer(store, task.run_id),
-            schedule=Schedule(task.checkpoint_tau, task.checkpoint_wall),
-            keep_state=True,
-        )
+        outcome = get_model(task.model).run(request(task, start, store))
+        ds, end_state = outcome.dataset, outcome.end_state
     except continuation.ParentFailed as e:  # redone with its parent (RETRYABLE_REASONS)
         record = failure_record(task, "parent_failed", str(e), "", time.perf_counter() - t0)
     except continuation.ParentUnusable as e:  # its state is corrupt or not the one named
@@ -329,7 +337,7 @@ def save_result(
     task: RunTask,
     store: CampaignStore,
     ds: xr.Dataset,
-    end_state: RunState | None,
+    end_state: State | None,
     start: continuation.Start,
     t0: float,
     held: Held | None = None,
@@ -402,35 +410,32 @@ def warm_kinds(expansion: Expansion) -> list[tuple[dict[str, Any], dict[str, Any
     return list(kinds.values())
 
 
-def check_device(device: str) -> str:
+def check_device(device: str, model: str = DEFAULT_MODEL) -> str:
     """The device ``device`` names here, described (``platform:kind``); raises
-    :class:`nematic_solids.model.errors.DeviceUnavailable` (one message: JAX missing, or no
+    :class:`~nematic_solids.sweep.errors.DeviceUnavailable` (one message: JAX missing, or no
     GPU where one is asked for) before any run is given to it."""
-    from nematic_solids.model.accelerated import select_device
-    from nematic_solids.model.accelerated.device import describe
-
-    return describe(select_device(device))
+    return batched(get_model(model)).check_device(device)
 
 
 def warm_worker(
-    kinds: list[tuple[dict[str, Any], dict[str, Any]]], device: str | None = None
+    kinds: list[tuple[dict[str, Any], dict[str, Any]]],
+    device: str | None = None,
+    model: str = DEFAULT_MODEL,
 ) -> dict[str, Any]:
     """Run on one worker per host before the campaign: compiles the model's kernels (or
     loads them from the disk cache) with tiny runs, so that the other workers load them
-    instead of all compiling at once (:mod:`nematic_solids.model.warmup`); with ``device``
-    (the accelerated backend's), also finds that device there (``device``, or why not:
+    instead of all compiling at once (the model's ``warm_up``); with ``device`` (the
+    accelerated backend's), also finds that device there (``device``, or why not:
     ``device_error``)."""
     from .workers import import_model
 
-    import_model()
-    from nematic_solids.model.errors import DeviceUnavailable
-    from nematic_solids.model.warmup import warm_up
-
-    info = warm_up([(Parameters.from_dict(p), Numerics.from_dict(n)) for p, n in kinds])
+    import_model(model)
+    found = get_model(model)
+    info = found.warm_up(kinds) if isinstance(found, Compiled) else {}
     info["host"] = socket.gethostname()
     if device is not None:
         try:
-            info["device"] = check_device(device)
+            info["device"] = check_device(device, model)
         except DeviceUnavailable as e:
             info["device_error"] = str(e)
     return info
@@ -438,7 +443,7 @@ def warm_worker(
 
 def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
     """:func:`warm_worker` on one worker of each host (in parallel across hosts); returns
-    what each reported, or raises :class:`nematic_solids.model.errors.DeviceUnavailable` where
+    what each reported, or raises :class:`~nematic_solids.sweep.errors.DeviceUnavailable` where
     a host lacks the accelerated backend's device. A worker that cannot run it is left to
     fail in the environment check that follows."""
     hosts: dict[str, str] = {}
@@ -455,6 +460,7 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
             warm_worker,
             kinds,
             device,
+            expansion.campaign.model,
             workers=[addr],
             pure=False,
             allow_other_workers=False,
@@ -470,7 +476,5 @@ def warm_workers(client: Client, expansion: Expansion) -> list[dict[str, Any]]:
             log.warning("warm-up failed on a worker: %s: %s", type(e).__name__, e)
     for info in out:  # a host without the device asked for: one message, nothing run
         if "device_error" in info:
-            from nematic_solids.model.errors import DeviceUnavailable
-
             raise DeviceUnavailable(f"on the worker host {info['host']}: {info['device_error']}")
     return out

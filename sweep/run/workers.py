@@ -26,8 +26,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..campaign import ClusterSpec, ExecutionSpec
+from ..campaign import DEFAULT_MODEL, ClusterSpec, ExecutionSpec
 from ..errors import ClusterError
+from ..models.interface import Compiled
+from ..models.registry import get_model
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -94,11 +96,13 @@ def window_size(threads: int) -> int:
 _MODEL_IMPORT = threading.Lock()
 
 
-def import_model() -> None:
-    """Import the model (py-pde, numba, the kernels' modules) in this process, once."""
+def import_model(name: str = DEFAULT_MODEL) -> None:
+    """Import the model ``name`` (the nematic model: py-pde, numba, the kernels' modules) in
+    this process, once."""
     with _MODEL_IMPORT:
-        import nematic_solids.model.simulate
-        import nematic_solids.model.warmup  # noqa: F401
+        model = get_model(name)
+        if isinstance(model, Compiled):
+            model.import_kernels()
 
 
 def worker_environment() -> dict[str, Any]:

@@ -31,11 +31,10 @@ from pathlib import Path
 from typing import Any
 
 from ..catalogue import Catalogue
-from ..observables import OBSERVABLES
+from ..models.interface import Observable
 from ..store import CampaignStore, Record
 from .views import (
     CONFIDENCE,
-    SHOWN,
     campaign_store,
     expansion_of,
     failure_entry,
@@ -46,6 +45,7 @@ from .views import (
     point_key,
     point_marks,
     rounds,
+    shown,
     verification,
 )
 
@@ -104,6 +104,8 @@ class CampaignView:
         self.seq = 0
         self.layout_seq = 0
         self._head: dict[str, Any] = not_started(self.name)
+        #: the observable the diagram shows (the campaign's model's classifying one)
+        self._shown: Observable = shown()
         self._points: list[_Point] = []
         self._runs: dict[str, _Run] = {}
         self._failures: dict[str, dict[str, Any]] = {}
@@ -135,6 +137,7 @@ class CampaignView:
             self._head = not_started(self.name)
             return
         expansion = expansion_of(campaign, self.store)
+        self._shown = shown(campaign.model)
         states, on_disk = self._states(seq)
         by_index: dict[tuple[int, ...], _Point] = {}
         counts, cost = self._counts, 0.0
@@ -167,7 +170,7 @@ class CampaignView:
             "readable": True,
             "description": campaign.description,
             "dims": [d.name for d in campaign.dims],
-            "shown": SHOWN,
+            "shown": self._shown.name,
             "confidence": CONFIDENCE,
             "total": len(expansion),
         }
@@ -180,8 +183,7 @@ class CampaignView:
         and the run ids with a record file (none: not run). A run that failed, or that the
         catalogue lacks (a driver that ran without it), is read from its record file."""
         try:
-            scalar = OBSERVABLES[SHOWN][0]
-            states = self.catalogue.campaign_states(self.name, scalar) if seq else {}
+            states = self.catalogue.campaign_states(self.name, self._shown.scalar) if seq else {}
         except Exception:  # noqa: BLE001 - the folder is the truth
             log.warning("catalogue not readable: %s read from its folder", self.name)
             states = {}
@@ -208,7 +210,7 @@ class CampaignView:
         self._cost += wall - run.wall
         run.status, run.wall = status, wall
         scalars = (record or {}).get("scalars") or {}
-        run.value = _finite(scalars.get(OBSERVABLES[SHOWN][0]))
+        run.value = _finite(scalars.get(self._shown.scalar))
         point = self._points[run.point]
         point.seq = max(point.seq, seq)
         if record is not None and status != "ok":

@@ -17,14 +17,21 @@ from typing import Any
 
 import numpy as np
 
-from ..campaign import Campaign
+from ..campaign import DEFAULT_MODEL, Campaign
 from ..errors import CampaignError
 from ..expand import Expansion
+from ..models.interface import Observable, classifier
+from ..models.registry import get_model
 from ..store import CampaignStore, Record
 from .security import inside, safe_name
 
-#: The observable the phase diagram shows (the report's, ``report.phase_plot.SHOWN``).
-SHOWN = "sigma2_S"
+
+def shown(model: str = DEFAULT_MODEL) -> Observable:
+    """The observable the phase diagram shows: the one that classifies the model's points
+    (the nematic model's sigma2_S, as the report's ``report.phase_plot.SHOWN``)."""
+    return classifier(get_model(model))
+
+
 #: The confidence of a point's interval.
 CONFIDENCE = 0.95
 #: Series of a run file the run view sends (those present).
@@ -231,7 +238,7 @@ def not_started(name: str) -> dict[str, Any]:
         "name": name,
         "readable": False,
         "dims": [],
-        "shown": SHOWN,
+        "shown": shown().name,
         "confidence": CONFIDENCE,
         "total": 0,
         "counts": {"ok": 0, "failed": 0, "pending": 0},

@@ -4,6 +4,7 @@ The schema (documented for users in ``docs/campaigns/file.md``)::
 
     name: fig2                      # results go to results/<name>/ (default: the file's stem)
     description: free text
+    model: nematic                  # the model the runs compute (default: nematic, the paper's)
     parameters: {B: 0.5, K: 5.0e-5}  # base model parameters (Parameters)
     numerics: {resolution: 128, t_final: 300}   # base numerics (Numerics)
     sweep:
@@ -61,6 +62,7 @@ from .chain import read_chain
 from .checker import Checker, KeyPath, is_int, suggest
 from .execution import read_execution
 from .initial import READING, InitialRequest, parent_error, read_initial, resolve_initial
+from .model import read_model
 from .points import check_points
 from .precision import read_precision
 from .prior import read_prior
@@ -85,6 +87,7 @@ from .yaml_input import NO_MEMORY, read_document, read_text
 TOP_KEYS = (
     "name",
     "description",
+    "model",
     "parameters",
     "protocol",
     "numerics",
@@ -120,6 +123,8 @@ SECTIONS: tuple[Section, ...] = (
     Section("limits", "limits", read_limits),
     Section("name", "name", read_name),
     Section("description", "description", read_description),
+    # the model first: the sections after it read its settings and observables
+    Section("model", "model", read_model),
     Section("parameters", "parameters", read_parameters),
     # the protocol joins the base parameters (the Campaign keeps the merged mapping)
     Section("protocol", "parameters", read_protocol),

@@ -6,9 +6,9 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from nematic_solids.model.resolution import is_rule
-
-from ..campaign import BRANCH, BRANCHES, CHAIN_STARTS, ChainSpec
+from ..campaign import BRANCH, BRANCHES, CHAIN_STARTS, DEFAULT_MODEL, ChainSpec
+from ..models.interface import resolution_rule
+from ..models.registry import get_model
 from .checker import Checker, is_number, suggest
 
 CHAIN_KEYS = ("axis", "branches", "up")
@@ -53,7 +53,9 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
     elif len(dims[axis]) < 2 or not all(is_number(v) for v in dims[axis].axes[0].values):
         c.bad(("chain", "axis"), axis, "an axis of two or more numbers")
         ok = False
-    if ok and axis in ("K", "A0") and is_rule((read.get("numerics") or {}).get("resolution")):
+    model = get_model(read.get("model") or DEFAULT_MODEL)
+    setting = (read.get("numerics") or {}).get("resolution")
+    if ok and axis in ("K", "A0") and resolution_rule(model, setting) is not None:
         c.add(
             ("chain", "axis"),
             f"a chain along {axis} with resolution: auto would change the grid between a run "

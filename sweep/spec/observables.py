@@ -7,18 +7,18 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ..campaign import Threshold
-from ..observables import OBSERVABLES
+from ..campaign import DEFAULT_MODEL, Threshold
+from ..models.registry import get_model
 from .checker import Checker, KeyPath, is_finite_number, suggest
 
 #: The derived observable read from the run files (the stability fit's criterion).
 GROWTH = "growth"
 
 
-def observable_sources() -> dict[str, str]:
-    """Observable name -> the run scalar it is read from (phase.nc names and the scalars
-    themselves), plus ``growth``."""
-    out = {name: src for name, (src, _) in OBSERVABLES.items()}
+def observable_sources(model: str = DEFAULT_MODEL) -> dict[str, str]:
+    """``model``'s observable name -> the run scalar it is read from (phase.nc names and the
+    scalars themselves), plus ``growth``."""
+    out = {o.name: o.scalar for o in get_model(model).observables}
     out.update({src: src for src in list(out.values())})
     out[GROWTH] = GROWTH
     return out
@@ -40,10 +40,12 @@ def read_observable(c: Checker, path: KeyPath, value: Any, sources: Mapping[str,
     return "sigma2_S"
 
 
-def read_classes(c: Checker, path: KeyPath, raw: Any) -> tuple[Threshold, ...] | None:
+def read_classes(
+    c: Checker, path: KeyPath, raw: Any, model: str = DEFAULT_MODEL
+) -> tuple[Threshold, ...] | None:
     """A ``classes:`` mapping (observable -> threshold) as thresholds, in the order written;
     ``None`` (problems added to ``c``) when it is not one."""
-    sources = observable_sources()
+    sources = observable_sources(model)
     if not isinstance(raw, Mapping) or not raw:
         c.bad(
             path,

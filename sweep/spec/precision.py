@@ -24,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ..campaign import PrecisionSpec
+from ..campaign import DEFAULT_MODEL, PrecisionSpec
 from .checker import Checker, is_finite_number, is_int
 from .observables import observable_sources, read_classes, read_observable
 
@@ -56,7 +56,8 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     n_seeds = len(read.get("seeds") or ())
 
     observable = sec.get("observable")
-    sources = observable_sources()
+    model = read.get("model") or DEFAULT_MODEL
+    sources = observable_sources(model)
     observable = read_observable(c, (*path, "observable"), observable, sources)
 
     width = sec.get("width")
@@ -87,7 +88,7 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
             "the pattern class",
         )
     patterned = sec.get("patterned_above")
-    classes = read_classes(c, (*path, "classes"), sec["classes"]) if "classes" in sec else ()
+    classes = read_classes(c, (*path, "classes"), sec["classes"], model) if "classes" in sec else ()
     if patterned is not None and "classes" in sec:
         c.add(
             (*path, "patterned_above"),

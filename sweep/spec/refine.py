@@ -51,6 +51,7 @@ from ..campaign import (
     DEFAULT_FRACTION,
     DEFAULT_JUMP,
     DEFAULT_MAX_WIDTH,
+    DEFAULT_MODEL,
     DEFAULT_ROUNDS,
     Dim,
     PrecisionSpec,
@@ -84,7 +85,12 @@ def read_refine(c: Checker, raw: Any, read: Mapping[str, Any]) -> RefineSpec | N
     """The reader of the ``refine:`` section (a row of :data:`nematic_solids.sweep.spec.SECTIONS`):
     needs the ``sweep``, ``seeds`` and ``precision`` sections read before it."""
     return check_refine(
-        c, raw, read.get("sweep") or (), read.get("seeds") or (), read.get("precision")
+        c,
+        raw,
+        read.get("sweep") or (),
+        read.get("seeds") or (),
+        read.get("precision"),
+        read.get("model") or DEFAULT_MODEL,
     )
 
 
@@ -252,9 +258,10 @@ def check_refine(
     dims: Sequence[Dim],
     seeds: Sequence[int],
     precision: PrecisionSpec | None = None,
+    model: str = DEFAULT_MODEL,
 ) -> RefineSpec | None:
     """The ``refine:`` section as a :class:`RefineSpec`, or ``None`` when there is none (or
-    it has problems, which are added to ``c``)."""
+    it has problems, which are added to ``c``); its observables are ``model``'s."""
     if raw is None:
         return None
     path: KeyPath = ("refine",)
@@ -274,7 +281,7 @@ def check_refine(
 
     classes: tuple[Threshold, ...] = ()
     if "classes" in sec:
-        read = read_classes(c, (*path, "classes"), sec["classes"])
+        read = read_classes(c, (*path, "classes"), sec["classes"], model)
         classes = read or ()
         if criterion != "fraction":
             c.add(
@@ -290,7 +297,7 @@ def check_refine(
                     "threshold); remove one of the two",
                 )
 
-    sources = observable_sources()
+    sources = observable_sources(model)
     observable = sec.get("observable", classes[0].observable if classes else "sigma2_S")
     observable = read_observable(c, (*path, "observable"), observable, sources)
 

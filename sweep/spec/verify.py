@@ -40,6 +40,7 @@ from nematic_solids.model.resolution import is_rule
 
 from ..campaign import (
     AMB,
+    DEFAULT_MODEL,
     DEFAULT_VERIFY_OBSERVABLES,
     MAX_SEED,
     NUMERICS_TYPES,
@@ -50,6 +51,7 @@ from ..campaign import (
     normalise_float,
     same_value,
 )
+from ..models.registry import get_model
 from .checker import Checker, coerce, is_int, is_number, suggest
 
 KEYS = (
@@ -62,20 +64,10 @@ KEYS = (
     "observables",
     "before",
 )
-#: Observables a verification compares (phase.nc names) -> the run scalar, and whether it
-#: measures a pattern (compared only where the base or the variant is patterned).
-#: Observables in :data:`ABSOLUTE` are compared by their absolute change (<cos 2 theta> lies
-#: in [-1, 1] and is near 0 without applied strain: a relative change would measure noise).
-ABSOLUTE = ("cos2theta",)
-OBSERVABLES: dict[str, tuple[str, bool]] = {
-    "sigma2_S": ("sigma2_S_final", True),
-    "cos2theta": ("cos2theta_final", False),
-    "mean_S": ("mean_S_final", False),
-    "lambda": ("lambda_final", True),
-    "lambda_peak": ("lambda_peak", True),
-    "t_peak": ("t_peak", True),
-    "lambda_mean": ("lambda_mean_final", True),
-}
+# A verification compares any observable of the campaign's model (its phase.nc names), each
+# by its declared rules (nematic_solids.sweep.models.interface.Observable): its seed mean, how
+# a change is measured, and whether it measures a pattern (compared only where the base or
+# the variant is patterned).
 MAX_VARIANTS = 20
 MAX_SEEDS = 50
 _FACTOR = re.compile(r"^\s*([x*/])\s*([0-9.eE+-]+)\s*$")
@@ -167,6 +159,7 @@ def read_verify(c: Checker, raw: Any, read: Mapping[str, Any]) -> VerifySpec | N
         read.get("seeds") or (),
         read.get("parameters") or {},
         read.get("numerics") or {},
+        read.get("model") or DEFAULT_MODEL,
     )
 
 
@@ -251,9 +244,10 @@ def check_verify(
     seeds: Sequence[int],
     parameters: Mapping[str, Any],
     numerics: Mapping[str, Any],
+    model: str = DEFAULT_MODEL,
 ) -> VerifySpec | None:
     """The ``verify:`` section as a :class:`VerifySpec`, or ``None`` when there is none (or it
-    has problems, which are added to ``c``)."""
+    has problems, which are added to ``c``); its observables are ``model``'s."""
     if raw is None:
         return None
     path: tuple[str | int, ...] = ("verify",)
@@ -349,24 +343,19 @@ def check_verify(
     if not is_number(patterned) or not 0 < patterned < 1:
         c.bad((*path, "patterned_above"), patterned, "a sigma2_S level in (0, 1)")
         patterned = 1e-6
+    known = [o.name for o in get_model(model).observables]
     observables = sec.get("observables", list(DEFAULT_VERIFY_OBSERVABLES))
     if (
         not isinstance(observables, Sequence)
         or isinstance(observables, str)
         or not observables
-        or any(o not in OBSERVABLES for o in observables)
+        or any(o not in known for o in observables)
     ):
-        bad = (
-            [o for o in observables if o not in OBSERVABLES]
-            if isinstance(observables, list)
-            else []
-        )
+        bad = [o for o in observables if o not in known] if isinstance(observables, list) else []
         c.bad(
             (*path, "observables"),
             observables,
-            "a list of "
-            + ", ".join(OBSERVABLES)
-            + (suggest(str(bad[0]), list(OBSERVABLES)) if bad else ""),
+            "a list of " + ", ".join(known) + (suggest(str(bad[0]), known) if bad else ""),
         )
         observables = ["sigma2_S"]
     before_flag = sec.get("before", False)

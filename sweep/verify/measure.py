@@ -2,12 +2,13 @@
 verdicts.
 
 Per sampled point ``p`` and observable ``X`` (``verify.observables``): ``X_base(p)``, the
-seed mean of the base runs (geometric for sigma2_S, arithmetic otherwise; for a pattern
-measure, sigma2_S, lambda and the peak values, over the runs that patterned only); per
-variant ``v``:
+seed mean of the base runs (geometric or arithmetic by the observable's declared rule,
+:class:`nematic_solids.sweep.models.interface.Observable`: geometric for the nematic model's
+sigma2_S; for a pattern measure, over the runs that patterned only); per variant ``v``:
 ``X(p, v)`` the variant's seed mean, ``X_change(p, v)`` the relative change
-``(X - X_base) / |X_base|`` (for <cos 2 theta>, which lies in [-1, 1] and is near 0 without
-applied strain, the absolute change ``X - X_base``) and ``X_verdict(p, v)``:
+``(X - X_base) / |X_base|`` or, for an observable whose change is absolute (the nematic
+model's <cos 2 theta>, which lies in [-1, 1] and is near 0 without applied strain), the
+absolute change ``X - X_base``, and ``X_verdict(p, v)``:
 
 - 1 converged: ``|change| < verify.threshold``;
 - 0 changed;
@@ -42,10 +43,10 @@ import xarray as xr
 from ..analysis.transition import fit_transition
 from ..expand import RunSpec
 from ..files import atomic_to_netcdf
-from ..observables import OBSERVABLES as PHASE_OBSERVABLES
+from ..models.interface import Observable, classifier, observable
+from ..models.registry import get_model
 from ..outputs.aggregate import coord_attrs
 from ..provenance import code_version, git_commit, library_versions_text
-from ..spec.verify import ABSOLUTE, OBSERVABLES
 from ..store import Record, now_iso
 from . import CHANGED, CONVERGED, MISSING, NOT_COMPARED, VERIFY
 from .sample import Sample, point_label
@@ -76,31 +77,16 @@ def _values(
     return out, ok
 
 
-def seed_mean(values: np.ndarray, geometric: bool) -> float:
-    v = values[np.isfinite(values)]
-    if geometric:
-        v = v[v > 0]
-        return float(10 ** np.mean(np.log10(v))) if v.size else math.nan
-    return float(np.mean(v)) if v.size else math.nan
-
-
-def relative_change(base: float, value: float) -> float:
-    if not (math.isfinite(base) and math.isfinite(value)):
-        return math.nan
-    if base == 0:
-        return 0.0 if value == 0 else math.inf
-    return (value - base) / abs(base)
-
-
 def verify_dataset(
     sample: Sample, base_records: Mapping[str, Record], variant_records: Mapping[str, Record]
 ) -> xr.Dataset:
     """The verify.nc Dataset of ``sample`` from the records of the campaign (base runs) and
     of its verify folder (variant runs)."""
     spec = sample.spec
+    model = get_model(sample.campaign.model)
     n_p, n_v = len(sample.points), len(sample.variants)
     level = spec.patterned_above
-    sig_src = PHASE_OBSERVABLES["sigma2_S"][0]
+    sig_src = classifier(model).scalar
     base_sig = [_values(runs, base_records, sig_src) for runs in sample.base]
     base_frac = np.array([_fraction(v, ok, level) for v, ok in base_sig])
     var_sig: list[list[np.ndarray]] = [[np.full(0, np.nan)] * n_v for _ in range(n_p)]
@@ -118,15 +104,13 @@ def verify_dataset(
     data: dict[str, xr.Variable] = {}
     worst = np.ones((n_p, n_v), dtype=bool)
     for name in spec.observables:
-        source, pattern = OBSERVABLES[name]
-        geometric = name == "sigma2_S"
+        obs = observable(model, name)
+        source, pattern = obs.scalar, obs.pattern
 
-        def mean(
-            vals: np.ndarray, sig: np.ndarray, pattern: bool = pattern, geometric: bool = geometric
-        ) -> float:
+        def mean(vals: np.ndarray, sig: np.ndarray, obs: Observable = obs) -> float:
             # a pattern measure is the mean over the patterned runs only: a relaxed run's
             # sigma2_S (1e-13, at the solver's floor) or lambda (the texture's) is no pattern's
-            return seed_mean(vals[sig > level] if pattern else vals, geometric)
+            return obs.mean(vals[sig > level] if obs.pattern else vals)
 
         base = np.array(
             [
@@ -142,11 +126,7 @@ def verify_dataset(
                 value[p, v] = mean(
                     _values(sample.variant_runs[v][p], variant_records, source)[0], var_sig[p][v]
                 )
-                change[p, v] = (
-                    value[p, v] - base[p]
-                    if name in ABSOLUTE
-                    else relative_change(base[p], value[p, v])
-                )
+                change[p, v] = obs.difference(base[p], value[p, v])
                 if not complete[p, v]:
                     continue
                 if not (math.isfinite(base[p]) and math.isfinite(value[p, v])):
@@ -157,7 +137,7 @@ def verify_dataset(
                 else:
                     verdict[p, v] = CHANGED
         worst &= verdict != CHANGED
-        long = PHASE_OBSERVABLES[name][1]
+        long = obs.long_name
         over = " over the patterned runs" if pattern else ""
         data[f"{name}_base"] = xr.Variable(
             ("point",),
@@ -174,7 +154,7 @@ def verify_dataset(
             change,
             {
                 "long_name": f"absolute change of {name}: variant - base"
-                if name in ABSOLUTE
+                if obs.change == "absolute"
                 else f"relative change of {name}: (variant - base) / |base|",
                 "units": "1",
             },
@@ -278,7 +258,8 @@ def _transitions(
     loc_v = np.full((n_t, n_v), np.nan)
     loc_b = np.full(n_t, np.nan)
     for t, tr in enumerate(sample.transitions):
-        source = PHASE_OBSERVABLES.get(tr.observable, (tr.observable, ""))[0]
+        known = {o.name: o.scalar for o in get_model(sample.campaign.model).observables}
+        source = known.get(tr.observable, tr.observable)
         x = [sample.points[tr.below].coords[tr.axis], sample.points[tr.above].coords[tr.axis]]
 
         def location(

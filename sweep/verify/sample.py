@@ -23,9 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from nematic_solids.model.errors import ParameterError
-
 from ..campaign import Campaign, Variant, VerifySpec, same_value
+from ..errors import ParameterError
 from ..expand import Expansion, GridPoint, RunSpec
 from ..identity import PointHasher
 from ..spec.verify import resolve

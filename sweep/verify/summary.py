@@ -10,14 +10,13 @@ from pathlib import Path
 
 import xarray as xr
 
-from ..spec.verify import ABSOLUTE
 from . import CHANGED, CONVERGED, MISSING, NOT_COMPARED, REQUIRED, VERIFY, stale
 
 
-def _pct(x: float, name: str) -> str:
+def _pct(x: float, absolute: bool) -> str:
     if not math.isfinite(x):
         return "inf"
-    if name in ABSOLUTE:
+    if absolute:
         return f"by {abs(x):.2g}"
     return f"{100 * abs(x):.0f} %" if abs(x) < 10 else f"by a factor {1 + x:.3g}"
 
@@ -55,11 +54,15 @@ def summary_line(ds: xr.Dataset, worst: int = 2) -> str:
             ]:
                 if ds[f"{name}_verdict"].values[p, v] == CHANGED:
                     c = float(ds[f"{name}_change"].values[p, v])
+                    # the file says how the change is measured (the observable's rule)
+                    absolute = str(ds[f"{name}_change"].attrs.get("long_name", "")).startswith(
+                        "absolute"
+                    )
                     size = abs(c) if math.isfinite(c) else math.inf
                     if size > best[0]:
                         best = (
                             size,
-                            f"{labels[p]}: {name} changes {_pct(c, name)} with {variants[v]}",
+                            f"{labels[p]}: {name} changes {_pct(c, absolute)} with {variants[v]}",
                         )
             if best[1]:
                 notes.append(best)

@@ -329,7 +329,7 @@ class Runner(threading.Thread):
         except (ClusterError, StoreError, CampaignError) as e:
             self.pool.close()  # a cluster that failed is not kept
             return FAILED, str(e), None
-        outcome = {
+        outcome: dict[str, Any] = {
             "total": len(expansion),
             "failed_before": len(plan.failed),
             "ok": 0 if summary is None else summary.ok,

@@ -40,7 +40,9 @@ def test_a_campaign_whose_figure_fails_is_failed_and_one_drawn_is_done(tmp_path)
     runner = Runner(tmp_path, queue, pool, Changes())
     try:
         for _ in ids:
-            runner.run_entry(queue.next())
+            entry = queue.next()
+            assert entry is not None
+            runner.run_entry(entry)
     finally:
         pool.close()
     broken, fine = (queue.get(i) for i in ids)

@@ -76,6 +76,8 @@ nitpick_ignore_regex = [
         r"(numpy|np|xarray|xr|pandas|pd|pathlib|collections\.abc|typing|jax|jaxlib|pde)\..*",
     ),
     (r"py:class", r"Path|Array|ArrayLike|NDArray|PDEBase|optional"),
+    # py-pde's own annotation of a boundary condition (a subclass of its SwiftHohenbergPDE)
+    (r"py:class", r"BoundariesData"),
     (r"py:meth", r"~?Mechanics\..*"),
     (r"py:mod", r"nematic_solids\..*"),
     (r"py:.*", r"nematic_solids\.sweep\.spec\.yaml_input\..*"),

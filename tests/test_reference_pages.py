@@ -21,7 +21,7 @@ CAMPAIGNS = DOCS / "campaigns"
 
 #: page of docs/campaigns/ -> the campaign-file sections (top-level keys) it is the reference of
 SECTION_PAGES: dict[str, set[str]] = {
-    "file.md": {"name", "description", "parameters", "numerics", "limits"},
+    "file.md": {"name", "description", "model", "parameters", "numerics", "limits"},
     "sweep.md": {"sweep", "seeds"},
     "store.md": {"store"},
     "protocols.md": {"protocol"},

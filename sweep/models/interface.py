@@ -88,7 +88,7 @@ class Observable:
     value at the end, ``<name>_final``). ``seed_mean`` is the mean over seeds: ``"geometric"``
     for quantities that span decades between seeds (a pattern's variance near onset),
     ``"arithmetic"`` otherwise. ``change`` is how two runs' values are compared (verification,
-    convergence): ``"relative"`` (|a - b| / |b|) or ``"absolute"`` (|a - b|). ``classifies``
+    convergence): ``"relative"`` (``|a - b| / |b|``) or ``"absolute"`` (``|a - b|``). ``classifies``
     marks the observable whose seed mean decides the pattern class (:meth:`Model.classify`
     reads it)."""
 
@@ -99,8 +99,8 @@ class Observable:
     seed_mean: Literal["arithmetic", "geometric"] = "arithmetic"
     change: Literal["absolute", "relative"] = "relative"
     classifies: bool = False
-    #: a measure of a pattern: its seed mean is taken over the patterned runs only (a relaxed
-    #: run's value is the floor of the solver or its initial texture's, no pattern's)
+    #: whether it measures a pattern, so that its seed mean is taken over the patterned runs
+    #: only (a relaxed run's value is the floor of the solver or its initial texture's)
     pattern: bool = False
     symbol: str | None = None
 
@@ -111,7 +111,7 @@ class Observable:
             raise ValueError(f"observable {self.name}: change not in {CHANGES}")
 
     def mean(self, values: ArrayLike) -> float:
-        """The seed mean of ``values`` by :attr:`seed_mean`, over the finite ones (and the
+        """The seed mean of ``values`` by ``seed_mean``, over the finite ones (and the
         positive ones for the geometric mean); NaN when none is left."""
         import numpy as np  # here: reading a campaign file needs the declarations only
 
@@ -123,7 +123,7 @@ class Observable:
         return float(np.mean(v)) if v.size else math.nan
 
     def difference(self, base: float, value: float) -> float:
-        """How ``value`` differs from ``base`` by :attr:`change`: ``value - base``, or that
+        """How ``value`` differs from ``base`` by ``change``: ``value - base``, or that
         over ``|base|`` (0 where both are 0, infinite where only the base is); NaN where
         either is not finite."""
         if not (math.isfinite(base) and math.isfinite(value)):
@@ -147,14 +147,14 @@ class Capabilities:
     protocols: bool = False
     #: a run may start from another run's end state (chains, ``initial.from``)
     start_from_state: bool = False
-    #: several seeds of one point run as one batch (:meth:`Model.run_batch`)
+    #: several seeds of one point run as one batch (:meth:`BatchedModel.run_batch`)
     batched: bool = False
-    #: :meth:`Model.cost_seconds` predicts a run's wall time
+    #: the model's ``cost_seconds`` predicts a run's wall time
     cost_model: bool = False
     #: a resolution setting may be a rule that gives each point its grid
     #: (:class:`ResolutionRule`: :meth:`~ResolutionRule.resolution`, :meth:`~ResolutionRule.rule`)
     resolution_rule: bool = False
-    #: :meth:`Model.memory_bytes` bounds a run's memory
+    #: the model's ``memory_bytes`` bounds a run's memory
     memory_per_run: bool = False
     #: the precisions its runs can compute in (the first is the default)
     precisions: tuple[str, ...] = ("float64",)

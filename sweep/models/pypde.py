@@ -122,7 +122,7 @@ def settings_of(cls: type) -> tuple[Setting, ...]:
 class Measure:
     """One observable of a py-pde run (py-pde's tracker style: ``handle``, ``finalize``).
 
-    Subclasses set :attr:`observable` and implement :meth:`handle`; a measure keeps no state
+    Subclasses set ``observable`` and implement :meth:`handle`; a measure keeps no state
     between calls, so one instance serves every run."""
 
     observable: Observable
@@ -157,7 +157,7 @@ class PDEState:
     series: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
 
     def to_dataset(self) -> xr.Dataset:
-        """The state as a dataset (to keep it in a file); :meth:`from_dataset` reads it."""
+        """The state as a dataset (to keep it in a file); :meth:`PDEState.from_dataset` reads it."""
         dims = [f"axis_{i}" for i in range(self.data.ndim)]
         ds = xr.Dataset({"data": (dims, self.data)}, coords={"time": list(self.times)})
         for name, values in self.series.items():
@@ -167,6 +167,7 @@ class PDEState:
 
     @classmethod
     def from_dataset(cls, ds: xr.Dataset) -> PDEState:
+        """The state that :meth:`to_dataset` wrote."""
         series = {
             str(k)[7:]: tuple(map(float, v.values))
             for k, v in ds.items()
@@ -263,6 +264,7 @@ class PDEModel:
         return self.settings_class(**values)
 
     def run(self, request: RunRequest) -> RunOutcome:
+        """One point and seed (the module docstring says what a run does)."""
         s = self.make_settings(request)
         _check_steps(s)
         warnings: list[str] = []

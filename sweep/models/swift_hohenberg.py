@@ -40,13 +40,13 @@ from .pypde import FunctionMeasure, Measure, SolverSettings, numerics, parameter
 UNIFORM_AMPLITUDE = 1e-2
 #: at or above this hexagonality a pattern is hexagons, below it stripes
 HEXAGONAL = 0.5
-#: the critical ring in the power spectrum: |k| between these (the linear band at eps < 1;
+#: The critical ring of the power spectrum, ``|k|`` between these (the linear band at eps < 1;
 #: the first harmonics of hexagons, at sqrt(3) and 2, fall outside)
 RING = (0.5, 1.5)
 #: directions within this angle (radians) of 0, 60 and 120 degrees to the strongest mode
 #: count for that direction
 DIRECTION_WIDTH = math.radians(15.0)
-#: RK4's stability limit on the negative real axis (|z| for R(z) = 1 at z < 0)
+#: RK4's stability limit on the negative real axis (``|z|`` for ``R(z) = 1`` at z < 0)
 RK4_LIMIT = 2.785
 
 
@@ -93,7 +93,7 @@ def laplacian_symbol(grid: pde.CartesianGrid, kx: np.ndarray, ky: np.ndarray) ->
 
 
 def growth_rate(eps: float, kappa2: np.ndarray | float) -> np.ndarray | float:
-    """The linear growth rate eps - (1 - kappa^2)^2 (continuum: kappa = |k|)."""
+    """The linear growth rate eps - (1 - kappa^2)^2 (continuum: ``kappa = |k|``)."""
     return eps - (1 - np.asarray(kappa2)) ** 2
 
 

@@ -153,6 +153,7 @@ def _assert_chained_runs(results: Path, text: str) -> dict[str, np.ndarray]:
     return out
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_a_chain_campaign_runs_and_resumes_where_it_stopped(tmp_path):
     text = loop()
     path = write(tmp_path, text)

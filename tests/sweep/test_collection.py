@@ -128,6 +128,7 @@ def test_dry_run_prints_the_cost_of_the_whole_and_writes_nothing(folder):
     assert "total now: 4 runs" in flat(out.output)
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_a_collection_runs_its_campaigns_in_order_and_resumes(folder):
     results = folder / "results"
     out = invoke("run", folder / "both.yaml", "--results", results, "--no-dashboard")
@@ -212,6 +213,7 @@ def test_the_paper_collection_is_valid():
     assert "valid: collection paper" in out.output
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_a_detached_collection_is_stopped_by_nematic_stop(folder):
     """`run COLLECTION --detach` runs the collection's driver in the background (its log in
     results/NAME/driver.log); `nematic stop COLLECTION` stops the member running, which ends

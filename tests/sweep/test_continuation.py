@@ -151,6 +151,7 @@ def test_a_worker_killed_at_random_points_resumes_exactly(tmp_path, mechanics, n
     assert_equal_runs(straight(task), store.nc_path(task.run_id))
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_sigkill_of_the_driver_and_its_workers_then_resume(tmp_path):
     path = campaign(tmp_path, "driver", values="[0.2, 0.3]", seeds=1)
     results = tmp_path / "results"
@@ -198,6 +199,7 @@ def test_sigkill_of_the_driver_and_its_workers_then_resume(tmp_path):
     assert not list(checkpoints.glob("*"))
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_a_campaign_whose_t_final_grew_continues_its_runs(tmp_path):
     kw = dict(n=32, t_final=5, save=0.5, snap=1, values="[0.1, 0.2]", seeds=2)
     path = campaign(tmp_path, "grow", **kw)
@@ -319,6 +321,7 @@ initial:
 """
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_a_campaign_begins_from_another_campaigns_runs(tmp_path):
     """Activity switched off (zeta = 0) from the parent's end states and from its snapshots
     at t = 2.5: each child run begins with its parent run's fields, bit for bit, under its

@@ -157,6 +157,7 @@ def test_model_scales_with_resolution_length_and_mechanics():
     assert curve_steps(curve, 50.0) == 25.0
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_the_model_prices_the_steps_a_protocol_forces(tmp_path):
     """10,000 switches force 10,001 steps (one per piece); a sine 16 per period; the estimate
     of a campaign with them is priced accordingly (not at the activity curve's 448 steps)."""

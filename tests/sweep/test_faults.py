@@ -193,6 +193,7 @@ def nematic(
     )
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_a_file_size_limit_keeps_runs_pending_and_a_rerun_completes(copy, tmp_path):
     """Results that cannot be written (ulimit -f) are not model failures: the driver stops at
     the first one with one message naming the path and the cause, exit 2, no record; status

@@ -636,6 +636,7 @@ execution: {{workers: 2}}
 """
 
 
+@pytest.mark.slow  # 12-20 s; CI runs it with the slow tests
 def test_a_real_campaign_refined_over_two_axes_with_seeds_by_precision(tmp_path):
     from test_cf_files import _checker_messages
 

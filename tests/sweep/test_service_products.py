@@ -8,22 +8,15 @@ import pytest
 
 pytest.importorskip("fastapi")
 
+from test_service_api import CAMPAIGN as SERVICE_CAMPAIGN
+
 from nematic_solids.sweep.figures.failed import read_failed
 from nematic_solids.sweep.service.catalogue_link import open_service_database
 from nematic_solids.sweep.service.queue import DONE, FAILED
 from nematic_solids.sweep.service.runner import Changes, ClusterPool, Runner
 
-CAMPAIGN = """\
-name: {name}
-parameters: {{noise_modes: 4}}
-numerics: {{resolution: 16, t_final: 0.5, save_every: 0.25, mechanics: linear}}
-sweep:
-  axes:
-    alpha_minus_B: [0.1, 0.2]
-seeds: 1
-figures: [fig2]
-execution: {{workers: 1}}
-"""
+#: the service tests' small campaign, drawing Fig. 2 on one worker
+CAMPAIGN = SERVICE_CAMPAIGN + "figures: [fig2]\nexecution: {{workers: 1}}\n"
 
 
 def test_a_campaign_whose_figure_fails_is_failed_and_one_drawn_is_done(tmp_path):

@@ -62,12 +62,7 @@ def open_catalogue(
     database refuses."""
     if readonly:
         return _open_readonly(target, root)
-    text = os.fspath(target) if target is not None else None
-    if text is not None and is_url(text):
-        url, root_path = text, Path(root) if root is not None else None
-    else:
-        root_path = Path(text if text is not None else (root if root is not None else "results"))
-        url = catalogue_url(root_path)
+    url, root_path = _url_and_root(target, root)
     state, moved = "opened", None
     sqlite = _sqlite_file(url)
     if sqlite is not None:
@@ -113,15 +108,22 @@ def open_catalogue(
     return catalogue
 
 
+def _url_and_root(
+    target: str | os.PathLike[str] | None, root: str | os.PathLike[str] | None
+) -> tuple[str, Path | None]:
+    """The database URL that ``target`` names (a URL, or a results root whose SQLite file it
+    is; default ``results``) and the results root (None for a URL without ``root``)."""
+    text = os.fspath(target) if target is not None else None
+    if text is not None and is_url(text):
+        return text, Path(root) if root is not None else None
+    root_path = Path(text if text is not None else (root if root is not None else "results"))
+    return catalogue_url(root_path), root_path
+
+
 def _open_readonly(
     target: str | os.PathLike[str] | None, root: str | os.PathLike[str] | None
 ) -> Catalogue:
-    text = os.fspath(target) if target is not None else None
-    if text is not None and is_url(text):
-        url, root_path = text, Path(root) if root is not None else None
-    else:
-        root_path = Path(text if text is not None else (root if root is not None else "results"))
-        url = catalogue_url(root_path)
+    url, root_path = _url_and_root(target, root)
     sqlite = _sqlite_file(url)
     if sqlite is not None and not sqlite.is_file():
         raise CatalogueError(f"no catalogue {sqlite}")

@@ -42,6 +42,26 @@ execution: {{workers: {workers}}}
 """
 
 
+def start_service(root: Path, log_path: Path) -> tuple[subprocess.Popen[bytes], Any, str, dict]:
+    """``nematic serve ROOT`` in its own session, its output in ``log_path``; waits until it
+    answers and returns the process, the open log, its URL and the token's header."""
+    log = open(log_path, "wb")  # noqa: SIM115 - open while the service runs
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nematic_solids.sweep", "serve", str(root), "--port", "0"],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
+    paths = ServicePaths(root)
+    while paths.running() is None:
+        if proc.poll() is not None:
+            raise SystemExit(log_path.read_text())
+        time.sleep(0.05)
+    info = paths.running()
+    assert info is not None
+    return proc, log, info["url"], {"Authorization": f"token {paths.read_token()}"}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=6)
@@ -57,22 +77,7 @@ def main() -> None:
     path.write_text(
         CAMPAIGN.format(t_final=args.t_final, values=values, seeds=args.seeds, workers=args.workers)
     )
-    log = open(folder / "serve.log", "wb")  # noqa: SIM115 - open while the service runs
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "nematic_solids.sweep", "serve", str(root), "--port", "0"],
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        start_new_session=True,
-    )
-    paths = ServicePaths(root)
-    while paths.running() is None:
-        if proc.poll() is not None:
-            raise SystemExit((folder / "serve.log").read_text())
-        time.sleep(0.05)
-    info = paths.running()
-    assert info is not None
-    url, token = info["url"], paths.read_token()
-    headers = {"Authorization": f"token {token}"}
+    proc, log, url, headers = start_service(root, folder / "serve.log")
     events: list[tuple[float, int]] = []
     stop = threading.Event()
 

@@ -21,7 +21,6 @@ import json
 import os
 import platform
 import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -30,9 +29,11 @@ from typing import Any
 
 import httpx
 
-from nematic_solids.sweep.service.paths import ServicePaths
-
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from bench_service import start_service  # noqa: E402
+
 CAMPAIGN = """\
 name: {name}
 parameters: {{noise_modes: 4}}
@@ -96,22 +97,7 @@ def main() -> None:
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="service-memory-"))
     root = folder / "results"
-    log = open(folder / "serve.log", "wb")  # noqa: SIM115 - open while the service runs
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "nematic_solids.sweep", "serve", str(root), "--port", "0"],
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        start_new_session=True,
-    )
-    paths = ServicePaths(root)
-    while paths.running() is None:
-        if proc.poll() is not None:
-            raise SystemExit((folder / "serve.log").read_text())
-        time.sleep(0.05)
-    info = paths.running()
-    assert info is not None
-    url, token = info["url"], paths.read_token()
-    headers = {"Authorization": f"token {token}"}
+    proc, log, url, headers = start_service(root, folder / "serve.log")
     client = httpx.Client(base_url=url, headers=headers, timeout=60)
     samples: list[dict[str, Any]] = [{"campaigns": 0, "t_s": 0.0, **proc_status(proc.pid)}]
     t0 = time.monotonic()

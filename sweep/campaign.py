@@ -8,15 +8,12 @@ This module imports nothing of the parsers.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import numbers
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
-
-from nematic_solids.model.parameters import Numerics, Parameters
 
 from .limits import DEFAULT_MAX_RUNS
 
@@ -49,22 +46,6 @@ CLUSTER_KINDS = {
 
 
 # --------------------------------------------------------------------------- the model's names
-def _field_types(cls: type) -> dict[str, str]:
-    return {f.name: str(f.type) for f in dataclasses.fields(cls) if f.name != "protocol"}
-
-
-PARAMETER_TYPES: dict[str, str] = {**_field_types(Parameters), AMB: "float"}
-NUMERICS_TYPES: dict[str, str] = _field_types(Numerics)
-#: Numerics fields that may be swept (scalars only).
-SWEEPABLE_NUMERICS = tuple(
-    n for n, t in NUMERICS_TYPES.items() if t in ("int", "float", "bool", "str")
-)
-AXIS_TYPES: dict[str, str] = {
-    **PARAMETER_TYPES,
-    **{n: NUMERICS_TYPES[n] for n in SWEEPABLE_NUMERICS},
-}
-
-
 def normalise_float(x: float) -> float:
     """Round to :data:`SIGNIFICANT_DIGITS` significant digits: 0.30000000000000004 -> 0.3."""
     y = float(f"{float(x):.{SIGNIFICANT_DIGITS}g}")

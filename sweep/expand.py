@@ -14,13 +14,12 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from nematic_solids.model.parameters import Numerics, Parameters, check_compatible
-from nematic_solids.model.resolution import resolve
-
-from .campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec, same_value
+from .campaign import Campaign, InitialSpec, same_value
 from .chains import chain_parents, in_chain_order
 from .identity import PointHasher, hash_canonical, identity_start, start_state, trajectory_id
+from .models.registry import get_model
 from .protocols import with_axis_values
+from .settings import setting_names
 
 log = logging.getLogger(__name__)
 
@@ -30,12 +29,13 @@ MAX_POINT_PROBLEMS = 20
 
 @dataclass(frozen=True)
 class GridPoint:
-    """One point of the grid: its multi-index, the swept values and the model's objects."""
+    """One point of the grid: its multi-index, the swept values and the model's objects of
+    its settings (:meth:`~nematic_solids.sweep.models.interface.Model.point`)."""
 
     index: tuple[int, ...]
     coords: dict[str, Any]
-    parameters: Parameters
-    numerics: Numerics
+    parameters: Any
+    numerics: Any
 
 
 @dataclass(frozen=True)
@@ -57,10 +57,11 @@ class RunSpec:
 def _settings(campaign: Campaign, values: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     params = dict(campaign.parameters)
     numerics = dict(campaign.numerics)
+    names = setting_names(campaign.model)
     for name, value in values.items():
-        if name in PARAMETER_TYPES:
+        if name in names.parameters:
             params[name] = value
-        elif name in NUMERICS_TYPES:
+        elif name in names.numerics:
             numerics[name] = value
     with_axis_values(params, values)  # the protocol's swept numbers
     return params, numerics
@@ -78,12 +79,8 @@ def iter_points(campaign: Campaign) -> Iterator[tuple[tuple[int, ...], dict[str,
 
 def make_point(campaign: Campaign, index: tuple[int, ...], coords: dict[str, Any]) -> GridPoint:
     params, numerics = _settings(campaign, coords)
-    parameters = Parameters.from_dict(params)
-    if "resolution" in numerics:  # a rule (resolution: auto) gives the point's grid
-        numerics["resolution"] = resolve(numerics["resolution"], parameters.K, parameters.A0)
-    point = GridPoint(index, coords, parameters, Numerics.from_dict(numerics))
-    check_compatible(point.parameters, point.numerics)
-    return point
+    parameters, nums = get_model(campaign.model).point(params, numerics)
+    return GridPoint(index, coords, parameters, nums)
 
 
 class Parents:

@@ -30,59 +30,12 @@ from typing import Any
 
 import numpy as np
 
-from nematic_solids.model.parameters import Numerics, Parameters
-from nematic_solids.model.protocol import RAMP_STEP_FRACTION, SINE_STEP_FRACTION
-
 from .campaign import DEFAULT_MODEL, SIGNIFICANT_DIGITS
+from .models.interface import IdentityRules
+from .models.registry import get_model
 
 SCHEMA_VERSION = 1
 ID_LENGTH = 16
-#: Numerics fields that change nothing while early stop is off (``steady_tol = 0``): left
-#: out of the canonical text then, so a run keeps the id it had before they existed.
-EARLY_STOP = ("steady_tol", "steady_window")
-#: Numerics fields that choose how a run is executed, not what it computes (the backends
-#: agree to rounding): recorded in the run file, never part of the identity.
-EXECUTION_ONLY = ("backend",)
-#: Numerics fields added later whose default changes nothing: left out of the canonical text
-#: at that default, so earlier runs keep their ids (``precision``: float64, what every run
-#: computed before the field existed; float32 enters the id).
-LATER_NUMERICS_DEFAULTS = {"precision": "float64"}
-#: The parameter that chooses the initial texture: left out of the canonical text at its
-#: original value ("band", the only texture before the field existed), so those runs keep their
-#: ids; with "per_node" the band's ``noise_modes`` changes nothing and is left out instead.
-TEXTURE, TEXTURE_ORIGINAL = "initial", "band"
-#: Parameters added later whose default changes nothing: left out of the canonical text at
-#: that default, so earlier runs keep their ids.
-LATER_DEFAULTS = {"texture_resolution": 0, "coupling": "trP"}
-
-
-def identity_parameters(parameters: Mapping[str, Any]) -> dict[str, Any]:
-    """The parameters as they enter the canonical text: without ``initial`` while it is
-    "band", without the unused ``noise_modes`` while it is "per_node", without
-    ``texture_resolution`` while it is 0."""
-    out = dict(parameters)
-    for name, default in LATER_DEFAULTS.items():
-        if name in out and out[name] == default:
-            del out[name]
-    if out.get(TEXTURE, TEXTURE_ORIGINAL) == TEXTURE_ORIGINAL:
-        out.pop(TEXTURE, None)
-    else:
-        out.pop("noise_modes", None)
-    return out
-
-
-def identity_numerics(numerics: Mapping[str, Any]) -> dict[str, Any]:
-    """The numerics as they enter the canonical text: without the execution-only fields,
-    without ``precision`` while it is float64, and without the early-stop fields while early
-    stop is off."""
-    out = {k: v for k, v in numerics.items() if k not in EXECUTION_ONLY}
-    for name, default in LATER_NUMERICS_DEFAULTS.items():
-        if name in out and out[name] == default:
-            del out[name]
-    if not out.get("steady_tol"):
-        for name in EARLY_STOP:
-            out.pop(name, None)
-    return out
 
 
 def canonical_value(value: Any) -> Any:
@@ -140,71 +93,55 @@ def canonical_json(
     payload["seed"] = canonical_value(int(seed))
     if start is not None:
         payload["start"] = canonical_value(dict(start))
-        # the paper's finite strain only (another model's numerics name no mechanics)
-        guess = start_guess(numerics, start) if model == DEFAULT_MODEL else None
-        if guess is not None:
-            payload["start_guess"] = guess
+        rules = _rules(model)
+        if rules is not None:
+            payload.update(rules.start_identity(numerics, start))
     return _dumps(payload)
 
 
-#: The first guess of the displacement of a finite-strain run begun from an exact end state (a
-#: chain's successor, a run of ``initial.from`` at ``time: end``), as it enters the canonical
-#: text: the end state's own displacement spectrum, bit for bit.
-EXACT_GUESS = "end state displacement spectrum"
+@functools.cache
+def _rules(model: str) -> IdentityRules | None:
+    m = get_model(model)
+    return m if isinstance(m, IdentityRules) else None
 
 
-def start_guess(numerics: Mapping[str, Any], start: Mapping[str, Any]) -> str | None:
-    """:data:`EXACT_GUESS` where a run's force balance at t = 0 is solved from the exact end
-    state's displacement spectrum: finite strain, from an end state (``time`` "end", no
-    snapshot ``state``). Runs made before began from the end snapshot's displacement, and
-    Newton's solve stops at an iterate that depends on its first guess (numbers apart by
-    rounding, up to the Newton tolerance): those runs have the ids without it. None where
-    nothing changed: linear strain (no guess), a start from a snapshot, the seeded texture."""
-    if start.get("time") != "end" or start.get("state"):
-        return None
-    return EXACT_GUESS if numerics.get("mechanics", "finite") == "finite" else None
+@functools.cache
+def _execution(model: str) -> frozenset[str]:
+    return frozenset(s.name for s in get_model(model).settings if s.execution)
+
+
+def identity_settings(
+    parameters: Mapping[str, Any], numerics: Mapping[str, Any], model: str = DEFAULT_MODEL
+) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """The parameters and numerics as they enter the canonical text, and what else the
+    model's point adds to it: by the model's own rules
+    (:class:`~nematic_solids.sweep.models.interface.IdentityRules`), else every setting but
+    those that choose only how a run executes (``Setting.execution``)."""
+    rules = _rules(model)
+    if rules is not None:
+        return rules.identity_settings(parameters, numerics)
+    drop = _execution(model)
+    return (
+        {k: v for k, v in parameters.items() if k not in drop},
+        {k: v for k, v in numerics.items() if k not in drop},
+        {},
+    )
 
 
 def _point_payload(
     parameters: Mapping[str, Any], numerics: Mapping[str, Any], model: str = DEFAULT_MODEL
 ) -> dict[str, Any]:
     """What the canonical text holds of a grid point (all its keys sort before ``seed``)."""
+    p, n, extra = identity_settings(parameters, numerics, model)
     payload: dict[str, Any] = {
-        "numerics": canonical_value(identity_numerics(numerics)),
-        "parameters": canonical_value(identity_parameters(parameters)),
+        "numerics": canonical_value(n),
+        "parameters": canonical_value(p),
         "schema": SCHEMA_VERSION,
+        **extra,
     }
-    rule = protocol_step_rule(parameters, numerics)
-    if rule is not None:
-        payload["protocol_steps"] = rule
     if model != DEFAULT_MODEL:
         payload["model"] = model
     return payload
-
-
-def protocol_step_rule(parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> str | None:
-    """The bound on the step that a run's sine or ramp imposes
-    (:data:`~nematic_solids.model.protocol.SINE_STEP_FRACTION` of a period,
-    :data:`~nematic_solids.model.protocol.RAMP_STEP_FRACTION` of a ramp piece) as it enters the
-    canonical text, where it can change the steps, so the numbers: where the shortest such bound
-    is below the largest step the run may take otherwise (``dt_max``, or ``dt`` for fixed
-    steps). Runs made before the bound existed then have other ids. None where no bound is
-    below it (a slow sine, a run with steps and pulses only, which land on their switch
-    times): the id is unchanged."""
-    protocol = parameters.get("protocol") or {}
-    bounds = [math.inf]
-    for spec in protocol.values():
-        if not isinstance(spec, Mapping):
-            continue
-        if "sine" in spec:
-            bounds.append(float(spec["sine"]["period"]) * SINE_STEP_FRACTION)
-        if "ramp" in spec:
-            times = [float(t) for t, _ in spec["ramp"]]
-            bounds += [(b - a) * RAMP_STEP_FRACTION for a, b in zip(times, times[1:], strict=False)]
-    largest = numerics.get("dt_max" if numerics.get("adaptive", True) else "dt", math.inf)
-    if not min(bounds) < float(largest):
-        return None
-    return f"sine {SINE_STEP_FRACTION:.12g}, ramp {RAMP_STEP_FRACTION:.12g}"
 
 
 def hash_canonical(
@@ -220,13 +157,17 @@ def hash_canonical(
 
 
 def run_id_for(
-    parameters: Parameters | Mapping[str, Any], numerics: Numerics | Mapping[str, Any], seed: int
+    parameters: Mapping[str, Any] | Any,
+    numerics: Mapping[str, Any] | Any,
+    seed: int,
+    model: str = DEFAULT_MODEL,
 ) -> str:
-    """run_id of one run; mappings go through the model's objects first (defaults filled in,
-    ``alpha_minus_B`` resolved, values validated)."""
-    p = parameters if isinstance(parameters, Parameters) else Parameters.from_dict(parameters)
-    n = numerics if isinstance(numerics, Numerics) else Numerics.from_dict(numerics)
-    return hash_canonical(p.to_dict(), n.to_dict(), seed)
+    """run_id of one run of ``model``; mappings go through the model's objects first
+    (:meth:`~nematic_solids.sweep.models.interface.Model.point`: defaults filled in, values
+    validated)."""
+    if isinstance(parameters, Mapping) and isinstance(numerics, Mapping):
+        parameters, numerics = get_model(model).point(parameters, numerics)
+    return hash_canonical(parameters.to_dict(), numerics.to_dict(), seed, model=model)
 
 
 #: the keys of a run's ``start`` that enter its identity: the parent ``run``, the ``time`` ("end"
@@ -286,17 +227,16 @@ class PointIdentity:
     them). The validation's check that no two grid points are one run
     (``sweep.spec.points``) keys every point by it."""
 
-    def __init__(self) -> None:
-        self._numerics: dict[Numerics, tuple[dict[str, Any], str]] = {}
+    def __init__(self, model: str = DEFAULT_MODEL) -> None:
+        self.model = model
+        self._numerics: dict[Any, dict[str, Any]] = {}
 
-    def __call__(self, parameters: Parameters, numerics: Numerics) -> tuple[str, str, str | None]:
-        known = self._numerics.get(numerics)
-        if known is None:
-            n = numerics.to_dict()
-            known = self._numerics[numerics] = (n, _dumps(canonical_value(identity_numerics(n))))
-        p = parameters.to_dict()
-        text = _dumps(canonical_value(identity_parameters(p)))
-        return text, known[1], protocol_step_rule(p, known[0])
+    def __call__(self, parameters: Any, numerics: Any) -> tuple[str, str, str]:
+        n = self._numerics.get(numerics)
+        if n is None:
+            n = self._numerics[numerics] = numerics.to_dict()
+        p, n, extra = identity_settings(parameters.to_dict(), n, self.model)
+        return _dumps(canonical_value(p)), _dumps(canonical_value(n)), _dumps(extra)
 
 
 class PointHasher:

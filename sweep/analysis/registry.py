@@ -9,7 +9,7 @@ from typing import Any
 
 import xarray as xr
 
-from ..campaign import AMB
+from ..campaign import AMB, DEFAULT_MODEL
 from ..errors import FitError
 from .anisotropy import ANISOTROPY_OPTIONS, anisotropy
 from .options import invalid_options
@@ -37,6 +37,8 @@ class FitSpec:
     options: tuple[str, ...] = ()
     includes: tuple[str, ...] = ()
     needs: Needs = field(default=lambda shape, options: None)
+    #: the models whose observables it reads (``model:``)
+    models: tuple[str, ...] = (DEFAULT_MODEL,)
 
 
 def _transition_needs(shape: Shape, options: Mapping[str, Any]) -> str | None:
@@ -138,8 +140,19 @@ def fit_shape_problems(name: str, options: Mapping[str, Any], shape: Shape) -> l
     ``shape`` (empty if it can, or if the name is unknown: :func:`option_problems` says so)."""
     if name not in REGISTRY:
         return []
-    why = REGISTRY[name].needs(shape, options)
+    spec = REGISTRY[name]
+    if shape.model not in spec.models:
+        return [model_problem(spec.models, shape.model)]
+    why = spec.needs(shape, options)
     return [] if why is None else [why]
+
+
+def model_problem(models: tuple[str, ...], model: str) -> str:
+    """Why a fit or figure of ``models`` is not made for a campaign of ``model``."""
+    return (
+        f"it reads the observables of the model {', '.join(models)}; this campaign runs the "
+        f"model {model}"
+    )
 
 
 def resolve(requests: Iterable[tuple[str, Mapping[str, Any]]]) -> list[tuple[str, dict[str, Any]]]:

@@ -11,7 +11,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from ..campaign import AMB, BRANCH
+from ..campaign import AMB, BRANCH, DEFAULT_MODEL
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -29,6 +29,8 @@ class Shape:
     chain_axis: str = ""
     protocol: Mapping[str, Any] = field(default_factory=dict)
     mechanics: str = "finite"
+    #: the campaign's model (``model:``): a fit or figure reads one model's observables
+    model: str = DEFAULT_MODEL
 
     @classmethod
     def of_campaign(cls, campaign: Campaign) -> Shape:
@@ -41,6 +43,7 @@ class Shape:
             campaign.chain.axis if campaign.chain is not None else "",
             dict(protocol) if isinstance(protocol, Mapping) else {},
             str(campaign.numerics.get("mechanics", "finite")),
+            campaign.model,
         )
 
     @classmethod
@@ -61,6 +64,7 @@ class Shape:
             str(phase.attrs.get("chain_axis", "")) if BRANCH in phase.dims else "",
             protocol if isinstance(protocol, Mapping) else {},
             str(phase.attrs.get("num_mechanics", "finite")),
+            str(phase.attrs.get("model", DEFAULT_MODEL)),
         )
 
     @property

@@ -109,7 +109,7 @@ def plan(
     elif listed is not None:
         figures = list(listed.items())
     else:
-        figures = [(n, {}) for n, spec in REGISTRY.items() if spec.applies(shape)]
+        figures = [(n, {}) for n, spec in REGISTRY.items() if spec.drawn_for(shape)]
     fit_requests: list[tuple[str, dict[str, Any]]] = [
         (p.name, dict(p.options)) for p in campaign.fits
     ]

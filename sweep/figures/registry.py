@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from ..analysis.shape import Shape
-from ..campaign import AMB
+from ..campaign import AMB, DEFAULT_MODEL
 from .common import Results, invalid_options
 from .fig2 import FIG2_OPTIONS, fig2
 from .fig3 import FIG3_OPTIONS, fig3
@@ -106,6 +106,13 @@ class FigureSpec:
     needs: Callable[[Shape, Mapping[str, Any]], str | None] = field(
         default=lambda shape, options: None
     )
+    #: the models whose observables it reads (``model:``)
+    models: tuple[str, ...] = (DEFAULT_MODEL,)
+
+    def drawn_for(self, shape: Shape) -> bool:
+        """Whether it is drawn unasked for a campaign of ``shape``: its model's, and it
+        applies."""
+        return shape.model in self.models and self.applies(shape)
 
 
 def _transition_along(axis: str) -> Callable[[Shape], Fits]:
@@ -200,9 +207,11 @@ def shape_problems(
     """Why registered figure ``name`` with ``options`` cannot be drawn for a campaign of
     ``shape`` (empty if it can): the figure's own needs and those of the fits it asks for, with
     the options of the campaign's own ``fits`` entry where it has one (they win)."""
-    from ..analysis.registry import fit_shape_problems
+    from ..analysis.registry import fit_shape_problems, model_problem
 
     spec = REGISTRY[name]
+    if shape.model not in spec.models:
+        return [model_problem(spec.models, shape.model)]
     why = spec.needs(shape, options)
     out = [] if why is None else [why]
     for fit, fit_options in spec.fits(shape):

@@ -24,7 +24,7 @@ Models are found by name through the entry point group :data:`ENTRY_POINT_GROUP`
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
@@ -63,6 +63,9 @@ class Setting:
     #: the symbol that figures and reports print (plain text or LaTeX between $...$)
     symbol: str | None = None
     choices: tuple[str, ...] = ()
+    #: whether it chooses only how a run is executed, not what it computes (a backend whose
+    #: results agree to rounding): recorded in the run file, never part of a run's identity
+    execution: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in SETTING_KINDS:
@@ -205,6 +208,14 @@ class Model(Protocol):
     observables: tuple[Observable, ...]
     capabilities: Capabilities
 
+    def point(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> tuple[Any, Any]:
+        """A point's settings as the model's own objects, every setting filled in from its
+        default and checked: ``(parameters, numerics)``, each hashable, read by attribute,
+        with ``to_dict()`` (:func:`point_values` builds them for a model that has no objects
+        of its own). Raises :class:`SettingError` (or a ``ValueError`` with the same
+        ``name``, ``value`` and ``allowed``) for a value the model cannot run."""
+        ...
+
     def run(self, request: RunRequest) -> RunOutcome:
         """Run one point and seed; raise an exception whose message says why a run fails."""
         ...
@@ -212,6 +223,103 @@ class Model(Protocol):
     def classify(self, values: Mapping[str, float]) -> str:
         """The pattern class of a point from its observables' seed means (``values``)."""
         ...
+
+
+class SettingError(ValueError):
+    """A setting's value that the model cannot run: the setting's ``name``, the ``value``
+    given and what is ``allowed`` (the campaign's validation reports it at the key that set
+    it)."""
+
+    def __init__(self, name: str, value: Any, allowed: str):
+        super().__init__(f"{name} = {value!r}: allowed: {allowed}")
+        self.name, self.value, self.allowed = name, value, allowed
+
+
+def setting_error(e: ValueError) -> SettingError:
+    """``e`` as a :class:`SettingError`: itself, or one with its ``name``, ``value`` and
+    ``allowed`` where it has them (a model's own error class), else its message as what is
+    allowed."""
+    if isinstance(e, SettingError):
+        return e
+    if all(hasattr(e, a) for a in ("name", "value", "allowed")):
+        return SettingError(str(e.name), e.value, str(e.allowed))  # type: ignore[attr-defined]
+    return SettingError("settings", "", str(e))
+
+
+class Values(Mapping[str, Any]):
+    """A point's settings of one kind as a model without objects of its own keeps them
+    (:func:`point_values`): immutable and hashable, read as a mapping or by attribute
+    (``values.t_final``), ``to_dict()`` for the plain dict."""
+
+    __slots__ = ("_values", "_hash")
+
+    def __init__(self, values: Mapping[str, Any]):
+        object.__setattr__(self, "_values", dict(values))
+        object.__setattr__(self, "_hash", None)
+
+    def __getitem__(self, key: str) -> Any:
+        return self._values[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        try:
+            return self._values[name]
+        except KeyError:
+            raise AttributeError(f"no setting {name!r}") from None
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("a point's settings are immutable")
+
+    def __hash__(self) -> int:
+        if self._hash is None:
+            object.__setattr__(self, "_hash", hash(repr(sorted(self._values.items()))))
+        return self._hash  # type: ignore[return-value]
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Values) and self._values == other._values
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (Values, (self._values,))
+
+    def __repr__(self) -> str:
+        return f"Values({self._values!r})"
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self._values)
+
+
+def point_values(
+    model: Model, parameters: Mapping[str, Any], numerics: Mapping[str, Any]
+) -> tuple[Values, Values]:
+    """A point's parameters and numerics as :class:`Values`, every setting of ``model``
+    filled in from its default: an unknown name, a value of the wrong type or not among its
+    setting's choices raises :class:`SettingError`; an int given for a float setting becomes
+    a float."""
+    out: dict[str, dict[str, Any]] = {"parameter": {}, "numerics": {}}
+    known = {s.name: s for s in model.settings}
+    for section, given in (("parameter", parameters), ("numerics", numerics)):
+        for name, value in given.items():
+            s = known.get(name)
+            if s is None or s.kind != section:
+                names = [k for k, v in known.items() if v.kind == section]
+                raise SettingError(name, value, f"a {section} of model {model.name}: {names}")
+            if s.protocol and isinstance(value, Mapping):  # a function of time, as written
+                out[section][name] = value
+                continue
+            if not s.accepts(value):
+                want = f"one of {list(s.choices)}" if s.choices else f"a {s.type.__name__}"
+                raise SettingError(name, value, want)
+            out[section][name] = float(value) if s.type is float else value
+    for s in model.settings:
+        out[s.kind].setdefault(s.name, s.default)
+    return Values(out["parameter"]), Values(out["numerics"])
 
 
 @runtime_checkable
@@ -222,6 +330,20 @@ class State(Protocol):
     t: float
 
     def to_dataset(self, snapshots: bool = True) -> xr.Dataset: ...
+
+
+@runtime_checkable
+class StateCodec(Protocol):
+    """A model whose end states and checkpoints the campaign manager keeps in files as
+    :meth:`State.to_dataset` writes them, and reads back with :meth:`state_from_dataset` (a
+    run file's group ``state``, a rolling checkpoint). A model that keeps states and is not a
+    StateCodec is the paper's, whose states the campaign manager reads with
+    :mod:`nematic_solids.model.checkpoint`."""
+
+    def state_from_dataset(self, ds: xr.Dataset) -> State:
+        """The state ``ds`` holds; ``ValueError`` where it is not one of this model's or it
+        fails its checksum."""
+        ...
 
 
 @runtime_checkable
@@ -236,9 +358,35 @@ class Compiled(Protocol):
         JSON-ready mapping. Never raises for a failed tiny run."""
         ...
 
+    def warm_kind(self, parameters: Any, numerics: Any) -> Hashable:
+        """The kind of run whose kernels a point's runs use (points of one kind share one
+        warm-up run)."""
+        ...
+
     def import_kernels(self) -> None:
         """Import the modules its runs need (a worker does it once, under a lock, before its
         first run: two threads importing them at once can deadlock)."""
+        ...
+
+
+@runtime_checkable
+class IdentityRules(Protocol):
+    """A model with rules of its own for what of a point enters its runs' ids (e.g. settings
+    left out at the default they had before they existed, so that older runs keep their ids).
+    Without them every setting enters but those marked :attr:`Setting.execution`."""
+
+    def identity_settings(
+        self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]
+    ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+        """The parameters and numerics (complete dicts) as they enter the canonical text,
+        and other entries of the point's own for it."""
+        ...
+
+    def start_identity(
+        self, numerics: Mapping[str, Any], start: Mapping[str, Any]
+    ) -> dict[str, Any]:
+        """What a run that begins from another run's state (``start``) adds to its canonical
+        text besides the start itself."""
         ...
 
 
@@ -318,6 +466,12 @@ def classifier(model: Model) -> Observable:
         if o.classifies:
             return o
     raise ValueError(f"model {model.name} declares no observable that classifies a pattern")
+
+
+def setting_types(model: Model, kind: str) -> dict[str, str]:
+    """Each setting of ``kind`` -> its type's name (``float``, ``int``, ``str``, ``bool``,
+    ``list``), in declaration order."""
+    return {s.name: s.type.__name__ for s in model.settings if s.kind == kind}
 
 
 def defaults(model: Model, kind: str) -> dict[str, Any]:

@@ -36,11 +36,13 @@ from nematic_solids.model.parameters import (
     SCHEMES,
     Numerics,
     Parameters,
+    check_compatible,
 )
 from nematic_solids.model.protocol import PROTOCOL_PARAMETERS
 
 from ..limits import run_memory_bytes
 from ..names import NAMES
+from . import nematic_identity
 from .interface import Capabilities, Observable, RunOutcome, RunRequest, Setting
 
 if TYPE_CHECKING:
@@ -66,6 +68,9 @@ NUMERICS_CHOICES: dict[str, tuple[str, ...]] = {
 _TYPES: dict[str, type] = {"float": float, "int": int, "str": str, "bool": bool}
 #: Numerics that are execution only (the same numbers whatever their value): never swept.
 _NOT_SWEPT = {"backend"}
+#: Numerics that choose how a run is executed, not what it computes (the backends agree to
+#: rounding): never part of a run's identity.
+_EXECUTION_ONLY = ("backend",)
 
 
 def _docstring_entries(cls: type) -> dict[str, str]:
@@ -108,6 +113,7 @@ def _settings() -> tuple[Setting, ...]:
                     protocol=f.name in PROTOCOL_PARAMETERS,
                     symbol=name.tex if name else None,
                     choices=tuple(choices.get(f.name, ())),
+                    execution=f.name in _EXECUTION_ONLY,
                 )
             )
         if cls is Parameters:
@@ -225,6 +231,24 @@ class Nematic:
         precisions=PRECISIONS,
     )
 
+    def point(
+        self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]
+    ) -> tuple[Parameters, Numerics]:
+        """The point's :class:`~nematic_solids.model.parameters.Parameters` and
+        :class:`~nematic_solids.model.parameters.Numerics`: a resolution rule (``auto``)
+        resolved at the point's K and A0, the pair checked by
+        :func:`~nematic_solids.model.parameters.check_compatible`; raises
+        :class:`~nematic_solids.model.errors.ParameterError`."""
+        from nematic_solids.model.resolution import resolve
+
+        p = Parameters.from_dict(parameters)
+        n = dict(numerics)
+        if "resolution" in n:  # a rule (resolution: auto) gives the point's grid
+            n["resolution"] = resolve(n["resolution"], p.K, p.A0)
+        nums = Numerics.from_dict(n)
+        check_compatible(p, nums)
+        return p, nums
+
     def run(self, request: RunRequest) -> RunOutcome:
         """One run by :func:`nematic_solids.model.simulate.run` (compiled or numpy backend),
         from the seeded texture, ``request.initial`` (an
@@ -314,6 +338,11 @@ class Nematic:
 
         return warm_up([(Parameters.from_dict(p), Numerics.from_dict(n)) for p, n in points])
 
+    def warm_kind(self, parameters: Parameters, numerics: Numerics) -> tuple[Any, ...]:
+        """The kernels a run uses: its mechanics, scheme, incompressibility and adaptivity."""
+        n = numerics
+        return (n.mechanics, n.scheme, n.incompressible, n.adaptive)
+
     def import_kernels(self) -> None:
         """Import py-pde, numba and the kernels' modules."""
         import nematic_solids.model.simulate
@@ -326,6 +355,19 @@ class Nematic:
         if not math.isfinite(value):
             return "unknown"
         return "patterned" if value > PATTERNED_ABOVE else "relaxed"
+
+    def identity_settings(
+        self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]
+    ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+        """What of a point enters its runs' ids (:mod:`.nematic_identity`)."""
+        return nematic_identity.identity_settings(parameters, numerics)
+
+    def start_identity(
+        self, numerics: Mapping[str, Any], start: Mapping[str, Any]
+    ) -> dict[str, Any]:
+        """What a run's start adds to its id: the first guess of finite strain
+        (:func:`.nematic_identity.start_guess`)."""
+        return nematic_identity.start_identity(numerics, start)
 
     def resolution(self, setting: Any, parameters: Mapping[str, Any]) -> Any:
         """The grid a resolution setting gives at a point: the number itself, or the rule's

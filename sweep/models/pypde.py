@@ -7,7 +7,9 @@ needs: ``t_final``, ``dt``, ``save_every``, ``scheme``, ``adaptive``, ``toleranc
 and adds the equation's parameters. Each field's ``metadata`` gives its
 :class:`~.interface.Setting`: ``long_name``, ``units``, ``kind`` (``"parameter"``, the default
 of a user's field, or ``"numerics"``), ``sweepable``, ``protocol`` (the setting may be a function
-of time), ``symbol`` and ``choices``. Use :func:`parameter` and :func:`numerics` to write them.
+of time), ``symbol``, ``choices`` and ``execution`` (it chooses how a run executes, not what it
+computes, and stays out of the run's identity). Use :func:`parameter` and :func:`numerics` to
+write them.
 
 **Measures** are the observables, in the style of py-pde's trackers: a :class:`Measure` declares
 its :class:`~.interface.Observable` once; :meth:`Measure.handle` gives its value from the state
@@ -50,9 +52,29 @@ import numpy as np
 import pde
 import xarray as xr
 from pde.fields.base import FieldBase
-from pde.trackers.base import TrackerBase
 
-from .interface import Capabilities, Observable, RunOutcome, RunRequest, Setting
+from .interface import (
+    Capabilities,
+    Observable,
+    RunOutcome,
+    RunRequest,
+    Setting,
+    SettingError,
+    point_values,
+)
+from .pypde_record import FunctionMeasure, Measure, PDEState, Recorder
+
+__all__ = [  # the adapter's API: what a model built on it imports from here
+    "FunctionMeasure",
+    "Measure",
+    "PDEModel",
+    "PDEState",
+    "Recorder",
+    "SolverSettings",
+    "numerics",
+    "parameter",
+    "pde_model",
+]
 
 #: the explicit py-pde solvers a run may use (``SolverSettings.scheme``)
 SCHEMES = ("runge-kutta", "euler")
@@ -88,7 +110,10 @@ class SolverSettings:
     adaptive: bool = numerics(False, "adaptive time stepping (continuation is then not exact)")
     tolerance: float = numerics(1e-4, "error tolerance of adaptive stepping")
     backend: str = numerics(
-        "numpy", "py-pde backend (numba compiles once per run)", choices=BACKENDS
+        "numpy",
+        "py-pde backend (numba compiles once per run)",
+        choices=BACKENDS,
+        execution=True,
     )
 
 
@@ -114,110 +139,10 @@ def settings_of(cls: type) -> tuple[Setting, ...]:
                 protocol=meta.get("protocol", False),
                 symbol=meta.get("symbol"),
                 choices=tuple(meta.get("choices", ())),
+                execution=meta.get("execution", False),
             )
         )
     return tuple(out)
-
-
-class Measure:
-    """One observable of a py-pde run (py-pde's tracker style: ``handle``, ``finalize``).
-
-    Subclasses set ``observable`` and implement :meth:`handle`; a measure keeps no state
-    between calls, so one instance serves every run."""
-
-    observable: Observable
-
-    def handle(self, state: FieldBase, t: float) -> float:
-        """The value at a save time ``t`` of the state."""
-        raise NotImplementedError
-
-    def finalize(self, times: np.ndarray, values: np.ndarray, state: FieldBase) -> float:
-        """The run's scalar from its series and final state: the last value."""
-        return float(values[-1])
-
-
-@dataclass(frozen=True)
-class FunctionMeasure(Measure):
-    """A measure from a plain function of the state."""
-
-    observable: Observable
-    function: Callable[[FieldBase], float]
-
-    def handle(self, state: FieldBase, t: float) -> float:
-        return float(self.function(state))
-
-
-@dataclass(frozen=True)
-class PDEState:
-    """A run's end state: the field's data at time ``t`` and the measures' series so far."""
-
-    data: np.ndarray
-    t: float
-    times: tuple[float, ...] = ()
-    series: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
-
-    def to_dataset(self) -> xr.Dataset:
-        """The state as a dataset (to keep it in a file); :meth:`PDEState.from_dataset` reads it."""
-        dims = [f"axis_{i}" for i in range(self.data.ndim)]
-        ds = xr.Dataset({"data": (dims, self.data)}, coords={"time": list(self.times)})
-        for name, values in self.series.items():
-            ds[f"series_{name}"] = ("time", list(values))
-        ds.attrs["t"] = self.t
-        return ds
-
-    @classmethod
-    def from_dataset(cls, ds: xr.Dataset) -> PDEState:
-        """The state that :meth:`to_dataset` wrote."""
-        series = {
-            str(k)[7:]: tuple(map(float, v.values))
-            for k, v in ds.items()
-            if str(k).startswith("series_")
-        }
-        return cls(
-            np.array(ds["data"].values),
-            float(ds.attrs["t"]),
-            tuple(map(float, ds["time"].values)),
-            series,
-        )
-
-
-class Recorder(TrackerBase):
-    """The run state of one run: the measures' series at the save times, the checkpoints and
-    the progress reports (a py-pde tracker)."""
-
-    def __init__(
-        self, measures: Sequence[Measure], request: RunRequest, every: float, start: PDEState | None
-    ) -> None:
-        super().__init__(interrupts=every)
-        self.measures = measures
-        self.request = request
-        self.times: list[float] = list(start.times) if start else []
-        self.values = {
-            m.observable.name: list(start.series.get(m.observable.name, ())) if start else []
-            for m in measures
-        }
-        t0 = start.t if start else 0.0
-        self.next_checkpoint = t0 + request.checkpoint_every
-
-    def handle(self, field: FieldBase, t: float) -> None:
-        if self.times and t <= self.times[-1]:
-            return  # the start of a continued run: already in its series
-        self.times.append(t)
-        for m in self.measures:
-            self.values[m.observable.name].append(m.handle(field, t))
-        if self.request.progress is not None:
-            self.request.progress(t)
-        if self.request.checkpoint is not None and t >= self.next_checkpoint:
-            self.request.checkpoint(self.state(field, t))
-            self.next_checkpoint = t + self.request.checkpoint_every
-
-    def state(self, field: FieldBase, t: float) -> PDEState:
-        return PDEState(
-            np.array(field.data, copy=True),
-            float(t),
-            tuple(self.times),
-            {k: tuple(v) for k, v in self.values.items()},
-        )
 
 
 def _whole(ratio: float) -> bool:
@@ -237,13 +162,36 @@ class PDEModel:
     measures: tuple[Measure, ...]
     classifier: Callable[[Mapping[str, float]], str] | None = None
     perturb: Callable[[FieldBase, Any, np.random.Generator], None] | None = None
+    check: Callable[[Any], None] | None = None
     settings: tuple[Setting, ...] = ()
     observables: tuple[Observable, ...] = ()
     capabilities: Capabilities = Capabilities()
 
+    def point(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> tuple[Any, Any]:
+        """A point's settings as :class:`~.interface.Values`, checked as a run checks them
+        (types and choices, the steps landing on the save times, the grid built); raises
+        :class:`~.interface.SettingError`."""
+        p, n = point_values(self, parameters, numerics)
+        s = self._settings({**p, **n})
+        _check_steps(s)
+        try:
+            self.grid(s)
+        except (ValueError, TypeError) as e:
+            raise SettingError("grid", str(e), "settings that give a grid") from None
+        if self.check is not None:
+            try:
+                self.check(s)
+            except SettingError:
+                raise
+            except ValueError as e:
+                raise SettingError("settings", "", str(e)) from None
+        return p, n
+
     def make_settings(self, request: RunRequest) -> Any:
         """The settings dataclass of a request (every value checked against its setting)."""
-        given = {**request.parameters, **request.numerics}
+        return self._settings({**request.parameters, **request.numerics})
+
+    def _settings(self, given: Mapping[str, Any]) -> Any:
         known = {s.name: s for s in self.settings}
         unknown = sorted(set(given) - set(known))
         if unknown:
@@ -354,6 +302,10 @@ class PDEModel:
             ds.attrs[f"setting_{st.name}"] = repr(v) if callable(v) else v
         return ds
 
+    def state_from_dataset(self, ds: xr.Dataset) -> PDEState:
+        """The end state or checkpoint ``ds`` holds (:meth:`PDEState.from_dataset`)."""
+        return PDEState.from_dataset(ds)
+
     def classify(self, values: Mapping[str, float]) -> str:
         if self.classifier is None:
             raise ValueError(f"model {self.name} declares no pattern classes")
@@ -367,19 +319,18 @@ CONTINUATION_ADAPTIVE = (
 
 
 def _check_steps(s: Any) -> None:
-    """Refuses save and final times that the step cannot land on."""
+    """Refuses save and final times that the step cannot land on (:class:`SettingError`)."""
     for name in ("t_final", "dt", "save_every"):
         v = getattr(s, name)
         if not (math.isfinite(v) and v > 0):
-            raise ValueError(f"{name} = {v!r} must be a positive finite number")
+            raise SettingError(name, v, "a positive finite number")
     if not _whole(s.t_final / s.save_every):
-        raise ValueError(
-            f"t_final = {s.t_final} is not a whole number of save_every = {s.save_every}"
-        )
+        raise SettingError("t_final", s.t_final, f"a whole number of save_every = {s.save_every:g}")
     if not s.adaptive and not _whole(s.save_every / s.dt):
-        raise ValueError(
-            f"save_every = {s.save_every} is not a whole number of steps "
-            f"dt = {s.dt} (a fixed step lands on every save time)"
+        raise SettingError(
+            "save_every",
+            s.save_every,
+            f"a whole number of steps dt = {s.dt:g} (a fixed step lands on every save time)",
         )
 
 
@@ -402,6 +353,7 @@ def pde_model(
     long_name: str = "",
     classify: Callable[[Mapping[str, float]], str] | None = None,
     perturb: Callable[[FieldBase, Any, np.random.Generator], None] | None = None,
+    check: Callable[[Any], None] | None = None,
 ) -> PDEModel:
     """A model of the py-pde equation ``pde_factory``.
 
@@ -412,7 +364,10 @@ def pde_model(
     random number from ``rng``); ``measures`` the observables; ``classify`` the pattern class
     of a point from its observables' seed means; ``perturb(state, settings, rng)`` changes a
     state given as ``initial`` in place before the run (e.g. adds the noise of an experiment
-    to a chain's start; its random numbers come from the seed too)."""
+    to a chain's start; its random numbers come from the seed too); ``check(settings)``
+    refuses settings the equation cannot run (a ``ValueError``, best a
+    :class:`~.interface.SettingError` naming the setting), called for every point of a
+    campaign when it is validated, before anything runs."""
     declared = settings_of(settings)
     if isinstance(pde_factory, type):
         if not issubclass(pde_factory, pde.PDEBase):
@@ -439,6 +394,7 @@ def pde_model(
         tuple(measures),
         classify,
         perturb,
+        check,
         declared,
         observables,
         caps,

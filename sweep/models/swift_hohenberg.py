@@ -32,7 +32,7 @@ import numpy as np
 import pde
 from pde.fields.base import FieldBase
 
-from .interface import Observable
+from .interface import Observable, SettingError
 from .pypde import FunctionMeasure, Measure, SolverSettings, numerics, parameter, pde_model
 
 #: below this rms amplitude of u at the end a run is uniform (the initial noise is 1e-2 and
@@ -139,17 +139,26 @@ def theory(g: float, order: str = "leading") -> dict[str, float]:
     }
 
 
-def make_pde(s: Settings) -> pde.SwiftHohenbergPDE:
-    """py-pde's Swift-Hohenberg PDE for ``s``; refuses a step RK4 or Euler is unstable at."""
+def check_step(s: Settings) -> None:
+    """Refuses a fixed step that RK4 or Euler is unstable at on the grid of ``s`` (the
+    fastest decaying mode's rate, ``eps - (1 - kappa^2)^2`` at the grid's largest
+    ``kappa^2``, times dt beyond the scheme's limit on the negative real axis)."""
     grid = make_grid(s)
     dx, dy = grid.discretization
     worst = abs(float(growth_rate(s.eps, 4 / dx**2 + 4 / dy**2)))
     limit = (RK4_LIMIT if s.scheme == "runge-kutta" else 2.0) / worst
     if not s.adaptive and s.dt >= limit:
-        raise ValueError(
-            f"dt = {s.dt} is above the stability limit {limit:.3g} of the "
-            f"{s.scheme} scheme on this grid (points = {s.points})"
+        raise SettingError(
+            "dt",
+            s.dt,
+            f"below the stability limit {limit:.3g} of the {s.scheme} scheme on this grid "
+            f"(points = {s.points}, eps = {s.eps:g})",
         )
+
+
+def make_pde(s: Settings) -> pde.SwiftHohenbergPDE:
+    """py-pde's Swift-Hohenberg PDE for ``s``; refuses a step RK4 or Euler is unstable at."""
+    check_step(s)
     if s.backend == "numba":
         return pde.SwiftHohenbergPDE(rate=s.eps, kc2=1.0, delta=s.g, bc="periodic")
     return SwiftHohenbergPDE(rate=s.eps, kc2=1.0, delta=s.g, bc="periodic")
@@ -247,4 +256,5 @@ MODEL = pde_model(
     long_name="Swift-Hohenberg equation with a quadratic term (py-pde)",
     classify=classify,
     perturb=kick,
+    check=check_step,
 )

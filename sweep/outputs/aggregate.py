@@ -25,12 +25,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..campaign import AMB, NUMERICS_TYPES, PARAMETER_TYPES
+from ..campaign import AMB, DEFAULT_MODEL
 from ..expand import Expansion
 from ..files import atomic_to_netcdf
 from ..models.interface import resolution_rule
 from ..models.registry import get_model
-from ..names import NAMES
 from ..protocols import AXIS_LONG_NAMES, PROTOCOL
 from ..provenance import code_version, git_commit, library_versions_text
 from ..store import RETRYABLE_REASONS, CampaignStore, Record, now_iso
@@ -41,29 +40,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 STATUS_MISSING, STATUS_OK, STATUS_FAILED = 0, 1, 2
-
-
-#: the long names of the model's parameters (the one table: sweep/names.py)
-PARAMETER_LONG_NAMES = {
-    k: NAMES[k].long_name
-    for k in (
-        "alpha_minus_B",
-        "alpha",
-        "B",
-        "K",
-        "chi",
-        "eps",
-        "S0",
-        "A0",
-        "C",
-        "zeta",
-        "s",
-        "gamma",
-        "tau",
-        "kappa",
-        "B_prime",
-    )
-}
 
 
 #: Scalars of the run files that are not observables (they differ between identical runs).
@@ -98,14 +74,19 @@ def _seed_stats(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return mean, std, count.astype(np.int32)
 
 
-def coord_attrs(name: str) -> dict[str, str]:
-    attrs = {"long_name": PARAMETER_LONG_NAMES.get(name, AXIS_LONG_NAMES.get(name, name))}
-    if (
-        name in PARAMETER_TYPES
-        or name in AXIS_LONG_NAMES
-        or NUMERICS_TYPES.get(name) in ("int", "float")
-    ):
-        attrs["units"] = "1"
+def coord_attrs(name: str, model: str = DEFAULT_MODEL) -> dict[str, str]:
+    """The attributes of a swept coordinate: a parameter's long name and units as its model
+    declares them, a number of a protocol's
+    (:data:`~nematic_solids.sweep.protocols.AXIS_LONG_NAMES`),
+    or a numerics setting's name (its units where it is a number)."""
+    setting = {s.name: s for s in get_model(model).settings}.get(name)
+    if setting is not None and setting.kind == "parameter":
+        return {"long_name": setting.long_name, "units": setting.units}
+    if name in AXIS_LONG_NAMES:
+        return {"long_name": AXIS_LONG_NAMES[name], "units": "1"}
+    attrs = {"long_name": name}
+    if setting is not None and setting.type in (int, float):
+        attrs["units"] = setting.units
     return attrs
 
 
@@ -154,7 +135,7 @@ def build_phase(
     for d in campaign.dims:
         for axis in d.axes:
             coords[axis.name] = xr.Variable(
-                (d.name,), np.asarray(axis.values), coord_attrs(axis.name)
+                (d.name,), np.asarray(axis.values), coord_attrs(axis.name, campaign.model)
             )
     coords["seed"] = xr.Variable(
         ("seed",),
@@ -259,8 +240,9 @@ def build_phase(
         for k, v in params.items()
         if k not in swept and not (k == "alpha" and (AMB in swept or "B" in swept))
     }
-    if AMB not in swept and "alpha" not in swept and "B" not in swept:
-        fixed_params[AMB] = first.parameters.alpha_minus_B
+    amb = getattr(first.parameters, AMB, None)  # the nematic model's alpha - B
+    if amb is not None and AMB not in swept and "alpha" not in swept and "B" not in swept:
+        fixed_params[AMB] = amb
     if PROTOCOL in campaign.parameters:  # as written (its swept numbers are axes)
         fixed_params[PROTOCOL] = json.dumps(campaign.parameters[PROTOCOL], sort_keys=True)
         for name in campaign.parameters[PROTOCOL]:  # not constants: no value of their own
@@ -276,6 +258,7 @@ def build_phase(
             "Conventions": "CF-1.11",
             "title": f"phase diagram of campaign {campaign.name}",
             "campaign": campaign.name,
+            "model": campaign.model,
             "description": campaign.description,
             "source": "active-nematic-solids campaign manager (nematic aggregate)",
             "code_version": code_version(),

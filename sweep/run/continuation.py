@@ -27,15 +27,25 @@ import contextlib
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 from nematic_solids.model.parameters import Numerics, Parameters
 
 from ..errors import StorageError
 from ..files import atomic_to_netcdf, netcdf_lock
+from ..models.interface import StateCodec
+from ..models.registry import get_model
 from ..store import CampaignStore
+from . import model_states
+from .start import (
+    STATE_GROUP,
+    ParentFailed,
+    ParentUnusable,
+    Run,
+    Start,
+    checkpoint_path,
+)
 
 if TYPE_CHECKING:
     from nematic_solids.model.checkpoint import InitialState, RunState
@@ -44,54 +54,10 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-class Run(Protocol):
-    """What this module reads of a run to do (a :class:`nematic_solids.sweep.run.task.RunTask`)."""
-
-    @property
-    def run_id(self) -> str: ...
-    @property
-    def seed(self) -> int: ...
-    @property
-    def parameters(self) -> dict[str, Any]: ...
-    @property
-    def numerics(self) -> dict[str, Any]: ...
-    @property
-    def parent(self) -> str | None: ...
-    @property
-    def parent_path(self) -> str | None: ...
-    @property
-    def snapshot_fields(self) -> tuple[str, ...] | None: ...
-    @property
-    def snapshot_dtype(self) -> str: ...
-    @property
-    def initial_from(self) -> dict[str, str] | None: ...
-
-
-#: the run file's group holding the run's end state
-STATE_GROUP = "state"
-
-
-def checkpoint_path(store: CampaignStore, run_id: str) -> Path:
-    """Where the rolling checkpoint of ``run_id`` is."""
-    return store.checkpoint_path(run_id)
-
-
 def remove_checkpoint(store: CampaignStore, run_id: str) -> None:
     """Remove the rolling checkpoint of a run whose record is written."""
     with contextlib.suppress(FileNotFoundError):
         checkpoint_path(store, run_id).unlink()
-
-
-@dataclass
-class Start:
-    """What a run starts from: ``state`` (None: t = 0), ``origin`` ("checkpoint", the run
-    id of the run it continues, or ""), and why a checkpoint or end state found was not used."""
-
-    state: RunState | None = None
-    origin: str = ""
-    warning: str = ""
-    #: the fields of another campaign's run it begins from (``initial.from``), at t = 0
-    initial: InitialState | None = None
 
 
 def _model_of(task: Run) -> tuple[Parameters, Numerics]:
@@ -100,7 +66,14 @@ def _model_of(task: Run) -> tuple[Parameters, Numerics]:
 
 def starting_state(task: Run, store: CampaignStore) -> Start:
     """The run's own checkpoint if it holds a state of this run, else the end state of the
-    run ``task.parent`` if it continues to this one, else t = 0 (see the module docstring)."""
+    run ``task.parent`` if it continues to this one, else t = 0 (see the module docstring).
+    A model that keeps its own states (:class:`~nematic_solids.sweep.models.interface.StateCodec`)
+    reads them itself (:mod:`.model_states`); one that keeps none starts at t = 0."""
+    model = get_model(task.model)
+    if isinstance(model, StateCodec):
+        return model_states.starting_state(task, store, model)
+    if not (model.capabilities.exact_continuation or model.capabilities.start_from_state):
+        return Start()
     from nematic_solids.model.checkpoint import CheckpointError, load
 
     params, numerics = _model_of(task)
@@ -141,19 +114,6 @@ def starting_state(task: Run, store: CampaignStore) -> Start:
                 "the end state"
             )
     return Start(None, "", "; ".join(warnings), initial)
-
-
-class ParentFailed(Exception):
-    """The run a run begins from (``initial.from``, or its predecessor in a chain) did not
-    end well or is not done: the run fails with the reason ``parent_failed`` (redone when the
-    campaign runs again)."""
-
-
-class ParentUnusable(Exception):
-    """The run a run begins from ended, but the state it should begin from cannot be used:
-    its end state fails its checksum or is not in the file, or its snapshot is not the one the
-    run's identity names. The run fails with the reason ``parent_state`` (never a silent
-    fallback to another state), and is redone when the campaign runs again."""
 
 
 def parent_fields(source: Mapping[str, str]) -> InitialState:
@@ -296,15 +256,14 @@ def run_attrs(start: Start) -> dict[str, Any]:
     state = start.state
     parent = start.origin if start.origin not in ("", "checkpoint") else ""
     if state is not None and not parent:  # a checkpoint of a run that continued another
-        parent = next(
-            (e.split("@")[0] for e in state.lineage if not e.startswith("checkpoint")), ""
-        )
-    origin = start.initial.origin if start.initial is not None else ""
+        lineage = getattr(state, "lineage", start.lineage)
+        parent = next((e.split("@")[0] for e in lineage if not e.startswith("checkpoint")), "")
+    origin = start.initial_origin or getattr(start.initial, "origin", "")
     if state is not None:
-        origin = state.initial_from
+        origin = getattr(state, "initial_from", origin)
     return {
         "initial_from": origin,
         "started_at": 0.0 if state is None else float(state.t),
         "continued_from": parent,
-        "lineage": [] if state is None else list(state.lineage),
+        "lineage": [] if state is None else list(getattr(state, "lineage", start.lineage)),
     }

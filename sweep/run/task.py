@@ -151,6 +151,7 @@ def prepare_dataset(ds: xr.Dataset, task: RunTask) -> tuple[xr.Dataset, dict[str
             if task.snapshot_dtype == "float32" and var.dtype.kind == "f":
                 ds[name] = var.astype("float32")
     ds.attrs.update(run_id=task.run_id, campaign=task.campaign, identity_schema=SCHEMA_VERSION)
+    ds.attrs.setdefault("status", "ok")  # a model's run that returns says how it ended, or ok
     return ds, encoding
 
 
@@ -399,12 +400,16 @@ def finish_record(
 
 
 def warm_kinds(expansion: Expansion) -> list[tuple[dict[str, Any], dict[str, Any]]]:
-    """One ``(parameters, numerics)`` per distinct kind of run in the campaign (mechanics,
-    scheme, incompressibility, adaptivity): what :func:`warm_worker` compiles."""
-    kinds: dict[tuple[Any, ...], tuple[dict[str, Any], dict[str, Any]]] = {}
+    """One ``(parameters, numerics)`` per distinct kind of run in the campaign (the model's
+    :meth:`~nematic_solids.sweep.models.interface.Compiled.warm_kind`): what
+    :func:`warm_worker` compiles; none for a model without compiled kernels."""
+    model = get_model(expansion.campaign.model)
+    if not isinstance(model, Compiled):
+        return []
+    kinds: dict[Any, tuple[dict[str, Any], dict[str, Any]]] = {}
     for point in expansion.points:
         n = point.numerics
-        key = (n.mechanics, n.scheme, n.incompressible, n.adaptive)
+        key = model.warm_kind(point.parameters, n)
         if key not in kinds:
             kinds[key] = (point.parameters.to_dict(), n.to_dict())
     return list(kinds.values())

@@ -48,7 +48,7 @@ from nematic_solids.model.errors import ParameterError
 from nematic_solids.model.parameters import Numerics, Parameters
 from nematic_solids.model.resolution import is_rule, read_rule
 
-from ..campaign import NUMERICS_TYPES, PARAMETER_TYPES, Campaign, InitialSpec
+from ..campaign import DEFAULT_MODEL, Campaign, InitialSpec
 from ..errors import CampaignError, Problem
 from ..limits import (
     MAX_GRID_POINTS,
@@ -57,6 +57,8 @@ from ..limits import (
     parse_size,
     run_memory_bytes,
 )
+from ..models.registry import get_model, list_models
+from ..settings import setting_names
 from .axes import read_sweep
 from .chain import read_chain
 from .checker import Checker, KeyPath, is_int, suggest
@@ -171,7 +173,10 @@ class Overrides:
 def _apply_overrides(
     doc: dict[str, Any], ov: Overrides, origins: dict[KeyPath, str], c: Checker
 ) -> None:
-    pnames, nnames = set(PARAMETER_TYPES), set(NUMERICS_TYPES)
+    model = doc.get("model")
+    known = isinstance(model, str) and model in list_models()
+    names = setting_names(model if known else DEFAULT_MODEL)
+    pnames, nnames = set(names.parameters), set(names.numerics)
     for key, value in ov.settings.items():
         label = f"--set {key}={value!r}"
         if key in pnames:
@@ -365,7 +370,7 @@ def _check_memory(c: Checker, campaign: Campaign) -> None:
     """Refuse a grid whose largest run needs more memory than a worker has (estimated from
     the resolution and the mechanics: :func:`nematic_solids.sweep.limits.run_memory_bytes`)."""
     limit, what = run_memory_limit(campaign)
-    if limit is None:
+    if limit is None or not get_model(campaign.model).capabilities.memory_per_run:
         return
     axes = {a.name: a.values for a in campaign.axes}
     resolutions = axes.get(

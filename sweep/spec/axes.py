@@ -10,9 +10,10 @@ from typing import Any
 
 import numpy as np
 
-from ..campaign import AMB, AXIS_TYPES, NUMERICS_TYPES, Axis, Dim
+from ..campaign import AMB, DEFAULT_MODEL, Axis, Dim
 from ..errors import Problem
 from ..protocols import PROTOCOL, protocol_axes
+from ..settings import setting_names
 from .checker import Checker, KeyPath, coerce, is_int, is_number, suggest
 
 SWEEP_KEYS = ("axes", "zip")
@@ -70,7 +71,9 @@ def _range_values(c: Checker, kind: str, spec: Any, path: KeyPath) -> list[Any] 
     return list(np.geomspace(float(start), float(stop), int(num)))
 
 
-def _check_axis(c: Checker, name: str, raw: Any, path: KeyPath) -> Axis | None:
+def _check_axis(
+    c: Checker, name: str, raw: Any, path: KeyPath, types: Mapping[str, str]
+) -> Axis | None:
     if isinstance(raw, Mapping):
         if len(raw) != 1 or next(iter(raw)) not in RANGE_KINDS:
             keys = list(raw)
@@ -99,7 +102,7 @@ def _check_axis(c: Checker, name: str, raw: Any, path: KeyPath) -> Axis | None:
     if not values:
         c.bad(path, raw, "a non-empty list of values (an empty axis would give no runs)")
         return None
-    kind_t = AXIS_TYPES.get(name, "float")  # a protocol's number (nematic_solids.sweep.protocols)
+    kind_t = types.get(name, "float")  # a protocol's number (nematic_solids.sweep.protocols)
     out: list[Any] = []
     ok = True
     for v, vpath in zip(values, vpaths, strict=True):
@@ -128,16 +131,18 @@ def read_sweep(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Dim, ...]
     sweep = c.mapping(("sweep",), raw, SWEEP_KEYS)
     axes_raw = c.mapping(("sweep", "axes"), sweep.get("axes"), None)
     axes: dict[str, Axis] = {}
+    names = setting_names(read.get("model") or DEFAULT_MODEL)
+    types = names.axes
     timed = read["protocol"].get(PROTOCOL, {})
     offered = protocol_axes(read["protocol"])
     for name, spec in axes_raw.items():
         path = ("sweep", "axes", name)
-        if name not in AXIS_TYPES and name not in offered:
+        if name not in types and name not in offered:
             c.unknown(
                 path,
                 name,
-                sorted(AXIS_TYPES) + sorted(offered),
-                "" if name not in NUMERICS_TYPES else " (snapshot_times cannot be swept)",
+                sorted(types) + sorted(offered),
+                "" if name not in names.numerics else f" ({name} cannot be swept)",
             )
             continue
         if name in timed or (name == "alpha" and AMB in timed):
@@ -167,7 +172,7 @@ def read_sweep(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Dim, ...]
                     f"'{base[name]}:'; remove it from one of them",
                 )
             continue
-        axis = _check_axis(c, name, spec, path)
+        axis = _check_axis(c, name, spec, path, types)
         if axis is not None:
             axes[name] = axis
     if AMB in axes_raw and "alpha" in axes_raw:

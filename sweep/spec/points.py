@@ -10,6 +10,7 @@ from nematic_solids.model.errors import ParameterError
 from ..campaign import AMB, Campaign
 from ..expand import MAX_POINT_PROBLEMS, iter_points, make_point
 from ..identity import PointIdentity
+from ..models.interface import SettingError, setting_error
 from ..protocols import error_path, protocol_axes
 from .checker import Checker
 
@@ -22,7 +23,7 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
     seen: set[tuple[str, str]] = set()
     _check_variant_precision(checker, campaign)
     runs: dict[tuple, dict] = {}  # one grid point's run (its identity) -> its coordinates
-    identity = PointIdentity()
+    identity = PointIdentity(campaign.model)
     for index, coords in iter_points(campaign):
         try:
             point = make_point(campaign, index, coords)
@@ -31,11 +32,11 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
                 checker, identity(point.parameters, point.numerics), coords, runs
             ):
                 return
-        except ParameterError as e:
-            if _report(checker, campaign, e, coords, axis_names, swept, seen):
+        except ValueError as e:
+            if _report(checker, campaign, setting_error(e), coords, axis_names, swept, seen):
                 return
             continue
-        if point.numerics.precision != "float64":
+        if getattr(point.numerics, "precision", "float64") != "float64":
             _check_float32(checker, campaign, axis_names, seen)
             try:
                 check_precision(point.numerics)
@@ -106,7 +107,7 @@ def _check_float32(
 def _report(
     checker: Checker,
     campaign: Campaign,
-    e: ParameterError,
+    e: SettingError,
     coords: dict,
     axis_names: set[str],
     swept: dict,
@@ -157,7 +158,8 @@ def _needs_samples(
     once; ``True`` when enough problems are reported."""
     if not any(f.name == "moduli" for f in campaign.fits):
         return False
-    sine = dict(point.parameters.protocol.profiles).get("eps")
+    protocol = getattr(point.parameters, "protocol", None)
+    sine = dict(protocol.profiles).get("eps") if protocol is not None else None
     period = getattr(sine, "period", None)
     save_every = point.numerics.save_every
     if period is None or save_every <= period / MODULI_SAMPLES * (1 + 1e-9):

@@ -46,7 +46,6 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from ..campaign import (
-    AXIS_TYPES,
     DEFAULT_CONFIDENCE,
     DEFAULT_FRACTION,
     DEFAULT_JUMP,
@@ -119,12 +118,12 @@ def _axis_values(
             f"{', '.join(a.name for a in dim.axes)}): refined points have no value on the "
             "zipped axes",
         )
-    elif AXIS_TYPES.get(axis) != "float":
+    elif not all(isinstance(v, float) for v in values):
+        kind = next(type(v).__name__ for v in values if not isinstance(v, float))
         c.bad(
             path,
             axis,
-            "a real-valued axis (refined points are midpoints; "
-            f"{axis} is of type {AXIS_TYPES.get(axis)})",
+            f"a real-valued axis (refined points are midpoints; {axis} is of type {kind})",
         )
     elif len(values) < 2:
         c.bad(path, axis, "an axis with at least two values (the cells between them are refined)")

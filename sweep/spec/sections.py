@@ -14,16 +14,16 @@ from typing import Any
 from ..campaign import (
     AMB,
     DEFAULT_CHECKPOINT_WALL,
+    DEFAULT_MODEL,
     DEFAULT_SEEDS,
     MAX_SEED,
-    NUMERICS_TYPES,
-    PARAMETER_TYPES,
     Campaign,
     LimitsSpec,
     Product,
     StoreSpec,
 )
 from ..limits import DEFAULT_MAX_RUNS, parse_size
+from ..settings import setting_names
 from .checker import Checker, KeyPath, is_int, suggest
 
 LIMITS_KEYS = ("max_runs", "run_memory")
@@ -95,13 +95,15 @@ def read_description(c: Checker, raw: Any, read: Mapping[str, Any]) -> str:
 def read_parameters(c: Checker, raw: Any, read: Mapping[str, Any]) -> dict[str, Any]:
     """``parameters:``: base values of model parameters (checked at every grid point by the
     model, :func:`nematic_solids.sweep.expand.check_points`)."""
-    return _check_settings(c, raw, "parameters", PARAMETER_TYPES, NUMERICS_TYPES, "numerics")
+    names = setting_names(read.get("model") or DEFAULT_MODEL)
+    return _check_settings(c, raw, "parameters", names.parameters, names.numerics, "numerics")
 
 
 def read_numerics(c: Checker, raw: Any, read: Mapping[str, Any]) -> dict[str, Any]:
     """``numerics:``: base values of numerics fields. With both base sections read, also
     refuses ``parameters:`` that set both ``alpha`` and ``alpha_minus_B``."""
-    numerics = _check_settings(c, raw, "numerics", NUMERICS_TYPES, PARAMETER_TYPES, "parameters")
+    names = setting_names(read.get("model") or DEFAULT_MODEL)
+    numerics = _check_settings(c, raw, "numerics", names.numerics, names.parameters, "parameters")
     if AMB in read["parameters"] and "alpha" in read["parameters"]:
         c.add(("parameters", AMB), "set either 'alpha' or 'alpha_minus_B', not both")
     return numerics

@@ -34,24 +34,20 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from nematic_solids.model.errors import ParameterError
-from nematic_solids.model.parameters import Numerics, Parameters, check_compatible
-from nematic_solids.model.resolution import is_rule
-
 from ..campaign import (
     AMB,
     DEFAULT_MODEL,
     DEFAULT_VERIFY_OBSERVABLES,
     MAX_SEED,
-    NUMERICS_TYPES,
-    PARAMETER_TYPES,
     Dim,
     Variant,
     VerifySpec,
     normalise_float,
     same_value,
 )
+from ..models.interface import SettingError, resolution_rule, setting_error
 from ..models.registry import get_model
+from ..settings import setting_names
 from .checker import Checker, coerce, is_int, is_number, suggest
 
 KEYS = (
@@ -73,8 +69,8 @@ MAX_SEEDS = 50
 _FACTOR = re.compile(r"^\s*([x*/])\s*([0-9.eE+-]+)\s*$")
 
 
-def _names() -> list[str]:
-    return sorted(set(PARAMETER_TYPES) | set(NUMERICS_TYPES))
+def _names(model: str) -> list[str]:
+    return sorted(setting_names(model).all)
 
 
 def _factor(value: Any) -> tuple[str, float] | None:
@@ -103,10 +99,12 @@ def variant_name(settings: Mapping[str, Any], seeds: Sequence[int] | None) -> st
 
 
 def resolve(
-    variant: Variant, parameters: Parameters, numerics: Numerics
-) -> tuple[Parameters, Numerics]:
-    """The model's objects of ``variant`` at a point whose own are given. Raises
-    :class:`~nematic_solids.model.errors.ParameterError` when the result is not a valid run."""
+    variant: Variant, parameters: Any, numerics: Any, model: str = DEFAULT_MODEL
+) -> tuple[Any, Any]:
+    """The model's objects of ``variant`` at a point whose own are given. Raises the model's
+    ``ValueError`` (:class:`~nematic_solids.sweep.models.interface.SettingError`) when the
+    result is not a valid run."""
+    names = setting_names(model)
     p, n = parameters.to_dict(), numerics.to_dict()
     for key, value in variant.settings.items():
         f = _factor(value)
@@ -115,26 +113,25 @@ def resolve(
             new = base * f[1] if f and f[0] == "x" else base / f[1] if f else float(value)
             p["alpha"] = p["B"] + normalise_float(new)
             continue
-        target = p if key in PARAMETER_TYPES else n
-        kind = (PARAMETER_TYPES if key in PARAMETER_TYPES else NUMERICS_TYPES)[key]
+        target = p if key in names.parameters else n
+        kind = names.all[key]
         if f is not None:
             old = target[key]
             new = old * f[1] if f[0] == "x" else old / f[1]
             if not math.isfinite(new):
-                raise ParameterError(key, value, f"a factor that leaves {key} finite")
+                raise SettingError(key, value, f"a factor that leaves {key} finite")
             target[key] = int(round(new)) if kind == "int" else normalise_float(new)
         else:
             target[key] = coerce(kind, value)
     if (
-        n["resolution"] != numerics.resolution
+        "resolution" in n
+        and n["resolution"] != numerics.resolution
         and p.get("initial") == "per_node"
         and not p.get("texture_resolution")
         and "texture_resolution" not in variant.settings
     ):
         p["texture_resolution"] = numerics.resolution  # the same physical initial field
-    params, nums = Parameters.from_dict(p), Numerics.from_dict(n)
-    check_compatible(params, nums)
-    return params, nums
+    return get_model(model).point(p, n)
 
 
 def variant_grid(variant: Variant, resolution: int, mechanics: str) -> tuple[int, str]:
@@ -168,10 +165,11 @@ def _variant(
     path: tuple[str | int, ...],
     raw: Any,
     seeds: Sequence[int],
-    parameters: Parameters | None,
-    numerics: Numerics | None,
+    parameters: Any,
+    numerics: Any,
+    model: str,
 ) -> Variant | None:
-    names = _names()
+    names = _names(model)
     if not isinstance(raw, Mapping) or not raw:
         c.bad(
             path,
@@ -207,7 +205,7 @@ def _variant(
         if not isinstance(key, str) or key not in names:
             c.unknown((*path, str(key)), key, [*names, "seeds"])
             continue
-        kind = PARAMETER_TYPES.get(key) or NUMERICS_TYPES[key]
+        kind = setting_names(model).all[key]
         f = _factor(value)
         if isinstance(value, str) and value.strip()[:1] in "x*/" and kind in ("int", "float"):
             if f is None:
@@ -228,8 +226,9 @@ def _variant(
     variant = Variant(variant_name(settings, other), settings, other)
     if parameters is not None and numerics is not None and settings:
         try:
-            resolve(variant, parameters, numerics)
-        except ParameterError as e:
+            resolve(variant, parameters, numerics, model)
+        except ValueError as exc:
+            e = setting_error(exc)
             c.add(
                 path, f"at the campaign's base values: {e.name} = {e.value!r}; allowed: {e.allowed}"
             )
@@ -257,11 +256,16 @@ def check_verify(
     sec = c.mapping(path, raw, KEYS)
     before = len(c.problems)
     try:
-        base_p: Parameters | None = Parameters.from_dict(parameters)
-        base_n: Numerics | None = Numerics.from_dict(
-            {k: v for k, v in numerics.items() if not (k == "resolution" and is_rule(v))}
+        m = get_model(model)
+        base_p, base_n = m.point(
+            parameters,
+            {
+                k: v
+                for k, v in numerics.items()
+                if not (k == "resolution" and resolution_rule(m, v) is not None)
+            },
         )  # a resolution rule: the checks below need no grid
-    except (ParameterError, TypeError):
+    except (ValueError, TypeError):
         base_p = base_n = None  # reported by their own sections
 
     raw_variants = sec.get("variants")
@@ -279,7 +283,7 @@ def check_verify(
         )
     else:
         for i, item in enumerate(raw_variants):
-            v = _variant(c, (*path, "variants", i), item, seeds, base_p, base_n)
+            v = _variant(c, (*path, "variants", i), item, seeds, base_p, base_n, model)
             if v is not None:
                 variants.append(v)
         labels = [v.name for v in variants]

@@ -212,7 +212,7 @@ def verify_dataset(
         coords[axis.name] = xr.Variable(
             ("point",),
             np.array([p.coords[axis.name] for p in sample.points]),
-            coord_attrs(axis.name),
+            coord_attrs(axis.name, sample.campaign.model),
         )
     ds = xr.Dataset(data, coords=coords)
     if sample.transitions:

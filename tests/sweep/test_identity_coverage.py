@@ -22,18 +22,17 @@ import xarray as xr
 from nematic_solids.model.checkpoint import InitialState, RunState, read_netcdf
 from nematic_solids.model.parameters import Numerics, Parameters
 from nematic_solids.model.simulate import run as simulate
-from nematic_solids.sweep.campaign import NUMERICS_TYPES
 from nematic_solids.sweep.expand import expand
 from nematic_solids.sweep.identity import (
-    EXACT_GUESS,
     ID_LENGTH,
     canonical_json,
     hash_canonical,
     identity_start,
-    start_guess,
 )
+from nematic_solids.sweep.models.nematic_identity import EXACT_GUESS, start_guess
 from nematic_solids.sweep.run.continuation import STATE_GROUP, file_snapshots
 from nematic_solids.sweep.run.task import RunTask, execute_run
+from nematic_solids.sweep.settings import setting_names
 from nematic_solids.sweep.spec import load_campaign
 from nematic_solids.sweep.spec.sections import STORE_KEYS
 from nematic_solids.sweep.store import RETRYABLE_REASONS, CampaignStore
@@ -92,7 +91,7 @@ MEASURED = ("wall_time",)
 
 
 def test_every_numerics_and_store_key_is_classified():
-    numerics = set(NUMERICS_TYPES)
+    numerics = set(setting_names().numerics)
     store = set(STORE_KEYS) - {"snapshot_times"}  # store.snapshot_times is numerics' key
     assert "snapshot_times" in numerics
     classified_numerics = (

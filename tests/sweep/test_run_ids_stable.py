@@ -18,8 +18,10 @@ from nematic_solids.model.parameters import Numerics, Parameters
 from nematic_solids.sweep import identity
 from nematic_solids.sweep.campaign import DEFAULT_MODEL, Axis, Campaign, Dim
 from nematic_solids.sweep.expand import expand
-from nematic_solids.sweep.identity import PointHasher, hash_canonical, trajectory_id
+from nematic_solids.sweep.identity import PointHasher, hash_canonical, run_id_for, trajectory_id
+from nematic_solids.sweep.models import nematic_identity
 from nematic_solids.sweep.models.interface import DEFAULT_MODEL as INTERFACE_DEFAULT
+from nematic_solids.sweep.models.registry import get_model
 from nematic_solids.sweep.spec import load_campaign
 
 REPO = Path(__file__).resolve().parents[2]
@@ -89,8 +91,8 @@ def test_expanding_a_shipped_campaign_gives_the_run_ids_of_its_phase_nc(name, ca
 def test_runs_made_before_have_todays_ids_without_the_newer_rules(name, campaigns_dir, monkeypatch):
     """Today's ids with the step bound and the first guess left out are the stored ones (a
     loop of rheology begins from its other branch's end states: both rules apply there)."""
-    monkeypatch.setattr(identity, "protocol_step_rule", lambda parameters, numerics: None)
-    monkeypatch.setattr(identity, "start_guess", lambda numerics, start: None)
+    monkeypatch.setattr(nematic_identity, "protocol_step_rule", lambda parameters, numerics: None)
+    monkeypatch.setattr(nematic_identity, "start_guess", lambda numerics, start: None)
     check(name, campaigns_dir)
 
 
@@ -110,10 +112,10 @@ def test_the_default_model_adds_nothing_and_another_models_name_is_in_the_id():
     assert "model" not in identity.canonical_json(p, n, 3)
     assert PointHasher(p, n, "swift-hohenberg")(3) == other
     assert PointHasher(p, n)(3) == plain
-    assert trajectory_id(p, n, 3, model="x") != trajectory_id(p, n, 3)
+    assert trajectory_id(p, n, 3, model="swift-hohenberg") != trajectory_id(p, n, 3)
 
 
-def test_a_campaign_of_another_model_has_other_run_ids(tmp_path):
+def test_a_campaign_that_names_the_default_model_keeps_its_run_ids(tmp_path):
     text = (
         "name: m\nparameters: {noise_modes: 4}\nnumerics: {resolution: 16, t_final: 1}\nseeds: 2\n"
     )
@@ -122,5 +124,24 @@ def test_a_campaign_of_another_model_has_other_run_ids(tmp_path):
     a = expand(load_campaign(tmp_path / "a.yaml"))
     b = expand(load_campaign(tmp_path / "b.yaml"))
     assert a.run_ids == b.run_ids
-    other = dataclasses.replace(a.campaign, model="another")
-    assert set(expand(other).run_ids).isdisjoint(a.run_ids)
+
+
+def test_another_models_ids_hold_every_setting_but_the_execution_only_ones():
+    """A model without identity rules of its own: each setting that can change a number
+    enters the id; the py-pde backend (numpy or numba, equal to rounding) does not."""
+    model = get_model("swift-hohenberg")
+    p, n = model.point({"eps": 0.1, "g": 0.5}, {"t_final": 10.0, "dt": 0.01})
+    base = run_id_for(p, n, 0, model="swift-hohenberg")
+    assert run_id_for(p, n, 0, model="swift-hohenberg") == base  # deterministic
+    text = identity.canonical_json(p.to_dict(), n.to_dict(), 0, model="swift-hohenberg")
+    assert "backend" not in text
+    assert '"kick"' in text
+    assert '"model":"swift-hohenberg"' in text
+    numba = model.point({"eps": 0.1, "g": 0.5}, {"t_final": 10.0, "dt": 0.01, "backend": "numba"})
+    assert run_id_for(*numba, 0, model="swift-hohenberg") == base
+    for key, value in (("g", 0.25), ("eps", 0.05)):
+        other = model.point({"eps": 0.1, "g": 0.5, key: value}, {"t_final": 10.0, "dt": 0.01})
+        assert run_id_for(*other, 0, model="swift-hohenberg") != base
+    for key, value in (("dt", 0.005), ("points", 6), ("kick", 1e-3), ("t_final", 20.0)):
+        other = model.point({"eps": 0.1, "g": 0.5}, {"t_final": 10.0, "dt": 0.01, key: value})
+        assert run_id_for(*other, 0, model="swift-hohenberg") != base, key

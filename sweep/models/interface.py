@@ -468,6 +468,14 @@ def classifier(model: Model) -> Observable:
     raise ValueError(f"model {model.name} declares no observable that classifies a pattern")
 
 
+def cost_seconds(model: Model, parameters: Any, numerics: Any) -> float:
+    """The predicted CPU seconds of one run of ``model`` at a point (its objects,
+    :meth:`Model.point`); NaN for a model without a cost model."""
+    if not model.capabilities.cost_model:
+        return math.nan
+    return float(model.cost_seconds(parameters, numerics))  # type: ignore[attr-defined]
+
+
 def setting_types(model: Model, kind: str) -> dict[str, str]:
     """Each setting of ``kind`` -> its type's name (``float``, ``int``, ``str``, ``bool``,
     ``list``), in declaration order."""

@@ -391,13 +391,14 @@ class Nematic:
         n = Numerics.from_dict(numerics)
         return run_memory_bytes(n.resolution, n.mechanics)
 
-    def cost_seconds(self, parameters: Mapping[str, Any], numerics: Mapping[str, Any]) -> float:
+    def cost_seconds(self, parameters: Parameters | Mapping[str, Any], numerics: Any) -> float:
         """The calibrated CPU seconds of one run
         (:func:`nematic_solids.sweep.cost.model.model_seconds`)."""
         from ..cost.model import model_seconds
 
-        p = Parameters.from_dict(parameters)
-        return model_seconds(Numerics.from_dict(numerics), protocol=p.protocol)
+        p = parameters if isinstance(parameters, Parameters) else Parameters.from_dict(parameters)
+        n = numerics if isinstance(numerics, Numerics) else Numerics.from_dict(numerics)
+        return model_seconds(n, protocol=p.protocol)
 
 
 #: The model registered as ``nematic`` (pyproject.toml, entry point group nematic_solids.models).

@@ -25,10 +25,11 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
-from ..cost.model import model_seconds
 from ..errors import StorageError
 from ..expand import Expansion
 from ..files import fsync_dir
+from ..models.interface import cost_seconds
+from ..models.registry import get_model
 from ..store import CampaignStore, Record
 from . import continuation
 from .batch import group_runs
@@ -100,18 +101,20 @@ def tasks_of(
 ) -> list[list[int]]:
     """The runs ``order`` in tasks: a chain's one per task (each waits for its predecessor);
     the accelerated backend's up to ``execution.batch`` seeds of one point per task; the
-    compiled backend's grouped by their predicted time (:func:`group_size`)."""
+    compiled backend's grouped by their predicted time (:func:`group_size`; one per task for
+    a model without a cost model)."""
     execution = expansion.campaign.execution
     if chained:
         return [[i] for i in order]
     if execution.backend == "accelerated":
         return group_runs(order, lambda i: expansion.run(i).point, execution.batch)
     sizes: dict[int, int] = {}  # per grid point (by identity): its runs alike
+    model = get_model(expansion.campaign.model)
 
     def size_of(i: int) -> int:
         point = expansion.run(i).point
         if id(point) not in sizes:
-            predicted = model_seconds(point.numerics, protocol=point.parameters.protocol)
+            predicted = cost_seconds(model, point.parameters, point.numerics)
             sizes[id(point)] = group_size(predicted, len(order), threads, execution.runs_per_task)
         return sizes[id(point)]
 

@@ -176,7 +176,11 @@ def trajectories(expansion: Expansion, positions: Iterable[int]) -> dict[int, st
         run = expansion.run(i)
         start = identity_start(run.start)  # as the run task records it (the state too)
         out[i] = trajectory_id(
-            run.point.parameters.to_dict(), run.point.numerics.to_dict(), run.seed, start
+            run.point.parameters.to_dict(),
+            run.point.numerics.to_dict(),
+            run.seed,
+            start,
+            expansion.campaign.model,
         )
     return out
 

@@ -45,7 +45,7 @@ from ..campaign import Campaign, ExecutionSpec, local_worker_count
 from ..expand import Expansion, GridPoint, continued_runs, expand
 from ..store import RETRYABLE_REASONS, CampaignStore, Record
 from .later import Prior, campaign_prior, point_key, precision_rounds, refine_rounds
-from .model import MODEL_SPREAD, kind, model_seconds
+from .model import MODEL_SPREAD, has_cost_model, kind, model_seconds, point_seconds
 from .result import Costed, Estimate, fmt_seconds
 
 #: the quantiles of the spread
@@ -149,7 +149,7 @@ class Basis:
         within = [s / float(np.median(v)) for v in self.by_point.values() if len(v) > 1 for s in v]
         self.seed_spread = _spread(within) if len(within) >= 3 else None
 
-    def ratios(self, kind_: tuple[Any, ...], resolution: int) -> list[float]:
+    def ratios(self, kind_: tuple[object, ...], resolution: int) -> list[float]:
         for keep in (
             lambda k, n: k == kind_ and n == resolution,
             lambda k, n: k == kind_,
@@ -173,23 +173,24 @@ class Basis:
             lo, hi = self.seed_spread or MODEL_SPREAD
             why = "the prior's measured runs there"
             grid = self.prior.resolution.get(point_key(point.coords))
-            n = point.numerics.resolution
-            if grid is not None and grid != n:  # measured on another grid: scaled
+            n = getattr(point.numerics, "resolution", None)
+            if grid is not None and n is not None and grid != n:  # measured on another grid: scaled
                 known *= model / model_seconds(
                     dataclasses.replace(point.numerics, resolution=grid),
                     protocol=point.parameters.protocol,
                 )
                 why += f" on {grid}^2, scaled to {n}^2 by the cost model"
             return known, known * lo, known * hi, why
-        ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
+        ratios = self.ratios(*kind(point.numerics))
         if ratios:
             med = float(np.median(ratios))
             lo, hi = _spread(ratios) if len(ratios) >= 3 else MODEL_SPREAD
             return model * med, model * med * lo, model * med * hi, "scaled"
-        return model, model * MODEL_SPREAD[0], model * MODEL_SPREAD[1], "cost model"
+        why = "cost model" if has_cost_model(point.numerics) else NO_COST_MODEL
+        return model, model * MODEL_SPREAD[0], model * MODEL_SPREAD[1], why
 
     def ratio_spread(self, point: GridPoint) -> tuple[float, float]:
-        ratios = self.ratios(kind(point.numerics), point.numerics.resolution)
+        ratios = self.ratios(*kind(point.numerics))
         return _spread(ratios) if len(ratios) >= 3 else MODEL_SPREAD
 
 
@@ -244,6 +245,10 @@ def reused_elsewhere(
     return [i for i in todo if expansion.run_ids[i] not in found], counts
 
 
+#: the basis of a run's price for a model without a cost model, before any run is measured
+NO_COST_MODEL = "cost model (none: 1 s a run until runs are measured)"
+
+
 def measurements(
     expansion: Expansion, records: Mapping[str, Record], prior: Prior | None = None
 ) -> Basis:
@@ -262,16 +267,8 @@ def measurements(
         length = run_length(point, rec)
         key = (id(point), length)
         if key not in models:
-            models[key] = model_seconds(point.numerics, length, point.parameters.protocol)
-        measured.append(
-            (
-                point_label(point),
-                kind(point.numerics),
-                point.numerics.resolution,
-                seconds,
-                models[key],
-            )
-        )
+            models[key] = point_seconds(point.parameters, point.numerics, length)
+        measured.append((point_label(point), *kind(point.numerics), seconds, models[key]))
     return Basis(measured, prior)
 
 
@@ -331,7 +328,7 @@ def estimate(
         point = expansion.run(i).point
         if id(point) not in per_point:
             label = point_label(point)
-            model = model_seconds(point.numerics, protocol=point.parameters.protocol)
+            model = point_seconds(point.parameters, point.numerics)
             per_point[id(point)] = (label, *basis.cost(point, label, model))
         label, est, lo, hi, why = per_point[id(point)]
         if i in continuing:
@@ -403,7 +400,7 @@ def estimate(
             lambda point: basis.cost(
                 point,
                 point_label(point),
-                model_seconds(point.numerics, protocol=point.parameters.protocol),
+                point_seconds(point.parameters, point.numerics),
             )[0],
             workers,
         )

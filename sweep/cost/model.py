@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from nematic_solids.model.parameters import Numerics
@@ -170,10 +170,12 @@ def model_seconds(
     return seconds * variant_factor(numerics)
 
 
-def kind(numerics: Numerics) -> tuple[object, ...]:
-    """What makes runs cost alike besides resolution and length: mechanics, scheme and the
-    numerics with a factor of their own."""
-    return (
+def kind(numerics: Numerics | Any) -> tuple[tuple[object, ...], int]:
+    """What makes runs cost alike besides length: mechanics, scheme and the numerics with a
+    factor of their own; and the resolution. Another model's runs are all alike: ``((), 0)``."""
+    if not has_cost_model(numerics):
+        return (), 0
+    alike = (
         numerics.mechanics,
         numerics.scheme,
         numerics.error_norm,
@@ -181,3 +183,25 @@ def kind(numerics: Numerics) -> tuple[object, ...]:
         numerics.incompressible if numerics.mechanics == "linear" else None,
         numerics.displacement if numerics.mechanics == "finite" else None,
     )
+    return alike, numerics.resolution
+
+
+#: what a run of a model without a cost model is priced at before any is measured (seconds)
+UNMEASURED_SECONDS = 1.0
+
+
+def has_cost_model(numerics: Any) -> bool:
+    """Whether a point's runs are priced by this cost model (the nematic model's)."""
+    from nematic_solids.model.parameters import Numerics  # (a light module: no py-pde)
+
+    return isinstance(numerics, Numerics)
+
+
+def point_seconds(parameters: Any, numerics: Any, t_final: float | None = None) -> float:
+    """:func:`model_seconds` of one run at a point of the nematic model (its objects). A
+    model without a cost model: :data:`UNMEASURED_SECONDS` a run (times the fraction of its
+    ``t_final`` it runs), which its measured runs then scale (sweep.cost.estimate)."""
+    if has_cost_model(numerics):
+        return model_seconds(numerics, t_final, parameters.protocol)
+    full = getattr(numerics, "t_final", None)
+    return UNMEASURED_SECONDS * (t_final / full if t_final is not None and full else 1.0)

@@ -89,7 +89,10 @@ class RunNamer:
         if key not in self._points:
             index = merge_index(self.ks, line, [-1] * len(self.ks))
             p = make_point(self.campaign, index, self.coords(line, x))
-            self._points[key] = (p, PointHasher(p.parameters.to_dict(), p.numerics.to_dict()))
+            self._points[key] = (
+                p,
+                PointHasher(p.parameters.to_dict(), p.numerics.to_dict(), self.campaign.model),
+            )
         return self._points[key]
 
     def run_id(self, line: Line, x: At, seed: int) -> str:

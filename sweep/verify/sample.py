@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 
 from ..campaign import Campaign, Variant, VerifySpec, same_value
-from ..errors import ParameterError
 from ..expand import Expansion, GridPoint, RunSpec
 from ..identity import PointHasher
+from ..models.interface import setting_error
 from ..spec.verify import resolve
 
 log = logging.getLogger(__name__)
@@ -189,8 +189,11 @@ def plan_sample(campaign: Campaign, expansion: Expansion, fits: Any = None) -> S
         per_point: list[list[RunSpec] | None] = []
         for point in points:
             try:
-                params, numerics = resolve(variant, point.parameters, point.numerics)
-            except ParameterError as e:
+                params, numerics = resolve(
+                    variant, point.parameters, point.numerics, campaign.model
+                )
+            except ValueError as exc:
+                e = setting_error(exc)
                 sample.problems.append(
                     f"variant {variant.name} at {point_label(point)}: "
                     f"{e.name} = {e.value!r}; allowed: {e.allowed}"
@@ -198,7 +201,7 @@ def plan_sample(campaign: Campaign, expansion: Expansion, fits: Any = None) -> S
                 per_point.append(None)
                 continue
             vpoint = GridPoint(point.index, point.coords, params, numerics)
-            hasher = PointHasher(params.to_dict(), numerics.to_dict())
+            hasher = PointHasher(params.to_dict(), numerics.to_dict(), campaign.model)
             vseeds = variant.seeds if variant.seeds is not None else seeds
             per_point.append(
                 [

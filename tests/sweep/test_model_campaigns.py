@@ -143,6 +143,29 @@ def test_a_corrupt_state_is_never_used(tmp_path):
     assert "checksum" in start.warning
 
 
+def test_refinement_and_verification_run_on_the_models_observables(tmp_path):
+    """``refine:`` splits the cells where the model's own observable crosses its threshold,
+    and ``verify:`` reruns a sample at half the step and compares the model's observables by
+    their declared rules."""
+    path = tmp_path / "adaptive.yaml"
+    path.write_text(
+        TINY.format(name="adaptive", t_final=10.0, chain="").replace(
+            "eps: [-0.02, 0.1]", "eps: [-0.1, 0.1, 0.3]"
+        )
+        + "refine: {axis: eps, observable: amplitude, patterned_above: 0.02, min_spacing: 0.05,"
+        " rounds: 2}\n"
+        "verify: {variants: [{dt: /2}], seeds: 1, observables: [amplitude, hexagonality],"
+        " patterned_above: 0.02}\n"
+    )
+    output = run(path, tmp_path / "results")
+    assert "refinement finished" in output
+    phase = xr.open_dataset(tmp_path / "results" / "adaptive" / "phase.nc")
+    assert phase.sizes["eps"] > 3  # points added between the grid's
+    verify = xr.open_dataset(tmp_path / "results" / "adaptive" / "verify.nc")
+    assert verify.sizes["point"] >= 2
+    assert bool(verify["converged"].all())
+
+
 @pytest.mark.slow
 def test_the_chain_shows_the_subcritical_hysteresis(tmp_path):
     """At g = 1 and eps = -0.02 the uniform state is linearly stable and hexagons exist (the

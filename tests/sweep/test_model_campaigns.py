@@ -188,4 +188,4 @@ def test_the_model_campaign_file_shipped_validates():
     campaign = load_campaign(Path(__file__).resolve().parents[2] / "campaigns/swift_hohenberg.yaml")
     assert campaign.model == "swift-hohenberg"
     assert campaign.chain is not None
-    assert campaign.n_runs == 400
+    assert campaign.n_runs == 170

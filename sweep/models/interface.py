@@ -146,7 +146,8 @@ class Capabilities:
     #: a longer run continues a shorter one's end state, with results equal to a run that
     #: never stopped (otherwise a longer run starts again from t = 0)
     exact_continuation: bool = False
-    #: settings may follow a time protocol (those whose :attr:`Setting.protocol` is true)
+    #: a campaign's ``protocol:`` section gives its settings functions of time (those whose
+    #: :attr:`Setting.protocol` is true; the forms of :mod:`nematic_solids.model.protocol`)
     protocols: bool = False
     #: a run may start from another run's end state (chains, ``initial.from``)
     start_from_state: bool = False

@@ -381,7 +381,9 @@ def pde_model(
         raise ValueError(f"model {name}: observables named twice in {names}")
     caps = Capabilities(
         exact_continuation=True,
-        protocols=any(s.protocol for s in declared),
+        # a setting declared protocol=True takes a function of time in a RunRequest; the
+        # campaign's protocol: section (the nematic model's forms) is not wired to it
+        protocols=False,
         start_from_state=True,
     )
     return PDEModel(

@@ -10,7 +10,8 @@ from typing import Any
 
 from nematic_solids.model.protocol import FORMS, PROTOCOL_PARAMETERS
 
-from ..campaign import AMB
+from ..campaign import AMB, DEFAULT_MODEL
+from ..models.registry import get_model
 from ..protocols import PROTOCOL
 from .checker import Checker
 
@@ -20,6 +21,14 @@ def read_protocol(c: Checker, raw: Any, read: Mapping[str, Any]) -> dict[str, An
     given a function of time is not also a constant under ``parameters:``."""
     params = dict(read["parameters"])
     if raw is None:
+        return params
+    model = get_model(read.get("model") or DEFAULT_MODEL)
+    if not model.capabilities.protocols:
+        c.add(
+            (PROTOCOL,),
+            f"the model {model.name} takes no time protocols (its settings are constants of a "
+            "run); drop 'protocol:'",
+        )
         return params
     if not isinstance(raw, Mapping) or not raw:
         c.bad((PROTOCOL,), raw, "a mapping {parameter: function of time}")

@@ -22,6 +22,7 @@ from nematic_solids.sweep.models.interface import (
     RunOutcome,
     RunRequest,
     defaults,
+    setting,
 )
 from nematic_solids.sweep.models.pypde import (
     FunctionMeasure,
@@ -210,7 +211,8 @@ def test_a_time_dependent_setting_follows_its_protocol() -> None:
     error in the exponent is at most z^5/120 per step, z = kappa^2 D dt <= 0.089: 4.7e-6 over
     the 100 steps to t = 1."""
     model = pde_model("ramp", ramp_pde, Ramp, grid, cosine, [AMPLITUDE])
-    assert model.capabilities.protocols
+    assert not model.capabilities.protocols  # a campaign's protocol: section: not wired
+    assert setting(model, "diffusivity").protocol  # a function of time in a RunRequest
     req = RunRequest(
         parameters={"diffusivity": Linear(0.5, 0.5)},
         numerics={**defaults(model, "numerics"), "backend": "numpy"},

@@ -157,15 +157,15 @@ def hash_canonical(
 
 
 def run_id_for(
-    parameters: Mapping[str, Any] | Any,
-    numerics: Mapping[str, Any] | Any,
+    parameters: Any,
+    numerics: Any,
     seed: int,
     model: str = DEFAULT_MODEL,
 ) -> str:
     """run_id of one run of ``model``; mappings go through the model's objects first
     (:meth:`~nematic_solids.sweep.models.interface.Model.point`: defaults filled in, values
     validated)."""
-    if isinstance(parameters, Mapping) and isinstance(numerics, Mapping):
+    if not (hasattr(parameters, "to_dict") and hasattr(numerics, "to_dict")):  # plain dicts
         parameters, numerics = get_model(model).point(parameters, numerics)
     return hash_canonical(parameters.to_dict(), numerics.to_dict(), seed, model=model)
 

@@ -173,13 +173,13 @@ class Basis:
             lo, hi = self.seed_spread or MODEL_SPREAD
             why = "the prior's measured runs there"
             grid = self.prior.resolution.get(point_key(point.coords))
-            n = getattr(point.numerics, "resolution", None)
-            if grid is not None and n is not None and grid != n:  # measured on another grid: scaled
+            own = getattr(point.numerics, "resolution", None)
+            if grid is not None and own is not None and grid != own:  # another grid: scaled
                 known *= model / model_seconds(
                     dataclasses.replace(point.numerics, resolution=grid),
                     protocol=point.parameters.protocol,
                 )
-                why += f" on {grid}^2, scaled to {n}^2 by the cost model"
+                why += f" on {grid}^2, scaled to {own}^2 by the cost model"
             return known, known * lo, known * hi, why
         ratios = self.ratios(*kind(point.numerics))
         if ratios:

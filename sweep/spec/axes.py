@@ -131,8 +131,8 @@ def read_sweep(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Dim, ...]
     sweep = c.mapping(("sweep",), raw, SWEEP_KEYS)
     axes_raw = c.mapping(("sweep", "axes"), sweep.get("axes"), None)
     axes: dict[str, Axis] = {}
-    names = setting_names(read.get("model") or DEFAULT_MODEL)
-    types = names.axes
+    known = setting_names(read.get("model") or DEFAULT_MODEL)
+    types = known.axes
     timed = read["protocol"].get(PROTOCOL, {})
     offered = protocol_axes(read["protocol"])
     for name, spec in axes_raw.items():
@@ -142,7 +142,7 @@ def read_sweep(c: Checker, raw: Any, read: Mapping[str, Any]) -> tuple[Dim, ...]
                 path,
                 name,
                 sorted(types) + sorted(offered),
-                "" if name not in names.numerics else f" ({name} cannot be swept)",
+                "" if name not in known.numerics else f" ({name} cannot be swept)",
             )
             continue
         if name in timed or (name == "alpha" and AMB in timed):

@@ -41,7 +41,7 @@ def check_points(campaign: Campaign, checker: Checker) -> None:
             try:
                 check_precision(point.numerics)
             except ParameterError as e:
-                if _report(checker, campaign, e, coords, axis_names, swept, seen):
+                if _report(checker, campaign, setting_error(e), coords, axis_names, swept, seen):
                     return
                 continue
         if _needs_samples(checker, campaign, point, coords, seen, axis_names):

@@ -228,9 +228,11 @@ def _variant(
         try:
             resolve(variant, parameters, numerics, model)
         except ValueError as exc:
-            e = setting_error(exc)
+            why = setting_error(exc)
             c.add(
-                path, f"at the campaign's base values: {e.name} = {e.value!r}; allowed: {e.allowed}"
+                path,
+                f"at the campaign's base values: {why.name} = {why.value!r}; allowed: "
+                f"{why.allowed}",
             )
             return None
     return variant

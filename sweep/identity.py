@@ -166,7 +166,10 @@ def run_id_for(
     (:meth:`~nematic_solids.sweep.models.interface.Model.point`: defaults filled in, values
     validated)."""
     if not (hasattr(parameters, "to_dict") and hasattr(numerics, "to_dict")):  # plain dicts
-        parameters, numerics = get_model(model).point(parameters, numerics)
+        parameters, numerics = get_model(model).point(
+            parameters.to_dict() if hasattr(parameters, "to_dict") else parameters,
+            numerics.to_dict() if hasattr(numerics, "to_dict") else numerics,
+        )
     return hash_canonical(parameters.to_dict(), numerics.to_dict(), seed, model=model)
 
 

@@ -117,7 +117,7 @@ def test_real_changes_change_the_id():
 
 
 def test_alpha_minus_b_is_alpha():
-    n = Numerics(resolution=64)
+    n = Numerics(resolution=128)
     a = run_id_for({"alpha_minus_B": 0.4}, n, 3)
     b = run_id_for({"alpha": 0.9}, n, 3)
     c = run_id_for({"B": 0.5, "alpha_minus_B": 0.4000000000000001}, n, 3)

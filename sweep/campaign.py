@@ -311,6 +311,9 @@ class PrecisionSpec:
     add: int = 4
     #: the class from several observables (``classes:``), instead of ``patterned_above``
     classes: tuple[Threshold, ...] = ()
+    #: the observable and run scalar ``patterned_above`` applies to: the model's classifying
+    #: observable (:func:`~nematic_solids.sweep.models.interface.classifier`)
+    patterned: tuple[str, str] = ("", "")
 
     @property
     def thresholds(self) -> tuple[Threshold, ...]:
@@ -319,7 +322,7 @@ class PrecisionSpec:
             return self.classes
         if self.patterned_above is None:
             return ()
-        return (Threshold("sigma2_S", "sigma2_S_final", self.patterned_above),)
+        return (Threshold(*self.patterned, self.patterned_above),)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -334,10 +337,6 @@ class PrecisionSpec:
             "initial": self.initial,
             "add": self.add,
         }
-
-
-#: What a verification compares by default (phase.nc names).
-DEFAULT_VERIFY_OBSERVABLES = ("sigma2_S", "cos2theta", "lambda", "lambda_peak", "t_peak")
 
 
 @dataclass(frozen=True)
@@ -369,7 +368,8 @@ class VerifySpec:
     seeds: int = 2
     threshold: float = 0.05
     patterned_above: float = 1e-6
-    observables: tuple[str, ...] = DEFAULT_VERIFY_OBSERVABLES
+    #: what it compares (phase.nc names; the model's ``verify`` observables unless listed)
+    observables: tuple[str, ...] = ()
     before: bool = False
 
     def to_dict(self) -> dict[str, Any]:

@@ -105,6 +105,9 @@ class Observable:
     #: whether it measures a pattern, so that its seed mean is taken over the patterned runs
     #: only (a relaxed run's value is the floor of the solver or its initial texture's)
     pattern: bool = False
+    #: whether a verification compares it when the campaign's ``verify:`` lists none (a
+    #: model that marks none: every observable)
+    verify: bool = False
     symbol: str | None = None
 
     def __post_init__(self) -> None:
@@ -481,6 +484,13 @@ def setting_types(model: Model, kind: str) -> dict[str, str]:
     """Each setting of ``kind`` -> its type's name (``float``, ``int``, ``str``, ``bool``,
     ``list``), in declaration order."""
     return {s.name: s.type.__name__ for s in model.settings if s.kind == kind}
+
+
+def verified(model: Model) -> tuple[str, ...]:
+    """What a verification compares unless the campaign lists observables: those marked
+    ``verify``, else every observable of ``model``."""
+    marked = tuple(o.name for o in model.observables if o.verify)
+    return marked or tuple(o.name for o in model.observables)
 
 
 def defaults(model: Model, kind: str) -> dict[str, Any]:

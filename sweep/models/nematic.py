@@ -131,9 +131,14 @@ def _settings() -> tuple[Setting, ...]:
     return tuple(out)
 
 
+#: What a verification compares unless a campaign lists its observables.
+VERIFIED = ("sigma2_S", "cos2theta", "lambda", "lambda_peak", "t_peak")
+
+
 def _obs(name: str, scalar: str, long_name: str, **rules: Any) -> Observable:
     known = NAMES.get(name)
-    return Observable(name, scalar, long_name, symbol=known.tex if known else None, **rules)
+    symbol = known.tex if known else None
+    return Observable(name, scalar, long_name, symbol=symbol, verify=name in VERIFIED, **rules)
 
 
 #: phase.nc's observables: the run scalar each is read from, its long name (units are all

@@ -16,7 +16,10 @@ Observables: ``amplitude`` (rms of u), ``mean`` (its spatial mean) and ``hexagon
 the two directions at 60 and 120 degrees to the strongest mode, relative to the strongest
 direction's: 1 for hexagons, 0 for stripes). :func:`classify` reads their seed means:
 ``uniform`` where the amplitude is below :data:`UNIFORM_AMPLITUDE`, else ``hexagons`` where the
-hexagonality is at least :data:`HEXAGONAL`, else ``stripes``.
+hexagonality is at least :data:`HEXAGONAL`, else ``stripes``. The amplitude is the classifying
+observable of the threshold rules (``refine:``, ``precision:``, ``verify:``: patterned above
+their ``patterned_above``), and the hexagonality's seed mean is taken over the patterned runs
+only.
 
 The theory (linear growth rate, amplitude equations, the existence and stability boundaries)
 is docs/model/swift_hohenberg.md; the tests are tests/sweep/test_swift_hohenberg.py.
@@ -218,6 +221,8 @@ class Hexagonality(Measure):
         "power at 60 and 120 degrees over the strongest",
         change="absolute",
         classifies=True,
+        pattern=True,
+        verify=True,
     )
 
     def handle(self, state: FieldBase, t: float) -> float:
@@ -241,7 +246,9 @@ def classify(values: Mapping[str, float]) -> str:
 
 
 MEASURES: tuple[Measure, ...] = (
-    FunctionMeasure(Observable("amplitude", "amplitude_final", "rms of u"), rms),
+    FunctionMeasure(
+        Observable("amplitude", "amplitude_final", "rms of u", classifies=True, verify=True), rms
+    ),
     FunctionMeasure(Observable("mean", "mean_final", "spatial mean of u", change="absolute"), mean),
     Hexagonality(),
 )

@@ -8,6 +8,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..campaign import DEFAULT_MODEL, Threshold
+from ..models.interface import classifier
 from ..models.registry import get_model
 from .checker import Checker, KeyPath, is_finite_number, suggest
 
@@ -24,10 +25,12 @@ def observable_sources(model: str = DEFAULT_MODEL) -> dict[str, str]:
     return out
 
 
-def read_observable(c: Checker, path: KeyPath, value: Any, sources: Mapping[str, str]) -> str:
-    """The observable a section names (one of ``sources``, :func:`observable_sources`);
-    ``sigma2_S`` when it is not one (the problem is added to ``c``), so that the rest of the
-    section is still checked."""
+def read_observable(
+    c: Checker, path: KeyPath, value: Any, sources: Mapping[str, str], model: str = DEFAULT_MODEL
+) -> str:
+    """The observable a section names (one of ``sources``, :func:`observable_sources`); the
+    model's classifying observable when it is not one (the problem is added to ``c``), so that
+    the rest of the section is still checked."""
     if isinstance(value, str) and value in sources:
         return value
     c.bad(
@@ -37,7 +40,7 @@ def read_observable(c: Checker, path: KeyPath, value: Any, sources: Mapping[str,
         + ", ".join(sorted(sources))
         + (suggest(value, list(sources)) if isinstance(value, str) else ""),
     )
-    return "sigma2_S"
+    return classifier(get_model(model)).name
 
 
 def read_classes(

@@ -25,6 +25,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..campaign import DEFAULT_MODEL, PrecisionSpec
+from ..models.interface import classifier
+from ..models.registry import get_model
 from .checker import Checker, is_finite_number, is_int
 from .observables import observable_sources, read_classes, read_observable
 
@@ -58,7 +60,7 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     observable = sec.get("observable")
     model = read.get("model") or DEFAULT_MODEL
     sources = observable_sources(model)
-    observable = read_observable(c, (*path, "observable"), observable, sources)
+    observable = read_observable(c, (*path, "observable"), observable, sources, model)
 
     width = sec.get("width")
     if width is not None and (not is_finite_number(width) or not width > 0):
@@ -98,9 +100,8 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     elif unanimous is not None and patterned is None and "classes" not in sec:
         c.add(
             (*path, "patterned_above"),
-            "missing; allowed: a number (a run's pattern class "
-            "is sigma2_S above it; or classes: for several observables); needed by "
-            "unanimous",
+            "missing; allowed: a number (a run's pattern class is the model's classifying "
+            "observable above it; or classes: for several observables); needed by unanimous",
         )
     elif patterned is not None and not is_finite_number(patterned):
         c.bad((*path, "patterned_above"), patterned, "a finite number")
@@ -131,4 +132,5 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
         initial=int(initial),
         add=int(add),
         classes=classes or (),
+        patterned=(classifier(get_model(model)).name, classifier(get_model(model)).scalar),
     )

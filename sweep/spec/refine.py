@@ -58,6 +58,8 @@ from ..campaign import (
     RefineSpec,
     Threshold,
 )
+from ..models.interface import classifier
+from ..models.registry import get_model
 from .checker import Checker, KeyPath, is_finite_number, is_int, suggest
 from .observables import observable_sources, read_classes, read_observable
 
@@ -297,8 +299,9 @@ def check_refine(
                 )
 
     sources = observable_sources(model)
-    observable = sec.get("observable", classes[0].observable if classes else "sigma2_S")
-    observable = read_observable(c, (*path, "observable"), observable, sources)
+    default = classes[0].observable if classes else classifier(get_model(model)).name
+    observable = sec.get("observable", default)
+    observable = read_observable(c, (*path, "observable"), observable, sources, model)
 
     patterned = sec.get("patterned_above")
     if criterion == "fraction":

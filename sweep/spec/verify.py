@@ -37,7 +37,6 @@ from typing import Any
 from ..campaign import (
     AMB,
     DEFAULT_MODEL,
-    DEFAULT_VERIFY_OBSERVABLES,
     MAX_SEED,
     Dim,
     Variant,
@@ -45,7 +44,13 @@ from ..campaign import (
     normalise_float,
     same_value,
 )
-from ..models.interface import SettingError, resolution_rule, setting_error
+from ..models.interface import (
+    SettingError,
+    classifier,
+    resolution_rule,
+    setting_error,
+    verified,
+)
 from ..models.registry import get_model
 from ..settings import setting_names
 from .checker import Checker, coerce, is_int, is_number, suggest
@@ -350,7 +355,7 @@ def check_verify(
         c.bad((*path, "patterned_above"), patterned, "a sigma2_S level in (0, 1)")
         patterned = 1e-6
     known = [o.name for o in get_model(model).observables]
-    observables = sec.get("observables", list(DEFAULT_VERIFY_OBSERVABLES))
+    observables = sec.get("observables", list(verified(get_model(model))))
     if (
         not isinstance(observables, Sequence)
         or isinstance(observables, str)
@@ -363,7 +368,7 @@ def check_verify(
             observables,
             "a list of " + ", ".join(known) + (suggest(str(bad[0]), known) if bad else ""),
         )
-        observables = ["sigma2_S"]
+        observables = [classifier(get_model(model)).name]
     before_flag = sec.get("before", False)
     if not isinstance(before_flag, bool):
         c.bad((*path, "before"), before_flag, "true or false")

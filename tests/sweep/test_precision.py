@@ -47,9 +47,13 @@ def problems(text: str) -> list[str]:
     return [str(p) for p in e.value.problems]
 
 
+SIGMA2 = ("sigma2_S", "sigma2_S_final")
+
+
 def spec(**kw) -> PrecisionSpec:
     kw.setdefault("observable", "lambda_peak")
     kw.setdefault("source", "lambda_peak")
+    kw.setdefault("patterned", SIGMA2)
     return PrecisionSpec(**kw)
 
 
@@ -73,6 +77,7 @@ def test_the_precision_section_parses():
         patterned_above=1e-6,
         initial=2,
         add=3,
+        patterned=SIGMA2,  # the nematic model's classifying observable
     )
     assert parse_campaign(BASE, "c.yaml").precision is None
 

@@ -16,7 +16,7 @@ import pytest
 import xarray as xr
 
 from nematic_solids.sweep.models import swift_hohenberg as sh
-from nematic_solids.sweep.models.interface import RunRequest, defaults
+from nematic_solids.sweep.models.interface import RunRequest, classifier, defaults
 from nematic_solids.sweep.models.pypde import PDEState
 from nematic_solids.sweep.models.registry import get_model
 
@@ -39,7 +39,8 @@ def test_the_registry_gives_the_model() -> None:
     assert kinds["eps"] == kinds["g"] == "parameter"
     assert kinds["points"] == "numerics"
     assert [o.name for o in MODEL.observables] == ["amplitude", "mean", "hexagonality"]
-    assert [o.name for o in MODEL.observables if o.classifies] == ["hexagonality"]
+    assert [o.name for o in MODEL.observables if o.classifies] == ["amplitude", "hexagonality"]
+    assert classifier(MODEL).name == "amplitude"  # patterned or not: the amplitude
 
 
 def test_the_domain_holds_stripes_and_hexagons() -> None:

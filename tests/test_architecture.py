@@ -112,7 +112,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     "refine": {"spec", "run", "outputs", "precision", "analysis"},
     "precision": {"spec", "run", "outputs", "refine", "analysis"},
     "verify": {"spec", "run", "outputs", "refine", "precision", "analysis", "models"},
-    "report": {"spec", "outputs", "refine", "precision", "verify", "analysis", "figures"},
+    # the observables a campaign's model declares (what the diagram shows)
+    "report": {"spec", "outputs", "refine", "precision", "verify", "analysis", "figures", "models"},
     # the service: the queue, the runner that drives campaigns, the API and dashboard
     "service": {
         "catalogue",

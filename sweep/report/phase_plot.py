@@ -1,7 +1,8 @@
 """The report's interactive phase diagram (bokeh): one point per grid point that has runs,
-coloured (2-D) or placed (1-D) by the seed mean of sigma2_S. Hovering a point shows its
+coloured (2-D) or placed (1-D) by the seed mean of the model's classifying observable
+(:class:`Shown`; sigma2_S for the paper's model). Hovering a point shows its
 parameters and the seed values of the main observables; clicking it shows one of its runs:
-its last snapshot (a small PNG, embedded as a data URI) and its sigma2_S(t) (drawn, and
+its last snapshot (a small PNG, embedded as a data URI) and that observable's series (drawn, and
 cached, by :mod:`.run_views`), through a bokeh ``CustomJS`` callback that copies the point's
 columns into the run panel.
 
@@ -24,16 +25,37 @@ import numpy as np
 import xarray as xr
 
 from ..analysis.phase import sweep_dims
-from ..campaign import BRANCH
+from ..campaign import BRANCH, DEFAULT_MODEL
+from ..models.interface import classifier
+from ..models.registry import get_model
 from ..names import label, symbol
 from .run_views import run_views
 
 log = logging.getLogger(__name__)
 
-#: The observables whose seed values the hover shows (those phase.nc holds).
-MAIN = ("sigma2_S", "mean_S", "cos2theta", "lambda", "lambda_peak")
-#: The colour (2-D) or height (1-D) of a point: the seed mean of this observable.
-SHOWN = "sigma2_S"
+#: The observables whose seed values the hover shows: the shown one and the model's next.
+HOVERED = 5
+
+
+@dataclass(frozen=True)
+class Shown:
+    """What the diagram shows of a campaign's model: ``observable``, whose seed mean is a
+    point's colour (2-D) or height (1-D) and whose series the run panel draws (the model's
+    classifying observable), and ``hover``, the observables whose seed values the hover
+    lists."""
+
+    observable: str
+    hover: tuple[str, ...]
+
+    @classmethod
+    def of(cls, phase: xr.Dataset) -> Shown:
+        """From the model phase.nc names (``model`` attribute; the default model's)."""
+        model = get_model(str(phase.attrs.get("model", DEFAULT_MODEL)))
+        main = classifier(model).name
+        others = [o.name for o in model.observables if o.name != main]
+        return cls(main, (main, *others[: HOVERED - 1]))
+
+
 #: Points whose run (snapshot and series) is embedded; the others show their hover only.
 MAX_POINTS_WITH_RUNS = 200
 #: Facets of a campaign with more than two sweep dims.
@@ -125,6 +147,7 @@ def point_columns(
     run of each point (the first seed that succeeded, else the first with a run file).
     ``facets``: the dims whose values name a point's facet (default: ``dims[2:]``)."""
     facet_dims = dims[2:] if facets is None else facets
+    shown_of = Shown.of(phase)
     shape = [phase.sizes[d] for d in dims]
     n_seeds = phase.sizes["seed"]
     seeds = phase["seed"].values
@@ -134,7 +157,7 @@ def point_columns(
 
     status = per_point("status").astype(int)
     run_ids = per_point("run_id")
-    observables = {m: per_point(m).astype(float) for m in MAIN if m in phase}
+    observables = {m: per_point(m).astype(float) for m in shown_of.hover if m in phase}
     grids = (
         np.asarray(phase["resolution"].transpose(*dims).values).reshape(-1)
         if "resolution" in phase.data_vars
@@ -185,7 +208,7 @@ def point_columns(
         )
         for m, values in observables.items():
             cols[f"seeds_{m}"].append(_seed_text(values[flat], seeds, st))
-        shown = observables.get(SHOWN)
+        shown = observables.get(shown_of.observable)
         ok = (st == STATUS_OK) & np.isfinite(shown[flat]) if shown is not None else st < 0
         mean = float(np.mean(shown[flat][ok])) if shown is not None and ok.any() else math.nan
         cols["shown"].append(mean)
@@ -201,7 +224,7 @@ def point_columns(
             path = runs_dir / f"{run_ids[flat][k]}.nc"
             if embedded < MAX_POINTS_WITH_RUNS and path.is_file():
                 try:
-                    image, t, y = run_views(path)
+                    image, t, y = run_views(path, shown_of.observable)
                 except (OSError, ValueError, KeyError) as e:
                     log.warning("report: cannot read run file %s: %s", path, e)
                     continue
@@ -213,7 +236,7 @@ def point_columns(
         cols["run_id"].append(str(run_ids[flat][k]))
         cols["run_seed"].append(int(seeds[k]))
         cols["run_title"].append(
-            f"{symbol('sigma2_S')}(t): seed {int(seeds[k])} ({state})"
+            f"{symbol(shown_of.observable)}(t): seed {int(seeds[k])} ({state})"
             if chosen is not None
             else "run not embedded"
         )
@@ -223,7 +246,9 @@ def point_columns(
     return cols
 
 
-def _figure(x: Axis, y: Axis | None, title: str, tools: str, *, stretch: bool = False) -> Any:
+def _figure(
+    x: Axis, y: Axis | None, title: str, tools: str, shown: str, *, stretch: bool = False
+) -> Any:
     from bokeh.models import FixedTicker
     from bokeh.plotting import figure
 
@@ -236,7 +261,7 @@ def _figure(x: Axis, y: Axis | None, title: str, tools: str, *, stretch: bool = 
         x_axis_type="log" if x.log else "linear",
         y_axis_type="log" if y is None or y.log else "linear",
         x_axis_label=label(x.name),
-        y_axis_label=f"{label(SHOWN)} (seed mean)" if y is None else label(y.name),
+        y_axis_label=f"{label(shown)} (seed mean)" if y is None else label(y.name),
         sizing_mode="stretch_width" if stretch else "fixed",
     )
     for ax, axis in ((fig.xaxis, x), (fig.yaxis, y)):
@@ -292,7 +317,10 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
     if len(cols["where"][0].split(", ")) > len(dims):
         tooltips = [("point", "@where")]
     tooltips.append(("runs", "@counts"))
-    tooltips += [(f"{symbol(m)} by seed", f"@{{seeds_{m}}}") for m in MAIN if f"seeds_{m}" in cols]
+    shown_of = Shown.of(phase)
+    tooltips += [
+        (f"{symbol(m)} by seed", f"@{{seeds_{m}}}") for m in shown_of.hover if f"seeds_{m}" in cols
+    ]
     tools = "pan,wheel_zoom,box_zoom,reset,save"
     facets = list(dict.fromkeys(cols["facet"]))
     if len(facets) > MAX_FACETS:
@@ -304,7 +332,12 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
     plots, renderers = [], []
     if y_axis is None:  # one plot, a line per facet (a chain's branches)
         fig = _figure(
-            x_axis, None, f"{symbol(SHOWN)} at t_final over {symbol(x_dim)}", tools, stretch=True
+            x_axis,
+            None,
+            f"{symbol(shown_of.observable)} at t_final over {symbol(x_dim)}",
+            tools,
+            shown_of.observable,
+            stretch=True,
         )
         for k, facet in enumerate(facets):
             colour = LINE_COLOURS[k % len(LINE_COLOURS)]
@@ -334,12 +367,14 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
             palette="Viridis256", low=low, high=high if high > low else low + 1, nan_color="#d62728"
         )
         notes.append(
-            f"Colour: log10 of the seed mean of {symbol(SHOWN)} at t_final; red: no "
+            f"Colour: log10 of the seed mean of {symbol(shown_of.observable)} at t_final; red: no "
             "successful run. Click a point for one of its runs."
         )
         for facet in facets:
-            title = facet or f"log10 {symbol(SHOWN)} (seed mean)"
-            fig = _figure(x_axis, y_axis, title, tools, stretch=len(facets) > 1)
+            title = facet or f"log10 {symbol(shown_of.observable)} (seed mean)"
+            fig = _figure(
+                x_axis, y_axis, title, tools, shown_of.observable, stretch=len(facets) > 1
+            )
             view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
             renderers.append(
                 fig.scatter(
@@ -357,12 +392,12 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
             plots.append(fig)
     series = ColumnDataSource({"t": [], "y": []}, name="series")
     run_plot = figure(
-        title=f"{symbol('sigma2_S')}(t) of the clicked point's run",
+        title=f"{symbol(shown_of.observable)}(t) of the clicked point's run",
         width=420,
         height=260,
         y_axis_type="log",
         x_axis_label=label("t"),
-        y_axis_label=symbol("sigma2_S"),
+        y_axis_label=symbol(shown_of.observable),
         tools="pan,wheel_zoom,reset,save",
         name="run_plot",
     )

@@ -1,6 +1,6 @@
 """One run as the report's phase diagram shows it when its point is clicked: the run's last
 snapshot (a small PNG drawn with :func:`nematic_solids.sweep.figures.common.safe_snapshot`, as a
-data URI) and its sigma2_S(t).
+data URI) and the time series of the diagram's observable (sigma2_S(t) for the paper's model).
 
 Drawing a snapshot means importing matplotlib and reading the run file: most of what a
 report costs beyond its imports. So each run's views are kept in ``results/<name>/
@@ -43,19 +43,20 @@ def png_data_uri(fig: Any) -> str:
     return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
 
 
-def draw_run_views(path: Path) -> RunViews:
-    """One run's last snapshot as a PNG data URI ("" without a snapshot) and its sigma2_S(t)
-    (non-positive values left out: the panel's axis is logarithmic), from its file."""
+def draw_run_views(path: Path, series: str = "sigma2_S") -> RunViews:
+    """One run's last snapshot as a PNG data URI ("" without a snapshot) and its time series
+    ``series`` (non-positive values left out: the panel's axis is logarithmic), from its
+    file."""
     import xarray as xr
     from matplotlib.figure import Figure
 
     from ..figures.common import safe_snapshot
 
     with xr.open_dataset(path) as ds:
-        names = [n for n in ("q1", "q2", "I1bar", "sigma2_S") if n in ds]
+        names = [n for n in ("q1", "q2", "I1bar", series) if n in ds]
         run = ds[names].load()
-    t = series_time(run).values.astype(float) if "sigma2_S" in run else np.array([])
-    y = run["sigma2_S"].values.astype(float) if "sigma2_S" in run else np.array([])
+    t = series_time(run).values.astype(float) if series in run else np.array([])
+    y = run[series].values.astype(float) if series in run else np.array([])
     keep = np.isfinite(t) & np.isfinite(y) & (y > 0)
     image = ""
     if run.sizes.get("snapshot_time", 0) and "q1" in run and "q2" in run:
@@ -74,10 +75,11 @@ def _stamp(path: Path) -> list[int]:
     return [VIEWS_VERSION, st.st_size, st.st_mtime_ns]
 
 
-def run_views(path: Path) -> RunViews:
+def run_views(path: Path, series: str = "sigma2_S") -> RunViews:
     """:func:`draw_run_views` of the run file ``path`` (``results/<name>/runs/<id>.nc``),
-    from the cache where it holds the views of this very file, else drawn and cached."""
-    stamp = _stamp(path)
+    from the cache where it holds the views of this very file and series, else drawn and
+    cached."""
+    stamp = [*_stamp(path), series] if series != "sigma2_S" else _stamp(path)
     cached = path.parent.parent / CACHE / f"{path.stem}.json"
     try:
         data = json.loads(cached.read_text(encoding="utf-8"))
@@ -85,7 +87,7 @@ def run_views(path: Path) -> RunViews:
             return str(data["image"]), list(data["t"]), list(data["y"])
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         pass  # absent, unreadable or of another file: drawn again
-    image, t, y = draw_run_views(path)
+    image, t, y = draw_run_views(path, series)
     _store(cached, dumps({"stamp": stamp, "image": image, "t": t, "y": y}))
     return image, t, y
 

@@ -90,7 +90,9 @@ def test_a_chain_of_the_model_runs_from_its_predecessors_end_states(tmp_path):
     assert {"amplitude_mean", "hexagonality_mean", "mean_mean"} <= set(phase.data_vars)
     assert "sigma2_S_mean" not in phase.data_vars
     assert phase["eps"].attrs["long_name"].startswith("distance from onset")
-    assert (tmp_path / "results" / "chain" / "report.html").exists()
+    report = (tmp_path / "results" / "chain" / "report.html").read_text()
+    assert "amplitude(t) of the clicked point" in report  # the model's classifying observable
+    assert "sigma2_S" not in report
     assert not (tmp_path / "results" / "chain" / "failed_products.json").exists()
 
 

@@ -202,7 +202,7 @@ def test_the_runs_views_are_cached_by_run_file(adaptive, monkeypatch):
     assert views.run_views(path) == first  # from the cache
     drawn = []
 
-    def drawing(path):
+    def drawing(path, series="sigma2_S"):
         drawn.append(path)
         return "", [1.0], [2.0]
 

@@ -30,9 +30,17 @@ class ProgressEvents:
     LOG_MIN = 5.0
 
     def __init__(
-        self, console: Console, progress: Progress, store: Any, *, clock: Any = time.monotonic
+        self,
+        console: Console,
+        progress: Progress,
+        store: Any,
+        *,
+        clock: Any = time.monotonic,
+        compiled: bool = True,
     ):
         self.console, self.progress, self.store = console, progress, store
+        #: whether the campaign's model compiles kernels before its runs (the nematic model)
+        self.compiled = compiled
         self.clock = clock
         self.task: TaskID | None = None
         self.ok = 0
@@ -94,6 +102,9 @@ class ProgressEvents:
             )
 
     def warming(self) -> None:
+        if not self.compiled:
+            self.console.print("preparing the workers: importing the model ...", soft_wrap=True)
+            return
         self.console.print(
             "preparing the workers: compiled kernels (cached on disk; about a "
             "minute once per machine, then seconds) ...",
@@ -103,11 +114,13 @@ class ProgressEvents:
     def warmed(self, infos: list[dict[str, Any]], seconds: float) -> None:
         compiled = sum(int(i.get("compiled", 0)) for i in infos)
         what = (
-            f"{compiled} kernel(s) compiled once, now cached for every worker"
+            f" ({compiled} kernel(s) compiled once, now cached for every worker)"
             if compiled
-            else "loaded from the cache"
+            else " (loaded from the cache)"
+            if self.compiled
+            else ""
         )
-        self.console.print(f"workers ready in {seconds:.0f} s ({what})", soft_wrap=True)
+        self.console.print(f"workers ready in {seconds:.0f} s{what}", soft_wrap=True)
         if self.startup is None:
             self.startup = self.clock() - self.t0
 

@@ -165,6 +165,8 @@ def run(
     --max-failures, 4: a fit or figure failed, 130: interrupted (docs/campaigns/execution.md).
     """
     from ..expand import expand
+    from ..models.interface import Compiled
+    from ..models.registry import get_model
     from ..outputs.aggregate import write_phase
     from ..run.clusters import WORKER_LOSSES
     from ..run.driver import drive
@@ -292,7 +294,9 @@ def run(
             transient=False,
             disable=quiet or not err.is_terminal,
         )
-        events = ProgressEvents(say, progress, store)
+        events = ProgressEvents(
+            say, progress, store, compiled=isinstance(get_model(c.model), Compiled)
+        )
         try:
             report_changes(
                 say,

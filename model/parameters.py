@@ -317,6 +317,25 @@ class Numerics:
     steady_window: float = 50.0
     precision: str = "float64"
 
+    def _snapshot_times(self) -> tuple[float, ...]:
+        """``snapshot_times`` as a sorted tuple of times in [0, t_final], at most MAX_SAVES."""
+        snaps = self.snapshot_times
+        if isinstance(snaps, (int, float)):
+            snaps = (snaps,)
+        try:
+            snaps = tuple(sorted(float(t) for t in snaps))
+        except (TypeError, ValueError):
+            raise ParameterError("snapshot_times", self.snapshot_times, "a list of times") from None
+        if any(not 0 <= t <= self.t_final for t in snaps):
+            raise ParameterError(
+                "snapshot_times", list(snaps), f"times between 0 and t_final = {self.t_final}"
+            )
+        if len(snaps) > MAX_SAVES:
+            raise ParameterError(
+                "snapshot_times", f"{len(snaps)} times", f"at most {MAX_SAVES} snapshot times"
+            )
+        return snaps
+
     def __post_init__(self) -> None:
         def number(name: str, *, integer: bool = False) -> float:
             value = getattr(self, name)
@@ -357,18 +376,16 @@ class Numerics:
             )
         if number("max_newton", integer=True) < 1:
             raise ParameterError("max_newton", self.max_newton, "an integer >= 1")
-        if self.error_norm not in ERROR_NORMS:
-            raise ParameterError("error_norm", self.error_norm, " or ".join(ERROR_NORMS))
-        if self.scheme not in SCHEMES:
-            raise ParameterError("scheme", self.scheme, " or ".join(SCHEMES))
-        if self.mechanics not in MECHANICS:
-            raise ParameterError("mechanics", self.mechanics, " or ".join(MECHANICS))
-        if self.displacement not in DISPLACEMENT:
-            raise ParameterError("displacement", self.displacement, " or ".join(DISPLACEMENT))
-        if self.backend not in BACKENDS:
-            raise ParameterError("backend", self.backend, " or ".join(BACKENDS))
-        if self.precision not in PRECISIONS:
-            raise ParameterError("precision", self.precision, " or ".join(PRECISIONS))
+        for name, words in (
+            ("error_norm", ERROR_NORMS),
+            ("scheme", SCHEMES),
+            ("mechanics", MECHANICS),
+            ("displacement", DISPLACEMENT),
+            ("backend", BACKENDS),
+            ("precision", PRECISIONS),
+        ):
+            if getattr(self, name) not in words:
+                raise ParameterError(name, getattr(self, name), " or ".join(words))
         for name in ("adaptive", "incompressible"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(name, getattr(self, name), "true or false")
@@ -379,22 +396,7 @@ class Numerics:
                 "true only with mechanics = 'linear' (finite strain "
                 "is compressible with bulk modulus kappa)",
             )
-        snaps = self.snapshot_times
-        if isinstance(snaps, (int, float)):
-            snaps = (snaps,)
-        try:
-            snaps = tuple(sorted(float(t) for t in snaps))
-        except (TypeError, ValueError):
-            raise ParameterError("snapshot_times", self.snapshot_times, "a list of times") from None
-        if any(not 0 <= t <= self.t_final for t in snaps):
-            raise ParameterError(
-                "snapshot_times", list(snaps), f"times between 0 and t_final = {self.t_final}"
-            )
-        if len(snaps) > MAX_SAVES:
-            raise ParameterError(
-                "snapshot_times", f"{len(snaps)} times", f"at most {MAX_SAVES} snapshot times"
-            )
-        object.__setattr__(self, "snapshot_times", snaps)
+        object.__setattr__(self, "snapshot_times", self._snapshot_times())
         # Bounds on the work and the memory of one run, checked before anything is allocated.
         if self.t_final / self.save_every > MAX_SAVES:
             raise ParameterError(

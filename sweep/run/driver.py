@@ -19,12 +19,11 @@ import logging
 import math
 import threading
 import time
-import traceback
 from collections.abc import Callable, Iterator
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, cast
+from typing import TYPE_CHECKING, Any, Protocol
 
 from ..campaign import ExecutionSpec
 from ..campaign_copy import save_campaign_copy
@@ -36,9 +35,9 @@ from ..store import CampaignStore, Record
 from .batch import BatchTask, execute_batch
 from .clusters import WORKER_LOSSES, open_cluster
 from .clusters import make_cluster as make_cluster  # where it was first
-from .failures import FailureLimit
+from .failures import FailureLimit, setup_failure_record
 from .group import RunGroup, execute_group, planned_stamp, tasks_of
-from .task import UNSAVED, RunTask, check_device, execute_run, failure_record, warm_workers
+from .task import UNSAVED, RunTask, check_device, execute_run, warm_workers
 from .todo import Plan, parents_not_done, plan_runs
 from .workers import CHECK_EVERY, ClusterLink, Supervisor
 
@@ -138,12 +137,6 @@ class RunSummary:
     @property
     def completed(self) -> int:
         return self.ok + len(self.failed)
-
-
-def _lost_task_record(task: RunTask, exc: BaseException) -> Record:
-    detail = f"{type(exc).__name__}: {exc}"
-    tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
-    return failure_record(task, "exception", detail, tb, math.nan)
 
 
 def _worker_lost(exc: BaseException) -> bool:
@@ -361,8 +354,7 @@ def _run_campaign(
                 return True
             results = []
             for run, task, _ in held:
-                record = _lost_task_record(task, e)
-                record.update(cast(Record, task.identity()))
+                record = setup_failure_record(task, e, len(held) if batched else 1)
                 store.write_record(record)
                 results.append((run, record))
         else:

@@ -219,11 +219,23 @@ def _named(name: str, raw: Any, keys: tuple[str, ...], required: tuple[str, ...]
     return {k: _number(f"{name}.{k}", v) for k, v in raw.items()}
 
 
-def _window(name: str, start: float, duration: float) -> None:
+def _window(name: str, start: float, duration: float) -> float:
+    """The end of a window that begins at ``start`` and lasts ``duration``: a finite time
+    after its start (a duration below the rounding of the start would end at the start, and
+    ``1e308 + 1e308`` overflows: the switch times written down must increase)."""
     if start < 0:
         raise ParameterError(f"{name}.start", start, "a time >= 0")
     if duration <= 0:
         raise ParameterError(f"{name}.duration", duration, "a duration > 0")
+    end = start + duration
+    if not (math.isfinite(end) and end > start):
+        raise ParameterError(
+            f"{name}.duration",
+            duration,
+            f"a duration that ends after its start ({start:g}) at a finite time "
+            f"(start + duration is {end:g})",
+        )
+    return end
 
 
 def profile_from(name: str, raw: Any) -> Profile | float:
@@ -243,15 +255,13 @@ def profile_from(name: str, raw: Any) -> Profile | float:
         profile = Piecewise(_points(where, spec), linear=form == "ramp")
     elif form == "ramp":
         r = _named(where, spec, RAMP_KEYS, RAMP_KEYS)
-        _window(where, r["start"], r["duration"])
+        end = _window(where, r["start"], r["duration"])
         head = [(0.0, r["from"])] if r["start"] > 0 else []
-        end = r["start"] + r["duration"]
         profile = Piecewise((*head, (r["start"], r["from"]), (end, r["to"])), linear=True)
     elif form == "pulse":
         r = _named(where, spec, PULSE_KEYS, PULSE_KEYS)
-        _window(where, r["start"], r["duration"])
+        end = _window(where, r["start"], r["duration"])
         head = [(0.0, r["base"])] if r["start"] > 0 else []
-        end = r["start"] + r["duration"]
         profile = Piecewise((*head, (r["start"], r["level"]), (end, r["base"])), linear=False)
     elif form == "sine":
         r = _named(where, spec, SINE_KEYS, ("amplitude", "period"))

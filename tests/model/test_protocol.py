@@ -88,6 +88,19 @@ def test_a_constant_protocol_is_the_plain_parameter():
         ({"kappa": [[0, 1.0], [3, 2.0]]}, "protocol.kappa"),
         ({"chi": {"pulse": {"base": 1, "level": 0, "start": 2}}}, "protocol.chi.pulse"),
         ({"chi": {"pulse": {"base": 1, "level": 0, "start": 2, "duration": 0}}}, "duration"),
+        # an end the sum cannot hold: at the start (rounded away) or past the largest float
+        (
+            {"chi": {"pulse": {"base": 1, "level": 0, "start": 0.1, "duration": 1e-300}}},
+            "'protocol.chi.pulse.duration': 1e-300 (allowed: a duration that ends after its start",
+        ),
+        (
+            {"chi": {"ramp": {"from": 0, "to": 1, "start": 1e308, "duration": 1e308}}},
+            "protocol.chi.ramp.duration",
+        ),
+        (
+            {"eps": {"pulse": {"base": 0, "level": 0.1, "start": 1e308, "duration": 1e308}}},
+            "start + duration is inf",
+        ),
         ({"eps": {"sine": {"amplitude": 0.1, "period": 0}}}, "protocol.eps.sine.period"),
         ({"chi": {"ramp": [[0, 1], [2, "x"]]}}, "protocol.chi.ramp[1] value"),
         ({"chi": {"steps": [[0, 1]], "ramp": [[0, 1]]}}, "exactly one of"),

@@ -23,12 +23,13 @@ from typing import Any
 
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.errors import CampaignError, Problem
+from nematic_solids.sweep.expand import expand
 from nematic_solids.sweep.spec import load_campaign
 
 BASE: dict[str, Any] = {
@@ -188,6 +189,8 @@ def campaigns(draw: st.DrawFn) -> dict[str, Any]:
     return doc
 
 
+#: grid points of an accepted campaign whose model objects are rebuilt as a worker does
+REBUILT = 64
 #: accepted campaigns run for real so far in this session (the default run does a few)
 RUNS = {"done": 0}
 LINE = re.compile(r"\.yaml:\d+: ")
@@ -205,12 +208,17 @@ def _check(folder: Path, doc: dict[str, Any], max_runs: int) -> None:
     path.write_text(text, encoding="utf-8", errors="surrogateescape")
     problems: list[Problem] = []
     try:  # the reader itself: refused with every problem at its line, or a campaign
-        load_campaign(path)
+        campaign = load_campaign(path)
     except CampaignError as e:
         problems = list(e.problems)
     refused = bool(problems)
     for problem in problems:
         assert AT_LINE.fullmatch(problem.location), (text, [str(p) for p in problems])
+    if not refused:  # a worker rebuilds each run's model objects from their dicts: the same
+        for point in expand(campaign).points[:REBUILT]:
+            for accepted in (point.parameters, point.numerics):
+                rebuilt = type(accepted).from_dict(accepted.to_dict())
+                assert rebuilt.to_dict() == accepted.to_dict(), (text, accepted)
     runner = CliRunner()
     res = runner.invoke(app, ["validate", str(path)])
     out = res.output
@@ -248,8 +256,31 @@ COMMON = settings(
 )
 
 
+#: campaigns the property found that failed once (each refused now)
+FOUND = [
+    # a pulse whose end rounds to its start: validated, then every run failed rebuilding it
+    {
+        **BASE,
+        "protocol": {"chi": {"pulse": {"base": 0.0, "level": 1.0, "start": 0.1}}},
+        "sweep": {"axes": {"alpha_minus_B": [0.1, 0.2], "chi_duration": [1e-300, 0.2]}},
+    },
+    # a ramp whose end overflows
+    {
+        **BASE,
+        "protocol": {"chi": {"ramp": {"from": 0.0, "to": 1.0, "start": 1e308, "duration": 1e308}}},
+    },
+]
+
+
+def _found(test):
+    for doc in FOUND:
+        test = example(doc=doc)(test)
+    return test
+
+
 @settings(COMMON, max_examples=40)
 @given(doc=campaigns())
+@_found
 def test_a_mutated_campaign_is_refused_with_its_line_or_runs(tmp_path_factory, doc):
     _check(tmp_path_factory.mktemp("prop"), doc, max_runs=1)
 

@@ -168,6 +168,12 @@ def test_max_failures_stops_the_campaign_with_exit_3(tmp_path):
             ],
         ),
         (RuntimeError("no such model module"), "exception", ["RuntimeError: no such model module"]),
+        # an OSError raised by the task is its failure, not a result lost on the way back
+        (
+            PermissionError(13, "Permission denied", "/results/runs"),
+            "exception",
+            ["PermissionError: [Errno 13] Permission denied: '/results/runs'"],
+        ),
     ],
 )
 def test_a_task_that_fails_before_its_model_runs_is_recorded_with_its_run(

@@ -264,6 +264,11 @@ FOUND = [
         "protocol": {"chi": {"pulse": {"base": 0.0, "level": 1.0, "start": 0.1}}},
         "sweep": {"axes": {"alpha_minus_B": [0.1, 0.2], "chi_duration": [1e-300, 0.2]}},
     },
+    # a ramp piece whose steps do not move the time on: its runs stalled at t = 0.1
+    {
+        **BASE,
+        "protocol": {"chi": {"ramp": {"from": 0.0, "to": 0.4, "start": 0.1, "duration": 2e-17}}},
+    },
     # a ramp whose end overflows
     {
         **BASE,

@@ -185,6 +185,14 @@ def test_every_value_of_every_section_replaced_by_every_hostile_value(tmp_path):
             "protocol.chi.ramp.duration: got 1e+308; allowed: a duration that ends after its "
             "start (1e+308) at a finite time (start + duration is inf)",
         ),
+        # a ramp piece below the float spacing of its time: validated, then its run stalled
+        # at t = 0.1 forever (each step of 1/8 of the piece left the time unchanged)
+        (
+            "protocol: {chi: {ramp: {from: 0, to: 0.4, start: 0.1, duration: 2.0e-17}}}\n",
+            4,
+            "protocol.chi.ramp: got 'a piece from t = 0.1 to t = 0.10000000000000002'; allowed: "
+            "ramp pieces at least 8 times the spacing of floating-point times",
+        ),
     ],
 )
 def test_what_failed_at_run_time_is_refused_with_its_line(tmp_path, text, line, words):

@@ -6,11 +6,15 @@ of the read and check, and the growth of the process's peak resident memory over
 after the imports. Also the model's check of every grid point (``grid_<n>``, ``grid_<n>x<m>``:
 an accepted campaign of that many grid points, one seed; ``protocol_<n>x<n>``: each point with
 a pulse and a sine), which is linear in the grid points: the largest accepted grids have
-sweep.limits.MAX_GRID_POINTS points, and ``grid_1000x1000`` is refused by its size.
+sweep.limits.MAX_GRID_POINTS points, and ``grid_1000x1000`` is refused by its size. And
+collections (``collection_*``: the collection read and checked, then each member as
+``nematic validate`` does): the largest accepted, sweep.limits.MAX_COLLECTION_MEMBERS small
+campaigns, and hostile ones refused by their member count or the YAML's node bound.
 
-    python benchmarks/validate_bounds.py
+    python benchmarks/validate_bounds.py [CASE ...]
 
-Prints a table and writes benchmarks/validate_bounds.json.
+Prints a table and writes benchmarks/validate_bounds.json (with CASEs: only those cases, the
+others kept as they were).
 """
 
 from __future__ import annotations
@@ -25,11 +29,14 @@ PROBE = """
 import json, resource, sys, time
 from nematic_solids.sweep.errors import CampaignError
 from nematic_solids.sweep.spec import load_campaign
+from nematic_solids.sweep.spec.collection import read_collection
 import nematic_solids.sweep.analysis.registry, nematic_solids.sweep.figures.registry
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t0 = time.process_time()
 try:
-    load_campaign(sys.argv[1])
+    collection = read_collection(sys.argv[1])
+    for member in collection.members if collection is not None else [sys.argv[1]]:
+        load_campaign(member)
     outcome = "accepted"
 except CampaignError as e:
     outcome = " ".join(str(e).split())[-110:]
@@ -82,6 +89,14 @@ def cases(folder: Path) -> dict[str, Path]:
         "grid_1000x1000": "name: big\nsweep:\n  axes:\n    eps: {linspace: [0, 0.1, 1000]}\n"
         "    K: {linspace: [1.0e-5, 1.0e-3, 1000]}\nseeds: 1\n",
     }
+    member = "parameters: {noise_modes: 8}\nsweep: {axes: {eps: [0.0, 0.01]}}\nseeds: 1\n"
+    for i in range(100):
+        (folder / f"member{i}.yaml").write_text(f"name: member{i}\n{member}")
+    texts["collection_100_members"] = "campaigns:\n" + "".join(
+        f"  - member{i}.yaml\n" for i in range(100)
+    )
+    texts["collection_90000_members"] = "campaigns:\n" + "  - member0.yaml\n" * 90_000
+    texts["collection_1000000_members"] = "campaigns: [" + "a," * 999_999 + "a]\n"
     out = {}
     for name, text in texts.items():
         out[name] = folder / f"{name}.yaml"
@@ -93,16 +108,19 @@ def cases(folder: Path) -> dict[str, Path]:
 
 
 def main() -> None:
-    results = {}
+    out = Path(__file__).with_suffix(".json")
+    only = sys.argv[1:]
+    results = json.loads(out.read_text()) if only and out.exists() else {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, path in cases(Path(tmp)).items():
+            if only and name not in only:
+                continue
             done = subprocess.run(
                 [sys.executable, "-c", PROBE, str(path)], capture_output=True, text=True
             )
             results[name] = json.loads(done.stdout)
             r = results[name]
             print(f"{name:28s} {r['cpu_s']:7.3f} s {r['peak_growth_mib']:7.1f} MiB  {r['outcome']}")
-    out = Path(__file__).with_suffix(".json")
     out.write_text(json.dumps(results, indent=1) + "\n")
     print(f"wrote {out}")
 

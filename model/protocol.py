@@ -26,7 +26,8 @@ switch time (its observables and its force balance) sees the value after it.
 **Resolved structure.** No step steps over a function's structure: besides landing on the
 switch times, a step is at most :data:`SINE_STEP_FRACTION` of a sine's period (16 steps per
 period) and :data:`RAMP_STEP_FRACTION` of a ramp piece's duration (:meth:`Protocol.max_step`).
-Every value and every rate of a function is finite at every time (checked when it is read), and
+Every value and every rate of a function is finite at every time, and every step a ramp piece
+allows moves the time on (checked when it is read), and
 :meth:`Protocol.forced_steps` counts the steps these rules force on a run (the cost estimate's).
 The floor on a sine's period relative to the model's own time scales is
 :func:`nematic_solids.model.parameters.check_compatible`'s.
@@ -219,11 +220,23 @@ def _named(name: str, raw: Any, keys: tuple[str, ...], required: tuple[str, ...]
     return {k: _number(f"{name}.{k}", v) for k, v in raw.items()}
 
 
-def _window(name: str, start: float, duration: float) -> None:
+def _window(name: str, start: float, duration: float) -> float:
+    """The end of a window that begins at ``start`` and lasts ``duration``: a finite time
+    after its start (a duration below the rounding of the start would end at the start, and
+    ``1e308 + 1e308`` overflows: the switch times written down must increase)."""
     if start < 0:
         raise ParameterError(f"{name}.start", start, "a time >= 0")
     if duration <= 0:
         raise ParameterError(f"{name}.duration", duration, "a duration > 0")
+    end = start + duration
+    if not (math.isfinite(end) and end > start):
+        raise ParameterError(
+            f"{name}.duration",
+            duration,
+            f"a duration that ends after its start ({start:g}) at a finite time "
+            f"(start + duration is {end:g})",
+        )
+    return end
 
 
 def profile_from(name: str, raw: Any) -> Profile | float:
@@ -243,15 +256,13 @@ def profile_from(name: str, raw: Any) -> Profile | float:
         profile = Piecewise(_points(where, spec), linear=form == "ramp")
     elif form == "ramp":
         r = _named(where, spec, RAMP_KEYS, RAMP_KEYS)
-        _window(where, r["start"], r["duration"])
+        end = _window(where, r["start"], r["duration"])
         head = [(0.0, r["from"])] if r["start"] > 0 else []
-        end = r["start"] + r["duration"]
         profile = Piecewise((*head, (r["start"], r["from"]), (end, r["to"])), linear=True)
     elif form == "pulse":
         r = _named(where, spec, PULSE_KEYS, PULSE_KEYS)
-        _window(where, r["start"], r["duration"])
+        end = _window(where, r["start"], r["duration"])
         head = [(0.0, r["base"])] if r["start"] > 0 else []
-        end = r["start"] + r["duration"]
         profile = Piecewise((*head, (r["start"], r["level"]), (end, r["base"])), linear=False)
     elif form == "sine":
         r = _named(where, spec, SINE_KEYS, ("amplitude", "period"))
@@ -263,6 +274,7 @@ def profile_from(name: str, raw: Any) -> Profile | float:
     else:
         raise ParameterError(where, spec, "a list of [time, value] pairs")
     _check_finite(where, profile)
+    _check_resolvable(where, profile)
     return profile.extremes()[0] if profile.constant() else profile
 
 
@@ -278,6 +290,22 @@ def _check_finite(name: str, profile: Profile) -> None:
             raise ParameterError(name, f"{what} {x}", "finite values at every time")
     if not math.isfinite(rate):
         raise ParameterError(name, f"largest rate {rate}", "a finite rate at every time")
+
+
+def _check_resolvable(name: str, profile: Profile) -> None:
+    """Every step a ramp piece allows (:data:`RAMP_STEP_FRACTION` of it) moves the time on: a
+    piece shorter than that many spacings of the floating-point times at its end (a ramp from
+    t = 0.1 lasting 2e-17) would hold the integrator at one time forever."""
+    if not (isinstance(profile, Piecewise) and profile.linear):
+        return
+    for (t0, _), (t1, _) in zip(profile.points, profile.points[1:], strict=False):
+        if (t1 - t0) * RAMP_STEP_FRACTION < math.ulp(t1):
+            raise ParameterError(
+                name,
+                f"a piece from t = {t0!r} to t = {t1!r}",
+                f"ramp pieces at least {1 / RAMP_STEP_FRACTION:g} times the spacing of "
+                f"floating-point times at their end ({math.ulp(t1):.3g} there) long",
+            )
 
 
 @dataclass(frozen=True)

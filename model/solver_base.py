@@ -369,6 +369,10 @@ class ETDSolver(SolverBase):
                     h_try = min(h, self.dt_max, cap, target - t)
                 else:
                     h_try = min(h, cap, target - t)
+                if t + h_try == t and h_try != switch - t:  # a step that would not move on
+                    raise SimulationFailure(
+                        "time_unresolved", f"a step of {h_try:g} does not change t", t
+                    )
                 try:
                     self._after = t
                     new, err = self.step(cur, t, h_try)

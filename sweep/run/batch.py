@@ -27,9 +27,9 @@ from ..models.interface import batched
 from ..models.registry import get_model
 from ..store import Record
 from . import continuation
+from .failures import crash_record
 from .task import (
     RunTask,
-    crash_record,
     execute_run,
     finish_record,
     request,

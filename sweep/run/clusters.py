@@ -35,6 +35,14 @@ log = logging.getLogger(__name__)
 WORKER_LOSSES = 3
 
 
+def worker_lost(exc: BaseException) -> bool:
+    """Whether ``exc`` (what a run's task ended with) says its worker was lost under it more
+    often than the scheduler retries it (:data:`WORKER_LOSSES`): not a failure of the run."""
+    from distributed import KilledWorker
+
+    return isinstance(exc, KilledWorker)
+
+
 def _security(execution: ExecutionSpec) -> Any:
     if not execution.tls:
         log.warning(

@@ -19,12 +19,11 @@ import logging
 import math
 import threading
 import time
-import traceback
 from collections.abc import Callable, Iterator
 from concurrent.futures import CancelledError
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, cast
+from typing import TYPE_CHECKING, Any, Protocol
 
 from ..campaign import ExecutionSpec
 from ..campaign_copy import save_campaign_copy
@@ -34,11 +33,11 @@ from ..errors import ClusterError
 from ..expand import Expansion, RunSpec
 from ..store import CampaignStore, Record
 from .batch import BatchTask, execute_batch
-from .clusters import WORKER_LOSSES, open_cluster
+from .clusters import WORKER_LOSSES, open_cluster, worker_lost
 from .clusters import make_cluster as make_cluster  # where it was first
-from .failures import FailureLimit
+from .failures import FailureLimit, setup_failure_record
 from .group import RunGroup, execute_group, planned_stamp, tasks_of
-from .task import UNSAVED, RunTask, check_device, execute_run, failure_record, warm_workers
+from .task import UNSAVED, RunTask, check_device, execute_run, warm_workers
 from .todo import Plan, parents_not_done, plan_runs
 from .workers import CHECK_EVERY, ClusterLink, Supervisor
 
@@ -138,20 +137,6 @@ class RunSummary:
     @property
     def completed(self) -> int:
         return self.ok + len(self.failed)
-
-
-def _lost_task_record(task: RunTask, exc: BaseException) -> Record:
-    detail = f"{type(exc).__name__}: {exc}"
-    tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
-    return failure_record(task, "exception", detail, tb, math.nan)
-
-
-def _worker_lost(exc: BaseException) -> bool:
-    """Whether ``exc`` says the run's worker was lost under it more often than dask retries
-    (:data:`~nematic_solids.sweep.run.clusters.WORKER_LOSSES`): not a failure of the run."""
-    from distributed import KilledWorker
-
-    return isinstance(exc, KilledWorker)
 
 
 def run_campaign(
@@ -299,37 +284,52 @@ def _run_campaign(
         """Take one finished future (one run, or a batch's runs); ``False`` to stop the
         campaign."""
         held = tasks.pop(fut.key)
+
+        def failed(e: BaseException) -> list[tuple[RunSpec, Record]]:
+            """The records of the runs ``held``, whose task raised ``e`` (written)."""
+            out = [
+                (run, setup_failure_record(t, e, len(held) if batched else 1)) for run, t, _ in held
+            ]
+            for _, record in out:
+                store.write_record(record)
+            return out
+
         try:
             result = fut.result(timeout=RESULT_WAIT)
         except OSError as e:
-            # Finished, but its result did not arrive: it went with its worker (a batch job
-            # ended; dask would recompute it), or the connection to the scheduler broke
-            # (TimeoutError, CommClosedError). Not the runs' fault: the records on disk say
-            # what happened, else the runs go again (or stay pending).
-            with contextlib.suppress(Exception):
-                fut.cancel()
-            found = [(run, store.read_record(run.run_id)) for run, _, _ in held]
-            missing = [i for (run, rec), (_, _, i) in zip(found, held, strict=True) if rec is None]
-            if missing:
-                i0 = missing[0]
-                what = f"{len(missing)} run(s) from {expansion.run(i0).run_id}"
-                if client.status != "running":
-                    summary.lost.extend(expansion.run(i) for i in missing)
-                elif attempts.get(i0, 0) < WORKER_LOSSES:
-                    log.warning(
-                        "the result of %s was lost with its worker (%s); it runs again",
-                        what,
-                        type(e).__name__,
-                    )
-                    queue.append(missing)
-                else:
-                    log.warning(
-                        "the result of %s was lost with its worker %d times; it stays pending",
-                        what,
-                        attempts.get(i0, 0) + 1,
-                    )
-                    summary.worker_lost.extend(expansion.run(i) for i in missing)
-            results = [(run, rec) for run, rec in found if rec is not None]
+            if fut.status == "error":  # raised by the task (its setup): its runs failed
+                results = failed(e)
+            else:
+                # Finished, but its result did not arrive: it went with its worker (a batch job
+                # ended; dask would recompute it), or the connection to the scheduler broke
+                # (TimeoutError, CommClosedError). Not the runs' fault: the records on disk say
+                # what happened, else the runs go again (or stay pending).
+                with contextlib.suppress(Exception):
+                    fut.cancel()
+                found = [(run, store.read_record(run.run_id)) for run, _, _ in held]
+                missing = [
+                    i for (run, rec), (_, _, i) in zip(found, held, strict=True) if rec is None
+                ]
+                if missing:
+                    i0 = missing[0]
+                    what = f"{len(missing)} run(s) from {expansion.run(i0).run_id}"
+                    if client.status != "running":
+                        summary.lost.extend(expansion.run(i) for i in missing)
+                    elif attempts.get(i0, 0) < WORKER_LOSSES:
+                        log.warning(
+                            "the result of %s was lost with its worker (%s); it runs again",
+                            what,
+                            type(e).__name__,
+                        )
+                        queue.append(missing)
+                    else:
+                        log.warning(
+                            "the result of %s was lost with its worker %d times; it stays pending",
+                            what,
+                            attempts.get(i0, 0) + 1,
+                        )
+                        summary.worker_lost.extend(expansion.run(i) for i in missing)
+                results = [(run, rec) for run, rec in found if rec is not None]
         except CancelledError as e:  # the cluster went away under the run: not its fault
             (log.debug if summary.lost else log.warning)(
                 "run %s was cancelled by dask (%s); rerun to redo it",
@@ -348,7 +348,7 @@ def _run_campaign(
                 queue.clear()  # nothing more can be submitted
             return True
         except Exception as e:  # noqa: BLE001 - killed workers, errors outside the run
-            if _worker_lost(e):  # not the runs' failure: they stay pending (no record)
+            if worker_lost(e):  # not the runs' failure: they stay pending (no record)
                 log.warning(
                     "run %s lost its worker %d times (batch jobs cancelled, "
                     "preempted or past their walltime, or the run kills its worker: "
@@ -359,12 +359,7 @@ def _run_campaign(
                 summary.worker_lost.extend(run for run, _, _ in held)
                 fut.release()
                 return True
-            results = []
-            for run, task, _ in held:
-                record = _lost_task_record(task, e)
-                record.update(cast(Record, task.identity()))
-                store.write_record(record)
-                results.append((run, record))
+            results = failed(e)
         else:
             records = result if isinstance(result, list) else [result]
             results = [(run, rec) for (run, _, _), rec in zip(held, records, strict=True)]

@@ -33,11 +33,11 @@ from ..models.registry import get_model
 from ..store import CampaignStore, Record
 from . import continuation
 from .batch import group_runs
+from .failures import crash_record
 from .task import (
     UNSAVED,
     Held,
     RunTask,
-    crash_record,
     execute_run,
     finish_record,
     task_store,

@@ -18,7 +18,6 @@ import math
 import os
 import socket
 import time
-import traceback
 import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -30,11 +29,11 @@ from ..errors import DeviceUnavailable, StorageError, StoreError
 from ..expand import Expansion, RunSpec
 from ..files import atomic_to_netcdf, file_stamp
 from ..identity import SCHEMA_VERSION, identity_start, trajectory_id
-from ..limits import OUT_OF_MEMORY, out_of_memory
 from ..models.interface import Compiled, RunRequest, State, batched
 from ..models.registry import get_model
-from ..store import CampaignStore, Record, now_iso, record_from_dataset
+from ..store import CampaignStore, Record, record_from_dataset
 from . import continuation
+from .failures import crash_record, failure_record
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -153,36 +152,6 @@ def prepare_dataset(ds: xr.Dataset, task: RunTask) -> tuple[xr.Dataset, dict[str
     ds.attrs.update(run_id=task.run_id, campaign=task.campaign, identity_schema=SCHEMA_VERSION)
     ds.attrs.setdefault("status", "ok")  # a model's run that returns says how it ended, or ok
     return ds, encoding
-
-
-def failure_record(task: RunTask, reason: str, detail: str, tb: str, wall: float) -> Record:
-    """The record of a run that failed (or was lost) before it produced a result."""
-    return {
-        "run_id": task.run_id,
-        "status": "failed",
-        "reason": reason,
-        "detail": detail,
-        "t_failed": None,
-        "traceback": tb,
-        "seed": task.seed,
-        "wall_time": wall,
-        "nc_bytes": None,
-        "scalars": {},
-        "code_version": "",
-        "git_commit": "",
-        "finished": now_iso(),
-        "host": socket.gethostname(),
-    }
-
-
-def crash_record(task: RunTask, reason: str, error: Exception, t0: float, seeds: int = 1) -> Record:
-    """The failure record of ``error``, being handled (its traceback), for a run started at
-    ``t0`` (``time.perf_counter``); a MemoryError is recorded as :data:`OUT_OF_MEMORY` with
-    what the run needed (``seeds``: computed together with it, an accelerated batch)."""
-    detail = f"{type(error).__name__}: {error}"
-    if isinstance(error, MemoryError):
-        reason, detail = OUT_OF_MEMORY, out_of_memory(task.numerics, error, seeds)
-    return failure_record(task, reason, detail, traceback.format_exc(), time.perf_counter() - t0)
 
 
 def task_store(task: RunTask) -> CampaignStore:

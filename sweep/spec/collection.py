@@ -13,7 +13,8 @@
 take a collection where they take a campaign file (:mod:`nematic_solids.sweep.cli.collection`);
 every campaign keeps its own results folder, lock, runs and products, so a member can also be run,
 inspected or resumed on its own. A collection is not a campaign: it has no other keys, and its
-members are campaign files (a collection does not include collections).
+members are campaign files (a collection does not include collections), at most
+:data:`~nematic_solids.sweep.limits.MAX_COLLECTION_MEMBERS` of them.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import CampaignError, Problem
+from ..limits import MAX_COLLECTION_MEMBERS
 from .checker import Checker
 from .yaml_input import read_document, read_text
 
@@ -71,6 +73,13 @@ def read_collection(path: str | Path) -> Collection | None:
     members: list[Path] = []
     if not isinstance(raw, list) or not raw:
         c.bad((MARK,), raw, "a non-empty list of campaign files (relative to this file)")
+        raw = []
+    elif len(raw) > MAX_COLLECTION_MEMBERS:  # refused by its count, before any member is read
+        c.add(
+            (MARK,),
+            f"{len(raw)} campaign files; allowed: at most {MAX_COLLECTION_MEMBERS} (more "
+            "campaigns are several collections)",
+        )
         raw = []
     seen: dict[Path, int] = {}
     for i, item in enumerate(raw):

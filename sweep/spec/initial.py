@@ -85,8 +85,9 @@ def read_initial(c: Checker, raw: Any, read: Mapping[str, Any]) -> InitialReques
         return None
     here = Path(c.source).parent if c.source and not c.source.startswith("<") else Path.cwd()
     file = here / name
-    if not file.exists() and file.with_suffix(".yaml").exists():
-        file = file.with_suffix(".yaml")
+    named = file.with_name(file.name + ".yaml")  # ``parent`` for parent.yaml
+    if not file.exists() and named.exists():
+        file = named
     if file.suffix.lower() not in SUFFIXES:
         c.add(where, f"{name} is not a campaign file (a {' or '.join(SUFFIXES)} file)")
         return None

@@ -6,6 +6,8 @@ paths agreeing; a protocol run continued exactly from its saved states."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,7 @@ from nematic_solids.model.errors import ParameterError
 from nematic_solids.model.fourier import SpectralGrid
 from nematic_solids.model.mechanics import make_mechanics
 from nematic_solids.model.parameters import Numerics, Parameters
-from nematic_solids.model.protocol import Protocol, protocol_from
+from nematic_solids.model.protocol import Piecewise, Protocol, protocol_from
 from nematic_solids.model.simulate import run
 from nematic_solids.model.solver import ETDRK4Solver
 from nematic_solids.model.solver_base import ETDSolver
@@ -88,6 +90,27 @@ def test_a_constant_protocol_is_the_plain_parameter():
         ({"kappa": [[0, 1.0], [3, 2.0]]}, "protocol.kappa"),
         ({"chi": {"pulse": {"base": 1, "level": 0, "start": 2}}}, "protocol.chi.pulse"),
         ({"chi": {"pulse": {"base": 1, "level": 0, "start": 2, "duration": 0}}}, "duration"),
+        # an end the sum cannot hold: at the start (rounded away) or past the largest float
+        (
+            {"chi": {"pulse": {"base": 1, "level": 0, "start": 0.1, "duration": 1e-300}}},
+            "'protocol.chi.pulse.duration': 1e-300 (allowed: a duration that ends after its start",
+        ),
+        (
+            {"chi": {"ramp": {"from": 0, "to": 1, "start": 1e308, "duration": 1e308}}},
+            "protocol.chi.ramp.duration",
+        ),
+        (
+            {"eps": {"pulse": {"base": 0, "level": 0.1, "start": 1e308, "duration": 1e308}}},
+            "start + duration is inf",
+        ),
+        # a ramp piece too short for its steps (1/8 of it) to move the time on
+        (
+            {"chi": {"ramp": {"from": 0, "to": 0.4, "start": 0.1, "duration": 2e-17}}},
+            "'protocol.chi.ramp': 'a piece from t = 0.1 to t = 0.10000000000000002' (allowed: "
+            "ramp pieces at least 8 times the spacing of floating-point times at their end "
+            "(1.39e-17 there) long)",
+        ),
+        ({"chi": {"ramp": [[0, 0.0], [1e6, 0.1], [1e6 + 5e-10, 0.2]]}}, "protocol.chi.ramp"),
         ({"eps": {"sine": {"amplitude": 0.1, "period": 0}}}, "protocol.eps.sine.period"),
         ({"chi": {"ramp": [[0, 1], [2, "x"]]}}, "protocol.chi.ramp[1] value"),
         ({"chi": {"steps": [[0, 1]], "ramp": [[0, 1]]}}, "exactly one of"),
@@ -97,6 +120,26 @@ def test_a_bad_protocol_names_its_place(protocol, where):
     with pytest.raises(ParameterError, match=None) as err:
         Parameters.from_dict({"protocol": protocol})
     assert where in str(err.value)
+
+
+def test_a_step_that_would_not_move_the_time_on_ends_the_run(monkeypatch):
+    """A ramp piece shorter than 8 float spacings of its time, built past the reader's check,
+    ends the run (``time_unresolved``) instead of holding it at one time forever."""
+    piece = Piecewise(((0.0, 0.0), (0.1, 0.0), (math.nextafter(0.1, 1.0), 0.4)), linear=True)
+    p = Parameters.from_dict({"noise_modes": 8, "protocol": Protocol((("chi", piece),))})
+    steps = []
+    step = ETDRK4Solver.step
+
+    def counted(self, u, t, h):
+        steps.append(t)
+        assert len(steps) < 100_000, f"the run stalls at t = {t!r}"
+        return step(self, u, t, h)
+
+    monkeypatch.setattr(ETDRK4Solver, "step", counted)
+    ds = run(p, Numerics(resolution=32, t_final=0.2, save_every=0.1), 0)
+    assert ds.attrs["status"] == "failed"
+    assert ds.attrs["reason"] == "time_unresolved", ds.attrs
+    assert ds.attrs["t_failed"] == 0.1
 
 
 def _spy_steps(monkeypatch):

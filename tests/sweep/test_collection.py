@@ -21,8 +21,10 @@ from typer.testing import CliRunner
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.cli.collection import run_collection
 from nematic_solids.sweep.errors import CampaignError
+from nematic_solids.sweep.limits import MAX_COLLECTION_MEMBERS
 from nematic_solids.sweep.lock import read_lock_holder
 from nematic_solids.sweep.spec.collection import read_collection
+from nematic_solids.sweep.spec.yaml_input import MAX_YAML_NODES
 from nematic_solids.sweep.store import CampaignStore
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -95,6 +97,50 @@ def test_collection_mistakes_are_listed_with_line_and_key(folder):
     assert "ending in .yaml" in text
     (folder / "empty.yaml").write_text("campaigns: []\n")
     assert "a non-empty list" in problems(folder / "empty.yaml")[0]
+
+
+@pytest.mark.parametrize("members", [MAX_COLLECTION_MEMBERS + 1, 90_000])
+def test_a_collection_is_refused_by_its_member_count_before_any_member_is_read(
+    folder, monkeypatch, members
+):
+    """A collection of more than MAX_COLLECTION_MEMBERS campaign files is refused at its
+    ``campaigns:`` line by the count alone: no member is opened (90000 members were each
+    checked, 19 s, before)."""
+    import nematic_solids.sweep.spec.collection as collection
+
+    (folder / "many.yaml").write_text("name: many\ncampaigns:\n" + "  - one.yaml\n" * members)
+    read: list[str] = []
+    real = collection.read_text
+
+    def counted(path):
+        read.append(Path(path).name)
+        return real(path)
+
+    monkeypatch.setattr(collection, "read_text", counted)
+    out = invoke("validate", folder / "many.yaml")
+    assert out.exit_code == 2, out.output
+    said = flat(out.output)
+    assert (
+        f"many.yaml:3: campaigns: {members} campaign files; allowed: at most "
+        f"{MAX_COLLECTION_MEMBERS}" in said
+    ), said
+    assert "1 problem(s)" in said, said
+    assert "one.yaml" not in read, read  # no member was read
+    (folder / "many.yaml").write_text(
+        "campaigns:\n" + "".join(f"  - m{i}.yaml\n" for i in range(MAX_COLLECTION_MEMBERS))
+    )
+    assert len(problems(folder / "many.yaml")) == MAX_COLLECTION_MEMBERS  # at the bound: checked
+
+
+def test_a_collection_of_a_million_members_is_refused_by_its_size(folder):
+    """A million members in 2 MB (a flow list of one-letter names) stop at the YAML's node
+    bound while it is parsed, with the file and line, before anything else is read."""
+    (folder / "million.yaml").write_text("campaigns: [" + "a," * 999_999 + "a]\n")
+    out = invoke("validate", folder / "million.yaml")
+    assert out.exit_code == 2, out.output
+    said = flat(out.output)
+    assert f"million.yaml:1: <document>: the file has more than {MAX_YAML_NODES} YAML" in said
+    assert "internal error" not in said
 
 
 def test_validate_reports_every_members_problems_and_shared_names(folder):

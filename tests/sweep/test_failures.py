@@ -153,3 +153,75 @@ def test_max_failures_stops_the_campaign_with_exit_3(tmp_path):
     bad = invoke("run", path, "--results", results, "--max-failures", "2.5")
     assert bad.exit_code == 2
     assert "error: --max-failures: got '2.5'; allowed:" in flat(bad.output)
+
+
+@pytest.mark.parametrize(
+    ("error", "reason", "says"),
+    [
+        (
+            MemoryError("Unable to allocate 3.00 GiB"),
+            "out_of_memory",
+            [
+                "the run needed more memory than its process has",
+                "MemoryError: Unable to allocate 3.00 GiB",
+                "allowed: a lower resolution, or more memory per run",
+            ],
+        ),
+        (RuntimeError("no such model module"), "exception", ["RuntimeError: no such model module"]),
+        # an OSError raised by the task is its failure, not a result lost on the way back
+        (
+            PermissionError(13, "Permission denied", "/results/runs"),
+            "exception",
+            ["PermissionError: [Errno 13] Permission denied: '/results/runs'"],
+        ),
+    ],
+)
+def test_a_task_that_fails_before_its_model_runs_is_recorded_with_its_run(
+    tmp_path, monkeypatch, error, reason, says
+):
+    """A task that raises while it is set up on its worker (its folder opened, its model
+    imported: outside the run's own try) reaches the driver as an exception instead of a
+    record; its record names the run, its point and the stage, and a MemoryError there is
+    ``out_of_memory`` with what the run needs and what to do, as in the run itself."""
+    from distributed import Client, LocalCluster
+
+    import nematic_solids.sweep.run.driver as driver
+    import nematic_solids.sweep.run.task as task_module
+    from nematic_solids.sweep.expand import expand
+    from nematic_solids.sweep.run.todo import plan_runs
+    from nematic_solids.sweep.spec import load_campaign
+    from nematic_solids.sweep.store import CampaignStore
+
+    path = write_campaign(tmp_path, values="[0.1, 0.2]", seeds=1, t_final=1.0, workers=1)
+    expansion = expand(load_campaign(path))
+    store = CampaignStore(tmp_path / "results", expansion.campaign.name)
+    store.ensure()
+    victim = expansion.run(0)
+    real = task_module.task_store
+
+    def setup_fails(task):
+        if task.run_id == victim.run_id:
+            raise error
+        return real(task)
+
+    monkeypatch.setattr(task_module, "task_store", setup_fails)
+    with (
+        LocalCluster(
+            n_workers=1, processes=False, threads_per_worker=1, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        summary = driver.run_campaign(expansion, store, client, plan_runs(expansion, store))
+    assert summary.ok == 1
+    assert [run.run_id for run, _ in summary.failed] == [victim.run_id]
+    record = store.read_record(victim.run_id)
+    assert record is not None
+    assert record["status"] == "failed"
+    assert record["reason"] == reason
+    detail = flat(record["detail"])
+    assert f"run {victim.run_id} (alpha_minus_B=0.1, seed 0)" in detail, detail
+    assert "failed while its task was set up on its worker, before the model ran" in detail
+    for words in says:
+        assert words in detail, detail
+    assert record["coords"] == {"alpha_minus_B": 0.1}  # the run's identity, as any record
+    assert type(error).__name__ in record["traceback"]

@@ -10,6 +10,7 @@ import errno
 import os
 import shutil
 import subprocess
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -18,6 +19,7 @@ from nematic_solids.sweep import files
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.errors import StorageError
 from nematic_solids.sweep.files import atomic_to_netcdf, atomic_write_text, storage_cause
+from nematic_solids.sweep.spec import load_campaign
 
 SMALL = (
     "name: {name}\nparameters: {{noise_modes: 8}}\n"
@@ -115,6 +117,25 @@ def test_a_parent_outside_the_folder_is_read_when_stated(tmp_path):
     res = invoke("validate", child)
     assert res.exit_code == 2, res.output
     assert "initial.from.outside: got 'yes please'" in said(res)
+
+
+def test_a_parent_named_without_its_suffix_is_that_file_and_no_other(tmp_path):
+    """``campaign: parent`` reads parent.yaml; ``campaign: parent.v2`` reads parent.v2.yaml,
+    never parent.yaml (its suffix replaced: another campaign, accepted as the parent), and a
+    name with a NUL in it is no campaign file."""
+    (tmp_path / "parent.yaml").write_text(SMALL.format(name="parent"))
+    (tmp_path / "parent.v2.yaml").write_text(SMALL.format(name="parent_v2"))
+    child = tmp_path / "child.yaml"
+    for name, parent in (("parent", "parent"), ("parent.v2", "parent_v2")):
+        child.write_text(SMALL.format(name="child") + f"initial: {{from: {{campaign: {name}}}}}\n")
+        initial = load_campaign(child).initial
+        assert initial is not None
+        assert (initial.parent.name, Path(initial.path).name) == (parent, f"{name}.yaml")
+    child.write_text(SMALL.format(name="child") + 'initial: {from: {campaign: "parent.yaml\\0"}}\n')
+    res = invoke("validate", child)
+    assert res.exit_code == 2, res.output
+    assert f"{child}:5: initial.from.campaign: parent.yaml" in said(res), said(res)
+    assert "is not a campaign file" in said(res), said(res)
 
 
 def test_a_parent_campaign_s_problems_are_shown_when_it_is_a_campaign(tmp_path):

@@ -171,6 +171,28 @@ def test_every_value_of_every_section_replaced_by_every_hostile_value(tmp_path):
             4,
             "verify.variants[0]",
         ),
+        # a pulse or ramp whose end the sum cannot hold (rounded to its start, or past the
+        # largest float): validated, then every run failed rebuilding its protocol
+        (
+            "protocol: {eps: {pulse: {base: 0.0, level: 0.1, start: 0.1, duration: 1.0e-300}}}\n",
+            4,
+            "protocol.eps.pulse.duration: got 1e-300; allowed: a duration that ends after its "
+            "start (0.1) at a finite time (start + duration is 0.1)",
+        ),
+        (
+            "protocol: {chi: {ramp: {from: 0, to: 1, start: 1.0e+308, duration: 1.0e+308}}}\n",
+            4,
+            "protocol.chi.ramp.duration: got 1e+308; allowed: a duration that ends after its "
+            "start (1e+308) at a finite time (start + duration is inf)",
+        ),
+        # a ramp piece below the float spacing of its time: validated, then its run stalled
+        # at t = 0.1 forever (each step of 1/8 of the piece left the time unchanged)
+        (
+            "protocol: {chi: {ramp: {from: 0, to: 0.4, start: 0.1, duration: 2.0e-17}}}\n",
+            4,
+            "protocol.chi.ramp: got 'a piece from t = 0.1 to t = 0.10000000000000002'; allowed: "
+            "ramp pieces at least 8 times the spacing of floating-point times",
+        ),
     ],
 )
 def test_what_failed_at_run_time_is_refused_with_its_line(tmp_path, text, line, words):

@@ -320,8 +320,7 @@ class Numerics:
     def _snapshot_times(self) -> tuple[float, ...]:
         """``snapshot_times`` as a sorted tuple of times in [0, t_final], at most MAX_SAVES."""
         snaps = self.snapshot_times
-        if isinstance(snaps, (int, float)):
-            snaps = (snaps,)
+        snaps = (snaps,) if isinstance(snaps, (int, float)) else snaps
         try:
             snaps = tuple(sorted(float(t) for t in snaps))
         except (TypeError, ValueError):

@@ -18,6 +18,7 @@ from .fig4 import FIG4_OPTIONS, fig4
 from .figA1 import FIGA1_OPTIONS, figA1
 from .loop import LOOP_OPTIONS, loop
 from .moduli import MODULI_FIGURE_OPTIONS, moduli_figure
+from .swift_hohenberg import SH_OPTIONS, sh_phase
 from .switch import DURATION, LEVEL, SWITCH_OPTIONS, switch
 
 if TYPE_CHECKING:
@@ -159,6 +160,19 @@ REGISTRY: dict[str, FigureSpec] = {
         _fig4_applies,
         FIG4_OPTIONS,
         _fig4_needs,
+    ),
+    "sh_phase": FigureSpec(
+        sh_phase,
+        "Swift-Hohenberg: both branches' patterns over (eps, g) against the amplitude equations",
+        lambda shape: [],
+        lambda shape: shape.chained and shape.swept("eps") and shape.swept("g"),
+        SH_OPTIONS,
+        lambda shape, options: (
+            None
+            if shape.chained and shape.swept("eps") and shape.swept("g")
+            else "a chain along eps over a sweep of g"
+        ),
+        models=("swift-hohenberg",),
     ),
     "loop": FigureSpec(
         loop,

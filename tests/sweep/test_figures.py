@@ -125,6 +125,7 @@ def test_registry_names_match_the_campaign_schema():
         "figA1",
         "loop",
         "moduli",
+        "sh_phase",
         "switch",
     ]
     assert set(registry("fits")) >= {"transition", "alpha_cr", "scaling", "anisotropy", "stability"}

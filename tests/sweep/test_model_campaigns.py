@@ -17,6 +17,7 @@ from typer.testing import CliRunner
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.errors import CampaignError
 from nematic_solids.sweep.expand import expand
+from nematic_solids.sweep.figures.swift_hohenberg import branch_boundaries, classes
 from nematic_solids.sweep.run.continuation import STATE_GROUP, ParentUnusable, starting_state
 from nematic_solids.sweep.run.task import RunTask
 from nematic_solids.sweep.spec import load_campaign, parse_campaign
@@ -166,6 +167,26 @@ def test_refinement_and_verification_run_on_the_models_observables(tmp_path):
     verify = xr.open_dataset(tmp_path / "results" / "adaptive" / "verify.nc")
     assert verify.sizes["point"] >= 2
     assert bool(verify["converged"].all())
+
+
+def test_the_models_own_figure_is_drawn_for_its_chain(tmp_path):
+    """A chain over eps and g draws the model's figure (``sh_phase``, registered for the
+    model swift-hohenberg), none of the paper's; its boundaries read the classes."""
+    path = tmp_path / "plane.yaml"
+    path.write_text(
+        TINY.format(name="plane", t_final=5.0, chain=CHAIN)
+        .replace("    eps: [-0.02, 0.1]", "    eps: [-0.02, 0.1]\n    g: [0.5, 1.0]")
+        .replace("parameters: {g: 1.0}\n", "")
+    )
+    run(path, tmp_path / "results")
+    figures = tmp_path / "results" / "plane" / "figures"
+    assert sorted(p.name for p in figures.iterdir()) == ["sh_phase.pdf", "sh_phase.png"]
+    phase = xr.open_dataset(tmp_path / "results" / "plane" / "phase.nc")
+    rows = branch_boundaries(phase)
+    assert [r["g"] for r in rows] == [0.5, 1.0]
+    assert rows[1]["eps_H_leading"] == pytest.approx(-1 / 15)
+    cls = classes(phase)
+    assert set(cls.values.ravel()) <= {"uniform", "stripes", "hexagons"}
 
 
 @pytest.mark.slow

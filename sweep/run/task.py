@@ -292,6 +292,8 @@ def execute_run(task: RunTask, held: Held | None = None) -> Record:
         start = continuation.starting_state(task, store)
         outcome = get_model(task.model).run(request(task, start, store))
         ds, end_state = outcome.dataset, outcome.end_state
+        if outcome.warnings:  # the model's word on its start (a continuation not exact)
+            start.warning = "; ".join(w for w in (start.warning, *outcome.warnings) if w)
     except continuation.ParentFailed as e:  # redone with its parent (RETRYABLE_REASONS)
         record = failure_record(task, "parent_failed", str(e), "", time.perf_counter() - t0)
     except continuation.ParentUnusable as e:  # its state is corrupt or not the one named

@@ -115,6 +115,18 @@ def test_a_longer_run_continues_the_shorter_ones_end_state_bitwise(tmp_path):
         np.testing.assert_array_equal(mine["amplitude"].values, other["amplitude"].values)
 
 
+def test_a_continuation_that_is_not_exact_says_so_in_its_record(tmp_path):
+    """With adaptive steps the step size at the stop is not kept: the continued run is close
+    to a straight run, not equal, and its record says so."""
+    for t_final in (5.0, 10.0):
+        path = write(tmp_path, "adaptive", t_final=t_final, chain="")
+        path.write_text(path.read_text().replace("kick: 0.001", "kick: 0.001, adaptive: true"))
+        run(path, tmp_path / "results")
+    recs = [r for r in records(tmp_path / "results", "adaptive").values() if r["continued_from"]]
+    assert len(recs) == 2
+    assert all("not equal to, a run that never stopped" in r["start_warning"] for r in recs)
+
+
 def test_a_corrupt_state_is_never_used(tmp_path):
     """A successor whose predecessor's end state fails its checksum fails (``parent_state``)
     rather than begin from anything else; a run's own checkpoint that fails it is ignored

@@ -3,7 +3,8 @@ r"""The Swift-Hohenberg model's phase diagram with both branches of its chain (f
 stripes or hexagons (the model's :func:`~nematic_solids.sweep.models.swift_hohenberg.classify`
 of the seed means) on the up and the down branch, over the amplitude equations' boundaries
 (:func:`~nematic_solids.sweep.models.swift_hohenberg.theory`): the onset eps = 0, the hexagons'
-saddle-node eps_H at leading and next order, and the stripes' stability eps_S.
+saddle-node eps_H at leading and next order (the latter where its cubic coefficient is
+positive, g < 0.84), and the stripes' stability eps_S.
 
 :func:`branch_boundaries` reads the measured boundaries off the same data: for each g, the
 lowest eps of the down branch that keeps a pattern and the highest eps below it that is
@@ -26,6 +27,9 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 SH_OPTIONS = ()
+#: the next order's cubic coefficient 3 - 38 g^2 / 9 is positive below this g: above it the
+#: expansion gives no saddle-node (docs/model/swift_hohenberg.md)
+NEXT_ORDER_LIMIT = math.sqrt(27 / 38)
 COLOURS = {"uniform": "0.8", "stripes": "tab:blue", "hexagons": "tab:red"}
 
 
@@ -103,7 +107,7 @@ def sh_phase(res: Results, options: Mapping[str, Any]) -> Figure:
     c = classes(res.phase)
     eps = np.asarray(c["eps"].values, dtype=float)
     gs = np.asarray(c["g"].values, dtype=float)
-    fig = Figure(figsize=(10.5, 4.2), layout="constrained")
+    fig = Figure(figsize=(10.5, 4.6), layout="constrained")
     line = np.linspace(0.0, float(gs.max()), 100)
     for k, branch in enumerate(("up", "down")):
         ax = fig.add_subplot(1, 2, k + 1)
@@ -112,8 +116,9 @@ def sh_phase(res: Results, options: Mapping[str, Any]) -> Figure:
             ax.scatter(eps[at[:, 1]], gs[at[:, 0]], s=40, color=colour, label=name, zorder=3)
         ax.axvline(0.0, color="k", lw=0.8, label="onset (eps = 0)")
         for order, style in (("leading", "--"), ("next", ":")):
-            h = [theory(float(g), order)["eps_H"] for g in line]
-            ax.plot(h, line, "k" + style, lw=1, label=f"eps_H, {order} order")
+            valid = line if order == "leading" else line[line < NEXT_ORDER_LIMIT]
+            h = [theory(float(g), order)["eps_H"] for g in valid]
+            ax.plot(h, valid, "k" + style, lw=1, label=f"eps_H, {order} order")
         s = [theory(float(g))["eps_S"] for g in line]
         ax.plot(s, line, color="tab:blue", ls="--", lw=1, label="eps_S (stripes stable)")
         ax.set_xlim(float(eps.min()) - 0.005, float(eps.max()) + 0.005)
@@ -122,7 +127,8 @@ def sh_phase(res: Results, options: Mapping[str, Any]) -> Figure:
         start = f"from eps = {eps.min() if branch == 'up' else eps.max():g}"
         ax.set_title(f"{branch} branch ({start}, each point from the previous)", fontsize=9)
         if k == 1:
-            ax.legend(fontsize=7, loc="upper left")
+            handles, labels = ax.get_legend_handles_labels()
+            fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncol=7)
     fig.suptitle(
         f"{res.name}: Swift-Hohenberg patterns against the amplitude equations", fontsize=10
     )

@@ -70,7 +70,7 @@ def check(name: str, folder: Path) -> None:
         campaign = load_campaign(
             folder / f"{name}.yaml", overrides(phase.attrs.get("campaign_overrides", ""))
         )
-        assert campaign.model == DEFAULT_MODEL
+        assert campaign.model == phase.attrs.get("model", DEFAULT_MODEL)
         ids = expand(grid_of(campaign, phase)).run_ids
     assert len(ids) == len(stored)
     wrong = [(i, s, r) for i, (s, r) in enumerate(zip(stored, ids, strict=True)) if s and s != r]

@@ -21,21 +21,22 @@ from ..campaign import DEFAULT_MODEL, Campaign
 from ..errors import CampaignError
 from ..expand import Expansion
 from ..models.interface import Observable, classifier
-from ..models.registry import get_model
+from ..models.registry import UnknownModel, get_model
 from ..store import CampaignStore, Record
 from .security import inside, safe_name
 
 
 def shown(model: str = DEFAULT_MODEL) -> Observable:
     """The observable the phase diagram shows: the one that classifies the model's points
-    (the nematic model's sigma2_S, as the report's ``report.phase_plot.SHOWN``)."""
+    (the nematic model's sigma2_S, as the report's ``report.phase_plot.Shown``)."""
     return classifier(get_model(model))
 
 
 #: The confidence of a point's interval.
 CONFIDENCE = 0.95
-#: Series of a run file the run view sends (those present).
-SERIES = ("sigma2_S", "mean_S", "cos2theta", "lambda")
+#: Series of a run file the run view sends at most: its model's first observables that the
+#: file holds as series over time (the nematic model's sigma2_S, mean_S, cos2theta, lambda).
+MAX_SERIES = 4
 #: Points of a series sent at most (evenly thinned beyond).
 MAX_SERIES_POINTS = 2000
 
@@ -250,6 +251,18 @@ def not_started(name: str) -> dict[str, Any]:
     }
 
 
+def _series_names(ds: Any, size: int) -> list[str]:
+    """The series the run view sends of the run file ``ds``: the first :data:`MAX_SERIES`
+    observables of its model (the file's ``model`` attribute; the default model's) that it
+    holds over its time; any of its series over time where the model is not registered here."""
+    try:
+        names = [o.name for o in get_model(str(ds.attrs.get("model", DEFAULT_MODEL))).observables]
+    except UnknownModel:  # a model named by its module: every series it holds
+        names = [str(k) for k in ds.data_vars]
+    found = [n for n in names if n in ds and ds[n].ndim == 1 and ds[n].size == size]
+    return found[:MAX_SERIES]
+
+
 def run_detail(store: CampaignStore, run_id: str) -> dict[str, Any]:
     """One run: its record and its time series (thinned to :data:`MAX_SERIES_POINTS`)."""
     import xarray as xr
@@ -269,9 +282,8 @@ def run_detail(store: CampaignStore, run_id: str) -> dict[str, Any]:
             time = np.asarray(series_time(ds).values, dtype=float)
             step = max(1, math.ceil(time.size / MAX_SERIES_POINTS))
             t = [_finite(v) for v in time[::step]]
-            for name in SERIES:
-                if name in ds and ds[name].ndim == 1 and ds[name].size == time.size:
-                    series[name] = [_finite(v) for v in np.asarray(ds[name].values)[::step]]
+            for name in _series_names(ds, time.size):
+                series[name] = [_finite(v) for v in np.asarray(ds[name].values)[::step]]
     keep = (
         "run_id",
         "status",

@@ -32,8 +32,7 @@ from typing import Any, Literal, overload
 import numpy as np
 import xarray as xr
 from pde.solvers import Controller
-from pde.trackers import CallbackTracker
-from pde.trackers.base import FinishedSimulation
+from pde.trackers.base import FinishedSimulation, TrackerBase
 
 from . import tensors as T
 from .checkpoint import CheckpointError, InitialState, RunState, Schedule
@@ -145,108 +144,65 @@ def run(
     run at t = 0 from given fields (another run's:
     :class:`nematic_solids.model.checkpoint.InitialState`) instead of the seeded texture; the seed
     then changes nothing."""
-    check_compatible(params, numerics)
-    if numerics.precision != "float64":
-        raise ParameterError("precision", numerics.precision, FLOAT64_ONLY)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ParameterError("seed", seed, "an integer >= 0")
-    n = numerics.resolution
-    if initial is not None and (start is not None or np.shape(initial.fields) != (3, n, n)):
-        raise ParameterError(
-            "initial", initial.origin or "fields", f"fields of shape (3, {n}, {n}), without start"
-        )
-    if start is not None and (why := start.problem(params, numerics, seed)) is not None:
-        raise CheckpointError(f"the state at t = {start.t:g} does not continue this run: {why}")
+    _check_inputs(params, numerics, seed, start, initial)
     wall0 = time.perf_counter()
     eq = ActiveNematicPDE(params, numerics)
     grid = eq.spectral
-    linear = numerics.mechanics == "linear"
     solver = SCHEMES[numerics.scheme](eq)
     times = save_times(numerics)
     snap_set = snapshot_set(numerics)
     rows: list[dict[str, float]] = []
     snaps: list[tuple[float, np.ndarray]] = []
-    stopped = [math.nan]  # the time the run ended early
+    stopped = math.nan  # the time the run ended early
     wall_before, t_start = 0.0, 0.0
     if initial is not None:
         state = make_state(*np.array(initial.fields, dtype=float))
-        if initial.displacement_hat is not None and not linear:  # Newton's first guess
-            eq.mechanics.u_hat = np.array(initial.displacement_hat, dtype=complex)
-        elif initial.displacement is not None and not linear:  # at t = 0
-            eq.mechanics.u_hat = grid.forward(np.asarray(initial.displacement, dtype=float))
+        _initial_displacement(eq, initial)
     elif start is None:
         state = make_state(*initial_fields(params, numerics.resolution, seed))
     else:
         state = make_state(*np.array(start.fields, dtype=float))
         _resume(start, state.data, solver, eq)
         rows = [dict(r) for r in start.rows]
-        wall_before, t_start, stopped[0] = start.wall, start.t, start.stopped
-        if (
-            math.isnan(stopped[0])
-            and rows
-            and rows[-1]["time"] == t_start
-            and steady(rows, numerics)
-        ):
-            stopped[0] = t_start  # a longer run may end where a shorter one reached its end
+        wall_before, t_start, stopped = start.wall, start.t, start.stopped
+        if math.isnan(stopped) and rows and rows[-1]["time"] == t_start and steady(rows, numerics):
+            stopped = t_start  # a longer run may end where a shorter one reached its end
         # the state's snapshots this run keeps (an early end stores its fields)
-        kept = snap_set | ({stopped[0]} if math.isfinite(stopped[0]) else set())
+        kept = snap_set | ({stopped} if math.isfinite(stopped) else set())
         snaps = [s for s in start.snaps if float(np.round(s[0], 12)) in kept]
-    origin = initial.origin if initial is not None else start.initial_from if start else ""
-    last = [t_start, wall0]  # the time and wall clock of the last state handed out
-    end: list[RunState | None] = [None]
-
-    def capture(st, t: float, stop: bool) -> RunState:
-        return RunState(
-            t=float(t),
-            fields=st.data.copy(),
-            solver=solver.saved_state(st.data),
-            mechanics=eq.mechanics.saved_state(),
-            counters=_counters(eq),
-            rows=[dict(r) for r in rows],
-            snaps=list(snaps),
-            parameters=params.to_dict(),
-            numerics=numerics.to_dict(),
-            seed=int(seed),
-            stopped=float(t) if stop else math.nan,
-            wall=wall_before + time.perf_counter() - wall0,
-            lineage=[] if start is None else list(start.lineage),
-            initial_from=origin,
-        )
-
-    def record(st, t: float) -> None:
-        d = st.data
-        obs, mech = observe_state(eq, d, t, steps=solver.stats["steps"])
-        rows.append(obs)
-        stop = steady(rows, numerics)
-        if stop or float(np.round(t, 12)) in snap_set:  # an early end stores its fields
-            snaps.append((float(t), snapshot_fields(eq, d, mech)))
-        final = stop or t >= numerics.t_final - 1e-9 * max(numerics.t_final, 1.0)
-        if final and keep_state:
-            end[0] = capture(st, t, stop)
-        elif not final and checkpoint is not None:
-            now = time.perf_counter()
-            if schedule.due(t - last[0], now - last[1]):
-                checkpoint(capture(st, t, stop))
-                last[:] = [t, time.perf_counter()]
-        if stop:
-            stopped[0] = float(t)
-            raise FinishedSimulation("steady")
-
-    if progress is not None:
-        solver.on_step = lambda t, h: progress(min(t / numerics.t_final, 1.0))
-    status, reason, detail, t_failed = "ok", "", "", float("nan")
     # a continued run's save times start after the state's (its save is in its rows)
     interrupts = [
         float(t) for t in times if start is None or t > t_start + 1e-12 * max(1.0, t_start)
     ]
-    tracker = CallbackTracker(record, interrupts=interrupts)
-    controller = Controller(solver, t_range=(t_start, numerics.t_final), tracker=[tracker])
+    origin = initial.origin if initial is not None else start.initial_from if start else ""
+    recorder = RunRecorder(
+        eq,
+        solver,
+        params,
+        numerics,
+        seed,
+        rows=rows,
+        snaps=snaps,
+        stopped=stopped,
+        checkpoint=checkpoint,
+        schedule=schedule,
+        keep_state=keep_state,
+        lineage=[] if start is None else list(start.lineage),
+        origin=origin,
+        clock=(t_start, wall0, wall_before),
+        interrupts=interrupts,
+    )
+
+    if progress is not None:
+        solver.on_step = lambda t, h: progress(min(t / numerics.t_final, 1.0))
+    status, reason, detail, t_failed = "ok", "", "", float("nan")
+    controller = Controller(solver, t_range=(t_start, numerics.t_final), tracker=[recorder])
     try:
-        if math.isnan(stopped[0]) and interrupts:
+        if math.isnan(recorder.stopped) and interrupts:
             controller.run(state, numerics.dt)
         elif keep_state and start is not None:  # nothing left to integrate: the state is the end
-            end[0] = dataclasses.replace(
-                start, numerics=numerics.to_dict(), snaps=list(snaps), stopped=stopped[0]
+            recorder.end = dataclasses.replace(
+                start, numerics=numerics.to_dict(), snaps=list(snaps), stopped=recorder.stopped
             )
     except SimulationFailure as exc:
         status, reason, detail = "failed", exc.reason, exc.detail
@@ -268,12 +224,127 @@ def run(
         detail=detail,
         t_failed=t_failed,
         wall=wall,
-        t_stopped=stopped[0],
+        t_stopped=recorder.stopped,
     )
     ds.attrs["initial_from"] = origin
     if not keep_state:
         return ds
-    return ds, end[0] if status == "ok" else None
+    return ds, recorder.end if status == "ok" else None
+
+
+def _check_inputs(
+    params: Parameters,
+    numerics: Numerics,
+    seed: int,
+    start: RunState | None,
+    initial: InitialState | None,
+) -> None:
+    """Refuse what a run cannot start from: incompatible settings, another precision than
+    float64, a seed that is not an integer >= 0, initial fields of another shape (or with a
+    state), a state of another run."""
+    check_compatible(params, numerics)
+    if numerics.precision != "float64":
+        raise ParameterError("precision", numerics.precision, FLOAT64_ONLY)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError("seed", seed, "an integer >= 0")
+    n = numerics.resolution
+    if initial is not None and (start is not None or np.shape(initial.fields) != (3, n, n)):
+        raise ParameterError(
+            "initial", initial.origin or "fields", f"fields of shape (3, {n}, {n}), without start"
+        )
+    if start is not None and (why := start.problem(params, numerics, seed)) is not None:
+        raise CheckpointError(f"the state at t = {start.t:g} does not continue this run: {why}")
+
+
+def _initial_displacement(eq: ActiveNematicPDE, initial: InitialState) -> None:
+    """Finite strain from given fields: the displacement they come with, as Newton's first
+    guess (the exact end state's spectrum) or at t = 0 (a snapshot's)."""
+    if eq.numerics.mechanics == "linear":
+        return
+    if initial.displacement_hat is not None:
+        eq.mechanics.u_hat = np.array(initial.displacement_hat, dtype=complex)
+    elif initial.displacement is not None:
+        eq.mechanics.u_hat = eq.spectral.forward(np.asarray(initial.displacement, dtype=float))
+
+
+class RunRecorder(TrackerBase):
+    """The run state of one simulation, as a py-pde tracker: at each save time it records the
+    observables (a row of the series), the snapshot where one is due, the early stop, the
+    checkpoint that ``schedule`` says is due (never at the end) and, with ``keep_state``, the
+    end state a longer run continues from (:attr:`end`). ``clock`` is the run's start
+    ``(t, wall clock, wall seconds of the run it continues)``; ``interrupts`` its save times
+    (a continued run's after its state's)."""
+
+    def __init__(
+        self,
+        eq: ActiveNematicPDE,
+        solver: ETDSolver,
+        params: Parameters,
+        numerics: Numerics,
+        seed: int,
+        *,
+        rows: list[dict[str, float]],
+        snaps: list[tuple[float, np.ndarray]],
+        stopped: float,
+        checkpoint: Callable[[RunState], None] | None,
+        schedule: Schedule,
+        keep_state: bool,
+        lineage: list[str],
+        origin: str,
+        clock: tuple[float, float, float],
+        interrupts: list[float],
+    ):
+        super().__init__(interrupts=interrupts)
+        self.eq, self.solver, self.params, self.numerics = eq, solver, params, numerics
+        self.seed = int(seed)
+        self.rows, self.snaps, self.stopped = rows, snaps, stopped
+        self.checkpoint, self.schedule, self.keep_state = checkpoint, schedule, keep_state
+        self.lineage, self.origin = lineage, origin
+        self.snap_set = snapshot_set(numerics)
+        #: the time and wall clock of the last state handed out (the run's start at first)
+        self.last_t, self.last_wall, self.wall_before = clock
+        self.wall0 = clock[1]
+        #: the end state (with ``keep_state``, once the run ended well)
+        self.end: RunState | None = None
+
+    def capture(self, st: Any, t: float, stop: bool) -> RunState:
+        """The run's state at ``t`` (``stop``: it ends early there)."""
+        return RunState(
+            t=float(t),
+            fields=st.data.copy(),
+            solver=self.solver.saved_state(st.data),
+            mechanics=self.eq.mechanics.saved_state(),
+            counters=_counters(self.eq),
+            rows=[dict(r) for r in self.rows],
+            snaps=list(self.snaps),
+            parameters=self.params.to_dict(),
+            numerics=self.numerics.to_dict(),
+            seed=self.seed,
+            stopped=float(t) if stop else math.nan,
+            wall=self.wall_before + time.perf_counter() - self.wall0,
+            lineage=list(self.lineage),
+            initial_from=self.origin,
+        )
+
+    def handle(self, field: Any, t: float) -> None:
+        """One save time: its row, its snapshot, the early stop, a checkpoint or the end."""
+        d, numerics = field.data, self.numerics
+        obs, mech = observe_state(self.eq, d, t, steps=self.solver.stats["steps"])
+        self.rows.append(obs)
+        stop = steady(self.rows, numerics)
+        if stop or float(np.round(t, 12)) in self.snap_set:  # an early end stores its fields
+            self.snaps.append((float(t), snapshot_fields(self.eq, d, mech)))
+        final = stop or t >= numerics.t_final - 1e-9 * max(numerics.t_final, 1.0)
+        if final and self.keep_state:
+            self.end = self.capture(field, t, stop)
+        elif not final and self.checkpoint is not None:
+            now = time.perf_counter()
+            if self.schedule.due(t - self.last_t, now - self.last_wall):
+                self.checkpoint(self.capture(field, t, stop))
+                self.last_t, self.last_wall = t, time.perf_counter()
+        if stop:
+            self.stopped = float(t)
+            raise FinishedSimulation("steady")
 
 
 def snapshot_set(numerics: Numerics) -> set[float]:

@@ -17,6 +17,7 @@ pytest.importorskip("jax")
 
 import nematic_solids.model.accelerated.run as accelerated_run
 import nematic_solids.sweep.run.driver as driver
+import nematic_solids.sweep.run.session as session
 from nematic_solids.model.errors import DeviceUnavailable
 from nematic_solids.sweep.errors import CampaignError
 from nematic_solids.sweep.expand import expand
@@ -285,22 +286,28 @@ def execute_batch_reference(tasks: tuple[RunTask, ...]):
     )
 
 
-def test_a_lost_batch_result_runs_its_seeds_again(tmp_path, monkeypatch):
-    """The first result of a batch does not arrive (its worker went: an OSError from the
-    future); no record was written, so its seeds go again, and every run ends ok once."""
-    real = driver.execute_batch
-    marker = tmp_path / "lost-once"  # a file: dask may copy the function and its closure
+def test_a_batch_task_that_raises_records_its_seeds_failed(tmp_path, monkeypatch):
+    """A batch task that raises on its worker (an OSError while it is set up: a folder it
+    cannot open) is its seeds' failure, each recorded with the reason and where it failed,
+    not a result lost with a worker (tests/sweep/test_lost_workers.py: a lost result)."""
+    real = session.execute_batch
+    marker = tmp_path / "raised-once"  # a file: dask may copy the function and its closure
 
-    def lost_once(batch: BatchTask):
+    def raises_once(batch: BatchTask):
         if not marker.exists():
             marker.write_text(str(len(batch.tasks)))
-            raise OSError("the result went with its worker")
+            raise OSError("the batch's folder cannot be opened")
         return real(batch)
 
-    monkeypatch.setattr(driver, "execute_batch", lost_once)
-    store, summary = run_in_process(write(tmp_path, "lost"), tmp_path / "results")
-    assert (summary.ok, len(summary.failed)) == (6, 0)
-    assert summary.submitted == 6 + int(marker.read_text())
+    monkeypatch.setattr(session, "execute_batch", raises_once)
+    path = write(tmp_path, "raised")
+    store, summary = run_in_process(path, tmp_path / "results")
+    n = int(marker.read_text())
+    assert (summary.ok, len(summary.failed)) == (6 - n, n)
+    assert summary.submitted == 6
+    failed = [rec for _, rec in summary.failed]
+    assert all("failed while its task was set up" in r["detail"] for r in failed)
+    assert all("the batch's folder cannot be opened" in r["detail"] for r in failed)
     assert len(list(store.runs_dir.glob("*.json"))) == 6
 
 

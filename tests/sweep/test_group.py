@@ -15,6 +15,7 @@ import pytest
 import xarray as xr
 
 import nematic_solids.sweep.run.driver as driver
+import nematic_solids.sweep.run.session as session
 from nematic_solids.sweep.catalogue.opening import open_catalogue
 from nematic_solids.sweep.catalogue.recorder import known_runs
 from nematic_solids.sweep.errors import CampaignError
@@ -86,14 +87,14 @@ def run_in_process(path: Path, results: Path) -> tuple[CampaignStore, driver.Run
 def count_groups(monkeypatch: pytest.MonkeyPatch, log: Path) -> None:
     """Make the driver's group tasks append their sizes to ``log`` (a file: dask may copy
     the function and its closure)."""
-    real = driver.execute_group
+    real = session.execute_group
 
     def counted(group: RunGroup):
         with open(log, "a") as f:
             f.write(f"{len(group.tasks)}\n")
         return real(group)
 
-    monkeypatch.setattr(driver, "execute_group", counted)
+    monkeypatch.setattr(session, "execute_group", counted)
 
 
 def problems(text: str) -> str:
@@ -259,7 +260,7 @@ def test_a_worker_killed_in_a_group_loses_only_the_group_s_runs_without_records(
     store = CampaignStore(tmp_path / "results", expansion.campaign.name)
     store.ensure()
     plan = plan_runs(expansion, store)
-    monkeypatch.setattr(driver, "execute_group", die_once_in_a_group)
+    monkeypatch.setattr(session, "execute_group", die_once_in_a_group)
     cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the workers lack tests/
     try:
         with open_cluster(ExecutionSpec(workers=1)) as link:

@@ -39,16 +39,15 @@ from ..store import CampaignStore, Record
 from .views import (
     CONFIDENCE,
     campaign_store,
-    expansion_of,
     failure_entry,
     interval,
-    load_stored,
     not_started,
     plain,
     point_key,
     point_marks,
     rounds,
     shown,
+    stored_layout,
     verification,
 )
 
@@ -165,11 +164,11 @@ class CampaignView:
         self.seq = self.layout_seq = seq
         self._points = []
         self._clear_runs()
-        campaign = load_stored(self.store)
-        if campaign is None:
+        layout = stored_layout(self.store)
+        if layout is None:
             self._head = not_started(self.name)
             return
-        expansion = expansion_of(campaign, self.store)
+        campaign, expansion = layout
         self._shown = shown(campaign.model)
         self._lay_out(expansion, seq)
         n = len(self._ids)
@@ -188,7 +187,7 @@ class CampaignView:
             ok.append(rid)
         self._counts = {"ok": len(ok), "failed": 0, "pending": n - len(ok)}
         # failed, or not in the catalogue: its record (in the layout's order)
-        for i in sorted(where[r] for r in on_disk.difference(ok) if r in where):
+        for i in sorted(map(where.__getitem__, on_disk.difference(ok).intersection(where))):
             self._apply(self._ids[i], self.store.read_record(self._ids[i]), seq)
         self._cost = math.fsum(wall)
         for point in self._points:

@@ -359,3 +359,16 @@ def test_runs_the_catalogue_lacks_are_read_from_their_records(tmp_path):
     (folder.store.runs_dir / f"{ids[0]}.json").unlink()  # the records are the truth
     ctx.catalogue.close()
     assert shown_of(fresh(folder.root)) == recomputed(folder)
+
+
+def test_a_copy_whose_point_the_model_refuses_is_shown_unreadable(tmp_path):
+    # a copy this code no longer accepts at one grid point (written by another version):
+    # the page says it cannot be read, no error
+    folder = Folder(tmp_path)
+    text = folder.store.campaign_copy.read_text()
+    folder.store.campaign_copy.write_text(text.replace("chi: [5.0, 10.0]", "chi: [5.0, -10.0]"))
+    client, ctx = client_for(folder.root)
+    page = get(client)
+    assert page["readable"] is False
+    assert page["points"] == []
+    ctx.catalogue.close()

@@ -228,6 +228,13 @@ class Expansion:
     def __iter__(self) -> Iterator[RunSpec]:
         return (self.run(i) for i in range(len(self)))
 
+    def by_point(self) -> Iterator[tuple[GridPoint, list[str], list[int]]]:
+        """Each point with its runs' ids and seeds, in run order (what iterating the runs
+        gives, grouped by point, without a :class:`RunSpec` per run)."""
+        n = len(self.seeds)
+        for k, point in enumerate(self.points):
+            yield point, self.run_ids[k * n : (k + 1) * n], list(self.seeds)
+
 
 def continued_runs(
     expansion: Expansion, todo: list[int], records: Mapping[str, Any]

@@ -124,21 +124,19 @@ class Catalogue:
         with self.db.engine.connect() as conn:
             return [(str(rid), int(seq)) for rid, seq in conn.execute(stmt)]
 
-    def campaign_states(
-        self, campaign: str, scalar: str
-    ) -> dict[str, tuple[str, float | None, float | None]]:
-        """Every run of ``campaign``: run_id -> (status, wall time, the value of scalar
-        ``scalar`` or None), in one query (what a campaign's page needs of each run)."""
+    def campaign_done(self, campaign: str, scalar: str) -> Sequence[sa.Row[Any, Any, Any]]:
+        """``(run_id, wall time, the value of scalar ``scalar`` or None)`` of every run of
+        ``campaign`` done ok, in one query (what a campaign's page needs of such a run)."""
         r, m, v = t.runs, t.campaign_runs, t.run_values
         value = sa.and_(v.c.run_id == r.c.run_id, v.c.space == "scalars", v.c.key == scalar)
         stmt = (
-            sa.select(r.c.run_id, r.c.status, r.c.wall_time, v.c.num_value)
+            sa.select(r.c.run_id, r.c.wall_time, v.c.num_value)
             .join(m, m.c.run_id == r.c.run_id)
             .outerjoin(v, value)
-            .where(m.c.campaign == campaign)
+            .where(m.c.campaign == campaign, r.c.status == "ok")
         )
         with self.db.engine.connect() as conn:
-            return {str(rid): (str(st), wall, x) for rid, st, wall, x in conn.execute(stmt)}
+            return conn.execute(stmt).all()
 
     def campaigns(self) -> pd.DataFrame:
         """One row per campaign: ``name``, ``folder``, ``campaign_sha256``, ``first_seen``,

@@ -49,15 +49,23 @@ def stored_text(store: CampaignStore) -> str | None:
         raise StoreError(f"cannot read {store.campaign_copy}: {e}") from None
 
 
-def stored_campaign(store: CampaignStore, text: str | None = None) -> Campaign | None:
+def stored_campaign(
+    store: CampaignStore, text: str | None = None, *, build_points: bool = True
+) -> Campaign | None:
     """The campaign of the folder's copy (validated by this code), ``None`` without a copy.
-    Raises :class:`~nematic_solids.sweep.errors.CampaignError` when this code does not accept it."""
+    Raises :class:`~nematic_solids.sweep.errors.CampaignError` when this code does not accept it
+    (``build_points``: whether its grid points are built and checked by the model, as
+    :func:`~nematic_solids.sweep.spec.parse_campaign`'s)."""
     if text is None:
         text = stored_text(store)
     if text is None:
         return None
     return parse_campaign(
-        text, stored_source(store, text), stored_overrides(text), default_name=store.root.name
+        text,
+        stored_source(store, text),
+        stored_overrides(text),
+        default_name=store.root.name,
+        build_points=build_points,
     )
 
 

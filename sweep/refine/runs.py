@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 from ..campaign import Campaign
@@ -78,3 +78,11 @@ class RunList(Expansion):
 
     def run(self, i: int) -> RunSpec:
         return self._runs[i]
+
+    def by_point(self) -> Iterator[tuple[GridPoint, list[str], list[int]]]:
+        groups: dict[int, tuple[GridPoint, list[str], list[int]]] = {}
+        for r in self._runs:
+            group = groups.setdefault(id(r.point), (r.point, [], []))
+            group[1].append(r.run_id)
+            group[2].append(r.seed)
+        return iter(groups.values())

@@ -21,31 +21,33 @@ number of campaigns it has shown.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 import os
 import threading
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ..catalogue import Catalogue
+from ..expand import Expansion
 from ..models.interface import Observable
 from ..store import CampaignStore, Record
 from .views import (
     CONFIDENCE,
     campaign_store,
-    expansion_of,
     failure_entry,
     interval,
-    load_stored,
     not_started,
     plain,
     point_key,
     point_marks,
     rounds,
     shown,
+    stored_layout,
     verification,
 )
 
@@ -69,23 +71,41 @@ def _stamp(folder: Path, names: tuple[str, ...]) -> tuple[tuple[int, int] | None
     return tuple(out)
 
 
+class _CollectorPaused:
+    """Python's cycle collector paused while a view is built (``with _CollectorPaused():``):
+    a build allocates some 10^5 objects (a big campaign's rows and lists) that hold no
+    cycles, and each full pass of the collector that they trigger walks the service's whole
+    heap and frees nothing. Concurrent builds are counted: the collector runs again when the
+    last one ends, and only if it ran before the first began."""
+
+    _lock = threading.Lock()
+    _holds = 0
+    _was_enabled = True
+
+    def __enter__(self) -> None:
+        with self._lock:
+            if _CollectorPaused._holds == 0:
+                _CollectorPaused._was_enabled = gc.isenabled()
+                gc.disable()
+            _CollectorPaused._holds += 1
+
+    def __exit__(self, *exc: object) -> None:
+        with self._lock:
+            _CollectorPaused._holds -= 1
+            if _CollectorPaused._holds == 0 and _CollectorPaused._was_enabled:
+                gc.enable()
+
+
 @dataclass
 class _Point:
     index: int
     coords: dict[str, Any]
-    run_ids: list[str] = field(default_factory=list)
-    seeds: list[int] = field(default_factory=list)
+    #: :func:`~.views.point_key` of its coords (what its marks are found by)
+    key: str
+    #: the positions of its runs in the view's per-run lists
+    runs: list[int] = field(default_factory=list)
     seq: int = 0
     summary: dict[str, Any] = field(default_factory=dict)
-
-
-@dataclass
-class _Run:
-    point: int
-    seed: int
-    status: str = "pending"
-    value: float | None = None
-    wall: float = 0.0
 
 
 def _finite(x: Any) -> float | None:
@@ -93,7 +113,11 @@ def _finite(x: Any) -> float | None:
 
 
 class CampaignView:
-    """One campaign's page (see the module's docstring); thread-safe."""
+    """One campaign's page (see the module's docstring); thread-safe.
+
+    The runs' state is kept in lists by position (the layout's run order): ``_ids``,
+    ``_seeds``, ``_point_of`` (the point's index), ``_status``, ``_value`` (the shown
+    scalar), ``_wall``; ``_where`` maps a run id to its position."""
 
     def __init__(self, store: CampaignStore, catalogue: Catalogue):
         self.store, self.catalogue = store, catalogue
@@ -107,13 +131,22 @@ class CampaignView:
         #: the observable the diagram shows (the campaign's model's classifying one)
         self._shown: Observable = shown()
         self._points: list[_Point] = []
-        self._runs: dict[str, _Run] = {}
+        self._clear_runs()
+        self._extras: dict[str, tuple[Any, Any]] = {}
+        self.builds = 0
+
+    def _clear_runs(self) -> None:
+        self._ids: list[str] = []
+        self._seeds: list[int] = []
+        self._point_of: list[int] = []
+        self._status: list[str] = []
+        self._value: list[float | None] = []
+        self._wall: list[float] = []
+        self._where: dict[str, int] = {}
         self._failures: dict[str, dict[str, Any]] = {}
         self._cleared: dict[str, int] = {}
         self._counts = {"ok": 0, "failed": 0, "pending": 0}
         self._cost = 0.0
-        self._extras: dict[str, tuple[Any, Any]] = {}
-        self.builds = 0
 
     # ------------------------------------------------------------------ reading
     def _last_seq(self) -> int | None:
@@ -129,40 +162,34 @@ class CampaignView:
         self.builds += 1
         self._layout = _stamp(self.store.root, LAYOUT_FILES)
         self.seq = self.layout_seq = seq
-        self._points, self._runs, self._failures, self._cleared = [], {}, {}, {}
-        self._counts = {"ok": 0, "failed": 0, "pending": 0}
-        self._cost = 0.0
-        campaign = load_stored(self.store)
-        if campaign is None:
+        self._points = []
+        self._clear_runs()
+        layout = stored_layout(self.store)
+        if layout is None:
             self._head = not_started(self.name)
             return
-        expansion = expansion_of(campaign, self.store)
+        campaign, expansion = layout
         self._shown = shown(campaign.model)
-        states, on_disk = self._states(seq)
-        by_index: dict[tuple[int, ...], _Point] = {}
-        counts, cost = self._counts, 0.0
-        for run in expansion:
-            rid, seed, where = run.run_id, int(run.seed), run.point
-            point = by_index.get(where.index)
-            if point is None:
-                point = _Point(len(self._points), {k: plain(v) for k, v in where.coords.items()})
-                point.seq = seq
-                by_index[where.index] = point
-                self._points.append(point)
-            point.run_ids.append(rid)
-            point.seeds.append(seed)
-            state = states.get(rid) if rid in on_disk else None
-            if state is not None and state[0] == "ok":  # what the catalogue holds is enough
-                wall = _finite(state[1]) or 0.0
-                self._runs[rid] = _Run(point.index, seed, "ok", _finite(state[2]), wall)
-                counts["ok"] += 1
-                cost += wall
+        self._lay_out(expansion, seq)
+        n = len(self._ids)
+        self._status, self._value, self._wall = ["pending"] * n, [None] * n, [0.0] * n
+        done, on_disk = self._states(seq)
+        where, status, value, wall = self._where, self._status, self._value, self._wall
+        isfinite = math.isfinite
+        ok: list[str] = []
+        for rid, w, x in done:  # done ok: what the catalogue holds is enough
+            i = where.get(rid)
+            if i is None or rid not in on_disk:
                 continue
-            self._runs[rid] = _Run(point.index, seed)
-            counts["pending"] += 1
-            if rid in on_disk:  # failed, or not in the catalogue: its record
-                self._apply(rid, self.store.read_record(rid), seq, coords=run.coords)
-        self._cost += cost
+            status[i] = "ok"
+            wall[i] = float(w) if w is not None and isfinite(w) else 0.0
+            value[i] = float(x) if x is not None and isfinite(x) else None
+            ok.append(rid)
+        self._counts = {"ok": len(ok), "failed": 0, "pending": n - len(ok)}
+        # failed, or not in the catalogue: its record (in the layout's order)
+        for i in sorted(map(where.__getitem__, on_disk.difference(ok).intersection(where))):
+            self._apply(self._ids[i], self.store.read_record(self._ids[i]), seq)
+        self._cost = math.fsum(wall)
         for point in self._points:
             self._summarise(point)
         self._head = {
@@ -175,46 +202,64 @@ class CampaignView:
             "total": len(expansion),
         }
 
-    def _states(
-        self, seq: int
-    ) -> tuple[dict[str, tuple[str, float | None, float | None]], set[str]]:
-        """What the build reads of the runs: the catalogue's state of every run of the
-        campaign in one query (status, wall time, the shown value: enough for a run done ok),
-        and the run ids with a record file (none: not run). A run that failed, or that the
-        catalogue lacks (a driver that ran without it), is read from its record file."""
+    def _lay_out(self, expansion: Expansion, seq: int) -> None:
+        """The points and the runs' positions of the campaign's layout (a point's runs
+        together, in the expansion's order)."""
+        by_index: dict[tuple[int, ...], _Point] = {}
+        ids, seeds, point_of = self._ids, self._seeds, self._point_of
+        for where, run_ids, run_seeds in expansion.by_point():
+            point = by_index.get(where.index)
+            if point is None:
+                coords = {k: plain(v) for k, v in where.coords.items()}
+                point = _Point(len(self._points), coords, point_key(coords), seq=seq)
+                by_index[where.index] = point
+                self._points.append(point)
+            point.runs.extend(range(len(ids), len(ids) + len(run_ids)))
+            ids.extend(run_ids)
+            seeds.extend(int(s) for s in run_seeds)
+            point_of.extend([point.index] * len(run_ids))
+        self._where = {rid: i for i, rid in enumerate(ids)}
+
+    def _states(self, seq: int) -> tuple[Sequence[Any], set[str]]:
+        """What the build reads of the runs: the catalogue's runs of the campaign done ok
+        (run id, wall time, the shown value), in one query, and the run ids with a record
+        file (none: not run). A run that failed, or that the catalogue lacks (a driver that
+        ran without it), is read from its record file."""
         try:
-            states = self.catalogue.campaign_states(self.name, self._shown.scalar) if seq else {}
+            done: Sequence[Any] = (
+                self.catalogue.campaign_done(self.name, self._shown.scalar) if seq else []
+            )
         except Exception:  # noqa: BLE001 - the folder is the truth
             log.warning("catalogue not readable: %s read from its folder", self.name)
-            states = {}
+            done = []
         try:
-            with os.scandir(self.store.runs_dir) as entries:
-                on_disk = {
-                    e.name[:-5] for e in entries if e.name.endswith(".json") and e.name[0] != "."
-                }
+            on_disk = {
+                n[:-5]
+                for n in os.listdir(self.store.runs_dir)
+                if n.endswith(".json") and n[0] != "."
+            }
         except OSError:
             on_disk = set()
-        return states, on_disk
+        return done, on_disk
 
-    def _apply(
-        self, run_id: str, record: Record | None, seq: int, coords: dict[str, Any] | None = None
-    ) -> None:
+    def _apply(self, run_id: str, record: Record | None, seq: int) -> None:
         """A run's record (None: not run) moves its point, the counts, the cost, the failures."""
-        run = self._runs[run_id]
+        i = self._where[run_id]
         status = "pending" if record is None else str(record.get("status"))
         kind = status if status in ("ok", "failed") else "pending"
-        old = run.status if run.status in ("ok", "failed") else "pending"
+        old = self._status[i] if self._status[i] in ("ok", "failed") else "pending"
         self._counts[old] -= 1
         self._counts[kind] += 1
         wall = _finite(None if record is None else record.get("wall_time")) or 0.0
-        self._cost += wall - run.wall
-        run.status, run.wall = status, wall
+        self._cost += wall - self._wall[i]
+        self._status[i], self._wall[i] = status, wall
         scalars = (record or {}).get("scalars") or {}
-        run.value = _finite(scalars.get(self._shown.scalar))
-        point = self._points[run.point]
+        self._value[i] = _finite(scalars.get(self._shown.scalar))
+        point = self._points[self._point_of[i]]
         point.seq = max(point.seq, seq)
         if record is not None and status != "ok":
-            entry = failure_entry(run_id, coords or point.coords, record)
+            coords = {**point.coords, "seed": self._seeds[i]}
+            entry = failure_entry(run_id, coords, record)
             self._failures[run_id] = {**entry, "point": point.index, "seq": seq}
             self._cleared.pop(run_id, None)
         elif run_id in self._failures:
@@ -222,10 +267,11 @@ class CampaignView:
             self._cleared[run_id] = seq
 
     def _summarise(self, point: _Point) -> None:
-        runs = [self._runs[r] for r in point.run_ids]
-        values = [r.value for r in runs if r.status == "ok" and r.value is not None]
+        status, value = self._status, self._value
+        values = [v for i in point.runs if status[i] == "ok" and (v := value[i]) is not None]
         mean, low, high = interval(values)
-        kinds = [r.status if r.status in ("ok", "failed") else "pending" for r in runs]
+        kinds = [status[i] for i in point.runs]
+        ok, failed = kinds.count("ok"), kinds.count("failed")
         point.summary = {
             "index": point.index,
             "coords": point.coords,
@@ -233,26 +279,27 @@ class CampaignView:
             "low": _finite(low),
             "high": _finite(high),
             "n": len(values),
-            "ok": kinds.count("ok"),
-            "failed": kinds.count("failed"),
-            "pending": kinds.count("pending"),
+            "ok": ok,
+            "failed": failed,
+            "pending": len(kinds) - ok - failed,
         }
 
     def refresh(self) -> None:
         """Bring the view up to the catalogue's latest ``seq`` (see the module's docstring)."""
         upto = self._last_seq()
         if upto is None or self._layout != _stamp(self.store.root, LAYOUT_FILES):
-            self._build(upto or 0)
+            with _CollectorPaused():
+                self._build(upto or 0)
             return
         if upto <= self.seq:
             return
         changed = self.catalogue.campaign_changes(self.name, self.seq, upto)
         touched: set[int] = set()
         for run_id, seq in changed:
-            if run_id not in self._runs:
+            if run_id not in self._where:
                 continue  # not a run of its layout (another folder's of the same name)
             self._apply(run_id, self.store.read_record(run_id), seq)
-            touched.add(self._runs[run_id].point)
+            touched.add(self._point_of[self._where[run_id]])
         for index in touched:
             self._summarise(self._points[index])
         self.seq = upto
@@ -285,11 +332,11 @@ class CampaignView:
                 layout_seq=self.layout_seq,
                 counts=dict(self._counts),
                 cost={
-                    "runs": sum(1 for r in self._runs.values() if r.status != "pending"),
+                    "runs": len(self._status) - self._status.count("pending"),
                     "cpu_seconds": float(self._cost),
                 },
                 points=[
-                    {**p.summary, **marks.get(point_key(p.coords), {})}
+                    {**p.summary, **marks.get(p.key, {})}
                     for p in self._points
                     if full or p.seq > (since or 0)
                 ],
@@ -311,12 +358,12 @@ class CampaignView:
             point = self._points[index]
             return [
                 {
-                    "run_id": rid,
-                    "seed": seed,
-                    "status": self._runs[rid].status,
-                    "value": self._runs[rid].value,
+                    "run_id": self._ids[i],
+                    "seed": self._seeds[i],
+                    "status": self._status[i],
+                    "value": self._value[i],
                 }
-                for rid, seed in zip(point.run_ids, point.seeds, strict=True)
+                for i in point.runs
             ]
 
 

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..campaign import DEFAULT_MODEL, Campaign
-from ..errors import CampaignError
+from ..errors import CampaignError, ParameterError
 from ..expand import Expansion
 from ..models.interface import Observable, classifier
 from ..models.registry import UnknownModel, get_model
@@ -65,19 +65,20 @@ def campaign_names(root: Path) -> list[str]:
     return [p.name for p in entries if (p / "campaign.yaml").exists() or (p / "runs").is_dir()]
 
 
-def load_stored(store: CampaignStore) -> Campaign | None:
+def stored_layout(store: CampaignStore) -> tuple[Campaign, Expansion] | None:
+    """The campaign of the folder's copy and its runs (the union grid of its rounds, for a
+    campaign with rounds), or ``None`` where the folder has no copy or this code does not
+    accept it: its text (:class:`~nematic_solids.sweep.errors.CampaignError`) or a grid
+    point the model refuses (:class:`~nematic_solids.model.errors.ParameterError`). The
+    points are built once, by the expansion (the copy is read without building them)."""
     from ..outputs.stored import stored_campaign
-
-    try:
-        return stored_campaign(store)
-    except CampaignError:
-        return None
-
-
-def expansion_of(campaign: Campaign, store: CampaignStore) -> Expansion:
     from ..refine.rounds import expansion_for
 
-    return expansion_for(campaign, store)
+    try:
+        campaign = stored_campaign(store, build_points=False)
+        return None if campaign is None else (campaign, expansion_for(campaign, store))
+    except (CampaignError, ParameterError):
+        return None
 
 
 @functools.cache

@@ -192,6 +192,29 @@ def test_expansion_ids_match_single_run_ids():
     assert expand(c2).run_ids == e.run_ids
 
 
+def test_the_runs_by_point_are_the_runs_grouped_by_their_point():
+    from nematic_solids.sweep.refine.runs import RunList
+
+    c = parse_campaign(
+        "name: x\nsweep: {axes: {alpha_minus_B: [0.1, 0.4], K: [1.0e-4, "
+        "1.0e-3]}}\nseeds: [3, 1, 2]\nnumerics: {resolution: 128}"
+    )
+    e = expand(c)
+
+    def grouped(runs: Any) -> list[tuple[Any, list[str], list[int]]]:
+        out: dict[int, tuple[Any, list[str], list[int]]] = {}
+        for r in runs:
+            out.setdefault(id(r.point), (r.point, [], []))[1].append(r.run_id)
+            out[id(r.point)][2].append(r.seed)
+        return list(out.values())
+
+    assert list(e.by_point()) == grouped(e)
+    assert len(list(e.by_point())) == 4
+    # a list of runs in another order (the planned runs of a round): grouped the same way
+    some = [e.run(i) for i in (7, 0, 8, 3, 4)]
+    assert list(RunList(c, some).by_point()) == grouped(some)
+
+
 def test_the_band_texture_keeps_the_ids_it_had_before_initial_existed():
     # "initial": "band" (the only texture before the field existed) is left out of the
     # canonical text; the golden hashes above are of dicts without it

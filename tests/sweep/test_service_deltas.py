@@ -7,6 +7,8 @@ seeds) sends the whole page; the views kept are bounded."""
 
 from __future__ import annotations
 
+import math
+import random
 import threading
 import time
 from pathlib import Path
@@ -239,4 +241,134 @@ def test_the_views_kept_are_bounded(tmp_path):
         assert client.get(f"/api/campaigns/c{k}", headers=AUTH).status_code == 200
     assert len(ctx.views) == MAX_VIEWS
     assert client.get("/api/campaigns/grid/points/99", headers=AUTH).status_code == 404
+    ctx.catalogue.close()
+
+
+def recomputed(folder: Folder) -> dict:
+    """The page's content computed from the run records alone, run by run (what the view
+    must show however it came to it): each point's counts and seed mean with its interval,
+    the failures, the cost."""
+    from nematic_solids.sweep.service.views import interval, plain
+
+    points: dict[tuple, dict] = {}
+    failures, walls, done = [], [], 0
+    for run in folder.expansion:
+        rec = folder.store.read_record(run.run_id)
+        p = points.setdefault(
+            run.point.index,
+            {
+                "index": len(points),
+                "coords": {k: plain(v) for k, v in run.point.coords.items()},
+                "values": [],
+                "ok": 0,
+                "failed": 0,
+                "pending": 0,
+            },
+        )
+        status = "pending" if rec is None else rec["status"]
+        p[status] += 1
+        if rec is None:
+            continue
+        done += 1
+        walls.append(rec["wall_time"])
+        if status == "ok":
+            p["values"].append(rec["scalars"]["sigma2_S_final"])
+        else:
+            failures.append(
+                {
+                    "run_id": run.run_id,
+                    "coords": {**p["coords"], "seed": run.seed},
+                    "reason": rec["reason"],
+                    "t_failed": rec["t_failed"],
+                    "detail": rec["detail"].splitlines()[-1],
+                    "point": p["index"],
+                    "seq": 0,
+                }
+            )
+    out = []
+    for p in points.values():
+        mean, low, high = interval(p.pop("values"))
+        n = p["ok"]
+        finite = [None if math.isnan(x) else x for x in (mean, low, high)]
+        out.append({**p, "mean": finite[0], "low": finite[1], "high": finite[2], "n": n})
+    counts = {k: sum(p[k] for p in out) for k in ("ok", "failed", "pending")}
+    return {
+        "points": out,
+        "failures": sorted(failures, key=lambda f: f["run_id"]),
+        "counts": counts,
+        "cost": {"runs": done, "cpu_seconds": pytest.approx(sum(walls), rel=1e-12)},
+    }
+
+
+def shown_of(page: dict) -> dict:
+    out = comparable(page)
+    return {k: out[k] for k in ("points", "failures", "counts", "cost")}
+
+
+def test_the_page_is_the_one_recomputed_from_the_records_built_followed_or_reindexed(tmp_path):
+    from nematic_solids.sweep.catalogue.index import index_root
+    from nematic_solids.sweep.catalogue.opening import open_catalogue
+
+    folder = Folder(tmp_path, seeds=4)
+    ids = folder.expansion.run_ids
+    rng = random.Random(7)
+    with Recorder(folder.store, catch_up=False) as recorder:
+        for rid in ids[:10]:  # done before the service starts
+            recorder.add(folder.record(rid, rng.uniform(0, 1)))
+    client, ctx = client_for(folder.root)
+    page = get(client)
+    assert shown_of(page) == recomputed(folder)  # built at once
+    # then runs recorded a few at a time, some failed, a failed one done again ok
+    later = ids[10:]
+    rng.shuffle(later)
+    batches = [later[k : k + 7] for k in range(0, len(later), 7)]
+    for b, batch in enumerate(batches):
+        rows = []
+        for k, rid in enumerate(batch):
+            failed = (b + k) % 5 == 0
+            rows.append(
+                _row(folder, folder.record(rid, rng.uniform(0, 1), "failed" if failed else "ok"))
+            )
+        if b == 3:
+            redone = next(f["run_id"] for f in page["failures"])
+            rows.append(_row(folder, folder.record(redone, 0.5)))
+        ctx.catalogue.record(rows)
+        page = merge(page, get(client, page["seq"]))
+        assert shown_of(page) == recomputed(folder)
+    assert page["counts"]["failed"] > 3
+    assert page["counts"]["pending"] == 0
+    assert ctx.views.get("grid").builds == 1  # followed, not built again
+    ctx.catalogue.close()
+    # the catalogue rebuilt from the folder: a service that starts shows the same
+    (folder.root / "catalogue.sqlite").unlink()
+    catalogue = open_catalogue(folder.root)
+    index_root(catalogue)
+    catalogue.close()
+    assert shown_of(fresh(folder.root)) == recomputed(folder)
+
+
+def test_runs_the_catalogue_lacks_are_read_from_their_records(tmp_path):
+    folder = Folder(tmp_path)
+    ids = folder.expansion.run_ids
+    client, ctx = client_for(folder.root)
+    with Recorder(folder.store, catch_up=False) as recorder:
+        for rid in ids[:6]:
+            recorder.add(folder.record(rid, 0.1 * len(rid)))
+    for k, rid in enumerate(ids[6:12]):  # a driver that ran without the catalogue
+        folder.record(rid, 0.3, "failed" if k % 2 else "ok")
+    (folder.store.runs_dir / f"{ids[0]}.json").unlink()  # the records are the truth
+    ctx.catalogue.close()
+    assert shown_of(fresh(folder.root)) == recomputed(folder)
+
+
+def test_a_copy_whose_point_the_model_refuses_is_shown_unreadable(tmp_path):
+    # a copy this code no longer accepts at one grid point (written by another version):
+    # the page says it cannot be read, no error
+    folder = Folder(tmp_path)
+    text = folder.store.campaign_copy.read_text()
+    folder.store.campaign_copy.write_text(text.replace("chi: [5.0, 10.0]", "chi: [5.0, -10.0]"))
+    client, ctx = client_for(folder.root)
+    page = get(client)
+    assert page["readable"] is False
+    assert page["points"] == []
     ctx.catalogue.close()

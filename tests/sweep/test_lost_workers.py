@@ -64,7 +64,7 @@ def test_a_result_lost_with_its_worker_runs_again_then_stays_pending(tmp_path):
     held = [(expansion.run(i), None, i) for i in (0, 1)]
     s = execute.Session.__new__(execute.Session)
     s.store, s.expansion, s.queue, s.attempts = store, expansion, [], {0: 0, 1: 0}
-    s.client = SimpleNamespace(status="running")
+    s.client = SimpleNamespace(status="running")  # type: ignore[assignment]
     s.summary = execute.RunSummary(total=2, skipped=0)
     fut = SimpleNamespace(cancel=lambda: None)
     taken = s._lost_result(fut, held, OSError("gone"))  # type: ignore[arg-type]

@@ -296,10 +296,10 @@ CORE_MODEL_IMPORTS: dict[str, str] = {
     "sweep/protocols.py": "protocol axes read with the model's Protocol",
     "sweep/provenance.py": "the model's version and library versions",
     "sweep/run/continuation.py": "checkpoints and end states are the model's RunState",
-    "sweep/spec/__init__.py": "grid points checked by Parameters/Numerics; resolution rule",
+    "sweep/spec/__init__.py": "the memory bound before any point is built: the nematic grids",
     "sweep/spec/execution.py": "what the accelerated backend supports",
     "sweep/spec/initial.py": "a parent's points as Parameters/Numerics; the resolution rule",
-    "sweep/spec/points.py": "every grid point checked by the model's objects",
+    "sweep/spec/points.py": "float32 and the accelerated backend's checks of a point",
     "sweep/spec/protocol.py": "the protocol section read by the model's Protocol",
 }
 #: Files outside the core that import nematic_solids.model: the paper's own commands, fits

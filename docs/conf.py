@@ -78,6 +78,8 @@ nitpick_ignore_regex = [
     (r"py:class", r"Path|Array|ArrayLike|NDArray|PDEBase|optional"),
     # py-pde's own annotation of a boundary condition (a subclass of its SwiftHohenbergPDE)
     (r"py:class", r"BoundariesData"),
+    # the grid's points and runs (sweep.expand) appear in signatures, documented with Expansion
+    (r"py:class", r"(nematic_solids\.sweep\.expand\.)?(GridPoint|RunSpec)"),
     (r"py:meth", r"~?Mechanics\..*"),
     (r"py:mod", r"nematic_solids\..*"),
     (r"py:.*", r"nematic_solids\.sweep\.spec\.yaml_input\..*"),

@@ -230,7 +230,7 @@ class Expansion:
 
     def by_point(self) -> Iterator[tuple[GridPoint, list[str], list[int]]]:
         """Each point with its runs' ids and seeds, in run order (what iterating the runs
-        gives, grouped by point, without a :class:`RunSpec` per run)."""
+        gives, grouped by point, without a ``RunSpec`` per run)."""
         n = len(self.seeds)
         for k, point in enumerate(self.points):
             yield point, self.run_ids[k * n : (k + 1) * n], list(self.seeds)

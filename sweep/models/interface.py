@@ -339,7 +339,7 @@ class State(Protocol):
 @runtime_checkable
 class StateCodec(Protocol):
     """A model whose end states and checkpoints the campaign manager keeps in files as
-    :meth:`State.to_dataset` writes them, and reads back with :meth:`state_from_dataset` (a
+    ``State.to_dataset`` writes them, and reads back with :meth:`state_from_dataset` (a
     run file's group ``state``, a rolling checkpoint). A model that keeps states and is not a
     StateCodec is the paper's, whose states the campaign manager reads with
     :mod:`nematic_solids.model.checkpoint`."""

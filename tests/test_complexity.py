@@ -28,7 +28,6 @@ ALLOWED: dict[str, int] = {
     "sweep/report/phase_plot.py::phase_layout": 35,
     "sweep/spec/axes.py::read_sweep": 47,
     "sweep/spec/chain.py::read_chain": 34,
-    "sweep/spec/precision.py::read_precision": 33,
     "sweep/spec/refine.py::check_refine": 38,
     "sweep/spec/verify.py::check_verify": 52,
 }

@@ -27,7 +27,6 @@ ALLOWED: dict[str, int] = {
     "sweep/report/phase_plot.py::point_columns": 37,
     "sweep/report/phase_plot.py::phase_layout": 35,
     "sweep/spec/axes.py::read_sweep": 47,
-    "sweep/spec/chain.py::read_chain": 34,
     "sweep/spec/refine.py::check_refine": 38,
     "sweep/spec/verify.py::check_verify": 52,
 }

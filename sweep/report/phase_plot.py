@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -158,6 +159,7 @@ def point_columns(
     status = per_point("status").astype(int)
     run_ids = per_point("run_id")
     observables = {m: per_point(m).astype(float) for m in shown_of.hover if m in phase}
+    shown = observables.get(shown_of.observable)
     grids = (
         np.asarray(phase["resolution"].transpose(*dims).values).reshape(-1)
         if "resolution" in phase.data_vars
@@ -168,39 +170,13 @@ def point_columns(
         for c in phase.coords
         if phase[c].ndim == 1 and phase[c].dims[0] in dims and str(c) not in dims
     }
-    cols: dict[str, list[Any]] = {
-        k: []
-        for k in (
-            "where",
-            "counts",
-            "shown",
-            "shown_log",
-            "run_id",
-            "run_seed",
-            "run_title",
-            "snapshot",
-            "series_t",
-            "series_y",
-            "facet",
-            *dims,
-            *(f"seeds_{m}" for m in observables),
-        )
-    }
+    cols = _empty_columns(dims, observables)
     embedded = 0
     for flat, index in enumerate(np.ndindex(*shape)):
         st = status[flat]
         if not (st > 0).any():  # not run (a refined campaign's union grid)
             continue
-        at = dict(zip(dims, index, strict=True))
-        coords = {d: phase[d].values[i] for d, i in at.items()}
-        coords.update({c: phase[c].values[at[d]] for c, d in extra.items()})
-        where = ", ".join(f"{symbol(str(k))} = {_label(v)}" for k, v in coords.items())
-        for d in dims:
-            cols[d].append(_label(phase[d].values[at[d]]))
-        cols["facet"].append(
-            ", ".join(f"{symbol(d)} = {_label(phase[d].values[at[d]])}" for d in facet_dims)
-        )
-        cols["where"].append(where)
+        _add_place(cols, phase, dict(zip(dims, index, strict=True)), extra, facet_dims)
         grid = f" on {int(grids[flat])}^2" if grids is not None else ""  # resolution: auto
         cols["counts"].append(
             f"{int((st == STATUS_OK).sum())} ok, "
@@ -208,42 +184,102 @@ def point_columns(
         )
         for m, values in observables.items():
             cols[f"seeds_{m}"].append(_seed_text(values[flat], seeds, st))
-        shown = observables.get(shown_of.observable)
-        ok = (st == STATUS_OK) & np.isfinite(shown[flat]) if shown is not None else st < 0
-        mean = float(np.mean(shown[flat][ok])) if shown is not None and ok.any() else math.nan
+        mean = _seed_mean(st, None if shown is None else shown[flat])
         cols["shown"].append(mean)
         cols["shown_log"].append(math.log10(mean) if mean > 0 else math.nan)
         order = [k for k in range(n_seeds) if st[k] == STATUS_OK] + [
             k for k in range(n_seeds) if st[k] == STATUS_FAILED
         ]
-        chosen: int | None = None
-        image = ""
-        t: list[float] = []
-        y: list[float] = []
-        for k in order:
-            path = runs_dir / f"{run_ids[flat][k]}.nc"
-            if embedded < MAX_POINTS_WITH_RUNS and path.is_file():
-                try:
-                    image, t, y = run_views(path, shown_of.observable)
-                except (OSError, ValueError, KeyError) as e:
-                    log.warning("report: cannot read run file %s: %s", path, e)
-                    continue
-                chosen = k
-                embedded += 1
-                break
-        k = chosen if chosen is not None else (order[0] if order else 0)
-        state = "ok" if st[k] == STATUS_OK else "failed"
-        cols["run_id"].append(str(run_ids[flat][k]))
-        cols["run_seed"].append(int(seeds[k]))
-        cols["run_title"].append(
-            f"{symbol(shown_of.observable)}(t): seed {int(seeds[k])} ({state})"
-            if chosen is not None
-            else "run not embedded"
+        run = (
+            _embedded_run(runs_dir, run_ids[flat], order, shown_of.observable)
+            if embedded < MAX_POINTS_WITH_RUNS
+            else (None, "", [], [])
         )
-        cols["snapshot"].append(image)
-        cols["series_t"].append(t)
-        cols["series_y"].append(y)
+        embedded += run[0] is not None
+        _add_run(cols, run, order, st, run_ids[flat], seeds, shown_of.observable)
     return cols
+
+
+def _empty_columns(dims: list[str], observables: Mapping[str, Any]) -> dict[str, list[Any]]:
+    """The points' columns, empty: their names."""
+    names = [
+        *("where", "counts", "shown", "shown_log", "run_id", "run_seed", "run_title"),
+        *("snapshot", "series_t", "series_y", "facet"),
+        *dims,
+        *(f"seeds_{m}" for m in observables),
+    ]
+    return {k: [] for k in names}
+
+
+def _add_place(
+    cols: dict[str, list[Any]],
+    phase: xr.Dataset,
+    at: dict[str, int],
+    extra: Mapping[str, str],
+    facet_dims: list[str],
+) -> None:
+    """Add where a point is (at the indices ``at`` of the dims): its value of each dim, its
+    facet, and its coordinates as text (those of ``extra``, coordinate -> its dim, too)."""
+    coords = {d: phase[d].values[i] for d, i in at.items()}
+    coords.update({c: phase[c].values[at[d]] for c, d in extra.items()})
+    for d in at:
+        cols[d].append(_label(phase[d].values[at[d]]))
+    cols["facet"].append(
+        ", ".join(f"{symbol(d)} = {_label(phase[d].values[at[d]])}" for d in facet_dims)
+    )
+    cols["where"].append(", ".join(f"{symbol(str(k))} = {_label(v)}" for k, v in coords.items()))
+
+
+def _seed_mean(status: np.ndarray, values: np.ndarray | None) -> float:
+    """The mean of a point's ``values`` over its seeds that succeeded with a finite value
+    (NaN without any)."""
+    if values is None:
+        return math.nan
+    ok = (status == STATUS_OK) & np.isfinite(values)
+    return float(np.mean(values[ok])) if ok.any() else math.nan
+
+
+#: A point's run as its panel shows it: (the seed's index, or None for none), snapshot, series.
+EmbeddedRun = tuple[int | None, str, list[float], list[float]]
+
+
+def _embedded_run(runs_dir: Path, ids: np.ndarray, order: list[int], series: str) -> EmbeddedRun:
+    """The first run of the seeds ``order`` whose file can be read, with its views."""
+    for k in order:
+        path = runs_dir / f"{ids[k]}.nc"
+        if path.is_file():
+            try:
+                image, t, y = run_views(path, series)
+            except (OSError, ValueError, KeyError) as e:
+                log.warning("report: cannot read run file %s: %s", path, e)
+                continue
+            return k, image, t, y
+    return None, "", [], []
+
+
+def _add_run(
+    cols: dict[str, list[Any]],
+    run: EmbeddedRun,
+    order: list[int],
+    status: np.ndarray,
+    ids: np.ndarray,
+    seeds: np.ndarray,
+    series: str,
+) -> None:
+    """Add a point's run: the one embedded, else its first seed in ``order``."""
+    chosen, image, t, y = run
+    k = chosen if chosen is not None else (order[0] if order else 0)
+    state = "ok" if status[k] == STATUS_OK else "failed"
+    cols["run_id"].append(str(ids[k]))
+    cols["run_seed"].append(int(seeds[k]))
+    cols["run_title"].append(
+        f"{symbol(series)}(t): seed {int(seeds[k])} ({state})"
+        if chosen is not None
+        else "run not embedded"
+    )
+    cols["snapshot"].append(image)
+    cols["series_t"].append(t)
+    cols["series_y"].append(y)
 
 
 def _figure(

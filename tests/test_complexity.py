@@ -24,7 +24,6 @@ ALLOWED: dict[str, int] = {
     "sweep/outputs/aggregate.py::build_phase": 51,
     "sweep/outputs/changes.py::describe_changes": 43,
     "sweep/outputs/status.py::campaign_status": 46,
-    "sweep/report/phase_plot.py::phase_layout": 35,
     "sweep/spec/axes.py::read_sweep": 47,
     "sweep/spec/refine.py::check_refine": 38,
     "sweep/spec/verify.py::check_verify": 52,

@@ -25,7 +25,6 @@ ALLOWED: dict[str, int] = {
     "sweep/outputs/changes.py::describe_changes": 43,
     "sweep/outputs/status.py::campaign_status": 46,
     "sweep/spec/axes.py::read_sweep": 47,
-    "sweep/spec/refine.py::check_refine": 38,
     "sweep/spec/verify.py::check_verify": 52,
 }
 

@@ -22,7 +22,6 @@ ALLOWED: dict[str, int] = {
     "sweep/figures/fig2.py::fig2": 45,
     "sweep/figures/fig4.py::fig4": 57,
     "sweep/outputs/aggregate.py::build_phase": 51,
-    "sweep/outputs/status.py::campaign_status": 46,
     "sweep/spec/axes.py::read_sweep": 47,
     "sweep/spec/verify.py::check_verify": 52,
 }

@@ -21,15 +21,7 @@ ALLOWED: dict[str, int] = {
     "sweep/figures/fig2.py::fig2": 45,
     "sweep/figures/fig4.py::fig4": 57,
     "sweep/outputs/aggregate.py::build_phase": 51,
-    "sweep/outputs/changes.py::describe_changes": 43,
-    "sweep/outputs/status.py::campaign_status": 46,
-    "sweep/report/content.py::fit_tables": 32,
-    "sweep/report/phase_plot.py::point_columns": 37,
-    "sweep/report/phase_plot.py::phase_layout": 35,
     "sweep/spec/axes.py::read_sweep": 47,
-    "sweep/spec/chain.py::read_chain": 34,
-    "sweep/spec/precision.py::read_precision": 33,
-    "sweep/spec/refine.py::check_refine": 38,
     "sweep/spec/verify.py::check_verify": 52,
 }
 

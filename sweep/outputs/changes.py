@@ -106,6 +106,25 @@ def _mapping_changes(section: str, old: Mapping[str, Any], new: Mapping[str, Any
 def describe_changes(old: Campaign, new: Campaign) -> list[str]:
     """One line per change: axes added, removed or with other values, zip groups, base
     parameters and numerics, seeds, the refine section, and the other sections by name."""
+    out = _axis_changes(old, new)
+    out += _zip_changes(old, new)
+    out += _mapping_changes("parameters", old.parameters, new.parameters)
+    out += _mapping_changes("numerics", old.numerics, new.numerics)
+    out += _seed_changes(old, new)
+    out += _section_change("refine", old.refine, new.refine)
+    out += _section_change("precision", old.precision, new.precision)
+    others = [
+        name
+        for name in ("store", "fits", "figures", "execution", "limits", "description")
+        if getattr(old, name) != getattr(new, name)
+    ]
+    if others:
+        out.append("also changed (no effect on the run ids): " + ", ".join(others))
+    return out or ["nothing that changes the runs (comments or layout)"]
+
+
+def _axis_changes(old: Campaign, new: Campaign) -> list[str]:
+    """One line per axis added, removed, with values added or removed, or reordered."""
     out = []
     old_axes = {a.name: a.values for a in old.axes}
     new_axes = {a.name: a.values for a in new.axes}
@@ -127,49 +146,41 @@ def describe_changes(old: Campaign, new: Campaign) -> list[str]:
         for name, values in old_axes.items()
         if name not in new_axes
     )
+    return out
+
+
+def _zip_changes(old: Campaign, new: Campaign) -> list[str]:
+    """The zip groups before and after, when they differ."""
     groups_old = {tuple(a.name for a in d.axes) for d in old.dims if len(d.axes) > 1}
     groups_new = {tuple(a.name for a in d.axes) for d in new.dims if len(d.axes) > 1}
-    if groups_old != groups_new:
-        out.append(
-            "zip groups: "
-            + (", ".join(f"[{', '.join(g)}]" for g in sorted(groups_old)) or "none")
-            + " -> "
-            + (", ".join(f"[{', '.join(g)}]" for g in sorted(groups_new)) or "none")
-        )
-    out += _mapping_changes("parameters", old.parameters, new.parameters)
-    out += _mapping_changes("numerics", old.numerics, new.numerics)
-    if old.seeds != new.seeds:
-        added = [s for s in new.seeds if s not in set(old.seeds)]
-        removed = [s for s in old.seeds if s not in set(new.seeds)]
-        out.append(
-            f"seeds: {len(old.seeds)} -> {len(new.seeds)}"
-            + (f"; added {_values(added)}" if added else "")
-            + (f"; removed {_values(removed)}" if removed else "")
-        )
-    if old.refine != new.refine:
-        out.append(
-            "refine: "
-            + ("added" if old.refine is None else "removed" if new.refine is None else "changed")
-        )
-    if old.precision != new.precision:
-        out.append(
-            "precision: "
-            + (
-                "added"
-                if old.precision is None
-                else "removed"
-                if new.precision is None
-                else "changed"
-            )
-        )
-    others = [
-        name
-        for name in ("store", "fits", "figures", "execution", "limits", "description")
-        if getattr(old, name) != getattr(new, name)
+    if groups_old == groups_new:
+        return []
+    return [
+        "zip groups: "
+        + (", ".join(f"[{', '.join(g)}]" for g in sorted(groups_old)) or "none")
+        + " -> "
+        + (", ".join(f"[{', '.join(g)}]" for g in sorted(groups_new)) or "none")
     ]
-    if others:
-        out.append("also changed (no effect on the run ids): " + ", ".join(others))
-    return out or ["nothing that changes the runs (comments or layout)"]
+
+
+def _seed_changes(old: Campaign, new: Campaign) -> list[str]:
+    """The number of seeds before and after, and those added and removed, when they differ."""
+    if old.seeds == new.seeds:
+        return []
+    added = [s for s in new.seeds if s not in set(old.seeds)]
+    removed = [s for s in old.seeds if s not in set(new.seeds)]
+    return [
+        f"seeds: {len(old.seeds)} -> {len(new.seeds)}"
+        + (f"; added {_values(added)}" if added else "")
+        + (f"; removed {_values(removed)}" if removed else "")
+    ]
+
+
+def _section_change(name: str, old: Any, new: Any) -> list[str]:
+    """``name: added``, ``removed`` or ``changed`` for a section that differs, else none."""
+    if old == new:
+        return []
+    return [f"{name}: " + ("added" if old is None else "removed" if new is None else "changed")]
 
 
 def _reachable(campaign: Campaign, run_id: str, record: Mapping[str, Any] | None) -> bool:

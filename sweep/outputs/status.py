@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from ..campaign import local_worker_count
+from ..campaign import Campaign, local_worker_count
 from ..expand import Expansion
 from ..lock import read_lock_holder
-from ..store import RETRYABLE_REASONS, CampaignStore
+from ..store import RETRYABLE_REASONS, CampaignStore, Record
 
 DONE, FAILED, PENDING = "done", "failed", "pending"
 MAX_EXAMPLES = 10
@@ -102,6 +102,72 @@ def _group(store: CampaignStore, example: dict[str, Any], count: int) -> dict[st
     }
 
 
+@dataclass
+class _Tally:
+    """What the records of a campaign's runs say, added run by run (:func:`campaign_status`):
+    each run's state, the failures' reasons with examples and each reason's first run, the
+    done runs other campaigns made, the wall times, who finished when, the unreadable runs."""
+
+    #: per run of the expansion: 0 done, 1 failed, 2 pending (3: not planned)
+    state: np.ndarray
+    reasons: Counter[str] = field(default_factory=Counter)
+    reused: Counter[str] = field(default_factory=Counter)
+    examples: list[dict[str, Any]] = field(default_factory=list)
+    #: reason -> its first failed run
+    first: dict[str, dict[str, Any]] = field(default_factory=dict)
+    times: list[float] = field(default_factory=list)
+    #: (finish time, host:pid)
+    finished: list[tuple[str, str]] = field(default_factory=list)
+    unreadable: list[dict[str, str]] = field(default_factory=list)
+    n_unreadable: int = 0
+
+    def add(
+        self, i: int, rid: str, rec: Record, expansion: Expansion, store: CampaignStore
+    ) -> None:
+        """Add run ``i`` (``rid``) of ``expansion`` from its record ``rec``."""
+        problem = store.check_run_file(rid, rec)
+        if problem is not None:  # the driver will redo it: pending
+            if len(self.unreadable) < MAX_EXAMPLES:
+                self.unreadable.append({"run_id": rid, "problem": problem})
+            self.n_unreadable += 1
+            return
+        if rec.get("status") != "ok" and rec.get("reason") in RETRYABLE_REASONS:
+            return
+        if rec.get("status") == "ok":
+            self.state[i] = 0
+            if rec.get("reused_from"):
+                self.reused[str(rec["reused_from"])] += 1
+            wall = rec.get("wall_time")
+            if isinstance(wall, (int, float)) and math.isfinite(wall):
+                self.times.append(float(wall))
+        else:
+            self.state[i] = 1
+            self._failed(i, rid, rec, expansion)
+        if rec.get("finished"):
+            self.finished.append((str(rec["finished"]), f"{rec.get('host')}:{rec.get('pid')}"))
+
+    def _failed(self, i: int, rid: str, rec: Record, expansion: Expansion) -> None:
+        reason = str(rec.get("reason") or "unknown")
+        self.reasons[reason] += 1
+        if len(self.examples) < MAX_EXAMPLES or reason not in self.first:
+            run = expansion.run(i)
+            example = {
+                "run_id": rid,
+                "coords": run.coords,
+                "reason": reason,
+                "detail": rec.get("detail") or "",
+                "t_failed": rec.get("t_failed"),
+            }
+            if len(self.examples) < MAX_EXAMPLES:
+                self.examples.append(example)
+            if reason not in self.first:
+                self.first[reason] = {
+                    **example,
+                    "finished": rec.get("finished"),
+                    "has_file": rec.get("nc_bytes") is not None,
+                }
+
+
 def campaign_status(
     expansion: Expansion, store: CampaignStore, *, workers: int | None = None
 ) -> StatusReport:
@@ -109,64 +175,55 @@ def campaign_status(
     campaign = expansion.campaign
     records = store.scan()
     n = len(expansion)
-    state = np.full(n, 2, dtype=np.int8)  # 0 done, 1 failed, 2 pending
-    reasons: Counter[str] = Counter()
-    reused: Counter[str] = Counter()
-    examples: list[dict[str, Any]] = []
-    first: dict[str, dict[str, Any]] = {}  # reason -> its first failed run
-    times: list[float] = []
-    finished: list[tuple[str, str]] = []  # (finish time, host:pid)
-    unreadable: list[dict[str, str]] = []
-    n_unreadable = 0
+    tally = _Tally(np.full(n, 2, dtype=np.int8))
     planned = getattr(expansion, "planned", None)  # a refined campaign: its planned runs
     for i, rid in enumerate(expansion.run_ids):
         rec = records.get(rid)
         if rec is None or (planned is not None and not planned[i]):
             continue
-        problem = store.check_run_file(rid, rec)
-        if problem is not None:  # the driver will redo it: pending
-            if len(unreadable) < MAX_EXAMPLES:
-                unreadable.append({"run_id": rid, "problem": problem})
-            n_unreadable += 1
-            continue
-        if rec.get("status") != "ok" and rec.get("reason") in RETRYABLE_REASONS:
-            continue
-        if rec.get("status") == "ok":
-            state[i] = 0
-            if rec.get("reused_from"):
-                reused[str(rec["reused_from"])] += 1
-            wall = rec.get("wall_time")
-            if isinstance(wall, (int, float)) and math.isfinite(wall):
-                times.append(float(wall))
-        else:
-            state[i] = 1
-            reason = str(rec.get("reason") or "unknown")
-            reasons[reason] += 1
-            if len(examples) < MAX_EXAMPLES or reason not in first:
-                run = expansion.run(i)
-                example = {
-                    "run_id": rid,
-                    "coords": run.coords,
-                    "reason": reason,
-                    "detail": rec.get("detail") or "",
-                    "t_failed": rec.get("t_failed"),
-                }
-                if len(examples) < MAX_EXAMPLES:
-                    examples.append(example)
-                if reason not in first:
-                    first[reason] = {
-                        **example,
-                        "finished": rec.get("finished"),
-                        "has_file": rec.get("nc_bytes") is not None,
-                    }
-        if rec.get("finished"):
-            finished.append((str(rec["finished"]), f"{rec.get('host')}:{rec.get('pid')}"))
+        tally.add(i, rid, rec, expansion, store)
+    state = tally.state
     if planned is not None:
         state[~planned] = 3
         n = int(planned.sum())
     done, failed = int((state == 0).sum()), int((state == 1).sum())
     pending = n - done - failed
+    report = StatusReport(
+        campaign=campaign.name,
+        folder=str(store.root),
+        total=n,
+        done=done,
+        failed=failed,
+        pending=pending,
+        per_axis=_per_axis(campaign, state),
+        reasons=dict(tally.reasons.most_common()),
+        examples=tally.examples,
+        failure_groups=[_group(store, tally.first[r], k) for r, k in tally.reasons.most_common()],
+        foreign_runs=len(set(records) - set(expansion.position)),
+        unreadable=tally.n_unreadable,
+        unreadable_examples=tally.unreadable,
+        reused=dict(sorted(tally.reused.items())),
+    )
+    report.running = read_lock_holder(store.lock_path)
+    for rid, info in store.in_progress().items():
+        pos = expansion.position.get(rid)
+        if pos is not None and state[pos] == 2:
+            run = expansion.run(pos)
+            report.in_progress.append(
+                {"run_id": rid, "coords": run.coords, "t_final": run.point.numerics.t_final, **info}
+            )
+    if tally.times:
+        report.mean_run_time = float(np.mean(tally.times))
+        report.median_run_time = float(np.median(tally.times))
+    if pending == 0:
+        report.eta_seconds = 0.0
+        return report
+    _estimate_eta(report, workers or local_worker_count(campaign.execution), not workers, tally)
+    return report
 
+
+def _per_axis(campaign: Campaign, state: np.ndarray) -> list[AxisCounts]:
+    """The done, failed and pending runs for each value of each sweep dim."""
     shaped = state.reshape(*campaign.shape, len(campaign.seeds))
     per_axis = []
     for k, d in enumerate(campaign.dims):
@@ -182,51 +239,25 @@ def campaign_status(
                 pending=[int(x) for x in (shaped == 2).sum(axis=other)],
             )
         )
+    return per_axis
 
-    report = StatusReport(
-        campaign=campaign.name,
-        folder=str(store.root),
-        total=n,
-        done=done,
-        failed=failed,
-        pending=pending,
-        per_axis=per_axis,
-        reasons=dict(reasons.most_common()),
-        examples=examples,
-        failure_groups=[_group(store, first[r], k) for r, k in reasons.most_common()],
-        foreign_runs=len(set(records) - set(expansion.position)),
-        unreadable=n_unreadable,
-        unreadable_examples=unreadable,
-        reused=dict(sorted(reused.items())),
-    )
-    report.running = read_lock_holder(store.lock_path)
-    for rid, info in store.in_progress().items():
-        pos = expansion.position.get(rid)
-        if pos is not None and state[pos] == 2:
-            run = expansion.run(pos)
-            report.in_progress.append(
-                {"run_id": rid, "coords": run.coords, "t_final": run.point.numerics.t_final, **info}
-            )
-    if times:
-        report.mean_run_time = float(np.mean(times))
-        report.median_run_time = float(np.median(times))
-    if pending == 0:
-        report.eta_seconds = 0.0
-        return report
-    w = workers or local_worker_count(campaign.execution)
+
+def _estimate_eta(report: StatusReport, w: int, seen: bool, tally: _Tally) -> None:
+    """The ETA of the pending runs of ``report``: their median run time over ``w`` workers,
+    or (``seen``: no worker count was given) over the processes that finished runs since the
+    running driver started, when there are some."""
     concurrency = f"{w} worker(s)"
-    if report.running and report.running.get("started") and not workers:
+    if report.running and report.running.get("started") and seen:
         # the processes that finished runs since the running driver started
         start = _parse_time(report.running["started"])
         procs = {
             who
-            for f, who in finished
+            for f, who in tally.finished
             if start is not None and (t := _parse_time(f)) is not None and t >= start
         }
         if procs:
             w = len(procs)
             concurrency = f"{w} worker(s) seen since the driver started"
     if report.median_run_time is not None:
-        report.eta_seconds = pending * report.median_run_time / w
+        report.eta_seconds = report.pending * report.median_run_time / w
         report.eta_basis = f"median run time {report.median_run_time:.3g} s over {concurrency}"
-    return report

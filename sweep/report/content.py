@@ -145,6 +145,10 @@ def units_text(var: xr.DataArray) -> str:
     return (unit(axis) if axis else "") or "1 (pure number)"
 
 
+#: each fit variable -> the variables of its interval (``None``: it has none)
+Ends = dict[str, tuple[str, str] | None]
+
+
 def _interval_ends(name: str, names: list[str]) -> tuple[str, str] | None:
     """The variables that hold ``name``'s interval: ``X_lower`` and ``X_upper``, or for a
     ``P_location`` the ``P_lower`` and ``P_upper`` of its fit."""
@@ -167,6 +171,66 @@ def _value(fits: xr.Dataset, name: str, ends: tuple[str, str] | None, at: Any = 
     return text
 
 
+def _fit_groups(fits: xr.Dataset) -> dict[tuple[str, tuple[str, ...]], list[str]]:
+    """The variables of ``fits.nc`` by (fit, dims): the variables of one table."""
+    groups: dict[tuple[str, tuple[str, ...]], list[str]] = {}
+    for name, var in fits.data_vars.items():
+        fit = str(var.attrs.get("fit", str(name).split("_")[0]))
+        groups.setdefault((fit, tuple(str(d) for d in var.dims)), []).append(str(name))
+    return groups
+
+
+def _scalar_fit_table(fits: xr.Dataset, fit: str, shown: list[str], pairs: Ends) -> Table:
+    """A scalar fit's table: one row per variable (its value and interval, or why it has
+    none; its units and long name)."""
+    rows = []
+    for n in shown:
+        value = _value(fits, n, pairs[n])
+        why = str(fits[n].attrs.get("nan_reason") or "")
+        rows.append(
+            [
+                n,
+                f"no value: {why}" if value == "-" and why else value,
+                units_text(fits[n]),
+                str(fits[n].attrs.get("long_name") or ""),
+            ]
+        )
+    return Table(title=fit, rows=rows, columns=["variable", "value [interval]", "units", "meaning"])
+
+
+def _swept_fit_table(
+    fits: xr.Dataset, fit: str, dims: tuple[str, ...], shown: list[str], pairs: Ends
+) -> Table:
+    """A fit over sweep values' table: one row per coordinate value (the first
+    :data:`MAX_FIT_ROWS`), a column per variable; the long names and the reasons of NaN
+    values in its note."""
+    headers = [f"{symbol(d)}{_unit(fits[d])}" if d in fits.coords else d for d in dims]
+    headers += [f"{n}{_unit(fits[n])}" for n in shown]
+    rows = []
+    size = int(np.prod([fits.sizes[d] for d in dims]))
+    for index in list(np.ndindex(*[fits.sizes[d] for d in dims]))[:MAX_FIT_ROWS]:
+        at = dict(zip(dims, index, strict=True))
+        row = [fmt(fits[d].values[i]) if d in fits.coords else str(i) for d, i in at.items()]
+        row += [_value(fits, n, pairs[n], at) for n in shown]
+        rows.append(row)
+    meanings = "; ".join(
+        f"{n}: {fits[n].attrs['long_name']}" for n in shown if fits[n].attrs.get("long_name")
+    )
+    reasons = list(
+        dict.fromkeys(
+            str(fits[n].attrs["nan_reason"]) for n in shown if fits[n].attrs.get("nan_reason")
+        )
+    )
+    why = f" No value ('-') where: {'; '.join(reasons)}." if reasons else ""
+    cut = f"the first {MAX_FIT_ROWS} of {size} rows. " if size > MAX_FIT_ROWS else ""
+    return Table(
+        title=f"{fit} over {', '.join(symbol(d) for d in dims)}",
+        columns=headers,
+        rows=rows,
+        note=cut + meanings + why,
+    )
+
+
 def fit_tables(fits: xr.Dataset) -> list[Table]:
     """``fits.nc`` as tables: one per fit and set of dims. A scalar fit is one row per
     variable (its value, interval, units and long name; a NaN value gives the fit's reason,
@@ -174,63 +238,15 @@ def fit_tables(fits: xr.Dataset) -> list[Table]:
     variable (its name and units; the long names, and where a value is NaN why, in the table's
     note). An interval (``X_lower``, ``X_upper``; for ``P_location``, ``P_lower`` and
     ``P_upper``) stands with its value: ``0.25 [0.1, 0.4]``."""
-    groups: dict[tuple[str, tuple[str, ...]], list[str]] = {}
-    for name, var in fits.data_vars.items():
-        fit = str(var.attrs.get("fit", str(name).split("_")[0]))
-        groups.setdefault((fit, tuple(str(d) for d in var.dims)), []).append(str(name))
     tables = []
-    for (fit, dims), names in groups.items():
+    for (fit, dims), names in _fit_groups(fits).items():
         pairs = {n: _interval_ends(n, names) for n in names}
         ends = {e for pair in pairs.values() if pair for e in pair}
         shown = [n for n in names if n not in ends]
-        if not dims:
-            rows = []
-            for n in shown:
-                value = _value(fits, n, pairs[n])
-                why = str(fits[n].attrs.get("nan_reason") or "")
-                rows.append(
-                    [
-                        n,
-                        f"no value: {why}" if value == "-" and why else value,
-                        units_text(fits[n]),
-                        str(fits[n].attrs.get("long_name") or ""),
-                    ]
-                )
-            tables.append(
-                Table(
-                    title=fit,
-                    rows=rows,
-                    columns=["variable", "value [interval]", "units", "meaning"],
-                )
-            )
-            continue
-        headers = [f"{symbol(d)}{_unit(fits[d])}" if d in fits.coords else d for d in dims]
-        headers += [f"{n}{_unit(fits[n])}" for n in shown]
-        rows = []
-        size = int(np.prod([fits.sizes[d] for d in dims]))
-        for index in list(np.ndindex(*[fits.sizes[d] for d in dims]))[:MAX_FIT_ROWS]:
-            at = dict(zip(dims, index, strict=True))
-            row = [fmt(fits[d].values[i]) if d in fits.coords else str(i) for d, i in at.items()]
-            row += [_value(fits, n, pairs[n], at) for n in shown]
-            rows.append(row)
-        meanings = "; ".join(
-            f"{n}: {fits[n].attrs['long_name']}" for n in shown if fits[n].attrs.get("long_name")
-        )
-        reasons = list(
-            dict.fromkeys(
-                str(fits[n].attrs["nan_reason"]) for n in shown if fits[n].attrs.get("nan_reason")
-            )
-        )
-        why = f" No value ('-') where: {'; '.join(reasons)}." if reasons else ""
-        cut = f"the first {MAX_FIT_ROWS} of {size} rows. " if size > MAX_FIT_ROWS else ""
-        tables.append(
-            Table(
-                title=f"{fit} over {', '.join(symbol(d) for d in dims)}",
-                columns=headers,
-                rows=rows,
-                note=cut + meanings + why,
-            )
-        )
+        if dims:
+            tables.append(_swept_fit_table(fits, fit, dims, shown, pairs))
+        else:
+            tables.append(_scalar_fit_table(fits, fit, shown, pairs))
     return tables
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,6 +68,8 @@ LINE_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"
 #: A numeric axis is logarithmic when its values are positive and max / min is at least this.
 LOG_AXIS_RATIO = 10.0
 STATUS_OK, STATUS_FAILED = 1, 2
+#: The tools of the phase diagram's plots.
+TOOLS = "pan,wheel_zoom,box_zoom,reset,save"
 HINT = "<p>Click a point of the phase diagram to show one of its runs here.</p>"
 
 #: The one piece of page code: copy the clicked point's run into the run panel.
@@ -158,6 +161,7 @@ def point_columns(
     status = per_point("status").astype(int)
     run_ids = per_point("run_id")
     observables = {m: per_point(m).astype(float) for m in shown_of.hover if m in phase}
+    shown = observables.get(shown_of.observable)
     grids = (
         np.asarray(phase["resolution"].transpose(*dims).values).reshape(-1)
         if "resolution" in phase.data_vars
@@ -168,39 +172,13 @@ def point_columns(
         for c in phase.coords
         if phase[c].ndim == 1 and phase[c].dims[0] in dims and str(c) not in dims
     }
-    cols: dict[str, list[Any]] = {
-        k: []
-        for k in (
-            "where",
-            "counts",
-            "shown",
-            "shown_log",
-            "run_id",
-            "run_seed",
-            "run_title",
-            "snapshot",
-            "series_t",
-            "series_y",
-            "facet",
-            *dims,
-            *(f"seeds_{m}" for m in observables),
-        )
-    }
+    cols = _empty_columns(dims, observables)
     embedded = 0
     for flat, index in enumerate(np.ndindex(*shape)):
         st = status[flat]
         if not (st > 0).any():  # not run (a refined campaign's union grid)
             continue
-        at = dict(zip(dims, index, strict=True))
-        coords = {d: phase[d].values[i] for d, i in at.items()}
-        coords.update({c: phase[c].values[at[d]] for c, d in extra.items()})
-        where = ", ".join(f"{symbol(str(k))} = {_label(v)}" for k, v in coords.items())
-        for d in dims:
-            cols[d].append(_label(phase[d].values[at[d]]))
-        cols["facet"].append(
-            ", ".join(f"{symbol(d)} = {_label(phase[d].values[at[d]])}" for d in facet_dims)
-        )
-        cols["where"].append(where)
+        _add_place(cols, phase, dict(zip(dims, index, strict=True)), extra, facet_dims)
         grid = f" on {int(grids[flat])}^2" if grids is not None else ""  # resolution: auto
         cols["counts"].append(
             f"{int((st == STATUS_OK).sum())} ok, "
@@ -208,42 +186,102 @@ def point_columns(
         )
         for m, values in observables.items():
             cols[f"seeds_{m}"].append(_seed_text(values[flat], seeds, st))
-        shown = observables.get(shown_of.observable)
-        ok = (st == STATUS_OK) & np.isfinite(shown[flat]) if shown is not None else st < 0
-        mean = float(np.mean(shown[flat][ok])) if shown is not None and ok.any() else math.nan
+        mean = _seed_mean(st, None if shown is None else shown[flat])
         cols["shown"].append(mean)
         cols["shown_log"].append(math.log10(mean) if mean > 0 else math.nan)
         order = [k for k in range(n_seeds) if st[k] == STATUS_OK] + [
             k for k in range(n_seeds) if st[k] == STATUS_FAILED
         ]
-        chosen: int | None = None
-        image = ""
-        t: list[float] = []
-        y: list[float] = []
-        for k in order:
-            path = runs_dir / f"{run_ids[flat][k]}.nc"
-            if embedded < MAX_POINTS_WITH_RUNS and path.is_file():
-                try:
-                    image, t, y = run_views(path, shown_of.observable)
-                except (OSError, ValueError, KeyError) as e:
-                    log.warning("report: cannot read run file %s: %s", path, e)
-                    continue
-                chosen = k
-                embedded += 1
-                break
-        k = chosen if chosen is not None else (order[0] if order else 0)
-        state = "ok" if st[k] == STATUS_OK else "failed"
-        cols["run_id"].append(str(run_ids[flat][k]))
-        cols["run_seed"].append(int(seeds[k]))
-        cols["run_title"].append(
-            f"{symbol(shown_of.observable)}(t): seed {int(seeds[k])} ({state})"
-            if chosen is not None
-            else "run not embedded"
+        run = (
+            _embedded_run(runs_dir, run_ids[flat], order, shown_of.observable)
+            if embedded < MAX_POINTS_WITH_RUNS
+            else (None, "", [], [])
         )
-        cols["snapshot"].append(image)
-        cols["series_t"].append(t)
-        cols["series_y"].append(y)
+        embedded += run[0] is not None
+        _add_run(cols, run, order, st, run_ids[flat], seeds, shown_of.observable)
     return cols
+
+
+def _empty_columns(dims: list[str], observables: Mapping[str, Any]) -> dict[str, list[Any]]:
+    """The points' columns, empty: their names."""
+    names = [
+        *("where", "counts", "shown", "shown_log", "run_id", "run_seed", "run_title"),
+        *("snapshot", "series_t", "series_y", "facet"),
+        *dims,
+        *(f"seeds_{m}" for m in observables),
+    ]
+    return {k: [] for k in names}
+
+
+def _add_place(
+    cols: dict[str, list[Any]],
+    phase: xr.Dataset,
+    at: dict[str, int],
+    extra: Mapping[str, str],
+    facet_dims: list[str],
+) -> None:
+    """Add where a point is (at the indices ``at`` of the dims): its value of each dim, its
+    facet, and its coordinates as text (those of ``extra``, coordinate -> its dim, too)."""
+    coords = {d: phase[d].values[i] for d, i in at.items()}
+    coords.update({c: phase[c].values[at[d]] for c, d in extra.items()})
+    for d in at:
+        cols[d].append(_label(phase[d].values[at[d]]))
+    cols["facet"].append(
+        ", ".join(f"{symbol(d)} = {_label(phase[d].values[at[d]])}" for d in facet_dims)
+    )
+    cols["where"].append(", ".join(f"{symbol(str(k))} = {_label(v)}" for k, v in coords.items()))
+
+
+def _seed_mean(status: np.ndarray, values: np.ndarray | None) -> float:
+    """The mean of a point's ``values`` over its seeds that succeeded with a finite value
+    (NaN without any)."""
+    if values is None:
+        return math.nan
+    ok = (status == STATUS_OK) & np.isfinite(values)
+    return float(np.mean(values[ok])) if ok.any() else math.nan
+
+
+#: A point's run as its panel shows it: (the seed's index, or None for none), snapshot, series.
+EmbeddedRun = tuple[int | None, str, list[float], list[float]]
+
+
+def _embedded_run(runs_dir: Path, ids: np.ndarray, order: list[int], series: str) -> EmbeddedRun:
+    """The first run of the seeds ``order`` whose file can be read, with its views."""
+    for k in order:
+        path = runs_dir / f"{ids[k]}.nc"
+        if path.is_file():
+            try:
+                image, t, y = run_views(path, series)
+            except (OSError, ValueError, KeyError) as e:
+                log.warning("report: cannot read run file %s: %s", path, e)
+                continue
+            return k, image, t, y
+    return None, "", [], []
+
+
+def _add_run(
+    cols: dict[str, list[Any]],
+    run: EmbeddedRun,
+    order: list[int],
+    status: np.ndarray,
+    ids: np.ndarray,
+    seeds: np.ndarray,
+    series: str,
+) -> None:
+    """Add a point's run: the one embedded, else its first seed in ``order``."""
+    chosen, image, t, y = run
+    k = chosen if chosen is not None else (order[0] if order else 0)
+    state = "ok" if status[k] == STATUS_OK else "failed"
+    cols["run_id"].append(str(ids[k]))
+    cols["run_seed"].append(int(seeds[k]))
+    cols["run_title"].append(
+        f"{symbol(series)}(t): seed {int(seeds[k])} ({state})"
+        if chosen is not None
+        else "run not embedded"
+    )
+    cols["snapshot"].append(image)
+    cols["series_t"].append(t)
+    cols["series_y"].append(y)
 
 
 def _figure(
@@ -280,18 +318,7 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
     """The interactive phase diagram of ``phase``: ``(bokeh layout or None, points with an
     embedded run, notes)``."""
     from bokeh.layouts import column, gridplot, row
-    from bokeh.models import (
-        CDSView,
-        ColumnDataSource,
-        CustomJS,
-        GroupFilter,
-        HoverTool,
-        LinearColorMapper,
-        TapTool,
-    )
-    from bokeh.models.annotations.legends import ColorBar
-    from bokeh.models.widgets.markups import Div
-    from bokeh.plotting import figure
+    from bokeh.models import ColumnDataSource, CustomJS, HoverTool, TapTool
 
     if not sweep_dims(phase):
         return None, 0, ["no sweep axis: nothing to plot"]
@@ -313,15 +340,8 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
     cols["x"] = _position(x_axis, cols[x_dim], phase)
     cols["y"] = _position(y_axis, cols[y_dim], phase) if y_axis and y_dim else cols["shown"]
     source = ColumnDataSource(cols, name="points")
-    tooltips = [(symbol(d), f"@{{{d}}}") for d in dims]
-    if len(cols["where"][0].split(", ")) > len(dims):
-        tooltips = [("point", "@where")]
-    tooltips.append(("runs", "@counts"))
     shown_of = Shown.of(phase)
-    tooltips += [
-        (f"{symbol(m)} by seed", f"@{{seeds_{m}}}") for m in shown_of.hover if f"seeds_{m}" in cols
-    ]
-    tools = "pan,wheel_zoom,box_zoom,reset,save"
+    tooltips = _tooltips(cols, dims, shown_of)
     facets = list(dict.fromkeys(cols["facet"]))
     if len(facets) > MAX_FACETS:
         notes.append(
@@ -329,80 +349,16 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
             f"first {MAX_FACETS} are shown"
         )
         facets = facets[:MAX_FACETS]
-    plots, renderers = [], []
     if y_axis is None:  # one plot, a line per facet (a chain's branches)
-        fig = _figure(
-            x_axis,
-            None,
-            f"{symbol(shown_of.observable)} at t_final over {symbol(x_dim)}",
-            tools,
-            shown_of.observable,
-            stretch=True,
-        )
-        for k, facet in enumerate(facets):
-            colour = LINE_COLOURS[k % len(LINE_COLOURS)]
-            rows = [i for i, f in enumerate(cols["facet"]) if f == facet]
-            rows.sort(key=lambda i: cols["x"][i])
-            fig.line(
-                [cols["x"][i] for i in rows],
-                [cols["y"][i] for i in rows],
-                line_width=2,
-                color=colour,
-                **({"legend_label": facet} if facet else {}),
-            )
-            view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
-            renderers.append(
-                fig.scatter(
-                    "x", "y", source=source, view=view, size=11, color=colour, name="phase_points"
-                )
-            )
-        if facet_dims:
-            fig.legend.location = "top_left"
-        plots.append(fig)
+        plots, renderers = _line_plot(x_axis, facets, bool(facet_dims), cols, source, shown_of)
         notes.append("Click a point for one of its runs.")
     else:
-        finite = [v for v in cols["shown_log"] if math.isfinite(v)]
-        low, high = (min(finite), max(finite)) if finite else (0.0, 1.0)
-        mapper = LinearColorMapper(
-            palette="Viridis256", low=low, high=high if high > low else low + 1, nan_color="#d62728"
-        )
+        plots, renderers = _colour_plots(x_axis, y_axis, facets, cols, source, shown_of)
         notes.append(
             f"Colour: log10 of the seed mean of {symbol(shown_of.observable)} at t_final; red: no "
             "successful run. Click a point for one of its runs."
         )
-        for facet in facets:
-            title = facet or f"log10 {symbol(shown_of.observable)} (seed mean)"
-            fig = _figure(
-                x_axis, y_axis, title, tools, shown_of.observable, stretch=len(facets) > 1
-            )
-            view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
-            renderers.append(
-                fig.scatter(
-                    "x",
-                    "y",
-                    source=source,
-                    view=view,
-                    size=16,
-                    line_color="black",
-                    fill_color={"field": "shown_log", "transform": mapper},
-                    name="phase_points",
-                )
-            )
-            fig.add_layout(ColorBar(color_mapper=mapper, width=10), "right")
-            plots.append(fig)
-    series = ColumnDataSource({"t": [], "y": []}, name="series")
-    run_plot = figure(
-        title=f"{symbol(shown_of.observable)}(t) of the clicked point's run",
-        width=420,
-        height=260,
-        y_axis_type="log",
-        x_axis_label=label("t"),
-        y_axis_label=symbol(shown_of.observable),
-        tools="pan,wheel_zoom,reset,save",
-        name="run_plot",
-    )
-    run_plot.line("t", "y", source=series, line_width=2, color="#d62728")
-    panel = Div(text=HINT, width=420, name="run_panel")
+    series, run_plot, panel = _run_panel(shown_of)
     for fig in plots:
         mine = [r for r in renderers if r in fig.renderers]
         fig.add_tools(HoverTool(renderers=mine, tooltips=tooltips), TapTool(renderers=mine))
@@ -423,3 +379,104 @@ def phase_layout(phase: xr.Dataset, runs_dir: Path) -> tuple[Any, int, list[str]
             merge_tools=False,
         )
     return column(diagram, row(panel, run_plot), sizing_mode="stretch_width"), embedded, notes
+
+
+def _tooltips(cols: dict[str, list[Any]], dims: list[str], shown_of: Shown) -> list[Any]:
+    """The hover of a point: its value of each dim (or its coordinates, when it has more),
+    its runs and the seed values of the hovered observables."""
+    tooltips = [(symbol(d), f"@{{{d}}}") for d in dims]
+    if len(cols["where"][0].split(", ")) > len(dims):
+        tooltips = [("point", "@where")]
+    tooltips.append(("runs", "@counts"))
+    tooltips += [
+        (f"{symbol(m)} by seed", f"@{{seeds_{m}}}") for m in shown_of.hover if f"seeds_{m}" in cols
+    ]
+    return tooltips
+
+
+def _line_plot(
+    x_axis: Axis, facets: list[str], legend: bool, cols: Any, source: Any, shown_of: Shown
+) -> tuple[list[Any], list[Any]]:
+    """One plot over the x axis, a line per facet: ``([the plot], the points' renderers)``."""
+    from bokeh.models import CDSView, GroupFilter
+
+    title = f"{symbol(shown_of.observable)} at t_final over {symbol(x_axis.name)}"
+    fig = _figure(x_axis, None, title, TOOLS, shown_of.observable, stretch=True)
+    renderers = []
+    for k, facet in enumerate(facets):
+        colour = LINE_COLOURS[k % len(LINE_COLOURS)]
+        rows = [i for i, f in enumerate(cols["facet"]) if f == facet]
+        rows.sort(key=lambda i: cols["x"][i])
+        fig.line(
+            [cols["x"][i] for i in rows],
+            [cols["y"][i] for i in rows],
+            line_width=2,
+            color=colour,
+            **({"legend_label": facet} if facet else {}),
+        )
+        view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
+        renderers.append(
+            fig.scatter(
+                "x", "y", source=source, view=view, size=11, color=colour, name="phase_points"
+            )
+        )
+    if legend:
+        fig.legend.location = "top_left"
+    return [fig], renderers
+
+
+def _colour_plots(
+    x_axis: Axis, y_axis: Axis, facets: list[str], cols: Any, source: Any, shown_of: Shown
+) -> tuple[list[Any], list[Any]]:
+    """A plot over the x and y axes per facet, its points coloured by the log10 of their
+    seed mean (red: none): ``(the plots, the points' renderers)``."""
+    from bokeh.models import CDSView, GroupFilter, LinearColorMapper
+    from bokeh.models.annotations.legends import ColorBar
+
+    finite = [v for v in cols["shown_log"] if math.isfinite(v)]
+    low, high = (min(finite), max(finite)) if finite else (0.0, 1.0)
+    mapper = LinearColorMapper(
+        palette="Viridis256", low=low, high=high if high > low else low + 1, nan_color="#d62728"
+    )
+    plots, renderers = [], []
+    for facet in facets:
+        title = facet or f"log10 {symbol(shown_of.observable)} (seed mean)"
+        fig = _figure(x_axis, y_axis, title, TOOLS, shown_of.observable, stretch=len(facets) > 1)
+        view = CDSView(filter=GroupFilter(column_name="facet", group=facet))
+        renderers.append(
+            fig.scatter(
+                "x",
+                "y",
+                source=source,
+                view=view,
+                size=16,
+                line_color="black",
+                fill_color={"field": "shown_log", "transform": mapper},
+                name="phase_points",
+            )
+        )
+        fig.add_layout(ColorBar(color_mapper=mapper, width=10), "right")
+        plots.append(fig)
+    return plots, renderers
+
+
+def _run_panel(shown_of: Shown) -> tuple[Any, Any, Any]:
+    """Where the clicked point's run shows: ``(the source of its series, the plot of the
+    series, the panel of its snapshot)``."""
+    from bokeh.models import ColumnDataSource
+    from bokeh.models.widgets.markups import Div
+    from bokeh.plotting import figure
+
+    series = ColumnDataSource({"t": [], "y": []}, name="series")
+    run_plot = figure(
+        title=f"{symbol(shown_of.observable)}(t) of the clicked point's run",
+        width=420,
+        height=260,
+        y_axis_type="log",
+        x_axis_label=label("t"),
+        y_axis_label=symbol(shown_of.observable),
+        tools="pan,wheel_zoom,reset,save",
+        name="run_plot",
+    )
+    run_plot.line("t", "y", source=series, line_width=2, color="#d62728")
+    return series, run_plot, Div(text=HINT, width=420, name="run_panel")

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ..campaign import BRANCH, BRANCHES, CHAIN_STARTS, DEFAULT_MODEL, ChainSpec
+from ..campaign import BRANCH, BRANCHES, CHAIN_STARTS, DEFAULT_MODEL, ChainSpec, Dim, StoreSpec
 from ..models.interface import resolution_rule
 from ..models.registry import get_model
 from .checker import Checker, is_number, suggest
@@ -31,6 +31,27 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
         return None
     dims = {d.name: d for d in read.get("sweep") or ()}
     axis = spec.get("axis")
+    ok = _axis_ok(c, axis, dims, read)
+    ok = _store_ok(c, read.get("store")) and ok
+    if BRANCH in dims:
+        c.add(("sweep", "axes", BRANCH), f"'{BRANCH}' names the chain's branches; rename it")
+        ok = False
+    branches = _branches(c, spec)
+    up = spec.get("up", CHAIN_STARTS[0])
+    if up not in CHAIN_STARTS:
+        c.bad(("chain", "up"), up, " or ".join(CHAIN_STARTS))
+        ok = False
+    others = [k for k in ("initial", "refine", "precision", "verify") if read.get(k) is not None]
+    if others:
+        c.add(("chain",), f"a chain has no {' or '.join(others)} section (it starts from t = 0)")
+        ok = False
+    return ChainSpec(str(axis), branches, str(up)) if ok and branches is not None else None
+
+
+def _axis_ok(c: Checker, axis: Any, dims: Mapping[str, Dim], read: Mapping[str, Any]) -> bool:
+    """Whether ``axis`` can be walked in order: a swept axis of its own with two or more
+    numbers that keeps the grid of the fields (not a :data:`GRID_AXES` one, nor one that
+    ``resolution: auto`` sets the grid by); else ``False``, its problem added to ``c``."""
     ok = True
     if not isinstance(axis, str):
         c.bad(("chain", "axis"), axis, "the name of one swept axis")
@@ -62,7 +83,12 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
             "and the next, which starts from its fields; set a resolution (a number)",
         )
         ok = False
-    store = read.get("store")
+    return ok
+
+
+def _store_ok(c: Checker, store: StoreSpec | None) -> bool:
+    """Whether the store keeps the end states a chain's runs begin from (``end_state``);
+    else ``False``, its problem added to ``c``."""
     if store is not None and not store.end_state:
         c.add(
             ("store", "end_state"),
@@ -70,10 +96,13 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
             "with end_state: true keeps (a snapshot is not it: another precision, fields left "
             "out); keep end_state: true",
         )
-        ok = False
-    if BRANCH in dims:
-        c.add(("sweep", "axes", BRANCH), f"'{BRANCH}' names the chain's branches; rename it")
-        ok = False
+        return False
+    return True
+
+
+def _branches(c: Checker, spec: Mapping[str, Any]) -> tuple[str, ...] | None:
+    """``branches:`` (``up``, ``down`` or both; default both) as a tuple; ``None``, its
+    problem added to ``c``, when it is not."""
     branches: Any = spec.get("branches", list(BRANCHES))
     if isinstance(branches, str):
         branches = [branches]
@@ -84,13 +113,5 @@ def read_chain(c: Checker, raw: Any, read: Mapping[str, Any]) -> ChainSpec | Non
         or len(set(branches)) != len(branches)
     ):
         c.bad(("chain", "branches"), spec.get("branches"), "up, down or [up, down]")
-        ok = False
-    up = spec.get("up", CHAIN_STARTS[0])
-    if up not in CHAIN_STARTS:
-        c.bad(("chain", "up"), up, " or ".join(CHAIN_STARTS))
-        ok = False
-    others = [k for k in ("initial", "refine", "precision", "verify") if read.get(k) is not None]
-    if others:
-        c.add(("chain",), f"a chain has no {' or '.join(others)} section (it starts from t = 0)")
-        ok = False
-    return ChainSpec(str(axis), tuple(branches), str(up)) if ok else None
+        return None
+    return tuple(branches)

@@ -24,10 +24,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ..campaign import DEFAULT_MODEL, PrecisionSpec
+from ..campaign import DEFAULT_MODEL, PrecisionSpec, Threshold
 from ..models.interface import classifier
 from ..models.registry import get_model
-from .checker import Checker, is_finite_number, is_int
+from .checker import Checker, KeyPath, is_finite_number, is_int
 from .observables import observable_sources, read_classes, read_observable
 
 KEYS = (
@@ -49,7 +49,7 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     ``None`` when there is none (or it has problems, which are added to ``c``)."""
     if raw is None:
         return None
-    path: tuple[str | int, ...] = ("precision",)
+    path: KeyPath = ("precision",)
     if not isinstance(raw, dict):
         c.bad(path, raw, "a mapping with keys " + ", ".join(KEYS))
         return None
@@ -61,7 +61,36 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     model = read.get("model") or DEFAULT_MODEL
     sources = observable_sources(model)
     observable = read_observable(c, (*path, "observable"), observable, sources, model)
+    width, relative, confidence = _interval_rule(c, path, sec)
+    unanimous, patterned, classes = _class_rule(c, path, sec, n_seeds, model)
+    if width is None and unanimous is None:
+        c.add(
+            path,
+            "no stopping rule; allowed: width (the interval of the seed mean), "
+            "unanimous (the pattern class), or both",
+        )
+    initial, add = _seed_steps(c, path, sec, n_seeds)
 
+    if len(c.problems) > before:
+        return None
+    return PrecisionSpec(
+        observable=observable,
+        source=sources[observable],
+        width=None if width is None else float(width),
+        relative=relative,
+        confidence=float(confidence),
+        unanimous=unanimous,
+        patterned_above=None if patterned is None else float(patterned),
+        initial=int(initial),
+        add=int(add),
+        classes=classes or (),
+        patterned=(classifier(get_model(model)).name, classifier(get_model(model)).scalar),
+    )
+
+
+def _interval_rule(c: Checker, path: KeyPath, sec: Mapping[str, Any]) -> tuple[Any, Any, Any]:
+    """The rule on the interval of the seed mean: ``width`` (``None``: no such rule),
+    ``relative`` and ``confidence``, as given (problems added to ``c``)."""
     width = sec.get("width")
     if width is not None and (not is_finite_number(width) or not width > 0):
         c.bad(
@@ -79,7 +108,14 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
     confidence = sec.get("confidence", 0.95)
     if not is_finite_number(confidence) or not 0 < confidence < 1:
         c.bad((*path, "confidence"), confidence, "a number in (0, 1)")
+    return width, relative, confidence
 
+
+def _class_rule(
+    c: Checker, path: KeyPath, sec: Mapping[str, Any], n_seeds: int, model: str
+) -> tuple[Any, Any, tuple[Threshold, ...] | None]:
+    """The rule on the pattern class: ``unanimous`` (``None``: no such rule) and the class,
+    ``patterned_above`` or ``classes``, as given (problems added to ``c``)."""
     unanimous = sec.get("unanimous")
     if unanimous is not None and (not is_int(unanimous) or not 2 <= unanimous <= max(n_seeds, 2)):
         c.bad(
@@ -105,32 +141,16 @@ def read_precision(c: Checker, raw: Any, read: Mapping[str, Any]) -> PrecisionSp
         )
     elif patterned is not None and not is_finite_number(patterned):
         c.bad((*path, "patterned_above"), patterned, "a finite number")
-    if width is None and unanimous is None:
-        c.add(
-            path,
-            "no stopping rule; allowed: width (the interval of the seed mean), "
-            "unanimous (the pattern class), or both",
-        )
+    return unanimous, patterned, classes
 
+
+def _seed_steps(c: Checker, path: KeyPath, sec: Mapping[str, Any], n_seeds: int) -> tuple[Any, Any]:
+    """The seeds every point starts with (``initial``) and those added per round (``add``),
+    as given (problems added to ``c``)."""
     initial = sec.get("initial", min(4, n_seeds) or 1)
     if not is_int(initial) or not 1 <= initial <= max(n_seeds, 1):
         c.bad((*path, "initial"), initial, f"an integer from 1 to {n_seeds} (the campaign's seeds)")
     add = sec.get("add", initial)
     if not is_int(add) or add < 1:
         c.bad((*path, "add"), add, "an integer >= 1")
-
-    if len(c.problems) > before:
-        return None
-    return PrecisionSpec(
-        observable=observable,
-        source=sources[observable],
-        width=None if width is None else float(width),
-        relative=relative,
-        confidence=float(confidence),
-        unanimous=unanimous,
-        patterned_above=None if patterned is None else float(patterned),
-        initial=int(initial),
-        add=int(add),
-        classes=classes or (),
-        patterned=(classifier(get_model(model)).name, classifier(get_model(model)).scalar),
-    )
+    return initial, add

@@ -280,57 +280,15 @@ def check_refine(
         c.bad((*path, "criterion"), criterion, " or ".join(CRITERIA))
         criterion = "fraction"
 
-    classes: tuple[Threshold, ...] = ()
-    if "classes" in sec:
-        read = read_classes(c, (*path, "classes"), sec["classes"], model)
-        classes = read or ()
-        if criterion != "fraction":
-            c.add(
-                (*path, "classes"),
-                "used by criterion 'fraction' only; this section has "
-                "criterion 'jump' (remove it, or set criterion: fraction)",
-            )
-        for key in ("observable", "patterned_above"):
-            if key in sec:
-                c.add(
-                    (*path, key),
-                    "not with classes: (each observable of classes has its "
-                    "threshold); remove one of the two",
-                )
+    classes = _classes(c, path, sec, criterion, model)
 
     sources = observable_sources(model)
     default = classes[0].observable if classes else classifier(get_model(model)).name
     observable = sec.get("observable", default)
     observable = read_observable(c, (*path, "observable"), observable, sources, model)
 
-    patterned = sec.get("patterned_above")
-    if criterion == "fraction":
-        if patterned is None and "classes" not in sec:
-            c.add(
-                (*path, "patterned_above"),
-                "missing; allowed: a number (a run counts as "
-                f"patterned when its {observable} is above it); needed by criterion "
-                "'fraction' (or classes: for several observables)",
-            )
-        elif patterned is not None and not is_finite_number(patterned):
-            c.bad((*path, "patterned_above"), patterned, "a finite number")
-    elif patterned is not None:
-        c.add(
-            (*path, "patterned_above"),
-            "used by criterion 'fraction' only; this section "
-            "has criterion 'jump' (remove it, or set criterion: fraction)",
-        )
-
-    fraction = sec.get("fraction", list(DEFAULT_FRACTION))
-    if (
-        not isinstance(fraction, Sequence)
-        or isinstance(fraction, str)
-        or len(fraction) != 2
-        or not all(is_finite_number(f) for f in fraction)
-        or not 0 <= fraction[0] < fraction[1] <= 1
-    ):
-        c.bad((*path, "fraction"), fraction, "[low, high] with 0 <= low < high <= 1")
-        fraction = list(DEFAULT_FRACTION)
+    patterned = _patterned_above(c, path, sec, criterion, observable)
+    fraction = _fraction(c, path, sec)
 
     jump = sec.get("jump", DEFAULT_JUMP)
     if not is_finite_number(jump) or not jump > 1:
@@ -375,12 +333,88 @@ def check_refine(
         max_width=width,
         confidence=confidence,
     )
-    # the union grid phase.nc holds (and the most runs) is bounded like a grid
+    return spec if _within_bound(c, path, sec, spec, axes, dims, len(seeds)) else None
+
+
+def _classes(
+    c: Checker, path: KeyPath, sec: Mapping[str, Any], criterion: str, model: str
+) -> tuple[Threshold, ...]:
+    """``classes:`` (a run's class from several observables; criterion ``fraction`` only, and
+    not with ``observable`` or ``patterned_above``) as thresholds; ``()`` without it."""
+    if "classes" not in sec:
+        return ()
+    read = read_classes(c, (*path, "classes"), sec["classes"], model)
+    if criterion != "fraction":
+        c.add(
+            (*path, "classes"),
+            "used by criterion 'fraction' only; this section has "
+            "criterion 'jump' (remove it, or set criterion: fraction)",
+        )
+    for key in ("observable", "patterned_above"):
+        if key in sec:
+            c.add(
+                (*path, key),
+                "not with classes: (each observable of classes has its "
+                "threshold); remove one of the two",
+            )
+    return read or ()
+
+
+def _patterned_above(
+    c: Checker, path: KeyPath, sec: Mapping[str, Any], criterion: str, observable: str
+) -> Any:
+    """``patterned_above:``, as given: needed by criterion ``fraction`` without ``classes``,
+    refused with criterion ``jump`` (problems added to ``c``)."""
+    patterned = sec.get("patterned_above")
+    if criterion == "fraction":
+        if patterned is None and "classes" not in sec:
+            c.add(
+                (*path, "patterned_above"),
+                "missing; allowed: a number (a run counts as "
+                f"patterned when its {observable} is above it); needed by criterion "
+                "'fraction' (or classes: for several observables)",
+            )
+        elif patterned is not None and not is_finite_number(patterned):
+            c.bad((*path, "patterned_above"), patterned, "a finite number")
+    elif patterned is not None:
+        c.add(
+            (*path, "patterned_above"),
+            "used by criterion 'fraction' only; this section "
+            "has criterion 'jump' (remove it, or set criterion: fraction)",
+        )
+    return patterned
+
+
+def _fraction(c: Checker, path: KeyPath, sec: Mapping[str, Any]) -> Any:
+    """``fraction: [low, high]``: a point is mixed when its patterned fraction lies between
+    them (the default, its problem added to ``c``, when it is not such a pair)."""
+    fraction = sec.get("fraction", list(DEFAULT_FRACTION))
+    if (
+        not isinstance(fraction, Sequence)
+        or isinstance(fraction, str)
+        or len(fraction) != 2
+        or not all(is_finite_number(f) for f in fraction)
+        or not 0 <= fraction[0] < fraction[1] <= 1
+    ):
+        c.bad((*path, "fraction"), fraction, "[low, high] with 0 <= low < high <= 1")
+        fraction = list(DEFAULT_FRACTION)
+    return fraction
+
+
+def _within_bound(
+    c: Checker,
+    path: KeyPath,
+    sec: Mapping[str, Any],
+    spec: RefineSpec,
+    axes: Mapping[str, tuple[Any, ...]],
+    dims: Sequence[Dim],
+    n_seeds: int,
+) -> bool:
+    """Whether the union grid phase.nc holds (and the most runs) is within
+    ``limits.max_runs``, like a grid; else ``False``, its problem added to ``c``."""
     lines = math.prod(len(d) for d in dims if d.name not in axes)
     bound = (
-        lines
-        * math.prod(points_bound(axes[a.name], a, spec.rounds) for a in spec.axes)
-        * len(seeds)
+        lines * math.prod(points_bound(axes[a.name], a, spec.rounds) for a in spec.axes) * n_seeds
     )
     if bound > c.max_runs:
         c.add(
@@ -389,8 +423,8 @@ def check_refine(
             f"reach {bound} runs; allowed: at most {c.max_runs} (limits.max_runs): a larger "
             "smallest spacing, fewer rounds or a smaller grid",
         )
-        return None
-    return spec
+        return False
+    return True
 
 
 def _seeds(

@@ -167,7 +167,8 @@ def test_a_run_begun_from_a_snapshot_looks_for_its_own_trajectory():
         )
         for s in starts
     ]
-    found = trajectories(SimpleNamespace(run=runs.__getitem__), [0, 1])  # type: ignore[arg-type]
+    expansion = SimpleNamespace(run=runs.__getitem__, campaign=SimpleNamespace(model="nematic"))
+    found = trajectories(expansion, [0, 1])  # type: ignore[arg-type]
     recorded = [
         trajectory_id(parameters.to_dict(), numerics.to_dict(), 0, identity_start(s))
         for s in starts

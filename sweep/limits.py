@@ -34,6 +34,11 @@ MAX_GRID_POINTS = 10_000
 #: count is: a list of 90000 members took 19 s to check member by member before it was
 #: refused. A paper is a few campaigns; more are several collections. Not a setting.
 MAX_COLLECTION_MEMBERS = 100
+#: Most grid points of a collection's campaigns together: its members are checked one after
+#: the other and the collection is refused once their points pass this, so checking a
+#: collection takes at most about five times the largest campaign's second. The paper's
+#: collection (campaigns/paper.yaml) has 223. Not a setting.
+MAX_COLLECTION_POINTS = 5 * MAX_GRID_POINTS
 #: Local worker processes allowed per CPU core.
 MAX_WORKERS_PER_CORE = 4
 #: Peak memory of a run without its arrays: the interpreter, numpy, xarray, py-pde, numba.

@@ -82,14 +82,28 @@ def load_members(
 ) -> list[Campaign]:
     """Every member read and checked; exit 2 after listing the problems of every member
     (and of two members sharing a name)."""
+    from ..errors import Problem
+    from ..limits import MAX_COLLECTION_POINTS
+
     err = err_console()
     out: list[Campaign] = []
     bad = False
+    points = 0
     for member in coll.members:
         try:
             out.append(load(err, member, set_, seeds, None, scheduler, workers))
         except typer.Exit:
             bad = True
+            continue
+        points += out[-1].n_points
+        if points > MAX_COLLECTION_POINTS:  # the work of checking them is bounded too
+            why = (
+                f"its campaigns have more than {MAX_COLLECTION_POINTS} grid points in all "
+                f"({points} up to {member.name}, each checked by the model before anything "
+                "runs); allowed: at most that many: split it into several collections"
+            )
+            error(err, CampaignError(coll.source, [Problem("campaigns", why, coll.source)]))
+            raise typer.Exit(EXIT_BAD_INPUT)
     from ..spec.collection import duplicate_names
 
     problems = duplicate_names([c.name for c in out], [c.source for c in out])

@@ -311,3 +311,33 @@ def test_a_detached_collection_is_stopped_by_nematic_stop(folder):
     assert "one: interrupted" in text, text
     assert "two: not run" in text, text
     assert not (results / "two").exists()
+
+
+def test_a_collection_is_refused_once_its_members_grid_points_pass_the_bound(folder, monkeypatch):
+    """Members are checked one after the other and the collection is refused as soon as their
+    grid points together pass MAX_COLLECTION_POINTS: the members after it are not read (the
+    work of checking a collection is bounded, not only each campaign's)."""
+    import nematic_solids.sweep.limits as limits
+    import nematic_solids.sweep.spec as spec
+
+    for name in ("three", "four"):
+        (folder / f"{name}.yaml").write_text(SMALL.format(name=name))
+    (folder / "all.yaml").write_text(
+        "name: all\ncampaigns: [one.yaml, two.yaml, three.yaml, four.yaml]\n"
+    )
+    monkeypatch.setattr(limits, "MAX_COLLECTION_POINTS", 3)  # each member has 2 points
+    read: list[str] = []
+    real = spec.read_text
+
+    def counted(path):
+        read.append(Path(path).name)
+        return real(path)
+
+    monkeypatch.setattr(spec, "read_text", counted)
+    out = invoke("validate", folder / "all.yaml")
+    assert out.exit_code == 2, out.output
+    said = flat(out.output)
+    assert "more than 3 grid points in all (4 up to two.yaml" in said, said
+    assert read == ["one.yaml", "two.yaml"], read  # three.yaml and four.yaml were not read
+    monkeypatch.setattr(limits, "MAX_COLLECTION_POINTS", 8)  # at the bound: accepted
+    assert invoke("validate", folder / "all.yaml").exit_code == 0

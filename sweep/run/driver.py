@@ -104,25 +104,11 @@ def run_campaign(
     (:class:`~nematic_solids.sweep.catalogue.recorder.Recorder`; never fails a run)."""
     recorder = Recorder(store) if record else None
     try:
-        return _run_campaign(expansion, store, client, plan, events, clock, limit, recorder, stop)
+        session = Session(expansion, store, client, plan, events, clock, limit, recorder)
+        return session.run(stop)
     finally:
         if recorder is not None:
             recorder.close()
-
-
-def _run_campaign(
-    expansion: Expansion,
-    store: CampaignStore,
-    client: Client | ClusterLink,
-    plan: Plan,
-    events: RunEvents | None,
-    clock: Callable[[], float],
-    limit: FailureLimit | None,
-    recorder: Recorder | None,
-    stop: threading.Event | None = None,
-) -> RunSummary:
-    session = Session(expansion, store, client, plan, events, clock, limit, recorder)
-    return session.run(stop)
 
 
 class DriveEvents(RunEvents, Protocol):

@@ -43,7 +43,7 @@ def png_data_uri(fig: Any) -> str:
     return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
 
 
-def draw_run_views(path: Path, series: str = "sigma2_S") -> RunViews:
+def draw_run_views(path: Path, series: str) -> RunViews:
     """One run's last snapshot as a PNG data URI ("" without a snapshot) and its time series
     ``series`` (non-positive values left out: the panel's axis is logarithmic), from its
     file."""
@@ -75,20 +75,20 @@ def _stamp(path: Path) -> list[int]:
     return [VIEWS_VERSION, st.st_size, st.st_mtime_ns]
 
 
-def run_views(path: Path, series: str = "sigma2_S") -> RunViews:
+def run_views(path: Path, series: str) -> RunViews:
     """:func:`draw_run_views` of the run file ``path`` (``results/<name>/runs/<id>.nc``),
     from the cache where it holds the views of this very file and series, else drawn and
     cached."""
-    stamp = [*_stamp(path), series] if series != "sigma2_S" else _stamp(path)
+    stamp = _stamp(path)
     cached = path.parent.parent / CACHE / f"{path.stem}.json"
     try:
         data = json.loads(cached.read_text(encoding="utf-8"))
-        if data.get("stamp") == stamp:
+        if data.get("stamp") == stamp and data.get("series") == series:
             return str(data["image"]), list(data["t"]), list(data["y"])
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         pass  # absent, unreadable or of another file: drawn again
     image, t, y = draw_run_views(path, series)
-    _store(cached, dumps({"stamp": stamp, "image": image, "t": t, "y": y}))
+    _store(cached, dumps({"stamp": stamp, "series": series, "image": image, "t": t, "y": y}))
     return image, t, y
 
 

@@ -192,28 +192,33 @@ def test_the_runs_views_are_cached_by_run_file(adaptive, monkeypatch):
     assert len(cached) >= 6  # written with the report at the end of the run
     path = results / "rep" / "runs" / f"{cached[0].stem}.nc"
     kept = cached[0].read_text()
-    first = views.run_views(path)
+    first = views.run_views(path, "sigma2_S")
     assert first[0].startswith("data:image/png;base64,")
 
-    def no_drawing(path):
+    def no_drawing(path, series):
         raise AssertionError(f"{path} drawn again")
 
     monkeypatch.setattr(views, "draw_run_views", no_drawing)
-    assert views.run_views(path) == first  # from the cache
+    assert views.run_views(path, "sigma2_S") == first  # from the cache
     drawn = []
 
-    def drawing(path, series="sigma2_S"):
+    def drawing(path, series):
         drawn.append(path)
         return "", [1.0], [2.0]
 
     monkeypatch.setattr(views, "draw_run_views", drawing)
     cached[0].write_text("{not json")
-    assert views.run_views(path) == ("", [1.0], [2.0])  # an unreadable cache file: redrawn
+    assert views.run_views(path, "sigma2_S") == (
+        "",
+        [1.0],
+        [2.0],
+    )  # an unreadable cache file: redrawn
     data = json.loads(cached[0].read_text())
     data["stamp"][-1] += 1  # another file (an older mtime): redrawn
     cached[0].write_text(json.dumps(data))
-    views.run_views(path)
-    assert drawn == [path, path]
+    views.run_views(path, "sigma2_S")
+    assert views.run_views(path, "mean_S")[1:] == ([1.0], [2.0])  # another series: drawn
+    assert drawn == [path, path, path]
     cached[0].write_text(kept)
 
 

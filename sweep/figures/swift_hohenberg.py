@@ -79,22 +79,24 @@ def _edge(eps: list[float], cls: list[str], branch: str) -> dict[str, float]:
     """The lowest patterned eps of a branch (walking down from the top: the down branch keeps
     its pattern to there; the up branch patterns from there) and the eps just below it."""
     patterned = [i for i, x in enumerate(cls) if x in ("stripes", "hexagons")]
+    if branch == "down":  # the pattern from the top, followed down until it is lost
+        patterned = _run_from_top(cls)
     if not patterned:
         return {f"{branch}_pattern": math.nan, f"{branch}_uniform": math.nan}
-    lowest = patterned[0] if branch == "up" else min(_run_from_top(cls))
+    lowest = min(patterned)
     below = eps[lowest - 1] if lowest > 0 else math.nan
     return {f"{branch}_pattern": eps[lowest], f"{branch}_uniform": below}
 
 
 def _run_from_top(cls: list[str]) -> list[int]:
     """The indices of the patterned points from the top of the axis down to the first
-    uniform one (the down branch's pattern, followed until it is lost)."""
+    uniform one; none where the top is uniform."""
     out = []
     for i in range(len(cls) - 1, -1, -1):
         if cls[i] not in ("stripes", "hexagons"):
             break
         out.append(i)
-    return out or [len(cls) - 1]
+    return out
 
 
 def sh_phase(res: Results, options: Mapping[str, Any]) -> Figure:

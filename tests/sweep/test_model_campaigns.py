@@ -7,6 +7,7 @@ phase.nc, products and report for the model's own observables."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,7 @@ from typer.testing import CliRunner
 from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.errors import CampaignError
 from nematic_solids.sweep.expand import expand
-from nematic_solids.sweep.figures.swift_hohenberg import branch_boundaries, classes
+from nematic_solids.sweep.figures.swift_hohenberg import _edge, branch_boundaries, classes
 from nematic_solids.sweep.run.continuation import STATE_GROUP, ParentUnusable, starting_state
 from nematic_solids.sweep.run.task import RunTask
 from nematic_solids.sweep.spec import load_campaign, parse_campaign
@@ -199,6 +200,20 @@ def test_the_models_own_figure_is_drawn_for_its_chain(tmp_path):
     assert rows[1]["eps_H_leading"] == pytest.approx(-1 / 15)
     cls = classes(phase)
     assert set(cls.values.ravel()) <= {"uniform", "stripes", "hexagons"}
+
+
+def test_the_branch_edges_follow_each_branch_from_its_start():
+    """The down branch's pattern is followed from the top of the axis until it is lost (a
+    down branch whose top is uniform has none); the up branch patterns at its first
+    patterned point from the bottom."""
+    eps = [-0.1, 0.0, 0.1]
+    assert math.isnan(_edge(eps, ["uniform", "hexagons", "uniform"], "down")["down_pattern"])
+    assert _edge(eps, ["uniform", "hexagons", "hexagons"], "down") == {
+        "down_pattern": 0.0,
+        "down_uniform": -0.1,
+    }
+    assert _edge(eps, ["uniform", "stripes", "hexagons"], "up")["up_pattern"] == 0.0
+    assert math.isnan(_edge(eps, ["uniform"] * 3, "up")["up_pattern"])
 
 
 @pytest.mark.slow

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 import typer
@@ -65,6 +66,19 @@ def folder(tmp_path: Path) -> Path:
     return tmp_path
 
 
+def reads_of(module: Any, monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The names of the files ``module`` reads with its ``read_text`` from now on."""
+    read: list[str] = []
+    real = module.read_text
+
+    def counted(path):
+        read.append(Path(path).name)
+        return real(path)
+
+    monkeypatch.setattr(module, "read_text", counted)
+    return read
+
+
 def problems(path: Path) -> list[str]:
     with pytest.raises(CampaignError) as e:
         read_collection(path)
@@ -109,14 +123,7 @@ def test_a_collection_is_refused_by_its_member_count_before_any_member_is_read(
     import nematic_solids.sweep.spec.collection as collection
 
     (folder / "many.yaml").write_text("name: many\ncampaigns:\n" + "  - one.yaml\n" * members)
-    read: list[str] = []
-    real = collection.read_text
-
-    def counted(path):
-        read.append(Path(path).name)
-        return real(path)
-
-    monkeypatch.setattr(collection, "read_text", counted)
+    read = reads_of(collection, monkeypatch)
     out = invoke("validate", folder / "many.yaml")
     assert out.exit_code == 2, out.output
     said = flat(out.output)
@@ -326,14 +333,7 @@ def test_a_collection_is_refused_once_its_members_grid_points_pass_the_bound(fol
         "name: all\ncampaigns: [one.yaml, two.yaml, three.yaml, four.yaml]\n"
     )
     monkeypatch.setattr(limits, "MAX_COLLECTION_POINTS", 3)  # each member has 2 points
-    read: list[str] = []
-    real = spec.read_text
-
-    def counted(path):
-        read.append(Path(path).name)
-        return real(path)
-
-    monkeypatch.setattr(spec, "read_text", counted)
+    read = reads_of(spec, monkeypatch)
     out = invoke("validate", folder / "all.yaml")
     assert out.exit_code == 2, out.output
     said = flat(out.output)

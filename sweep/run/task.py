@@ -31,6 +31,7 @@ from ..files import atomic_to_netcdf, file_stamp
 from ..identity import SCHEMA_VERSION, identity_start, trajectory_id
 from ..models.interface import Compiled, RunRequest, State, batched
 from ..models.registry import get_model
+from ..provenance import code_version, git_commit
 from ..store import CampaignStore, Record, record_from_dataset
 from . import continuation
 from .failures import crash_record, failure_record
@@ -151,6 +152,8 @@ def prepare_dataset(ds: xr.Dataset, task: RunTask) -> tuple[xr.Dataset, dict[str
                 ds[name] = var.astype("float32")
     ds.attrs.update(run_id=task.run_id, campaign=task.campaign, identity_schema=SCHEMA_VERSION)
     ds.attrs.setdefault("status", "ok")  # a model's run that returns says how it ended, or ok
+    ds.attrs.setdefault("code_version", code_version())  # where a model's file does not say
+    ds.attrs.setdefault("git_commit", git_commit())
     return ds, encoding
 
 

@@ -19,6 +19,7 @@ from nematic_solids.sweep.cli import app
 from nematic_solids.sweep.errors import CampaignError
 from nematic_solids.sweep.expand import expand
 from nematic_solids.sweep.figures.swift_hohenberg import _edge, branch_boundaries, classes
+from nematic_solids.sweep.provenance import git_commit
 from nematic_solids.sweep.run.continuation import STATE_GROUP, ParentUnusable, starting_state
 from nematic_solids.sweep.run.task import RunTask
 from nematic_solids.sweep.spec import load_campaign, parse_campaign
@@ -81,6 +82,7 @@ def test_a_chain_of_the_model_runs_from_its_predecessors_end_states(tmp_path):
     recs = records(tmp_path / "results", "chain")
     assert set(recs) == set(expansion.run_ids)
     assert all(r["status"] == "ok" for r in recs.values())
+    assert all(r["git_commit"] == git_commit() for r in recs.values())  # provenance, as nematic
     successors = [r for r in recs.values() if r["initial_from"]]
     assert len(successors) == 2  # the second point of each branch
     for r in successors:
